@@ -1,0 +1,20 @@
+"""torch_gpioius: visuo-tactile inner-shape estimation with Gaussian process inner-outer implicit surfaces.
+
+Conventions (DESIGN.md): SI units, float64, ``y = 0`` on a surface and ``y = 1`` in free space, prior mean 1,
+``mu < 0`` inside; task 0 is the inner (tactile) shape, task 1 the outer (visual) shape.
+"""
+
+from __future__ import annotations
+
+from . import geometry, metrics, surfaces
+from .gpiois import GPIOIS, INNER, OUTER
+from .gpis import GPIS
+from .inference import DenseExactInference, JitterWarning
+from .kernels import InverseMultiquadricKernel
+from .settings import exact_arithmetic
+from .tolerances import tol
+
+__version__ = "0.1.0"
+
+__all__ = ["GPIOIS", "GPIS", "INNER", "OUTER", "DenseExactInference", "InverseMultiquadricKernel",
+           "JitterWarning", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__"]

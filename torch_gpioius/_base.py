@@ -1,0 +1,132 @@
+"""Shared machinery of GPIS and GPIOIS: fixed mean and noise, validation, the exact inference engine."""
+
+from __future__ import annotations
+
+import math
+
+import gpytorch
+import torch
+from gpytorch.constraints import GreaterThan
+from gpytorch.likelihoods import GaussianLikelihood
+from gpytorch.means import ConstantMean
+from torch import Tensor
+
+from ._validation import as_points
+from .inference import DenseExactInference
+from .kernels import InverseMultiquadricKernel
+from .settings import exact_arithmetic
+
+__all__ = ["ImplicitSurfaceGP"]
+
+
+def _fixed_likelihood(noise: float) -> GaussianLikelihood:
+    noise = float(noise)
+    if not (math.isfinite(noise) and noise > 0):
+        raise ValueError(f"noise: must be a positive finite variance sigma^2, got {noise}")
+    lik = GaussianLikelihood(noise_constraint=GreaterThan(0.0))
+    lik.double()
+    lik.noise = torch.tensor(noise, dtype=torch.float64)  # a Python float would pass through float32
+    lik.raw_noise.requires_grad_(False)
+    return lik
+
+
+class ImplicitSurfaceGP(gpytorch.models.ExactGP):
+    """Base class: an ``ExactGP`` with constant prior mean fixed at ``m = 1`` and fixed noise (eq. 1-3).
+
+    Subclasses define ``forward`` and the task structure; this class owns the exact inference engine
+    (``DenseExactInference``), keeps it in step with the data and hyper-parameters, and validates input.
+    """
+
+    #: Number of tasks of the model (1 for GPIS, 2 for GPIOIS).
+    num_tasks: int = 1
+
+    def __init__(self, train_inputs: tuple[Tensor, ...], train_y: Tensor, theta: float, noise: float,
+                 learn_theta: bool = False):
+        likelihood = _fixed_likelihood(noise)
+        super().__init__(train_inputs, train_y, likelihood)
+        self.mean_module = ConstantMean().double()
+        self.mean_module.constant.data.fill_(1.0)
+        self.mean_module.constant.requires_grad_(False)
+        self.covar_module = InverseMultiquadricKernel(theta, learn_theta=learn_theta).double()
+        self._engine: DenseExactInference | None = None
+        self._engine_key: tuple | None = None
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def theta(self) -> float:
+        """IMQ kernel parameter theta_x [m]."""
+        return float(self.covar_module.theta.reshape(-1)[0])
+
+    @property
+    def noise(self) -> float:
+        """Noise variance sigma^2 on the diagonal of the Gram matrix (eq. 12)."""
+        return float(self.likelihood.noise.reshape(-1)[0])
+
+    @property
+    def prior_mean(self) -> float:
+        """Constant prior mean m (eq. 2), 1 by default."""
+        return float(self.mean_module.constant.reshape(-1)[0])
+
+    @property
+    def train_x(self) -> Tensor:
+        """`(n, d)` training points [m]."""
+        return self.train_inputs[0]
+
+    @property
+    def dim(self) -> int:
+        """Spatial dimension d."""
+        return self.train_inputs[0].shape[-1]
+
+    def _task_matrix(self) -> Tensor:  # (T, T) task covariance used by the engine
+        raise NotImplementedError
+
+    def _train_task(self) -> Tensor:  # (n,) long
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ engine
+    def _inference(self) -> DenseExactInference:
+        """The exact engine for the current data and hyper-parameters (rebuilt only when they change)."""
+        x = self.train_inputs[0]
+        key = (self.theta, self.noise, self.prior_mean, x.shape[0], x.dtype, x.device)
+        if self._engine is None or self._engine_key != key:
+            self._engine = DenseExactInference(x, self.train_targets, self._train_task(), self.theta, self.noise,
+                                               self.prior_mean)
+            self._engine_key = key
+        return self._engine
+
+    def _append_to_engine(self, x: Tensor, y: Tensor, task: Tensor) -> None:
+        if self._engine is not None:
+            self._engine.append(x, y, task)
+            n = self._engine.n
+            self._engine_key = (self.theta, self.noise, self.prior_mean, n, x.dtype, x.device)
+
+    def _apply(self, fn, *args, **kwargs):
+        self._engine = None  # device / dtype moves rebuild the engine
+        return super()._apply(fn, *args, **kwargs)
+
+    def set_train_data(self, inputs=None, targets=None, strict=True):
+        self._engine = None
+        return super().set_train_data(inputs, targets, strict)
+
+    def __call__(self, *args, **kwargs):
+        with exact_arithmetic():
+            return super().__call__(*args, **kwargs)
+
+    # ------------------------------------------------------------------ public API
+    def _check_query(self, x, name: str = "x") -> Tensor:
+        x0 = self.train_inputs[0]  # as_points keeps the autograd graph of x (planner, users' gradients)
+        return as_points(x, name, dim=self.dim, dtype=x0.dtype, device=x0.device)
+
+    def _predict(self, x, task: int) -> tuple[Tensor, Tensor]:
+        xq = self._check_query(x)
+        return self._inference().predict(xq, task, self._task_matrix())
+
+    def log_marginal_likelihood(self) -> Tensor:
+        """Log marginal likelihood of the training labels, eq. (16) with ``C = -n/2 log(2 pi)``.
+
+        Exact (Cholesky), not divided by n (GPyTorch's ``ExactMarginalLogLikelihood`` divides by n).
+
+        Returns:
+            Scalar tensor [nats].
+        """
+        return self._inference().mll(self._task_matrix())

@@ -1,0 +1,219 @@
+"""Gaussian process inner-outer implicit surface (GPIOIS), Sec. IV-A, eq. (9)-(16)."""
+
+from __future__ import annotations
+
+import math
+import warnings
+
+import torch
+from gpytorch.distributions import MultivariateNormal
+from gpytorch.kernels import IndexKernel
+from torch import Tensor
+
+from ._base import ImplicitSurfaceGP
+from ._validation import as_labels, as_points, as_tasks
+from .optim import FitResult, maximize_mll
+
+__all__ = ["GPIOIS", "INNER", "OUTER"]
+
+#: Task id of the inner (tactile) shape.
+INNER = 0
+#: Task id of the outer (visual) shape.
+OUTER = 1
+
+# softplus(-1000) == 0.0 exactly in float64: pins IndexKernel's diagonal term v at zero so K_t = W W^T.
+_ZERO_VAR_RAW = -1000.0
+
+
+class GPIOIS(ImplicitSurfaceGP):
+    r"""Two-task GPIS over the inner (tactile, task 0) and outer (visual, task 1) shapes, eq. (9)-(16).
+
+    Covariance ``k((x, t), (x', t')) = k_x(x, x') K_t[t, t']`` (eq. 9) with the IMQ kernel (eq. 5) and a
+    free-form PSD task matrix ``K_t`` (eq. 10) held by ``gpytorch.kernels.IndexKernel(num_tasks=2, rank=2)``:
+    ``K_t = W W^T`` with ``W`` the lower Cholesky factor (the paper's ``theta_t = L``); the IndexKernel's extra
+    diagonal term is pinned at zero. Prior mean ``m = 1`` and noise ``sigma^2`` are fixed; ``fit()`` learns
+    ``K_t`` and only ``K_t`` by exact marginal likelihood (eq. 15-16).
+
+    The similarity of the paper is ``K_t[0,1] / K_t[0,0]`` (Sec. V-A-3): a regression coefficient of F_out on
+    F_in scaled, not a correlation; it can exceed 1.
+
+    Args:
+        train_x: `(n, d)` observed points [m], base frame.
+        train_y: `(n,)` labels, 0 on a surface (touched or seen), 1 in free space.
+        train_task: `(n,)` task ids, 0 inner (tactile), 1 outer (visual).
+        theta: IMQ kernel parameter theta_x [m].
+        noise: noise variance sigma^2.
+        task_covariance: `(2, 2)` initial K_t (default identity: no assumed relation between the shapes).
+        learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
+
+    Raises:
+        ValueError: NaN/inf coordinates, empty data, mismatched lengths, labels or task ids outside {0, 1}.
+
+    Example:
+        >>> model = GPIOIS(x, y, task, theta=0.1, noise=0.006).fit()
+        >>> mean, var = model.predict(grid, task=0)   # F_in posterior, eq. (12)-(13)
+        >>> model.similarity                          # K_t[0,1] / K_t[0,0]
+    """
+
+    num_tasks = 2
+
+    def __init__(self, train_x, train_y, train_task, theta: float = 0.1, noise: float = 0.006,
+                 task_covariance: Tensor | None = None, learn_theta: bool = False):
+        x = as_points(train_x, "train_x")
+        y = as_labels(train_y, x.shape[0], "train_y")
+        t = as_tasks(train_task, x.shape[0], "train_task")
+        super().__init__((x, t.unsqueeze(-1)), y, theta, noise, learn_theta)
+        self.task_covar_module = IndexKernel(num_tasks=2, rank=2).double()
+        self.task_covar_module.raw_var.data.fill_(_ZERO_VAR_RAW)
+        self.task_covar_module.raw_var.requires_grad_(False)
+        self.task_covariance = torch.eye(2, dtype=torch.float64) if task_covariance is None else task_covariance
+        #: Outcome of the last ``fit()`` (None before the first).
+        self.fit_result: FitResult | None = None
+
+    # ------------------------------------------------------------------ GPyTorch idiom
+    def forward(self, x: Tensor, task: Tensor) -> MultivariateNormal:
+        """GPyTorch prior at `(n, d)` points with `(n, 1)` task ids: mean m, covariance k_x ∘ K_t (eq. 9)."""
+        covar = self.covar_module(x).mul(self.task_covar_module(task))
+        return MultivariateNormal(self.mean_module(x), covar)
+
+    def __call__(self, x, task=None, **kwargs):
+        """``model(x, task)``: GPyTorch prior (train mode) or posterior (eval mode) of F_task at x.
+
+        ``task`` may be an int, an `(m,)` or an `(m, 1)` tensor of task ids.
+        """
+        if task is None:
+            raise ValueError("task: GPIOIS needs the task ids of the query points (0 inner, 1 outer)")
+        if isinstance(task, int) or (torch.is_tensor(task) and task.dim() == 0):
+            task = torch.full((x.shape[-2], 1), int(task), dtype=torch.long, device=x.device)
+        elif task.dim() == x.dim() - 1:
+            task = task.unsqueeze(-1)
+        return super().__call__(x, task, **kwargs)
+
+    # ------------------------------------------------------------------ task covariance
+    @property
+    def task_covariance(self) -> Tensor:
+        """`(2, 2)` task covariance K_t (eq. 10), detached. ``K_t[0, 0]`` is k_t(in, in)."""
+        return self.task_covar_module._eval_covar_matrix().detach().clone()
+
+    @task_covariance.setter
+    def task_covariance(self, value) -> None:
+        kt = torch.as_tensor(value, dtype=torch.float64)
+        if kt.shape != (2, 2) or not torch.isfinite(kt).all():
+            raise ValueError(f"task_covariance: expected a finite (2, 2) matrix, got shape {tuple(kt.shape)}")
+        if (kt - kt.T).abs().max() > 1e-12 * kt.abs().max().clamp_min(1.0):
+            raise ValueError("task_covariance: must be symmetric")
+        chol, info = torch.linalg.cholesky_ex(kt)
+        if int(info) != 0:  # PSD but singular (e.g. perfectly correlated tasks): a square root by eigenvalues
+            evals, evecs = torch.linalg.eigh(kt)
+            if evals.min() < -1e-12 * evals.abs().max():
+                raise ValueError(f"task_covariance: must be positive semi-definite (eigenvalues {evals.tolist()})")
+            chol = evecs * evals.clamp_min(0).sqrt()
+        cf = self.task_covar_module.covar_factor
+        cf.data.copy_(chol.to(cf))
+
+    @property
+    def similarity(self) -> float:
+        """Similarity between the outer and inner shapes, ``K_t[0,1] / K_t[0,0]`` (Sec. V-A-3). Can exceed 1."""
+        kt = self.task_covariance
+        return float(kt[0, 1] / kt[0, 0])
+
+    @property
+    def correlation(self) -> float:
+        """Task correlation ``K_t[0,1] / sqrt(K_t[0,0] K_t[1,1])`` in [-1, 1] (not the paper's similarity)."""
+        kt = self.task_covariance
+        return float(kt[0, 1] / torch.sqrt(kt[0, 0] * kt[1, 1]))
+
+    def _task_matrix(self) -> Tensor:
+        x0 = self.train_inputs[0]
+        return self.task_covariance.to(dtype=x0.dtype, device=x0.device)
+
+    def _train_task(self) -> Tensor:
+        return self.train_inputs[1].squeeze(-1)
+
+    @property
+    def train_task(self) -> Tensor:
+        """`(n,)` task ids of the training points."""
+        return self._train_task()
+
+    # ------------------------------------------------------------------ learning and prediction
+    def fit(self, multi_start: bool | None = None) -> "GPIOIS":
+        """Learn K_t (and only K_t) by maximising the exact log marginal likelihood, eq. (15)-(16).
+
+        A projected, damped Newton method on the Cholesky parameters of K_t with the exact gradient and Hessian
+        (``DenseExactInference.mll_derivatives``) runs to the tolerances of ``tol`` (see ``optim.maximize_mll``).
+        Deterministic for the same data.
+
+        Args:
+            multi_start: also start from fixed, data-independent K_t values (identity; 0.1 x a correlation of 0.9)
+                and keep the best. Default: on the first fit only; later fits warm-start from the current K_t
+                (exploration adds a few points per step).
+
+        Returns:
+            self, with ``fit_result`` describing the optimisation.
+        """
+        engine = self._inference()
+        if multi_start is None:
+            multi_start = self.fit_result is None
+        starts = [self.task_covariance]
+        if multi_start:
+            starts += [torch.eye(2, dtype=torch.float64), 0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]],
+                                                                                  dtype=torch.float64)]
+        x0 = self.train_inputs[0]
+
+        def evaluate(kt: Tensor):
+            return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
+
+        best: FitResult | None = None
+        for kt0 in starts:
+            result = maximize_mll(evaluate, kt0)
+            if best is None or result.mll > best.mll + 1e-9 * max(1.0, abs(best.mll)):
+                best = result
+        if not best.converged:
+            warnings.warn(f"GPIOIS.fit: K_t optimisation stopped after {best.iterations} iterations with "
+                          f"projected gradient {best.grad_norm:.3g}", RuntimeWarning, stacklevel=2)
+        self.task_covariance = best.task_covariance
+        self.fit_result = best
+        return self
+
+    def predict(self, x, task: int = INNER) -> tuple[Tensor, Tensor]:
+        """Latent posterior mean and variance of F_task, eq. (12)-(13). Differentiable with respect to ``x``.
+
+        Args:
+            x: `(m, d)` query points [m], base frame.
+            task: 0 for F_in (inner, tactile), 1 for F_out (outer, visual).
+
+        Returns:
+            `(m,)` posterior mean (``< 0`` inside, ``0`` on the estimated surface) and `(m,)` variance.
+        """
+        if task not in (INNER, OUTER):
+            raise ValueError(f"task: must be 0 (inner) or 1 (outer), got {task!r}")
+        return self._predict(x, int(task))
+
+    def add_observations(self, x, y, task) -> "GPIOIS":
+        """Append observations; the posterior updates exactly, ``K_t`` is re-learned by ``fit()``.
+
+        Args:
+            x: `(k, d)` points [m].
+            y: `(k,)` labels in {0, 1}.
+            task: `(k,)` task ids in {0, 1}, or one int for all.
+
+        Raises:
+            ValueError: on bad input; the model is left unchanged.
+        """
+        x0 = self.train_inputs[0]
+        x = as_points(x, "x", dim=self.dim, dtype=x0.dtype, device=x0.device)
+        y = as_labels(y, x.shape[0], "y", dtype=x0.dtype, device=x0.device)
+        t = as_tasks(task, x.shape[0], "task", device=x0.device)
+        engine = self._engine
+        super().set_train_data((torch.cat([x0, x]), torch.cat([self.train_inputs[1], t.unsqueeze(-1)])),
+                               torch.cat([self.train_targets, y]), strict=False)
+        self._engine = engine
+        self._append_to_engine(x, y, t)
+        return self
+
+    def __repr__(self) -> str:
+        kt = self.task_covariance
+        n_in = int((self._train_task() == INNER).sum())
+        return (f"GPIOIS(n_inner={n_in}, n_outer={self._train_task().numel() - n_in}, theta={self.theta:g}, "
+                f"noise={self.noise:g}, K_t={[[round(v, 6) for v in r] for r in kt.tolist()]}, "
+                f"similarity={self.similarity:.4g})")

@@ -1,0 +1,90 @@
+"""Gaussian process implicit surface (GPIS), Sec. III-A, eq. (1)-(5): the tactile-only baseline."""
+
+from __future__ import annotations
+
+import torch
+from gpytorch.distributions import MultivariateNormal
+from torch import Tensor
+
+from ._base import ImplicitSurfaceGP
+from ._validation import as_labels, as_points
+
+__all__ = ["GPIS"]
+
+
+class GPIS(ImplicitSurfaceGP):
+    r"""Single-task GPIS: an ``ExactGP`` regressing the implicit function F of one shape.
+
+    Prior ``F ~ GP(m, k_x)`` with ``m = 1`` (almost all space is outside the object) and the IMQ kernel of
+    eq. (5); labels ``y = 0`` on the surface and ``y = 1`` in free space; the estimated shape is
+    ``{x : mu(x) = 0}`` with ``mu < 0`` inside (eq. 4). Noise ``sigma^2`` and ``theta`` are fixed.
+
+    Args:
+        train_x: `(n, d)` observed points [m], base frame.
+        train_y: `(n,)` labels in {0, 1}.
+        theta: IMQ kernel parameter theta_x [m].
+        noise: noise variance sigma^2.
+        learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
+
+    Raises:
+        ValueError: NaN/inf coordinates, empty data, wrong shapes, labels outside {0, 1}.
+    """
+
+    num_tasks = 1
+
+    def __init__(self, train_x, train_y, theta: float = 0.1, noise: float = 0.006, learn_theta: bool = False):
+        x = as_points(train_x, "train_x")
+        y = as_labels(train_y, x.shape[0], "train_y")
+        super().__init__((x,), y, theta, noise, learn_theta)
+
+    def forward(self, x: Tensor) -> MultivariateNormal:
+        """GPyTorch prior of F at `(n, d)` points."""
+        return MultivariateNormal(self.mean_module(x), self.covar_module(x))
+
+    def _task_matrix(self) -> Tensor:
+        return torch.ones(1, 1, dtype=self.train_inputs[0].dtype, device=self.train_inputs[0].device)
+
+    def _train_task(self) -> Tensor:
+        return torch.zeros(self.train_inputs[0].shape[0], dtype=torch.long, device=self.train_inputs[0].device)
+
+    def fit(self) -> "GPIS":
+        """Nothing is learned in GPIS (theta, sigma^2 and m are fixed, eq. 1-5); refreshes the exact factors.
+
+        Present so that GPIS and GPIOIS follow the same protocol during exploration.
+
+        Returns:
+            self
+        """
+        self._inference().factor(self._task_matrix())
+        return self
+
+    def predict(self, x) -> tuple[Tensor, Tensor]:
+        """Posterior mean and variance of F, eq. (2)-(3). Differentiable with respect to ``x``.
+
+        Args:
+            x: `(m, d)` query points [m], base frame.
+
+        Returns:
+            `(m,)` mean (``< 0`` inside, ``0`` on the surface) and `(m,)` variance.
+        """
+        return self._predict(x, 0)
+
+    def add_observations(self, x, y) -> "GPIS":
+        """Append observations; the posterior updates (exactly) at the next query.
+
+        Args:
+            x: `(k, d)` points [m].
+            y: `(k,)` labels in {0, 1}.
+
+        Raises:
+            ValueError: on bad input; the model is left unchanged.
+        """
+        x0 = self.train_inputs[0]
+        x = as_points(x, "x", dim=self.dim, dtype=x0.dtype, device=x0.device)
+        y = as_labels(y, x.shape[0], "y", dtype=x0.dtype, device=x0.device)
+        task = torch.zeros(x.shape[0], dtype=torch.long, device=x0.device)
+        engine = self._engine
+        super().set_train_data((torch.cat([x0, x]),), torch.cat([self.train_targets, y]), strict=False)
+        self._engine = engine
+        self._append_to_engine(x, y, task)
+        return self

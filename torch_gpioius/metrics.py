@@ -1,0 +1,152 @@
+"""Evaluation metrics of Sec. V-A-3: uncertainty measure (eq. 23) and Hausdorff distance (eq. 24)."""
+
+from __future__ import annotations
+
+from typing import Sequence, Union
+
+import numpy as np
+import torch
+import trimesh
+
+from .geometry import predict_task
+
+__all__ = ["resample_polyline", "uncertainty_measure", "hausdorff_distance", "directed_hausdorff", "Shape"]
+
+#: A shape for the metrics: an `(n, d)` point set, a list of `(k, d)` polylines, or a triangle mesh.
+Shape = Union[np.ndarray, Sequence[np.ndarray], trimesh.Trimesh]
+
+
+def resample_polyline(curve: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Points spaced uniformly by arc length along a polyline, with the length each point stands for.
+
+    Args:
+        curve: `(k, d)` polyline [m] (closed if its last vertex repeats the first).
+        spacing: target spacing [m].
+
+    Returns:
+        `(p, d)` points and `(p,)` weights [m] (arc length per point; they sum to the curve length).
+    """
+    curve = np.asarray(curve, dtype=np.float64)
+    seg = np.linalg.norm(np.diff(curve, axis=0), axis=1)
+    length = seg.sum()
+    if len(curve) < 2 or length == 0:
+        return curve[:1], np.zeros(1)
+    n = max(1, int(np.ceil(length / spacing)))
+    s = (np.arange(n) + 0.5) * (length / n)  # midpoints of n equal pieces
+    cum = np.concatenate([[0.0], np.cumsum(seg)])
+    pts = np.stack([np.interp(s, cum, curve[:, k]) for k in range(curve.shape[1])], axis=-1)
+    return pts, np.full(n, length / n)
+
+
+def uncertainty_measure(model, surface: Shape, task: int = 0, spacing: float = 0.0025) -> float:
+    r"""Uncertainty measure, eq. (23): mean posterior variance V over the estimated surface.
+
+    Normalisation: the mean is taken per unit of surface, not per extracted vertex: curves are resampled
+    uniformly by arc length (``spacing``) and meshes are weighted by triangle area, so the value is
+    :math:`\frac{1}{|\hat S|}\int_{\hat S} V\,ds` — independent of the size of the object and of how finely
+    the surface was extracted, hence comparable across objects (Sec. V-A-3). Units: those of V.
+
+    Args:
+        model: ``GPIS`` or ``GPIOIS``.
+        surface: the estimated surface: list of `(k, d)` polylines (2-D), a ``trimesh.Trimesh`` (3-D), or an
+            `(n, d)` point set (plain mean).
+        task: task whose variance is averaged (0: inner).
+        spacing: resampling step for polylines [m].
+
+    Returns:
+        The uncertainty measure (NaN if the surface is empty).
+    """
+    pts, w = _weighted_points(surface, spacing)
+    if len(pts) == 0 or w.sum() <= 0:
+        return float("nan")
+    x0 = model.train_inputs[0]
+    with torch.no_grad():
+        _, var = predict_task(model, torch.as_tensor(pts, dtype=x0.dtype, device=x0.device), task)
+    return float((var.cpu().numpy() * w).sum() / w.sum())
+
+
+def _weighted_points(surface: Shape, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(surface, trimesh.Trimesh):
+        return np.asarray(surface.triangles_center), np.asarray(surface.area_faces)
+    if isinstance(surface, np.ndarray):
+        if surface.ndim != 2:
+            raise ValueError(f"surface: expected an (n, d) point set, got shape {surface.shape}")
+        return surface, np.ones(len(surface))
+    parts = [resample_polyline(c, spacing) for c in surface if len(c) >= 2]
+    if not parts:
+        return np.zeros((0, 2)), np.zeros(0)
+    return np.concatenate([p for p, _ in parts]), np.concatenate([w for _, w in parts])
+
+
+def _segments(polylines: Sequence[np.ndarray]) -> np.ndarray:
+    segs = [np.stack([c[:-1], c[1:]], axis=1) for c in (np.asarray(c, dtype=np.float64) for c in polylines)
+            if len(c) >= 2]
+    return np.concatenate(segs) if segs else np.zeros((0, 2, 2))
+
+
+def _distance_to_segments(p: np.ndarray, segs: np.ndarray, chunk: int = 4096) -> np.ndarray:
+    """Exact Euclidean distance from each point `(P, d)` to the nearest segment `(S, 2, d)`."""
+    a, b = segs[:, 0], segs[:, 1]
+    ab = b - a
+    denom = np.maximum((ab * ab).sum(-1), 1e-300)
+    out = np.empty(len(p))
+    for i in range(0, len(p), chunk):
+        q = p[i:i + chunk, None, :]
+        t = np.clip(((q - a) * ab).sum(-1) / denom, 0.0, 1.0)
+        d = np.linalg.norm(q - (a + t[..., None] * ab), axis=-1)
+        out[i:i + chunk] = d.min(axis=1)
+    return out
+
+
+def _sample(shape: Shape, spacing: float) -> np.ndarray:
+    if isinstance(shape, trimesh.Trimesh):
+        count = int(min(max(shape.area / spacing**2, 2000), 200_000))
+        pts, _ = trimesh.sample.sample_surface(shape, count, seed=0)
+        return np.concatenate([np.asarray(shape.vertices), pts])
+    if isinstance(shape, np.ndarray):
+        return shape
+    parts = [resample_polyline(c, spacing)[0] for c in shape if len(c) >= 2]
+    verts = [np.asarray(c, dtype=np.float64) for c in shape]
+    return np.concatenate(parts + verts) if parts else np.concatenate(verts)
+
+
+def _distance_to(points: np.ndarray, shape: Shape) -> np.ndarray:
+    if isinstance(shape, trimesh.Trimesh):
+        _, dist, _ = trimesh.proximity.closest_point(shape, points)
+        return np.asarray(dist)
+    if isinstance(shape, np.ndarray):
+        from scipy.spatial import cKDTree
+        return cKDTree(shape).query(points)[0]
+    return _distance_to_segments(points, _segments(shape))
+
+
+def _is_empty(shape: Shape) -> bool:
+    if isinstance(shape, trimesh.Trimesh):
+        return len(shape.faces) == 0
+    if isinstance(shape, np.ndarray):
+        return len(shape) == 0
+    return all(len(c) == 0 for c in shape)
+
+
+def directed_hausdorff(a: Shape, b: Shape, spacing: float = 5e-4) -> float:
+    """max over x in A of d(x, B) [m]: A is sampled at ``spacing``; distances to B are exact."""
+    if _is_empty(a) or _is_empty(b):
+        return float("inf")
+    pa = _sample(a, spacing)
+    return float(_distance_to(pa, b).max())
+
+
+def hausdorff_distance(a: Shape, b: Shape, spacing: float = 5e-4) -> float:
+    r"""Hausdorff distance between two shapes, eq. (24) [m].
+
+    :math:`d_H(A, B) = \max[\max_{x\in A} d(x, B), \max_{x\in B} d(x, A)]`.
+
+    Shapes: an `(n, d)` numpy array is a finite point set; a list of `(k, d)` arrays is a set of polylines
+    (close a polygon by repeating its first vertex); a ``trimesh.Trimesh`` is a surface. Distances *to* a
+    polyline or mesh are exact (point-to-segment / point-to-triangle); the shape measured *from* is sampled at
+    ``spacing`` (plus its vertices), so for curves the result is within ``spacing / 2`` of the exact value.
+
+    Returns:
+        The distance [m]; ``inf`` if one shape is empty.
+    """
+    return max(directed_hausdorff(a, b, spacing), directed_hausdorff(b, a, spacing))
