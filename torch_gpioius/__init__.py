@@ -6,7 +6,8 @@ Conventions (DESIGN.md): SI units, float64, ``y = 0`` on a surface and ``y = 1``
 
 from __future__ import annotations
 
-from . import geometry, metrics, surfaces
+from . import geometry, metrics, planning, sim, surfaces
+from .exploration import ObservationPolicy, Trace, explore
 from .gpiois import GPIOIS, INNER, OUTER
 from .gpis import GPIS
 from .inference import DenseExactInference, JitterWarning
@@ -16,5 +17,5 @@ from .tolerances import tol
 
 __version__ = "0.1.0"
 
-__all__ = ["GPIOIS", "GPIS", "INNER", "OUTER", "DenseExactInference", "InverseMultiquadricKernel",
+__all__ = ["GPIOIS", "GPIS", "ObservationPolicy", "Trace", "explore", "planning", "sim", "INNER", "OUTER", "DenseExactInference", "InverseMultiquadricKernel",
            "JitterWarning", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__"]

@@ -1,0 +1,257 @@
+"""Active visuo-tactile exploration (Sec. IV-B, V): approach, plan, slide, settle, observe, re-learn, repeat."""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from .gpiois import GPIOIS, INNER, OUTER
+from .gpis import GPIS
+from .metrics import hausdorff_distance, uncertainty_measure
+from .planning import ZeroPenalty, plan_direction
+from .surfaces import closed_curves, evaluate_grid, zero_level_curves
+
+__all__ = ["ObservationPolicy", "Trace", "explore", "winding_angle"]
+
+MODES = ("visual-tactile", "tactile")
+
+
+@dataclass(frozen=True)
+class ObservationPolicy:
+    """Which observations the simulated sensors produce (see docs/method-notes.md for the evidence).
+
+    Attributes:
+        vision_spacing: spacing of the outer-boundary points seen by the camera (y = 0, task outer) [m].
+        vision_free_offset: distance outside the outer boundary of the camera's free-space points
+            (y = 1, task outer) [m]; ``None`` disables them.
+        free_space_spacing: spacing of free-space samples along the path the toucher occupied
+            (approach, lost-contact presses; y = 1, task inner) [m].
+        free_space_margin: free-space samples closer than this to any contact are not recorded [m]; keeps the
+            inner Gram block well conditioned (trap 2 of issue 3).
+    """
+
+    vision_spacing: float = 0.02
+    vision_free_offset: float | None = 0.05
+    free_space_spacing: float = 0.02
+    free_space_margin: float = 0.02
+
+
+@dataclass
+class Trace:
+    """Per-step records of one exploration (record 0 is the state right after the first contact).
+
+    Attributes:
+        hausdorff: `(n,)` Hausdorff distance [m] between the estimated inner shape {mu_in = 0} and the true inner
+            boundary (eq. 24); NaN while the estimate has no closed curve.
+        uncertainty: `(n,)` uncertainty measure (eq. 23) over the estimated inner shape; NaN without a curve.
+        similarity: `(n,)` K_t[0,1] / K_t[0,0] (NaN in tactile mode).
+        travel: `(n,)` toucher travel since the first contact [m].
+        path: `(k, 2)` every position the toucher occupied, approach included [m].
+        contacts: `(n, 2)` contact positions [m].
+        model: the final fitted model (``GPIOIS`` or ``GPIS``).
+        step_time: `(n,)` wall time of each planning step (plan + ingest + re-learn) [s].
+        terminated: "winding" (went once around) or "max_steps".
+    """
+
+    mode: str
+    scene_name: str
+    hausdorff: np.ndarray
+    uncertainty: np.ndarray
+    similarity: np.ndarray
+    travel: np.ndarray
+    path: np.ndarray
+    contacts: np.ndarray
+    model: object
+    step_time: np.ndarray
+    terminated: str
+    task_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.travel)
+
+    def records(self) -> list[dict]:
+        """Per-step records as dicts (JSON/CSV friendly)."""
+        out = []
+        for i in range(self.n_steps):
+            out.append({"object": self.scene_name, "mode": self.mode, "step": i, "travel_m": float(self.travel[i]),
+                        "hausdorff_m": float(self.hausdorff[i]), "uncertainty": float(self.uncertainty[i]),
+                        "similarity": float(self.similarity[i]), "contact_x": float(self.contacts[i, 0]),
+                        "contact_y": float(self.contacts[i, 1]), "step_time_s": float(self.step_time[i])})
+        return out
+
+
+def winding_angle(points: np.ndarray, centre: np.ndarray | None = None) -> float:
+    """Total signed angle [rad] swept by a path of points about ``centre``.
+
+    Sum of the wrapped angle increments of consecutive points seen from ``centre`` (default: the points' mean).
+    A path that goes once around a point sweeps +-2 pi; a path along part of a shape's boundary, seen from a
+    point inside the shape, sweeps the angle that part subtends, less than 2 pi.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) < 3:
+        return 0.0
+    rel = p - (p.mean(axis=0) if centre is None else np.asarray(centre, dtype=np.float64))
+    ang = np.arctan2(rel[:, 1], rel[:, 0])
+    inc = np.diff(ang)
+    inc = (inc + np.pi) % (2 * np.pi) - np.pi
+    return float(inc.sum())
+
+
+def _free_space_along(a: np.ndarray, b: np.ndarray, spacing: float, contacts: np.ndarray, margin: float,
+                      include_end: bool = True) -> np.ndarray:
+    """Samples every ``spacing`` on segment a->b that are at least ``margin`` from every contact."""
+    length = float(np.linalg.norm(b - a))
+    if length == 0:
+        pts = a[None]
+    else:
+        n = int(math.floor(length / spacing))
+        s = np.arange(0, n + 1) * spacing
+        if include_end and (len(s) == 0 or s[-1] < length - 1e-12):
+            s = np.append(s, length)
+        pts = a + np.outer(s / length, b - a)
+    if len(contacts):
+        d = np.linalg.norm(pts[:, None, :] - contacts[None, :, :], axis=-1).min(axis=1)
+        pts = pts[d >= margin]
+    return pts
+
+
+def _estimate_metrics(model, scene, bounds, resolution):
+    """Hausdorff (eq. 24), uncertainty (eq. 23) and the centroid of the estimated region {mu_in < 0}."""
+    field_ = evaluate_grid(model, bounds, resolution, INNER)
+    curves = zero_level_curves(model, bounds, resolution, INNER, field=field_)
+    unc = uncertainty_measure(model, curves, INNER) if curves else float("nan")
+    inside = field_.mean < 0
+    centre = None
+    if inside.any():
+        gx, gy = np.meshgrid(*field_.axes, indexing="ij")
+        centre = np.array([gx[inside].mean(), gy[inside].mean()])
+    if not closed_curves(curves):
+        return float("nan"), unc, centre
+    return hausdorff_distance(curves, [scene.inner_boundary], spacing=2e-3), unc, centre
+
+
+def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: float = 0.1, noise: float = 0.006,
+            max_steps: int = 400, penalty=None, policy: ObservationPolicy | None = None,
+            metrics_resolution: float = 0.01, progress: bool = False, min_steps: int = 10,
+            winding_tolerance: float = 0.25) -> Trace:
+    """Run one simulated exploration of a 2-D scene and record per-step metrics.
+
+    Protocol (both modes alike): vision once before exploration (visual-tactile only: outer boundary points and
+    free space outside it); approach from ``scene.start`` along ``scene.direction`` to the first contact, the
+    approach path giving inner free space; then repeat: plan d* (eq. 19) at the contact, move x' = x + d*,
+    settle onto the inner surface (``Scene2D.settle``), record the contact (y = 0) and the free space occupied
+    on the way (y = 1, at least ``policy.free_space_margin`` from any contact), update the model and re-learn
+    K_t. Stops when the contacts have gone once around the inner shape or after ``max_steps``. "Once around":
+    the contacts' winding angle about the centroid of the current estimated inner region {mu_in < 0} reaches
+    2 pi - ``winding_tolerance`` (after at least ``min_steps`` steps). The centroid of the estimate, unlike the
+    contacts' mean, lies inside the shape and away from the path, so a partial path cannot reach 2 pi; the
+    tolerance (0.25 rad, 4 % of a turn) accepts a loop whose last few centimetres are not retraced: the planner
+    may turn back there, since at theta_x = 10 cm such a gap carries almost no variance.
+
+    Args:
+        scene: a ``Scene2D``.
+        mode: "visual-tactile" (GPIOIS on vision + touch) or "tactile" (GPIS on touch only).
+        step: alpha, the sliding step [m].
+        theta: IMQ kernel parameter [m].
+        noise: sigma^2.
+        max_steps: cap on planning steps.
+        penalty: C(x) (default ``ZeroPenalty``, as in the 2-D study).
+        policy: ``ObservationPolicy``.
+        metrics_resolution: grid spacing for the per-step estimated curve [m].
+        progress: show a tqdm progress bar.
+        min_steps: steps before the winding test applies.
+        winding_tolerance: angle short of 2 pi that still counts as once around [rad].
+
+    Returns:
+        ``Trace``.
+    """
+    if mode not in MODES:
+        raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
+    if not (step > 0 and max_steps >= 0):
+        raise ValueError("step must be > 0 and max_steps >= 0")
+    policy = policy or ObservationPolicy()
+    penalty = penalty or ZeroPenalty()
+    bounds = scene.bounds(0.1)
+
+    contact = scene.first_contact()
+    contacts = [contact]
+    approach_free = _free_space_along(scene.start, contact, policy.free_space_spacing, contact[None],
+                                      policy.free_space_margin)
+    path = [scene.start, contact]
+    x_in = np.concatenate([contact[None], approach_free])
+    y_in = np.concatenate([[0.0], np.ones(len(approach_free))])
+
+    if mode == "visual-tactile":
+        seen = scene.sample_boundary("outer", policy.vision_spacing)
+        x_out, y_out = [seen], [np.zeros(len(seen))]
+        if policy.vision_free_offset is not None:
+            free = scene.sample_offset("outer", policy.vision_free_offset, policy.vision_spacing)
+            x_out.append(free)
+            y_out.append(np.ones(len(free)))
+        x_out, y_out = np.concatenate(x_out), np.concatenate(y_out)
+        model = GPIOIS(np.concatenate([x_in, x_out]), np.concatenate([y_in, y_out]),
+                       np.r_[np.full(len(x_in), INNER), np.full(len(x_out), OUTER)], theta=theta, noise=noise)
+    else:
+        model = GPIS(x_in, y_in, theta=theta, noise=noise)
+
+    t0 = time.perf_counter()
+    model.fit()
+    rec = {"h": [], "u": [], "s": [], "travel": [], "time": [], "kt": []}
+
+    centre = [None]
+
+    def record(travel: float, dt: float) -> None:
+        h, u, centre[0] = _estimate_metrics(model, scene, bounds, metrics_resolution)
+        rec["h"].append(h)
+        rec["u"].append(u)
+        rec["s"].append(model.similarity if mode == "visual-tactile" else float("nan"))
+        rec["kt"].append(model.task_covariance.numpy() if mode == "visual-tactile" else np.full((2, 2), np.nan))
+        rec["travel"].append(travel)
+        rec["time"].append(dt)
+
+    record(0.0, time.perf_counter() - t0)
+    travel = 0.0
+    previous = None
+    terminated = "max_steps"
+    bar = tqdm(total=max_steps, desc=f"{scene.name or 'scene'} {mode}", disable=not progress, leave=False)
+    for _ in range(max_steps):
+        t0 = time.perf_counter()
+        x = contacts[-1]
+        plan = plan_direction(model, torch.as_tensor(x), step=step, penalty=penalty, previous=previous)
+        d = plan.direction.numpy()
+        previous = plan.direction
+        moved = x + d
+        settled = scene.settle(moved)
+        travel += float(np.linalg.norm(d) + np.linalg.norm(settled - moved))
+        path += [moved, settled]
+        contacts.append(settled)
+        new_x, new_y = [settled[None]], [np.zeros(1)]
+        if not scene.is_inside_inner(moved) and np.linalg.norm(settled - moved) >= policy.free_space_margin:
+            free = _free_space_along(moved, settled, policy.free_space_spacing, np.asarray(contacts),
+                                     policy.free_space_margin)
+            new_x.append(free)
+            new_y.append(np.ones(len(free)))
+        new_x, new_y = np.concatenate(new_x), np.concatenate(new_y)
+        if mode == "visual-tactile":
+            model.add_observations(new_x, new_y, INNER)
+        else:
+            model.add_observations(new_x, new_y)
+        model.fit()
+        dt = time.perf_counter() - t0
+        record(travel, dt)
+        bar.update(1)
+        if (len(contacts) > min_steps and centre[0] is not None
+                and abs(winding_angle(np.asarray(contacts), centre[0])) >= 2 * math.pi - winding_tolerance):
+            terminated = "winding"
+            break
+    bar.close()
+    return Trace(mode=mode, scene_name=scene.name, hausdorff=np.asarray(rec["h"]), uncertainty=np.asarray(rec["u"]),
+                 similarity=np.asarray(rec["s"]), travel=np.asarray(rec["travel"]), path=np.asarray(path),
+                 contacts=np.asarray(contacts), model=model, step_time=np.asarray(rec["time"]),
+                 terminated=terminated, task_covariance=np.asarray(rec["kt"]))

@@ -1,0 +1,249 @@
+"""The paper's 2-D study (Sec. V): objects A-D, visual-tactile vs tactile-only, figures like Fig. 4 and 5."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .exploration import Trace, explore
+from .sim import paper_objects_2d
+from .surfaces import evaluate_grid, zero_level_curves
+
+__all__ = ["run_study", "summarize", "check_claims", "FRACTIONS"]
+
+#: Points of the tactile-only run's travel at which the table reports the estimates.
+FRACTIONS = (0.10, 0.25, 0.50, 1.00)
+MODES = ("visual-tactile", "tactile")
+
+
+def _at_travel(trace: Trace, distance: float) -> int:
+    """Index of the first record whose travel is >= distance (the last one if none)."""
+    return int(min(np.searchsorted(trace.travel, distance - 1e-12), trace.n_steps - 1))
+
+
+def summarize(traces: dict[str, dict[str, Trace]]) -> list[dict]:
+    """Per object: Hausdorff of both modes and similarity at 10/25/50/100 % of the tactile run's travel.
+
+    Returns:
+        One dict per object with keys ``object``, ``travel_tactile_m``, and for each fraction f in
+        ``FRACTIONS``: ``H_vt_<f>``, ``H_t_<f>`` [m] and ``S_<f>``; plus final values and step counts.
+    """
+    rows = []
+    for name, pair in traces.items():
+        vt, ta = pair["visual-tactile"], pair["tactile"]
+        total = float(ta.travel[-1])
+        row = {"object": name, "travel_tactile_m": total, "travel_vt_m": float(vt.travel[-1]),
+               "steps_vt": vt.n_steps - 1, "steps_t": ta.n_steps - 1,
+               "terminated_vt": vt.terminated, "terminated_t": ta.terminated,
+               "H_vt_final": float(vt.hausdorff[-1]), "H_t_final": float(ta.hausdorff[-1]),
+               "S_final": float(vt.similarity[-1]),
+               "median_step_s_vt": float(np.median(vt.step_time[1:])) if vt.n_steps > 1 else float("nan"),
+               "median_step_s_t": float(np.median(ta.step_time[1:])) if ta.n_steps > 1 else float("nan")}
+        for f in FRACTIONS:
+            key = f"{int(round(f * 100))}"
+            i_vt, i_t = _at_travel(vt, f * total), _at_travel(ta, f * total)
+            row[f"H_vt_{key}"] = float(vt.hausdorff[i_vt])
+            row[f"H_t_{key}"] = float(ta.hausdorff[i_t])
+            row[f"S_{key}"] = float(vt.similarity[i_vt])
+        # similarity early (first 25 % of travel) and late (last 25 %) for claim 3
+        early = vt.similarity[vt.travel <= 0.25 * total]
+        late = vt.similarity[vt.travel >= 0.75 * float(vt.travel[-1])]
+        row["S_early_max"] = float(np.nanmax(early)) if early.size else float("nan")
+        row["S_late_mean"] = float(np.nanmean(late)) if late.size else float("nan")
+        rows.append(row)
+    return rows
+
+
+def _h(v: float) -> str:
+    return "no closed curve" if not math.isfinite(v) else f"{100 * v:.1f}"
+
+
+def check_claims(rows: list[dict]) -> list[dict]:
+    """The paper's claims 1-6 (issue 3), each as measured here: ``{"claim", "measured", "holds"}``."""
+    by = {r["object"]: r for r in rows}
+    out = []
+
+    def add(claim: str, measured: str, holds: bool | None) -> None:
+        out.append({"claim": claim, "measured": measured, "holds": holds})
+
+    if "A" in by:
+        a = by["A"]
+        ok = math.isfinite(a["H_t_25"]) and math.isfinite(a["H_vt_25"]) and a["H_vt_25"] <= 0.5 * a["H_t_25"]
+        if not math.isfinite(a["H_t_25"]) and math.isfinite(a["H_vt_25"]):
+            ok = True  # tactile-only has no closed estimate at all yet
+        add("1. A: visual-tactile Hausdorff at 25 % travel <= half of tactile-only",
+            f"VT {_h(a['H_vt_25'])} cm vs T {_h(a['H_t_25'])} cm", ok)
+    if "B" in by:
+        b = by["B"]
+        add("2. B: VT better early, about equal at the end",
+            f"10 %: VT {_h(b['H_vt_10'])} / T {_h(b['H_t_10'])} cm; 25 %: VT {_h(b['H_vt_25'])} / "
+            f"T {_h(b['H_t_25'])} cm; end: VT {_h(b['H_vt_final'])} / T {_h(b['H_t_final'])} cm", None)
+    if "C" in by:
+        c = by["C"]
+        add("3. C: early estimate pulled to the outer shape, similarity later falls clearly",
+            f"similarity max in first 25 %: {c['S_early_max']:.2f}, mean over last 25 %: {c['S_late_mean']:.2f}",
+            bool(c["S_late_mean"] < c["S_early_max"] - 0.1))
+    if "D" in by:
+        d = by["D"]
+        tol_d = max(0.1 * d["H_t_final"], 0.005)
+        add("4. D: similarity stays low; both reach about the same final Hausdorff",
+            f"final similarity {d['S_final']:.2f}; final H VT {_h(d['H_vt_final'])} / T {_h(d['H_t_final'])} cm",
+            bool(abs(d["H_vt_final"] - d["H_t_final"]) <= tol_d))
+    fine = []
+    for r in rows:
+        allowed = max(0.1 * r["H_t_final"], 0.005)
+        ok = (r["H_vt_final"] <= r["H_t_final"] + allowed and r["H_vt_final"] < 0.02 and r["H_t_final"] < 0.02)
+        fine.append(ok)
+    add("5. No adverse effect: final VT within 10 % (or 0.5 cm) of T, both < 2 cm",
+        "; ".join(f"{r['object']}: VT {_h(r['H_vt_final'])} / T {_h(r['H_t_final'])} cm" for r in rows), all(fine))
+    if "A" in by and "D" in by:
+        add("6. Final similarity A clearly above D", f"A {by['A']['S_final']:.2f} vs D {by['D']['S_final']:.2f}",
+            bool(by["A"]["S_final"] > by["D"]["S_final"] + 0.2))
+    return out
+
+
+def _figure_object(name: str, scene, pair: dict[str, Trace], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(15, 4.8))
+    grid = fig.add_gridspec(2, 3, width_ratios=[1.15, 1.15, 1.0])
+    bounds = scene.bounds(0.08)
+    vmax = None
+    fields = {}
+    for mode in MODES:
+        fields[mode] = evaluate_grid(pair[mode].model, bounds, 0.004, 0)
+        vmax = max(vmax or 0.0, float(np.percentile(fields[mode].var, 99)))
+    for k, mode in enumerate(MODES):
+        ax = fig.add_subplot(grid[:, k])
+        tr, f = pair[mode], fields[mode]
+        im = ax.imshow(f.var.T, origin="lower", extent=bounds.flatten(), cmap="Purples", vmin=0, vmax=vmax)
+        ax.fill(*scene.inner_boundary.T, color="tab:green", alpha=0.35, lw=0, label="true inner")
+        ax.plot(*scene.outer_boundary.T, "k-.", lw=1.2, label="outer")
+        for j, c in enumerate(zero_level_curves(tr.model, bounds, 0.004, 0, field=f)):
+            ax.plot(*c.T, "r", lw=1.6, label="estimate $\\mu_{in}=0$" if j == 0 else None)
+        ax.plot(*tr.path.T, "k--", lw=0.8, label="path")
+        ax.plot(*scene.start, "ko", ms=5)
+        ax.set_aspect("equal")
+        ax.set_xlim(bounds[0])
+        ax.set_ylim(bounds[1])
+        title = "visual-tactile (GPIOIS)" if mode == "visual-tactile" else "tactile only (GPIS)"
+        ax.set_title(f"object {name}: {title}")
+        ax.set_xlabel("x [m]")
+        if k == 0:
+            ax.set_ylabel("y [m]")
+            ax.legend(loc="lower left", fontsize=7)
+        fig.colorbar(im, ax=ax, fraction=0.035, label="$V_{in}$")
+    ax_u = fig.add_subplot(grid[0, 2])
+    ax_h = fig.add_subplot(grid[1, 2], sharex=ax_u)
+    for mode, style in zip(MODES, ("r-", "b--")):
+        tr = pair[mode]
+        ax_u.plot(tr.travel, tr.uncertainty, style, label=mode)
+        ax_h.plot(tr.travel, 100 * tr.hausdorff, style, label=mode)
+    ax_u.set_ylabel("uncertainty (eq. 23)")
+    ax_u.set_yscale("log")
+    ax_u.legend(fontsize=8)
+    ax_h.set_ylabel("Hausdorff [cm]")
+    ax_h.set_xlabel("travel [m]")
+    ax_h.set_yscale("log")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _figure_similarity(traces: dict[str, dict[str, Trace]], path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.5, 4))
+    for name, pair in traces.items():
+        tr = pair["visual-tactile"]
+        ax.plot(tr.travel, tr.similarity, label=f"object {name}")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xlabel("travel [m]")
+    ax.set_ylabel("similarity $K_t[0,1]/K_t[0,0]$")
+    ax.set_title("Similarity transitions (cf. Fig. 5)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _markdown(rows: list[dict], claims: list[dict]) -> str:
+    pct = [f"{int(round(f * 100))}" for f in FRACTIONS]
+    lines = ["| object | " + " | ".join(f"H {p} % VT / T [cm]" for p in pct) + " | "
+             + " | ".join(f"S {p} %" for p in pct) + " |",
+             "|---|" + "---|" * (2 * len(pct))]
+    for r in rows:
+        hs = " | ".join(f"{_h(r[f'H_vt_{p}'])} / {_h(r[f'H_t_{p}'])}" for p in pct)
+        ss = " | ".join(f"{r[f'S_{p}']:.2f}" for p in pct)
+        lines.append(f"| {r['object']} | {hs} | {ss} |")
+    lines += ["", "| object | steps VT / T | travel VT / T [m] | final H VT / T [cm] | final similarity | "
+              "median step VT / T [ms] |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['object']} | {r['steps_vt']} ({r['terminated_vt']}) / {r['steps_t']} "
+                     f"({r['terminated_t']}) | {r['travel_vt_m']:.2f} / {r['travel_tactile_m']:.2f} | "
+                     f"{_h(r['H_vt_final'])} / {_h(r['H_t_final'])} | {r['S_final']:.2f} | "
+                     f"{1e3 * r['median_step_s_vt']:.0f} / {1e3 * r['median_step_s_t']:.0f} |")
+    lines += ["", "| claim | measured | holds |", "|---|---|---|"]
+    for c in claims:
+        holds = "n/a (judged in docs)" if c["holds"] is None else ("yes" if c["holds"] else "**no**")
+        lines.append(f"| {c['claim']} | {c['measured']} | {holds} |")
+    return "\n".join(lines) + "\n"
+
+
+def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d", max_steps: int = 400,
+              progress: bool = True, **explore_kwargs) -> dict:
+    """Run both modes on the chosen objects and write figures, records and the summary.
+
+    Writes into ``out``: ``fig4_<object>.png`` (path, estimate, variance map, uncertainty and Hausdorff
+    transitions for both modes), ``fig5_similarity.png``, ``records.csv`` and ``records.json`` (every per-step
+    record), ``summary.json`` and ``summary.md`` (the results table and the claims).
+
+    Args:
+        objects: object names among A-D.
+        out: output folder (created).
+        max_steps: cap on planning steps per run.
+        progress: show progress bars.
+        **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, ...).
+
+    Returns:
+        ``{"traces": ..., "rows": ..., "claims": ..., "seconds": ...}``.
+    """
+    from tqdm.auto import tqdm
+
+    scenes = paper_objects_2d()
+    unknown = [o for o in objects if o not in scenes]
+    if unknown:
+        raise ValueError(f"objects: unknown {unknown}; choose among {sorted(scenes)}")
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    traces: dict[str, dict[str, Trace]] = {}
+    jobs = [(o, m) for o in objects for m in MODES]
+    with tqdm(jobs, desc="2-D study", disable=not progress) as bar:
+        for name, mode in bar:
+            bar.set_postfix_str(f"object {name}, {mode}")
+            traces.setdefault(name, {})[mode] = explore(scenes[name], mode=mode, max_steps=max_steps,
+                                                        progress=progress, **explore_kwargs)
+    for name in objects:
+        _figure_object(name, scenes[name], traces[name], out / f"fig4_{name}.png")
+    _figure_similarity(traces, out / "fig5_similarity.png")
+    records = [r for pair in traces.values() for tr in pair.values() for r in tr.records()]
+    with open(out / "records.csv", "w", newline="") as fh:
+        writer = csv.DictWriter(fh, fieldnames=list(records[0]))
+        writer.writeheader()
+        writer.writerows(records)
+    (out / "records.json").write_text(json.dumps(records, indent=1))
+    rows = summarize(traces)
+    claims = check_claims(rows)
+    (out / "summary.json").write_text(json.dumps({"rows": rows, "claims": claims}, indent=1))
+    (out / "summary.md").write_text(_markdown(rows, claims))
+    return {"traces": traces, "rows": rows, "claims": claims, "seconds": time.perf_counter() - t0}
