@@ -202,3 +202,24 @@ def test_bad_constructor_and_query_input():
         m.predict(torch.zeros(1, 2), task=2)
     with pytest.raises(ValueError, match="semi-definite"):
         m.task_covariance = torch.tensor([[1.0, 2.0], [2.0, 1.0]])
+
+
+def test_remove_observations_equals_model_on_remaining_data(random_data):
+    x, y, t = random_data
+    m = _model(random_data)
+    m.predict(torch.zeros(1, 2, dtype=torch.float64))
+    drop = torch.zeros(len(y), dtype=torch.bool)
+    drop[[3, 10, 11, 40]] = True
+    m.remove_observations(drop)
+    fresh = _model((x[~drop], y[~drop], t[~drop]))
+    xq = torch.rand(6, 2, dtype=torch.float64)
+    for task in (0, 1):
+        torch.testing.assert_close(m.predict(xq, task)[0], fresh.predict(xq, task)[0], atol=1e-12, rtol=0)
+        torch.testing.assert_close(m.predict(xq, task)[1], fresh.predict(xq, task)[1], atol=1e-12, rtol=0)
+    m.remove_observations([0, 1])
+    assert m.train_targets.shape[0] == len(y) - 6
+    with pytest.raises(ValueError, match="out of range"):
+        m.remove_observations([1000])
+    with pytest.raises(ValueError, match="every observation"):
+        m.remove_observations(torch.ones(len(y) - 6, dtype=torch.bool))
+    assert m.train_targets.shape[0] == len(y) - 6

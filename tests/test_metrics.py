@@ -49,6 +49,20 @@ def test_uncertainty_measure_is_length_normalised():
     expected = model.predict(torch.tensor(dense))[1].mean().item()   # independent: uniform angles
     # a curve given with very uneven vertex density gives the same value (per unit length, not per vertex)
     uneven = np.concatenate([circle(0.2, 2000)[:1000], circle(0.2, 20)[10:]])
-    assert uncertainty_measure(model, [uneven], spacing=0.001) == pytest.approx(expected, rel=2e-3)
-    assert uncertainty_measure(model, [circle(0.2, 500)], spacing=0.001) == pytest.approx(expected, rel=1e-4)
+    got = uncertainty_measure(model, [uneven], spacing=0.001, relative=False)
+    assert got == pytest.approx(expected, rel=2e-3)
+    assert uncertainty_measure(model, [circle(0.2, 500)], spacing=0.001, relative=False) == pytest.approx(
+        expected, rel=1e-4)
+    # relative (default): divided by the GPIS prior variance 1 / theta
+    assert uncertainty_measure(model, [uneven], spacing=0.001) == pytest.approx(got * model.theta, rel=1e-12)
     assert np.isnan(uncertainty_measure(model, []))
+
+
+def test_relative_uncertainty_uses_the_task_prior_variance():
+    x = torch.tensor([[0.2, 0.0], [0.0, 0.2], [0.5, 0.5]], dtype=torch.float64)
+    m = tg.GPIOIS(x, torch.zeros(3), torch.tensor([0, 0, 1]), task_covariance=torch.tensor([[0.04, 0.01],
+                                                                                          [0.01, 0.09]], dtype=torch.float64))
+    raw = uncertainty_measure(m, [circle(0.2, 400)], relative=False)
+    rel = uncertainty_measure(m, [circle(0.2, 400)])
+    assert rel == pytest.approx(raw / (0.04 / 0.1), rel=1e-12)
+    assert 0.0 <= rel <= 1.0

@@ -121,6 +121,37 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         xq = self._check_query(x)
         return self._inference().predict(xq, task, self._task_matrix())
 
+    def remove_observations(self, index) -> "ImplicitSurfaceGP":
+        """Remove training observations (e.g. free-space samples a later contact showed to be too close).
+
+        The exact engine is rebuilt from the remaining data; hyper-parameters and K_t are kept.
+
+        Args:
+            index: `(k,)` integer indices or an `(n,)` boolean mask of the observations to remove.
+
+        Raises:
+            ValueError: indices out of range, or removing every observation; the model is left unchanged.
+        """
+        n = self.train_targets.shape[0]
+        idx = torch.as_tensor(index)
+        if idx.dtype == torch.bool:
+            if idx.shape != (n,):
+                raise ValueError(f"index: boolean mask must have shape ({n},), got {tuple(idx.shape)}")
+            drop = idx.to(self.train_targets.device)
+        else:
+            idx = idx.reshape(-1).long()
+            if idx.numel() and (idx.min() < -n or idx.max() >= n):
+                raise ValueError(f"index: out of range for {n} observations")
+            drop = torch.zeros(n, dtype=torch.bool, device=self.train_targets.device)
+            drop[idx.to(drop.device)] = True
+        if bool(drop.all()):
+            raise ValueError("index: cannot remove every observation (empty data)")
+        if not bool(drop.any()):
+            return self
+        keep = ~drop
+        self.set_train_data(tuple(t[keep] for t in self.train_inputs), self.train_targets[keep], strict=False)
+        return self
+
     def log_marginal_likelihood(self) -> Tensor:
         """Log marginal likelihood of the training labels, eq. (16) with ``C = -n/2 log(2 pi)``.
 

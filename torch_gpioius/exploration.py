@@ -16,7 +16,7 @@ from .metrics import hausdorff_distance, uncertainty_measure
 from .planning import ZeroPenalty, plan_direction
 from .surfaces import closed_curves, evaluate_grid, zero_level_curves
 
-__all__ = ["ObservationPolicy", "Trace", "explore", "winding_angle"]
+__all__ = ["ObservationPolicy", "Trace", "explore", "gone_around", "largest_uncovered_gap", "winding_angle"]
 
 MODES = ("visual-tactile", "tactile")
 
@@ -87,11 +87,10 @@ class Trace:
 
 
 def winding_angle(points: np.ndarray, centre: np.ndarray | None = None) -> float:
-    """Total signed angle [rad] swept by a path of points about ``centre``.
+    """Total signed angle [rad] swept by a path of points about ``centre`` (default: the points' mean).
 
-    Sum of the wrapped angle increments of consecutive points seen from ``centre`` (default: the points' mean).
-    A path that goes once around a point sweeps +-2 pi; a path along part of a shape's boundary, seen from a
-    point inside the shape, sweeps the angle that part subtends, less than 2 pi.
+    Sum of the wrapped angle increments of consecutive points seen from ``centre``: +-2 pi for a path that
+    goes once around it.
     """
     p = np.asarray(points, dtype=np.float64)
     if len(p) < 3:
@@ -101,6 +100,43 @@ def winding_angle(points: np.ndarray, centre: np.ndarray | None = None) -> float
     inc = np.diff(ang)
     inc = (inc + np.pi) % (2 * np.pi) - np.pi
     return float(inc.sum())
+
+
+def largest_uncovered_gap(points: np.ndarray, centre: np.ndarray) -> tuple[float, float]:
+    """Largest angular gap between contacts seen from ``centre``, and the chord between its two ends.
+
+    Sorts the contacts' angles about ``centre``; the largest circular difference between neighbours is the
+    sector no contact has visited.
+
+    Returns:
+        ``(gap_angle [rad], gap_chord [m])``; ``(2 pi, inf)`` for fewer than 2 points.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if len(p) < 2:
+        return 2 * math.pi, math.inf
+    rel = p - np.asarray(centre, dtype=np.float64)
+    ang = np.arctan2(rel[:, 1], rel[:, 0])
+    order = np.argsort(ang)
+    a = ang[order]
+    gaps = np.diff(np.append(a, a[0] + 2 * math.pi))
+    k = int(np.argmax(gaps))
+    i, j = order[k], order[(k + 1) % len(order)]
+    return float(gaps[k]), float(np.linalg.norm(p[i] - p[j]))
+
+
+def gone_around(points: np.ndarray, centre: np.ndarray | None, max_gap: float) -> bool:
+    """Termination rule: the contacts surround ``centre`` with no unvisited sector wider than ``max_gap``.
+
+    "Once around the inner shape" is read as angular coverage about a point inside the estimate: every
+    direction from it has been visited, except sectors whose two bounding contacts lie at most ``max_gap`` [m]
+    apart (a gap the GP bridges at its length scale). Coverage rather than the path's winding number, because
+    the variance-driven planner may turn back a few centimetres short of closing its loop, where little
+    variance is left, and close it later from the other side.
+    """
+    if centre is None or len(points) < 3:
+        return False
+    angle, chord = largest_uncovered_gap(points, centre)
+    return angle < math.pi / 2 and chord <= max_gap
 
 
 def _free_space_along(a: np.ndarray, b: np.ndarray, spacing: float, contacts: np.ndarray, margin: float,
@@ -121,6 +157,10 @@ def _free_space_along(a: np.ndarray, b: np.ndarray, spacing: float, contacts: np
     return pts
 
 
+def _inner_mask(model) -> np.ndarray:
+    return (model.train_inputs[1].squeeze(-1) == INNER).numpy()
+
+
 def _estimate_metrics(model, scene, bounds, resolution):
     """Hausdorff (eq. 24), uncertainty (eq. 23) and the centroid of the estimated region {mu_in < 0}."""
     field_ = evaluate_grid(model, bounds, resolution, INNER)
@@ -139,7 +179,7 @@ def _estimate_metrics(model, scene, bounds, resolution):
 def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: float = 0.1, noise: float = 0.006,
             max_steps: int = 400, penalty=None, policy: ObservationPolicy | None = None,
             metrics_resolution: float = 0.01, progress: bool = False, min_steps: int = 10,
-            winding_tolerance: float = 0.25) -> Trace:
+            closure_gap: float = 0.05) -> Trace:
     """Run one simulated exploration of a 2-D scene and record per-step metrics.
 
     Protocol (both modes alike): vision once before exploration (visual-tactile only: outer boundary points and
@@ -147,12 +187,10 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
     approach path giving inner free space; then repeat: plan d* (eq. 19) at the contact, move x' = x + d*,
     settle onto the inner surface (``Scene2D.settle``), record the contact (y = 0) and the free space occupied
     on the way (y = 1, at least ``policy.free_space_margin`` from any contact), update the model and re-learn
-    K_t. Stops when the contacts have gone once around the inner shape or after ``max_steps``. "Once around":
-    the contacts' winding angle about the centroid of the current estimated inner region {mu_in < 0} reaches
-    2 pi - ``winding_tolerance`` (after at least ``min_steps`` steps). The centroid of the estimate, unlike the
-    contacts' mean, lies inside the shape and away from the path, so a partial path cannot reach 2 pi; the
-    tolerance (0.25 rad, 4 % of a turn) accepts a loop whose last few centimetres are not retraced: the planner
-    may turn back there, since at theta_x = 10 cm such a gap carries almost no variance.
+    K_t. Stops when the contacts have gone once around the inner shape (``gone_around``: seen from the centroid
+    of the current estimated region {mu_in < 0}, no sector wider than ``closure_gap`` is unvisited; after at
+    least ``min_steps`` steps) or after ``max_steps``. The centroid of the estimate, unlike the contacts' mean,
+    lies inside the shape and away from the path.
 
     Args:
         scene: a ``Scene2D``.
@@ -166,7 +204,8 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         metrics_resolution: grid spacing for the per-step estimated curve [m].
         progress: show a tqdm progress bar.
         min_steps: steps before the winding test applies.
-        winding_tolerance: angle short of 2 pi that still counts as once around [rad].
+        closure_gap: widest unvisited gap (chord between its bounding contacts) that still counts as once
+            around [m]; default theta_x / 2 of the paper.
 
     Returns:
         ``Trace``.
@@ -217,6 +256,7 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
 
     record(0.0, time.perf_counter() - t0)
     travel = 0.0
+    retracted = 0
     previous = None
     terminated = "max_steps"
     bar = tqdm(total=max_steps, desc=f"{scene.name or 'scene'} {mode}", disable=not progress, leave=False)
@@ -227,7 +267,11 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         d = plan.direction.numpy()
         previous = plan.direction
         moved = x + d
-        settled = scene.settle(moved)
+        # Compliant settling onto the nearest inner-surface point (Scene2D.settle). Pressing along the
+        # estimated inward normal instead was tried: when the normal is still that of the previous face, the
+        # press grazes the next face and records free space millimetres from a surface not yet touched,
+        # which bends the whole estimate (docs/method-notes.md, "settling").
+        settled = scene.settle(moved, press_direction=None)
         travel += float(np.linalg.norm(d) + np.linalg.norm(settled - moved))
         path += [moved, settled]
         contacts.append(settled)
@@ -238,6 +282,14 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
             new_x.append(free)
             new_y.append(np.ones(len(free)))
         new_x, new_y = np.concatenate(new_x), np.concatenate(new_y)
+        # Keep the margin at all times: free space recorded earlier (e.g. pressed along an edge not yet
+        # touched) is retracted once a contact lands within the margin of it (trap 2, docs/method-notes.md).
+        train_x = model.train_inputs[0].numpy()
+        free_in = (model.train_targets.numpy() == 1) & (_inner_mask(model) if mode == "visual-tactile" else True)
+        too_close = free_in & (np.linalg.norm(train_x - settled, axis=1) < policy.free_space_margin)
+        if too_close.any():
+            model.remove_observations(torch.as_tensor(too_close))
+            retracted += int(too_close.sum())
         if mode == "visual-tactile":
             model.add_observations(new_x, new_y, INNER)
         else:
@@ -246,8 +298,7 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         dt = time.perf_counter() - t0
         record(travel, dt)
         bar.update(1)
-        if (len(contacts) > min_steps and centre[0] is not None
-                and abs(winding_angle(np.asarray(contacts), centre[0])) >= 2 * math.pi - winding_tolerance):
+        if len(contacts) > min_steps and gone_around(np.asarray(contacts), centre[0], closure_gap):
             terminated = "winding"
             break
     bar.close()

@@ -10,7 +10,7 @@ import trimesh
 
 from .geometry import predict_task
 
-__all__ = ["resample_polyline", "uncertainty_measure", "hausdorff_distance", "directed_hausdorff", "Shape"]
+__all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff", "Shape"]
 
 #: A shape for the metrics: an `(n, d)` point set, a list of `(k, d)` polylines, or a triangle mesh.
 Shape = Union[np.ndarray, Sequence[np.ndarray], trimesh.Trimesh]
@@ -38,13 +38,19 @@ def resample_polyline(curve: np.ndarray, spacing: float) -> tuple[np.ndarray, np
     return pts, np.full(n, length / n)
 
 
-def uncertainty_measure(model, surface: Shape, task: int = 0, spacing: float = 0.0025) -> float:
-    r"""Uncertainty measure, eq. (23): mean posterior variance V over the estimated surface.
+def uncertainty_measure(model, surface: Shape, task: int = 0, spacing: float = 0.0025,
+                        relative: bool = True) -> float:
+    r"""Uncertainty measure, eq. (23): mean posterior variance over the estimated surface, normalised.
 
-    Normalisation: the mean is taken per unit of surface, not per extracted vertex: curves are resampled
-    uniformly by arc length (``spacing``) and meshes are weighted by triangle area, so the value is
-    :math:`\frac{1}{|\hat S|}\int_{\hat S} V\,ds` — independent of the size of the object and of how finely
-    the surface was extracted, hence comparable across objects (Sec. V-A-3). Units: those of V.
+    Two normalisations make it comparable across objects of different size and across models (Sec. V-A-3):
+
+    * per unit of surface, not per extracted vertex: curves are resampled uniformly by arc length (``spacing``)
+      and meshes are weighted by triangle area, giving :math:`\frac{1}{|\hat S|}\int_{\hat S} V\,ds`,
+      independent of the object's size and of how finely the surface was extracted;
+    * with ``relative=True`` (default), V is divided by the prior variance of the task,
+      ``k(x, x) K_t[task, task] = K_t[task, task] / theta`` (``1 / theta`` for GPIS): the fraction of the prior
+      uncertainty left, in [0, 1]. Without it, a GPIOIS whose learned ``K_t[0, 0]`` is 0.03 would look 30 times
+      "more certain" than a GPIS (amplitude 1) with the same data.
 
     Args:
         model: ``GPIS`` or ``GPIOIS``.
@@ -52,6 +58,7 @@ def uncertainty_measure(model, surface: Shape, task: int = 0, spacing: float = 0
             `(n, d)` point set (plain mean).
         task: task whose variance is averaged (0: inner).
         spacing: resampling step for polylines [m].
+        relative: divide by the prior variance (dimensionless result) instead of returning units of V.
 
     Returns:
         The uncertainty measure (NaN if the surface is empty).
@@ -62,7 +69,14 @@ def uncertainty_measure(model, surface: Shape, task: int = 0, spacing: float = 0
     x0 = model.train_inputs[0]
     with torch.no_grad():
         _, var = predict_task(model, torch.as_tensor(pts, dtype=x0.dtype, device=x0.device), task)
-    return float((var.cpu().numpy() * w).sum() / w.sum())
+    value = float((var.cpu().numpy() * w).sum() / w.sum())
+    return value / prior_variance(model, task) if relative else value
+
+
+def prior_variance(model, task: int = 0) -> float:
+    """Prior variance of F_task at any point: ``K_t[task, task] / theta`` (``1 / theta`` for GPIS)."""
+    scale = 1.0 if getattr(model, "num_tasks", 1) == 1 else float(model.task_covariance[task, task])
+    return scale / model.theta
 
 
 def _weighted_points(surface: Shape, spacing: float) -> tuple[np.ndarray, np.ndarray]:

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .exploration import Trace, explore
+from .metrics import prior_variance
 from .sim import paper_objects_2d
 from .surfaces import evaluate_grid, zero_level_curves
 
@@ -115,15 +116,12 @@ def _figure_object(name: str, scene, pair: dict[str, Trace], path: Path) -> None
     fig = plt.figure(figsize=(15, 4.8))
     grid = fig.add_gridspec(2, 3, width_ratios=[1.15, 1.15, 1.0])
     bounds = scene.bounds(0.08)
-    vmax = None
-    fields = {}
-    for mode in MODES:
-        fields[mode] = evaluate_grid(pair[mode].model, bounds, 0.004, 0)
-        vmax = max(vmax or 0.0, float(np.percentile(fields[mode].var, 99)))
+    fields = {mode: evaluate_grid(pair[mode].model, bounds, 0.004, 0) for mode in MODES}
     for k, mode in enumerate(MODES):
         ax = fig.add_subplot(grid[:, k])
         tr, f = pair[mode], fields[mode]
-        im = ax.imshow(f.var.T, origin="lower", extent=bounds.flatten(), cmap="Purples", vmin=0, vmax=vmax)
+        rel_var = f.var / prior_variance(tr.model, 0)   # fraction of the prior variance: comparable across modes
+        im = ax.imshow(rel_var.T, origin="lower", extent=bounds.flatten(), cmap="Purples", vmin=0, vmax=1)
         ax.fill(*scene.inner_boundary.T, color="tab:green", alpha=0.35, lw=0, label="true inner")
         ax.plot(*scene.outer_boundary.T, "k-.", lw=1.2, label="outer")
         for j, c in enumerate(zero_level_curves(tr.model, bounds, 0.004, 0, field=f)):
@@ -139,14 +137,14 @@ def _figure_object(name: str, scene, pair: dict[str, Trace], path: Path) -> None
         if k == 0:
             ax.set_ylabel("y [m]")
             ax.legend(loc="lower left", fontsize=7)
-        fig.colorbar(im, ax=ax, fraction=0.035, label="$V_{in}$")
+        fig.colorbar(im, ax=ax, fraction=0.035, label="$V_{in}$ / prior variance")
     ax_u = fig.add_subplot(grid[0, 2])
     ax_h = fig.add_subplot(grid[1, 2], sharex=ax_u)
     for mode, style in zip(MODES, ("r-", "b--")):
         tr = pair[mode]
         ax_u.plot(tr.travel, tr.uncertainty, style, label=mode)
         ax_h.plot(tr.travel, 100 * tr.hausdorff, style, label=mode)
-    ax_u.set_ylabel("uncertainty (eq. 23)")
+    ax_u.set_ylabel("uncertainty (eq. 23, rel.)")
     ax_u.set_yscale("log")
     ax_u.legend(fontsize=8)
     ax_h.set_ylabel("Hausdorff [cm]")

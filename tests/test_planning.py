@@ -1,0 +1,87 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import torch_gpioius as tg
+from torch_gpioius.planning import RangePenalty, ZeroPenalty, plan_direction
+
+
+def _half_circle_model():
+    """Circle r = 0.2 touched on its upper half only: variance is higher on the lower half."""
+    a = np.linspace(0.0, math.pi, 25)
+    ring = np.stack([np.cos(a), np.sin(a)], -1)
+    x = np.concatenate([0.2 * ring, 0.3 * ring])
+    y = np.r_[np.zeros(25), np.ones(25)]
+    return tg.GPIS(torch.tensor(x), torch.tensor(y))
+
+
+def test_direction_is_tangent_unit_alpha_and_climbs_variance():
+    model = _half_circle_model()
+    x = torch.tensor([0.2, 0.0], dtype=torch.float64)   # right end of the touched arc
+    plan = plan_direction(model, x, step=0.01)
+    d = plan.direction
+    assert float(d.norm()) == pytest.approx(0.01, rel=1e-12)
+    assert abs(float(d @ plan.normal)) < 1e-12                # tangent (P d = d)
+    # the normal is (close to) radial and the step heads into the untouched lower half
+    assert float(plan.normal @ torch.tensor([1.0, 0.0], dtype=torch.float64)) > 0.95
+    assert float(d[1]) < 0
+    # variance really increases along d (finite step, independent of the gradient code)
+    v0 = model.predict(x[None])[1]
+    v1 = model.predict((x + 0.2 * d)[None])[1]
+    assert float(v1) > float(v0)
+    assert plan.fallback == ""
+
+
+def test_direction_matches_eq19_computed_independently():
+    model = _half_circle_model()
+    x = torch.tensor([[0.15, 0.12]], dtype=torch.float64)
+    # independent: finite-difference gradients of mu and V, projector, eq. (19)
+    eps = 1e-6
+    g_mu, g_v = np.zeros(2), np.zeros(2)
+    for k in range(2):
+        e = torch.zeros(1, 2, dtype=torch.float64)
+        e[0, k] = eps
+        mp, vp = model.predict(x + e)
+        mm, vm = model.predict(x - e)
+        g_mu[k] = float(mp - mm) / (2 * eps)
+        g_v[k] = float(vp - vm) / (2 * eps)
+    n = g_mu / np.linalg.norm(g_mu)
+    pg = (np.eye(2) - np.outer(n, n)) @ g_v
+    expected = 0.01 * pg / np.linalg.norm(pg)
+    got = plan_direction(model, x[0], step=0.01).direction.numpy()
+    angle = math.acos(min(1.0, float(got @ expected) / 1e-4))
+    assert angle < 1e-5
+
+
+def test_degenerate_cases_are_deterministic():
+    # a single datum: grad mu = 0 at the datum (undefined normal), grad V = 0 there too
+    model = tg.GPIS(torch.tensor([[0.0, 0.0]]), torch.tensor([0.0]))
+    plan = plan_direction(model, torch.tensor([0.0, 0.0]), step=0.01)
+    assert plan.fallback != ""
+    assert float(plan.direction.norm()) == pytest.approx(0.01)
+    again = plan_direction(model, torch.tensor([0.0, 0.0]), step=0.01)
+    assert torch.equal(plan.direction, again.direction)
+    prev = torch.tensor([0.0, 1.0], dtype=torch.float64)
+    with_prev = plan_direction(model, torch.tensor([0.0, 0.0]), step=0.01, previous=prev)
+    assert with_prev.fallback == "previous-direction"
+    torch.testing.assert_close(with_prev.direction, 0.01 * prev)
+
+
+def test_range_penalty_eq25():
+    c = RangePenalty([-1.0, -1.0], [1.0, 1.0], beta=100.0)
+    x = torch.tensor([[0.0, 0.0], [1.5, 0.0], [2.0, 3.0]], dtype=torch.float64)
+    torch.testing.assert_close(c(x), torch.tensor([0.0, -100 * 0.25, -100 * (1.0 + 4.0)], dtype=torch.float64))
+    torch.testing.assert_close(c.distance(x), torch.tensor([0.0, 0.5, math.sqrt(5.0)], dtype=torch.float64))
+    assert float(ZeroPenalty()(x).abs().sum()) == 0.0
+
+
+def test_range_penalty_steers_back_into_the_box():
+    model = _half_circle_model()
+    x = torch.tensor([0.2, 0.0], dtype=torch.float64)
+    free = plan_direction(model, x, step=0.01)
+    # forbid everything below y = 0.05: the penalty gradient now dominates and pushes the step upwards
+    boxed = plan_direction(model, x + torch.tensor([0.0, -0.1], dtype=torch.float64) * 0, step=0.01,
+                           penalty=RangePenalty([-1.0, 0.05], [1.0, 1.0]))
+    assert float(free.direction[1]) < 0 < float(boxed.direction[1])
