@@ -12,10 +12,11 @@ from .gpiois import GPIOIS, INNER, OUTER
 from .gpis import GPIS
 from .inference import DenseExactInference, JitterWarning
 from .kernels import InverseMultiquadricKernel
+from .structured import StructuredExactInference
 from .settings import exact_arithmetic
 from .tolerances import tol
 
 __version__ = "0.1.0"
 
 __all__ = ["GPIOIS", "GPIS", "ObservationPolicy", "Trace", "explore", "planning", "sim", "INNER", "OUTER", "DenseExactInference", "InverseMultiquadricKernel",
-           "JitterWarning", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__"]
+           "JitterWarning", "StructuredExactInference", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__"]

@@ -84,13 +84,19 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         raise NotImplementedError
 
     # ------------------------------------------------------------------ engine
-    def _inference(self) -> DenseExactInference:
+    #: Which exact engine computes predict / fit: "dense" (the reference), "structured" or "auto".
+    inference: str = "dense"
+
+    def _engine_class(self):
+        return DenseExactInference
+
+    def _inference(self):
         """The exact engine for the current data and hyper-parameters (rebuilt only when they change)."""
         x = self.train_inputs[0]
         key = (self.theta, self.noise, self.prior_mean, x.shape[0], x.dtype, x.device)
         if self._engine is None or self._engine_key != key:
-            self._engine = DenseExactInference(x, self.train_targets, self._train_task(), self.theta, self.noise,
-                                               self.prior_mean)
+            self._engine = self._engine_class()(x, self.train_targets, self._train_task(), self.theta, self.noise,
+                                                self.prior_mean)
             self._engine_key = key
         return self._engine
 

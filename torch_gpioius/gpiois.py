@@ -12,7 +12,9 @@ from torch import Tensor
 
 from ._base import ImplicitSurfaceGP
 from ._validation import as_labels, as_points, as_tasks
+from .inference import DenseExactInference
 from .optim import FitResult, maximize_mll
+from .structured import StructuredExactInference
 
 __all__ = ["GPIOIS", "INNER", "OUTER"]
 
@@ -45,6 +47,10 @@ class GPIOIS(ImplicitSurfaceGP):
         noise: noise variance sigma^2.
         task_covariance: `(2, 2)` initial K_t (default identity: no assumed relation between the shapes).
         learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
+        inference: exact engine behind ``predict`` / ``fit`` / ``log_marginal_likelihood``: "dense" (one
+            Cholesky of the full Gram matrix, the reference), "structured" (``StructuredExactInference``: fixed
+            outer set, inner Schur complement; agrees with dense to ~1e-10, 100x faster at N_o = 2000), or
+            "auto" (structured when there are outer points and sigma^2 >= 1e-8, else dense).
 
     Raises:
         ValueError: NaN/inf coordinates, empty data, mismatched lengths, labels or task ids outside {0, 1}.
@@ -58,11 +64,14 @@ class GPIOIS(ImplicitSurfaceGP):
     num_tasks = 2
 
     def __init__(self, train_x, train_y, train_task, theta: float = 0.1, noise: float = 0.006,
-                 task_covariance: Tensor | None = None, learn_theta: bool = False):
+                 task_covariance: Tensor | None = None, learn_theta: bool = False, inference: str = "auto"):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")
+        if inference not in ("auto", "dense", "structured"):
+            raise ValueError(f"inference: must be 'auto', 'dense' or 'structured', got {inference!r}")
         super().__init__((x, t.unsqueeze(-1)), y, theta, noise, learn_theta)
+        self.inference = inference
         self.task_covar_module = IndexKernel(num_tasks=2, rank=2).double()
         self.task_covar_module.raw_var.data.fill_(_ZERO_VAR_RAW)
         self.task_covar_module.raw_var.requires_grad_(False)
@@ -122,6 +131,16 @@ class GPIOIS(ImplicitSurfaceGP):
         """Task correlation ``K_t[0,1] / sqrt(K_t[0,0] K_t[1,1])`` in [-1, 1] (not the paper's similarity)."""
         kt = self.task_covariance
         return float(kt[0, 1] / torch.sqrt(kt[0, 0] * kt[1, 1]))
+
+    def _engine_class(self):
+        if self.inference == "dense":
+            return DenseExactInference
+        has_outer = bool((self._train_task() == OUTER).any())
+        if self.inference == "structured":
+            if not has_outer:
+                raise ValueError("inference='structured' needs outer (task 1) observations")
+            return StructuredExactInference
+        return StructuredExactInference if has_outer and self.noise >= 1e-8 else DenseExactInference
 
     def _task_matrix(self) -> Tensor:
         x0 = self.train_inputs[0]

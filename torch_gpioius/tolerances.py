@@ -24,6 +24,8 @@ class Tolerances:
         log_chol_bounds: bounds on ``log L[0, 0]`` and ``log L[1, 1]`` where ``K_t = L L^T``; they keep the
             optimiser finite when the likelihood prefers a singular ``K_t`` (e.g. perfectly correlated tasks).
         normal_eps: gradient norm below which a normal is considered undefined.
+        structured_series: bound on the relative perturbation of the inner Schur complement from truncating
+            the tail series of the structured engine (``StructuredExactInference``).
     """
 
     jitter_start: float = 1e-10
@@ -33,6 +35,7 @@ class Tolerances:
     fit_max_iter: int = 200
     log_chol_bounds: tuple[float, float] = (-12.0, 12.0)
     normal_eps: float = 1e-12
+    structured_series: float = 1e-13
 
 
 tol = Tolerances()
