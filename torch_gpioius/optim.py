@@ -124,6 +124,10 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
             step[idx] = torch.linalg.solve(system, grad[idx])
             candidate = torch.minimum(torch.maximum(phi + step, lower), upper)
             decrement = float(grad @ (candidate - phi))
+            if shift == 0.0 and 0 <= decrement <= tol.fit_ftol * max(1.0, abs(f)):
+                # Newton-decrement stop: the pure Newton step predicts a gain below tolerance; near a
+                # non-degenerate maximum its error is quadratic in that gain, so take it without re-evaluating.
+                return FitResult(chol_params_to_task_covariance(candidate), f, pg_norm, it, True)
             f_new, g_new, h_new = evaluate(chol_params_to_task_covariance(candidate))
             if f_new >= f - 1e-12 * max(1.0, abs(f)) and math.isfinite(f_new):
                 break

@@ -16,12 +16,17 @@ any c. Inner rows enter through ``P = K_io U`` (one O(N_o^2) row per new inner p
 and the quadratic form ``r^T G^-1 r = sum_k rt_k^2 D_k + v^T S^-1 v`` with ``rt = U^T r_o`` and
 ``v = r_i - b P D rt``. S is symmetric positive definite with S >= s I (a Schur complement of G >= s I).
 
-**Head / tail split.** Forming T(c) costs N_i^2 N_o. Modes with small ``c lam`` ("tail") are summed by the
-convergent series ``1/(c lam + s) = (1/s) sum_j (-c lam / s)^j`` with precomputed ``M_j = P_T lam_T^j P_T^T``; the
-rest ("head") is summed exactly. The series is cut at the first J with
-``rho^(J+1) / (1 - rho) * tr(M_0) / s^2 <= tol.structured_series`` (``rho = c max(lam_T) / s``), a rigorous bound on
-the relative perturbation of S (since S >= s I); when no J <= ``J_MAX`` meets it the split is rebuilt for the
-current c. Nothing else is approximated.
+**Three-way split.** Forming T(c) costs N_i^2 N_o. Modes are split at the c of the last split:
+
+* low (``c lam < 0.15 s``): ``1/(c lam + s) = (1/s) sum_j (-c lam / s)^j``, with precomputed
+  ``M_j = P_L lam_L^j P_L^T``;
+* high (``c lam > s / 0.15``): ``1/(c lam + s) = sum_j (-s)^j / (c lam)^(j+1)``, with ``N_j = P_H lam_H^-(j+1) P_H^T``;
+* middle: summed exactly, O(N_i^2 |middle|).
+
+Each series is cut at the first J whose remainder bound, relative to S >= s I, is below ``tol.structured_series``:
+``rho^(J+1) / (1 - rho) * tr(M_0) / s^2`` (low, ``rho = c max(lam_L) / s``) and
+``rho^(J+1) / (1 - rho) * tr(N_0) / (c s)`` (high, ``rho = s / (c min(lam_H))``). When no J <= ``J_MAX`` meets a
+bound (c moved far since the split), the split is rebuilt for the current c. Nothing else is approximated.
 
 **Derivatives.** With S, dS/dp and d^2S/dp^2 as explicit N_i x N_i matrices (T, T', T'' from the head and the
 series), the exact gradient and Hessian of the log marginal likelihood in ``p = (a, b, c)`` cost O(N_i^2 |head| +
@@ -46,6 +51,47 @@ from .tolerances import tol
 __all__ = ["StructuredExactInference"]
 
 J_MAX = 40
+
+
+class _Series:
+    """Precomputed ``sum_k lam_k^e(j) p_k p_k^T`` for a set of modes, j = 0..J_MAX, grown row by row."""
+
+    def __init__(self, mask: Tensor, lam: Tensor, p: Tensor, exponent_sign: int, kind: dict):
+        self.mask = mask
+        self.sign = exponent_sign            # +1: lam^j (low series); -1: lam^-(j+1) (high series)
+        self.kind = kind
+        lm = lam[mask]
+        self.lam_extreme = float(lm.max()) if exponent_sign > 0 and len(lm) else (float(lm.min()) if len(lm) else 0.0)
+        j = torch.arange(J_MAX + 1, **kind).unsqueeze(1)
+        self.pows = lm ** j if exponent_sign > 0 else lm ** (-(j + 1))      # (J+1, |modes|)
+        pm = p[:, mask]
+        self.store = (pm.unsqueeze(0) * self.pows.unsqueeze(1)) @ pm.T if len(lm) else \
+            torch.zeros(J_MAX + 1, p.shape[0], p.shape[0], **kind)
+        self.size = p.shape[0]
+        self.trace0 = float(self.store[0].diagonal().sum()) if self.size else 0.0
+
+    @property
+    def empty(self) -> bool:
+        return not bool(self.mask.any())
+
+    def matrices(self) -> Tensor:
+        return self.store[:, :self.size, :self.size]
+
+    def append(self, p_new: Tensor, p_all: Tensor) -> None:
+        if self.empty:
+            self.size = p_all.shape[0]
+            return
+        new_rows = (p_new[:, self.mask].unsqueeze(0) * self.pows.unsqueeze(1)) @ p_all[:, self.mask].T
+        n_old, n_new = self.size, p_all.shape[0]
+        if n_new > self.store.shape[1]:  # amortised growth: copy only when the capacity doubles
+            cap = max(2 * self.store.shape[1], n_new, 16)
+            store = torch.zeros(J_MAX + 1, cap, cap, **self.kind)
+            store[:, :n_old, :n_old] = self.store[:, :n_old, :n_old]
+            self.store = store
+        self.store[:, n_old:n_new, :n_new] = new_rows
+        self.store[:, :n_old, n_old:n_new] = new_rows[:, :, :n_old].transpose(1, 2)
+        self.size = n_new
+        self.trace0 += float(new_rows[0, :, n_old:].diagonal().sum())
 
 
 class StructuredExactInference:
@@ -77,11 +123,10 @@ class StructuredExactInference:
         self.rt = self.u.T @ (self.yo - self.mean)
         self.kii = imq(self.xi, self.xi, self.theta)
         self.p = imq(self.xi, self.xo, self.theta) @ self.u if len(self.xi) else torch.zeros(0, len(self.xo), **kind)
-        self._head = None  # bool mask over modes
+        self._head = None  # bool mask of the modes summed exactly (the middle band)
+        self._low = None   # _Series of the low modes
+        self._high = None  # _Series of the high modes
         self._split_c = None
-        self._m_store = None  # (J_MAX + 1, capacity, capacity); M_j = _m_store[j, :N_i, :N_i]
-        self._m_size = 0
-        self.tr_m0 = 0.0
         self._invalidate()
 
     # ------------------------------------------------------------------ data
@@ -115,86 +160,83 @@ class StructuredExactInference:
         self.p = torch.cat([self.p, p_new])
         self.xi = torch.cat([self.xi, x])
         self.yi = torch.cat([self.yi, y])
-        if self.m_series is not None:
-            tail = ~self._head
-            pows = self.lam[tail] ** torch.arange(J_MAX + 1, **self._kind).unsqueeze(1)      # (J+1, T)
-            new_rows = (p_new[:, tail].unsqueeze(0) * pows.unsqueeze(1)) @ self.p[:, tail].T    # (J+1, k, N_i)
-            n_old, n_new = self._m_size, self._m_size + len(x)
-            if n_new > self._m_store.shape[1]:  # amortised growth: copy only when capacity doubles
-                cap = max(2 * self._m_store.shape[1], n_new, 16)
-                store = torch.zeros(J_MAX + 1, cap, cap, **self._kind)
-                store[:, :n_old, :n_old] = self._m_store[:, :n_old, :n_old]
-                self._m_store = store
-            self._m_store[:, n_old:n_new, :n_new] = new_rows
-            self._m_store[:, :n_old, n_old:n_new] = new_rows[:, :, :n_old].transpose(1, 2)
-            self._m_size = n_new
-            self.tr_m0 += float(new_rows[0, :, n_old:].diagonal().sum())
+        if self._low is not None:
+            self._low.append(p_new, self.p)
+            self._high.append(p_new, self.p)
         self._invalidate()
 
-    # ------------------------------------------------------------------ head / tail split
+    # ------------------------------------------------------------------ mode split
     def _split(self, c: float) -> None:
-        """Head = modes with c lam > 0.15 s (summed exactly); tail series matrices M_j for the rest."""
-        threshold = 0.15 * self.noise / max(c, 1e-300)
-        self._head = self.lam > threshold
+        """Low (c lam < 0.15 s), high (c lam > s / 0.15) series and the exact middle band, at this c."""
+        c = max(c, 1e-300)
+        low = c * self.lam < 0.15 * self.noise
+        high = c * self.lam > self.noise / 0.15
+        self._head = ~(low | high)
+        self._low = _Series(low, self.lam, self.p, +1, self._kind)
+        self._high = _Series(high, self.lam, self.p, -1, self._kind)
         self._split_c = c
-        tail = ~self._head
-        pt = self.p[:, tail]
-        pows = self.lam[tail] ** torch.arange(J_MAX + 1, **self._kind).unsqueeze(1)   # (J+1, T)
-        self._m_store = (pt.unsqueeze(0) * pows.unsqueeze(1)) @ pt.T if pt.shape[1] else \
-            torch.zeros(J_MAX + 1, self.n_inner, self.n_inner, **self._kind)
-        self._m_size = self.n_inner
-        self.tr_m0 = float(self._m_store[0].diagonal().sum())
 
     @property
     def m_series(self) -> Tensor | None:
-        """`(J_MAX + 1, N_i, N_i)` tail series matrices M_j = P_T diag(lam_T^j) P_T^T (None before the split)."""
-        if self._m_store is None:
-            return None
-        return self._m_store[:, :self._m_size, :self._m_size]
+        """`(J_MAX + 1, N_i, N_i)` low-mode series matrices M_j = P_L diag(lam_L^j) P_L^T (None before a split)."""
+        return None if self._low is None else self._low.matrices()
 
-    def _series_order(self, c: float) -> int | None:
-        """Smallest J meeting the truncation bound at c, or None if the split must be rebuilt."""
-        tail = ~self._head
-        if not bool(tail.any()) or self.tr_m0 == 0.0:
+    @staticmethod
+    def _order(rho: float, scale: float) -> int | None:
+        """Smallest J with rho^(J+1) / (1 - rho) * scale <= tol, or None if above J_MAX / rho >= 0.5."""
+        if scale == 0.0 or rho == 0.0:
             return 0
-        rho = c * float(self.lam[tail].max()) / self.noise
         if rho >= 0.5:
             return None
-        scale = self.tr_m0 / self.noise**2
-        target = tol.structured_series
-        if rho == 0.0:
-            return 0
-        j = math.ceil(math.log(target * (1 - rho) / scale) / math.log(rho)) - 1 if scale * rho / (1 - rho) > target \
-            else 0
-        return max(j, 0) if j <= J_MAX else None
+        target = tol.structured_series * (1 - rho) / scale
+        j = max(0, math.ceil(math.log(target) / math.log(rho)) - 1) if target < 1 else 0
+        return j if j <= J_MAX else None
 
-    def _t_matrices(self, c: float) -> tuple[Tensor, Tensor, Tensor]:
-        """T(c) = P D P^T and its first two c-derivatives, `(N_i, N_i)` each."""
-        if self._head is None:
-            self._split(c)
-        order = self._series_order(c)
-        if order is None:
-            self._split(c)
-            order = self._series_order(c)
-            assert order is not None, "structured engine: series bound cannot be met"
-        head = self._head
+    def _series_orders(self, c: float) -> tuple[int, int] | None:
         s = self.noise
-        lam_h = self.lam[head]
-        d = 1.0 / (c * lam_h + s)
-        ph = self.p[:, head]
-        t0 = (ph * d) @ ph.T
-        t1 = (ph * (-lam_h * d * d)) @ ph.T
-        t2 = (ph * (2 * lam_h * lam_h * d * d * d)) @ ph.T
-        if self.m_series is not None and order >= 0 and self.m_series.shape[1]:
-            j = torch.arange(order + 1, **self._kind)
-            sign = (-1.0) ** j
-            w0 = sign * c**j / s ** (j + 1)
-            w1 = sign * j * c ** (j - 1).clamp_min(0) / s ** (j + 1)
-            w2 = sign * j * (j - 1) * c ** (j - 2).clamp_min(0) / s ** (j + 1)
-            m = self.m_series[: order + 1]
-            t0 = t0 + torch.einsum("j,jik->ik", w0, m)
-            t1 = t1 + torch.einsum("j,jik->ik", w1, m)
-            t2 = t2 + torch.einsum("j,jik->ik", w2, m)
+        lo = 0 if self._low.empty else self._order(c * self._low.lam_extreme / s, self._low.trace0 / s**2)
+        hi = 0 if self._high.empty else self._order(s / (c * self._high.lam_extreme), self._high.trace0 / (c * s))
+        return None if lo is None or hi is None else (lo, hi)
+
+    def _t_matrices(self, c: float, derivatives: bool = True) -> tuple[Tensor, Tensor | None, Tensor | None]:
+        """T(c) = P D P^T and (with ``derivatives``) its first two c-derivatives, `(N_i, N_i)` each."""
+        orders = None if self._low is None else self._series_orders(c)
+        if orders is None:
+            self._split(c)
+            orders = self._series_orders(c)
+            assert orders is not None, "structured engine: series bound cannot be met"
+        s = self.noise
+        mid = self._head
+        lam_m = self.lam[mid]
+        d = 1.0 / (c * lam_m + s)
+        pm = self.p[:, mid]
+        t0 = (pm * d) @ pm.T
+        if not derivatives:
+            m = self._low.matrices()
+            for j in range(orders[0] + 1 if not self._low.empty else 0):
+                t0.add_(m[j], alpha=(-1.0 if j % 2 else 1.0) * c**j / s ** (j + 1))
+            n = self._high.matrices()
+            for j in range(orders[1] + 1 if not self._high.empty else 0):
+                t0.add_(n[j], alpha=(-s) ** j * c ** (-(j + 1)))
+            return t0, None, None
+        t1 = (pm * (-lam_m * d * d)) @ pm.T
+        t2 = (pm * (2 * lam_m * lam_m * d * d * d)) @ pm.T
+        # low modes: T = (1/s) sum_j (-c/s)^j M_j ; in-place axpys on the (strided) stores
+        m = self._low.matrices()
+        for j in range(orders[0] + 1 if not self._low.empty else 0):
+            sign = -1.0 if j % 2 else 1.0
+            t0.add_(m[j], alpha=sign * c**j / s ** (j + 1))
+            if j >= 1:
+                t1.add_(m[j], alpha=sign * j * c ** (j - 1) / s ** (j + 1))
+            if j >= 2:
+                t2.add_(m[j], alpha=sign * j * (j - 1) * c ** (j - 2) / s ** (j + 1))
+        # high modes: T = sum_j (-s)^j c^-(j+1) N_j
+        n = self._high.matrices()
+        for j in range(orders[1] + 1 if not self._high.empty else 0):
+            coef = (-s) ** j
+            t0.add_(n[j], alpha=coef * c ** (-(j + 1)))
+            t1.add_(n[j], alpha=-coef * (j + 1) * c ** (-(j + 2)))
+            t2.add_(n[j], alpha=coef * (j + 1) * (j + 2) * c ** (-(j + 3)))
         return t0, t1, t2
 
     # ------------------------------------------------------------------ factorisation
@@ -207,8 +249,8 @@ class StructuredExactInference:
         a, beta, c = float(b[0, 0]), float(b[0, 1]), float(b[1, 1])
         s = self.noise
         d_all = 1.0 / (c * self.lam + s)
-        t0, t1, t2 = self._t_matrices(c) if self.n_inner else (None, None, None)
-        cache = {"a": a, "beta": beta, "c": c, "d": d_all, "t": (t0, t1, t2)}
+        t0 = self._t_matrices(c, derivatives=False)[0] if self.n_inner else None
+        cache = {"a": a, "beta": beta, "c": c, "d": d_all, "t0": t0}
         if self.n_inner:
             smat = a * self.kii - beta * beta * t0
             smat.diagonal().add_(s)
@@ -271,7 +313,7 @@ class StructuredExactInference:
         h[2, 2] += -0.5 * (-(lam * lam * d * d).sum() + 2 * (rt * rt * lam * lam * d ** 3).sum())
         if not self.n_inner:
             return mll, g, h
-        t0, t1, t2 = f["t"]
+        t0, t1, t2 = self._t_matrices(f["c"])
         zero = torch.zeros_like(t0)
         s_1 = [self.kii, -2 * beta * t0, -beta * beta * t1]               # dS/dp_j
         s_2 = [[zero, zero, zero], [zero, -2 * t0, -2 * beta * t1], [zero, -2 * beta * t1, -beta * beta * t2]]

@@ -1,0 +1,173 @@
+"""Time one GPIOIS planning step: fast exact engine vs the naive per-step GPyTorch refit, in one run.
+
+A planning step = ingest one contact + 4 free-space points, re-learn K_t to convergence (warm start from the
+previous step), compute the next sliding direction (eq. 19) at the contact.
+
+(a) fast:  ``GPIOIS(inference="structured")``: ``add_observations`` -> ``fit()`` (Newton, analytic derivatives)
+           -> ``plan_direction``.
+(b) naive: a fresh GPyTorch ``ExactGP`` (IMQ x IndexKernel, exact Cholesky settings) on all data each step,
+           K_t learned by ``torch.optim.LBFGS`` (strong Wolfe) on ``ExactMarginalLogLikelihood`` to the same
+           gradient tolerance, warm-started from the previous K_t; direction from the GPyTorch posterior by
+           autograd.
+
+Data: 3-D, outer points on an ellipsoid (half on it, y = 0; half 5 cm outside, y = 1), inner contacts on a
+smaller ellipsoid with 20 % free space; theta = 0.15, sigma^2 = 0.08 (the paper's 3-D settings).
+Prints medians, the ratio (b)/(a), the one-time setup cost, and the largest disagreement between (a) and (b).
+
+    python benchmarks/planning_step.py                    # N_outer 500, 2000, 8000 x N_inner 50, 300
+    python benchmarks/planning_step.py --outer 500 --inner 50 --steps 3   # quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import platform
+import statistics
+import time
+
+import gpytorch
+import numpy as np
+import torch
+
+import torch_gpioius as tg
+from torch_gpioius.planning import plan_direction
+
+THETA, NOISE, STEP = 0.15, 0.08, 0.01
+
+
+def make_data(n_outer: int, n_inner_total: int, seed: int = 0):
+    rng = np.random.default_rng(seed)
+
+    def ellipsoid(n, radii):
+        v = rng.normal(size=(n, 3))
+        return v / np.linalg.norm(v, axis=1, keepdims=True) * np.asarray(radii)
+
+    xo = np.concatenate([ellipsoid(n_outer // 2, (0.25, 0.18, 0.3)),
+                         ellipsoid(n_outer - n_outer // 2, (0.30, 0.23, 0.35))])
+    yo = np.r_[np.zeros(n_outer // 2), np.ones(n_outer - n_outer // 2)]
+    # inner stream: groups of 1 contact (y = 0) + 4 free-space points 3 cm outside (y = 1)
+    contacts = ellipsoid(n_inner_total // 5, (0.2, 0.14, 0.25))
+    xi, yi = [], []
+    for c in contacts:
+        xi.append(c[None]), yi.append([0.0])
+        free = c * (1 + 0.03 / np.linalg.norm(c)) + 0.01 * rng.normal(size=(4, 3))
+        xi.append(free), yi.append([1.0] * 4)
+    return (torch.tensor(xo), torch.tensor(yo), torch.tensor(np.concatenate(xi)), torch.tensor(np.concatenate(yi)))
+
+
+def naive_step(x, y, t, kt_init, contact):
+    """Per-step GPyTorch refit with L-BFGS; returns K_t, MLL, mu, V at contact, direction."""
+    model = tg.GPIOIS(x, y, t, theta=THETA, noise=NOISE, task_covariance=kt_init, inference="dense")
+    model.train()
+    mll = gpytorch.mlls.ExactMarginalLogLikelihood(model.likelihood, model)
+    params = [model.task_covar_module.covar_factor]
+    n = len(y)
+    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=200, tolerance_grad=tg.tol.fit_gtol / n,
+                            tolerance_change=1e-14, history_size=20, line_search_fn="strong_wolfe")
+
+    def closure():
+        opt.zero_grad()
+        with tg.exact_arithmetic():
+            loss = -mll(model(*model.train_inputs), model.train_targets)
+        loss.backward()
+        return loss
+
+    for _ in range(5):
+        loss = opt.step(closure)
+        g = params[0].grad
+        if g is not None and float(g.abs().max()) <= tg.tol.fit_gtol / n:
+            break
+    model.eval()
+    xq = contact.reshape(1, -1).clone().requires_grad_(True)
+    with tg.exact_arithmetic():
+        post = model(xq, 0)
+        mean, var = post.mean, post.variance
+    g_mu, = torch.autograd.grad(mean.sum(), xq, retain_graph=True)
+    g_v, = torch.autograd.grad(var.sum(), xq)
+    nrm = g_mu[0] / g_mu[0].norm()
+    pg = g_v[0] - (g_v[0] @ nrm) * nrm
+    direction = STEP * pg / pg.norm()
+    return (model.task_covariance, -float(loss) * n, float(mean), float(var), direction.detach())
+
+
+def run(n_outer: int, n_inner: int, steps: int, naive: bool):
+    xo, yo, xi_all, yi_all = make_data(n_outer, n_inner + 5 * (steps + 1))
+    t_o = torch.ones(n_outer, dtype=torch.long)
+    t0 = time.perf_counter()
+    model = tg.GPIOIS(torch.cat([xi_all[:n_inner], xo]), torch.cat([yi_all[:n_inner], yo]),
+                      torch.cat([torch.zeros(n_inner, dtype=torch.long), t_o]), theta=THETA, noise=NOISE,
+                      inference="structured")
+    model._inference()
+    t_eig = time.perf_counter() - t0
+    model.fit()
+    t_setup = time.perf_counter() - t0
+    fast_times, naive_times, diffs = [], [], []
+    kt_prev = model.task_covariance
+    for s in range(steps):
+        lo = n_inner + 5 * s
+        new_x, new_y = xi_all[lo:lo + 5], yi_all[lo:lo + 5]
+        contact = new_x[0]
+        t1 = time.perf_counter()
+        model.add_observations(new_x, new_y, 0)
+        model.fit()
+        plan = plan_direction(model, contact, step=STEP)
+        fast_times.append(time.perf_counter() - t1)
+        if naive:
+            x = torch.cat([xi_all[:lo + 5], xo])
+            y = torch.cat([yi_all[:lo + 5], yo])
+            t = torch.cat([torch.zeros(lo + 5, dtype=torch.long), t_o])
+            t2 = time.perf_counter()
+            kt_n, mll_n, mu_n, v_n, d_n = naive_step(x, y, t, kt_prev, contact)
+            naive_times.append(time.perf_counter() - t2)
+            mu_f, v_f = model.predict(contact[None])
+            kt_f = model.task_covariance
+            cos = float(plan.direction @ d_n) / STEP**2
+            diffs.append({
+                "K_t": float((kt_f - kt_n).abs().max() / kt_n.abs().max()),
+                "MLL": abs(float(model.log_marginal_likelihood()) - mll_n) / abs(mll_n),
+                "mu": abs(float(mu_f) - mu_n) / max(abs(mu_n), 1e-12),
+                "V": abs(float(v_f) - v_n) / v_n,
+                "dir_rad": math.acos(max(-1.0, min(1.0, cos))),
+            })
+            kt_prev = kt_n
+        else:
+            kt_prev = model.task_covariance
+    return {"n_outer": n_outer, "n_inner": n_inner, "eig_s": t_eig, "setup_s": t_setup,
+            "fast_ms": 1e3 * statistics.median(fast_times),
+            "naive_ms": 1e3 * statistics.median(naive_times) if naive_times else float("nan"),
+            "diff": {k: max(d[k] for d in diffs) for k in diffs[0]} if diffs else None,
+            "head": int(model._inference()._head.sum()), "n": len(model.train_targets)}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--outer", type=int, nargs="+", default=[500, 2000, 8000])
+    parser.add_argument("--inner", type=int, nargs="+", default=[50, 300])
+    parser.add_argument("--steps", type=int, default=7, help="planning steps timed per configuration")
+    parser.add_argument("--naive-max-outer", type=int, default=2000,
+                        help="skip the naive side above this N_outer (it takes minutes per step there)")
+    args = parser.parse_args()
+    print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__} "
+          f"({torch.get_num_threads()} threads), gpytorch {gpytorch.__version__}, float64")
+    print("| N_outer | N_inner | setup: eigh + first fit [s] | fast step [ms] | naive step [ms] | ratio | "
+          "max rel. diff K_t / MLL / mu / V | max dir. diff [rad] | head modes |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for n_outer in args.outer:
+        for n_inner in args.inner:
+            r = run(n_outer, n_inner, args.steps, naive=n_outer <= args.naive_max_outer)
+            if r["diff"]:
+                d = r["diff"]
+                diff = f"{d['K_t']:.1e} / {d['MLL']:.1e} / {d['mu']:.1e} / {d['V']:.1e}"
+                ddir = f"{d['dir_rad']:.1e}"
+                naive = f"{r['naive_ms']:.0f}"
+                ratio = f"{r['naive_ms'] / r['fast_ms']:.0f}x"
+            else:
+                diff = ddir = naive = ratio = "skipped (minutes per step)"
+            print(f"| {n_outer} | {n_inner} | {r['eig_s']:.2f} + {r['setup_s'] - r['eig_s']:.2f} | "
+                  f"{r['fast_ms']:.1f} | {naive} | {ratio} | {diff} | {ddir} | {r['head']} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
