@@ -84,6 +84,17 @@ def _chain(phi: Tensor, g: Tensor, h: Tensor) -> tuple[Tensor, Tensor]:
     return grad, hess
 
 
+def _evaluate_trial(evaluate, phi: Tensor):
+    """Evaluate a trial point; a numerical failure there (an extreme K_t) counts as a rejected step."""
+    try:
+        f, g, h = evaluate(chol_params_to_task_covariance(phi))
+    except (torch.linalg.LinAlgError, ArithmeticError):
+        return -math.inf, None, None
+    if not (math.isfinite(f) and bool(torch.isfinite(g).all()) and bool(torch.isfinite(h).all())):
+        return -math.inf, None, None
+    return f, g, h
+
+
 def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0: Tensor) -> FitResult:
     """Maximise the marginal likelihood over K_t by projected, damped Newton steps.
 
@@ -128,7 +139,7 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
                 # Newton-decrement stop: the pure Newton step predicts a gain below tolerance; near a
                 # non-degenerate maximum its error is quadratic in that gain, so take it without re-evaluating.
                 return FitResult(chol_params_to_task_covariance(candidate), f, pg_norm, it, True)
-            f_new, g_new, h_new = evaluate(chol_params_to_task_covariance(candidate))
+            f_new, g_new, h_new = _evaluate_trial(evaluate, candidate)
             if f_new >= f - 1e-12 * max(1.0, abs(f)) and math.isfinite(f_new):
                 break
             shift = max(10.0 * shift, 1e-6 * max(1.0, abs(f)))

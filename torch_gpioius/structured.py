@@ -50,48 +50,69 @@ from .tolerances import tol
 
 __all__ = ["StructuredExactInference"]
 
-J_MAX = 40
+J_MAX = 24
 
 
-class _Series:
-    """Precomputed ``sum_k lam_k^e(j) p_k p_k^T`` for a set of modes, j = 0..J_MAX, grown row by row."""
+class _SeriesStore:
+    """Series matrices of the low and high modes in one contiguous `(2 (J_MAX + 1), cap * cap)` block.
 
-    def __init__(self, mask: Tensor, lam: Tensor, p: Tensor, exponent_sign: int, kind: dict):
-        self.mask = mask
-        self.sign = exponent_sign            # +1: lam^j (low series); -1: lam^-(j+1) (high series)
-        self.kind = kind
-        lm = lam[mask]
-        self.lam_extreme = float(lm.max()) if exponent_sign > 0 and len(lm) else (float(lm.min()) if len(lm) else 0.0)
+    Rows 0..J_MAX hold ``M_j = P_L diag(lam_L^j) P_L^T``, rows J_MAX+1.. hold ``N_j = P_H diag(lam_H^-(j+1)) P_H^T``,
+    each an N_i x N_i matrix in the top-left of a cap x cap square. Any weighted sum of them is one small GEMM
+    that reads the block once; rows for new inner points are written in place (capacity grows in chunks).
+    """
+
+    CHUNK = 24
+
+    def __init__(self, low: Tensor, high: Tensor, lam: Tensor, p: Tensor, kind: dict):
+        self.low, self.high, self.kind = low, high, kind
         j = torch.arange(J_MAX + 1, **kind).unsqueeze(1)
-        self.pows = lm ** j if exponent_sign > 0 else lm ** (-(j + 1))      # (J+1, |modes|)
-        pm = p[:, mask]
-        self.store = (pm.unsqueeze(0) * self.pows.unsqueeze(1)) @ pm.T if len(lm) else \
-            torch.zeros(J_MAX + 1, p.shape[0], p.shape[0], **kind)
-        self.size = p.shape[0]
-        self.trace0 = float(self.store[0].diagonal().sum()) if self.size else 0.0
+        one = torch.ones_like(lam)
+        self.pows = torch.cat([torch.where(low, lam, one) ** j * low,                  # lam^j on low modes
+                               torch.where(high, lam, one) ** (-(j + 1)) * high])     # lam^-(j+1) on high modes
+        self.lam_low_max = float(lam[low].max()) if bool(low.any()) else 0.0
+        self.lam_high_min = float(lam[high].min()) if bool(high.any()) else 0.0
+        self.modes = low | high
+        n = p.shape[0]
+        self.cap = n + self.CHUNK
+        self.block = torch.zeros(2 * (J_MAX + 1), self.cap * self.cap, **kind)
+        self.size = 0
+        self.trace_low = self.trace_high = 0.0
+        if n:
+            self._write(p, p, 0)
+        self.size = n
 
-    @property
-    def empty(self) -> bool:
-        return not bool(self.mask.any())
+    def _square(self) -> Tensor:
+        return self.block.view(-1, self.cap, self.cap)
 
-    def matrices(self) -> Tensor:
-        return self.store[:, :self.size, :self.size]
+    def _write(self, p_new: Tensor, p_all: Tensor, n_old: int) -> None:
+        pm_new, pm_all = p_new[:, self.modes], p_all[:, self.modes]
+        rows = (pm_new.unsqueeze(0) * self.pows[:, self.modes].unsqueeze(1)) @ pm_all.T   # (2(J+1), k, n_all)
+        sq = self._square()
+        n_all = p_all.shape[0]
+        sq[:, n_old:n_all, :n_all] = rows
+        sq[:, :n_old, n_old:n_all] = rows[:, :, :n_old].transpose(1, 2)
+        diag = rows[:, :, n_old:].diagonal(dim1=1, dim2=2).sum(-1)
+        self.trace_low += float(diag[0])
+        self.trace_high += float(diag[J_MAX + 1])
 
     def append(self, p_new: Tensor, p_all: Tensor) -> None:
-        if self.empty:
-            self.size = p_all.shape[0]
-            return
-        new_rows = (p_new[:, self.mask].unsqueeze(0) * self.pows.unsqueeze(1)) @ p_all[:, self.mask].T
         n_old, n_new = self.size, p_all.shape[0]
-        if n_new > self.store.shape[1]:  # amortised growth: copy only when the capacity doubles
-            cap = max(2 * self.store.shape[1], n_new, 16)
-            store = torch.zeros(J_MAX + 1, cap, cap, **self.kind)
-            store[:, :n_old, :n_old] = self.store[:, :n_old, :n_old]
-            self.store = store
-        self.store[:, n_old:n_new, :n_new] = new_rows
-        self.store[:, :n_old, n_old:n_new] = new_rows[:, :, :n_old].transpose(1, 2)
+        if n_new > self.cap:
+            cap = n_new + self.CHUNK
+            block = torch.zeros(2 * (J_MAX + 1), cap * cap, **self.kind)
+            block.view(-1, cap, cap)[:, :n_old, :n_old] = self._square()[:, :n_old, :n_old]
+            self.block, self.cap = block, cap
+        self._write(p_new, p_all, n_old)
         self.size = n_new
-        self.trace0 += float(new_rows[0, :, n_old:].diagonal().sum())
+
+    def combine(self, coefs: Tensor, orders: tuple[int, int]) -> Tensor:
+        """`(r, 2(J+1))` coefficients -> `(r, N_i, N_i)` weighted sums; reads only rows up to the orders used."""
+        lo, hi = orders[0] + 1, J_MAX + 1 + orders[1] + 1
+        out = coefs[:, :lo] @ self.block[:lo] + coefs[:, J_MAX + 1:hi] @ self.block[J_MAX + 1:hi]
+        return out.view(-1, self.cap, self.cap)[:, :self.size, :self.size]
+
+    def matrices(self) -> Tensor:
+        return self._square()[: J_MAX + 1, :self.size, :self.size]
 
 
 class StructuredExactInference:
@@ -123,9 +144,8 @@ class StructuredExactInference:
         self.rt = self.u.T @ (self.yo - self.mean)
         self.kii = imq(self.xi, self.xi, self.theta)
         self.p = imq(self.xi, self.xo, self.theta) @ self.u if len(self.xi) else torch.zeros(0, len(self.xo), **kind)
-        self._head = None  # bool mask of the modes summed exactly (the middle band)
-        self._low = None   # _Series of the low modes
-        self._high = None  # _Series of the high modes
+        self._head = None    # bool mask of the modes summed exactly (the middle band)
+        self._series = None  # _SeriesStore of the low and high modes
         self._split_c = None
         self._invalidate()
 
@@ -160,9 +180,8 @@ class StructuredExactInference:
         self.p = torch.cat([self.p, p_new])
         self.xi = torch.cat([self.xi, x])
         self.yi = torch.cat([self.yi, y])
-        if self._low is not None:
-            self._low.append(p_new, self.p)
-            self._high.append(p_new, self.p)
+        if self._series is not None:
+            self._series.append(p_new, self.p)
         self._invalidate()
 
     # ------------------------------------------------------------------ mode split
@@ -172,14 +191,13 @@ class StructuredExactInference:
         low = c * self.lam < 0.15 * self.noise
         high = c * self.lam > self.noise / 0.15
         self._head = ~(low | high)
-        self._low = _Series(low, self.lam, self.p, +1, self._kind)
-        self._high = _Series(high, self.lam, self.p, -1, self._kind)
+        self._series = _SeriesStore(low, high, self.lam, self.p, self._kind)
         self._split_c = c
 
     @property
     def m_series(self) -> Tensor | None:
         """`(J_MAX + 1, N_i, N_i)` low-mode series matrices M_j = P_L diag(lam_L^j) P_L^T (None before a split)."""
-        return None if self._low is None else self._low.matrices()
+        return None if self._series is None else self._series.matrices()
 
     @staticmethod
     def _order(rho: float, scale: float) -> int | None:
@@ -193,50 +211,42 @@ class StructuredExactInference:
         return j if j <= J_MAX else None
 
     def _series_orders(self, c: float) -> tuple[int, int] | None:
-        s = self.noise
-        lo = 0 if self._low.empty else self._order(c * self._low.lam_extreme / s, self._low.trace0 / s**2)
-        hi = 0 if self._high.empty else self._order(s / (c * self._high.lam_extreme), self._high.trace0 / (c * s))
+        s, st = self.noise, self._series
+        lo = self._order(c * st.lam_low_max / s, st.trace_low / s**2)
+        hi = self._order(s / (c * st.lam_high_min), st.trace_high / (c * s)) if st.lam_high_min > 0 else 0
         return None if lo is None or hi is None else (lo, hi)
 
-    def _t_matrices(self, c: float, derivatives: bool = True) -> tuple[Tensor, Tensor | None, Tensor | None]:
-        """T(c) = P D P^T and (with ``derivatives``) its first two c-derivatives, `(N_i, N_i)` each."""
-        orders = None if self._low is None else self._series_orders(c)
+    def _t_matrices(self, c: float) -> tuple[Tensor, Tensor, Tensor]:
+        """T(c) = P D P^T and its first two c-derivatives, `(N_i, N_i)` each."""
+        orders = None if self._series is None else self._series_orders(c)
         if orders is None:
             self._split(c)
             orders = self._series_orders(c)
-            assert orders is not None, "structured engine: series bound cannot be met"
+            if orders is None:
+                raise FloatingPointError(f"structured engine: no series order <= {J_MAX} meets the bound at "
+                                         f"K_t[1,1] = {c:.3g}")
         s = self.noise
         mid = self._head
         lam_m = self.lam[mid]
         d = 1.0 / (c * lam_m + s)
         pm = self.p[:, mid]
-        t0 = (pm * d) @ pm.T
-        if not derivatives:
-            m = self._low.matrices()
-            for j in range(orders[0] + 1 if not self._low.empty else 0):
-                t0.add_(m[j], alpha=(-1.0 if j % 2 else 1.0) * c**j / s ** (j + 1))
-            n = self._high.matrices()
-            for j in range(orders[1] + 1 if not self._high.empty else 0):
-                t0.add_(n[j], alpha=(-s) ** j * c ** (-(j + 1)))
-            return t0, None, None
-        t1 = (pm * (-lam_m * d * d)) @ pm.T
-        t2 = (pm * (2 * lam_m * lam_m * d * d * d)) @ pm.T
-        # low modes: T = (1/s) sum_j (-c/s)^j M_j ; in-place axpys on the (strided) stores
-        m = self._low.matrices()
-        for j in range(orders[0] + 1 if not self._low.empty else 0):
+        # coefficients of the truncated series: low T = (1/s) sum_j (-c/s)^j M_j, high T = sum_j (-s)^j c^-(j+1) N_j
+        coefs = torch.zeros(3, 2 * (J_MAX + 1), dtype=torch.float64)
+        st = self._series
+        for j in range(orders[0] + 1 if bool(st.low.any()) else 0):
             sign = -1.0 if j % 2 else 1.0
-            t0.add_(m[j], alpha=sign * c**j / s ** (j + 1))
-            if j >= 1:
-                t1.add_(m[j], alpha=sign * j * c ** (j - 1) / s ** (j + 1))
-            if j >= 2:
-                t2.add_(m[j], alpha=sign * j * (j - 1) * c ** (j - 2) / s ** (j + 1))
-        # high modes: T = sum_j (-s)^j c^-(j+1) N_j
-        n = self._high.matrices()
-        for j in range(orders[1] + 1 if not self._high.empty else 0):
-            coef = (-s) ** j
-            t0.add_(n[j], alpha=coef * c ** (-(j + 1)))
-            t1.add_(n[j], alpha=-coef * (j + 1) * c ** (-(j + 2)))
-            t2.add_(n[j], alpha=coef * (j + 1) * (j + 2) * c ** (-(j + 3)))
+            coefs[0, j] = sign * c**j / s ** (j + 1)
+            coefs[1, j] = sign * j * c ** (j - 1) / s ** (j + 1) if j >= 1 else 0.0
+            coefs[2, j] = sign * j * (j - 1) * c ** (j - 2) / s ** (j + 1) if j >= 2 else 0.0
+        for j in range(orders[1] + 1 if bool(st.high.any()) else 0):   # empty series: no inf * 0 = NaN
+            k, coef = J_MAX + 1 + j, (-s) ** j
+            coefs[0, k] = coef * c ** (-(j + 1))
+            coefs[1, k] = -coef * (j + 1) * c ** (-(j + 2))
+            coefs[2, k] = coef * (j + 1) * (j + 2) * c ** (-(j + 3))
+        t = self._series.combine(coefs.to(**self._kind), orders)
+        t0 = t[0] + (pm * d) @ pm.T
+        t1 = t[1] + (pm * (-lam_m * d * d)) @ pm.T
+        t2 = t[2] + (pm * (2 * lam_m * lam_m * d * d * d)) @ pm.T
         return t0, t1, t2
 
     # ------------------------------------------------------------------ factorisation
@@ -249,8 +259,9 @@ class StructuredExactInference:
         a, beta, c = float(b[0, 0]), float(b[0, 1]), float(b[1, 1])
         s = self.noise
         d_all = 1.0 / (c * self.lam + s)
-        t0 = self._t_matrices(c, derivatives=False)[0] if self.n_inner else None
-        cache = {"a": a, "beta": beta, "c": c, "d": d_all, "t0": t0}
+        t = self._t_matrices(c) if self.n_inner else None
+        t0 = t[0] if t is not None else None
+        cache = {"a": a, "beta": beta, "c": c, "d": d_all, "t": t}
         if self.n_inner:
             smat = a * self.kii - beta * beta * t0
             smat.diagonal().add_(s)
@@ -263,7 +274,7 @@ class StructuredExactInference:
         else:
             cache.update(alpha_i=torch.zeros(0, **self._kind))
             alpha_rot = d_all * self.rt
-        cache["alpha_o"] = self.u @ alpha_rot
+        cache["alpha_rot"] = alpha_rot          # outer weights in the rotated basis (U^T alpha_o)
         self._cache, self._key = cache, key
         return cache
 
@@ -277,8 +288,8 @@ class StructuredExactInference:
             return torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
         b0, b1, beta = b[task, 0], b[task, 1], f["beta"]
         k_o = imq(xq, self.xo, self.theta)
-        mean = self.mean + b1 * (k_o @ f["alpha_o"])
         w = k_o @ self.u                                  # (m, N_o) rotated outer kernel vectors
+        mean = self.mean + b1 * (w @ f["alpha_rot"])
         quad = b1 * b1 * (w * w * f["d"]).sum(-1)
         if self.n_inner:
             k_i = imq(xq, self.xi, self.theta)
@@ -313,7 +324,7 @@ class StructuredExactInference:
         h[2, 2] += -0.5 * (-(lam * lam * d * d).sum() + 2 * (rt * rt * lam * lam * d ** 3).sum())
         if not self.n_inner:
             return mll, g, h
-        t0, t1, t2 = self._t_matrices(f["c"])
+        t0, t1, t2 = f["t"]
         zero = torch.zeros_like(t0)
         s_1 = [self.kii, -2 * beta * t0, -beta * beta * t1]               # dS/dp_j
         s_2 = [[zero, zero, zero], [zero, -2 * t0, -2 * beta * t1], [zero, -2 * beta * t1, -beta * beta * t2]]
