@@ -31,7 +31,7 @@ def test_circle_exploration_converges(mode):
     scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0),
                     name="circle")
     trace = tg.explore(scene, mode=mode, max_steps=120)
-    assert trace.terminated == "winding"
+    assert trace.terminated == "once-around"
     assert trace.hausdorff[-1] < 0.02
     # 2 pi r = 0.63 m: going once around should not take much more than the perimeter
     assert 0.5 < trace.travel[-1] < 1.0

@@ -58,10 +58,32 @@ def test_learn_theta_in_the_gpytorch_idiom():
     m.train()
     for _ in range(30):
         opt.zero_grad()
-        with tg.exact_arithmetic():
+        with tg.exact_arithmetic():   # backward inside too: linear_operator reads the settings there
             loss = -mll(m(m.train_inputs[0]), m.train_targets)
-        loss.backward()
+            loss.backward()
         opt.step()
     assert m.theta != pytest.approx(0.02)
     assert float(m.log_marginal_likelihood()) > start
     del rng
+
+
+def test_gpytorch_gradients_exact_only_inside_context():
+    """Above GPyTorch's max_cholesky_size (800), gradients of model(x) are exact only if backward runs inside
+    tg.exact_arithmetic(); model.predict is exact wherever it is differentiated (finite differences as reference)."""
+    rng = np.random.default_rng(7)
+    n = 820
+    x = rng.uniform(-0.5, 0.5, (n, 3))
+    y = (rng.uniform(size=n) > 0.5).astype(float)
+    m = tg.GPIS(torch.tensor(x), torch.tensor(y), theta=0.15, noise=0.08).eval()
+    q = torch.tensor([[0.05, -0.1, 0.2]], dtype=torch.float64)
+    eps = 1e-6
+    fd = np.array([(float(m.predict(q + e)[1]) - float(m.predict(q - e)[1])) / (2 * eps)
+                   for e in torch.eye(3, dtype=torch.float64) * eps])
+    xq = q.clone().requires_grad_(True)
+    grad_predict, = torch.autograd.grad(m.predict(xq)[1].sum(), xq)
+    np.testing.assert_allclose(grad_predict[0].numpy(), fd, rtol=1e-6, atol=1e-8)
+    xq = q.clone().requires_grad_(True)
+    with tg.exact_arithmetic():
+        var = m(xq).variance
+        grad_inside, = torch.autograd.grad(var.sum(), xq)
+    np.testing.assert_allclose(grad_inside[0].numpy(), fd, rtol=1e-6, atol=1e-8)

@@ -55,7 +55,7 @@ class Trace:
         contacts: `(n, 2)` contact positions [m].
         model: the final fitted model (``GPIOIS`` or ``GPIS``).
         step_time: `(n,)` wall time of each planning step (plan + ingest + re-learn) [s].
-        terminated: "winding" (went once around) or "max_steps".
+        terminated: "once-around" (``gone_around``) or "max_steps".
     """
 
     mode: str
@@ -299,7 +299,7 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         record(travel, dt)
         bar.update(1)
         if len(contacts) > min_steps and gone_around(np.asarray(contacts), centre[0], closure_gap):
-            terminated = "winding"
+            terminated = "once-around"
             break
     bar.close()
     return Trace(mode=mode, scene_name=scene.name, hausdorff=np.asarray(rec["h"]), uncertainty=np.asarray(rec["u"]),
