@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import torch_gpioius as tg
-from torch_gpioius.exploration import winding_angle
+from torch_gpioius.exploration import gone_around, largest_uncovered_gap
 from torch_gpioius.sim import Scene2D
 
 
@@ -13,16 +13,20 @@ def _polygon_circle(r, n=72, c=(0.0, 0.0)):
     return np.stack([c[0] + r * np.cos(a), c[1] + r * np.sin(a)], -1)
 
 
-def test_winding_angle():
-    a = np.linspace(0, 2 * np.pi, 50)
-    loop = np.stack([np.cos(a), np.sin(a)], -1)
-    assert winding_angle(loop, centre=[0, 0]) == pytest.approx(2 * np.pi)
-    assert winding_angle(loop[::-1], centre=[0, 0]) == pytest.approx(-2 * np.pi)
-    assert abs(winding_angle(loop[:30], centre=[0, 0])) < 2 * np.pi - 0.5
-    # three sides of a square seen from its centre: 3/4 of a turn, far from 2 pi
+def test_gone_around_and_largest_gap():
+    a = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    loop = 0.1 * np.stack([np.cos(a), np.sin(a)], -1)
+    assert gone_around(loop, np.zeros(2), max_gap=0.05)
+    angle, chord = largest_uncovered_gap(loop, np.zeros(2))
+    assert angle == pytest.approx(2 * np.pi / 60) and chord == pytest.approx(0.2 * np.sin(np.pi / 60))
+    # three sides of a square seen from its centre: a quarter turn unvisited, chord = the side
     u = np.concatenate([np.linspace([-1, 1], [-1, -1], 20), np.linspace([-1, -1], [1, -1], 20),
-                        np.linspace([1, -1], [1, 1], 20)])
-    assert abs(winding_angle(u, centre=[0, 0])) == pytest.approx(1.5 * np.pi, rel=1e-6)
+                        np.linspace([1, -1], [1, 1], 20)]) * 0.1
+    angle, chord = largest_uncovered_gap(u, np.zeros(2))
+    assert angle == pytest.approx(np.pi / 2) and chord == pytest.approx(0.2)
+    assert not gone_around(u, np.zeros(2), max_gap=0.05)
+    assert not gone_around(loop[:50], np.zeros(2), max_gap=0.05)   # a 60 degree gap, chord 10 cm
+    assert not gone_around(loop, None, max_gap=0.05)               # no estimated interior yet
 
 
 @pytest.mark.parametrize("mode", ["tactile", "visual-tactile"])

@@ -16,7 +16,7 @@ from .metrics import hausdorff_distance, uncertainty_measure
 from .planning import ZeroPenalty, plan_direction
 from .surfaces import closed_curves, evaluate_grid, zero_level_curves
 
-__all__ = ["ObservationPolicy", "Trace", "explore", "gone_around", "largest_uncovered_gap", "winding_angle"]
+__all__ = ["ObservationPolicy", "Trace", "explore", "gone_around", "largest_uncovered_gap"]
 
 MODES = ("visual-tactile", "tactile")
 
@@ -56,6 +56,8 @@ class Trace:
         model: the final fitted model (``GPIOIS`` or ``GPIS``).
         step_time: `(n,)` wall time of each planning step (plan + ingest + re-learn) [s].
         terminated: "once-around" (``gone_around``) or "max_steps".
+        task_covariance: `(n, 2, 2)` learned K_t per record (NaN in tactile mode).
+        retracted: free-space samples removed because a later contact landed within the margin.
     """
 
     mode: str
@@ -70,6 +72,7 @@ class Trace:
     step_time: np.ndarray
     terminated: str
     task_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
+    retracted: int = 0
 
     @property
     def n_steps(self) -> int:
@@ -84,22 +87,6 @@ class Trace:
                         "similarity": float(self.similarity[i]), "contact_x": float(self.contacts[i, 0]),
                         "contact_y": float(self.contacts[i, 1]), "step_time_s": float(self.step_time[i])})
         return out
-
-
-def winding_angle(points: np.ndarray, centre: np.ndarray | None = None) -> float:
-    """Total signed angle [rad] swept by a path of points about ``centre`` (default: the points' mean).
-
-    Sum of the wrapped angle increments of consecutive points seen from ``centre``: +-2 pi for a path that
-    goes once around it.
-    """
-    p = np.asarray(points, dtype=np.float64)
-    if len(p) < 3:
-        return 0.0
-    rel = p - (p.mean(axis=0) if centre is None else np.asarray(centre, dtype=np.float64))
-    ang = np.arctan2(rel[:, 1], rel[:, 0])
-    inc = np.diff(ang)
-    inc = (inc + np.pi) % (2 * np.pi) - np.pi
-    return float(inc.sum())
 
 
 def largest_uncovered_gap(points: np.ndarray, centre: np.ndarray) -> tuple[float, float]:
@@ -305,4 +292,4 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
     return Trace(mode=mode, scene_name=scene.name, hausdorff=np.asarray(rec["h"]), uncertainty=np.asarray(rec["u"]),
                  similarity=np.asarray(rec["s"]), travel=np.asarray(rec["travel"]), path=np.asarray(path),
                  contacts=np.asarray(contacts), model=model, step_time=np.asarray(rec["time"]),
-                 terminated=terminated, task_covariance=np.asarray(rec["kt"]))
+                 terminated=terminated, task_covariance=np.asarray(rec["kt"]), retracted=retracted)

@@ -148,9 +148,4 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         damping = shift / 10.0 if shift > 0 else 0.0
         phi, f = candidate, f_new
         grad, hess = _chain(phi, g_new, h_new)
-        if shift == 0.0 and 0 <= decrement <= tol.fit_ftol * max(1.0, abs(f)):
-            pg = torch.where(free, grad, torch.zeros_like(grad))
-            pg_norm = float(pg.abs().max())
-            converged = True
-            break
     return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged)
