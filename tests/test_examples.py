@@ -1,0 +1,20 @@
+"""Examples run in CI in their smoke form (CI=1), as a user would run them."""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_fit_two_shapes_example(tmp_path):
+    env = dict(os.environ, CI="1")
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / "fit_two_shapes.py"), "--out", str(tmp_path)],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "fit_two_shapes.png").stat().st_size > 0
+    lines = {line.split()[0]: line for line in out.stdout.splitlines() if line.startswith(("A ", "D "))}
+    # the printed similarity table has both pairs and all four observation sets
+    assert set(lines) == {"A", "D"}
+    assert all(line.count("rho") == 4 for line in lines.values())
