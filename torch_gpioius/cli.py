@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 __all__ = ["main"]
 
@@ -14,7 +15,7 @@ def _simulate(args: argparse.Namespace) -> int:
     objects = ["A", "B", "C", "D"] if args.object == "all" else [args.object]
     max_steps = 12 if args.smoke else args.max_steps
     result = run_study(objects, out=args.out, max_steps=max_steps, progress=not args.quiet)
-    print((__import__("pathlib").Path(args.out) / "summary.md").read_text())
+    print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
 

@@ -230,10 +230,11 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
     model.fit()
     rec = {"h": [], "u": [], "s": [], "travel": [], "time": [], "kt": []}
 
-    centre = [None]
+    centre = None   # centroid of the estimated inner region, updated by record()
 
     def record(travel: float, dt: float) -> None:
-        h, u, centre[0] = _estimate_metrics(model, scene, bounds, metrics_resolution)
+        nonlocal centre
+        h, u, centre = _estimate_metrics(model, scene, bounds, metrics_resolution)
         rec["h"].append(h)
         rec["u"].append(u)
         rec["s"].append(model.similarity if mode == "visual-tactile" else float("nan"))
@@ -255,10 +256,8 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         previous = plan.direction
         moved = x + d
         # Compliant settling onto the nearest inner-surface point (Scene2D.settle). Pressing along the
-        # estimated inward normal instead was tried: when the normal is still that of the previous face, the
-        # press grazes the next face and records free space millimetres from a surface not yet touched,
-        # which bends the whole estimate (docs/method-notes.md, "settling").
-        settled = scene.settle(moved, press_direction=None)
+        # estimated inward normal instead was tried and dropped (docs/method-notes.md, section 3).
+        settled = scene.settle(moved)
         travel += float(np.linalg.norm(d) + np.linalg.norm(settled - moved))
         path += [moved, settled]
         contacts.append(settled)
@@ -285,7 +284,7 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         dt = time.perf_counter() - t0
         record(travel, dt)
         bar.update(1)
-        if len(contacts) > min_steps and gone_around(np.asarray(contacts), centre[0], closure_gap):
+        if len(contacts) > min_steps and gone_around(np.asarray(contacts), centre, closure_gap):
             terminated = "once-around"
             break
     bar.close()

@@ -64,6 +64,11 @@ def robust_cholesky(a: Tensor, what: str = "Gram matrix") -> tuple[Tensor, float
                                    "check the task covariance and the noise")
 
 
+def bordered(k: Tensor, k_new_old: Tensor, k_new_new: Tensor) -> Tensor:
+    """Symmetric kernel matrix `(n + k, n + k)` grown by new rows `(k, n)` and the new block `(k, k)`."""
+    return torch.cat([torch.cat([k, k_new_old.T], dim=1), torch.cat([k_new_old, k_new_new], dim=1)], dim=0)
+
+
 class DenseExactInference:
     """Exact posterior, marginal likelihood and its K_t derivatives from one dense Cholesky factor.
 
@@ -92,9 +97,7 @@ class DenseExactInference:
         x, y, task = x.detach(), y.detach(), task.detach()
         k_new_old = imq(x, self.x, self.theta)
         k_new_new = imq(x, x, self.theta)
-        top = torch.cat([self.kx, k_new_old.T], dim=1)
-        bottom = torch.cat([k_new_old, k_new_new], dim=1)
-        self.kx = torch.cat([top, bottom], dim=0)
+        self.kx = bordered(self.kx, k_new_old, k_new_new)
         self.x = torch.cat([self.x, x])
         self.y = torch.cat([self.y, y])
         self.task = torch.cat([self.task, task])

@@ -33,7 +33,8 @@ class FitResult:
 
     Attributes:
         task_covariance: `(2, 2)` learned K_t.
-        mll: log marginal likelihood at the optimum [nats].
+        mll: log marginal likelihood at the last evaluated point [nats]; when the Newton-decrement stop took a
+            final unevaluated step, the returned K_t is better than this by less than ``tol.fit_ftol * |mll|``.
         grad_norm: infinity norm of the projected gradient in the Cholesky parameters at the end.
         iterations: Newton iterations taken.
         converged: whether the tolerance was met before ``tol.fit_max_iter``.

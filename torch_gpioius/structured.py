@@ -44,7 +44,7 @@ import math
 import torch
 from torch import Tensor
 
-from .inference import robust_cholesky
+from .inference import bordered, robust_cholesky
 from .kernels import imq
 from .tolerances import tol
 
@@ -144,9 +144,8 @@ class StructuredExactInference:
         self.rt = self.u.T @ (self.yo - self.mean)
         self.kii = imq(self.xi, self.xi, self.theta)
         self.p = imq(self.xi, self.xo, self.theta) @ self.u if len(self.xi) else torch.zeros(0, len(self.xo), **kind)
-        self._head = None    # bool mask of the modes summed exactly (the middle band)
+        self._middle = None  # bool mask of the modes summed exactly (the middle band)
         self._series = None  # _SeriesStore of the low and high modes
-        self._split_c = None
         self._invalidate()
 
     # ------------------------------------------------------------------ data
@@ -164,7 +163,7 @@ class StructuredExactInference:
         self.jitter = 0.0
 
     def append(self, x: Tensor, y: Tensor, task: Tensor) -> None:
-        """Append inner observations in O(k N_o^2 + k N_i (|tail| J)); outer ones rebuild the engine."""
+        """Append inner observations in O(k N_o^2 + k N_i |series modes| J); outer ones rebuild the engine."""
         x, y, task = x.detach(), y.detach(), task.detach()
         if bool((task == 1).any()):
             xs = torch.cat([self.xi, self.xo, x])
@@ -173,9 +172,7 @@ class StructuredExactInference:
                             torch.ones(len(self.xo), dtype=torch.long, device=x.device), task])
             self.__init__(xs, ys, ts, self.theta, self.noise, self.mean)
             return
-        k_new_old = imq(x, self.xi, self.theta)
-        k_new_new = imq(x, x, self.theta)
-        self.kii = torch.cat([torch.cat([self.kii, k_new_old.T], 1), torch.cat([k_new_old, k_new_new], 1)], 0)
+        self.kii = bordered(self.kii, imq(x, self.xi, self.theta), imq(x, x, self.theta))
         p_new = imq(x, self.xo, self.theta) @ self.u
         self.p = torch.cat([self.p, p_new])
         self.xi = torch.cat([self.xi, x])
@@ -190,9 +187,8 @@ class StructuredExactInference:
         c = max(c, 1e-300)
         low = c * self.lam < 0.15 * self.noise
         high = c * self.lam > self.noise / 0.15
-        self._head = ~(low | high)
+        self._middle = ~(low | high)
         self._series = _SeriesStore(low, high, self.lam, self.p, self._kind)
-        self._split_c = c
 
     @property
     def m_series(self) -> Tensor | None:
@@ -226,7 +222,7 @@ class StructuredExactInference:
                 raise FloatingPointError(f"structured engine: no series order <= {J_MAX} meets the bound at "
                                          f"K_t[1,1] = {c:.3g}")
         s = self.noise
-        mid = self._head
+        mid = self._middle
         lam_m = self.lam[mid]
         d = 1.0 / (c * lam_m + s)
         pm = self.p[:, mid]

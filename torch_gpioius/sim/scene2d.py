@@ -89,37 +89,21 @@ class Scene2D:
             raise ValueError("direction: the approach ray from start misses the inner polygon")
         return min(points, key=lambda p: float(np.linalg.norm(p - self.start)))
 
-    def settle(self, x: np.ndarray, press_direction: np.ndarray | None = None, max_press: float = 0.3) -> np.ndarray:
+    def settle(self, x: np.ndarray) -> np.ndarray:
         """Where a compliant fingertip at ``x`` comes to rest on the rigid inner surface [m].
 
-        The toucher passes through the soft outer material. If ``x`` penetrates the inner shape (a tangential
-        step into a concave part), compliance pushes it back out to the nearest boundary point. If ``x`` is in
-        free space (the step left a convex part, or crossed a notch), the fingertip presses along
-        ``press_direction`` (the estimated inward normal) until it touches the inner shape within ``max_press``;
-        if that ray misses, it settles on the nearest boundary point.
+        The toucher passes through the soft outer material. At ``x`` it is pressed onto (or, if it penetrates
+        the inner shape after a step into a concave part, pushed back out of) the rigid inner shape, ending at
+        the nearest point of the inner boundary (docs/method-notes.md, section 3).
 
         Args:
             x: `(2,)` position after the tangential step [m].
-            press_direction: `(2,)` direction to press in (normalised here); None: nearest point.
-            max_press: longest press [m].
 
         Returns:
             `(2,)` contact point on the inner boundary [m].
         """
-        x = np.asarray(x, dtype=np.float64)
         boundary = self.inner.exterior
-        nearest = np.asarray(boundary.interpolate(boundary.project(Point(x))).coords[0])
-        if press_direction is None or self.inner.contains(Point(x)):
-            return nearest
-        d = np.asarray(press_direction, dtype=np.float64)
-        if not np.isfinite(d).all() or np.linalg.norm(d) == 0:
-            return nearest
-        d = d / np.linalg.norm(d)
-        hit = LineString([x, x + max_press * d]).intersection(boundary)
-        points = [np.asarray(c) for g in getattr(hit, "geoms", [hit]) if not g.is_empty for c in g.coords]
-        if not points:
-            return nearest
-        return min(points, key=lambda p: float(np.linalg.norm(p - x)))
+        return np.asarray(boundary.interpolate(boundary.project(Point(np.asarray(x, dtype=np.float64)))).coords[0])
 
     def is_inside_inner(self, x: np.ndarray) -> bool:
         return bool(self.inner.contains(Point(x)))
