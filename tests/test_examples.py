@@ -18,3 +18,13 @@ def test_fit_two_shapes_example(tmp_path):
     # the printed similarity table has both pairs and all four observation sets
     assert set(lines) == {"A", "D"}
     assert all(line.count("rho") == 4 for line in lines.values())
+
+
+def test_ur5_ik_demo_example(tmp_path):
+    env = dict(os.environ, CI="1")
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / "ur5_ik_demo.py"), "--out", str(tmp_path)],
+                         capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "ur5_ik_demo.png").stat().st_size > 0
+    err = float(out.stdout.split("max tracking error ")[1].split()[0])
+    assert err < 1e-6 and "5 cm jump refused" in out.stdout

@@ -1,0 +1,258 @@
+"""The contact controller: turns a planned tangential step into safe motion with force feedback.
+
+Paper Sec. VI-A: contact when ``|F| > 1.0 N``; retreat along the normal while ``|F| > 5.0 N``; motion split
+into a tangential part (the planner's step) and a normal part that keeps the fingertip on the inner surface.
+
+Every reading is checked before it is used. A sensing fault (a stale or missing sample, a checksum storm, a
+disconnect) stops the robot and raises :class:`ContactFault`; a force fault (an overload bit, a force above
+``max_force``, a jump above ``max_force_jump``) retreats along the normal first, then raises.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import torch
+
+from .sensors.base import ForceReading, ForceSensor, SensorError
+
+__all__ = ["ContactConfig", "ContactController", "ContactFault", "ContactResult"]
+
+
+class ContactFault(RuntimeError):
+    """Motion was stopped (or retreated) because the force signal could not be trusted or was unsafe."""
+
+
+@dataclass(frozen=True)
+class ContactConfig:
+    """Thresholds and step sizes (SI units).
+
+    Attributes:
+        contact_force: ``|F|`` at or above which the fingertip is in contact [N] (paper: 1.0 N).
+        retreat_force: ``|F|`` above which the fingertip retreats along the normal [N] (paper: 5.0 N).
+        max_force: ``|F|`` treated as a fault (spike or collision) [N].
+        max_force_jump: change of ``|F|`` between consecutive readings treated as a spike [N].
+        tangential_step: largest tangential sub-step between two force readings [m].
+        normal_step: step along the normal while regulating contact [m].
+        max_normal_travel: inward travel without finding contact before contact counts as lost [m].
+        retreat_distance: how far a force fault retreats along the normal [m].
+        speed: fingertip speed [m/s].
+        max_reading_age: a reading older than this (robot clock vs sample time) is stale [s].
+    """
+
+    contact_force: float = 1.0
+    retreat_force: float = 5.0
+    max_force: float = 30.0
+    max_force_jump: float = 20.0
+    tangential_step: float = 0.002
+    normal_step: float = 0.001
+    max_normal_travel: float = 0.05
+    retreat_distance: float = 0.005
+    speed: float = 0.02
+    max_reading_age: float = 0.25
+
+    def __post_init__(self) -> None:
+        if not 0 < self.contact_force < self.retreat_force < self.max_force:
+            raise ValueError("need 0 < contact_force < retreat_force < max_force")
+        for name in ("tangential_step", "normal_step", "max_normal_travel", "retreat_distance", "speed",
+                     "max_reading_age", "max_force_jump"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be positive")
+
+
+@dataclass
+class ContactResult:
+    """What one controlled step did.
+
+    Attributes:
+        in_contact: whether the step ended in contact (``contact_force <= |F| <= retreat_force``).
+        contact: `(3,)` fingertip position at the end of the step [m, base] (the contact point if in contact).
+        free_space: `(k, 3)` positions traversed with ``|F| < contact_force`` [m, base].
+        path: `(m, 3)` every fingertip position visited [m, base].
+        forces: `(m, 3)` the force at each position [N, base frame].
+        travel: fingertip path length [m].
+    """
+
+    in_contact: bool
+    contact: torch.Tensor
+    free_space: torch.Tensor
+    path: torch.Tensor
+    forces: torch.Tensor
+    travel: float
+
+    @property
+    def force_normal(self) -> torch.Tensor:
+        """`(3,)` unit direction of the last measured force (the surface normal seen by the sensor)."""
+        f = self.forces[-1]
+        return f / f.norm().clamp_min(1e-12)
+
+
+@dataclass
+class _Log:
+    path: list = field(default_factory=list)
+    forces: list = field(default_factory=list)
+    free: list = field(default_factory=list)
+
+
+def _unit(v: torch.Tensor, name: str) -> torch.Tensor:
+    v = torch.as_tensor(v, dtype=torch.float64)
+    if v.shape != (3,) or not bool(torch.isfinite(v).all()) or float(v.norm()) < 1e-12:
+        raise ValueError(f"{name} must be a finite non-zero (3,) vector, got {v}")
+    return v / v.norm()
+
+
+class ContactController:
+    """Force-guarded sliding on the inner surface with a robot backend and a force sensor.
+
+    Args:
+        robot: a :class:`kinematics.RobotBackend` (``move_cartesian``, ``read_pose``, ``stop``, and a ``time``
+            attribute or ``clock()`` for reading ages; without either, ages are not checked).
+        sensor: a :class:`torch_gpioius.sensors.ForceSensor`; its frame is the tool frame.
+        config: thresholds and step sizes.
+    """
+
+    def __init__(self, robot: Any, sensor: ForceSensor, config: ContactConfig | None = None) -> None:
+        self.robot, self.sensor = robot, sensor
+        self.config = config if config is not None else ContactConfig()
+        self._prev: ForceReading | None = None
+
+    # ---------------------------------------------------------------------------------- sensing
+    def _now(self) -> float | None:
+        if hasattr(self.robot, "time"):
+            return float(self.robot.time)
+        if hasattr(self.robot, "clock"):
+            return float(self.robot.clock())
+        return None
+
+    def _fault(self, message: str, normal: torch.Tensor | None, cause: BaseException | None = None) -> None:
+        self.robot.stop()
+        if normal is not None:
+            try:
+                self.robot.move_cartesian(normal * self.config.retreat_distance, self.config.speed)
+                message += f"; retreated {self.config.retreat_distance * 1e3:.1f} mm along the normal"
+            except Exception as exc:  # the retreat itself was refused: say so, stay stopped
+                message += f"; retreat refused ({exc}), robot stopped"
+        else:
+            message += "; robot stopped"
+        raise ContactFault(message) from cause
+
+    def read_force(self, normal: torch.Tensor | None = None) -> torch.Tensor:
+        """A checked force reading in the base frame, `(3,)` [N].
+
+        Raises:
+            ContactFault: on a sensing or force fault (after stopping or retreating along ``normal``).
+        """
+        cfg = self.config
+        try:
+            r = self.sensor.read()
+        except SensorError as exc:
+            self._fault(f"force sensor failed: {exc}", None, exc)
+        prev = self._prev
+        if prev is not None and r.counter == prev.counter and r.timestamp == prev.timestamp:
+            self._fault(f"stale force reading (sample {r.counter} repeated)", None)
+        now = self._now()
+        if now is not None and now - r.timestamp > cfg.max_reading_age:
+            self._fault(f"stale force reading ({(now - r.timestamp) * 1e3:.0f} ms old)", None)
+        if r.errors:
+            self._fault(f"force sensor reports {', '.join(r.errors)}", normal)
+        if r.overloaded:
+            self._fault(f"force sensor overloaded on {', '.join(r.overloaded)}", normal)
+        if not bool(torch.isfinite(r.force).all()):
+            self._fault("force reading is not finite", None)
+        if r.magnitude > cfg.max_force:
+            self._fault(f"force {r.magnitude:.1f} N above the {cfg.max_force:.1f} N limit", normal)
+        if prev is not None and abs(r.magnitude - prev.magnitude) > cfg.max_force_jump:
+            self._fault(f"force spike: |F| jumped {prev.magnitude:.1f} -> {r.magnitude:.1f} N", normal)
+        self._prev = r
+        R = self.robot.read_pose()[:3, :3]
+        return R @ r.force
+
+    # ---------------------------------------------------------------------------------- motion
+    def _move(self, dx: torch.Tensor, log: _Log, normal: torch.Tensor) -> torch.Tensor:
+        self.robot.move_cartesian(dx, self.config.speed)
+        f = self.read_force(normal)
+        p = self.robot.read_pose()[:3, 3].clone()
+        log.path.append(p)
+        log.forces.append(f)
+        if float(f.norm()) < self.config.contact_force:
+            log.free.append(p)
+        return f
+
+    def _regulate(self, normal: torch.Tensor, f: torch.Tensor, log: _Log) -> tuple[bool, torch.Tensor]:
+        """Retreat while ``|F| > retreat_force``, press in while ``|F| < contact_force``."""
+        cfg = self.config
+        pressed = 0.0
+        for _ in range(int(math.ceil(cfg.max_normal_travel / cfg.normal_step)) * 2 + 1):
+            mag = float(f.norm())
+            if mag > cfg.retreat_force:
+                f = self._move(normal * cfg.normal_step, log, normal)
+            elif mag < cfg.contact_force:
+                if pressed >= cfg.max_normal_travel:
+                    return False, f
+                f = self._move(-normal * cfg.normal_step, log, normal)
+                pressed += cfg.normal_step
+            else:
+                return True, f
+        return cfg.contact_force <= float(f.norm()) <= cfg.retreat_force, f
+
+    def _result(self, in_contact: bool, log: _Log, start: torch.Tensor) -> ContactResult:
+        path = torch.stack(log.path) if log.path else start[None]
+        forces = torch.stack(log.forces) if log.forces else torch.zeros(1, 3, dtype=torch.float64)
+        free = torch.stack(log.free) if log.free else torch.zeros(0, 3, dtype=torch.float64)
+        full = torch.cat([start[None], path])
+        travel = float((full[1:] - full[:-1]).norm(dim=-1).sum())
+        return ContactResult(in_contact, path[-1].clone(), free, path, forces, travel)
+
+    def approach(self, direction: torch.Tensor, max_travel: float = 0.3) -> ContactResult:
+        """Move along ``direction`` until contact, then settle into the contact band.
+
+        Args:
+            direction: `(3,)` approach direction (base frame), normalised here.
+            max_travel: give up (``in_contact=False``) after this distance [m].
+        """
+        d = _unit(direction, "direction")
+        cfg = self.config
+        log = _Log()
+        start = self.robot.read_pose()[:3, 3].clone()
+        f = self.read_force(-d)
+        moved = 0.0
+        while float(f.norm()) < cfg.contact_force and moved < max_travel:
+            f = self._move(d * cfg.normal_step, log, -d)
+            moved += cfg.normal_step
+        if float(f.norm()) < cfg.contact_force:
+            return self._result(False, log, start)
+        ok, f = self._regulate(-d, f, log)
+        return self._result(ok, log, start)
+
+    def slide(self, step: torch.Tensor, normal: torch.Tensor) -> ContactResult:
+        """Execute one planned step: tangential motion in sub-steps, contact regulated along the normal.
+
+        Args:
+            step: `(3,)` planned displacement [m, base]; its component along ``normal`` is removed.
+            normal: `(3,)` outward surface normal estimate [base]; retreat is along ``+normal``.
+
+        Returns:
+            :class:`ContactResult`; ``in_contact=False`` when contact was lost for ``max_normal_travel``.
+
+        Raises:
+            ContactFault: a sensing or force fault (the robot was stopped or retreated first).
+        """
+        n = _unit(normal, "normal")
+        step = torch.as_tensor(step, dtype=torch.float64)
+        if step.shape != (3,) or not bool(torch.isfinite(step).all()):
+            raise ValueError(f"step must be a finite (3,) vector [m], got {step}")
+        t = step - (step @ n) * n
+        cfg = self.config
+        log = _Log()
+        start = self.robot.read_pose()[:3, 3].clone()
+        self.read_force(n)
+        k = max(1, int(math.ceil(float(t.norm()) / cfg.tangential_step)))
+        ok = True
+        for _ in range(k):
+            f = self._move(t / k, log, n)
+            ok, f = self._regulate(n, f, log)
+            if not ok:
+                break
+        return self._result(ok, log, start)
