@@ -28,3 +28,24 @@ def test_ur5_ik_demo_example(tmp_path):
     assert (tmp_path / "ur5_ik_demo.png").stat().st_size > 0
     err = float(out.stdout.split("max tracking error ")[1].split()[0])
     assert err < 1e-6 and "5 cm jump refused" in out.stdout
+
+
+def test_fit_logged_example(tmp_path):
+    out = subprocess.run([sys.executable, str(ROOT / "examples" / "fit_logged.py"), "--out", str(tmp_path)],
+                         capture_output=True, text=True, env=dict(os.environ, CI="1"), timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert (tmp_path / "model.pt").stat().st_size > 0 and "CSV round trip" in out.stdout
+    assert "(inside < 0)" in out.stdout and float(out.stdout.split("mu_in at (0, 0) = ")[1].split()[0]) < 0
+
+
+def test_example_dataset_is_what_the_script_generates(tmp_path):
+    """The shipped file is reproducible from the script (its observations; timings differ)."""
+    import numpy as np
+
+    import torch_gpioius as tg
+
+    out = tmp_path / "ex.gpioius"
+    subprocess.run([sys.executable, str(ROOT / "scripts" / "make_example_dataset.py"), "--out", str(out)],
+                   check=True, capture_output=True, timeout=300)
+    a, b = tg.load_dataset(out), tg.load_dataset(ROOT / "data" / "example_2d.gpioius")
+    assert np.allclose(a.x, b.x, atol=1e-12) and (a.y == b.y).all() and (a.step == b.step).all()

@@ -4,6 +4,8 @@ import json
 
 import pytest
 
+import torch_gpioius as tg
+
 from torch_gpioius.cli import main
 from torch_gpioius.study import FRACTIONS, check_claims, run_study
 
@@ -42,3 +44,29 @@ def test_full_study_reproduces_claims_1_and_6(tmp_path):
     result = run_study(out=tmp_path, progress=False)
     holds = {c["claim"][:2]: c["holds"] for c in result["claims"]}
     assert holds["1."] and holds["6."]
+
+
+def test_cli_fit_and_replay_on_the_shipped_example(tmp_path):
+    from pathlib import Path
+
+    from torch_gpioius.cli import main
+
+    data = Path(__file__).resolve().parents[1] / "data" / "example_2d.gpioius"
+    assert main(["fit", str(data), "--out", str(tmp_path / "fit")]) == 0
+    model = tg.load_checkpoint(tmp_path / "fit" / "model.pt")
+    assert 0 < model.similarity < 2 and (tmp_path / "fit" / "fit.png").stat().st_size > 0
+    assert main(["replay", str(data), "--out", str(tmp_path / "rep"), "--every", "20", "--quiet"]) == 0
+    rows = (tmp_path / "rep" / "records.csv").read_text().splitlines()
+    assert rows[0].startswith("step,") and len(rows) == 1 + 3          # steps 0, 20, 40
+    assert (tmp_path / "rep" / "transition.png").stat().st_size > 0
+
+
+def test_cli_bad_input_is_one_line_and_nonzero(tmp_path, capsys):
+    from torch_gpioius.cli import main
+
+    bad = tmp_path / "bad.gpioius"
+    bad.write_bytes(b"not a dataset")
+    assert main(["fit", str(bad)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("gpioius: error:") and "bad.gpioius" in err and "\n" not in err
+    assert main(["replay", str(tmp_path / "missing.gpioius")]) == 2

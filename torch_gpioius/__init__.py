@@ -6,7 +6,9 @@ Conventions (DESIGN.md): SI units, float64, ``y = 0`` on a surface and ``y = 1``
 
 from __future__ import annotations
 
-from . import geometry, metrics, planning, sim, surfaces
+from . import checkpoints, datasets, geometry, importers, metrics, offline, planning, sim, surfaces
+from .checkpoints import load_checkpoint, save_checkpoint
+from .datasets import Dataset, DatasetError, load_dataset, save_dataset
 from .exploration import ObservationPolicy, Trace, explore
 from .gpiois import GPIOIS, INNER, OUTER
 from .gpis import GPIS
@@ -19,4 +21,6 @@ from .tolerances import tol
 __version__ = "0.1.0"
 
 __all__ = ["GPIOIS", "GPIS", "ObservationPolicy", "Trace", "explore", "planning", "sim", "INNER", "OUTER", "DenseExactInference", "InverseMultiquadricKernel",
-           "JitterWarning", "StructuredExactInference", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__"]
+           "JitterWarning", "StructuredExactInference", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__",
+           "checkpoints", "datasets", "importers", "offline", "Dataset", "DatasetError", "load_dataset", "save_dataset",
+           "load_checkpoint", "save_checkpoint"]

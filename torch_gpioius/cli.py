@@ -1,4 +1,4 @@
-"""Command-line interface: ``gpioius simulate`` (the 2-D study)."""
+"""Command-line interface: ``gpioius simulate`` (the 2-D study), ``fit DATASET``, ``replay LOG``."""
 
 from __future__ import annotations
 
@@ -20,6 +20,35 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fit(args: argparse.Namespace) -> int:
+    from .offline import fit_dataset
+
+    info = fit_dataset(args.dataset, args.out, theta=args.theta, noise=args.noise)
+    print(f"{args.dataset}: {info['n']} observations ({info['n_inner']} inner, {info['n_outer']} outer), "
+          f"theta = {info['theta']:g} m, sigma^2 = {info['noise']:g}")
+    if "task_covariance" in info:
+        kt = info["task_covariance"]
+        print(f"K_t = [[{kt[0][0]:.5g}, {kt[0][1]:.5g}], [{kt[1][0]:.5g}, {kt[1][1]:.5g}]]")
+        print(f"similarity K_t[0,1]/K_t[0,0] = {info['similarity']:.4f}   (correlation {info['correlation']:.4f})")
+    else:
+        print("no outer observations: fitted a tactile-only GPIS")
+    print(f"log marginal likelihood = {info['mll']:.4f}")
+    if args.out:
+        print(f"wrote {info['checkpoint']}, {info['figure']} and fit.json")
+    return 0
+
+
+def _replay(args: argparse.Namespace) -> int:
+    from .offline import replay_log
+
+    rows = replay_log(args.log, args.out, every=args.every, progress=not args.quiet)
+    last = rows[-1]
+    print(f"replayed {len(rows)} steps of {args.log}; last step {last['step']}: similarity {last['similarity']:.3f}, "
+          f"uncertainty {last['uncertainty']:.4g}, Hausdorff {last['hausdorff'] * 100:.2f} cm")
+    print(f"wrote records.csv, records.json and transition.png to {args.out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="gpioius", description="Visuo-tactile inner-shape estimation (GPIOIS).")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -33,6 +62,24 @@ def main(argv: list[str] | None = None) -> int:
     sim.add_argument("--smoke", action="store_true", help="a few steps per run only (CI)")
     sim.add_argument("--quiet", action="store_true", help="no progress bars")
     sim.set_defaults(func=_simulate)
+    fit = sub.add_parser("fit", help="learn K_t on a dataset or log; save a checkpoint and a figure",
+                         description="Fit GPIOIS (GPIS if there are no outer observations) on a torch_gpioius "
+                                     "dataset or exploration log (docs/data-format.md): prints K_t, the similarity "
+                                     "and the marginal likelihood; with --out saves model.pt and fit.png.")
+    fit.add_argument("dataset", help="dataset or exploration log file (.gpioius)")
+    fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
+    fit.add_argument("--theta", type=float, default=None, help="IMQ theta [m] (default: the file's, else 0.1)")
+    fit.add_argument("--noise", type=float, default=None, help="sigma^2 (default: the file's, else 0.006)")
+    fit.set_defaults(func=_fit)
+    rep = sub.add_parser("replay", help="re-run the estimation of an exploration log step by step",
+                         description="Rebuild the model after each logged step, re-learn K_t, and write per-step "
+                                     "records (similarity, uncertainty, Hausdorff when the scene is known) and a "
+                                     "transition figure.")
+    rep.add_argument("log", help="exploration log (.gpioius) written by explore(log=...) or `gpioius simulate`")
+    rep.add_argument("--out", default="outputs/replay", help="output folder")
+    rep.add_argument("--every", type=int, default=1, help="replay every k-th step (the last is always included)")
+    rep.add_argument("--quiet", action="store_true", help="no progress bar")
+    rep.set_defaults(func=_replay)
     args = parser.parse_args(argv)
     try:
         return args.func(args)

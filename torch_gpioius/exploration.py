@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -10,6 +12,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from .datasets import DatasetError, LogWriter, TornLogWarning, read_records
 from .gpiois import GPIOIS, INNER, OUTER
 from .gpis import GPIS
 from .metrics import hausdorff_distance, uncertainty_measure
@@ -163,10 +166,63 @@ def _estimate_metrics(model, scene, bounds, resolution):
     return hausdorff_distance(curves, [scene.inner_boundary], spacing=2e-3), unc, centre
 
 
+def _restore(path: str | os.PathLike, params: dict) -> dict:
+    """Rebuild the exploration state after the last complete step of a log written by :func:`explore`."""
+    import warnings
+
+    with warnings.catch_warnings(record=True):
+        warnings.simplefilter("always", TornLogWarning)
+        records = list(read_records(path))
+    if not records or records[0].kind != "header":
+        raise DatasetError(f"{path}: no header record; not an exploration log")
+    header = records[0].meta
+    for key, want in params.items():
+        have = header.get(key)
+        if have != want and not (isinstance(want, float) and isinstance(have, float) and math.isclose(have, want)):
+            raise ValueError(f"{path}: cannot resume: the log was written with {key}={have!r}, this call asks "
+                             f"{key}={want!r}")
+    steps = [r for r in records[1:] if r.kind == "step"]
+    if not steps:
+        raise DatasetError(f"{path}: the log has no complete step to resume from")
+    end = [r for r in records[1:] if r.kind == "end"]
+    mode = header["mode"]
+    x = y = task = None
+    contacts, path_pts = [], []
+    rec = {"h": [], "u": [], "s": [], "travel": [], "time": [], "kt": []}
+    for r in steps:
+        a = r.arrays
+        if int(r.meta["step"]) != len(rec["h"]):
+            raise DatasetError(f"{path}: step records out of order at step {r.meta['step']}")
+        if x is None:
+            x, y, task = a["x"], a["y"], a["task"]
+        else:
+            keep = np.ones(len(x), bool)
+            keep[a["removed"]] = False
+            x, y, task = x[keep], y[keep], task[keep]
+            x, y, task = np.concatenate([x, a["x"]]), np.concatenate([y, a["y"]]), np.concatenate([task, a["task"]])
+        contacts.append(a["contact"])
+        path_pts.extend(list(a["path"]))
+        for key in ("h", "u", "s", "travel", "time"):
+            rec[key].append(float(r.meta[key if key != "travel" else "travel"]))
+        rec["kt"].append(a["kt"])
+    last = steps[-1]
+    theta, noise = header["theta"], header["noise"]
+    if mode == "visual-tactile":
+        model = GPIOIS(x, y, task, theta=theta, noise=noise, task_covariance=torch.as_tensor(last.arrays["kt"]))
+    else:
+        model = GPIS(x, y, theta=theta, noise=noise)
+    prev = last.arrays["previous"]
+    return {"model": model, "contacts": contacts, "path": path_pts, "rec": rec,
+            "travel": float(last.meta["travel"]), "retracted": int(last.meta["retracted"]),
+            "previous": None if np.isnan(prev).any() else torch.as_tensor(prev),
+            "steps": int(last.meta["step"]), "terminated": end[-1].meta["terminated"] if end else None}
+
+
 def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: float = 0.1, noise: float = 0.006,
             max_steps: int = 400, penalty=None, policy: ObservationPolicy | None = None,
             metrics_resolution: float = 0.01, progress: bool = False, min_steps: int = 10,
-            closure_gap: float = 0.05) -> Trace:
+            closure_gap: float = 0.05, log: str | os.PathLike | None = None,
+            resume_from: str | os.PathLike | None = None) -> Trace:
     """Run one simulated exploration of a 2-D scene and record per-step metrics.
 
     Protocol (both modes alike): vision once before exploration (visual-tactile only: outer boundary points and
@@ -193,6 +249,10 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         min_steps: steps before the winding test applies.
         closure_gap: widest unvisited gap (chord between its bounding contacts) that still counts as once
             around [m]; default theta_x / 2 of the paper.
+        log: write a crash-safe exploration log here (docs/data-format.md): one record per completed step,
+            durable (fsync) before the next step begins.
+        resume_from: continue the run logged in this file from its last complete step (the parameters must
+            match the log's header; appends to it). The resumed run ends where an uninterrupted one would.
 
     Returns:
         ``Trace``.
@@ -205,32 +265,44 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
     penalty = penalty or ZeroPenalty()
     bounds = scene.bounds(0.1)
 
-    contact = scene.first_contact()
-    contacts = [contact]
-    approach_free = _free_space_along(scene.start, contact, policy.free_space_spacing, contact[None],
-                                      policy.free_space_margin)
-    path = [scene.start, contact]
-    x_in = np.concatenate([contact[None], approach_free])
-    y_in = np.concatenate([[0.0], np.ones(len(approach_free))])
-
-    if mode == "visual-tactile":
-        seen = scene.sample_boundary("outer", policy.vision_spacing)
-        x_out, y_out = [seen], [np.zeros(len(seen))]
-        if policy.vision_free_offset is not None:
-            free = scene.sample_offset("outer", policy.vision_free_offset, policy.vision_spacing)
-            x_out.append(free)
-            y_out.append(np.ones(len(free)))
-        x_out, y_out = np.concatenate(x_out), np.concatenate(y_out)
-        model = GPIOIS(np.concatenate([x_in, x_out]), np.concatenate([y_in, y_out]),
-                       np.r_[np.full(len(x_in), INNER), np.full(len(x_out), OUTER)], theta=theta, noise=noise)
-    else:
-        model = GPIS(x_in, y_in, theta=theta, noise=noise)
-
-    t0 = time.perf_counter()
-    model.fit()
+    params = {"scene": scene.name, "mode": mode, "step_length": step, "theta": theta, "noise": noise,
+              "max_steps": max_steps, "min_steps": min_steps, "closure_gap": closure_gap,
+              "metrics_resolution": metrics_resolution, "policy": dataclasses.asdict(policy),
+              "penalty": type(penalty).__name__}
     rec = {"h": [], "u": [], "s": [], "travel": [], "time": [], "kt": []}
-
     centre = None   # centroid of the estimated inner region, updated by record()
+    if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
+        raise ValueError("resume_from appends to its own log; pass log=None or the same path")
+    if resume_from is not None:
+        state = _restore(resume_from, params)
+        model = state["model"]
+        contacts, path, rec = state["contacts"], state["path"], state["rec"]
+        travel, retracted, previous = state["travel"], state["retracted"], state["previous"]
+        done, terminated = state["steps"], state["terminated"]
+        writer = LogWriter(resume_from, resume=True) if terminated is None else None
+    else:
+        contact = scene.first_contact()
+        contacts = [contact]
+        approach_free = _free_space_along(scene.start, contact, policy.free_space_spacing, contact[None],
+                                          policy.free_space_margin)
+        path = [scene.start, contact]
+        x_in = np.concatenate([contact[None], approach_free])
+        y_in = np.concatenate([[0.0], np.ones(len(approach_free))])
+
+        if mode == "visual-tactile":
+            seen = scene.sample_boundary("outer", policy.vision_spacing)
+            x_out, y_out = [seen], [np.zeros(len(seen))]
+            if policy.vision_free_offset is not None:
+                free = scene.sample_offset("outer", policy.vision_free_offset, policy.vision_spacing)
+                x_out.append(free)
+                y_out.append(np.ones(len(free)))
+            x_out, y_out = np.concatenate(x_out), np.concatenate(y_out)
+            model = GPIOIS(np.concatenate([x_in, x_out]), np.concatenate([y_in, y_out]),
+                           np.r_[np.full(len(x_in), INNER), np.full(len(x_out), OUTER)], theta=theta, noise=noise)
+        else:
+            model = GPIS(x_in, y_in, theta=theta, noise=noise)
+        travel, retracted, previous, done, terminated = 0.0, 0, None, 0, None
+        writer = None
 
     def record(travel: float, dt: float) -> None:
         nonlocal centre
@@ -242,13 +314,31 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         rec["travel"].append(travel)
         rec["time"].append(dt)
 
-    record(0.0, time.perf_counter() - t0)
-    travel = 0.0
-    retracted = 0
-    previous = None
-    terminated = "max_steps"
-    bar = tqdm(total=max_steps, desc=f"{scene.name or 'scene'} {mode}", disable=not progress, leave=False)
-    for _ in range(max_steps):
+    def log_step(k: int, x_new, y_new, removed, path_new) -> None:
+        if writer is None:
+            return
+        n = len(x_new)
+        task_new = np.full(n, INNER) if mode == "visual-tactile" or k > 0 else np.zeros(n, np.int64)
+        if k == 0 and mode == "visual-tactile":
+            task_new = model.train_inputs[1].reshape(-1).numpy()
+        writer.append("step", {"step": k, "travel": travel, "retracted": retracted, "h": rec["h"][-1],
+                               "u": rec["u"][-1], "s": rec["s"][-1], "time": rec["time"][-1]},
+                      {"x": np.asarray(x_new), "y": np.asarray(y_new), "task": task_new,
+                       "removed": np.asarray(removed, dtype=np.int64), "path": np.asarray(path_new),
+                       "contact": contacts[-1], "kt": rec["kt"][-1],
+                       "previous": (np.full(2, np.nan) if previous is None else previous.numpy())})
+
+    if resume_from is None:
+        t0 = time.perf_counter()
+        model.fit()
+        record(0.0, time.perf_counter() - t0)
+        if log is not None:
+            writer = LogWriter(log, {"dim": 2, "frame": "scene", "source": "torch_gpioius.explore",
+                                     "theta": theta, "noise": noise, **params})
+            log_step(0, model.train_inputs[0].numpy(), model.train_targets.numpy(), [], path)
+    bar = tqdm(total=max_steps, initial=done, desc=f"{scene.name or 'scene'} {mode}", disable=not progress,
+               leave=False)
+    for k in range(done + 1, max_steps + 1 if terminated is None else 0):
         t0 = time.perf_counter()
         x = contacts[-1]
         plan = plan_direction(model, torch.as_tensor(x), step=step, penalty=penalty, previous=previous)
@@ -273,6 +363,7 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         train_x = model.train_inputs[0].numpy()
         free_in = (model.train_targets.numpy() == 1) & (_inner_mask(model) if mode == "visual-tactile" else True)
         too_close = free_in & (np.linalg.norm(train_x - settled, axis=1) < policy.free_space_margin)
+        removed = np.flatnonzero(too_close)
         if too_close.any():
             model.remove_observations(torch.as_tensor(too_close))
             retracted += int(too_close.sum())
@@ -280,14 +371,20 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
             model.add_observations(new_x, new_y, INNER)
         else:
             model.add_observations(new_x, new_y)
-        model.fit()
+        # warm start from the previous K_t (also after a resume, where fit_result is not restored)
+        model.fit(multi_start=False) if isinstance(model, GPIOIS) else model.fit()
         dt = time.perf_counter() - t0
         record(travel, dt)
+        log_step(k, new_x, new_y, removed, [moved, settled])
         bar.update(1)
         if len(contacts) > min_steps and gone_around(np.asarray(contacts), centre, closure_gap):
             terminated = "once-around"
             break
     bar.close()
+    terminated = terminated or "max_steps"
+    if writer is not None:
+        writer.append("end", {"terminated": terminated, "steps": len(rec["h"]) - 1}, {})
+        writer.close()
     return Trace(mode=mode, scene_name=scene.name, hausdorff=np.asarray(rec["h"]), uncertainty=np.asarray(rec["u"]),
                  similarity=np.asarray(rec["s"]), travel=np.asarray(rec["travel"]), path=np.asarray(path),
                  contacts=np.asarray(contacts), model=model, step_time=np.asarray(rec["time"]),

@@ -226,11 +226,13 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
     t0 = time.perf_counter()
     traces: dict[str, dict[str, Trace]] = {}
     jobs = [(o, m) for o in objects for m in MODES]
+    (out / "logs").mkdir(exist_ok=True)
     with tqdm(jobs, desc="2-D study", disable=not progress) as bar:
         for name, mode in bar:
             bar.set_postfix_str(f"object {name}, {mode}")
+            log = out / "logs" / f"{name}_{mode}.gpioius"   # crash-safe exploration log (docs/data-format.md)
             traces.setdefault(name, {})[mode] = explore(scenes[name], mode=mode, max_steps=max_steps,
-                                                        progress=progress, **explore_kwargs)
+                                                        progress=progress, log=log, **explore_kwargs)
     for name in objects:
         _figure_object(name, scenes[name], traces[name], out / f"fig4_{name}.png")
     _figure_similarity(traces, out / "fig5_similarity.png")

@@ -1,0 +1,71 @@
+"""Checkpoints: exact round trip, weights_only loading, tampered and foreign files give clear errors."""
+
+import pickle
+
+import numpy as np
+import pytest
+import torch
+
+import torch_gpioius as tg
+from torch_gpioius.checkpoints import CheckpointError
+
+
+def fitted():
+    a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    x = np.r_[np.c_[0.05 * np.cos(a), 0.05 * np.sin(a)], np.c_[0.08 * np.cos(a), 0.08 * np.sin(a)]]
+    return tg.GPIOIS(x, np.zeros(48), np.r_[np.zeros(24), np.ones(24)], theta=0.12, noise=0.004).fit()
+
+
+def test_round_trip_predicts_identically(tmp_path):
+    m = fitted()
+    p = tg.save_checkpoint(m, tmp_path / "m.pt")
+    torch.load(p, weights_only=True)         # plain data: loads with weights_only
+    m2 = tg.load_checkpoint(p)
+    q = torch.tensor([[0.0, 0.0], [0.06, 0.01], [0.2, 0.1]], dtype=torch.float64)
+    for task in (0, 1):
+        a, b = m.predict(q, task=task), m2.predict(q, task=task)
+        # same parameters and data; the factorisation is rebuilt, so equal to rounding
+        assert torch.allclose(a[0], b[0], rtol=1e-12, atol=1e-14) and torch.allclose(a[1], b[1], rtol=1e-10, atol=1e-16)
+    assert torch.equal(m.task_covariance, m2.task_covariance)
+    gpis = tg.GPIS(m.train_inputs[0][:24], torch.zeros(24, dtype=torch.float64))
+    g2 = tg.load_checkpoint(tg.save_checkpoint(gpis, tmp_path / "g.pt"))
+    assert isinstance(g2, tg.GPIS) and torch.allclose(g2.predict(q)[0], gpis.predict(q)[0], rtol=1e-12)
+
+
+def test_tampered_values_are_detected(tmp_path):
+    p = tg.save_checkpoint(fitted(), tmp_path / "m.pt")
+    payload = torch.load(p, weights_only=True)
+    payload["tensors"]["train_x"][0, 0] += 1e-3
+    torch.save(payload, p)
+    with pytest.raises(CheckpointError, match="SHA-256"):
+        tg.load_checkpoint(p)
+
+
+class Evil:
+    def __reduce__(self):
+        return (print, ("this must never run",))
+
+
+def test_code_carrying_pickles_and_foreign_files_are_refused(tmp_path, capsys):
+    p = tmp_path / "evil.pt"
+    torch.save({"format": "torch_gpioius.checkpoint", "x": Evil()}, p)
+    with pytest.raises(CheckpointError, match="not a loadable"):
+        tg.load_checkpoint(p)
+    assert "must never run" not in capsys.readouterr().out
+    (tmp_path / "junk.pt").write_bytes(pickle.dumps([1, 2, 3]))
+    with pytest.raises(CheckpointError):
+        tg.load_checkpoint(tmp_path / "junk.pt")
+    torch.save({"weights": torch.zeros(3)}, tmp_path / "other.pt")
+    with pytest.raises(CheckpointError, match="'format'"):
+        tg.load_checkpoint(tmp_path / "other.pt")
+    with pytest.raises(CheckpointError, match="no such file"):
+        tg.load_checkpoint(tmp_path / "missing.pt")
+
+
+def test_other_version_is_refused(tmp_path):
+    p = tg.save_checkpoint(fitted(), tmp_path / "m.pt")
+    payload = torch.load(p, weights_only=True)
+    payload["version"] = 99
+    torch.save(payload, p)
+    with pytest.raises(CheckpointError, match="version 99 is not supported"):
+        tg.load_checkpoint(p)

@@ -1,0 +1,96 @@
+"""Importers: point clouds (PLY, XYZ, PCD ascii/binary, NPZ), contact CSVs, voxel averaging."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from torch_gpioius.datasets import DatasetError
+from torch_gpioius.importers import dataset_from_files, load_contacts_csv, load_point_cloud, voxel_average
+
+PTS = np.array([[0.01, 0.02, 0.03], [0.04, -0.05, 0.06], [0.2, 0.1, -0.3], [0.021, 0.022, 0.023]])
+
+
+def write_pcd(path, pts, binary):
+    head = ("# .PCD v0.7\nVERSION 0.7\nFIELDS x y z intensity\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1\n"
+            f"WIDTH {len(pts)}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {len(pts)}\n")
+    data = np.c_[pts, np.ones(len(pts))].astype("<f4")
+    if binary:
+        path.write_bytes((head + "DATA binary\n").encode() + data.tobytes())
+    else:
+        path.write_text(head + "DATA ascii\n" + "\n".join(" ".join(f"{v:.6f}" for v in r) for r in data))
+
+
+@pytest.mark.parametrize("fmt", ["ply", "xyz", "pcd-ascii", "pcd-binary", "npz"])
+def test_point_cloud_formats(tmp_path, fmt):
+    if fmt == "ply":
+        p = tmp_path / "c.ply"
+        trimesh.PointCloud(PTS).export(p)
+    elif fmt == "xyz":
+        p = tmp_path / "c.xyz"
+        np.savetxt(p, PTS)
+    elif fmt.startswith("pcd"):
+        p = tmp_path / "c.pcd"
+        write_pcd(p, PTS, binary=fmt.endswith("binary"))
+    else:
+        p = tmp_path / "c.npz"
+        np.savez(p, points=PTS)
+    got = load_point_cloud(p)
+    assert got.shape == (4, 3) and np.allclose(got, PTS, atol=1e-6)
+    assert np.allclose(load_point_cloud(p, units="cm"), PTS / 100, atol=1e-8)
+
+
+def test_point_cloud_errors(tmp_path):
+    np.savez(tmp_path / "a.npz", points=np.full((3, 3), np.nan))
+    with pytest.raises(DatasetError, match="no \\(finite\\) points"):
+        load_point_cloud(tmp_path / "a.npz")
+    np.savez(tmp_path / "b.npz", points=np.c_[PTS[:2].T, [0, 0, np.inf]].T)
+    with pytest.raises(DatasetError, match="NaN or inf"):
+        load_point_cloud(tmp_path / "b.npz", drop_nonfinite=False)
+    np.savez(tmp_path / "c.npz", pts=PTS)
+    with pytest.raises(DatasetError, match="'points'"):
+        load_point_cloud(tmp_path / "c.npz")
+    (tmp_path / "d.pcd").write_text("VERSION 0.7\nFIELDS x y\n")
+    with pytest.raises(DatasetError, match="d.pcd"):
+        load_point_cloud(tmp_path / "d.pcd")
+    (tmp_path / "e.ply").write_bytes(b"ply\nformat garbage\n")
+    with pytest.raises(DatasetError, match="e.ply"):
+        load_point_cloud(tmp_path / "e.ply")
+    with pytest.raises(DatasetError, match="unknown point-cloud format"):
+        load_point_cloud(tmp_path / "f.obj2")
+    with pytest.raises(DatasetError, match="units"):
+        load_point_cloud(tmp_path / "a.npz", units="inch")
+
+
+def test_voxel_average_by_hand():
+    pts = np.array([[0.01, 0.01, 0.01], [0.03, 0.04, 0.02], [0.07, 0.01, 0.01], [-0.01, 0.0, 0.0]])
+    got = voxel_average(pts, 0.05)
+    # voxels: (0,0,0) holds the first two, (1,0,0) the third, (-1,0,0) the last
+    want = {(-1, 0, 0): [-0.01, 0.0, 0.0], (0, 0, 0): [0.02, 0.025, 0.015], (1, 0, 0): [0.07, 0.01, 0.01]}
+    assert len(got) == 3
+    for row in got:
+        key = tuple(np.floor(row / 0.05).astype(int))
+        assert np.allclose(row, want[key])
+
+
+def test_contacts_csv(tmp_path):
+    p = tmp_path / "c.csv"
+    p.write_text("x,y,z,label,step\n1,2,3,contact,0\n4,5,6,free,2\n7,8,9,1,3\n")
+    x, y, step = load_contacts_csv(p, units="mm")
+    assert np.allclose(x, [[0.001, 0.002, 0.003], [0.004, 0.005, 0.006], [0.007, 0.008, 0.009]])
+    assert y.tolist() == [0, 1, 1] and step.tolist() == [0, 2, 3]
+    for body, match in [("x,y,label\n1,nan,contact\n", "NaN"), ("x,y,label\n1,2,touch\n", "c.csv:2: label"),
+                        ("x,y,label\n1,a,contact\n", "not numbers"), ("x,label\n1,contact\n", "header"),
+                        ("x,y,label\n", "no rows"), ("x,y,label,step\n1,2,free,1.5\n", "step")]:
+        p.write_text(body)
+        with pytest.raises(DatasetError, match=match):
+            load_contacts_csv(p)
+
+
+def test_dataset_from_files(tmp_path):
+    (tmp_path / "c.csv").write_text("x,y,z,label\n0.1,0,0,contact\n0.3,0,0,free\n")
+    np.savez(tmp_path / "cloud.npz", points=PTS)
+    ds = dataset_from_files(tmp_path / "c.csv", tmp_path / "cloud.npz", voxel=None)
+    assert len(ds) == 6 and ds.task.tolist() == [0, 0, 1, 1, 1, 1] and ds.y.tolist() == [0, 1, 0, 0, 0, 0]
+    (tmp_path / "c2.csv").write_text("x,y,label\n0.1,0,contact\n")
+    with pytest.raises(DatasetError, match="3-D"):
+        dataset_from_files(tmp_path / "c2.csv", tmp_path / "cloud.npz")

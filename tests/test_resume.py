@@ -1,0 +1,77 @@
+"""A real exploration process killed with SIGKILL mid-way loses no completed step and resumes to the same end."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+import pytest
+
+import torch_gpioius as tg
+from torch_gpioius.datasets import TornLogWarning, read_records
+from torch_gpioius.sim import paper_objects_2d
+
+STEPS = 24
+CHILD = """
+import sys
+import torch_gpioius as tg
+from torch_gpioius.sim import paper_objects_2d
+import torch_gpioius.exploration as ex
+orig = ex.LogWriter.append
+def append(self, kind, meta, arrays):
+    orig(self, kind, meta, arrays)            # durable (fsync) when this returns
+    if kind == "step":
+        print("durable", meta["step"], flush=True)
+ex.LogWriter.append = append
+tg.explore(paper_objects_2d()["A"], max_steps=int(sys.argv[2]), log=sys.argv[1])
+"""
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
+def test_sigkill_then_resume(tmp_path):
+    log = tmp_path / "run.gpioius"
+    proc = subprocess.Popen([sys.executable, "-c", CHILD, str(log), str(STEPS)], stdout=subprocess.PIPE, text=True)
+    acknowledged = -1
+    deadline = time.monotonic() + 240
+    while acknowledged < 8 and time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            break
+        acknowledged = int(line.split()[1])
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL and 8 <= acknowledged < STEPS
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", TornLogWarning)
+        logged = [r.meta["step"] for r in read_records(log) if r.kind == "step"]
+    assert logged == list(range(len(logged))) and logged[-1] >= acknowledged   # nothing completed is lost
+    assert logged[-1] < STEPS                                                  # it really was cut short
+
+    resumed = tg.explore(paper_objects_2d()["A"], max_steps=STEPS, resume_from=log)
+    reference = tg.explore(paper_objects_2d()["A"], max_steps=STEPS)
+    assert resumed.n_steps == reference.n_steps and resumed.terminated == reference.terminated
+    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
+    assert np.abs(resumed.path - reference.path).max() < 1e-9
+    assert np.abs(resumed.task_covariance - reference.task_covariance).max() < 1e-9
+    assert np.allclose(resumed.hausdorff, reference.hausdorff, atol=1e-9, equal_nan=True)
+    # the log now holds the whole run and ends with its termination record
+    records = list(read_records(log))
+    assert [r.meta["step"] for r in records if r.kind == "step"] == list(range(STEPS + 1))
+    assert records[-1].kind == "end" and records[-1].meta["terminated"] == reference.terminated
+    final = tg.load_dataset(log)
+    assert np.allclose(final.x, reference.model.train_inputs[0].numpy(), atol=1e-12)
+
+
+def test_resume_refuses_other_parameters(tmp_path):
+    log = tmp_path / "run.gpioius"
+    tg.explore(paper_objects_2d()["A"], max_steps=2, log=log)
+    with pytest.raises(ValueError, match="mode"):
+        tg.explore(paper_objects_2d()["A"], mode="tactile", max_steps=2, resume_from=log)
+    with pytest.raises(ValueError, match="scene"):
+        tg.explore(paper_objects_2d()["B"], max_steps=2, resume_from=log)
+    done = tg.explore(paper_objects_2d()["A"], max_steps=2, resume_from=log)   # already finished: returns it
+    assert done.n_steps == 3

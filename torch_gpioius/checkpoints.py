@@ -1,0 +1,111 @@
+"""Save and load fitted models: ``state_dict`` plus the data it needs, loaded with ``weights_only=True``."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+import torch
+
+__all__ = ["CheckpointError", "save_checkpoint", "load_checkpoint", "CHECKPOINT_VERSION"]
+
+CHECKPOINT_VERSION = 1
+_FORMAT = "torch_gpioius.checkpoint"
+
+
+class CheckpointError(ValueError):
+    """A checkpoint file is unreadable, from another format version, or was modified after saving."""
+
+
+def _digest(state: dict, tensors: dict) -> str:
+    h = hashlib.sha256()
+    for name in sorted(state):
+        h.update(name.encode())
+        h.update(state[name].detach().cpu().contiguous().numpy().tobytes())
+    for name in sorted(tensors):
+        h.update(name.encode())
+        h.update(tensors[name].detach().cpu().contiguous().numpy().tobytes())
+    return h.hexdigest()
+
+
+def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None) -> Path:
+    """Write a fitted :class:`~torch_gpioius.GPIOIS` or :class:`~torch_gpioius.GPIS` to ``path``.
+
+    The file holds only tensors, numbers and strings (so it loads with ``torch.load(weights_only=True)``),
+    a SHA-256 over them (so a modified file is detected), and the format version. Written atomically.
+
+    Args:
+        model: the model.
+        path: destination (conventionally ``.pt``).
+        extra: small JSON-like metadata to keep alongside (strings/numbers).
+    """
+    from . import __version__
+    from .gpiois import GPIOIS
+
+    kind = "GPIOIS" if isinstance(model, GPIOIS) else "GPIS"
+    state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
+    tensors = {"train_x": model.train_inputs[0].detach().cpu().clone(),
+               "train_y": model.train_targets.detach().cpu().clone()}
+    if kind == "GPIOIS":
+        tensors["train_task"] = model.train_inputs[1].detach().cpu().reshape(-1).clone()
+    payload = {
+        "format": _FORMAT, "version": CHECKPOINT_VERSION, "library_version": __version__, "kind": kind,
+        "theta": float(model.theta), "noise": float(model.noise),
+        "inference": getattr(model, "inference", "dense"), "state_dict": state, "tensors": tensors,
+        "sha256": _digest(state, tensors), "extra": dict(extra or {}),
+    }
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    os.replace(tmp, path)
+    return path
+
+
+def load_checkpoint(path: str | os.PathLike):
+    """Load a model saved by :func:`save_checkpoint` (``weights_only=True``: no code runs while loading).
+
+    Returns:
+        The model in eval mode, with the saved K_t, theta and noise.
+
+    Raises:
+        CheckpointError: not a checkpoint, a pickle that is not plain data (tampered), another format
+            version, or contents that no longer match their SHA-256.
+    """
+    from .gpiois import GPIOIS
+    from .gpis import GPIS
+
+    path = Path(path)
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except FileNotFoundError:
+        raise CheckpointError(f"{path}: no such file") from None
+    except Exception as exc:  # UnpicklingError for code-carrying pickles, RuntimeError for non-zip files, ...
+        raise CheckpointError(f"{path}: not a loadable torch_gpioius checkpoint ({type(exc).__name__}: "
+                              f"{str(exc).splitlines()[0][:200]})") from exc
+    if not isinstance(payload, dict) or payload.get("format") != _FORMAT:
+        raise CheckpointError(f"{path}: not a torch_gpioius checkpoint (field 'format' missing or wrong)")
+    if payload.get("version") != CHECKPOINT_VERSION:
+        raise CheckpointError(f"{path}: checkpoint version {payload.get('version')!r} is not supported (this "
+                              f"torch_gpioius reads version {CHECKPOINT_VERSION}; saved by "
+                              f"{payload.get('library_version')!r})")
+    try:
+        state, tensors = payload["state_dict"], payload["tensors"]
+        ok = payload["sha256"] == _digest(state, tensors)
+    except (KeyError, AttributeError, TypeError) as exc:
+        raise CheckpointError(f"{path}: checkpoint is missing field {exc}") from exc
+    if not ok:
+        raise CheckpointError(f"{path}: contents do not match the stored SHA-256 (the file was modified)")
+    try:
+        if payload["kind"] == "GPIOIS":
+            model = GPIOIS(tensors["train_x"], tensors["train_y"], tensors["train_task"], theta=payload["theta"],
+                           noise=payload["noise"], inference=payload["inference"])
+        elif payload["kind"] == "GPIS":
+            model = GPIS(tensors["train_x"], tensors["train_y"], theta=payload["theta"], noise=payload["noise"])
+        else:
+            raise CheckpointError(f"{path}: unknown model kind {payload['kind']!r}")
+        model.load_state_dict(state)
+    except (KeyError, ValueError, RuntimeError) as exc:
+        raise CheckpointError(f"{path}: checkpoint data is inconsistent ({exc})") from exc
+    model.eval()
+    return model

@@ -1,0 +1,367 @@
+"""Logged datasets: one versioned, append-only, crash-safe file format for observations and explorations.
+
+A file is a fixed preamble followed by framed records::
+
+    b"GPIOIUS\\0"  uint16 format version (big-endian)
+    record*:  b"RC"  uint32 payload length  uint32 CRC-32 of the payload  payload
+
+Each payload is an uncompressed NPZ archive (read with ``allow_pickle=False``) holding a ``kind`` string, a
+JSON ``meta`` string and arrays. The first record is the ``header`` (units, frame, dimension, theta, sigma^2,
+voxel size, source, ...). A **dataset** is a header plus ``observations`` records; an **exploration log** is a
+header plus one ``step`` record per completed step (the observations that arrived, the indices removed, the
+robot/sensor trace and the loop state needed to resume). See docs/data-format.md.
+
+Why not HDF5: a process killed while HDF5 writes can leave the whole file unreadable (its metadata is not
+journaled, and SWMR only protects appends to existing datasets); an append-only framed log loses at most the
+record being written, which the CRC detects. Why not a plain ``.npz``: a zip cannot be appended to safely.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import struct
+import warnings
+import zlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+
+__all__ = ["FORMAT_VERSION", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
+           "save_dataset", "load_dataset", "validate_observations"]
+
+MAGIC = b"GPIOIUS\x00"
+FORMAT_VERSION = 1
+_REC = b"RC"
+_REC_HEAD = struct.Struct(">2sII")
+_MAX_RECORD = 1 << 31
+UNITS = "m"
+
+
+class DatasetError(ValueError):
+    """A dataset or log file is unreadable or holds invalid data; the message names the file and field."""
+
+
+class TornLogWarning(UserWarning):
+    """The last record of a log is incomplete (the writer was killed mid-write); it was ignored."""
+
+
+@dataclass
+class Record:
+    """One decoded record: ``kind``, JSON-able ``meta`` and named arrays; ``end`` = byte offset after it."""
+
+    kind: str
+    meta: dict
+    arrays: dict[str, np.ndarray]
+    end: int = 0
+
+
+def _encode(kind: str, meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
+    buf = io.BytesIO()
+    payload = {k: np.asarray(v) for k, v in arrays.items()}
+    for k, v in payload.items():
+        if v.dtype == object:
+            raise DatasetError(f"array {k!r} has dtype object; only numeric and string arrays are stored")
+    np.savez(buf, kind=np.array(kind), meta=np.array(json.dumps(meta, allow_nan=True)), **payload)
+    data = buf.getvalue()
+    return _REC_HEAD.pack(_REC, len(data), zlib.crc32(data)) + data
+
+
+def _decode(path: Path, offset: int, data: bytes) -> Record:
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except Exception as exc:  # a CRC-valid record that is not an NPZ archive was written by something else
+        raise DatasetError(f"{path}: record at byte {offset} is not a valid NPZ payload ({exc})") from exc
+    try:
+        kind = str(arrays.pop("kind"))
+        meta = json.loads(str(arrays.pop("meta")))
+    except (KeyError, json.JSONDecodeError) as exc:
+        raise DatasetError(f"{path}: record at byte {offset} lacks a valid 'kind'/'meta' field") from exc
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{path}: record at byte {offset}: 'meta' must be a JSON object")
+    return Record(kind, meta, arrays)
+
+
+def read_records(path: str | os.PathLike, *, allow_torn_tail: bool = True) -> Iterator[Record]:
+    """Decode every complete record of a file, in order.
+
+    Args:
+        path: dataset or log file.
+        allow_torn_tail: an incomplete *last* record (a writer killed mid-write) is skipped with a
+            :class:`TornLogWarning`; if False it is an error. Corruption before the last record is always an error.
+
+    Raises:
+        DatasetError: not our format, an unsupported version, or a corrupt record (names file and byte offset).
+    """
+    path = Path(path)
+    try:
+        blob = path.read_bytes()
+    except OSError as exc:
+        raise DatasetError(f"{path}: cannot read ({exc.strerror or exc})") from exc
+    if len(blob) < len(MAGIC) + 2 or blob[:len(MAGIC)] != MAGIC:
+        raise DatasetError(f"{path}: not a torch_gpioius dataset/log (bad magic bytes)")
+    (version,) = struct.unpack(">H", blob[len(MAGIC):len(MAGIC) + 2])
+    if version != FORMAT_VERSION:
+        raise DatasetError(f"{path}: format version {version} is not supported (this torch_gpioius reads version "
+                           f"{FORMAT_VERSION}); convert it with the matching release")
+    pos = len(MAGIC) + 2
+    while pos < len(blob):
+        torn = None
+        if len(blob) - pos < _REC_HEAD.size:
+            torn = "a record header is cut off"
+        else:
+            tag, length, crc = _REC_HEAD.unpack_from(blob, pos)
+            if tag != _REC or length > _MAX_RECORD:
+                raise DatasetError(f"{path}: corrupt record header at byte {pos}")
+            start, end = pos + _REC_HEAD.size, pos + _REC_HEAD.size + length
+            if end > len(blob):
+                torn = f"the record at byte {pos} is cut off ({len(blob) - start} of {length} bytes)"
+            elif zlib.crc32(blob[start:end]) != crc:
+                if end == len(blob):
+                    torn = f"the last record (byte {pos}) fails its checksum"
+                else:
+                    raise DatasetError(f"{path}: record at byte {pos} fails its CRC-32 check (file corrupted)")
+        if torn is not None:
+            if not allow_torn_tail:
+                raise DatasetError(f"{path}: truncated: {torn}")
+            warnings.warn(f"{path}: {torn}; ignoring it (the writer was probably killed)", TornLogWarning,
+                          stacklevel=2)
+            return
+        rec = _decode(path, pos, blob[start:end])
+        rec.end = end
+        yield rec
+        pos = end
+
+
+def validate_observations(x: Any, y: Any, task: Any, step: Any, *, where: str, dim: int | None = None) -> tuple:
+    """Check and convert observation arrays; raise :class:`DatasetError` naming ``where`` and the field.
+
+    Returns:
+        ``x (n, d) float64``, ``y (n,) float64`` in {0, 1}, ``task (n,) int64`` in {0, 1}, ``step (n,) int64`` >= 0.
+    """
+    try:
+        x = np.asarray(x, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        task = np.asarray(task)
+        step = np.asarray(step)
+    except (TypeError, ValueError) as exc:
+        raise DatasetError(f"{where}: observation arrays are not numeric ({exc})") from exc
+    if x.ndim != 2 or x.shape[1] not in (2, 3):
+        raise DatasetError(f"{where}: field 'x' must have shape (n, 2) or (n, 3), got {x.shape}")
+    if dim is not None and x.shape[1] != dim:
+        raise DatasetError(f"{where}: field 'x' has dimension {x.shape[1]} but the header says {dim}")
+    n = x.shape[0]
+    for name, a in (("y", y), ("task", task), ("step", step)):
+        if a.shape != (n,):
+            raise DatasetError(f"{where}: field {name!r} must have shape ({n},), got {a.shape}")
+    if not np.isfinite(x).all():
+        raise DatasetError(f"{where}: field 'x' contains NaN or inf")
+    if not np.isin(y, (0.0, 1.0)).all():
+        raise DatasetError(f"{where}: field 'y' must be 0 (surface) or 1 (free space)")
+    if task.dtype.kind not in "iub" and not (task.dtype.kind == "f" and np.isfinite(task).all()
+                                             and (task == np.round(task)).all()):
+        raise DatasetError(f"{where}: field 'task' must hold integers 0 (inner) or 1 (outer)")
+    if not np.isin(task, (0, 1)).all():
+        raise DatasetError(f"{where}: field 'task' must be 0 (inner) or 1 (outer)")
+    if step.dtype.kind not in "iu" and not (step.dtype.kind == "f" and np.isfinite(step).all()
+                                            and (step == np.round(step)).all()):
+        raise DatasetError(f"{where}: field 'step' must hold integers")
+    if (step < 0).any():
+        raise DatasetError(f"{where}: field 'step' must be >= 0")
+    return x, y, task.astype(np.int64), step.astype(np.int64)
+
+
+def _check_header(path: Path, rec: Record) -> dict:
+    if rec.kind != "header":
+        raise DatasetError(f"{path}: the first record must be the header, found {rec.kind!r}")
+    meta = rec.meta
+    if meta.get("units") != UNITS:
+        raise DatasetError(f"{path}: header field 'units' is {meta.get('units')!r}; torch_gpioius files are in "
+                           f"metres ('m'): convert when importing (importers take units=)")
+    if meta.get("dim") not in (2, 3):
+        raise DatasetError(f"{path}: header field 'dim' must be 2 or 3, got {meta.get('dim')!r}")
+    for k in ("theta", "noise"):
+        v = meta.get(k)
+        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
+            raise DatasetError(f"{path}: header field {k!r} must be a positive number, got {v!r}")
+    return meta
+
+
+@dataclass
+class Dataset:
+    """Observations with the step each arrived at, an optional robot/sensor trace, and metadata.
+
+    Attributes:
+        x: `(n, d)` positions [m] in ``meta['frame']`` (robot base frame by default).
+        y: `(n,)` labels: 0 on a surface, 1 free space.
+        task: `(n,)` 0 inner (touch), 1 outer (vision).
+        step: `(n,)` exploration step at which each observation arrived (0 = before exploring).
+        meta: units ("m"), frame, dim, theta, noise, voxel_size, source, ...
+        trace: optional arrays ``positions (m, d)`` [m], ``forces (m, 3)`` [N], ``timestamps (m,)`` [s].
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    task: np.ndarray
+    step: np.ndarray
+    meta: dict = field(default_factory=dict)
+    trace: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.x, self.y, self.task, self.step = validate_observations(
+            self.x, self.y, self.task, self.step, where="Dataset", dim=self.meta.get("dim"))
+        self.meta = {"units": UNITS, "frame": "base", "dim": int(self.x.shape[1]), **self.meta}
+
+    def __len__(self) -> int:
+        return int(self.x.shape[0])
+
+    def to_model(self, theta: float | None = None, noise: float | None = None, **kwargs: Any):
+        """A :class:`torch_gpioius.GPIOIS` on these observations (GPIS if no outer observation), not yet fit.
+
+        ``theta``/``noise`` default to the header's values, then to 0.1 / 0.006.
+        """
+        from .gpiois import GPIOIS
+        from .gpis import GPIS
+
+        if len(self) == 0:
+            raise DatasetError("the dataset is empty: nothing to fit")
+        theta = theta if theta is not None else self.meta.get("theta") or 0.1
+        noise = noise if noise is not None else self.meta.get("noise") or 0.006
+        if (self.task == 1).any():
+            if not (self.task == 0).any():
+                raise DatasetError("the dataset has outer (visual) observations only; GPIOIS needs touches too")
+            return GPIOIS(self.x, self.y, self.task, theta=theta, noise=noise, **kwargs)
+        return GPIS(self.x, self.y, theta=theta, noise=noise, **kwargs)
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path.parent, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory fds
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def save_dataset(ds: Dataset, path: str | os.PathLike) -> Path:
+    """Write ``ds`` atomically (temporary file, fsync, rename): a crash leaves the old file or the new one."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        f.write(MAGIC + struct.pack(">H", FORMAT_VERSION))
+        f.write(_encode("header", ds.meta, {}))
+        f.write(_encode("observations", {}, {"x": ds.x, "y": ds.y, "task": ds.task, "step": ds.step}))
+        if ds.trace:
+            f.write(_encode("trace", {}, ds.trace))
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+    _fsync_dir(path)
+    return path
+
+
+class LogWriter:
+    """Append-only writer: every :meth:`append` is durable (flush + fsync) before it returns.
+
+    Args:
+        path: the log file. A new file gets the preamble and ``header`` (``meta``); ``resume=True`` opens an
+            existing log, truncates an incomplete last record and appends after the last complete one.
+        meta: header metadata (new files only).
+    """
+
+    def __init__(self, path: str | os.PathLike, meta: dict | None = None, *, resume: bool = False) -> None:
+        self.path = Path(path)
+        if resume:
+            end = len(MAGIC) + 2
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", TornLogWarning)
+                for rec in read_records(self.path):
+                    end = rec.end
+            self._f = open(self.path, "r+b")
+            self._f.truncate(end)
+            self._f.seek(end)
+        else:
+            meta = dict(meta or {})
+            meta.setdefault("units", UNITS)
+            self._f = open(self.path, "wb")
+            self._f.write(MAGIC + struct.pack(">H", FORMAT_VERSION))
+            self._write(_encode("header", meta, {}))
+            _fsync_dir(self.path)
+
+    def _write(self, data: bytes) -> None:
+        self._f.write(data)
+        self._f.flush()
+        os.fsync(self._f.fileno())
+
+    def append(self, kind: str, meta: dict, arrays: dict[str, np.ndarray]) -> None:
+        """Append one record and make it durable."""
+        self._write(_encode(kind, meta, arrays))
+
+    def close(self) -> None:
+        self._f.close()
+
+    def __enter__(self) -> "LogWriter":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def load_dataset(path: str | os.PathLike, *, upto_step: int | None = None) -> Dataset:
+    """Read a dataset or an exploration log (replaying its adds and removals) into a :class:`Dataset`.
+
+    Args:
+        path: the file.
+        upto_step: for logs, stop after this step (default: all complete steps).
+
+    Raises:
+        DatasetError: unreadable, corrupt, invalid or empty (names the file and the field).
+    """
+    path = Path(path)
+    records = iter(read_records(path))
+    try:
+        first = next(records)
+    except StopIteration:
+        raise DatasetError(f"{path}: no header record (empty or truncated file)") from None
+    meta = _check_header(path, first)
+    dim = meta["dim"]
+    trace: dict[str, list] = {}
+    cur = [np.zeros((0, dim)), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)]
+    for rec in records:
+        where = f"{path}: {rec.kind} record ending at byte {rec.end}"
+        if rec.kind in ("observations", "step"):
+            step_no = int(rec.meta.get("step", 0))
+            if upto_step is not None and rec.kind == "step" and step_no > upto_step:
+                break
+            a = rec.arrays
+            if rec.kind == "step":
+                removed = np.asarray(a.get("removed", np.zeros(0, np.int64)))
+                if removed.size:
+                    if removed.dtype.kind not in "iu" or removed.min() < 0 or removed.max() >= len(cur[0]):
+                        raise DatasetError(f"{where}: field 'removed' holds invalid indices")
+                    keep = np.ones(len(cur[0]), bool)
+                    keep[removed] = False
+                    cur = [c[keep] for c in cur]
+            if "x" in a:
+                n = len(np.asarray(a["x"]))
+                step_arr = a.get("step", np.full(n, step_no, np.int64))
+                new = validate_observations(a["x"], a.get("y"), a.get("task"), step_arr, where=where, dim=dim)
+                cur = [np.concatenate([c, v]) for c, v in zip(cur, new)]
+            for k in ("positions", "forces", "timestamps"):
+                if k in a:
+                    trace.setdefault(k, []).append(np.asarray(a[k], dtype=np.float64))
+        elif rec.kind == "trace":
+            for k, v in rec.arrays.items():
+                trace.setdefault(k, []).append(np.asarray(v, dtype=np.float64))
+        elif rec.kind == "header":
+            raise DatasetError(f"{where}: a second header record")
+        # unknown kinds from newer minor writers are skipped on purpose (forward compatible within a version)
+    if len(cur[0]) == 0:
+        raise DatasetError(f"{path}: the dataset holds no observations")
+    return Dataset(*cur, meta=meta, trace={k: np.concatenate(v) for k, v in trace.items()})
