@@ -8,11 +8,16 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def run_example(script: str, out: Path) -> subprocess.CompletedProcess:
+    """Run ``examples/<script> --out OUT`` with CI=1 (the smoke switch), as a user would; assert it succeeds."""
+    result = subprocess.run([sys.executable, str(ROOT / "examples" / script), "--out", str(out)],
+                            capture_output=True, text=True, env=dict(os.environ, CI="1"), timeout=300)
+    assert result.returncode == 0, result.stderr
+    return result
+
+
 def test_fit_two_shapes_example(tmp_path):
-    env = dict(os.environ, CI="1")
-    out = subprocess.run([sys.executable, str(ROOT / "examples" / "fit_two_shapes.py"), "--out", str(tmp_path)],
-                         capture_output=True, text=True, env=env, timeout=300)
-    assert out.returncode == 0, out.stderr
+    out = run_example("fit_two_shapes.py", tmp_path)
     assert (tmp_path / "fit_two_shapes.png").stat().st_size > 0
     lines = {line.split()[0]: line for line in out.stdout.splitlines() if line.startswith(("A ", "D "))}
     # the printed similarity table has both pairs and all four observation sets
@@ -21,19 +26,14 @@ def test_fit_two_shapes_example(tmp_path):
 
 
 def test_ur5_ik_demo_example(tmp_path):
-    env = dict(os.environ, CI="1")
-    out = subprocess.run([sys.executable, str(ROOT / "examples" / "ur5_ik_demo.py"), "--out", str(tmp_path)],
-                         capture_output=True, text=True, env=env, timeout=300)
-    assert out.returncode == 0, out.stderr
+    out = run_example("ur5_ik_demo.py", tmp_path)
     assert (tmp_path / "ur5_ik_demo.png").stat().st_size > 0
     err = float(out.stdout.split("max tracking error ")[1].split()[0])
     assert err < 1e-6 and "5 cm jump refused" in out.stdout
 
 
 def test_fit_logged_example(tmp_path):
-    out = subprocess.run([sys.executable, str(ROOT / "examples" / "fit_logged.py"), "--out", str(tmp_path)],
-                         capture_output=True, text=True, env=dict(os.environ, CI="1"), timeout=300)
-    assert out.returncode == 0, out.stderr
+    out = run_example("fit_logged.py", tmp_path)
     assert (tmp_path / "model.pt").stat().st_size > 0 and "CSV round trip" in out.stdout
     assert "(inside < 0)" in out.stdout and float(out.stdout.split("mu_in at (0, 0) = ")[1].split()[0]) < 0
 

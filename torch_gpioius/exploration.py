@@ -318,9 +318,11 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         if writer is None:
             return
         n = len(x_new)
-        task_new = np.full(n, INNER) if mode == "visual-tactile" or k > 0 else np.zeros(n, np.int64)
+        # step 0 logs the whole initial set (both tasks); later steps add inner observations only (GPIS: task 0)
         if k == 0 and mode == "visual-tactile":
             task_new = model.train_inputs[1].reshape(-1).numpy()
+        else:
+            task_new = np.full(n, INNER, dtype=np.int64)
         writer.append("step", {"step": k, "travel": travel, "retracted": retracted, "h": rec["h"][-1],
                                "u": rec["u"][-1], "s": rec["s"][-1], "time": rec["time"][-1]},
                       {"x": np.asarray(x_new), "y": np.asarray(y_new), "task": task_new,

@@ -1,7 +1,6 @@
 """Safety gate and robot backends: refusals leave the robot untouched; the RTDE backend against a mock."""
 
 import importlib.util
-import math
 
 import pytest
 import torch
