@@ -31,7 +31,7 @@ from typing import Any, Iterator
 import numpy as np
 
 __all__ = ["FORMAT_VERSION", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
-           "save_dataset", "load_dataset", "validate_observations"]
+           "replay", "save_dataset", "load_dataset", "validate_observations"]
 
 MAGIC = b"GPIOIUS\x00"
 FORMAT_VERSION = 1
@@ -313,15 +313,18 @@ class LogWriter:
         self.close()
 
 
-def load_dataset(path: str | os.PathLike, *, upto_step: int | None = None) -> Dataset:
-    """Read a dataset or an exploration log (replaying its adds and removals) into a :class:`Dataset`.
+def replay(path: str | os.PathLike) -> Iterator[tuple[Record, Dataset]]:
+    """Read a dataset or log once, yielding the observations as they stand after each data record.
 
-    Args:
-        path: the file.
-        upto_step: for logs, stop after this step (default: all complete steps).
+    For a log this is the training set after each step (its ``removed`` indices applied, then its new
+    observations appended, each with the step it arrived at); for a dataset, after each ``observations`` or
+    ``trace`` record.
+
+    Yields:
+        ``(record, dataset)`` pairs, in file order; ``dataset.trace`` holds the trace read so far.
 
     Raises:
-        DatasetError: unreadable, corrupt, invalid or empty (names the file and the field).
+        DatasetError: unreadable, corrupt or invalid (names the file and the field).
     """
     path = Path(path)
     records = iter(read_records(path))
@@ -337,8 +340,6 @@ def load_dataset(path: str | os.PathLike, *, upto_step: int | None = None) -> Da
         where = f"{path}: {rec.kind} record ending at byte {rec.end}"
         if rec.kind in ("observations", "step"):
             step_no = int(rec.meta.get("step", 0))
-            if upto_step is not None and rec.kind == "step" and step_no > upto_step:
-                break
             a = rec.arrays
             if rec.kind == "step":
                 removed = np.asarray(a.get("removed", np.zeros(0, np.int64)))
@@ -356,12 +357,32 @@ def load_dataset(path: str | os.PathLike, *, upto_step: int | None = None) -> Da
             for k in ("positions", "forces", "timestamps"):
                 if k in a:
                     trace.setdefault(k, []).append(np.asarray(a[k], dtype=np.float64))
+            yield rec, Dataset(*cur, meta=meta, trace={k: np.concatenate(v) for k, v in trace.items()})
         elif rec.kind == "trace":
             for k, v in rec.arrays.items():
                 trace.setdefault(k, []).append(np.asarray(v, dtype=np.float64))
+            yield rec, Dataset(*cur, meta=meta, trace={k: np.concatenate(v) for k, v in trace.items()})
         elif rec.kind == "header":
             raise DatasetError(f"{where}: a second header record")
         # unknown kinds from newer minor writers are skipped on purpose (forward compatible within a version)
-    if len(cur[0]) == 0:
+
+
+def load_dataset(path: str | os.PathLike, *, upto_step: int | None = None) -> Dataset:
+    """Read a dataset or an exploration log (replaying its adds and removals) into a :class:`Dataset`.
+
+    Args:
+        path: the file.
+        upto_step: for logs, stop after this step (default: all complete steps).
+
+    Raises:
+        DatasetError: unreadable, corrupt, invalid or empty (names the file and the field).
+    """
+    path = Path(path)
+    ds = None
+    for rec, state in replay(path):
+        if upto_step is not None and rec.kind == "step" and int(rec.meta.get("step", 0)) > upto_step:
+            break
+        ds = state
+    if ds is None or len(ds) == 0:
         raise DatasetError(f"{path}: the dataset holds no observations")
-    return Dataset(*cur, meta=meta, trace={k: np.concatenate(v) for k, v in trace.items()})
+    return ds

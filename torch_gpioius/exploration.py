@@ -12,7 +12,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from .datasets import DatasetError, LogWriter, TornLogWarning, read_records
+from .datasets import DatasetError, LogWriter, TornLogWarning, read_records, replay
 from .gpiois import GPIOIS, INNER, OUTER
 from .gpis import GPIS
 from .metrics import hausdorff_distance, uncertainty_measure
@@ -173,6 +173,7 @@ def _restore(path: str | os.PathLike, params: dict) -> dict:
     with warnings.catch_warnings(record=True):
         warnings.simplefilter("always", TornLogWarning)
         records = list(read_records(path))
+        states = [ds for rec, ds in replay(path) if rec.kind == "step"]
     if not records or records[0].kind != "header":
         raise DatasetError(f"{path}: no header record; not an exploration log")
     header = records[0].meta
@@ -185,32 +186,23 @@ def _restore(path: str | os.PathLike, params: dict) -> dict:
     if not steps:
         raise DatasetError(f"{path}: the log has no complete step to resume from")
     end = [r for r in records[1:] if r.kind == "end"]
-    mode = header["mode"]
-    x = y = task = None
     contacts, path_pts = [], []
     rec = {"h": [], "u": [], "s": [], "travel": [], "time": [], "kt": []}
     for r in steps:
-        a = r.arrays
         if int(r.meta["step"]) != len(rec["h"]):
             raise DatasetError(f"{path}: step records out of order at step {r.meta['step']}")
-        if x is None:
-            x, y, task = a["x"], a["y"], a["task"]
-        else:
-            keep = np.ones(len(x), bool)
-            keep[a["removed"]] = False
-            x, y, task = x[keep], y[keep], task[keep]
-            x, y, task = np.concatenate([x, a["x"]]), np.concatenate([y, a["y"]]), np.concatenate([task, a["task"]])
-        contacts.append(a["contact"])
-        path_pts.extend(list(a["path"]))
+        contacts.append(r.arrays["contact"])
+        path_pts.extend(list(r.arrays["path"]))
         for key in ("h", "u", "s", "travel", "time"):
-            rec[key].append(float(r.meta[key if key != "travel" else "travel"]))
-        rec["kt"].append(a["kt"])
-    last = steps[-1]
+            rec[key].append(float(r.meta[key]))
+        rec["kt"].append(r.arrays["kt"])
+    last, data = steps[-1], states[-1]    # the training set after the last step (removals and additions replayed)
     theta, noise = header["theta"], header["noise"]
-    if mode == "visual-tactile":
-        model = GPIOIS(x, y, task, theta=theta, noise=noise, task_covariance=torch.as_tensor(last.arrays["kt"]))
+    if header["mode"] == "visual-tactile":
+        model = GPIOIS(data.x, data.y, data.task, theta=theta, noise=noise,
+                       task_covariance=torch.as_tensor(last.arrays["kt"]))
     else:
-        model = GPIS(x, y, theta=theta, noise=noise)
+        model = GPIS(data.x, data.y, theta=theta, noise=noise)
     prev = last.arrays["previous"]
     return {"model": model, "contacts": contacts, "path": path_pts, "rec": rec,
             "travel": float(last.meta["travel"]), "retracted": int(last.meta["retracted"]),

@@ -12,7 +12,7 @@ import torch
 from tqdm.auto import tqdm
 
 from .checkpoints import save_checkpoint
-from .datasets import Dataset, DatasetError, load_dataset, read_records
+from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
 from .gpiois import GPIOIS, INNER
 from .metrics import hausdorff_distance, uncertainty_measure
 from .surfaces import closed_curves, evaluate_grid, zero_level_curves, zero_level_mesh
@@ -122,8 +122,9 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
     rows, snapshots = [], {}
     shots = set(np.unique(np.linspace(0, len(chosen) - 1, max(1, figures)).round().astype(int)).tolist())
     kt = None
+    states = {int(rec.meta["step"]): ds for rec, ds in replay(path) if rec.kind == "step"}   # one read of the file
     for i, k in enumerate(tqdm(chosen, desc=f"replay {path.name}", disable=not progress)):
-        ds = load_dataset(path, upto_step=k)
+        ds = states[k]
         model = ds.to_model()
         if kt is not None and isinstance(model, GPIOIS):
             model.task_covariance = kt
