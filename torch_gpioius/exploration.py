@@ -61,6 +61,8 @@ class Trace:
         terminated: "once-around" (``gone_around``) or "max_steps".
         task_covariance: `(n, 2, 2)` learned K_t per record (NaN in tactile mode).
         retracted: free-space samples removed because a later contact landed within the margin.
+        sim_time: `(n,)` robot clock at each record [s] (3-D runs on a robot; empty in 2-D).
+        final_mesh: 3-D only: the last estimated inner surface within the exploration range (``trimesh``).
     """
 
     mode: str
@@ -76,6 +78,8 @@ class Trace:
     terminated: str
     task_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     retracted: int = 0
+    sim_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    final_mesh: object = None
 
     @property
     def n_steps(self) -> int:
@@ -85,10 +89,14 @@ class Trace:
         """Per-step records as dicts (JSON/CSV friendly)."""
         out = []
         for i in range(self.n_steps):
-            out.append({"object": self.scene_name, "mode": self.mode, "step": i, "travel_m": float(self.travel[i]),
-                        "hausdorff_m": float(self.hausdorff[i]), "uncertainty": float(self.uncertainty[i]),
-                        "similarity": float(self.similarity[i]), "contact_x": float(self.contacts[i, 0]),
-                        "contact_y": float(self.contacts[i, 1]), "step_time_s": float(self.step_time[i])})
+            row = {"object": self.scene_name, "mode": self.mode, "step": i, "travel_m": float(self.travel[i]),
+                   "hausdorff_m": float(self.hausdorff[i]), "uncertainty": float(self.uncertainty[i]),
+                   "similarity": float(self.similarity[i])}
+            row.update({f"contact_{a}": float(v) for a, v in zip("xyz", self.contacts[i])})
+            row["step_time_s"] = float(self.step_time[i])
+            if len(self.sim_time):
+                row["robot_time_s"] = float(self.sim_time[i])
+            out.append(row)
         return out
 
 
@@ -210,12 +218,18 @@ def _restore(path: str | os.PathLike, params: dict) -> dict:
             "steps": int(last.meta["step"]), "terminated": end[-1].meta["terminated"] if end else None}
 
 
-def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: float = 0.1, noise: float = 0.006,
-            max_steps: int = 400, penalty=None, policy: ObservationPolicy | None = None,
-            metrics_resolution: float = 0.01, progress: bool = False, min_steps: int = 10,
+def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: float | None = None,
+            noise: float | None = None, max_steps: int = 400, penalty=None, policy: ObservationPolicy | None = None,
+            metrics_resolution: float | None = None, progress: bool = False, min_steps: int = 10,
             closure_gap: float = 0.05, log: str | os.PathLike | None = None,
-            resume_from: str | os.PathLike | None = None) -> Trace:
-    """Run one simulated exploration of a 2-D scene and record per-step metrics.
+            resume_from: str | os.PathLike | None = None, **options) -> Trace:
+    """Run one simulated exploration of a 2-D or 3-D scene and record per-step metrics.
+
+    A ``Scene3D`` runs the robot loop of :func:`torch_gpioius.exploration3d.explore_3d` (simulated UR5, force
+    sensor, depth camera; stops after ``max_travel`` = 1.5 m of fingertip travel; paper defaults theta = 0.15,
+    sigma^2 = 0.08, range penalty of eq. 25, 2 cm metrics grid); its extra keyword ``options`` are
+    ``max_travel``, ``voxel``, ``metrics_every``, ``robot`` and ``camera``. The rest of this docstring is the
+    2-D protocol.
 
     Protocol (both modes alike): vision once before exploration (visual-tactile only: outer boundary points and
     free space outside it); approach from ``scene.start`` along ``scene.direction`` to the first contact, the
@@ -231,12 +245,12 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
         scene: a ``Scene2D``.
         mode: "visual-tactile" (GPIOIS on vision + touch) or "tactile" (GPIS on touch only).
         step: alpha, the sliding step [m].
-        theta: IMQ kernel parameter [m].
-        noise: sigma^2.
+        theta: IMQ kernel parameter [m] (default 0.1 in 2-D, 0.15 in 3-D).
+        noise: sigma^2 (default 0.006 in 2-D, 0.08 in 3-D).
         max_steps: cap on planning steps.
         penalty: C(x) (default ``ZeroPenalty``, as in the 2-D study).
         policy: ``ObservationPolicy``.
-        metrics_resolution: grid spacing for the per-step estimated curve [m].
+        metrics_resolution: grid spacing for the per-step estimated curve [m] (default 0.01; 3-D 0.02).
         progress: show a tqdm progress bar.
         min_steps: steps before the winding test applies.
         closure_gap: widest unvisited gap (chord between its bounding contacts) that still counts as once
@@ -249,6 +263,21 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
     Returns:
         ``Trace``.
     """
+    if getattr(scene, "dim", 2) == 3:
+        from .exploration3d import explore_3d
+
+        if resume_from is not None:
+            raise ValueError("resume_from: resuming is supported for 2-D scenes only (a 3-D run also needs the "
+                             "robot's state); start a new run")
+        return explore_3d(scene, mode, step, 0.15 if theta is None else theta, 0.08 if noise is None else noise,
+                          max_steps=max_steps, penalty=penalty, policy=policy, progress=progress, log=log,
+                          metrics_resolution=0.02 if metrics_resolution is None else metrics_resolution,
+                          **options)
+    if options:
+        raise TypeError(f"explore: options {sorted(options)} apply to 3-D scenes only")
+    theta = 0.1 if theta is None else theta
+    noise = 0.006 if noise is None else noise
+    metrics_resolution = 0.01 if metrics_resolution is None else metrics_resolution
     if mode not in MODES:
         raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
     if not (step > 0 and max_steps >= 0):

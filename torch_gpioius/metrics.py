@@ -81,7 +81,7 @@ def prior_variance(model, task: int = 0) -> float:
 
 def _weighted_points(surface: Shape, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(surface, trimesh.Trimesh):
-        return np.asarray(surface.triangles_center), np.asarray(surface.area_faces)
+        return np.array(surface.triangles_center), np.array(surface.area_faces)
     if isinstance(surface, np.ndarray):
         if surface.ndim != 2:
             raise ValueError(f"surface: expected an (n, d) point set, got shape {surface.shape}")
@@ -126,11 +126,12 @@ def _sample(shape: Shape, spacing: float) -> np.ndarray:
 
 def _distance_to(points: np.ndarray, shape: Shape) -> np.ndarray:
     if isinstance(shape, trimesh.Trimesh):
-        _, dist, _ = trimesh.proximity.closest_point(shape, points)
-        return np.asarray(dist)
+        # in chunks: trimesh's closest_point holds candidate triangles for all points at once (GBs for 10^4)
+        query = trimesh.proximity.ProximityQuery(shape)
+        return np.concatenate([query.on_surface(points[i:i + 1000])[1] for i in range(0, len(points), 1000)])
     if isinstance(shape, np.ndarray):
         from scipy.spatial import cKDTree
-        return cKDTree(shape).query(points)[0]
+        return cKDTree(shape).query(points, workers=-1)[0]
     return _distance_to_segments(points, _segments(shape))
 
 

@@ -1,0 +1,119 @@
+"""Point-cloud sources: the simulated depth camera against analytic geometry, voxel averaging, file sources."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from torch_gpioius.importers import voxel_average
+from torch_gpioius.sensors import FilePointCloud, PinholeCamera, PointCloud, SimulatedDepthCamera, look_at
+
+C, R = np.array([0.5, 0.0, 0.25]), 0.1
+EYE = np.array([0.5, -0.8, 0.9])
+
+
+def sphere_camera(**kw):
+    mesh = trimesh.creation.icosphere(subdivisions=5, radius=R)
+    mesh.apply_translation(C)
+    return SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.5), look_at(EYE, C), **kw)
+
+
+def test_look_at_is_a_rigid_pose_pointing_at_the_target():
+    T = look_at(EYE, C)
+    np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-12)
+    assert np.linalg.det(T[:3, :3]) == pytest.approx(1.0)
+    z = T[:3, 2]
+    np.testing.assert_allclose(z, (C - EYE) / np.linalg.norm(C - EYE), atol=1e-12)
+    assert T[:3, 1] @ [0, 0, 1] < 0           # image y points down
+    with pytest.raises(ValueError, match="parallel"):
+        look_at([0, 0, 1], [0, 0, 0])
+
+
+def test_sphere_seen_from_a_known_pose_gives_points_on_the_visible_sphere():
+    cam = sphere_camera()
+    cloud = cam.capture()
+    r = np.linalg.norm(cloud.points - C, axis=1)
+    # icosphere subdivision 5: chord sag below 0.1 mm for r = 10 cm
+    assert np.abs(r - R).max() < 2e-4
+    # only the hemisphere facing the camera, and only points whose ray meets no other part of the sphere
+    assert ((cloud.points - C) @ (EYE - C) > 0).all()
+    np.testing.assert_allclose(cloud.origin, EYE)
+    # pixel count matches the sphere's projected solid angle: pi * atan(R / sqrt(D^2 - R^2))^2 * f^2
+    D = np.linalg.norm(EYE - C)
+    half_angle = np.arcsin(R / D)
+    intr = cam.intrinsics
+    expected = np.pi * (np.tan(half_angle) * intr.fx) ** 2
+    assert len(cloud) == pytest.approx(expected, rel=0.05)
+
+
+def test_depth_noise_is_along_the_ray_with_the_model_std():
+    clean = sphere_camera().capture()
+    noisy = sphere_camera(noise_a=0.002, noise_b=0.0, seed=3).capture()
+    assert len(noisy) == len(clean)
+    d_clean = np.linalg.norm(clean.points - EYE, axis=1)
+    d_noisy = np.linalg.norm(noisy.points - EYE, axis=1)
+    dirs_clean = (clean.points - EYE) / d_clean[:, None]
+    dirs_noisy = (noisy.points - EYE) / d_noisy[:, None]
+    np.testing.assert_allclose(dirs_clean, dirs_noisy, atol=1e-12)        # same pixel rays
+    z = d_clean * (dirs_clean @ look_at(EYE, C)[:3, 2])
+    dz = (d_noisy - d_clean) * (z / d_clean)
+    assert np.std(dz) == pytest.approx(0.002, rel=0.1)
+    dropped = sphere_camera(dropout=0.5, seed=1).capture()
+    assert 0.4 * len(clean) < len(dropped) < 0.6 * len(clean)
+
+
+def test_missing_everything_gives_an_empty_cloud():
+    mesh = trimesh.creation.icosphere(radius=0.1)
+    mesh.apply_translation([10.0, 0.0, 0.0])   # behind the camera
+    cam = SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.1), look_at(EYE, C))
+    assert len(cam.capture()) == 0
+
+
+def test_voxel_averaging_against_a_hand_computed_grid():
+    pts = np.array([[0.01, 0.01, 0.01], [0.03, 0.04, 0.02],   # voxel (0, 0, 0)
+                    [0.06, 0.01, 0.01],                         # voxel (1, 0, 0)
+                    [-0.01, 0.02, 0.03], [-0.03, 0.04, 0.01]])  # voxel (-1, 0, 0)
+    out = voxel_average(pts, 0.05)
+    want = np.array([[-0.02, 0.03, 0.02], [0.02, 0.025, 0.015], [0.06, 0.01, 0.01]])
+    np.testing.assert_allclose(out, want, atol=1e-15)
+    # a dense plane averages to one point per voxel, each within its voxel
+    g = np.stack(np.meshgrid(np.linspace(0, 0.2, 81), np.linspace(0, 0.2, 81)), -1).reshape(-1, 2)
+    plane = np.c_[g, np.full(len(g), 0.012)]
+    avg = PointCloud(plane).voxel_averaged(0.05).points
+    assert len(avg) == 25                       # 0 <= x, y < 0.2 (4 x 4) plus the edge at exactly 0.2 (+9)
+    np.testing.assert_allclose(avg[:, 2], 0.012)
+    with pytest.raises(ValueError, match="positive"):
+        voxel_average(pts, 0.0)
+
+
+def test_free_space_lies_on_the_rays_in_front_of_the_surface():
+    cloud = sphere_camera().capture()
+    free = cloud.free_space(0.05)
+    assert len(free) == len(cloud)
+    np.testing.assert_allclose(np.linalg.norm(free - cloud.points, axis=1), 0.05, atol=1e-12)
+    assert (np.linalg.norm(free - C, axis=1) > R + 0.01).all()   # outside the sphere
+    with pytest.raises(ValueError, match="origin"):
+        PointCloud(cloud.points).free_space(0.05)
+
+
+def test_file_source_loads_and_transforms(tmp_path):
+    pts = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 1.0]])
+    np.savez(tmp_path / "cloud.npz", points=pts * 1000)
+    T = np.eye(4)
+    T[:3, 3] = [0.5, 0.0, 0.2]
+    src = FilePointCloud(tmp_path / "cloud.npz", units="mm", T_base_camera=T, origin=[0, 0, 0])
+    cloud = src.capture()
+    np.testing.assert_allclose(cloud.points, pts + [0.5, 0.0, 0.2])
+    np.testing.assert_allclose(cloud.origin, [0.5, 0.0, 0.2])
+    with pytest.raises(ValueError, match="T_base_camera"):
+        FilePointCloud(tmp_path / "cloud.npz", T_base_camera=np.eye(3))
+
+
+def test_bad_inputs():
+    with pytest.raises(ValueError, match="NaN"):
+        PointCloud(np.array([[0.0, np.nan, 0.0]]))
+    with pytest.raises(ValueError, match=r"\(n, 3\)"):
+        PointCloud(np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="rigid"):
+        SimulatedDepthCamera(trimesh.creation.box(), PinholeCamera.kinect_v2(), 2 * np.eye(4))
+    with pytest.raises(ValueError, match="focal"):
+        PinholeCamera(10, 10, 0.0, 1.0, 5, 5)
