@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test test-all clean
+.PHONY: setup demo demo3d test test-all clean
 
 setup: $(STAMP)
 
@@ -15,11 +15,14 @@ $(STAMP): setup.cfg pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	# The pinned CPU torch first (local wheel on our machines); setup.cfg keeps a range it satisfies.
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[test]"
+	$(PY) -m pip install --quiet -e ".[test,raycast]"
 	touch $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/gpioius simulate --object all --out outputs/study2d
+
+demo3d: $(STAMP)
+	$(VENV)/bin/gpioius simulate3d --object all --out outputs/study3d
 
 test: $(STAMP)
 	$(PY) -m pytest -m "not slow" -q

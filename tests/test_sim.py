@@ -3,7 +3,6 @@ import pytest
 import shapely
 from shapely.geometry import Polygon
 
-import torch_gpioius as tg
 from torch_gpioius.sim import Scene2D, paper_objects_2d, rectangle
 
 TABLE_I_CM = {"A": 6.4, "B": 12.0, "C": 26.9, "D": 37.5}

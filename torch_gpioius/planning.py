@@ -8,7 +8,6 @@ import torch
 from torch import Tensor
 
 from .geometry import surface_geometry
-from .tolerances import tol
 
 __all__ = ["ZeroPenalty", "RangePenalty", "PlannedStep", "plan_direction"]
 

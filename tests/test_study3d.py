@@ -1,0 +1,53 @@
+"""Smoke version of the 3-D robot study (CI); the full study is `gpioius simulate3d` (`-m slow` runs it here)."""
+
+import json
+
+import numpy as np
+import pytest
+
+import torch_gpioius as tg
+from torch_gpioius.cli import main
+from torch_gpioius.study3d import check_claims_3d, run_study_3d
+
+
+def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):
+    assert main(["simulate3d", "--object", "G", "--smoke", "--quiet", "--out", str(tmp_path)]) == 0
+    for name in ("fig9_G.png", "fig10_similarity.png", "records.csv", "records.json", "summary.md",
+                 "summary.json", "logs/G_visual-tactile.gpioius", "logs/G_tactile.gpioius"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    records = json.loads((tmp_path / "records.json").read_text())
+    assert {r["mode"] for r in records} == {"visual-tactile", "tactile"}
+    assert all("contact_z" in r and "robot_time_s" in r for r in records)
+    assert "| G |" in capsys.readouterr().out
+    # the logs replay: the training set of the last step has the inner contacts of the records
+    ds = tg.load_dataset(tmp_path / "logs" / "G_tactile.gpioius")
+    touched = ds.x[(ds.task == 0) & (ds.y == 0)]
+    contacts = np.array([[r["contact_x"], r["contact_y"], r["contact_z"]] for r in records
+                         if r["mode"] == "tactile"])
+    np.testing.assert_allclose(touched, contacts)
+
+
+def test_check_claims_on_hand_made_rows():
+    base = {f"{k}_{f}": 0.02 for k in ("H_vt", "H_t") for f in (10, 50, 100)}
+    base.update({f"U_{k}_100": 0.1 for k in ("vt", "t")})
+    e = dict(base, object="E", H_t_10=0.15, H_vt_10=0.02, S_mean=0.9)
+    f = dict(base, object="F", H_vt_10=0.05, H_vt_100=0.02, S_mean=0.7)
+    h = dict(base, object="H", H_vt_100=0.10, H_t_100=0.11, S_mean=0.3)
+    holds = {c["claim"][:2]: c["holds"] for c in check_claims_3d([e, f, h])}
+    assert holds == {"E ": True, "F ": True, "H ": True, "Fi": True}
+    e["H_vt_10"] = 0.12                         # vision did not help at the start
+    h["S_mean"] = 1.0                           # H is no longer the least similar
+    holds = {c["claim"][:2]: c["holds"] for c in check_claims_3d([e, f, h])}
+    assert not holds["E "] and not holds["Fi"]
+
+
+def test_unknown_object():
+    with pytest.raises(ValueError, match="unknown"):
+        run_study_3d(["Q"], progress=False)
+
+
+@pytest.mark.slow
+def test_full_study_runs(tmp_path):
+    result = run_study_3d(out=tmp_path, progress=False)
+    assert {r["object"] for r in result["rows"]} == {"E", "F", "G", "H"}
+    assert all(tr.terminated == "travel" for pair in result["traces"].values() for tr in pair.values())
