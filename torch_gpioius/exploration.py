@@ -159,6 +159,24 @@ def _inner_mask(model) -> np.ndarray:
     return (model.train_inputs[1].squeeze(-1) == INNER).numpy()
 
 
+def retract_free_space(model, contact: np.ndarray, margin: float) -> np.ndarray:
+    """Remove the inner free-space observations closer than ``margin`` [m] to a new ``contact``.
+
+    Keeps the free-space margin at all times: free space recorded earlier (e.g. pressed along an edge not yet
+    touched) is retracted once a contact lands within the margin of it (trap 2, docs/method-notes.md).
+
+    Returns:
+        `(k,)` indices (into the observations before the call) that were removed.
+    """
+    free_in = model.train_targets.numpy() == 1
+    if isinstance(model, GPIOIS):
+        free_in &= _inner_mask(model)
+    too_close = free_in & (np.linalg.norm(model.train_inputs[0].numpy() - contact, axis=1) < margin)
+    if too_close.any():
+        model.remove_observations(torch.as_tensor(too_close))
+    return np.flatnonzero(too_close)
+
+
 def _estimate_metrics(model, scene, bounds, resolution):
     """Hausdorff (eq. 24), uncertainty (eq. 23) and the centroid of the estimated region {mu_in < 0}."""
     field_ = evaluate_grid(model, bounds, resolution, INNER)
@@ -381,15 +399,8 @@ def explore(scene, mode: str = "visual-tactile", step: float = 0.01, theta: floa
             new_x.append(free)
             new_y.append(np.ones(len(free)))
         new_x, new_y = np.concatenate(new_x), np.concatenate(new_y)
-        # Keep the margin at all times: free space recorded earlier (e.g. pressed along an edge not yet
-        # touched) is retracted once a contact lands within the margin of it (trap 2, docs/method-notes.md).
-        train_x = model.train_inputs[0].numpy()
-        free_in = (model.train_targets.numpy() == 1) & (_inner_mask(model) if mode == "visual-tactile" else True)
-        too_close = free_in & (np.linalg.norm(train_x - settled, axis=1) < policy.free_space_margin)
-        removed = np.flatnonzero(too_close)
-        if too_close.any():
-            model.remove_observations(torch.as_tensor(too_close))
-            retracted += int(too_close.sum())
+        removed = retract_free_space(model, settled, policy.free_space_margin)
+        retracted += len(removed)
         if mode == "visual-tactile":
             model.add_observations(new_x, new_y, INNER)
         else:

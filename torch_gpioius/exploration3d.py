@@ -187,7 +187,7 @@ def explore_3d(scene, mode: str = "visual-tactile", step: float = 0.01, theta: f
         ``Trace`` with 3-D ``path`` and ``contacts``, plus ``sim_time`` (robot clock per record [s]) and
         ``final_mesh`` (the last estimated surface in the range).
     """
-    from .exploration import MODES, ObservationPolicy, Trace
+    from .exploration import MODES, ObservationPolicy, Trace, retract_free_space
 
     if mode not in MODES:
         raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
@@ -296,13 +296,7 @@ def explore_3d(scene, mode: str = "visual-tactile", step: float = 0.01, theta: f
                                policy.free_space_margin)
         new_x = np.concatenate([settled[None], new_free])
         new_y = np.r_[0.0, np.ones(len(new_free))]
-        train_x = model.train_inputs[0].numpy()
-        inner = (model.train_inputs[1].reshape(-1) == INNER).numpy() if mode == "visual-tactile" else True
-        too_close = (model.train_targets.numpy() == 1) & inner & (
-            np.linalg.norm(train_x - settled, axis=1) < policy.free_space_margin)
-        removed = np.flatnonzero(too_close)
-        if too_close.any():
-            model.remove_observations(torch.as_tensor(too_close))
+        removed = retract_free_space(model, settled, policy.free_space_margin)
         if mode == "visual-tactile":
             model.add_observations(new_x, new_y, INNER)
             model.fit(multi_start=False)

@@ -3,7 +3,6 @@ visual-tactile vs tactile-only, figures like Fig. 9 and 10, and the Sec. VI-B cl
 
 from __future__ import annotations
 
-import csv
 import json
 import time
 from pathlib import Path
@@ -12,10 +11,12 @@ import numpy as np
 
 from .exploration import Trace, explore
 from .geometry import predict_task
+from .study import figure_similarity, write_records
 
 __all__ = ["run_study_3d", "summarize_3d", "check_claims_3d"]
 
 MODES = ("visual-tactile", "tactile")
+OBJECTS = ("E", "F", "G", "H")
 #: Fractions of the travel at which the table reports the estimates.
 FRACTIONS = (0.1, 0.5, 1.0)
 
@@ -168,24 +169,6 @@ def _figure_object(name: str, scene, pair: dict[str, Trace], path: Path) -> None
     plt.close(fig)
 
 
-def _figure_similarity(traces: dict[str, dict[str, Trace]], path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(5.5, 3.6))
-    for name, pair in traces.items():
-        tr = pair.get("visual-tactile")
-        if tr is not None:
-            ax.plot(tr.travel, tr.similarity, label=name)
-    ax.set(xlabel="travel [m]", ylabel="similarity K_t[0,1] / K_t[0,0]", title="Fig. 10-like: estimated similarity")
-    ax.legend()
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
                  metrics_every: int = 5, modes=MODES, progress: bool = True, mesh_resolution: float = 0.006,
                  **explore_kwargs) -> dict:
@@ -209,10 +192,10 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
 
     from .sim import paper_objects_3d
 
+    unknown = [o for o in objects if o not in OBJECTS]
+    if unknown:   # before building the meshes (seconds)
+        raise ValueError(f"objects: unknown {unknown}; choose among {list(OBJECTS)}")
     scenes = paper_objects_3d(mesh_resolution)
-    unknown = [o for o in objects if o not in scenes]
-    if unknown:
-        raise ValueError(f"objects: unknown {unknown}; choose among {sorted(scenes)}")
     out = Path(out)
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -227,13 +210,8 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     hio = {name: scenes[name].inner_outer_hausdorff() for name in objects}
     for name in objects:
         _figure_object(name, scenes[name], traces[name], out / f"fig9_{name}.png")
-    _figure_similarity(traces, out / "fig10_similarity.png")
-    records = [r for pair in traces.values() for tr in pair.values() for r in tr.records()]
-    with open(out / "records.csv", "w", newline="") as fh:
-        writer = csv.DictWriter(fh, fieldnames=list(records[0]))
-        writer.writeheader()
-        writer.writerows(records)
-    (out / "records.json").write_text(json.dumps(records, indent=1))
+    figure_similarity(traces, out / "fig10_similarity.png", "Similarity transitions (cf. Fig. 10)")
+    write_records(traces, out)
     rows = summarize_3d(traces, hio)
     claims = check_claims_3d(rows)
     (out / "summary.json").write_text(json.dumps({"rows": rows, "claims": claims}, indent=1))
