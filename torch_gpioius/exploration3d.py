@@ -114,8 +114,7 @@ def clip_mesh(mesh: trimesh.Trimesh | None, lower, upper) -> trimesh.Trimesh | N
     return mesh.submesh([np.flatnonzero(keep)], append=True)
 
 
-def estimate_metrics_3d(model, scene, resolution: float = 0.02, truth: np.ndarray | None = None,
-                        spacing: float = 0.003) -> dict:
+def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float = 0.003) -> dict:
     """Uncertainty (eq. 23) and Hausdorff distance (eq. 24) of the estimated inner surface, in the range.
 
     The estimate {mu_in = 0} is meshed by marching cubes on a grid over the exploration range grown by 5 cm,
@@ -128,16 +127,13 @@ def estimate_metrics_3d(model, scene, resolution: float = 0.02, truth: np.ndarra
         model: 3-D ``GPIOIS`` or ``GPIS``.
         scene: the ``Scene3D``.
         resolution: marching-cubes grid spacing [m].
-        truth: precomputed samples of the true inner surface in the range (``surface_samples`` + ``in_range``).
         spacing: sampling spacing of the surfaces [m].
 
     Returns:
         ``{"hausdorff": [m], "uncertainty": relative V, "mesh": estimated trimesh in range or None}``; NaN
         metrics when the estimate has no surface in the range.
     """
-    if truth is None:
-        truth = surface_samples(scene.inner, spacing)
-        truth = truth[scene.in_range(truth)]
+    truth = scene.inner_samples_in_range(spacing)
     field = evaluate_grid(model, scene.bounds(0.05), resolution, INNER)
     mesh = clip_mesh(zero_level_mesh(model, None, field=field), scene.range[:, 0], scene.range[:, 1])
     if mesh is None:
@@ -151,8 +147,8 @@ def estimate_metrics_3d(model, scene, resolution: float = 0.02, truth: np.ndarra
 def _camera_observations(camera, voxel: float, free_offset: float | None, scene) -> tuple[np.ndarray, np.ndarray]:
     """Outer-task observations from one capture: voxel-averaged surface (y = 0) and free space (y = 1)."""
     cloud = camera.capture()
-    lo, hi = scene.bounds(0.15)[:, 0], scene.bounds(0.15)[:, 1]
-    cloud = cloud.cropped(lo, hi)   # the table, walls and people a real camera sees are not the object
+    box = scene.bounds(0.15)
+    cloud = cloud.cropped(box[:, 0], box[:, 1])   # the table, walls and people a real camera sees are not the object
     if len(cloud) == 0:
         raise ValueError("the camera sees nothing of the object near the exploration range")
     seen = cloud.voxel_averaged(voxel).points
@@ -198,8 +194,6 @@ def explore_3d(scene, mode: str = "visual-tactile", step: float = 0.01, theta: f
     hw = robot if robot is not None else simulated_robot(scene)
     ctl = hw.controller
     camera = camera if camera is not None else scene.camera
-    truth = surface_samples(scene.inner, 0.003)
-    truth = truth[scene.in_range(truth)]
 
     x_out = y_out = None
     if mode == "visual-tactile":
@@ -221,17 +215,18 @@ def explore_3d(scene, mode: str = "visual-tactile", step: float = 0.01, theta: f
         model = GPIS(x_in, y_in, theta=theta, noise=noise)
 
     rec = {"h": [], "u": [], "s": [], "travel": [], "time": [], "kt": [], "sim": []}
-    last_mesh = [None]
+    last_mesh = None
+
+    def measure() -> tuple[float, float]:
+        nonlocal last_mesh
+        m = estimate_metrics_3d(model, scene, metrics_resolution)
+        last_mesh = m["mesh"]
+        return m["hausdorff"], m["uncertainty"]
 
     def record(k: int, travel: float, dt: float, final: bool = False) -> None:
-        if k % metrics_every == 0 or final:
-            m = estimate_metrics_3d(model, scene, metrics_resolution, truth)
-            rec["h"].append(m["hausdorff"])
-            rec["u"].append(m["uncertainty"])
-            last_mesh[0] = m["mesh"]
-        else:
-            rec["h"].append(float("nan"))
-            rec["u"].append(float("nan"))
+        h, u = measure() if k % metrics_every == 0 or final else (float("nan"), float("nan"))
+        rec["h"].append(h)
+        rec["u"].append(u)
         rec["s"].append(model.similarity if mode == "visual-tactile" else float("nan"))
         rec["kt"].append(model.task_covariance.numpy() if mode == "visual-tactile" else np.full((2, 2), np.nan))
         rec["travel"].append(travel)
@@ -312,15 +307,12 @@ def explore_3d(scene, mode: str = "visual-tactile", step: float = 0.01, theta: f
             terminated = "travel"
     bar.close()
     if np.isnan(rec["h"][-1]) and len(rec["h"]) > 1:
-        m = estimate_metrics_3d(model, scene, metrics_resolution, truth)   # always measure the final estimate
-        rec["h"][-1], rec["u"][-1], last_mesh[0] = m["hausdorff"], m["uncertainty"], m["mesh"]
+        rec["h"][-1], rec["u"][-1] = measure()   # always measure the final estimate
     if writer is not None:
         writer.append("end", {"terminated": terminated, "steps": len(rec["h"]) - 1}, {})
         writer.close()
-    trace = Trace(mode=mode, scene_name=scene.name, hausdorff=np.asarray(rec["h"]), uncertainty=np.asarray(rec["u"]),
-                  similarity=np.asarray(rec["s"]), travel=np.asarray(rec["travel"]), path=np.asarray(path),
-                  contacts=np.asarray(contacts), model=model, step_time=np.asarray(rec["time"]),
-                  terminated=terminated, task_covariance=np.asarray(rec["kt"]))
-    trace.sim_time = np.asarray(rec["sim"])
-    trace.final_mesh = last_mesh[0]
-    return trace
+    return Trace(mode=mode, scene_name=scene.name, hausdorff=np.asarray(rec["h"]), uncertainty=np.asarray(rec["u"]),
+                 similarity=np.asarray(rec["s"]), travel=np.asarray(rec["travel"]), path=np.asarray(path),
+                 contacts=np.asarray(contacts), model=model, step_time=np.asarray(rec["time"]),
+                 terminated=terminated, task_covariance=np.asarray(rec["kt"]), sim_time=np.asarray(rec["sim"]),
+                 final_mesh=last_mesh)

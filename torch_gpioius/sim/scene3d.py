@@ -73,6 +73,7 @@ class Scene3D:
         if not cover_stiffness >= 0:
             raise ValueError("cover_stiffness must be >= 0 [N/m]")
         self.name = name
+        self._inner_samples: dict[float, np.ndarray] = {}
         self.cover_stiffness = float(cover_stiffness)
         self.camera = camera if camera is not None else self.default_camera()
         self.first_contact()  # raises if the approach misses
@@ -95,6 +96,16 @@ class Scene3D:
         """`(n,)` bool: points `(n, 3)` inside the exploration range."""
         p = np.asarray(points, dtype=np.float64)
         return ((p >= self.range[:, 0]) & (p <= self.range[:, 1])).all(axis=1)
+
+    def inner_samples_in_range(self, spacing: float = 0.003) -> np.ndarray:
+        """`(n, 3)` samples of the true inner surface inside the exploration range, about one per ``spacing``^2
+        (the reference of the Hausdorff metric; computed once per spacing)."""
+        from ..exploration3d import surface_samples
+
+        if spacing not in self._inner_samples:
+            pts = surface_samples(self.inner, spacing)
+            self._inner_samples[spacing] = pts[self.in_range(pts)]
+        return self._inner_samples[spacing]
 
     def range_penalty(self, beta: float = 100.0) -> RangePenalty:
         """The paper's C(x) (eq. 25, beta = 100) for this scene's exploration range."""
