@@ -127,6 +127,15 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         xq = self._check_query(x)
         return self._inference().predict(xq, task, self._task_matrix())
 
+    def _predict_with_gradients(self, x, task: int) -> tuple[Tensor, Tensor, Tensor, Tensor] | None:
+        """Mean, variance and their x-gradients by the engine's closed form, or None if it has none (autograd)."""
+        if task not in range(self.num_tasks):
+            raise ValueError(f"task: must be in 0..{self.num_tasks - 1}, got {task!r}")
+        engine = self._inference()
+        if not hasattr(engine, "predict_with_gradients"):
+            return None
+        return engine.predict_with_gradients(self._check_query(x).detach(), task, self._task_matrix())
+
     def remove_observations(self, index) -> "ImplicitSurfaceGP":
         """Remove training observations (e.g. free-space samples a later contact showed to be too close).
 

@@ -19,6 +19,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -47,14 +48,14 @@ class FitResult:
     converged: bool
 
 
-def chol_params_to_task_covariance(phi: Tensor) -> Tensor:
-    """`(3,)` Cholesky parameters (u, v, w) -> `(2, 2)` K_t."""
-    u, v, w = phi
-    eu = torch.exp(u)
-    return torch.stack([torch.stack([eu * eu, v * eu]), torch.stack([v * eu, v * v + torch.exp(2 * w)])])
+def chol_params_to_task_covariance(phi) -> Tensor:
+    """`(3,)` Cholesky parameters (u, v, w) -> `(2, 2)` K_t (float64)."""
+    u, v, w = (float(x) for x in phi)
+    eu = math.exp(u)
+    return torch.tensor([[eu * eu, v * eu], [v * eu, v * v + math.exp(2 * w)]], dtype=torch.float64)
 
 
-def task_covariance_to_chol_params(kt: Tensor) -> Tensor:
+def task_covariance_to_chol_params(kt: Tensor) -> np.ndarray:
     """`(2, 2)` positive-definite K_t -> `(3,)` Cholesky parameters (u, v, w), clamped to the bounds."""
     lo, hi = tol.log_chol_bounds
     a, b, c = float(kt[0, 0]), float(kt[0, 1]), float(kt[1, 1])
@@ -62,30 +63,27 @@ def task_covariance_to_chol_params(kt: Tensor) -> Tensor:
     l00 = math.sqrt(a)
     v = b / l00
     l11sq = max(c - v * v, math.exp(2 * lo))
-    return torch.tensor([min(max(math.log(l00), lo), hi), v, min(max(0.5 * math.log(l11sq), lo), hi)],
-                        dtype=torch.float64)
+    return np.array([min(max(math.log(l00), lo), hi), v, min(max(0.5 * math.log(l11sq), lo), hi)])
 
 
-def _chain(phi: Tensor, g: Tensor, h: Tensor) -> tuple[Tensor, Tensor]:
-    """Gradient and Hessian in phi from those in p = (a, b, c) by the chain rule."""
+def _chain(phi: np.ndarray, g: Tensor, h: Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """Gradient and Hessian in phi from those in p = (a, b, c) by the chain rule (3x3 NumPy arithmetic: these
+    small steps run once per Newton iteration, where torch's per-operation dispatch would dominate)."""
     u, v, w = phi.tolist()
     eu, e2u, e2w = math.exp(u), math.exp(2 * u), math.exp(2 * w)
-    jac = torch.tensor([[2 * e2u, 0.0, 0.0],
-                        [v * eu, eu, 0.0],
-                        [0.0, 2 * v, 2 * e2w]], dtype=torch.float64)  # d p_i / d phi_j
-    second = torch.zeros(3, 3, 3, dtype=torch.float64)  # second[i] = d^2 p_i / d phi^2
-    second[0, 0, 0] = 4 * e2u
-    second[1, 0, 0] = v * eu
-    second[1, 0, 1] = second[1, 1, 0] = eu
-    second[2, 1, 1] = 2.0
-    second[2, 2, 2] = 4 * e2w
-    g64, h64 = g.detach().cpu().double(), h.detach().cpu().double()
-    grad = jac.T @ g64
-    hess = jac.T @ h64 @ jac + torch.einsum("i,ijk->jk", g64, second)
-    return grad, hess
+    jac = np.array([[2 * e2u, 0.0, 0.0],
+                    [v * eu, eu, 0.0],
+                    [0.0, 2 * v, 2 * e2w]])  # d p_i / d phi_j
+    g64 = g.detach().cpu().double().numpy()
+    h64 = h.detach().cpu().double().numpy()
+    # sum_i g_i d^2 p_i / d phi^2
+    curvature = np.array([[4 * e2u * g64[0] + v * eu * g64[1], eu * g64[1], 0.0],
+                          [eu * g64[1], 2.0 * g64[2], 0.0],
+                          [0.0, 0.0, 4 * e2w * g64[2]]])
+    return jac.T @ g64, jac.T @ h64 @ jac + curvature
 
 
-def _evaluate_trial(evaluate, phi: Tensor):
+def _evaluate_trial(evaluate, phi: np.ndarray):
     """Evaluate a trial point; a numerical failure there (an extreme K_t) counts as a rejected step."""
     try:
         f, g, h = evaluate(chol_params_to_task_covariance(phi))
@@ -108,8 +106,8 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         decrement below ``tol.fit_ftol * max(1, |mll|)``.
     """
     lo, hi = tol.log_chol_bounds
-    lower = torch.tensor([lo, -math.inf, lo], dtype=torch.float64)
-    upper = torch.tensor([hi, math.inf, hi], dtype=torch.float64)
+    lower = np.array([lo, -math.inf, lo])
+    upper = np.array([hi, math.inf, hi])
     phi = task_covariance_to_chol_params(kt0)
     f, g, h = evaluate(chol_params_to_task_covariance(phi))
     grad, hess = _chain(phi, g, h)
@@ -121,20 +119,19 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         at_lower = (phi <= lower) & (grad < 0)
         at_upper = (phi >= upper) & (grad > 0)
         free = ~(at_lower | at_upper)
-        pg = torch.where(free, grad, torch.zeros_like(grad))
-        pg_norm = float(pg.abs().max())
+        pg = np.where(free, grad, 0.0)
+        pg_norm = float(np.abs(pg).max())
         if pg_norm <= tol.fit_gtol:
             converged = True
             break
-        idx = free.nonzero().flatten()
-        neg_h = -hess[idx][:, idx]
-        min_eig = float(torch.linalg.eigvalsh(neg_h).min())
+        idx = np.flatnonzero(free)
+        neg_h = -hess[np.ix_(idx, idx)]
+        min_eig = float(np.linalg.eigvalsh(neg_h).min())
         shift = max(damping, 0.0 if min_eig > 1e-12 * max(1.0, abs(f)) else -min_eig + 1e-8 * max(1.0, abs(f)))
         while True:
-            step = torch.zeros(3, dtype=torch.float64)
-            system = neg_h + shift * torch.eye(len(idx), dtype=torch.float64)
-            step[idx] = torch.linalg.solve(system, grad[idx])
-            candidate = torch.minimum(torch.maximum(phi + step, lower), upper)
+            step = np.zeros(3)
+            step[idx] = np.linalg.solve(neg_h + shift * np.eye(len(idx)), grad[idx])
+            candidate = np.minimum(np.maximum(phi + step, lower), upper)
             decrement = float(grad @ (candidate - phi))
             if shift == 0.0 and 0 <= decrement <= tol.fit_ftol * max(1.0, abs(f)):
                 # Newton-decrement stop: the pure Newton step predicts a gain below tolerance; near a

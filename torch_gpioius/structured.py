@@ -11,26 +11,27 @@ any c. Inner rows enter through ``P = K_io U`` (one O(N_o^2) row per new inner p
 
 **Schur complement.** Eliminating the outer block leaves the N_i x N_i matrix
 
-    S = a K_ii + s I - b^2 T(c),   T(c) = P D(c) P^T,   log|G| = sum_k log(c lam_k + s) + log|S|,
+    S = a K_ii + s I - b^2 T(c),   T(c) = P D(c) P^T = sum_k f_k(c) p_k p_k^T,   f_k(c) = 1 / (c lam_k + s),
 
-and the quadratic form ``r^T G^-1 r = sum_k rt_k^2 D_k + v^T S^-1 v`` with ``rt = U^T r_o`` and
-``v = r_i - b P D rt``. S is symmetric positive definite with S >= s I (a Schur complement of G >= s I).
+with ``log|G| = sum_k log(c lam_k + s) + log|S|`` and ``r^T G^-1 r = sum_k rt_k^2 D_k + v^T S^-1 v``
+(``rt = U^T r_o``, ``v = r_i - b P D rt``). S is symmetric positive definite with S >= s I (a Schur complement
+of G >= s I).
 
-**Three-way split.** Forming T(c) costs N_i^2 N_o. Modes are split at the c of the last split:
+**T(c) without O(N_i^2 N_o) work per K_t.** In ``u = ln c`` each ``f_k`` is analytic in the strip
+``|Im u| < pi`` whatever ``lam_k`` is (its poles sit at ``Im u = +-pi``), so on a window ``c in [c0 / 2, 2 c0]``
+every mode has a rapidly converging Chebyshev expansion ``f_k(c) = sum_j a_kj T_j(x)``, ``x = (u - u0) / h``.
+Then ``T(c) = sum_j T_j(x) M_j`` with c-independent ``M_j = P diag(a_:j) P^T`` built once per window, and T' and
+T'' follow from the derivatives of ``T_j``. Mode k keeps ``J_k`` terms; ``J_k`` comes from a rigorous bound on
+the truncation error of f_k, f_k' and f_k'' over the whole window (Bernstein ellipses and Cauchy estimates, see
+``_unit_error_bounds``), allocated over the modes so that ``b^2 sum_k err_k |p_k|^2``, a bound on the spectral
+norm of the perturbation of S, stays below ``tol.structured_series * s``. That keeps every result within
+``tol.structured_series`` (relative) of the untruncated arithmetic; rounding is as in any float64 computation.
+``M_j`` are stored packed (lower triangle, row-major), so the rows of new inner points append at the end of
+each and an evaluation of T, T', T'' reads each stored number once. The window is rebuilt around the current c
+when c leaves it or when the data have grown past the bound.
 
-* low (``c lam < 0.15 s``): ``1/(c lam + s) = (1/s) sum_j (-c lam / s)^j``, with precomputed
-  ``M_j = P_L lam_L^j P_L^T``;
-* high (``c lam > s / 0.15``): ``1/(c lam + s) = sum_j (-s)^j / (c lam)^(j+1)``, with ``N_j = P_H lam_H^-(j+1) P_H^T``;
-* middle: summed exactly, O(N_i^2 |middle|).
-
-Each series is cut at the first J whose remainder bound, relative to S >= s I, is below ``tol.structured_series``:
-``rho^(J+1) / (1 - rho) * tr(M_0) / s^2`` (low, ``rho = c max(lam_L) / s``) and
-``rho^(J+1) / (1 - rho) * tr(N_0) / (c s)`` (high, ``rho = s / (c min(lam_H))``). When no J <= ``J_MAX`` meets a
-bound (c moved far since the split), the split is rebuilt for the current c. Nothing else is approximated.
-
-**Derivatives.** With S, dS/dp and d^2S/dp^2 as explicit N_i x N_i matrices (T, T', T'' from the head and the
-series), the exact gradient and Hessian of the log marginal likelihood in ``p = (a, b, c)`` cost O(N_i^2 |head| +
-N_i^3) per Newton iteration, never O(N_o^2).
+**Derivatives.** With S, dS/dp and d^2S/dp^2 as explicit N_i x N_i matrices, the exact gradient and Hessian of
+the log marginal likelihood in ``p = (a, b, c)`` cost O(N_i^2 J + N_i^3) per Newton iteration, never O(N_o^2).
 
 **Queries.** Posterior mean: O(N) per point from cached weights. Posterior variance:
 ``b1^2 w^T D w + z^T S^-1 z`` with ``w = U^T k_o``, ``z = b0 k_i - b b1 P D w``: one O(N_o^2) rotation per point
@@ -50,69 +51,249 @@ from .tolerances import tol
 
 __all__ = ["StructuredExactInference"]
 
-J_MAX = 24
+#: Highest Chebyshev order kept for any mode.
+J_MAX = 48
+#: Window of the expansion: c in [c0 / WINDOW, c0 * WINDOW] (u = ln c within ln WINDOW of the centre).
+WINDOW = 2.0
+#: Chebyshev-Lobatto interpolation degree used to compute the coefficients (aliasing is bounded, ~R^-(2n-J)).
+N_NODES = 128
 
 
-class _SeriesStore:
-    """Series matrices of the low and high modes in one contiguous `(2 (J_MAX + 1), cap * cap)` block.
+def _unit_error_bounds(lam: Tensor, noise: float, u0: float, h: float) -> Tensor:
+    r"""Rigorous bounds on the truncation error of each ``f_k(c) = 1 / (c lam_k + s)`` over the window.
 
-    Rows 0..J_MAX hold ``M_j = P_L diag(lam_L^j) P_L^T``, rows J_MAX+1.. hold ``N_j = P_H diag(lam_H^-(j+1)) P_H^T``,
-    each an N_i x N_i matrix in the top-left of a cap x cap square. Any weighted sum of them is one small GEMM
-    that reads the block once; rows for new inner points are written in place (capacity grows in chunks).
+    Returns ``err[k, J]``: for mode k truncated after order J (interpolated coefficients, ``N_NODES``), a bound on
+    ``max(|e|, |c de/dc|, |c^2 d^2e/dc^2|)`` over ``u = ln c in [u0 - h, u0 + h]``.
+
+    Derivation, per Bernstein ellipse ``E_R`` in ``x = (u - u0) / h`` (semi-axes ``(R +- 1/R) / 2``):
+
+    * on ``E_R``, ``r = lam e^{Re u}`` lies in ``[r_lo, r_hi]`` and ``|Im u| <= v = h (R - 1/R) / 2``, and
+      ``|lam e^u + s| >= L = min_r max(m_v max(r, s), |r - s|)`` with ``m_v = 1`` (v <= pi/2),
+      ``sqrt(1 - |cos v|)`` (v < pi), 0 otherwise (from ``|r e^{i phi} + s|^2 >= (r^2 + s^2)(1 - |cos v|)``);
+    * so ``|f_k - kappa| <= M = min(1, r_hi / s) / L`` there (kappa = 1/s or 0), and for j >= 1
+      ``|a_kj| <= 2 M R^-j``: the tail after J is at most ``2 M R^-(J+1) / (1 - 1/R)`` on [-1, 1];
+    * on a smaller ellipse ``E_R'`` the tail is at most ``E' = 2 M (R'/R)^(J+1) / (1 - R'/R)``, and every
+      disc of radius ``delta = (R' + 1/R') / 2 - 1`` around a point of [-1, 1] lies inside ``E_R'``, so Cauchy's
+      estimates give ``|e_x| <= E' / delta``, ``|e_xx| <= 2 E' / delta^2``; with ``c d/dc = (1/h) d/dx``:
+      ``|c e_c| <= |e_x| / h`` and ``|c^2 e_cc| <= |e_xx| / h^2 + |e_x| / h``;
+    * interpolation at the ``n + 1`` Chebyshev-Lobatto points aliases ``|c_j - a_j| <= 4 M R^-(2n-j) / (1 - 1/R)``,
+      added for every kept order with the Markov factors of its derivatives.
+
+    The bound is the minimum over a grid of R (and R') of these expressions.
+    """
+    kind = dict(dtype=torch.float64, device=lam.device)
+    lam = lam.to(**kind)
+    j = torch.arange(J_MAX + 1, **kind)
+    big_r = torch.logspace(math.log10(1.05), math.log10(min(1e4, 900.0 / h)), 72, **kind)   # e^(a_R h) finite
+    a_r, b_r = (big_r + 1 / big_r) / 2, (big_r - 1 / big_r) / 2
+    # per-unit-M tables (R, J): value tail, derivative tails (min over R' = R^t), aliasing
+    rr = big_r.unsqueeze(1)
+    value = 2 * rr ** (-(j + 1)) / (1 - 1 / rr)
+    deriv = torch.full((len(big_r), J_MAX + 1), math.inf, **kind)
+    for t in torch.linspace(0.02, 0.98, 49).tolist():
+        rp = rr ** t
+        q = rp / rr
+        e_tail = 2 * q ** (j + 1) / (1 - q)
+        delta = (rp + 1 / rp) / 2 - 1
+        ex, exx = e_tail / delta, 2 * e_tail / delta ** 2
+        deriv = torch.minimum(deriv, torch.maximum(ex / h, exx / h ** 2 + ex / h))
+    alias = (j + 1) * 4 * rr ** (-(2 * N_NODES - j)) / (1 - 1 / rr) * (1 + 2 * j ** 2 / h + j ** 4 / (3 * h ** 2))
+    unit = torch.maximum(value, deriv) + alias                                   # (nR, J+1)
+    v = b_r * h
+    m_v = torch.where(v <= math.pi / 2, torch.ones_like(v), (1 - torch.cos(v).abs()).clamp_min(0).sqrt())
+    m_v = torch.where(v >= math.pi, torch.zeros_like(v), m_v)
+    err = torch.full((len(lam), J_MAX + 1), math.inf, **kind)
+    for i in range(len(big_r)):
+        r_lo = lam * math.exp(u0 - float(a_r[i]) * h)
+        r_hi = lam * math.exp(u0 + float(a_r[i]) * h)
+        mv = float(m_v[i])
+        low = torch.maximum(torch.full_like(r_hi, mv * noise), noise - r_hi)
+        high = torch.maximum(mv * r_lo, r_lo - noise)
+        bound_l = torch.where(r_hi <= noise, low, torch.where(r_lo >= noise, high, torch.full_like(r_lo, mv * noise)))
+        m = torch.where(r_hi > 0, torch.minimum(torch.ones_like(r_hi), r_hi / noise) / bound_l,
+                        torch.zeros_like(r_hi))                                 # M_k(R); 0 for lam = 0
+        err = torch.minimum(err, m.unsqueeze(1) * unit[i].unsqueeze(0))
+    return err
+
+
+def _chebyshev_coefficients(lam: Tensor, noise: float, u0: float, h: float) -> Tensor:
+    """`(N_o, J_MAX + 1)` coefficients of the degree-``N_NODES`` Chebyshev-Lobatto interpolant of each f_k."""
+    kind = dict(dtype=torch.float64, device=lam.device)
+    n = N_NODES
+    k = torch.arange(n + 1, **kind)
+    nodes = torch.cos(math.pi * k / n)
+    f = 1.0 / (lam.to(**kind).unsqueeze(1) * torch.exp(u0 + h * nodes).unsqueeze(0) + noise)   # (N_o, n+1)
+    weights = torch.ones(n + 1, **kind)
+    weights[0] = weights[-1] = 0.5
+    jj = torch.arange(J_MAX + 1, **kind)
+    basis = torch.cos(math.pi * jj.unsqueeze(1) * k.unsqueeze(0) / n)              # (J+1, n+1)
+    coef = (2.0 / n) * (f * weights) @ basis.T
+    coef[:, 0] *= 0.5
+    return coef
+
+
+def _tril(n: int, device) -> tuple[Tensor, Tensor]:
+    """Row-major lower-triangle indices of an n x n matrix (row i holds columns 0..i)."""
+    idx = torch.tril_indices(n, n, device=device)
+    return idx[0], idx[1]
+
+
+def _kernel_rows(xq: Tensor, x_train: Tensor, theta: float) -> Tensor:
+    """`(1 + d, m, n)`: IMQ kernel values ``k(xq_i, x_j)`` and their derivatives ``-(xq_i - x_j) k^3`` in each
+    coordinate of the query point."""
+    k = imq(xq, x_train, theta)
+    diff = xq.unsqueeze(1) - x_train.unsqueeze(0)                                  # (m, n, d)
+    dk = -(diff * (k * k * k).unsqueeze(-1)).permute(2, 0, 1)                      # (d, m, n)
+    return torch.cat([k.unsqueeze(0), dk])
+
+
+class _Rows:
+    """Rows appended in place into a buffer with spare capacity (``torch.cat`` would copy everything per append)."""
+
+    def __init__(self, rows: Tensor):
+        self.buf, self.n = rows.clone(), rows.shape[0]
+
+    @property
+    def data(self) -> Tensor:
+        return self.buf[:self.n]
+
+    def append(self, rows: Tensor) -> Tensor:
+        n_new = self.n + rows.shape[0]
+        if n_new > self.buf.shape[0]:
+            buf = self.buf.new_empty((max(n_new, 2 * self.buf.shape[0] + 16),) + tuple(self.buf.shape[1:]))
+            buf[:self.n] = self.data
+            self.buf = buf
+        self.buf[self.n:n_new] = rows
+        self.n = n_new
+        return self.data
+
+
+class _ChebyshevStore:
+    """``M_j = P diag(a_:j) P^T``, j = 0..max J_k, packed lower triangles in one ``(J + 1, capacity)`` block.
+
+    Modes are permuted by decreasing order so that the modes kept at order j are a prefix of length ``n_j``.
+
+    Args:
+        lam: `(N_o,)` eigenvalues of K_oo.
+        p: `(N_i, N_o)` rotated inner-outer kernel rows.
+        noise: s.
+        c0: centre of the window.
+        beta2: b^2 the truncation is sized for (grown by ``HEADROOM``).
     """
 
-    CHUNK = 24
+    HEADROOM = 16.0
 
-    def __init__(self, low: Tensor, high: Tensor, lam: Tensor, p: Tensor, kind: dict):
-        self.low, self.high, self.kind = low, high, kind
-        j = torch.arange(J_MAX + 1, **kind).unsqueeze(1)
-        one = torch.ones_like(lam)
-        self.pows = torch.cat([torch.where(low, lam, one) ** j * low,                  # lam^j on low modes
-                               torch.where(high, lam, one) ** (-(j + 1)) * high])     # lam^-(j+1) on high modes
-        self.lam_low_max = float(lam[low].max()) if bool(low.any()) else 0.0
-        self.lam_high_min = float(lam[high].min()) if bool(high.any()) else 0.0
-        self.modes = low | high
-        n = p.shape[0]
-        self.cap = n + self.CHUNK
-        self.block = torch.zeros(2 * (J_MAX + 1), self.cap * self.cap, **kind)
-        self.size = 0
-        self.trace_low = self.trace_high = 0.0
-        if n:
-            self._write(p, p, 0)
-        self.size = n
+    def __init__(self, lam: Tensor, p: Tensor, noise: float, c0: float, beta2: float):
+        kind = dict(dtype=p.dtype, device=p.device)
+        self.kind, self.noise = kind, noise
+        self.u0, self.h = math.log(c0), math.log(WINDOW)
+        coef = _chebyshev_coefficients(lam, noise, self.u0, self.h).to(**kind)
+        err = _unit_error_bounds(lam, noise, self.u0, self.h)
+        w = (p * p).sum(0).to(err)                                                   # |p_k|^2
+        target = tol.structured_series * noise / (self.HEADROOM * max(beta2, 1e-300))
+        orders = self._allocate(err * w.unsqueeze(1), target)
+        self.unit_err = err.gather(1, orders.unsqueeze(1)).squeeze(1).to(**kind)     # bound per unit |p_k|^2
+        self.w = w.to(**kind)
+        self.perm = torch.argsort(orders.to(p.device), descending=True, stable=True)
+        counts = torch.bincount(orders, minlength=J_MAX + 1).flip(0).cumsum(0).flip(0)   # n_j = #{k: J_k >= j}
+        self.n_j = [int(v) for v in counts.tolist() if v > 0]
+        self.coef = coef[self.perm][:, :len(self.n_j)]                               # (N_o, J + 1), permuted
+        self.size = p.shape[0]
+        self.capacity = 0
+        self.block = torch.zeros(len(self.n_j), 0, **kind)
+        self._reserve(self.size * (self.size + 1) // 2)
+        self._pp = _Rows(p[:, self.perm[:self.n_j[0]]])                              # P, modes permuted
+        self.pp = self._pp.data
+        if self.size:
+            r, c = _tril(self.size, p.device)
+            for j, nj in enumerate(self.n_j):
+                m = (self.pp[:, :nj] * self.coef[:nj, j]) @ self.pp[:, :nj].T
+                self.block[j, :len(r)] = m[r, c]
+        self._unpack = None
 
-    def _square(self) -> Tensor:
-        return self.block.view(-1, self.cap, self.cap)
+    @staticmethod
+    def _allocate(err: Tensor, target: float) -> Tensor:
+        """Per-mode orders J_k minimising the work for ``sum_k err[k, J_k] <= target`` (bisection on a threshold)."""
+        best = err[:, -1]
+        if float(best.sum()) > target:
+            raise FloatingPointError("structured engine: the Chebyshev window cannot meet tol.structured_series "
+                                     f"with {J_MAX} orders")
+        lo, hi = -320.0, math.log10(max(float(err.max()), 1e-300)) + 1
+        orders = torch.full((err.shape[0],), J_MAX, dtype=torch.long, device=err.device)
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            ok = err <= 10.0 ** mid
+            ok[:, -1] = True
+            trial = ok.to(torch.int8).argmax(1)
+            if float(err.gather(1, trial.unsqueeze(1)).sum()) <= target:
+                lo, orders = mid, trial
+            else:
+                hi = mid
+        return orders
 
-    def _write(self, p_new: Tensor, p_all: Tensor, n_old: int) -> None:
-        pm_new, pm_all = p_new[:, self.modes], p_all[:, self.modes]
-        rows = (pm_new.unsqueeze(0) * self.pows[:, self.modes].unsqueeze(1)) @ pm_all.T   # (2(J+1), k, n_all)
-        sq = self._square()
-        n_all = p_all.shape[0]
-        sq[:, n_old:n_all, :n_all] = rows
-        sq[:, :n_old, n_old:n_all] = rows[:, :, :n_old].transpose(1, 2)
-        diag = rows[:, :, n_old:].diagonal(dim1=1, dim2=2).sum(-1)
-        self.trace_low += float(diag[0])
-        self.trace_high += float(diag[J_MAX + 1])
+    def _reserve(self, packed: int) -> None:
+        if packed <= self.capacity:
+            return
+        cap = max(packed, int(1.5 * self.capacity) + 1024)
+        block = torch.zeros(self.block.shape[0], cap, **self.kind)
+        block[:, :self.capacity] = self.block
+        self.block, self.capacity = block, cap
 
-    def append(self, p_new: Tensor, p_all: Tensor) -> None:
-        n_old, n_new = self.size, p_all.shape[0]
-        if n_new > self.cap:
-            cap = n_new + self.CHUNK
-            block = torch.zeros(2 * (J_MAX + 1), cap * cap, **self.kind)
-            block.view(-1, cap, cap)[:, :n_old, :n_old] = self._square()[:, :n_old, :n_old]
-            self.block, self.cap = block, cap
-        self._write(p_new, p_all, n_old)
+    # ------------------------------------------------------------------ use
+    def bound(self) -> float:
+        """Bound on ``||T_rem||``, ``||c T'_rem||`` and ``||c^2 T''_rem||`` over the window (times b^2: on S)."""
+        return float(self.unit_err @ self.w)
+
+    def covers(self, c: float, beta2: float) -> bool:
+        return abs(math.log(c) - self.u0) <= self.h and beta2 * self.bound() <= tol.structured_series * self.noise
+
+    def append(self, p_new: Tensor) -> None:
+        """Append the packed rows of new inner points, `(k, N_o)` rows of P (O(k N_i sum_j n_j))."""
+        n_old = self.size
+        n_new = n_old + p_new.shape[0]
+        start, stop = n_old * (n_old + 1) // 2, n_new * (n_new + 1) // 2
+        self._reserve(stop)
+        r, c = _tril(n_new, p_new.device)
+        r, c = r[start:] - n_old, c[start:]
+        pn = p_new[:, self.perm[:self.n_j[0]]]
+        self.pp = self._pp.append(pn)
+        k, orders = pn.shape[0], len(self.n_j)
+        rows = torch.zeros(orders, k, n_new, **self.kind)
+        # modes [n_(j+1), n_j) are kept at orders 0..j: one GEMM per such chunk reads each column of P once
+        for j in range(orders - 1, -1, -1):
+            lo, hi = (self.n_j[j + 1] if j + 1 < orders else 0), self.n_j[j]
+            if hi == lo:
+                continue
+            lhs = pn[:, lo:hi].unsqueeze(0) * self.coef[lo:hi, :j + 1].T.unsqueeze(1)   # (j+1, k, m)
+            rows[:j + 1] += (lhs.reshape(-1, hi - lo) @ self.pp[:, lo:hi].T).view(j + 1, k, n_new)
+        self.block[:, start:stop] = rows[:, r, c]
+        self.w = self.w + (p_new * p_new).sum(0)
         self.size = n_new
+        self._unpack = None
 
-    def combine(self, coefs: Tensor, orders: tuple[int, int]) -> Tensor:
-        """`(r, 2(J+1))` coefficients -> `(r, N_i, N_i)` weighted sums; reads only rows up to the orders used."""
-        lo, hi = orders[0] + 1, J_MAX + 1 + orders[1] + 1
-        out = coefs[:, :lo] @ self.block[:lo] + coefs[:, J_MAX + 1:hi] @ self.block[J_MAX + 1:hi]
-        return out.view(-1, self.cap, self.cap)[:, :self.size, :self.size]
-
-    def matrices(self) -> Tensor:
-        return self._square()[: J_MAX + 1, :self.size, :self.size]
+    def t_matrices(self, c: float, derivatives: bool = True) -> tuple:
+        """``T(c)`` and, with ``derivatives``, ``T'(c)``, ``T''(c)`` as `(N_i, N_i)` matrices (else None): one pass
+        over the stored block."""
+        x = (math.log(c) - self.u0) / self.h
+        nj = len(self.n_j)
+        t, dt, ddt = [1.0, x], [0.0, 1.0], [0.0, 0.0]                               # T_j(x), T_j'(x), T_j''(x)
+        for j in range(2, nj):
+            t.append(2 * x * t[-1] - t[-2])
+            dt.append(2 * t[-2] + 2 * x * dt[-1] - dt[-2])
+            ddt.append(4 * dt[-2] + 2 * x * ddt[-1] - ddt[-2])
+        rows = [t[:nj]]
+        if derivatives:                                            # d/dc = (1 / (h c)) d/dx
+            hc = self.h * c
+            rows += [[d / hc for d in dt[:nj]], [dd / hc ** 2 - d / (hc * c) for d, dd in zip(dt[:nj], ddt[:nj])]]
+        coefs = torch.tensor(rows, dtype=torch.float64).to(**self.kind)
+        n = self.size
+        packed = coefs @ self.block[:, :n * (n + 1) // 2]                            # (1 or 3, n(n+1)/2)
+        if self._unpack is None or self._unpack.numel() != n * n:
+            i = torch.arange(n, device=self.block.device)
+            hi, lo = torch.maximum(i.unsqueeze(1), i), torch.minimum(i.unsqueeze(1), i)
+            self._unpack = (hi * (hi + 1) // 2 + lo).reshape(-1)                     # packed index of (i, j)
+        out = [torch.take(row, self._unpack).view(n, n) for row in packed]
+        return (out[0], out[1], out[2]) if derivatives else (out[0], None, None)
 
 
 class StructuredExactInference:
@@ -143,12 +324,18 @@ class StructuredExactInference:
         self.lam = lam.clamp_min(0.0)  # K_oo is PSD; clamp rounding below zero
         self.rt = self.u.T @ (self.yo - self.mean)
         self.kii = imq(self.xi, self.xi, self.theta)
-        self.p = imq(self.xi, self.xo, self.theta) @ self.u if len(self.xi) else torch.zeros(0, len(self.xo), **kind)
-        self._middle = None  # bool mask of the modes summed exactly (the middle band)
-        self._series = None  # _SeriesStore of the low and high modes
+        self._p = _Rows(imq(self.xi, self.xo, self.theta) @ self.u if len(self.xi)
+                        else torch.zeros(0, len(self.xo), **kind))
+        self._series = None  # _ChebyshevStore of the current window of K_t[1,1]
+        self._rotated = None  # (points, (1 + d, k, N_o) rotated kernel rows and x-derivatives) of the last append
         self._invalidate()
 
     # ------------------------------------------------------------------ data
+    @property
+    def p(self) -> Tensor:
+        """`(N_i, N_o)` rotated inner-outer kernel rows ``P = K_io U``."""
+        return self._p.data
+
     @property
     def n(self) -> int:
         return len(self.xi) + len(self.xo)
@@ -163,7 +350,7 @@ class StructuredExactInference:
         self.jitter = 0.0
 
     def append(self, x: Tensor, y: Tensor, task: Tensor) -> None:
-        """Append inner observations in O(k N_o^2 + k N_i |series modes| J); outer ones rebuild the engine."""
+        """Append inner observations in O(k N_o^2 + k N_i sum_j n_j); outer ones rebuild the engine."""
         x, y, task = x.detach(), y.detach(), task.detach()
         if bool((task == 1).any()):
             xs = torch.cat([self.xi, self.xo, x])
@@ -173,106 +360,72 @@ class StructuredExactInference:
             self.__init__(xs, ys, ts, self.theta, self.noise, self.mean)
             return
         self.kii = bordered(self.kii, imq(x, self.xi, self.theta), imq(x, x, self.theta))
-        p_new = imq(x, self.xo, self.theta) @ self.u
-        self.p = torch.cat([self.p, p_new])
+        # The rows of P and, from the same pass over U, the rotated kernel x-derivatives at the new points: the
+        # planner's next query is the contact just added, and U (N_o^2 doubles) is the largest thing read per step.
+        dim = x.shape[1]
+        rotated = (_kernel_rows(x, self.xo, self.theta).reshape(-1, len(self.xo)) @ self.u).view(1 + dim, len(x), -1)
+        p_new = rotated[0]
+        self._rotated = (x, rotated)
+        self._p.append(p_new)
         self.xi = torch.cat([self.xi, x])
         self.yi = torch.cat([self.yi, y])
         if self._series is not None:
-            self._series.append(p_new, self.p)
+            self._series.append(p_new)
         self._invalidate()
 
-    # ------------------------------------------------------------------ mode split
-    def _split(self, c: float) -> None:
-        """Low (c lam < 0.15 s), high (c lam > s / 0.15) series and the exact middle band, at this c."""
-        c = max(c, 1e-300)
-        low = c * self.lam < 0.15 * self.noise
-        high = c * self.lam > self.noise / 0.15
-        self._middle = ~(low | high)
-        self._series = _SeriesStore(low, high, self.lam, self.p, self._kind)
-
+    # ------------------------------------------------------------------ T(c)
     @property
-    def m_series(self) -> Tensor | None:
-        """`(J_MAX + 1, N_i, N_i)` low-mode series matrices M_j = P_L diag(lam_L^j) P_L^T (None before a split)."""
-        return None if self._series is None else self._series.matrices()
+    def series(self) -> _ChebyshevStore | None:
+        """The Chebyshev store of the current window (None before the first factorisation with inner points)."""
+        return self._series
 
-    @staticmethod
-    def _order(rho: float, scale: float) -> int | None:
-        """Smallest J with rho^(J+1) / (1 - rho) * scale <= tol, or None if above J_MAX / rho >= 0.5."""
-        if scale == 0.0 or rho == 0.0:
-            return 0
-        if rho >= 0.5:
-            return None
-        target = tol.structured_series * (1 - rho) / scale
-        j = max(0, math.ceil(math.log(target) / math.log(rho)) - 1) if target < 1 else 0
-        return j if j <= J_MAX else None
-
-    def _series_orders(self, c: float) -> tuple[int, int] | None:
-        s, st = self.noise, self._series
-        lo = self._order(c * st.lam_low_max / s, st.trace_low / s**2)
-        hi = self._order(s / (c * st.lam_high_min), st.trace_high / (c * s)) if st.lam_high_min > 0 else 0
-        return None if lo is None or hi is None else (lo, hi)
-
-    def _t_matrices(self, c: float) -> tuple[Tensor, Tensor, Tensor]:
-        """T(c) = P D P^T and its first two c-derivatives, `(N_i, N_i)` each."""
-        orders = None if self._series is None else self._series_orders(c)
-        if orders is None:
-            self._split(c)
-            orders = self._series_orders(c)
-            if orders is None:
-                raise FloatingPointError(f"structured engine: no series order <= {J_MAX} meets the bound at "
-                                         f"K_t[1,1] = {c:.3g}")
-        s = self.noise
-        mid = self._middle
-        lam_m = self.lam[mid]
-        d = 1.0 / (c * lam_m + s)
-        pm = self.p[:, mid]
-        # coefficients of the truncated series: low T = (1/s) sum_j (-c/s)^j M_j, high T = sum_j (-s)^j c^-(j+1) N_j
-        coefs = torch.zeros(3, 2 * (J_MAX + 1), dtype=torch.float64)
-        st = self._series
-        for j in range(orders[0] + 1 if bool(st.low.any()) else 0):
-            sign = -1.0 if j % 2 else 1.0
-            coefs[0, j] = sign * c**j / s ** (j + 1)
-            coefs[1, j] = sign * j * c ** (j - 1) / s ** (j + 1) if j >= 1 else 0.0
-            coefs[2, j] = sign * j * (j - 1) * c ** (j - 2) / s ** (j + 1) if j >= 2 else 0.0
-        for j in range(orders[1] + 1 if bool(st.high.any()) else 0):   # empty series: no inf * 0 = NaN
-            k, coef = J_MAX + 1 + j, (-s) ** j
-            coefs[0, k] = coef * c ** (-(j + 1))
-            coefs[1, k] = -coef * (j + 1) * c ** (-(j + 2))
-            coefs[2, k] = coef * (j + 1) * (j + 2) * c ** (-(j + 3))
-        t = self._series.combine(coefs.to(**self._kind), orders)
-        t0 = t[0] + (pm * d) @ pm.T
-        t1 = t[1] + (pm * (-lam_m * d * d)) @ pm.T
-        t2 = t[2] + (pm * (2 * lam_m * lam_m * d * d * d)) @ pm.T
-        return t0, t1, t2
+    def _t_matrices(self, c: float, beta: float, a: float, derivatives: bool) -> tuple:
+        """T(c) = P D P^T `(N_i, N_i)`, with T'(c) and T''(c) if ``derivatives`` (else None); rebuilds the window
+        if needed."""
+        c = max(c, 1e-300)
+        if self._series is None or not self._series.covers(c, beta * beta):
+            # size the truncation for the largest b^2 a PSD K_t allows at this a, c (b^2 <= a c)
+            self._series = _ChebyshevStore(self.lam, self.p, self.noise, c, max(beta * beta, a * c))
+        return self._series.t_matrices(c, derivatives)
 
     # ------------------------------------------------------------------ factorisation
-    def factor(self, b: Tensor) -> dict:
-        """Schur factor and posterior weights for task covariance ``b`` (cached)."""
+    def factor(self, b: Tensor, derivatives: bool = False) -> dict:
+        """Schur factor and posterior weights for task covariance ``b`` (cached).
+
+        With ``derivatives`` the cache also holds T', T'' and the c-derivative vectors that ``mll_derivatives``
+        needs; they come from the same pass over the stored expansion.
+        """
         b = b.detach()
         key = tuple(b.flatten().tolist())
-        if self._key == key:
+        if self._key == key and (not derivatives or self._cache.get("t1") is not None or not self.n_inner):
             return self._cache
         a, beta, c = float(b[0, 0]), float(b[0, 1]), float(b[1, 1])
         s = self.noise
         d_all = 1.0 / (c * self.lam + s)
-        t = self._t_matrices(c) if self.n_inner else None
-        t0 = t[0] if t is not None else None
-        cache = {"a": a, "beta": beta, "c": c, "d": d_all, "t": t}
+        cache = {"a": a, "beta": beta, "c": c, "d": d_all, "alpha_rot": None}
         if self.n_inner:
-            smat = a * self.kii - beta * beta * t0
+            t = self._t_matrices(c, beta, a, derivatives)
+            vecs = [d_all * self.rt]
+            if derivatives:
+                vecs += [self.lam * d_all * d_all * self.rt, self.lam * self.lam * d_all ** 3 * self.rt]
+            pd = self.p @ torch.stack(vecs, dim=1)                  # P D rt (and its c-derivative companions)
+            smat = a * self.kii - beta * beta * t[0]
             smat.diagonal().add_(s)
             smat = 0.5 * (smat + smat.T)
             chol, self.jitter = robust_cholesky(smat, "inner Schur complement")
-            v = (self.yi - self.mean) - beta * (self.p @ (d_all * self.rt))
+            v = (self.yi - self.mean) - beta * pd[:, 0]
             alpha_i = torch.cholesky_solve(v.unsqueeze(-1), chol).squeeze(-1)
-            cache.update(s=smat, chol=chol, v=v, alpha_i=alpha_i)
-            alpha_rot = d_all * (self.rt - beta * (self.p.T @ alpha_i))
+            cache.update(t0=t[0], t1=t[1], t2=t[2], pd=pd, chol=chol, v=v, alpha_i=alpha_i)
         else:
-            cache.update(alpha_i=torch.zeros(0, **self._kind))
-            alpha_rot = d_all * self.rt
-        cache["alpha_rot"] = alpha_rot          # outer weights in the rotated basis (U^T alpha_o)
+            cache.update(alpha_i=torch.zeros(0, **self._kind), alpha_rot=d_all * self.rt)
         self._cache, self._key = cache, key
         return cache
+
+    def _alpha_rot(self, f: dict) -> Tensor:
+        """Outer weights in the rotated basis, ``U^T alpha_o`` (computed on the first query of a factor)."""
+        if f["alpha_rot"] is None:
+            f["alpha_rot"] = f["d"] * (self.rt - f["beta"] * (self.p.T @ f["alpha_i"]))
+        return f["alpha_rot"]
 
     # ------------------------------------------------------------------ posterior
     def predict(self, xq: Tensor, task: int, b: Tensor, chunk: int = 4096) -> tuple[Tensor, Tensor]:
@@ -285,7 +438,7 @@ class StructuredExactInference:
         b0, b1, beta = b[task, 0], b[task, 1], f["beta"]
         k_o = imq(xq, self.xo, self.theta)
         w = k_o @ self.u                                  # (m, N_o) rotated outer kernel vectors
-        mean = self.mean + b1 * (w @ f["alpha_rot"])
+        mean = self.mean + b1 * (w @ self._alpha_rot(f))
         quad = b1 * b1 * (w * w * f["d"]).sum(-1)
         if self.n_inner:
             k_i = imq(xq, self.xi, self.theta)
@@ -295,6 +448,58 @@ class StructuredExactInference:
             quad = quad + (y * y).sum(0)
         var = b[task, task] / self.theta - quad
         return mean, var.clamp_min(0.0)
+
+    def predict_with_gradients(self, xq: Tensor, task: int, b: Tensor,
+                               chunk: int = 256) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+        r"""Posterior mean, variance and their x-gradients at `(m, d)` points, without autograd.
+
+        Same arithmetic as ``predict`` differentiated by hand: with ``dk/dx = -(x - x') k^3`` (IMQ), the rotated
+        vectors ``[w, dw/dx] = [k_o, dk_o/dx] U`` come from one pass over U (autograd needs one forward and one
+        backward pass per output), and
+
+            d mu/dx = b1 (dw/dx) alpha_rot + b0 (dk_i/dx) alpha_i,
+            dV/dx   = -2 b1^2 (dw/dx) D w - 2 (dz/dx)^T S^-1 z,   z = b0 k_i - b b1 P D w.
+
+        Returns:
+            `(m,)` mean, `(m,)` variance, `(m, d)` mean gradient, `(m, d)` variance gradient (zero where the
+            variance is clamped at 0, as autograd through ``predict`` gives).
+        """
+        f = self.factor(b)
+        xq, b = xq.detach(), b.detach()
+        if xq.shape[0] > chunk:
+            parts = [self.predict_with_gradients(xq[i:i + chunk], task, b, chunk)
+                     for i in range(0, xq.shape[0], chunk)]
+            return tuple(torch.cat([p[k] for p in parts]) for k in range(4))
+        m, dim = xq.shape
+        b0, b1, beta = b[task, 0], b[task, 1], f["beta"]
+
+        w_all = None
+        if self._rotated is not None:                                        # queries at just-added points
+            x_new, rotated = self._rotated
+            hit = (xq.unsqueeze(1) == x_new.unsqueeze(0)).all(-1)            # (m, k)
+            if bool(hit.any(1).all()):
+                w_all = rotated[:, hit.to(torch.int8).argmax(1)]
+        if w_all is None:
+            w_all = (_kernel_rows(xq, self.xo, self.theta).reshape(-1, len(self.xo)) @ self.u).view(1 + dim, m, -1)
+        w, dw = w_all[0], w_all[1:]
+        d = f["d"]
+        alpha_rot = self._alpha_rot(f)
+        mean = self.mean + b1 * (w @ alpha_rot)
+        g_mean = b1 * (dw @ alpha_rot)                                        # (d, m)
+        quad = b1 * b1 * (w * w * d).sum(-1)
+        g_quad = 2 * b1 * b1 * (dw * (w * d)).sum(-1)
+        if self.n_inner:
+            k_all = _kernel_rows(xq, self.xi, self.theta)                    # (1 + d, m, N_i)
+            mean = mean + b0 * (k_all[0] @ f["alpha_i"])
+            g_mean = g_mean + b0 * (k_all[1:] @ f["alpha_i"])
+            z_all = b0 * k_all - beta * b1 * ((w_all * d) @ self.p.T)        # (1 + d, m, N_i)
+            y = torch.linalg.solve_triangular(f["chol"], z_all.reshape(-1, self.n_inner).T, upper=False)
+            y = y.T.reshape(1 + dim, m, -1)
+            quad = quad + (y[0] * y[0]).sum(-1)
+            g_quad = g_quad + 2 * (y[1:] * y[0]).sum(-1)
+        var = b[task, task] / self.theta - quad
+        g_var = torch.where(var > 0, -g_quad, torch.zeros_like(g_quad))
+        return mean, var.clamp_min(0.0), g_mean.T.contiguous(), g_var.T.contiguous()
 
     # ------------------------------------------------------------------ marginal likelihood
     def mll(self, b: Tensor) -> Tensor:
@@ -309,8 +514,18 @@ class StructuredExactInference:
         return -0.5 * logdet - 0.5 * quad - 0.5 * self.n * math.log(2 * math.pi)
 
     def mll_derivatives(self, b: Tensor) -> tuple[float, Tensor, Tensor]:
-        """MLL with its exact gradient and Hessian in ``p = (K_t00, K_t01, K_t11)`` (formulas: module docstring)."""
-        f = self.factor(b)
+        r"""MLL with its exact gradient and Hessian in ``p = (K_t00, K_t01, K_t11)``.
+
+        With ``S_j = dS/dp_j`` (``K_ii``, ``-2b T``, ``-b^2 T'``), ``S_jk`` (nonzero: ``S_bb = -2T``,
+        ``S_bc = -2b T'``, ``S_cc = -b^2 T''``), ``v_j``, ``v_jk`` likewise, ``W = S^-1`` and ``u = W v``:
+
+            g_j  = -1/2 [tr(W S_j) + 2 v_j.u - u.S_j u]
+            H_jk = -1/2 [tr(W S_jk) - tr(W S_j W S_k) + 2 v_jk.u + 2 v_j.W v_k - 2 (W v_j).S_k u
+                         - 2 (W v_k).S_j u + 2 (S_k u).W (S_j u) - u.S_jk u]
+
+        plus the outer terms, which depend on c only. Cost: one inverse of S and one `(N_i, 2 N_i)` product.
+        """
+        f = self.factor(b, derivatives=True)
         mll = float(self.mll(b))
         lam, d, rt, beta = self.lam, f["d"], self.rt, f["beta"]
         g = torch.zeros(3, **self._kind)
@@ -320,31 +535,41 @@ class StructuredExactInference:
         h[2, 2] += -0.5 * (-(lam * lam * d * d).sum() + 2 * (rt * rt * lam * lam * d ** 3).sum())
         if not self.n_inner:
             return mll, g, h
-        t0, t1, t2 = f["t"]
-        zero = torch.zeros_like(t0)
-        s_1 = [self.kii, -2 * beta * t0, -beta * beta * t1]               # dS/dp_j
-        s_2 = [[zero, zero, zero], [zero, -2 * t0, -2 * beta * t1], [zero, -2 * beta * t1, -beta * beta * t2]]
-        pd_rt = self.p @ (d * rt)
-        pd_l = self.p @ (lam * d * d * rt)
-        pd_ll = self.p @ (lam * lam * d ** 3 * rt)
-        zv = torch.zeros_like(pd_rt)
-        v_1 = [zv, -pd_rt, beta * pd_l]                                     # dv/dp_j
-        v_2 = [[zv, zv, zv], [zv, zv, pd_l], [zv, pd_l, -2 * beta * pd_ll]]
-        chol = f["chol"]
-        w = torch.cholesky_inverse(chol)                                    # S^-1
-        u = f["alpha_i"]                                                    # S^-1 v
-        ws = [w @ sj for sj in s_1]                                         # S^-1 S_j
-        w_v = [w @ vj for vj in v_1]                                        # S^-1 v_j
-        s_u = [sj @ u for sj in s_1]                                        # S_j u
-        for j in range(3):
-            dlogdet = ws[j].diagonal().sum()
-            dq = 2 * v_1[j] @ u - u @ s_u[j]
-            g[j] += -0.5 * (dlogdet + dq)
-            for k in range(j, 3):
-                d2logdet = (w * s_2[j][k]).sum() - (ws[j] * ws[k].T).sum()
-                d2q = (2 * v_2[j][k] @ u + 2 * v_1[j] @ w_v[k] - 2 * w_v[j] @ s_u[k] - 2 * w_v[k] @ s_u[j]
-                       + 2 * s_u[k] @ (w @ s_u[j]) - u @ (s_2[j][k] @ u))
-                h[j, k] += -0.5 * (d2logdet + d2q)
-                if k != j:
-                    h[k, j] = h[j, k]
+        t0, t1, t2, pd = f["t0"], f["t1"], f["t2"], f["pd"]
+        a, n = f["a"], self.n_inner
+        w = torch.cholesky_inverse(f["chol"])                                # W = S^-1
+        u = f["alpha_i"]                                                    # W v
+        wf = w.reshape(-1)
+        tr_w_t = torch.stack([wf @ t0.reshape(-1), wf @ t1.reshape(-1), wf @ t2.reshape(-1)])   # tr(W T), ...(T', T'')
+        scale = torch.tensor([1.0, -2 * beta, -beta * beta], **self._kind)   # S_j = scale_j A_j
+        tr_ws = scale * torch.stack([wf @ self.kii.reshape(-1), tr_w_t[0], tr_w_t[1]])   # tr(W S_j)
+        zero = torch.zeros_like(u)
+        vj = torch.stack([zero, -pd[:, 0], beta * pd[:, 1]])                # dv/dp_j, (3, n)
+        au = torch.stack([self.kii @ u, t0 @ u, t1 @ u, t2 @ u])            # K u, T u, T' u, T'' u
+        su = scale.unsqueeze(1) * au[:3]                                    # S_j u
+        g += -0.5 * (tr_ws + 2 * (vj @ u) - su @ u)
+        if beta * beta >= 0.01 * a * f["c"]:
+            # W T from S = a K + s' I - b^2 T (s' = s + jitter): W T = (a W K + s' W - I) / b^2, one product
+            # fewer. Its relative rounding error is ~eps (1 + |b^2 W T|) / |b^2 W T|, small when the tasks are
+            # correlated; only the Hessian uses it (the gradient takes tr(W T) directly), and Newton's fixed point
+            # does not depend on the Hessian, only its speed does.
+            wk_wt1 = (w @ torch.cat([self.kii, t1], dim=1)).view(n, 2, n).transpose(0, 1)
+            wt0 = a * wk_wt1[0] + (self.noise + self.jitter) * w
+            wt0.diagonal().sub_(1.0)
+            ws = torch.stack([wk_wt1[0], wt0 / (beta * beta), wk_wt1[1]])
+        else:
+            ws = (w @ torch.cat([self.kii, t0, t1], dim=1)).view(n, 3, n).transpose(0, 1)   # W K, W T, W T'
+        gram = ws.reshape(3, -1) @ ws.transpose(1, 2).reshape(3, -1).T      # tr(W A W B), A, B in {K, T, T'}
+        tr_wsws = scale.unsqueeze(1) * scale.unsqueeze(0) * gram
+        w_vs = torch.cat([vj, su]) @ w                                      # W v_j, W S_j u (W symmetric)
+        wv, wsu = w_vs[:3], w_vs[3:]
+        x = wv @ su.T                                                       # (W v_j).S_k u
+        quad2 = 2 * (vj @ wv.T) - 2 * (x + x.T) + 2 * (su @ wsu.T)
+        # second-derivative terms: tr(W S_jk) + 2 v_jk.u - u.S_jk u for (b, b), (b, c), (c, c)
+        u_t = au[1:] @ u                                                    # u.T u, u.T' u, u.T'' u
+        second = torch.zeros(3, 3, **self._kind)
+        second[1, 1] = -2 * tr_w_t[0] + 2 * u_t[0]
+        second[1, 2] = second[2, 1] = -2 * beta * tr_w_t[1] + 2 * (pd[:, 1] @ u) + 2 * beta * u_t[1]
+        second[2, 2] = -beta * beta * tr_w_t[2] - 4 * beta * (pd[:, 2] @ u) + beta * beta * u_t[2]
+        h += -0.5 * (second - tr_wsws + quad2)
         return mll, g, h
