@@ -10,6 +10,7 @@ import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
 from torch_gpioius.planning import plan_direction
 from torch_gpioius.structured import StructuredExactInference
+from torch_gpioius.tolerances import tol
 
 REL = 1e-6  # the issue's tolerance; the engine achieves ~1e-10
 
@@ -72,6 +73,8 @@ def test_no_drift_after_200_incremental_additions():
         if k % 50 == 0:
             b = b * 1.1                           # K_t moves as it does between steps
             fast.mll_derivatives(b)
+            # the invariant behind exactness: the truncation of the current store stays within the tolerance
+            assert fast.series.bound() * float(b[0, 1]) ** 2 <= tol.structured_series * fast.noise
     dense = DenseExactInference(torch.cat([xi, x[outer]]), torch.cat([yi, y[outer]]),
                                 torch.cat([torch.zeros(260, dtype=torch.long), torch.ones(int(outer.sum()),
                                                                                           dtype=torch.long)]),
@@ -126,3 +129,149 @@ def test_structured_needs_outer_points():
                   inference="structured").predict(torch.zeros(1, 2))
     with pytest.raises(ValueError, match="inference"):
         tg.GPIOIS(torch.zeros(2, 2), torch.zeros(2), torch.zeros(2, dtype=torch.long), inference="fast")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The Chebyshev expansion of T(c) (structured._ChebyshevStore) against independent references.
+
+from torch_gpioius import structured as st_mod  # noqa: E402
+
+
+def _chebyshev_sum(coef, x, order):
+    """sum_j coef_j T_j(x) and its first two x-derivatives (NumPy's Chebyshev class: an independent route)."""
+    series = np.polynomial.chebyshev.Chebyshev(coef[:order + 1])
+    return series(x), series.deriv(1)(x), series.deriv(2)(x)
+
+
+@pytest.mark.parametrize("lam", [0.0, 1e-6, 3e-3, 0.08, 1.0, 40.0, 5e3])
+def test_truncation_bounds_hold_for_every_order(lam):
+    """err[k, J] bounds |e|, |c e_c| and |c^2 e_cc| of f(c) = 1/(c lam + s) truncated after order J, on the window."""
+    s, c0 = 0.08, 0.3
+    u0, h = math.log(c0), math.log(st_mod.WINDOW)
+    lam_t = torch.tensor([lam], dtype=torch.float64)
+    err = st_mod._unit_error_bounds(lam_t, s, u0, h)[0].numpy()
+    coef = st_mod._chebyshev_coefficients(lam_t, s, u0, h)[0].numpy()
+    x = np.linspace(-1, 1, 801)
+    c = np.exp(u0 + h * x)
+    f = 1 / (c * lam + s)
+    c_fc = -c * lam / (c * lam + s) ** 2                       # c df/dc
+    c2_fcc = 2 * (c * lam) ** 2 / (c * lam + s) ** 3           # c^2 d^2f/dc^2
+    # rounding of each computed coefficient (a 129-term cosine sum), amplified by the derivatives of T_j
+    delta = 4 * (st_mod.N_NODES + 2) * np.finfo(float).eps * f.max()
+    j = np.arange(st_mod.J_MAX + 1)
+    r0 = np.cumsum(np.full(len(j), delta))
+    r1 = np.cumsum(delta * j**2 / h)
+    r2 = np.cumsum(delta * (j**4 / (3 * h**2) + j**2 / h))
+    informative = 0
+    for order in range(st_mod.J_MAX + 1):
+        p, px, pxx = _chebyshev_sum(coef, x, order)
+        # c d/dc = (1/h) d/dx; c^2 d^2/dc^2 = (1/h^2) d^2/dx^2 - (1/h) d/dx
+        e0 = np.abs(p - f).max()
+        e1 = np.abs(px / h - c_fc).max()
+        e2 = np.abs(pxx / h**2 - px / h - c2_fcc).max()
+        assert e0 <= err[order] + r0[order] and e1 <= err[order] + r1[order] and e2 <= err[order] + r2[order], \
+            (order, e0, e1, e2, err[order])
+        informative += err[order] > r2[order]                  # orders where truncation, not rounding, is tested
+    assert informative >= (3 if lam >= 1e-3 else 0)
+    assert err[-1] < 1e-14 * (1 / s)                           # and it is not vacuous
+
+
+def _store_case(seed=3, n_outer=300, n_inner=40):
+    x, y, t = _surface_data(n_outer=n_outer, n_inner=n_inner, seed=seed)
+    eng = StructuredExactInference(x, y, t, theta=0.15, noise=0.08)
+    return eng
+
+
+def test_store_equals_direct_sum_within_its_bound():
+    eng = _store_case()
+    c0, beta2 = 0.3, 0.05
+    store = st_mod._ChebyshevStore(eng.lam, eng.p, eng.noise, c0, beta2)
+    assert store.bound() * beta2 <= tol.structured_series * eng.noise
+    for c in (c0 / 2, c0 / 1.3, c0, 1.7 * c0, 2 * c0):
+        t0, t1, t2 = store.t_matrices(c)
+        d = 1 / (c * eng.lam + eng.noise)
+        ref0 = (eng.p * d) @ eng.p.T
+        ref1 = (eng.p * (-eng.lam * d * d)) @ eng.p.T
+        ref2 = (eng.p * (2 * eng.lam**2 * d**3)) @ eng.p.T
+        scale = float(torch.linalg.matrix_norm(ref0, ord=2))
+        # truncation within the rigorous bound, plus rounding: the coefficients' (~1e-16 relative) amplified by
+        # the derivatives of the Chebyshev polynomials (~J^2 for T', ~J^4 for T'')
+        assert float(torch.linalg.matrix_norm(t0 - ref0, ord=2)) <= store.bound() + 1e-13 * scale
+        assert c * float(torch.linalg.matrix_norm(t1 - ref1, ord=2)) <= store.bound() + 1e-11 * scale
+        assert c * c * float(torch.linalg.matrix_norm(t2 - ref2, ord=2)) <= store.bound() + 1e-9 * scale
+        assert torch.equal(t0, t0.T)                       # unpacked exactly symmetric
+    t_only = store.t_matrices(c0, derivatives=False)
+    assert t_only[1] is None and torch.equal(t_only[0], store.t_matrices(c0)[0])
+
+
+def _direct_t(eng, c):
+    d = 1 / (c * eng.lam + eng.noise)
+    return [(eng.p * wk) @ eng.p.T for wk in (d, -eng.lam * d * d, 2 * eng.lam**2 * d**3)]
+
+
+def test_store_grown_by_appends_equals_direct_sum():
+    """Rows appended in place (several batches) give the same T, T', T'' as the direct sum over all rows."""
+    eng = _store_case(n_inner=60)
+    grown = st_mod._ChebyshevStore(eng.lam, eng.p[:20], eng.noise, 0.3, 0.05)
+    orders = list(grown.n_j)
+    for lo in range(20, 60, 7):
+        grown.append(eng.p[lo:lo + 7])
+    assert grown.size == 60 and grown.n_j == orders          # orders are kept until the bound asks otherwise
+    assert grown.bound() > st_mod._ChebyshevStore(eng.lam, eng.p[:20], eng.noise, 0.3, 0.05).bound()
+    c = 0.4
+    ref = _direct_t(eng, c)
+    scale = float(torch.linalg.matrix_norm(ref[0], ord=2))
+    for k, (got, want, rnd) in enumerate(zip(grown.t_matrices(c), ref, (1e-13, 1e-11, 1e-9))):
+        err = c**k * float(torch.linalg.matrix_norm(got - want, ord=2))
+        assert err <= grown.bound() + rnd * scale, (k, err)
+
+
+def test_window_moves_with_c_and_results_stay_exact():
+    x, y, t = _surface_data(n_outer=400, n_inner=60, seed=4)
+    dense = DenseExactInference(x, y, t, 0.15, 0.08)
+    fast = StructuredExactInference(x, y, t, 0.15, 0.08)
+    centres = []
+    for c in (0.05, 0.09, 0.5, 4.0, 0.02):                  # leaves the window [c0/2, 2 c0] several times
+        b = torch.tensor([[0.3, 0.05], [0.05, c]], dtype=torch.float64)
+        fd, gd, hd = dense.mll_derivatives(b)
+        fs, gs, hs = fast.mll_derivatives(b)
+        centres.append(fast.series.u0)
+        assert abs(fs - fd) <= 1e-10 * abs(fd) and _rel(gs, gd) < 1e-8 and _rel(hs, hd) < 1e-7
+        assert abs(math.log(c) - fast.series.u0) <= fast.series.h
+    assert len(set(centres)) >= 4
+
+
+def test_closed_form_gradients_equal_autograd():
+    x, y, t = _surface_data(n_outer=300, n_inner=50, seed=5)
+    fast = StructuredExactInference(x, y, t, 0.15, 0.08)
+    new = x[t == 0][:3] + 0.004
+    fast.append(new, torch.tensor([0.0, 1.0, 1.0], dtype=torch.float64), torch.zeros(3, dtype=torch.long))
+    b = torch.tensor([[0.3, 0.2], [0.2, 0.4]], dtype=torch.float64)
+    rng = torch.Generator().manual_seed(0)
+    queries = [new[:1], new, x[:25] + 0.01 * torch.randn(25, 3, generator=rng, dtype=torch.float64)]
+    for xq in queries:                                      # cached rotated rows (just added) and fresh ones
+        for task in (0, 1):
+            mean, var, g_mean, g_var = fast.predict_with_gradients(xq, task, b, chunk=8)
+            xg = xq.clone().requires_grad_(True)
+            m_ref, v_ref = fast.predict(xg, task, b)
+            gm_ref, = torch.autograd.grad(m_ref.sum(), xg, retain_graph=True)
+            gv_ref, = torch.autograd.grad(v_ref.sum(), xg)
+            torch.testing.assert_close(mean, m_ref.detach(), rtol=1e-12, atol=1e-12)
+            torch.testing.assert_close(var, v_ref.detach(), rtol=1e-9, atol=1e-12)
+            torch.testing.assert_close(g_mean, gm_ref, rtol=1e-9, atol=1e-10)
+            torch.testing.assert_close(g_var, gv_ref, rtol=1e-7, atol=1e-9)
+
+
+def test_planner_geometry_closed_form_equals_autograd():
+    x, y, t = _surface_data(n_outer=300, n_inner=50, seed=6)
+    fast = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="structured").fit()
+    dense = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="dense",
+                      task_covariance=fast.task_covariance)
+    xq = x[:10] + 0.01
+    a = tg.geometry.surface_geometry(fast, xq)            # closed form
+    b = tg.geometry.surface_geometry(dense, xq)           # autograd through the dense engine
+    torch.testing.assert_close(a.grad_mean, b.grad_mean, rtol=1e-8, atol=1e-9)
+    torch.testing.assert_close(a.grad_var, b.grad_var, rtol=1e-6, atol=1e-9)
+    torch.testing.assert_close(a.normal, b.normal, rtol=1e-8, atol=1e-10)
+    with pytest.raises(ValueError, match="task"):
+        fast._predict_with_gradients(xq, 2)

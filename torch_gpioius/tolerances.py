@@ -25,8 +25,9 @@ class Tolerances:
         log_chol_bounds: bounds on ``log L[0, 0]`` and ``log L[1, 1]`` where ``K_t = L L^T``; they keep the
             optimiser finite when the likelihood prefers a singular ``K_t`` (e.g. perfectly correlated tasks).
         normal_eps: gradient norm below which a normal is considered undefined.
-        structured_series: bound on the relative perturbation of the inner Schur complement from truncating
-            the tail series of the structured engine (``StructuredExactInference``).
+        structured_series: bound, relative to sigma^2, on the perturbation of the inner Schur complement (and
+            of its c-derivatives, scaled by c and c^2) from truncating the Chebyshev expansion of the structured
+            engine (``StructuredExactInference``).
     """
 
     jitter_start: float = 1e-10
