@@ -275,3 +275,26 @@ def test_planner_geometry_closed_form_equals_autograd():
     torch.testing.assert_close(a.normal, b.normal, rtol=1e-8, atol=1e-10)
     with pytest.raises(ValueError, match="task"):
         fast._predict_with_gradients(xq, 2)
+
+
+def test_removing_inner_points_keeps_the_eigendecomposition():
+    x, y, t = _surface_data(n_outer=300, n_inner=60, seed=7)
+    m = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="structured").fit()
+    engine = m._inference()
+    u = engine.u
+    inner = torch.nonzero(t == 0).flatten()
+    drop = torch.zeros(len(y), dtype=torch.bool)
+    drop[inner[[2, 7, 30]]] = True
+    m.remove_observations(drop)
+    assert m._inference() is engine and engine.u is u and engine.n_inner == 57
+    fresh = tg.GPIOIS(x[~drop], y[~drop], t[~drop], theta=0.15, noise=0.08, inference="dense",
+                      task_covariance=m.task_covariance)
+    xq = x[:15] + 0.01
+    for task in (0, 1):
+        torch.testing.assert_close(m.predict(xq, task)[0], fresh.predict(xq, task)[0], rtol=1e-10, atol=1e-12)
+        torch.testing.assert_close(m.predict(xq, task)[1], fresh.predict(xq, task)[1], rtol=1e-8, atol=1e-12)
+    assert abs(float(m.log_marginal_likelihood() - fresh.log_marginal_likelihood())) < 1e-9 * abs(
+        float(fresh.log_marginal_likelihood()))
+    outer_first = int(torch.nonzero(m.train_task == 1)[0])
+    m.remove_observations([outer_first])                   # an outer point: the engine is rebuilt
+    assert m._inference() is not engine and m._inference().n == len(y) - 4

@@ -139,7 +139,9 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
     def remove_observations(self, index) -> "ImplicitSurfaceGP":
         """Remove training observations (e.g. free-space samples a later contact showed to be too close).
 
-        The exact engine is rebuilt from the remaining data; hyper-parameters and K_t are kept.
+        The exact engine drops the rows in place where it can (the structured engine keeps its eigendecomposition
+        when only inner points go) and is rebuilt from the remaining data otherwise; hyper-parameters and K_t are
+        kept.
 
         Args:
             index: `(k,)` integer indices or an `(n,)` boolean mask of the observations to remove.
@@ -164,7 +166,12 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         if not bool(drop.any()):
             return self
         keep = ~drop
+        engine, task = self._engine, self._train_task()
         self.set_train_data(tuple(t[keep] for t in self.train_inputs), self.train_targets[keep], strict=False)
+        if engine is not None and engine.remove(drop, task):   # the engine drops rows in place where it can
+            x = self.train_inputs[0]
+            self._engine = engine
+            self._engine_key = (self.theta, self.noise, self.prior_mean, x.shape[0], x.dtype, x.device)
         return self
 
     def log_marginal_likelihood(self) -> Tensor:

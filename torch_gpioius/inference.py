@@ -103,6 +103,14 @@ class DenseExactInference:
         self.task = torch.cat([self.task, task])
         self._invalidate()
 
+    def remove(self, drop: Tensor, task: Tensor) -> bool:
+        """Drop observations (`(n,)` bool mask in data order) from the cached kernel matrix; always possible."""
+        keep = ~drop
+        self.kx = self.kx[keep][:, keep]
+        self.x, self.y, self.task = self.x[keep], self.y[keep], self.task[keep]
+        self._invalidate()
+        return True
+
     @property
     def n(self) -> int:
         return self.x.shape[0]

@@ -334,7 +334,7 @@ class StructuredExactInference:
         self._p = _Rows(imq(self.xi, self.xo, self.theta) @ self.u if len(self.xi)
                         else torch.zeros(0, len(self.xo), **kind))
         self._series = None  # _ChebyshevStore of the current window of K_t[1,1]
-        self._rotated = None  # (points, (1 + d, k, N_o) rotated kernel rows and x-derivatives) of the last append
+        self._rotated = None  # (contacts, (1 + d, k, N_o) rotated kernel rows and x-derivatives) of the last append
         self._invalidate()
 
     # ------------------------------------------------------------------ data
@@ -367,18 +367,43 @@ class StructuredExactInference:
             self.__init__(xs, ys, ts, self.theta, self.noise, self.mean)
             return
         self.kii = bordered(self.kii, imq(x, self.xi, self.theta), imq(x, x, self.theta))
-        # The rows of P and, from the same pass over U, the rotated kernel x-derivatives at the new points: the
-        # planner's next query is the contact just added, and U (N_o^2 doubles) is the largest thing read per step.
-        dim = x.shape[1]
-        rotated = (_kernel_rows(x, self.xo, self.theta).reshape(-1, len(self.xo)) @ self.u).view(1 + dim, len(x), -1)
-        p_new = rotated[0]
-        self._rotated = (x, rotated)
+        # The rows of P and, from the same pass over U, the rotated kernel x-derivatives at the new surface
+        # contacts (y = 0): the planner plans from the contact just added, and U (N_o^2 doubles) is the largest
+        # thing read per step. Free-space points get no derivative rows.
+        dim, n_o = x.shape[1], len(self.xo)
+        contacts = x[y == 0]
+        rows = torch.cat([imq(x, self.xo, self.theta), _kernel_rows(contacts, self.xo, self.theta)[1:].reshape(-1, n_o)])
+        rotated = rows @ self.u
+        p_new = rotated[:len(x)]
+        self._rotated = (contacts, torch.cat([rotated[:len(x)][y == 0].unsqueeze(0),
+                                              rotated[len(x):].view(dim, len(contacts), n_o)]))
         self._p.append(p_new)
         self.xi = torch.cat([self.xi, x])
         self.yi = torch.cat([self.yi, y])
         if self._series is not None:
             self._series.append(p_new)
         self._invalidate()
+
+    def remove(self, drop: Tensor, task: Tensor) -> bool:
+        """Drop inner observations in place, keeping the eigendecomposition of K_oo.
+
+        Args:
+            drop: `(n,)` bool mask over the model's observations (data order).
+            task: `(n,)` their task ids.
+
+        Returns:
+            False (nothing changed) if outer points are to go: the caller then rebuilds the engine.
+        """
+        if bool((drop & (task == 1)).any()):
+            return False
+        keep = ~drop[task == 0]            # inner points keep their data order here (init and append)
+        self.xi, self.yi = self.xi[keep], self.yi[keep]
+        self.kii = self.kii[keep][:, keep]
+        self._p = _Rows(self.p[keep])
+        self._series = None                # rebuilt for the remaining rows at the next factorisation
+        self._rotated = None
+        self._invalidate()
+        return True
 
     # ------------------------------------------------------------------ T(c)
     @property
