@@ -295,6 +295,10 @@ def test_removing_inner_points_keeps_the_eigendecomposition():
         torch.testing.assert_close(m.predict(xq, task)[1], fresh.predict(xq, task)[1], rtol=1e-8, atol=1e-12)
     assert abs(float(m.log_marginal_likelihood() - fresh.log_marginal_likelihood())) < 1e-9 * abs(
         float(fresh.log_marginal_likelihood()))
+    m.covar_module.theta = 0.2                               # a stale engine is never reused
+    m.remove_observations([int(torch.nonzero(m.train_task == 0)[0])])
+    assert m._inference() is not engine and m._inference().theta == 0.2
+    engine = m._inference()
     outer_first = int(torch.nonzero(m.train_task == 1)[0])
     m.remove_observations([outer_first])                   # an outer point: the engine is rebuilt
-    assert m._inference() is not engine and m._inference().n == len(y) - 4
+    assert m._inference() is not engine and m._inference().n == len(y) - 5

@@ -166,12 +166,14 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         if not bool(drop.any()):
             return self
         keep = ~drop
+        x = self.train_inputs[0]
+        current = self._engine is not None and self._engine_key == (self.theta, self.noise, self.prior_mean, n,
+                                                                    x.dtype, x.device)
         engine, task = self._engine, self._train_task()
         self.set_train_data(tuple(t[keep] for t in self.train_inputs), self.train_targets[keep], strict=False)
-        if engine is not None and engine.remove(drop, task):   # the engine drops rows in place where it can
-            x = self.train_inputs[0]
+        if current and engine.remove(drop, task):   # an up-to-date engine drops the rows in place where it can
             self._engine = engine
-            self._engine_key = (self.theta, self.noise, self.prior_mean, x.shape[0], x.dtype, x.device)
+            self._engine_key = (self.theta, self.noise, self.prior_mean, n - int(drop.sum()), x.dtype, x.device)
         return self
 
     def log_marginal_likelihood(self) -> Tensor:

@@ -250,6 +250,7 @@ class _ChebyshevStore:
         return float(self.unit_err @ self.w)
 
     def covers(self, c: float, beta2: float) -> bool:
+        """Whether c lies in the window and ``b^2 bound()`` meets ``tol.structured_series * s`` (else rebuild)."""
         return abs(math.log(c) - self.u0) <= self.h and beta2 * self.bound() <= tol.structured_series * self.noise
 
     def append(self, p_new: Tensor) -> None:
