@@ -214,7 +214,7 @@ class _ChebyshevStore:
             for j, nj in enumerate(self.n_j):
                 m = (self.pp[:, :nj] * self.coef[:nj, j]) @ self.pp[:, :nj].T
                 self.block[j, :len(r)] = m[r, c]
-        self._unpack = None
+        self._unpack = None                # gather index from packed to full; rebuilt when the size changes
 
     @staticmethod
     def _allocate(err: Tensor, target: float) -> Tensor:
@@ -277,7 +277,6 @@ class _ChebyshevStore:
         self.block[:, start:stop] = rows[:, r, c]
         self.w = self.w + (p_new * p_new).sum(0)
         self.size = n_new
-        self._unpack = None
 
     def t_matrices(self, c: float, derivatives: bool = True) -> tuple:
         """``T(c)`` and, with ``derivatives``, ``T'(c)``, ``T''(c)`` as `(N_i, N_i)` matrices (else None): one pass
