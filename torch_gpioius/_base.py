@@ -90,10 +90,15 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
     def _engine_class(self):
         return DenseExactInference
 
+    def _key(self, n: int) -> tuple:
+        """What an engine built for n observations depends on: hyper-parameters, size, dtype and device."""
+        x = self.train_inputs[0]
+        return (self.theta, self.noise, self.prior_mean, n, x.dtype, x.device)
+
     def _inference(self):
         """The exact engine for the current data and hyper-parameters (rebuilt only when they change)."""
         x = self.train_inputs[0]
-        key = (self.theta, self.noise, self.prior_mean, x.shape[0], x.dtype, x.device)
+        key = self._key(x.shape[0])
         if self._engine is None or self._engine_key != key:
             self._engine = self._engine_class()(x, self.train_targets, self._train_task(), self.theta, self.noise,
                                                 self.prior_mean)
@@ -104,7 +109,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         if self._engine is not None:
             self._engine.append(x, y, task)
             n = self._engine.n
-            self._engine_key = (self.theta, self.noise, self.prior_mean, n, x.dtype, x.device)
+            self._engine_key = self._key(n)
 
     def _apply(self, fn, *args, **kwargs):
         self._engine = None  # device / dtype moves rebuild the engine
@@ -166,14 +171,12 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         if not bool(drop.any()):
             return self
         keep = ~drop
-        x = self.train_inputs[0]
-        current = self._engine is not None and self._engine_key == (self.theta, self.noise, self.prior_mean, n,
-                                                                    x.dtype, x.device)
+        current = self._engine is not None and self._engine_key == self._key(n)
         engine, task = self._engine, self._train_task()
         self.set_train_data(tuple(t[keep] for t in self.train_inputs), self.train_targets[keep], strict=False)
         if current and engine.remove(drop, task):   # an up-to-date engine drops the rows in place where it can
             self._engine = engine
-            self._engine_key = (self.theta, self.noise, self.prior_mean, n - int(drop.sum()), x.dtype, x.device)
+            self._engine_key = self._key(n - int(drop.sum()))
         return self
 
     def log_marginal_likelihood(self) -> Tensor:
