@@ -37,3 +37,53 @@ def kt_from_chol(phi):
     u, v, w = phi
     lo = np.array([[np.exp(u), 0.0], [v, np.exp(w)]])
     return lo @ lo.T
+
+
+def richardson_derivative(f, x, h, directions=None):
+    """Derivatives of ``f`` at ``x`` by Richardson-extrapolated central differences, with an error estimate.
+
+    A reference has an error of its own (STYLE.md 14): a central difference D(h) errs by ~h^2 f''' (truncation)
+    plus ~r / h, where r is the rounding noise of one evaluation of f, which for a linear solve is
+    cond * eps * |f|, not eps * |f|, and moves with the BLAS blocking (thread count, CPU). The estimate here is
+    R(h/2) with R(h) = (4 D(h/2) - D(h)) / 3 (fourth order); its error is estimated as |R(h) - R(h/2)| (the
+    truncation of R(h) is 16x that of R(h/2), and both carry rounding of the same size), plus a floor of
+    eps * max|f| / h per evaluation.
+
+    Args:
+        f: maps an array shaped like ``x`` to an array (or a scalar).
+        x: point; ``directions`` default to the unit vectors of ``x.ravel()``.
+        h: base step.
+        directions: `(k, x.size)` directions; the result has one derivative per direction.
+
+    Returns:
+        ``(derivative, error)``: arrays of shape ``(k,) + f(x).shape``.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    dirs = np.eye(x.size) if directions is None else np.asarray(directions, dtype=np.float64)
+    est, err = [], []
+    for d in dirs:
+        d = d.reshape(x.shape)
+        vals = {}
+
+        def central(step):
+            plus, minus = np.asarray(f(x + step * d), float), np.asarray(f(x - step * d), float)
+            vals[step] = max(np.abs(plus).max(), np.abs(minus).max())
+            return (plus - minus) / (2 * step)
+
+        d1, d2, d4 = central(h), central(h / 2), central(h / 4)
+        r1, r2 = (4 * d2 - d1) / 3, (4 * d4 - d2) / 3
+        floor = 8 * np.finfo(float).eps * max(vals.values()) / (h / 4)
+        est.append(r2)
+        err.append(np.abs(r1 - r2) + floor)
+    return np.array(est), np.array(err)
+
+
+def assert_close_to_reference(actual, reference, error, margin=10.0, what="value"):
+    """Assert ``|actual - reference| <= margin * error`` elementwise, naming the worst element."""
+    actual, reference, error = (np.asarray(a, dtype=np.float64) for a in (actual, reference, error))
+    bad = np.abs(actual - reference) > margin * error
+    if bad.any():
+        i = np.unravel_index(np.argmax(np.abs(actual - reference) / np.maximum(error, 1e-300)), actual.shape)
+        raise AssertionError(f"{what}: {actual[i]!r} vs reference {reference[i]!r} (difference "
+                             f"{abs(actual[i] - reference[i]):.3g}, reference error estimate {error[i]:.3g}, "
+                             f"margin {margin}); {int(bad.sum())} of {bad.size} elements out of tolerance")

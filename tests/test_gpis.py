@@ -76,14 +76,20 @@ def test_gpytorch_gradients_exact_only_inside_context():
     y = (rng.uniform(size=n) > 0.5).astype(float)
     m = tg.GPIS(torch.tensor(x), torch.tensor(y), theta=0.15, noise=0.08).eval()
     q = torch.tensor([[0.05, -0.1, 0.2]], dtype=torch.float64)
-    eps = 1e-6
-    fd = np.array([(float(m.predict(q + e)[1]) - float(m.predict(q - e)[1])) / (2 * eps)
-                   for e in torch.eye(3, dtype=torch.float64) * eps])
+    fd, err = ref.richardson_derivative(lambda p: float(m.predict(torch.tensor(p))[1]), q.numpy(), 1e-3)
     xq = q.clone().requires_grad_(True)
     grad_predict, = torch.autograd.grad(m.predict(xq)[1].sum(), xq)
-    np.testing.assert_allclose(grad_predict[0].numpy(), fd, rtol=1e-6, atol=1e-8)
+    ref.assert_close_to_reference(grad_predict[0].numpy(), fd, err, what="d var / dx of model.predict")
     xq = q.clone().requires_grad_(True)
     with tg.exact_arithmetic():
         var = m(xq).variance
         grad_inside, = torch.autograd.grad(var.sum(), xq)
-    np.testing.assert_allclose(grad_inside[0].numpy(), fd, rtol=1e-6, atol=1e-8)
+    ref.assert_close_to_reference(grad_inside[0].numpy(), fd, err, what="d var / dx of model(x) in the context")
+
+
+@pytest.mark.parametrize("args, match", [((None, [0.0]), "train_x: missing"), (([[0.0, 0.0]], None), "train_y: missing"),
+                                         (([[0.0, 0.0]], "0"), "train_y"), ((torch.zeros(1, 2, dtype=torch.complex128),
+                                                                              [0.0]), "real")])
+def test_missing_or_malformed_data_are_named(args, match):
+    with pytest.raises(ValueError, match=match):
+        tg.GPIS(*args)

@@ -10,9 +10,9 @@ from . import checkpoints, datasets, geometry, importers, metrics, offline, plan
 from .checkpoints import load_checkpoint, save_checkpoint
 from .datasets import Dataset, DatasetError, load_dataset, save_dataset
 from .exploration import ObservationPolicy, Trace, explore
-from .gpiois import GPIOIS, INNER, OUTER
+from .gpiois import GPIOIS, INNER, OUTER, UnidentifiedSimilarityWarning
 from .gpis import GPIS
-from .inference import DenseExactInference, JitterWarning
+from .inference import DenseExactInference, JitterWarning, NotPositiveDefiniteError
 from .kernels import InverseMultiquadricKernel
 from .structured import StructuredExactInference
 from .settings import exact_arithmetic
@@ -21,6 +21,6 @@ from .tolerances import tol
 __version__ = "0.1.0"
 
 __all__ = ["GPIOIS", "GPIS", "ObservationPolicy", "Trace", "explore", "planning", "sim", "INNER", "OUTER", "DenseExactInference", "InverseMultiquadricKernel",
-           "JitterWarning", "StructuredExactInference", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__",
+           "JitterWarning", "NotPositiveDefiniteError", "UnidentifiedSimilarityWarning", "StructuredExactInference", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__",
            "checkpoints", "datasets", "importers", "offline", "Dataset", "DatasetError", "load_dataset", "save_dataset",
            "load_checkpoint", "save_checkpoint"]

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import gpytorch
 import torch
 from gpytorch.constraints import GreaterThan
@@ -11,18 +9,17 @@ from gpytorch.likelihoods import GaussianLikelihood
 from gpytorch.means import ConstantMean
 from torch import Tensor
 
-from ._validation import as_points
+from ._validation import as_float, as_points, task_id
 from .inference import DenseExactInference
 from .kernels import InverseMultiquadricKernel
 from .settings import exact_arithmetic
+from .tolerances import tol
 
 __all__ = ["ImplicitSurfaceGP"]
 
 
 def _fixed_likelihood(noise: float) -> GaussianLikelihood:
-    noise = float(noise)
-    if not (math.isfinite(noise) and noise > 0):
-        raise ValueError(f"noise: must be a positive finite variance sigma^2, got {noise}")
+    noise = as_float(noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
     lik = GaussianLikelihood(noise_constraint=GreaterThan(0.0))
     lik.double()
     lik.noise = torch.tensor(noise, dtype=torch.float64)  # a Python float would pass through float32
@@ -112,8 +109,50 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             self._engine_key = self._key(n)
 
     def _apply(self, fn, *args, **kwargs):
-        self._engine = None  # device / dtype moves rebuild the engine
+        # .to(dtype) / .float() / .half() would run the GP arithmetic in that dtype: refuse before anything moves.
+        # The probe is what fn makes of a float64 tensor (device moves keep float64 and pass).
+        probe = fn(torch.zeros((), dtype=torch.float64))
+        if torch.is_tensor(probe) and probe.dtype != torch.float64:
+            raise TypeError(
+                f"{type(self).__name__}: the GP arithmetic is float64 only (posterior variances near data are ~1e-6 "
+                f"against a prior variance of ~10, which {probe.dtype} cancels away); the model was left unchanged. "
+                "Move it with .to(device) and cast the results of predict() if you need another dtype.")
+        self._engine = None  # device moves rebuild the engine
         return super()._apply(fn, *args, **kwargs)
+
+    def check_state(self) -> None:
+        """Validate hyper-parameters as the constructor would: theta and the noise in their supported ranges,
+        the prior mean m = 1 (eq. 2), finite parameters, and (GPIOIS) a finite PSD ``K_t`` within range.
+
+        Raises:
+            ValueError: naming the first invalid field.
+        """
+        for name, value in self.state_dict().items():
+            if "_constraint." in name:      # constraint bounds are legitimately infinite (GreaterThan, Positive)
+                continue
+            if torch.is_tensor(value) and value.is_floating_point() and not bool(torch.isfinite(value).all()):
+                raise ValueError(f"{name}: contains NaN or inf")
+        as_float(self.theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        as_float(self.noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
+        if self.prior_mean != 1.0:
+            raise ValueError(f"prior mean: must be m = 1 (eq. 2; free space is labelled 1), got {self.prior_mean}")
+
+    def load_state_dict(self, state_dict, strict: bool = True, assign: bool = False):
+        """``torch.nn.Module.load_state_dict``, then :meth:`check_state`; on failure the previous state is restored.
+
+        Raises:
+            ValueError: the loaded state is invalid (the model keeps its previous state).
+        """
+        before = {k: v.detach().clone() for k, v in self.state_dict().items()}
+        result = super().load_state_dict(state_dict, strict=strict, assign=assign)
+        self._engine = None
+        try:
+            self.check_state()
+        except ValueError:
+            super().load_state_dict(before)
+            self._engine = None
+            raise
+        return result
 
     def set_train_data(self, inputs=None, targets=None, strict=True):
         self._engine = None
@@ -134,6 +173,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
 
     def _predict_with_gradients(self, x, task: int) -> tuple[Tensor, Tensor, Tensor, Tensor] | None:
         """Mean, variance and their x-gradients by the engine's closed form, or None if it has none (autograd)."""
+        task = task_id(task)
         if task not in range(self.num_tasks):
             raise ValueError(f"task: must be in 0..{self.num_tasks - 1}, got {task!r}")
         engine = self._inference()
@@ -155,17 +195,28 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             ValueError: indices out of range, or removing every observation; the model is left unchanged.
         """
         n = self.train_targets.shape[0]
-        idx = torch.as_tensor(index)
+        try:
+            idx = torch.as_tensor(index)
+        except Exception as exc:
+            raise ValueError(f"index: expected integer indices or a boolean mask ({exc})") from None
+        device = self.train_targets.device
         if idx.dtype == torch.bool:
             if idx.shape != (n,):
                 raise ValueError(f"index: boolean mask must have shape ({n},), got {tuple(idx.shape)}")
-            drop = idx.to(self.train_targets.device)
+            drop = idx.to(device)
         else:
+            if idx.is_floating_point() or idx.is_complex():
+                raise ValueError(f"index: expected integer indices or a boolean mask, got dtype {idx.dtype} "
+                                 f"(e.g. {idx.flatten()[:3].tolist()}); a float index is never rounded")
             idx = idx.reshape(-1).long()
             if idx.numel() and (idx.min() < -n or idx.max() >= n):
                 raise ValueError(f"index: out of range for {n} observations")
-            drop = torch.zeros(n, dtype=torch.bool, device=self.train_targets.device)
-            drop[idx.to(drop.device)] = True
+            idx = torch.where(idx < 0, idx + n, idx)
+            if idx.unique().numel() != idx.numel():
+                raise ValueError("index: duplicate indices; to remove by a 0/1 mask pass it as a boolean tensor "
+                                 "(dtype=torch.bool)")
+            drop = torch.zeros(n, dtype=torch.bool, device=device)
+            drop[idx.to(device)] = True
         if bool(drop.all()):
             raise ValueError("index: cannot remove every observation (empty data)")
         if not bool(drop.any()):

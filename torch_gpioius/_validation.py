@@ -2,19 +2,77 @@
 
 from __future__ import annotations
 
+import math
+
 import torch
 from torch import Tensor
 
-__all__ = ["as_points", "as_labels", "as_tasks"]
+__all__ = ["as_points", "as_labels", "as_tasks", "as_float", "task_id", "TASK_NAMES"]
+
+#: Task names accepted beside the ids: 0 is the inner (tactile) shape, 1 the outer (visual) one.
+TASK_NAMES = {"inner": 0, "outer": 1}
+
+
+def _tensor(value, name: str) -> Tensor:
+    if value is None:
+        raise ValueError(f"{name}: missing (got None)")
+    if isinstance(value, str):
+        raise ValueError(f"{name}: expected numbers, got the string {value!r}")
+    try:
+        return torch.as_tensor(value)
+    except Exception as exc:
+        raise ValueError(f"{name}: cannot be converted to a tensor ({type(exc).__name__}: {exc})") from None
+
+
+def as_float(value, name: str, *, lo: float | None = None, hi: float | None = None, positive: bool = False,
+             unit: str = "") -> float:
+    """A finite real number within ``[lo, hi]`` (and > 0 if ``positive``), or ``ValueError`` naming the field.
+
+    Booleans, strings, NaN, inf and complex numbers are refused: a limit or a hyper-parameter given as ``True``
+    or ``"0.1"`` is a mistake, never silently converted.
+    """
+    unit = f" {unit}" if unit else ""
+    if isinstance(value, (bool, str, bytes)) or value is None:
+        raise ValueError(f"{name}: expected a finite number{unit}, got {value!r}")
+    try:
+        if torch.is_tensor(value):
+            if value.numel() != 1 or value.is_complex() or value.dtype == torch.bool:
+                raise TypeError
+            v = float(value.detach().reshape(()))
+        else:
+            if isinstance(value, complex):
+                raise TypeError
+            v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a finite number{unit}, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name}: must be finite{unit}, got {v}")
+    if positive and not v > 0:
+        raise ValueError(f"{name}: must be positive{unit}, got {v}")
+    if lo is not None and v < lo:
+        raise ValueError(f"{name}: {v:g}{unit} is below the supported minimum {lo:g}{unit}")
+    if hi is not None and v > hi:
+        raise ValueError(f"{name}: {v:g}{unit} is above the supported maximum {hi:g}{unit}")
+    return v
+
+
+def task_id(task, name: str = "task") -> int:
+    """One task given as 0 / 1 or "inner" / "outer" -> 0 or 1."""
+    if isinstance(task, str):
+        if task.lower() not in TASK_NAMES:
+            raise ValueError(f"{name}: must be 0 / 'inner' or 1 / 'outer', got {task!r}")
+        return TASK_NAMES[task.lower()]
+    if torch.is_tensor(task) and task.numel() == 1 and not task.is_floating_point():
+        task = int(task)
+    if isinstance(task, bool) or not isinstance(task, int) or task not in (0, 1):
+        raise ValueError(f"{name}: must be 0 / 'inner' or 1 / 'outer', got {task!r}")
+    return task
 
 
 def as_points(x, name: str = "x", dim: int | None = None, dtype: torch.dtype = torch.float64,
               device: torch.device | None = None, allow_empty: bool = False) -> Tensor:
     """Return ``x`` as an ``(n, d)`` floating tensor or raise ``ValueError`` naming the problem."""
-    try:
-        t = torch.as_tensor(x)
-    except Exception as exc:  # pragma: no cover - exotic input types
-        raise ValueError(f"{name}: cannot be converted to a tensor ({exc})") from None
+    t = _tensor(x, name)
     if t.dim() != 2:
         raise ValueError(f"{name}: expected a 2-D tensor of shape (n, d), got shape {tuple(t.shape)}")
     if t.shape[0] == 0 and not allow_empty:
@@ -35,11 +93,13 @@ def as_points(x, name: str = "x", dim: int | None = None, dtype: torch.dtype = t
 def as_labels(y, n: int, name: str = "y", dtype: torch.dtype = torch.float64,
               device: torch.device | None = None) -> Tensor:
     """Return surface labels as an ``(n,)`` float tensor with values in {0, 1}."""
-    t = torch.as_tensor(y)
+    t = _tensor(y, name)
     if t.dim() != 1:
         raise ValueError(f"{name}: expected a 1-D tensor of labels, got shape {tuple(t.shape)}")
     if t.shape[0] != n:
         raise ValueError(f"{name}: length {t.shape[0]} does not match the {n} points")
+    if t.is_complex():
+        raise ValueError(f"{name}: expected real labels 0 or 1, got dtype {t.dtype}")
     t = t.to(dtype=dtype, device=device)
     if not torch.isfinite(t).all():
         raise ValueError(f"{name}: contains NaN or inf labels")
@@ -50,14 +110,21 @@ def as_labels(y, n: int, name: str = "y", dtype: torch.dtype = torch.float64,
 
 
 def as_tasks(task, n: int, name: str = "task", device: torch.device | None = None) -> Tensor:
-    """Return task ids as an ``(n,)`` long tensor with values in {0 (inner), 1 (outer)}."""
-    if isinstance(task, int):
-        task = torch.full((n,), task)
-    t = torch.as_tensor(task)
+    """Return task ids as an ``(n,)`` long tensor with values in {0 (inner), 1 (outer)}.
+
+    ``task`` may be one id or name for all points (0 / "inner", 1 / "outer"), or a sequence of them.
+    """
+    if isinstance(task, (str, int)) and not isinstance(task, bool):
+        task = torch.full((n,), task_id(task, name))
+    elif isinstance(task, (list, tuple)) and task and all(isinstance(v, str) for v in task):
+        task = torch.tensor([task_id(v, name) for v in task])
+    t = _tensor(task, name)
     if t.dim() != 1:
         raise ValueError(f"{name}: expected a 1-D tensor of task ids, got shape {tuple(t.shape)}")
     if t.shape[0] != n:
         raise ValueError(f"{name}: length {t.shape[0]} does not match the {n} points")
+    if t.is_complex() or t.dtype == torch.bool:
+        raise ValueError(f"{name}: task ids must be integers 0 (inner) or 1 (outer), got dtype {t.dtype}")
     if t.is_floating_point():
         if not torch.isfinite(t).all() or not (t == t.round()).all():
             raise ValueError(f"{name}: task ids must be integers 0 (inner) or 1 (outer)")

@@ -10,17 +10,22 @@ from gpytorch.kernels import IndexKernel
 from torch import Tensor
 
 from ._base import ImplicitSurfaceGP
-from ._validation import as_labels, as_points, as_tasks
+from ._validation import as_labels, as_points, as_tasks, task_id
 from .inference import DenseExactInference
 from .optim import FitResult, maximize_mll
 from .structured import StructuredExactInference
+from .tolerances import tol
 
-__all__ = ["GPIOIS", "INNER", "OUTER"]
+__all__ = ["GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
 
 #: Task id of the inner (tactile) shape.
 INNER = 0
 #: Task id of the outer (visual) shape.
 OUTER = 1
+
+class UnidentifiedSimilarityWarning(UserWarning):
+    """The data observe only one task, so the similarity between the shapes cannot be learned from them."""
+
 
 # softplus(-1000) == 0.0 exactly in float64: pins IndexKernel's diagonal term v at zero so K_t = W W^T.
 _ZERO_VAR_RAW = -1000.0
@@ -91,6 +96,8 @@ class GPIOIS(ImplicitSurfaceGP):
         """
         if task is None:
             raise ValueError("task: GPIOIS needs the task ids of the query points (0 inner, 1 outer)")
+        if isinstance(task, str):
+            task = task_id(task)
         if isinstance(task, int) or (torch.is_tensor(task) and task.dim() == 0):
             task = torch.full((x.shape[-2], 1), int(task), dtype=torch.long, device=x.device)
         elif task.dim() == x.dim() - 1:
@@ -105,9 +112,17 @@ class GPIOIS(ImplicitSurfaceGP):
 
     @task_covariance.setter
     def task_covariance(self, value) -> None:
-        kt = torch.as_tensor(value, dtype=torch.float64)
+        if value is None or isinstance(value, str):
+            raise ValueError(f"task_covariance: expected a finite (2, 2) matrix, got {value!r}")
+        try:
+            kt = torch.as_tensor(value, dtype=torch.float64)
+        except Exception as exc:
+            raise ValueError(f"task_covariance: expected a finite (2, 2) matrix ({exc})") from None
         if kt.shape != (2, 2) or not torch.isfinite(kt).all():
             raise ValueError(f"task_covariance: expected a finite (2, 2) matrix, got shape {tuple(kt.shape)}")
+        if float(kt.abs().max()) > tol.task_covariance_max:
+            raise ValueError(f"task_covariance: entries above {tol.task_covariance_max:g} are outside the supported "
+                             f"range (got {kt.tolist()})")
         if (kt - kt.T).abs().max() > 1e-12 * kt.abs().max().clamp_min(1.0):
             raise ValueError("task_covariance: must be symmetric")
         chol, info = torch.linalg.cholesky_ex(kt)
@@ -120,16 +135,43 @@ class GPIOIS(ImplicitSurfaceGP):
         cf.data.copy_(chol.to(cf))
 
     @property
+    def identified(self) -> bool:
+        """Whether the data can identify the relation between the tasks: both tasks have observations.
+
+        With one task only, ``K_t[0, 1]`` does not enter the likelihood at all (nor does the absent task's
+        variance): any value fits the data equally well, so the similarity is *unidentified*, not zero.
+        """
+        task = self._train_task()
+        return bool((task == INNER).any()) and bool((task == OUTER).any())
+
+    @property
     def similarity(self) -> float:
-        """Similarity between the outer and inner shapes, ``K_t[0,1] / K_t[0,0]`` (Sec. V-A-3). Can exceed 1."""
+        """The paper's similarity ``K_t[0,1] / K_t[0,0]`` (Sec. V-A-3): a ratio of amplitudes that can exceed 1.
+
+        NaN when the data observe only one task (:attr:`identified` is False): the ratio is then unidentified,
+        and a number such as 0 would read as "dissimilar".
+        """
+        if not self.identified:
+            return float("nan")
         kt = self.task_covariance
         return float(kt[0, 1] / kt[0, 0])
 
     @property
     def correlation(self) -> float:
-        """Task correlation ``K_t[0,1] / sqrt(K_t[0,0] K_t[1,1])`` in [-1, 1] (not the paper's similarity)."""
+        """Task correlation ``K_t[0,1] / sqrt(K_t[0,0] K_t[1,1])`` in [-1, 1] (not the paper's similarity).
+
+        NaN when unidentified (one task only, see :attr:`identified`).
+        """
+        if not self.identified:
+            return float("nan")
         kt = self.task_covariance
         return float(kt[0, 1] / torch.sqrt(kt[0, 0] * kt[1, 1]))
+
+    def check_state(self) -> None:
+        super().check_state()
+        kt = self.task_covariance
+        if float(kt.abs().max()) > tol.task_covariance_max:
+            raise ValueError(f"task_covariance: entries above {tol.task_covariance_max:g} are outside the supported range")
 
     def _engine_class(self):
         if self.inference == "dense":
@@ -186,6 +228,11 @@ class GPIOIS(ImplicitSurfaceGP):
             result = maximize_mll(evaluate, kt0)
             if best is None or result.mll > best.mll + 1e-9 * max(1.0, abs(best.mll)):
                 best = result
+        if not self.identified:
+            present = "outer" if bool((self._train_task() == OUTER).any()) else "inner"
+            warnings.warn(f"GPIOIS.fit: only {present} (task {int(present == 'outer')}) observations: the similarity "
+                          "K_t[0,1] is unidentified (reported as NaN); only the observed task's variance was learned",
+                          UnidentifiedSimilarityWarning, stacklevel=2)
         if not best.converged:
             warnings.warn(f"GPIOIS.fit: K_t optimisation stopped after {best.iterations} iterations with "
                           f"projected gradient {best.grad_norm:.3g}", RuntimeWarning, stacklevel=2)
@@ -193,19 +240,17 @@ class GPIOIS(ImplicitSurfaceGP):
         self.fit_result = best
         return self
 
-    def predict(self, x, task: int = INNER) -> tuple[Tensor, Tensor]:
+    def predict(self, x, task: int | str = INNER) -> tuple[Tensor, Tensor]:
         """Latent posterior mean and variance of F_task, eq. (12)-(13). Differentiable with respect to ``x``.
 
         Args:
             x: `(m, d)` query points [m], base frame.
-            task: 0 for F_in (inner, tactile), 1 for F_out (outer, visual).
+            task: 0 or "inner" for F_in (tactile), 1 or "outer" for F_out (visual).
 
         Returns:
             `(m,)` posterior mean (``< 0`` inside, ``0`` on the estimated surface) and `(m,)` variance.
         """
-        if task not in (INNER, OUTER):
-            raise ValueError(f"task: must be 0 (inner) or 1 (outer), got {task!r}")
-        return self._predict(x, int(task))
+        return self._predict(x, task_id(task))
 
     def add_observations(self, x, y, task) -> "GPIOIS":
         """Append observations; the posterior updates exactly, ``K_t`` is re-learned by ``fit()``.
@@ -213,7 +258,7 @@ class GPIOIS(ImplicitSurfaceGP):
         Args:
             x: `(k, d)` points [m].
             y: `(k,)` labels in {0, 1}.
-            task: `(k,)` task ids in {0, 1}, or one int for all.
+            task: `(k,)` task ids in {0, 1}, or one id or name ("inner" / "outer") for all.
 
         Raises:
             ValueError: on bad input; the model is left unchanged.

@@ -15,7 +15,6 @@ single-task GPIS), and residuals ``r = y - m`` with prior mean ``m = 1`` (eq. 2)
 from __future__ import annotations
 
 import math
-import warnings
 
 import torch
 from torch import Tensor
@@ -23,45 +22,51 @@ from torch import Tensor
 from .kernels import imq
 from .tolerances import tol
 
-__all__ = ["DenseExactInference", "JitterWarning", "robust_cholesky"]
+__all__ = ["DenseExactInference", "JitterWarning", "NotPositiveDefiniteError", "robust_cholesky"]
 
 
 class JitterWarning(RuntimeWarning):
-    """A Gram matrix was numerically singular and was factorised with added diagonal jitter."""
+    """Kept for compatibility: no longer emitted. A matrix that is not positive definite to within rounding now
+    raises :class:`NotPositiveDefiniteError` instead of being factorised with visible jitter."""
+
+
+class NotPositiveDefiniteError(torch.linalg.LinAlgError):
+    """A Gram matrix (or Schur complement) is not positive definite to within rounding: exact GP arithmetic cannot
+    proceed. Causes: duplicate or near-duplicate points with a tiny noise, or an extreme task covariance."""
 
 
 def robust_cholesky(a: Tensor, what: str = "Gram matrix") -> tuple[Tensor, float]:
-    """Lower Cholesky factor of a symmetric PSD matrix, adding escalating jitter only when needed.
+    """Lower Cholesky factor of a symmetric positive-definite matrix, exact to rounding.
 
-    The jitter starts at ``tol.jitter_start`` times the mean diagonal and grows tenfold per attempt up to
-    ``tol.jitter_max`` times the mean diagonal; a ``JitterWarning`` names the amount used. It never returns NaN.
+    If the factorisation fails, it is retried once with ``tol.jitter_rounding * n * eps * max(diag)`` on the
+    diagonal: the backward error of any Cholesky factorisation is of that order, so this changes nothing the
+    rounding had not changed already. A matrix that still fails is not positive definite in any meaningful sense
+    and raises; nothing larger is ever added (that would be a different model, not exact arithmetic).
 
     Args:
         a: `(n, n)` symmetric matrix.
-        what: name used in warnings and errors.
+        what: name used in errors.
 
     Returns:
-        `(n, n)` lower factor ``L`` with ``L L^T = a + jitter I``, and the absolute jitter added.
+        `(n, n)` lower factor ``L`` with ``L L^T = a + jitter I``, and the absolute jitter added (0 or rounding level).
 
     Raises:
-        torch.linalg.LinAlgError: if even the largest jitter does not make ``a`` positive definite.
+        NotPositiveDefiniteError: non-finite entries, or not positive definite to within rounding.
     """
+    if not bool(torch.isfinite(a).all()):
+        raise NotPositiveDefiniteError(f"{what} has NaN or inf entries (overflow: check theta, the noise and K_t)")
     factor, info = torch.linalg.cholesky_ex(a)
     if int(info) == 0 and torch.isfinite(factor).all():
         return factor, 0.0
-    scale = float(a.diagonal().abs().mean().clamp_min(torch.finfo(a.dtype).tiny))
-    jitter = tol.jitter_start * scale
-    eye = torch.eye(a.shape[-1], dtype=a.dtype, device=a.device)
-    while jitter <= tol.jitter_max * scale * (1 + 1e-9):
-        factor, info = torch.linalg.cholesky_ex(a + jitter * eye)
-        if int(info) == 0 and torch.isfinite(factor).all():
-            warnings.warn(f"{what} is numerically singular (duplicate or near-duplicate points?); "
-                          f"factorised with jitter {jitter:.3g} added to the diagonal", JitterWarning,
-                          stacklevel=3)
-            return factor, jitter
-        jitter *= 10.0
-    raise torch.linalg.LinAlgError(f"{what} is not positive definite even with jitter {jitter / 10:.3g}; "
-                                   "check the task covariance and the noise")
+    n = a.shape[-1]
+    jitter = tol.jitter_rounding * n * torch.finfo(a.dtype).eps * float(a.diagonal().abs().max())
+    factor, info2 = torch.linalg.cholesky_ex(a + jitter * torch.eye(n, dtype=a.dtype, device=a.device))
+    if int(info2) == 0 and torch.isfinite(factor).all():
+        return factor, jitter
+    raise NotPositiveDefiniteError(
+        f"{what} ({n} x {n}) is not positive definite to within rounding (leading minor {int(info)} failed, also "
+        f"with {jitter:.3g} on the diagonal): duplicate or near-duplicate points with a tiny noise, or an extreme "
+        "task covariance")
 
 
 def bordered(k: Tensor, k_new_old: Tensor, k_new_new: Tensor) -> Tensor:

@@ -7,6 +7,9 @@ from gpytorch.constraints import Interval, Positive
 from gpytorch.kernels import Kernel
 from torch import Tensor
 
+from ._validation import as_float
+from .tolerances import tol
+
 __all__ = ["InverseMultiquadricKernel", "imq"]
 
 
@@ -62,9 +65,7 @@ class InverseMultiquadricKernel(Kernel):
     def __init__(self, theta: float = 0.1, learn_theta: bool = False, theta_constraint: Interval | None = None,
                  **kwargs):
         super().__init__(**kwargs)
-        theta = float(theta)
-        if not (theta > 0 and torch.isfinite(torch.tensor(theta))):
-            raise ValueError(f"theta: must be a positive finite length [m], got {theta}")
+        theta = as_float(theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
         if theta_constraint is None:
             theta_constraint = Positive()
         self.register_parameter("raw_theta", torch.nn.Parameter(torch.zeros(*self.batch_shape, 1, 1,
@@ -81,8 +82,9 @@ class InverseMultiquadricKernel(Kernel):
     @theta.setter
     def theta(self, value: float | Tensor) -> None:
         value = torch.as_tensor(value, dtype=self.raw_theta.dtype, device=self.raw_theta.device)
-        if not (value > 0).all():
-            raise ValueError("theta: must be positive")
+        lo, hi = tol.theta_range
+        if not bool(torch.isfinite(value).all()) or not bool(((value >= lo) & (value <= hi)).all()):
+            raise ValueError(f"theta: must be finite within [{lo:g}, {hi:g}] m, got {value.flatten()[:4].tolist()}")
         self.initialize(raw_theta=self.raw_theta_constraint.inverse_transform(value.expand_as(self.raw_theta)))
 
     def forward(self, x1: Tensor, x2: Tensor, diag: bool = False, last_dim_is_batch: bool = False,

@@ -15,8 +15,10 @@ class Tolerances:
     """Library-wide numerical tolerances.
 
     Attributes:
-        jitter_start: first relative jitter (times the mean Gram diagonal) tried when a Cholesky fails.
-        jitter_max: largest relative jitter tried before giving up with an error.
+        jitter_rounding: when a Cholesky factorisation fails, it is retried once with ``jitter_rounding * n * eps``
+            times the largest diagonal entry added: the perturbation a backward-stable Cholesky makes anyway.
+            Anything larger would change the model, not its rounding, so a matrix that still fails is an error
+            (``NotPositiveDefiniteError``), never a silently regularised result.
         fit_gtol: absolute tolerance on the projected gradient of the log marginal likelihood with
             respect to the Cholesky parameters of ``K_t`` [nats per unit parameter].
         fit_ftol: relative tolerance on the predicted MLL gain of a pure Newton step (Newton decrement): below
@@ -25,19 +27,26 @@ class Tolerances:
         log_chol_bounds: bounds on ``log L[0, 0]`` and ``log L[1, 1]`` where ``K_t = L L^T``; they keep the
             optimiser finite when the likelihood prefers a singular ``K_t`` (e.g. perfectly correlated tasks).
         normal_eps: gradient norm below which a normal is considered undefined.
+        theta_range: supported IMQ kernel parameter theta_x [m]; outside it the kernel over- or underflows
+            (theta = 1e-170 made the Gram matrix infinite).
+        noise_range: supported noise variance sigma^2.
+        task_covariance_max: largest supported magnitude of a K_t entry (the optimiser's bounds keep K_t below
+            e^24 ~ 2.6e10).
         structured_series: bound, relative to sigma^2, on the perturbation of the inner Schur complement (and
             of its c-derivatives, scaled by c and c^2) from truncating the Chebyshev expansion of the structured
             engine (``StructuredExactInference``).
     """
 
-    jitter_start: float = 1e-10
-    jitter_max: float = 1e-2
+    jitter_rounding: float = 4.0
     fit_gtol: float = 1e-7
     fit_ftol: float = 1e-9
     fit_max_iter: int = 200
     log_chol_bounds: tuple[float, float] = (-12.0, 12.0)
     normal_eps: float = 1e-12
     structured_series: float = 1e-13
+    theta_range: tuple[float, float] = (1e-6, 1e3)
+    noise_range: tuple[float, float] = (1e-12, 1e6)
+    task_covariance_max: float = 1e12
 
 
 tol = Tolerances()

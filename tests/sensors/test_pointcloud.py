@@ -61,10 +61,35 @@ def test_depth_noise_is_along_the_ray_with_the_model_std():
     assert 0.4 * len(clean) < len(dropped) < 0.6 * len(clean)
 
 
-def test_missing_everything_gives_an_empty_cloud():
+@pytest.mark.parametrize("engine", ["embree", "triangle"])
+def test_both_ray_engines_see_the_same_sphere_including_all_miss_chunks(engine):
+    """A small image whose first and last 256-ray chunks see only background (the all-miss chunk crashed the
+    trimesh engine's concatenation); both engines give points on the analytic sphere, the same pixels."""
+    pytest.importorskip("embreex") if engine == "embree" else None
+    mesh = trimesh.creation.icosphere(subdivisions=4, radius=R)
+    mesh.apply_translation(C)
+    cam = SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.15), look_at(EYE, C), engine=engine)
+    pts, pix = cam.depth_points()
+    assert pix.min() >= 256 and pix.max() < cam.intrinsics.width * cam.intrinsics.height - 256   # misses at both ends
+    world = pts @ cam.T_base_camera[:3, :3].T + cam.T_base_camera[:3, 3]
+    assert np.abs(np.linalg.norm(world - C, axis=1) - R).max() < 1e-3
+    other = SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.15), look_at(EYE, C),
+                                 engine="triangle" if engine == "embree" else "auto")
+    pts2, pix2 = other.depth_points()
+    np.testing.assert_array_equal(pix, pix2)
+    np.testing.assert_allclose(pts, pts2, atol=1e-6)   # Embree intersects in float32
+
+
+def test_unknown_ray_engine_is_refused():
+    with pytest.raises(ValueError, match="engine"):
+        sphere_camera(engine="optix")
+
+
+@pytest.mark.parametrize("engine", ["auto", "triangle"])
+def test_missing_everything_gives_an_empty_cloud(engine):
     mesh = trimesh.creation.icosphere(radius=0.1)
     mesh.apply_translation([10.0, 0.0, 0.0])   # behind the camera
-    cam = SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.1), look_at(EYE, C))
+    cam = SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.1), look_at(EYE, C), engine=engine)
     assert len(cam.capture()) == 0
 
 

@@ -189,16 +189,24 @@ class SimulatedDepthCamera(PointCloudSource):
         noise_a: depth noise at zero depth [m]; noise_b: its growth [1/m].
         dropout: fraction of pixels returned empty.
         seed: random seed of noise and dropout.
+        engine: ray engine: "auto" (Embree when ``embreex`` is installed, else trimesh's own), "embree" or
+            "triangle" (trimesh's pure-Python engine; slow, no extra needed).
     """
 
+    ENGINES = ("auto", "embree", "triangle")
+
     def __init__(self, mesh: trimesh.Trimesh, intrinsics: PinholeCamera, T_base_camera, *,
-                 noise_a: float = 0.0, noise_b: float = 0.0, dropout: float = 0.0, seed: int = 0) -> None:
+                 noise_a: float = 0.0, noise_b: float = 0.0, dropout: float = 0.0, seed: int = 0,
+                 engine: str = "auto") -> None:
         T = np.asarray(T_base_camera, dtype=np.float64)
         if T.shape != (4, 4) or not np.isfinite(T).all() or not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3),
                                                                           atol=1e-6):
             raise ValueError("T_base_camera: expected a rigid (4, 4) transform")
         if noise_a < 0 or noise_b < 0 or not 0 <= dropout < 1:
             raise ValueError("noise_a, noise_b must be >= 0 and dropout in [0, 1)")
+        if engine not in self.ENGINES:
+            raise ValueError(f"engine: must be one of {self.ENGINES}, got {engine!r}")
+        self.engine = engine
         self.mesh, self.intrinsics, self.T_base_camera = mesh, intrinsics, T
         self.noise_a, self.noise_b, self.dropout = float(noise_a), float(noise_b), float(dropout)
         self._rng = np.random.default_rng(seed)
@@ -215,18 +223,33 @@ class SimulatedDepthCamera(PointCloudSource):
         dirs = rays / np.linalg.norm(rays, axis=1, keepdims=True)
         dirs = dirs @ R.T
         origins = np.broadcast_to(t, dirs.shape)
-        engine = self.mesh.ray
+        engine = self._ray_engine()
         # trimesh's fallback engine (no embreex) holds every candidate triangle of every ray in memory: chunk it
         chunk = len(dirs) if type(engine).__module__.endswith("ray_pyembree") else 256
         parts = [engine.intersects_location(origins[i:i + chunk], dirs[i:i + chunk], multiple_hits=False)
                  for i in range(0, len(dirs), chunk)]
-        hits = np.concatenate([h for h, _, _ in parts]) if parts else np.zeros((0, 3))
-        ray_idx = np.concatenate([r + i * chunk for i, (_, r, _) in enumerate(parts)]) if parts else np.zeros(0, int)
+        # a chunk whose rays all miss comes back as a 1-D empty array: give every part its (k, 3) shape
+        hits = np.concatenate([np.reshape(h, (-1, 3)) for h, _, _ in parts] + [np.zeros((0, 3))])
+        ray_idx = np.concatenate([np.reshape(r, -1).astype(np.int64) + i * chunk for i, (_, r, _) in enumerate(parts)]
+                                 + [np.zeros(0, np.int64)])
         p_cam = (hits - t) @ R
         z = p_cam[:, 2]
         keep = (z >= self.intrinsics.min_depth) & (z <= self.intrinsics.max_depth)
         order = np.argsort(ray_idx[keep])
         return p_cam[keep][order], ray_idx[keep][order]
+
+    def _ray_engine(self):
+        if self.engine == "auto":
+            return self.mesh.ray
+        if self.engine == "embree":
+            try:
+                from trimesh.ray.ray_pyembree import RayMeshIntersector
+            except ImportError as exc:
+                raise ImportError("engine='embree' needs embreex: pip install torch_gpioius[raycast]") from exc
+            return RayMeshIntersector(self.mesh)
+        from trimesh.ray.ray_triangle import RayMeshIntersector
+
+        return RayMeshIntersector(self.mesh)
 
     def capture(self) -> PointCloud:
         p_cam, _ = self.depth_points()
