@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import abc
 import importlib
+import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -19,6 +20,16 @@ from .safety import SafetyGate, SafetyViolation
 from .ur5 import UR5
 
 __all__ = ["RobotBackend", "SimulatedUR5", "RTDEUR5", "RobotError"]
+
+
+def _positive(value, name: str, hi: float, unit: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a number [{unit}], got {value!r}") from None
+    if isinstance(value, bool) or not (math.isfinite(v) and 0 < v <= hi):
+        raise ValueError(f"{name}: must be finite and in (0, {hi:g}] {unit}, got {value!r}")
+    return v
 
 
 class RobotError(RuntimeError):
@@ -48,7 +59,13 @@ class RobotBackend(abc.ABC):
                  step_tolerance: tuple[float, float] = (2e-5, 2e-3)) -> None:
         self.ur5 = ur5
         self.gate = gate if gate is not None else SafetyGate(ur5)
-        self.step_tolerance = step_tolerance
+        try:
+            a, r = (float(v) for v in step_tolerance)
+        except (TypeError, ValueError):
+            raise ValueError(f"step_tolerance: expected (absolute [m], relative), got {step_tolerance!r}") from None
+        if not (math.isfinite(a) and math.isfinite(r) and 0 < a <= 1e-3 and 0 <= r <= 0.05):
+            raise ValueError(f"step_tolerance: need 0 < absolute <= 1 mm and 0 <= relative <= 0.05, got {(a, r)}")
+        self.step_tolerance = (a, r)
 
     # -- state ---------------------------------------------------------------------------------------
     @abc.abstractmethod
@@ -192,8 +209,8 @@ class RTDEUR5(RobotBackend):
         if receive is None:
             receive = _require("rtde_receive").RTDEReceiveInterface(host)
         self.control, self.receive = control, receive
-        self.acceleration = float(acceleration)
-        self.state_tolerance = float(state_tolerance)
+        self.acceleration = _positive(acceleration, "acceleration", 40.0, "rad/s^2")   # UR5 joint limit 40 rad/s^2
+        self.state_tolerance = _positive(state_tolerance, "state_tolerance", 0.05, "rad")
         self._expected: torch.Tensor | None = None
 
     def read_joints(self) -> torch.Tensor:

@@ -69,3 +69,48 @@ def test_other_version_is_refused(tmp_path):
     torch.save(payload, p)
     with pytest.raises(CheckpointError, match="version 99 is not supported"):
         tg.load_checkpoint(p)
+
+
+def _tamper(p, edit):
+    """Edit a saved checkpoint and recompute its (unkeyed) hash, as an attacker or a buggy tool could."""
+    from torch_gpioius.checkpoints import _digest
+    payload = torch.load(p, weights_only=True)
+    edit(payload)
+    payload["sha256"] = _digest(payload["state_dict"], payload["tensors"])
+    torch.save(payload, p)
+
+
+@pytest.mark.parametrize("field, value, match", [("mean_module.raw_constant", float("nan"), "NaN"),
+                                                 ("mean_module.raw_constant", -50.0, "prior mean"),
+                                                 ("likelihood.noise_covar.raw_noise", float("inf"), "NaN or inf")])
+def test_rehashed_invalid_parameters_are_refused(tmp_path, field, value, match):
+    p = tg.save_checkpoint(fitted(), tmp_path / "m.pt")
+    _tamper(p, lambda pl: pl["state_dict"].__setitem__(field, torch.full_like(pl["state_dict"][field], value)))
+    with pytest.raises(CheckpointError, match=match):
+        tg.load_checkpoint(p)
+
+
+def test_zero_length_and_truncated_files(tmp_path):
+    (tmp_path / "z.pt").write_bytes(b"")
+    with pytest.raises(CheckpointError, match="z.pt"):
+        tg.load_checkpoint(tmp_path / "z.pt")
+    good = tg.save_checkpoint(fitted(), tmp_path / "m.pt").read_bytes()
+    (tmp_path / "t.pt").write_bytes(good[:len(good) // 2])
+    with pytest.raises(CheckpointError, match="t.pt"):
+        tg.load_checkpoint(tmp_path / "t.pt")
+
+
+def test_bad_extra_and_failed_writes_keep_the_good_file(tmp_path, monkeypatch):
+    m = fitted()
+    p = tg.save_checkpoint(m, tmp_path / "m.pt")
+    before = p.read_bytes()
+    with pytest.raises(CheckpointError, match="extra"):
+        tg.save_checkpoint(m, p, extra={"o": object()})
+    import torch_gpioius.checkpoints as ck
+
+    def full(*a, **k):
+        raise RuntimeError("basic_ios::clear: iostream error")
+    monkeypatch.setattr(ck.torch, "save", full)
+    with pytest.raises(CheckpointError, match="disk full"):
+        tg.save_checkpoint(m, p)
+    assert p.read_bytes() == before and not list(tmp_path.glob("*.tmp"))

@@ -12,6 +12,13 @@ import torch_gpioius as tg
 from torch_gpioius.datasets import FORMAT_VERSION, MAGIC, DatasetError, LogWriter, TornLogWarning, read_records
 
 
+def write_raw(path, records):
+    """A file written record by record without the writers' validation (what another tool might produce)."""
+    from torch_gpioius.datasets import _encode
+    path.write_bytes(MAGIC + struct.pack(">H", FORMAT_VERSION) + b"".join(_encode(*r) for r in records))
+    return path
+
+
 def small_dataset(n=12, d=2):
     rng = np.random.default_rng(0)
     return tg.Dataset(rng.normal(size=(n, d)), rng.integers(0, 2, n), rng.integers(0, 2, n),
@@ -90,8 +97,9 @@ def test_versions_magic_and_header(tmp_path):
     (tmp_path / "e.gpioius").write_bytes(blob[:len(MAGIC) + 2])
     with pytest.raises(DatasetError, match="no header"):
         tg.load_dataset(tmp_path / "e.gpioius")
-    with LogWriter(tmp_path / "cm.gpioius", {"dim": 2, "units": "cm"}):
-        pass
+    with pytest.raises(DatasetError, match="'units' is 'cm'"):     # the writer refuses what the reader would
+        LogWriter(tmp_path / "cm.gpioius", {"dim": 2, "units": "cm"})
+    write_raw(tmp_path / "cm.gpioius", [("header", {"dim": 2, "units": "cm"}, {})])
     with pytest.raises(DatasetError, match="'units' is 'cm'"):
         tg.load_dataset(tmp_path / "cm.gpioius")
     with LogWriter(tmp_path / "empty.gpioius", {"dim": 2}):
@@ -167,3 +175,116 @@ def test_fuzzed_arrays_raise_only_dataset_errors(x, y, d):
     except DatasetError:
         return
     assert np.isfinite(ds.x).all() and ds.x.shape[1] in (2, 3)
+
+
+# ------------------------------------------------------------------------------------------ issue 14: integrity
+def _record_offsets(blob):
+    pos, out = len(MAGIC) + 2, []
+    while pos < len(blob):
+        out.append(pos)
+        pos += 10 + struct.unpack(">I", blob[pos + 2:pos + 6])[0]
+    return out
+
+
+def test_a_corrupt_length_mid_log_is_corruption_not_a_torn_tail(tmp_path):
+    p = tmp_path / "log.gpioius"
+    log_with_steps(p, n_steps=8)
+    blob = bytearray(p.read_bytes())
+    offsets = _record_offsets(blob)
+    for patch in ("bit20", "1GiB"):
+        b = bytearray(blob)
+        at = offsets[3] + 2 if patch == "bit20" else offsets[2] + 2
+        if patch == "bit20":
+            b[at:at + 4] = struct.pack(">I", struct.unpack(">I", b[at:at + 4])[0] ^ (1 << 20))
+        else:
+            b[at:at + 4] = struct.pack(">I", 1 << 30)
+        p.write_bytes(bytes(b))
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", TornLogWarning)    # no "torn tail" story for a corrupt middle
+            with pytest.raises(DatasetError, match="corrupt length|limit"):
+                tg.load_dataset(p)
+        from torch_gpioius.cli import main
+        assert main(["fit", str(p)]) == 2
+
+
+def test_compressed_payloads_are_refused_before_they_expand(tmp_path):
+    import io
+    import zipfile
+    import zlib
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        zf.writestr("kind.npy", b"\x00" * (50 << 20))      # 50 MB of zeros, ~50 kB compressed
+    data = buf.getvalue()
+    assert len(data) < 1 << 20
+    p = tmp_path / "bomb.gpioius"
+    p.write_bytes(MAGIC + struct.pack(">H", FORMAT_VERSION) + struct.pack(">2sII", b"RC", len(data), zlib.crc32(data))
+                  + data)
+    with pytest.raises(DatasetError, match="compressed"):
+        tg.load_dataset(p)
+
+
+def test_the_magic_is_checked_before_the_file_is_read():
+    with pytest.raises(DatasetError, match="bad magic"):
+        tg.load_dataset("/dev/zero")
+    from torch_gpioius.cli import main
+    assert main(["fit", "/dev/zero"]) == 2
+
+
+@pytest.mark.parametrize("meta", [{"theta": -1}, {"theta": float("nan")}, {"theta": "abc"}, {"units": "cm"},
+                                  {"theta": True}, {"dim": 2.0}])
+def test_saves_refuse_what_the_loader_would_and_keep_the_good_file(tmp_path, meta):
+    p = tg.save_dataset(small_dataset(), tmp_path / "good.gpioius")
+    before = p.read_bytes()
+    bad = small_dataset()
+    with pytest.raises(DatasetError):
+        bad.meta.update(meta)
+        tg.save_dataset(bad, p)
+    assert p.read_bytes() == before and not list(tmp_path.glob("*.tmp"))
+    with pytest.raises(DatasetError):
+        tg.Dataset(bad.x, bad.y, bad.task, bad.step, meta=dict(meta))
+
+
+def test_string_trace_arrays_and_failed_writes_leave_no_damage(tmp_path, monkeypatch):
+    p = tg.save_dataset(small_dataset(), tmp_path / "good.gpioius")
+    before = p.read_bytes()
+    with pytest.raises(DatasetError, match="trace array"):
+        tg.Dataset(np.zeros((2, 2)), np.zeros(2), np.zeros(2, int), np.zeros(2, int),
+                   trace={"positions": np.array(["a", "b"])})
+    import torch_gpioius.datasets as dsm
+
+    def full_disk(fd):
+        raise OSError(28, "No space left on device")
+    monkeypatch.setattr(dsm.os, "fsync", full_disk)
+    with pytest.raises(OSError, match="No space"):
+        tg.save_dataset(small_dataset(n=20), p)
+    assert p.read_bytes() == before and not list(tmp_path.glob("*.tmp"))
+
+
+@pytest.mark.parametrize("header, step_meta, match", [
+    ({"dim": 2.0}, {"step": 0}, "'dim'"), ({"dim": 2, "scene": ["A"]}, {"step": 0}, "'scene'"),
+    ({"dim": 2, "theta": True}, {"step": 0}, "'theta'"), ({"dim": 2}, {"step": None}, "'step'"),
+    ({"dim": 2}, {"step": [1]}, "'step'"), ({"dim": 2}, {}, "'step' is missing"),
+    ({"dim": 2}, {"step": "three"}, "'step'"),
+])
+def test_malformed_headers_and_steps_name_the_file_and_field(tmp_path, header, step_meta, match):
+    p = write_raw(tmp_path / "m.gpioius", [("header", {"units": "m", **header}, {}),
+                                           ("step", step_meta, {"x": np.zeros((1, 2)), "y": np.zeros(1),
+                                                                "task": np.zeros(1, int)})])
+    with pytest.raises(DatasetError, match=match) as info:
+        tg.load_dataset(p)
+    assert "m.gpioius" in str(info.value)
+    from torch_gpioius.cli import main
+    assert main(["fit", str(p)]) == 2
+    assert main(["replay", str(p), "--out", str(tmp_path / "r"), "--quiet"]) == 2
+
+
+@pytest.mark.parametrize("x, match", [(np.zeros((3, 2), bool), "real numbers"),
+                                      (np.zeros((3, 2), complex), "real numbers")])
+def test_boolean_and_complex_coordinates_are_refused(tmp_path, x, match):
+    with pytest.raises(DatasetError, match=match):
+        tg.Dataset(x, np.zeros(3), np.zeros(3, int), np.zeros(3, int))
+    p = write_raw(tmp_path / "b.gpioius", [("header", {"units": "m", "dim": 2}, {}),
+                                           ("observations", {}, {"x": x, "y": np.zeros(3), "task": np.zeros(3, int),
+                                                                 "step": np.zeros(3, int)})])
+    with pytest.raises(DatasetError, match=match):
+        tg.load_dataset(p)

@@ -94,3 +94,64 @@ def test_dataset_from_files(tmp_path):
     (tmp_path / "c2.csv").write_text("x,y,label\n0.1,0,contact\n")
     with pytest.raises(DatasetError, match="3-D"):
         dataset_from_files(tmp_path / "c2.csv", tmp_path / "cloud.npz")
+
+
+# ------------------------------------------------------------------------------------------ issue 14: importers
+def test_csv_rows_with_extra_or_missing_fields_are_named(tmp_path):
+    (tmp_path / "a.csv").write_text("x,y,label\n0.1,0.2,contact\n0.1,0.2,contact,oops\n")
+    with pytest.raises(DatasetError, match="a.csv:3: .*more fields"):
+        load_contacts_csv(tmp_path / "a.csv")
+    (tmp_path / "b.csv").write_text("x,y,label\n0.1,0.2\n")
+    with pytest.raises(DatasetError, match="b.csv:2: .*fewer fields"):
+        load_contacts_csv(tmp_path / "b.csv")
+
+
+def test_ply_with_a_wrong_or_negative_vertex_count_is_refused(tmp_path):
+    p = tmp_path / "ok.ply"
+    trimesh.PointCloud(PTS).export(p)                  # binary, exact: accepted
+    assert load_point_cloud(p).shape == (4, 3)
+    p.write_bytes(p.read_bytes() + b"\x00" * 12)       # one row more than declared
+    with pytest.raises(DatasetError, match="vertices"):
+        load_point_cloud(p)
+    rows = "\n".join(" ".join(f"{v}" for v in r) for r in PTS)
+    for n in (-2, 2, 10):
+        p = tmp_path / f"v{n}.ply"
+        p.write_text(f"ply\nformat ascii 1.0\nelement vertex {n}\nproperty float x\nproperty float y\n"
+                     f"property float z\nend_header\n{rows}\n")
+        with pytest.raises(DatasetError, match="vertices|vertex count"):
+            load_point_cloud(p)
+
+
+@pytest.mark.parametrize("binary", [False, True])
+def test_pcd_whose_body_disagrees_with_points_is_refused(tmp_path, binary):
+    p = tmp_path / "c.pcd"
+    write_pcd(p, np.tile(PTS, (13, 1))[:50], binary=binary)
+    text = p.read_bytes().replace(b"POINTS 50", b"POINTS 10")
+    p.write_bytes(text)
+    with pytest.raises(DatasetError, match="POINTS 10"):
+        load_point_cloud(p)
+
+
+@pytest.mark.parametrize("voxel", [float("inf"), 1e-300, 0.0, -0.05, float("nan"), True])
+def test_voxel_sizes_that_collapse_or_skip_are_refused(tmp_path, voxel):
+    np.savez(tmp_path / "c.npz", points=np.random.default_rng(0).uniform(-0.3, 0.3, (50, 3)))
+    with pytest.raises(DatasetError, match="voxel"):
+        load_point_cloud(tmp_path / "c.npz", voxel=voxel)
+    with pytest.raises(ValueError, match="voxel"):
+        voxel_average(np.zeros((5, 3)), voxel)
+    assert len(load_point_cloud(tmp_path / "c.npz", voxel=None)) == 50
+
+
+def test_complex_and_boolean_points_are_refused(tmp_path):
+    np.savez(tmp_path / "c.npz", points=PTS + 1j)
+    with pytest.raises(DatasetError, match="real numbers"):
+        load_point_cloud(tmp_path / "c.npz")
+    np.savez(tmp_path / "b.npz", points=PTS > 0)
+    with pytest.raises(DatasetError, match="real numbers"):
+        load_point_cloud(tmp_path / "b.npz")
+
+
+def test_dataset_from_files_validates_its_parameters(tmp_path):
+    (tmp_path / "a.csv").write_text("x,y,label\n0.1,0.2,contact\n")
+    with pytest.raises(DatasetError, match="theta"):
+        dataset_from_files(tmp_path / "a.csv", theta=-1)

@@ -29,20 +29,56 @@ def _digest(state: dict, tensors: dict) -> str:
     return h.hexdigest()
 
 
+def _check_extra(extra, where: str = "extra"):
+    """``extra`` must be plain JSON-like data (what ``weights_only`` loading accepts): strings, numbers, bools,
+    None, and lists / dicts with string keys of those."""
+    if extra is None or isinstance(extra, (str, bool, int, float)):
+        return
+    if isinstance(extra, (list, tuple)):
+        for i, v in enumerate(extra):
+            _check_extra(v, f"{where}[{i}]")
+        return
+    if isinstance(extra, dict):
+        for k, v in extra.items():
+            if not isinstance(k, str):
+                raise CheckpointError(f"{where}: keys must be strings, got {k!r}")
+            _check_extra(v, f"{where}[{k!r}]")
+        return
+    raise CheckpointError(f"{where}: only strings, numbers, bools, None, lists and dicts can be stored (a "
+                          f"checkpoint loads with weights_only=True), got {type(extra).__name__}")
+
+
 def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None) -> Path:
     """Write a fitted :class:`~torch_gpioius.GPIOIS` or :class:`~torch_gpioius.GPIS` to ``path``.
 
     The file holds only tensors, numbers and strings (so it loads with ``torch.load(weights_only=True)``),
-    a SHA-256 over them (so a modified file is detected), and the format version. Written atomically.
+    a SHA-256 over them, and the format version. Written atomically: everything is validated first (the model's
+    state as the constructor would, ``extra`` as plain data), then written to a temporary file that is renamed
+    over ``path``; a failed write (disk full) removes the temporary file and leaves a previous file untouched.
+
+    The SHA-256 is unkeyed: it detects accidental damage (a truncated copy, a flipped bit, a file edited by
+    hand), not a deliberate forgery, which could simply recompute it. ``load_checkpoint`` never runs code
+    from the file (``weights_only=True``) and validates every loaded parameter, whatever the hash says.
 
     Args:
         model: the model.
         path: destination (conventionally ``.pt``).
-        extra: small JSON-like metadata to keep alongside (strings/numbers).
+        extra: small JSON-like metadata to keep alongside (strings, numbers, lists, dicts).
+
+    Raises:
+        CheckpointError: invalid model state or ``extra``, or the write failed (names the cause).
     """
     from . import __version__
     from .gpiois import GPIOIS
+    from .gpis import GPIS
 
+    if not isinstance(model, (GPIOIS, GPIS)):
+        raise CheckpointError(f"save_checkpoint: expected a GPIOIS or GPIS, got {type(model).__name__}")
+    _check_extra(extra)
+    try:
+        model.check_state()
+    except ValueError as exc:
+        raise CheckpointError(f"save_checkpoint: the model's state is invalid ({exc}); nothing was written") from exc
     kind = "GPIOIS" if isinstance(model, GPIOIS) else "GPIS"
     state = {k: v.detach().cpu().clone() for k, v in model.state_dict().items()}
     tensors = {"train_x": model.train_inputs[0].detach().cpu().clone(),
@@ -57,8 +93,18 @@ def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None
     }
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
+    try:
+        torch.save(payload, tmp)
+        with open(tmp, "rb+") as f:
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except (OSError, RuntimeError) as exc:   # torch reports a full disk as RuntimeError("basic_ios::clear")
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise CheckpointError(f"{path}: could not write the checkpoint ({type(exc).__name__}: {exc}; disk full or "
+                              "not writable?); a previous file there is unchanged") from exc
     return path
 
 
@@ -81,8 +127,9 @@ def load_checkpoint(path: str | os.PathLike):
     except FileNotFoundError:
         raise CheckpointError(f"{path}: no such file") from None
     except Exception as exc:  # UnpicklingError for code-carrying pickles, RuntimeError for non-zip files, ...
+        first = (str(exc).splitlines() or [""])[0][:200]
         raise CheckpointError(f"{path}: not a loadable torch_gpioius checkpoint ({type(exc).__name__}: "
-                              f"{str(exc).splitlines()[0][:200]})") from exc
+                              f"{first or 'empty or truncated file'})") from exc
     if not isinstance(payload, dict) or payload.get("format") != _FORMAT:
         raise CheckpointError(f"{path}: not a torch_gpioius checkpoint (field 'format' missing or wrong)")
     if payload.get("version") != CHECKPOINT_VERSION:
@@ -97,6 +144,8 @@ def load_checkpoint(path: str | os.PathLike):
     if not ok:
         raise CheckpointError(f"{path}: contents do not match the stored SHA-256 (the file was modified)")
     try:
+        if not isinstance(payload.get("theta"), float) or not isinstance(payload.get("noise"), float):
+            raise CheckpointError(f"{path}: fields 'theta' and 'noise' must be numbers")
         if payload["kind"] == "GPIOIS":
             model = GPIOIS(tensors["train_x"], tensors["train_y"], tensors["train_task"], theta=payload["theta"],
                            noise=payload["noise"], inference=payload["inference"])

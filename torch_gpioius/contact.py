@@ -40,6 +40,9 @@ class ContactConfig:
         retreat_distance: how far a force fault retreats along the normal [m].
         speed: fingertip speed [m/s].
         max_reading_age: a reading older than this (robot clock vs sample time) is stale [s].
+        max_step: largest planned step :meth:`ContactController.slide` accepts [m] (a few times the planner's
+            alpha = 1 cm). A larger one is refused, never split into many gate-approved sub-steps.
+        max_approach: longest approach :meth:`ContactController.approach` accepts [m].
     """
 
     contact_force: float = 1.0
@@ -52,14 +55,24 @@ class ContactConfig:
     retreat_distance: float = 0.005
     speed: float = 0.02
     max_reading_age: float = 0.25
+    max_step: float = 0.03
+    max_approach: float = 2.0
+
+    #: Upper ends of the accepted ranges (what the OptoForce OMD-20-SE-40N and a UR5 in contact work allow).
+    BOUNDS = {"contact_force": 40.0, "retreat_force": 40.0, "max_force": 40.0, "max_force_jump": 40.0,
+              "tangential_step": 0.01, "normal_step": 0.005, "max_normal_travel": 0.2, "retreat_distance": 0.05,
+              "speed": 0.25, "max_reading_age": 1.0, "max_step": 0.1, "max_approach": 3.0}
 
     def __post_init__(self) -> None:
-        if not 0 < self.contact_force < self.retreat_force < self.max_force:
-            raise ValueError("need 0 < contact_force < retreat_force < max_force")
-        for name in ("tangential_step", "normal_step", "max_normal_travel", "retreat_distance", "speed",
-                     "max_reading_age", "max_force_jump"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be positive")
+        for name, hi in self.BOUNDS.items():
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= hi):
+                raise ValueError(f"ContactConfig.{name}: must be finite and in (0, {hi:g}], got {v!r}")
+        if not self.contact_force < self.retreat_force < self.max_force:
+            raise ValueError("ContactConfig: need 0 < contact_force < retreat_force < max_force, got "
+                             f"{self.contact_force}, {self.retreat_force}, {self.max_force}")
+        if self.tangential_step > self.max_step:
+            raise ValueError("ContactConfig: tangential_step must not exceed max_step")
 
 
 @dataclass
@@ -150,8 +163,11 @@ class ContactController:
         except SensorError as exc:
             self._fault(f"force sensor failed: {exc}", None, exc)
         prev = self._prev
-        if prev is not None and r.counter == prev.counter and r.timestamp == prev.timestamp:
-            self._fault(f"stale force reading (sample {r.counter} repeated)", None)
+        # The sensor's own sample counter decides staleness: a frozen DAQ that repeats counter 42 is stale even
+        # when the host stamps each read with a new time.
+        if prev is not None and r.counter == prev.counter:
+            self._fault(f"stale force reading (sample counter {r.counter} repeated: the sensor is frozen or "
+                        "stopped streaming)", None)
         now = self._now()
         if now is not None and now - r.timestamp > cfg.max_reading_age:
             self._fault(f"stale force reading ({(now - r.timestamp) * 1e3:.0f} ms old)", None)
@@ -214,6 +230,10 @@ class ContactController:
         """
         d = _unit(direction, "direction")
         cfg = self.config
+        if isinstance(max_travel, bool) or not (isinstance(max_travel, (int, float)) and math.isfinite(max_travel)
+                                                and 0 < max_travel <= cfg.max_approach):
+            raise ValueError(f"max_travel: must be in (0, {cfg.max_approach}] m (ContactConfig.max_approach), "
+                             f"got {max_travel!r}")
         log = _Log()
         start = self.robot.read_pose()[:3, 3].clone()
         f = self.read_force(-d)
@@ -238,13 +258,20 @@ class ContactController:
 
         Raises:
             ContactFault: a sensing or force fault (the robot was stopped or retreated first).
+            SafetyViolation: the planned step is longer than ``config.max_step``; nothing was sent (splitting
+                it into many small gate-approved commands would bypass the gate's per-command limit).
         """
         n = _unit(normal, "normal")
         step = torch.as_tensor(step, dtype=torch.float64)
         if step.shape != (3,) or not bool(torch.isfinite(step).all()):
             raise ValueError(f"step must be a finite (3,) vector [m], got {step}")
-        t = step - (step @ n) * n
         cfg = self.config
+        if float(step.norm()) > cfg.max_step:
+            from kinematics import SafetyViolation
+
+            raise SafetyViolation(f"planned step of {float(step.norm()) * 1e3:.1f} mm exceeds the "
+                                  f"{cfg.max_step * 1e3:.1f} mm limit (ContactConfig.max_step); refused, not split")
+        t = step - (step @ n) * n
         log = _Log()
         start = self.robot.read_pose()[:3, 3].clone()
         self.read_force(n)

@@ -20,9 +20,11 @@ from __future__ import annotations
 
 import io
 import json
+import math
 import os
 import struct
 import warnings
+import zipfile
 import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,13 +33,16 @@ from typing import Any, Iterator
 import numpy as np
 
 __all__ = ["FORMAT_VERSION", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
-           "replay", "save_dataset", "load_dataset", "validate_observations"]
+           "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta", "step_number"]
 
 MAGIC = b"GPIOIUS\x00"
 FORMAT_VERSION = 1
 _REC = b"RC"
 _REC_HEAD = struct.Struct(">2sII")
-_MAX_RECORD = 1 << 31
+#: Largest declared payload of one record [bytes] (a 3-D dataset of 10^7 observations fits in ~320 MB).
+_MAX_RECORD = 1 << 29
+#: Largest number of arrays in one record payload.
+_MAX_MEMBERS = 64
 UNITS = "m"
 
 
@@ -70,7 +75,29 @@ def _encode(kind: str, meta: dict, arrays: dict[str, np.ndarray]) -> bytes:
     return _REC_HEAD.pack(_REC, len(data), zlib.crc32(data)) + data
 
 
+def _check_members(path: Path, offset: int, data: bytes) -> None:
+    """A payload is an NPZ written by ``np.savez``: uncompressed (stored) members whose sizes add up to no more
+    than the payload itself. A deflated member could expand a few MB into GBs before anything is validated."""
+    try:
+        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+            infos = zf.infolist()
+    except (zipfile.BadZipFile, ValueError, OSError) as exc:
+        raise DatasetError(f"{path}: record at byte {offset} is not a valid NPZ payload ({exc})") from exc
+    if len(infos) > _MAX_MEMBERS:
+        raise DatasetError(f"{path}: record at byte {offset} holds {len(infos)} arrays (at most {_MAX_MEMBERS})")
+    total = 0
+    for info in infos:
+        if info.compress_type != zipfile.ZIP_STORED:
+            raise DatasetError(f"{path}: record at byte {offset}: array {info.filename!r} is compressed; this format "
+                               "stores arrays uncompressed (a compressed member could expand without bound)")
+        total += info.file_size
+        if info.file_size > len(data) or total > len(data):
+            raise DatasetError(f"{path}: record at byte {offset}: array {info.filename!r} declares "
+                               f"{info.file_size} bytes, more than the {len(data)}-byte payload")
+
+
 def _decode(path: Path, offset: int, data: bytes) -> Record:
+    _check_members(path, offset, data)
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
@@ -86,55 +113,90 @@ def _decode(path: Path, offset: int, data: bytes) -> Record:
     return Record(kind, meta, arrays)
 
 
+def _later_record_exists(blob: bytes) -> bool:
+    """Whether ``blob`` (the bytes after a record's header) contains a complete record with a valid CRC.
+
+    A writer killed mid-write leaves a *prefix* of one record at the end of the file, never a complete record
+    after it; so a record that claims to run past the end while a valid record follows is corruption (e.g. a
+    flipped bit in its length), not a torn tail.
+    """
+    pos = blob.find(_REC)
+    while pos >= 0:
+        if len(blob) - pos >= _REC_HEAD.size:
+            _, length, crc = _REC_HEAD.unpack_from(blob, pos)
+            start = pos + _REC_HEAD.size
+            if length <= len(blob) - start and zlib.crc32(blob[start:start + length]) == crc:
+                return True
+        pos = blob.find(_REC, pos + 1)
+    return False
+
+
 def read_records(path: str | os.PathLike, *, allow_torn_tail: bool = True) -> Iterator[Record]:
-    """Decode every complete record of a file, in order.
+    """Decode every complete record of a file, in order, reading it as a stream.
+
+    The magic bytes and version are checked before anything else is read (``gpioius fit /dev/zero`` stops at
+    once); each record's declared length is bounded (``_MAX_RECORD``) and its payload must be an uncompressed
+    NPZ whose members fit in it.
 
     Args:
         path: dataset or log file.
-        allow_torn_tail: an incomplete *last* record (a writer killed mid-write) is skipped with a
-            :class:`TornLogWarning`; if False it is an error. Corruption before the last record is always an error.
+        allow_torn_tail: an incomplete *last* record (a writer killed mid-write: a record that runs past the end
+            of the file with nothing valid after it, or a last record whose checksum fails) is skipped with a
+            :class:`TornLogWarning`; if False it is an error. Corruption anywhere else is always an error.
 
     Raises:
         DatasetError: not our format, an unsupported version, or a corrupt record (names file and byte offset).
     """
     path = Path(path)
     try:
-        blob = path.read_bytes()
+        f = open(path, "rb")
     except OSError as exc:
         raise DatasetError(f"{path}: cannot read ({exc.strerror or exc})") from exc
-    if len(blob) < len(MAGIC) + 2 or blob[:len(MAGIC)] != MAGIC:
-        raise DatasetError(f"{path}: not a torch_gpioius dataset/log (bad magic bytes)")
-    (version,) = struct.unpack(">H", blob[len(MAGIC):len(MAGIC) + 2])
-    if version != FORMAT_VERSION:
-        raise DatasetError(f"{path}: format version {version} is not supported (this torch_gpioius reads version "
-                           f"{FORMAT_VERSION}); convert it with the matching release")
-    pos = len(MAGIC) + 2
-    while pos < len(blob):
-        torn = None
-        if len(blob) - pos < _REC_HEAD.size:
-            torn = "a record header is cut off"
-        else:
-            tag, length, crc = _REC_HEAD.unpack_from(blob, pos)
-            if tag != _REC or length > _MAX_RECORD:
-                raise DatasetError(f"{path}: corrupt record header at byte {pos}")
-            start, end = pos + _REC_HEAD.size, pos + _REC_HEAD.size + length
-            if end > len(blob):
-                torn = f"the record at byte {pos} is cut off ({len(blob) - start} of {length} bytes)"
-            elif zlib.crc32(blob[start:end]) != crc:
-                if end == len(blob):
+    with f:
+        head = f.read(len(MAGIC) + 2)
+        if len(head) < len(MAGIC) + 2 or head[:len(MAGIC)] != MAGIC:
+            raise DatasetError(f"{path}: not a torch_gpioius dataset/log (bad magic bytes)")
+        (version,) = struct.unpack(">H", head[len(MAGIC):])
+        if version != FORMAT_VERSION:
+            raise DatasetError(f"{path}: format version {version} is not supported (this torch_gpioius reads "
+                               f"version {FORMAT_VERSION}); convert it with the matching release")
+        pos = len(MAGIC) + 2
+        while True:
+            rec_head = f.read(_REC_HEAD.size)
+            if not rec_head:
+                return
+            torn = None
+            if len(rec_head) < _REC_HEAD.size:
+                torn = "a record header is cut off"
+            else:
+                tag, length, crc = _REC_HEAD.unpack(rec_head)
+                if tag != _REC:
+                    raise DatasetError(f"{path}: corrupt record header at byte {pos}")
+                if length > _MAX_RECORD:
+                    raise DatasetError(f"{path}: record at byte {pos} declares {length} bytes (more than the "
+                                       f"{_MAX_RECORD}-byte limit): corrupt length field")
+                data = f.read(length)
+                start, end = pos + _REC_HEAD.size, pos + _REC_HEAD.size + length
+                if len(data) < length:
+                    if _later_record_exists(data):
+                        raise DatasetError(f"{path}: record at byte {pos} declares {length} bytes, past the end of "
+                                           "the file, but complete records follow it: corrupt length field")
+                    torn = f"the record at byte {pos} is cut off ({len(data)} of {length} bytes)"
+                elif zlib.crc32(data) != crc:
+                    if f.read(1):
+                        raise DatasetError(f"{path}: record at byte {pos} fails its CRC-32 check (file corrupted)")
                     torn = f"the last record (byte {pos}) fails its checksum"
-                else:
-                    raise DatasetError(f"{path}: record at byte {pos} fails its CRC-32 check (file corrupted)")
-        if torn is not None:
-            if not allow_torn_tail:
-                raise DatasetError(f"{path}: truncated: {torn}")
-            warnings.warn(f"{path}: {torn}; ignoring it (the writer was probably killed)", TornLogWarning,
-                          stacklevel=2)
-            return
-        rec = _decode(path, pos, blob[start:end])
-        rec.end = end
-        yield rec
-        pos = end
+            if torn is not None:
+                if not allow_torn_tail:
+                    raise DatasetError(f"{path}: truncated: {torn}")
+                warnings.warn(f"{path}: {torn}; ignoring it (the writer was probably killed)", TornLogWarning,
+                              stacklevel=2)
+                return
+            rec = _decode(path, pos, data)
+            rec.end = end
+            yield rec
+            pos = end
+            del start
 
 
 def validate_observations(x: Any, y: Any, task: Any, step: Any, *, where: str, dim: int | None = None) -> tuple:
@@ -143,9 +205,17 @@ def validate_observations(x: Any, y: Any, task: Any, step: Any, *, where: str, d
     Returns:
         ``x (n, d) float64``, ``y (n,) float64`` in {0, 1}, ``task (n,) int64`` in {0, 1}, ``step (n,) int64`` >= 0.
     """
+    raw = {}
+    for name, a in (("x", x), ("y", y)):
+        try:
+            raw[name] = np.asarray(a)
+        except (TypeError, ValueError) as exc:
+            raise DatasetError(f"{where}: field {name!r} is not numeric ({exc})") from exc
+        if raw[name].dtype.kind not in "iuf":   # bool, complex, strings, objects: never converted silently
+            raise DatasetError(f"{where}: field {name!r} must hold real numbers, got dtype {raw[name].dtype}")
     try:
-        x = np.asarray(x, dtype=np.float64)
-        y = np.asarray(y, dtype=np.float64)
+        x = raw["x"].astype(np.float64)
+        y = raw["y"].astype(np.float64)
         task = np.asarray(task)
         step = np.asarray(step)
     except (TypeError, ValueError) as exc:
@@ -175,20 +245,71 @@ def validate_observations(x: Any, y: Any, task: Any, step: Any, *, where: str, d
     return x, y, task.astype(np.int64), step.astype(np.int64)
 
 
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def check_meta(meta: dict, where: str) -> dict:
+    """Validate header metadata with the reader's rules (the writers call this before writing anything).
+
+    Raises:
+        DatasetError: naming ``where`` and the field.
+    """
+    from .tolerances import tol
+
+    if not isinstance(meta, dict):
+        raise DatasetError(f"{where}: header metadata must be a JSON object, got {type(meta).__name__}")
+    if meta.get("units") != UNITS:
+        raise DatasetError(f"{where}: header field 'units' is {meta.get('units')!r}; torch_gpioius files are in "
+                           f"metres ('m'): convert when importing (importers take units=)")
+    dim = meta.get("dim")
+    if not (isinstance(dim, int) and not isinstance(dim, bool) and dim in (2, 3)):
+        raise DatasetError(f"{where}: header field 'dim' must be the integer 2 or 3, got {dim!r}")
+    ranges = {"theta": tol.theta_range, "noise": tol.noise_range}
+    for k, (lo, hi) in ranges.items():
+        v = meta.get(k)
+        if v is not None and not (_number(v) and lo <= v <= hi):
+            raise DatasetError(f"{where}: header field {k!r} must be a number in [{lo:g}, {hi:g}], got {v!r}")
+    v = meta.get("voxel_size")
+    if v is not None and not (_number(v) and v > 0):
+        raise DatasetError(f"{where}: header field 'voxel_size' must be a positive number [m] or null, got {v!r}")
+    for k in ("frame", "source", "scene", "mode", "scene_fingerprint"):
+        v = meta.get(k)
+        if v is not None and not isinstance(v, str):
+            raise DatasetError(f"{where}: header field {k!r} must be a string, got {v!r}")
+    try:
+        json.dumps(meta, allow_nan=True)
+    except (TypeError, ValueError) as exc:
+        raise DatasetError(f"{where}: header metadata is not JSON-serialisable ({exc})") from None
+    return meta
+
+
 def _check_header(path: Path, rec: Record) -> dict:
     if rec.kind != "header":
         raise DatasetError(f"{path}: the first record must be the header, found {rec.kind!r}")
-    meta = rec.meta
-    if meta.get("units") != UNITS:
-        raise DatasetError(f"{path}: header field 'units' is {meta.get('units')!r}; torch_gpioius files are in "
-                           f"metres ('m'): convert when importing (importers take units=)")
-    if meta.get("dim") not in (2, 3):
-        raise DatasetError(f"{path}: header field 'dim' must be 2 or 3, got {meta.get('dim')!r}")
-    for k in ("theta", "noise"):
-        v = meta.get(k)
-        if v is not None and not (isinstance(v, (int, float)) and np.isfinite(v) and v > 0):
-            raise DatasetError(f"{path}: header field {k!r} must be a positive number, got {v!r}")
-    return meta
+    return check_meta(rec.meta, str(path))
+
+
+def step_number(meta: dict, where: str) -> int:
+    """The ``step`` field of a step record: a non-negative integer, or ``DatasetError`` naming the record."""
+    v = meta.get("step")
+    if v is None and "step" not in meta:
+        raise DatasetError(f"{where}: field 'step' is missing")
+    if not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+        raise DatasetError(f"{where}: field 'step' must be a non-negative integer, got {v!r}")
+    return v
+
+
+def _check_trace(trace: dict, where: str) -> dict[str, np.ndarray]:
+    out = {}
+    for k, v in trace.items():
+        a = np.asarray(v)
+        if a.dtype.kind not in "iuf" or a.dtype == bool:
+            raise DatasetError(f"{where}: trace array {k!r} must be numeric, got dtype {a.dtype}")
+        if not np.isfinite(a).all():
+            raise DatasetError(f"{where}: trace array {k!r} contains NaN or inf")
+        out[k] = a.astype(np.float64)
+    return out
 
 
 @dataclass
@@ -212,9 +333,13 @@ class Dataset:
     trace: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.meta, dict):
+            raise DatasetError(f"Dataset: meta must be a dict, got {type(self.meta).__name__}")
         self.x, self.y, self.task, self.step = validate_observations(
             self.x, self.y, self.task, self.step, where="Dataset", dim=self.meta.get("dim"))
-        self.meta = {"units": UNITS, "frame": "base", "dim": int(self.x.shape[1]), **self.meta}
+        self.meta = check_meta({"units": UNITS, "frame": "base", "dim": int(self.x.shape[1]), **self.meta},
+                               "Dataset")
+        self.trace = _check_trace(dict(self.trace), "Dataset")
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
@@ -250,20 +375,44 @@ def _fsync_dir(path: Path) -> None:
 
 
 def save_dataset(ds: Dataset, path: str | os.PathLike) -> Path:
-    """Write ``ds`` atomically (temporary file, fsync, rename): a crash leaves the old file or the new one."""
+    """Write ``ds`` atomically (temporary file, fsync, rename): a crash leaves the old file or the new one.
+
+    Everything is validated with the reader's own rules and encoded *before* the file is touched, so a save
+    that would write something :func:`load_dataset` refuses fails and leaves a good file in place; a failed
+    write (disk full) removes its temporary file.
+
+    Raises:
+        DatasetError: invalid metadata, observations or trace (nothing was written).
+        OSError: the write failed (the previous file, if any, is unchanged).
+    """
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        f.write(MAGIC + struct.pack(">H", FORMAT_VERSION))
-        f.write(_encode("header", ds.meta, {}))
-        f.write(_encode("observations", {}, {"x": ds.x, "y": ds.y, "task": ds.task, "step": ds.step}))
-        if ds.trace:
-            f.write(_encode("trace", {}, ds.trace))
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-    _fsync_dir(path)
+    meta = check_meta(dict(ds.meta), f"save_dataset({path})")
+    x, y, task, step = validate_observations(ds.x, ds.y, ds.task, ds.step, where=f"save_dataset({path})",
+                                             dim=meta["dim"])
+    trace = _check_trace(dict(ds.trace), f"save_dataset({path})")
+    blob = MAGIC + struct.pack(">H", FORMAT_VERSION) + _encode("header", meta, {}) + _encode(
+        "observations", {}, {"x": x, "y": y, "task": task, "step": step}) + (_encode("trace", {}, trace) if trace
+                                                                              else b"")
+    _atomic_write(path, blob)
     return path
+
+
+def _atomic_write(path: Path, blob: bytes) -> None:
+    """Write ``blob`` to a temporary file beside ``path``, fsync, rename; remove the temporary file on failure."""
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(blob)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
+    _fsync_dir(path)
 
 
 class LogWriter:
@@ -289,6 +438,7 @@ class LogWriter:
         else:
             meta = dict(meta or {})
             meta.setdefault("units", UNITS)
+            check_meta(meta, f"LogWriter({self.path})")
             self._f = open(self.path, "wb")
             self._f.write(MAGIC + struct.pack(">H", FORMAT_VERSION))
             self._write(_encode("header", meta, {}))
@@ -339,7 +489,7 @@ def replay(path: str | os.PathLike) -> Iterator[tuple[Record, Dataset]]:
     for rec in records:
         where = f"{path}: {rec.kind} record ending at byte {rec.end}"
         if rec.kind in ("observations", "step"):
-            step_no = int(rec.meta.get("step", 0))
+            step_no = step_number(rec.meta, where) if rec.kind == "step" else 0
             a = rec.arrays
             if rec.kind == "step":
                 removed = np.asarray(a.get("removed", np.zeros(0, np.int64)))
@@ -380,7 +530,7 @@ def load_dataset(path: str | os.PathLike, *, upto_step: int | None = None) -> Da
     path = Path(path)
     ds = None
     for rec, state in replay(path):
-        if upto_step is not None and rec.kind == "step" and int(rec.meta.get("step", 0)) > upto_step:
+        if upto_step is not None and rec.kind == "step" and rec.meta["step"] > upto_step:
             break
         ds = state
     if ds is None or len(ds) == 0:

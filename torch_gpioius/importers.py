@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import csv
+import math
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +15,8 @@ from .datasets import Dataset, DatasetError
 __all__ = ["load_point_cloud", "load_contacts_csv", "voxel_average", "dataset_from_files"]
 
 _SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+#: Accepted voxel edge lengths [m].
+VOXEL_RANGE = (1e-4, 10.0)
 
 
 def _scale(units: str, path: Path) -> float:
@@ -26,14 +30,26 @@ def voxel_average(points: np.ndarray, voxel: float) -> np.ndarray:
 
     Args:
         points: `(n, d)` [m].
-        voxel: edge length [m]; voxels are aligned to the origin of the frame.
+        voxel: edge length [m], in [1e-4, 10] (a finer or coarser grid is a unit mistake: 1e-300 overflowed the
+            voxel indices and collapsed every point into one; inf did the same); voxels are aligned to the
+            origin of the frame.
 
     Returns:
         `(k, d)` one mean point per occupied voxel, in lexicographic voxel order.
+
+    Raises:
+        ValueError: a voxel size outside the range, or voxel indices that do not fit in int64.
     """
-    if not voxel > 0:
-        raise ValueError(f"voxel size must be positive, got {voxel}")
-    keys = np.floor(points / voxel).astype(np.int64)
+    if isinstance(voxel, bool) or not isinstance(voxel, (int, float, np.floating)) or not (
+            math.isfinite(voxel) and VOXEL_RANGE[0] <= voxel <= VOXEL_RANGE[1]):
+        raise ValueError(f"voxel size must be a number in [{VOXEL_RANGE[0]:g}, {VOXEL_RANGE[1]:g}] m, got {voxel!r}")
+    points = np.asarray(points, dtype=np.float64)
+    if len(points) == 0:
+        return points
+    scaled = np.floor(points / voxel)
+    if np.abs(scaled).max() >= 2.0**62:
+        raise ValueError(f"voxel size {voxel:g} m: voxel indices overflow for points up to {np.abs(points).max():g} m")
+    keys = scaled.astype(np.int64)
     _, inv = np.unique(keys, axis=0, return_inverse=True)
     inv = inv.reshape(-1)
     sums = np.zeros((inv.max() + 1, points.shape[1]))
@@ -70,6 +86,9 @@ def _read_pcd(path: Path) -> np.ndarray:
         npoints = int(header["POINTS"][0])
     except (KeyError, ValueError, IndexError) as exc:
         raise DatasetError(f"{path}: PCD header lacks or garbles FIELDS/SIZE/TYPE/POINTS ({exc})") from exc
+    if npoints < 0 or not (len(fields) == len(sizes) == len(types) == len(counts)):
+        raise DatasetError(f"{path}: PCD header is inconsistent (POINTS {npoints}, {len(fields)} fields, "
+                           f"{len(sizes)} sizes, {len(types)} types, {len(counts)} counts)")
     if not {"x", "y", "z"} <= set(fields):
         raise DatasetError(f"{path}: PCD has no x/y/z fields (fields: {fields})")
     if fmt == "ascii":
@@ -79,6 +98,8 @@ def _read_pcd(path: Path) -> np.ndarray:
             arr = np.asarray(rows, dtype=np.float64).reshape(-1, ncol)
         except ValueError as exc:
             raise DatasetError(f"{path}: PCD ascii body is not {ncol} numbers per point") from exc
+        if len(arr) != npoints:
+            raise DatasetError(f"{path}: PCD header declares POINTS {npoints} but the body holds {len(arr)}")
         cols, c = {}, 0
         for f, k in zip(fields, counts):
             cols[f] = c
@@ -91,13 +112,65 @@ def _read_pcd(path: Path) -> np.ndarray:
                               for f, s, t, k in zip(fields, sizes, types, counts)])
         except (KeyError, TypeError) as exc:
             raise DatasetError(f"{path}: unsupported PCD field types {types}/{sizes}") from exc
-        if len(data) - pos < npoints * dtype.itemsize:
-            raise DatasetError(f"{path}: PCD binary body is truncated")
+        if len(data) - pos != npoints * dtype.itemsize:
+            raise DatasetError(f"{path}: PCD header declares POINTS {npoints} ({npoints * dtype.itemsize} bytes) but "
+                               f"the binary body has {len(data) - pos} bytes")
         rec = np.frombuffer(data, dtype=dtype, count=npoints, offset=pos)
         pts = np.stack([rec["x"], rec["y"], rec["z"]], axis=-1).astype(np.float64)
     else:
         raise DatasetError(f"{path}: PCD DATA {fmt!r} is not supported (ascii or binary)")
     return pts
+
+
+_PLY_SIZES = {"char": 1, "uchar": 1, "int8": 1, "uint8": 1, "short": 2, "ushort": 2, "int16": 2, "uint16": 2,
+              "int": 4, "uint": 4, "int32": 4, "uint32": 4, "float": 4, "float32": 4, "double": 8, "float64": 8}
+
+
+def _ply_vertex_count(path: Path) -> int:
+    """The vertex count a PLY header declares, checked against the body of a point-cloud PLY.
+
+    trimesh trusts the header: it reads 2 of 4 rows under ``element vertex 2`` and accepts a negative count.
+    For a PLY holding only vertices (what a point cloud is), the body must hold exactly the declared rows.
+    """
+    with open(path, "rb") as f:
+        blob = f.read()
+    end = blob.find(b"end_header")
+    if not blob.startswith(b"ply") or end < 0:
+        raise DatasetError(f"{path}: not a PLY file (no 'ply' magic or no 'end_header')")
+    lines = blob[:end].decode("ascii", "replace").splitlines()
+    fmt, elements = None, []
+    for line in lines:
+        words = line.split()
+        if words[:1] == ["format"] and len(words) > 1:
+            fmt = words[1]
+        elif words[:1] == ["element"] and len(words) == 3:
+            try:
+                elements.append([words[1], int(words[2]), []])
+            except ValueError:
+                raise DatasetError(f"{path}: PLY element count {words[2]!r} is not an integer") from None
+        elif words[:1] == ["property"] and elements:
+            elements[-1][2].append(words[1:])
+    vertex = [e for e in elements if e[0] == "vertex"]
+    if not vertex:
+        raise DatasetError(f"{path}: PLY header has no 'element vertex' line")
+    n = vertex[0][1]
+    if n < 0:
+        raise DatasetError(f"{path}: PLY header declares a negative vertex count ({n})")
+    if len(elements) == 1:                                   # a point cloud: the body must match exactly
+        body = blob[end + len(b"end_header"):]
+        body = body[1:] if body[:1] == b"\n" else body[2:] if body[:2] == b"\r\n" else body
+        if fmt == "ascii":
+            rows = [r for r in body.decode("ascii", "replace").splitlines() if r.strip()]
+            if len(rows) != n:
+                raise DatasetError(f"{path}: PLY header declares {n} vertices but the body holds {len(rows)} rows")
+        elif fmt in ("binary_little_endian", "binary_big_endian"):
+            props = vertex[0][2]
+            if all(len(pr) == 2 and pr[0] in _PLY_SIZES for pr in props):
+                size = sum(_PLY_SIZES[pr[0]] for pr in props)
+                if len(body) != n * size:
+                    raise DatasetError(f"{path}: PLY header declares {n} vertices ({n * size} bytes) but the body has "
+                                       f"{len(body)} bytes")
+    return n
 
 
 def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float | None = None,
@@ -110,6 +183,9 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
         voxel: if given, average into voxels of this edge [m] (paper: 0.05).
         drop_nonfinite: drop NaN/inf points (depth cameras mark missing pixels that way); if False they are
             an error.
+
+    ``voxel=None`` keeps every point; ``voxel=0`` (or any size outside ``VOXEL_RANGE``) is an error, never a
+    silent skip.
 
     Raises:
         DatasetError: unreadable file, no points, wrong shape.
@@ -124,12 +200,18 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
             with np.load(path, allow_pickle=False) as z:
                 if "points" not in z.files:
                     raise DatasetError(f"{path}: NPZ point cloud needs a 'points' array (has {z.files})")
-                pts = np.asarray(z["points"], dtype=np.float64)
+                raw = np.asarray(z["points"])
+                if raw.dtype.kind not in "iuf":   # complex, bool, strings: never converted silently
+                    raise DatasetError(f"{path}: 'points' must hold real numbers, got dtype {raw.dtype}")
+                pts = raw.astype(np.float64)
         elif ext in (".ply", ".xyz"):
             import trimesh
 
+            declared = _ply_vertex_count(path) if ext == ".ply" else None
             geom = trimesh.load(path, process=False)
             pts = np.asarray(getattr(geom, "vertices", np.zeros((0, 3))), dtype=np.float64)
+            if declared is not None and declared != len(pts):
+                raise DatasetError(f"{path}: PLY header declares {declared} vertices, the file holds {len(pts)}")
         else:
             raise DatasetError(f"{path}: unknown point-cloud format {ext!r} (use .ply, .pcd, .xyz or .npz)")
     except DatasetError:
@@ -146,7 +228,12 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
     if len(pts) == 0:
         raise DatasetError(f"{path}: the point cloud holds no (finite) points")
     pts = pts * scale
-    return voxel_average(pts, voxel) if voxel else pts
+    if voxel is None:
+        return pts
+    try:
+        return voxel_average(pts, voxel)
+    except ValueError as exc:
+        raise DatasetError(f"{path}: {exc}") from None
 
 
 _LABELS = {"0": 0.0, "1": 1.0, "contact": 0.0, "surface": 0.0, "free": 1.0, "free_space": 1.0}
@@ -178,7 +265,11 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
         raise DatasetError(f"{path}: header must contain x, y[, z] and label, got {cols}")
     xs, ys, steps = [], [], []
     for i, row in enumerate(rows, start=2):
-        row = {(k or "").strip().lower(): (v or "").strip() for k, v in row.items()}
+        if None in row:
+            raise DatasetError(f"{path}:{i}: the row has more fields than the header ({len(cols)} columns: {cols})")
+        if any(v is None for v in row.values()):
+            raise DatasetError(f"{path}:{i}: the row has fewer fields than the header ({len(cols)} columns: {cols})")
+        row = {k.strip().lower(): v.strip() for k, v in row.items()}
         try:
             p = [float(row[d]) for d in dims]
         except (KeyError, ValueError):

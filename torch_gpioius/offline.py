@@ -102,11 +102,15 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
     evenly spaced steps; 2-D logs).
     """
     path, out = Path(path), Path(out)
-    records = list(read_records(path))
-    header = records[0].meta if records and records[0].kind == "header" else None
+    states = {}
+    header = None
+    for rec, ds in replay(path):      # one validated read: header fields, step numbers, observations
+        header = ds.meta
+        if rec.kind == "step":
+            states[rec.meta["step"]] = ds
     if header is None:
-        raise DatasetError(f"{path}: no header record")
-    steps = sorted({int(r.meta["step"]) for r in records if r.kind == "step"})
+        header = next(iter(read_records(path))).meta
+    steps = sorted(states)
     if not steps:
         raise DatasetError(f"{path}: no step records: this is a dataset, not an exploration log (use `fit`)")
     chosen = steps[::max(1, every)]
@@ -122,7 +126,6 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
     rows, snapshots = [], {}
     shots = set(np.unique(np.linspace(0, len(chosen) - 1, max(1, figures)).round().astype(int)).tolist())
     kt = None
-    states = {int(rec.meta["step"]): ds for rec, ds in replay(path) if rec.kind == "step"}   # one read of the file
     for i, k in enumerate(tqdm(chosen, desc=f"replay {path.name}", disable=not progress)):
         ds = states[k]
         model = ds.to_model()

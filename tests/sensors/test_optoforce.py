@@ -9,7 +9,7 @@ import tty
 import pytest
 import torch
 
-from torch_gpioius.sensors import (ChecksumStorm, FrameParser, OptoForceDAQ, SensorDisconnected, SensorTimeout,
+from torch_gpioius.sensors import (ChecksumStorm, FrameParser, OptoForceDAQ, SensorDisconnected, SensorStale, SensorTimeout,
                                    decode_status, encode_config, encode_frame)
 
 serial = pytest.importorskip("serial")
@@ -173,6 +173,23 @@ def test_loop_url_and_echoed_config_frames_are_skipped():
     port.write(frame(9, 0, 0, 0, 250))
     r = sensor.read()
     assert r.counter == 9 and torch.allclose(r.force, torch.tensor([0.0, 0.0, 10.0], dtype=torch.float64))
+
+
+def test_a_frozen_daq_repeating_its_counter_is_stale(daq):
+    sensor = OptoForceDAQ(daq.port, SENS, timeout=0.3)
+    daq.send(frame(42, 0, 100, 0, 0))
+    assert sensor.read().counter == 42
+    daq.send(frame(42, 0, 100, 0, 0) * 3)              # new bytes, same sample: host time moved, the DAQ did not
+    with pytest.raises(SensorStale, match="counter 42 repeated"):
+        sensor.read()
+
+
+@pytest.mark.parametrize("kwargs, match", [(dict(timeout=float("nan")), "timeout"), (dict(timeout=-1), "timeout"),
+                                           (dict(timeout=float("inf")), "timeout"), (dict(max_bad_frames=0), "max_bad"),
+                                           (dict(max_bad_frames=2.5), "max_bad"), (dict(timeout="0.1"), "timeout")])
+def test_settings_that_would_hang_or_always_fail_are_refused(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        OptoForceDAQ("loop://", SENS, **kwargs)
 
 
 def test_bad_configuration_and_missing_port():

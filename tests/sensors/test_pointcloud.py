@@ -106,7 +106,7 @@ def test_voxel_averaging_against_a_hand_computed_grid():
     avg = PointCloud(plane).voxel_averaged(0.05).points
     assert len(avg) == 25                       # 0 <= x, y < 0.2 (4 x 4) plus the edge at exactly 0.2 (+9)
     np.testing.assert_allclose(avg[:, 2], 0.012)
-    with pytest.raises(ValueError, match="positive"):
+    with pytest.raises(ValueError, match="voxel size"):
         voxel_average(pts, 0.0)
 
 

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm",
+__all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm", "SensorStale",
            "decode_status", "STATUS_OVERLOAD_MASK", "STATUS_ERROR_MASK"]
 
 # OptoForce DAQ status word (16 bits), as documented for the DAQ: bits 15-13 DAQ error code (1 DAQ error,
@@ -88,6 +88,10 @@ class SensorDisconnected(SensorError):
 
 class ChecksumStorm(SensorError):
     """Too many consecutive frames failed their checksum: the link is corrupt."""
+
+
+class SensorStale(SensorError):
+    """The sensor's own sample counter did not advance: the device is frozen or repeats old samples."""
 
 
 class ForceSensor(abc.ABC):

@@ -19,6 +19,7 @@ Counts become newtons through the per-axis sensitivities on the sensor's calibra
 from __future__ import annotations
 
 import importlib
+import math
 import struct
 import time
 from dataclasses import dataclass
@@ -26,7 +27,7 @@ from typing import Any, Sequence
 
 import torch
 
-from .base import ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorTimeout
+from .base import ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorStale, SensorTimeout
 
 __all__ = ["OptoForceDAQ", "FrameParser", "RawFrame", "encode_config", "encode_frame", "DATA_HEADER",
            "CONFIG_HEADER", "SPEED_CODES", "FILTER_CODES"]
@@ -122,8 +123,8 @@ class OptoForceDAQ(ForceSensor):
         sensitivity: `(3,)` counts per newton for Fx, Fy, Fz (calibration sheet).
         rate: sample rate [Hz], one of ``SPEED_CODES``.
         filter_hz: DAQ low-pass cut-off [Hz], one of ``FILTER_CODES`` (None = off).
-        timeout: how long :meth:`read` waits for a valid frame [s].
-        max_bad_frames: consecutive checksum failures that raise :class:`ChecksumStorm`.
+        timeout: how long :meth:`read` waits for a valid frame [s], in (0, 10].
+        max_bad_frames: consecutive checksum failures that raise :class:`ChecksumStorm`, an integer in [1, 10000].
         serial_port: an already-open pyserial-like object (``read``, ``write``, ``in_waiting``, ``close``);
             ``port`` is then only used in messages.
 
@@ -143,8 +144,14 @@ class OptoForceDAQ(ForceSensor):
             raise ValueError(f"rate must be one of {sorted(k for k in SPEED_CODES if k)} Hz, got {rate}")
         if filter_hz not in FILTER_CODES:
             raise ValueError(f"filter_hz must be one of {list(FILTER_CODES)}, got {filter_hz}")
+        if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not (math.isfinite(timeout)
+                                                                                     and 0 < timeout <= 10):
+            raise ValueError(f"timeout: must be finite and in (0, 10] s, got {timeout!r} (NaN or inf would make "
+                             "read() wait forever)")
+        if isinstance(max_bad_frames, bool) or not isinstance(max_bad_frames, int) or not 1 <= max_bad_frames <= 10000:
+            raise ValueError(f"max_bad_frames: must be an integer in [1, 10000], got {max_bad_frames!r}")
         self.port, self.sensitivity, self.timeout = port, sens, float(timeout)
-        self.max_bad_frames = int(max_bad_frames)
+        self.max_bad_frames = max_bad_frames
         self._speed, self._filter = SPEED_CODES[rate], FILTER_CODES[filter_hz]
         if serial_port is None:
             try:
@@ -184,6 +191,8 @@ class OptoForceDAQ(ForceSensor):
             SensorTimeout: no valid frame within ``timeout``.
             SensorDisconnected: the port failed (unplugged, closed).
             ChecksumStorm: ``max_bad_frames`` consecutive frames failed their checksum.
+            SensorStale: the newest frame carries the same sample counter as the previous read: the DAQ is
+                frozen (host time cannot tell, since every read is stamped anew).
         """
         deadline = time.monotonic() + self.timeout
         newest = None
@@ -199,6 +208,9 @@ class OptoForceDAQ(ForceSensor):
                 break
             if time.monotonic() > deadline:
                 raise SensorTimeout(f"OptoForce DAQ at {self.port}: no valid frame in {self.timeout * 1e3:.0f} ms")
+        if self._last is not None and newest.counter == self._last.counter:
+            raise SensorStale(f"OptoForce DAQ at {self.port}: sample counter {newest.counter} repeated; the DAQ is "
+                              "frozen or replays old samples")
         force = torch.tensor(newest.counts, dtype=torch.float64) / self.sensitivity
         reading = ForceReading(force, newest.status, newest.counter, time.monotonic())
         self._last, self._last_status = reading, newest.status
