@@ -25,7 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import torch_gpioius as tg  # noqa: E402
-from torch_gpioius.exploration import _free_space_along  # noqa: E402
+from torch_gpioius.exploration import free_space_along, thin_points  # noqa: E402
 
 SMOKE = "CI" in os.environ
 
@@ -38,7 +38,8 @@ def observations(scene, inner_free: bool, outer_free: bool, spacing: float):
     t = [np.zeros(len(touched), dtype=int)]
     if inner_free:
         contact = scene.first_contact()
-        free = _free_space_along(scene.start, contact, 0.02, touched, 0.02)
+        # the approach path, sampled every 2 cm and kept 2 cm from every contact (the exploration's rule)
+        free = thin_points(free_space_along(scene.start, contact, 0.02), 0.02, touched, 0.02)
         x.append(free), y.append(np.ones(len(free))), t.append(np.zeros(len(free), dtype=int))
     seen = scene.sample_boundary("outer", spacing)
     x.append(seen), y.append(np.zeros(len(seen))), t.append(np.ones(len(seen), dtype=int))
@@ -68,9 +69,11 @@ def main() -> None:
             model = tg.GPIOIS(x, y, t, theta=0.1, noise=0.006).fit()
             sims.append(f"{model.similarity:8.3f} (rho {model.correlation:4.2f})")
         print(f"{label:<16}" + "".join(f"{s:>22}" for s in sims))
-        bounds = scene.bounds(0.08)
+        bounds = scene.bounds(0.08)                       # (2, 2): [min corner; max corner]
         field = tg.surfaces.evaluate_grid(model, bounds, 0.005, task=0)
-        im = ax.imshow(field.var.T, origin="lower", extent=bounds.flatten(), cmap="Purples")
+        extent = [bounds[0, 0], bounds[1, 0], bounds[0, 1], bounds[1, 1]]
+        prior = tg.metrics.prior_variance(model, 0)
+        im = ax.imshow(field.var.T / prior, origin="lower", extent=extent, cmap="Purples", vmin=0, vmax=1)
         ax.fill(*scene.inner_boundary.T, color="tab:green", alpha=0.3, label="true inner")
         ax.plot(*scene.outer_boundary.T, "k-.", label="outer")
         for j, c in enumerate(tg.surfaces.zero_level_curves(model, bounds, 0.005, field=field)):
@@ -78,10 +81,11 @@ def main() -> None:
         inner = t == 0
         ax.plot(*x[inner & (y == 0)].T, "k.", ms=3, label="contacts")
         ax.plot(*x[inner & (y == 1)].T, "bx", ms=4, label="inner free space")
-        ax.set_title(f"{label}: similarity {model.similarity:.2f}")
-        ax.set_aspect("equal")
+        ax.set_title(f"{label}, all observations: correlation {model.correlation:.2f}\n"
+                     f"(the paper's similarity K01/K00 = {model.similarity:.2f})", fontsize=9)
+        ax.set(xlabel="x [m]", ylabel="y [m]", aspect="equal")
         ax.legend(fontsize=7, loc="lower right")
-        fig.colorbar(im, ax=ax, fraction=0.04, label="$V_{in}$")
+        fig.colorbar(im, ax=ax, fraction=0.04, label="$V_{in}$ / prior variance")
     fig.tight_layout()
     fig.savefig(out / "fit_two_shapes.png", dpi=110)
     print(f"figure: {out / 'fit_two_shapes.png'}")

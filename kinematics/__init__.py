@@ -9,9 +9,9 @@ kinematics, inverse kinematics and a differentiable damped-least-squares Cartesi
 from .backends import RobotBackend, RTDEUR5, SimulatedUR5
 from .dh import UR5_DH, UR5_JOINT_LIMITS, UR5_JOINT_NAMES, UR5_VELOCITY_LIMITS, ur5_urdf
 from .safety import SafetyGate, SafetyViolation
-from .ur5 import UR5, UnreachablePoseError, pose_error
+from .ur5 import UR5, UnreachablePoseError, pose_error, tool_rotation
 
 __all__ = [
-    "UR5", "UnreachablePoseError", "pose_error", "SafetyGate", "SafetyViolation", "RobotBackend", "SimulatedUR5",
+    "UR5", "UnreachablePoseError", "pose_error", "tool_rotation", "SafetyGate", "SafetyViolation", "RobotBackend", "SimulatedUR5",
     "RTDEUR5", "UR5_DH", "UR5_JOINT_LIMITS", "UR5_JOINT_NAMES", "UR5_VELOCITY_LIMITS", "ur5_urdf",
 ]

@@ -178,6 +178,14 @@ class SimulatedUR5(RobotBackend):
     def stop(self) -> None:
         self.stopped = True
 
+    def set_state(self, q: torch.Tensor, time: float) -> None:
+        """Place the simulated arm at joints ``q`` `(6,)` [rad] and clock ``time`` [s] (resume only; not a move)."""
+        q = self.ur5._q(q)
+        if not bool(self.ur5.within_limits(q)):
+            raise ValueError("set_state: joints outside their limits")
+        self._q, self.time = q.clone(), float(time)
+        self.log.append(_Sample(self.time, self._q.clone()))
+
     def trajectory(self) -> tuple[torch.Tensor, torch.Tensor]:
         """`(k,)` times [s] and `(k, 6)` joints [rad] of every executed command."""
         return (torch.tensor([s.t for s in self.log], dtype=torch.float64),

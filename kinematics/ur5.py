@@ -17,7 +17,22 @@ import torch
 from .dh import UR5_JOINT_LIMITS, UR5_VELOCITY_LIMITS
 from .ik import dls_step
 
-__all__ = ["UR5", "UnreachablePoseError", "pose_error", "load_chain"]
+__all__ = ["UR5", "UnreachablePoseError", "pose_error", "load_chain", "tool_rotation"]
+
+
+def tool_rotation(direction) -> torch.Tensor:
+    """`(3, 3)` ``R_base_tool`` whose z axis (the fingertip's pointing direction) is ``direction`` `(3,)`.
+
+    The tool's x axis is the base x axis made orthogonal to z (the base y axis when z is nearly along x).
+    """
+    z = torch.as_tensor(direction, dtype=torch.float64)
+    if z.shape != (3,) or not bool(torch.isfinite(z).all()) or float(z.norm()) == 0:
+        raise ValueError(f"direction: expected a finite non-zero (3,) vector, got {direction!r}")
+    z = z / z.norm()
+    helper = torch.tensor([1.0, 0.0, 0.0] if abs(float(z[0])) < 0.9 else [0.0, 1.0, 0.0], dtype=torch.float64)
+    x = torch.linalg.cross(helper, z)
+    x = x / x.norm()
+    return torch.stack([x, torch.linalg.cross(z, x), z], dim=1)
 
 
 def _convert_transform_float64(origin):  # noqa: ANN001 - urdf_parser_py's Pose

@@ -1,26 +1,45 @@
 """torch_gpioius: visuo-tactile inner-shape estimation with Gaussian process inner-outer implicit surfaces.
 
 Conventions (DESIGN.md): SI units, float64, ``y = 0`` on a surface and ``y = 1`` in free space, prior mean 1,
-``mu < 0`` inside; task 0 is the inner (tactile) shape, task 1 the outer (visual) shape.
+``mu < 0`` inside; task 0 is the inner (tactile) shape, task 1 the outer (visual) shape; boxes are ``(2, d)``
+[min corner; max corner].
+
+Layout (the data flow): ``kernels`` -> ``models`` (GPIS, GPIOIS) -> ``inference`` (exact engines, the K_t fit)
+-> ``geometry`` / ``surfaces`` / ``metrics`` -> ``planning`` -> ``exploration`` (one loop, behind the robot,
+force-sensor and point-cloud interfaces) <- ``sim`` (the worlds) and ``sensors``; ``io`` (datasets, logs,
+checkpoints, importers), ``studies``, ``cli``.
 """
 
 from __future__ import annotations
 
-from . import checkpoints, datasets, geometry, importers, metrics, offline, planning, sim, surfaces
-from .checkpoints import load_checkpoint, save_checkpoint
-from .datasets import Dataset, DatasetError, load_dataset, save_dataset
-from .exploration import ObservationPolicy, Trace, explore
-from .gpiois import GPIOIS, INNER, OUTER, UnidentifiedSimilarityWarning
-from .gpis import GPIS
-from .inference import DenseExactInference, JitterWarning, NotPositiveDefiniteError
-from .kernels import InverseMultiquadricKernel
-from .structured import StructuredExactInference
-from .settings import exact_arithmetic
-from .tolerances import tol
+import sys as _sys
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
-__all__ = ["GPIOIS", "GPIS", "ObservationPolicy", "Trace", "explore", "planning", "sim", "INNER", "OUTER", "DenseExactInference", "InverseMultiquadricKernel",
-           "JitterWarning", "NotPositiveDefiniteError", "UnidentifiedSimilarityWarning", "StructuredExactInference", "exact_arithmetic", "geometry", "metrics", "surfaces", "tol", "__version__",
-           "checkpoints", "datasets", "importers", "offline", "Dataset", "DatasetError", "load_dataset", "save_dataset",
-           "load_checkpoint", "save_checkpoint"]
+from . import geometry, metrics, planning, sim, surfaces  # noqa: E402
+from . import exploration, inference, io, models  # noqa: E402
+from .exploration import ObservationPolicy, RobotWorld, Trace, World, explore  # noqa: E402
+from .inference import (DenseExactInference, JitterWarning, NotPositiveDefiniteError,  # noqa: E402
+                        StructuredExactInference)
+from .io import (CheckpointError, Dataset, DatasetError, checkpoints, datasets, importers,  # noqa: E402
+                 load_checkpoint, load_dataset, offline, save_checkpoint, save_dataset)
+from .kernels import InverseMultiquadricKernel  # noqa: E402
+from .models import GPIOIS, GPIS, INNER, OUTER, UnidentifiedSimilarityWarning  # noqa: E402
+from .settings import exact_arithmetic  # noqa: E402
+from .threads import torch_threads  # noqa: E402
+from .tolerances import tol  # noqa: E402
+
+__all__ = ["GPIOIS", "GPIS", "INNER", "OUTER", "InverseMultiquadricKernel", "DenseExactInference",
+           "StructuredExactInference", "JitterWarning", "NotPositiveDefiniteError", "UnidentifiedSimilarityWarning",
+           "exact_arithmetic", "tol", "torch_threads", "__version__", "ObservationPolicy", "Trace", "World",
+           "RobotWorld", "explore", "models", "inference", "exploration", "io", "geometry", "metrics", "planning",
+           "surfaces", "sim", "checkpoints", "datasets", "importers", "offline", "Dataset", "DatasetError",
+           "CheckpointError", "load_dataset", "save_dataset", "load_checkpoint", "save_checkpoint"]
+
+# Module paths of the 0.1 layout keep working (``from torch_gpioius.gpiois import GPIOIS``, ...): each old name
+# points at the module that holds the code now.
+for _old, _new in {"gpiois": models.gpiois, "gpis": models.gpis, "_base": models.base,
+                   "structured": inference.structured, "optim": inference.optim, "datasets": io.datasets,
+                   "checkpoints": io.checkpoints, "importers": io.importers, "offline": io.offline}.items():
+    _sys.modules.setdefault(f"{__name__}.{_old}", _new)
+del _old, _new

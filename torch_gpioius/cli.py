@@ -1,5 +1,9 @@
-"""Command-line interface: ``gpioius simulate`` (the 2-D study), ``simulate3d`` (the robot study), ``fit DATASET``,
-``replay LOG``."""
+"""Command-line interface: ``gpioius simulate | simulate3d | study | fit | replay | import-bag | view | export``.
+
+Every command runs its GP arithmetic on ``--threads`` torch threads (default 1: on 2-core machines under load two
+threads per process made runs 2-3x slower with identical results; docs/performance.md). Bad input prints one
+line ``gpioius: error: ...`` and exits with status 2.
+"""
 
 from __future__ import annotations
 
@@ -11,30 +15,44 @@ __all__ = ["main"]
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from .study import run_study
+    from .studies.study2d import run_study
 
     objects = ["A", "B", "C", "D"] if args.object == "all" else [args.object]
     max_steps = 12 if args.smoke else args.max_steps
-    result = run_study(objects, out=args.out, max_steps=max_steps, progress=not args.quiet)
+    result = run_study(objects, out=args.out, max_steps=max_steps, progress=not args.quiet, smoke=args.smoke)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
 
 
 def _simulate3d(args: argparse.Namespace) -> int:
-    from .study3d import run_study_3d
+    from .studies.study3d import run_study_3d
 
     objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
     travel = 0.06 if args.smoke else args.max_travel
     result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
-                          progress=not args.quiet, mesh_resolution=0.01 if args.smoke else 0.006)
+                          progress=not args.quiet, mesh_resolution=0.01 if args.smoke else 0.006,
+                          smoke=args.smoke, world=args.world)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
 
 
+def _study(args: argparse.Namespace) -> int:
+    from .studies.sweep import run_sweep
+
+    result = run_sweep(world=args.world, objects=args.objects.split(","), modes=args.modes.split(","),
+                       seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
+                       max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
+                       progress=not args.quiet, threads=args.threads)
+    print((Path(args.out) / "summary.md").read_text())
+    print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
+          f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
+    return 0
+
+
 def _fit(args: argparse.Namespace) -> int:
-    from .offline import fit_dataset
+    from .io.offline import fit_dataset
 
     info = fit_dataset(args.dataset, args.out, theta=args.theta, noise=args.noise)
     print(f"{args.dataset}: {info['n']} observations ({info['n_inner']} inner, {info['n_outer']} outer), "
@@ -42,7 +60,8 @@ def _fit(args: argparse.Namespace) -> int:
     if "task_covariance" in info:
         kt = info["task_covariance"]
         print(f"K_t = [[{kt[0][0]:.5g}, {kt[0][1]:.5g}], [{kt[1][0]:.5g}, {kt[1][1]:.5g}]]")
-        print(f"similarity K_t[0,1]/K_t[0,0] = {info['similarity']:.4f}   (correlation {info['correlation']:.4f})")
+        print(f"correlation = {info['correlation']:.4f}   (the paper's similarity K_t[0,1]/K_t[0,0] = "
+              f"{info['similarity']:.4f})")
     else:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")
@@ -52,7 +71,7 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .offline import replay_log
+    from .io.offline import replay_log
 
     rows = replay_log(args.log, args.out, every=args.every, progress=not args.quiet)
     last = rows[-1]
@@ -62,56 +81,118 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="gpioius", description="Visuo-tactile inner-shape estimation (GPIOIS).")
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {v}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``gpioius`` argument parser (every help text shows its defaults)."""
+    from . import __version__
+
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    parser = argparse.ArgumentParser(prog="gpioius", formatter_class=fmt,
+                                     description="Visuo-tactile inner-shape estimation (GPIOIS).")
+    parser.add_argument("--version", action="version", version=f"gpioius {__version__}")
+    common = argparse.ArgumentParser(add_help=False, formatter_class=fmt)
+    common.add_argument("--threads", type=_positive_int, default=1,
+                        help="torch threads for the GP arithmetic (1 is fastest on 2 cores under load)")
     sub = parser.add_subparsers(dest="command", required=True)
-    sim = sub.add_parser("simulate", help="run the paper's 2-D study (objects A-D, both modes) and write figures",
+    sim = sub.add_parser("simulate", parents=[common], formatter_class=fmt,
+                         help="run the paper's 2-D study (objects A-D, both modes) and write figures",
                          description="Reproduce the paper's 2-D study: sliding exploration of objects A-D with "
                                      "visual-tactile GPIOIS and tactile-only GPIS; writes Fig. 4/5-like figures, "
                                      "per-step records (CSV/JSON) and a summary table.")
     sim.add_argument("--object", default="all", choices=["all", "A", "B", "C", "D"], help="object(s) to explore")
     sim.add_argument("--out", default="outputs/study2d", help="output folder")
     sim.add_argument("--max-steps", type=int, default=400, help="cap on planning steps per run")
-    sim.add_argument("--smoke", action="store_true", help="a few steps per run only (CI)")
-    sim.add_argument("--quiet", action="store_true", help="no progress bars")
+    sim.add_argument("--smoke", action="store_true", help="12 steps per run, claims not judged (CI)")
+    sim.add_argument("--quiet", action="store_true", help="no progress output")
     sim.set_defaults(func=_simulate)
-    s3 = sub.add_parser("simulate3d", help="run the robot study in simulation (objects E-H, both modes)",
+    s3 = sub.add_parser("simulate3d", parents=[common], formatter_class=fmt,
+                        help="run the robot study in simulation (objects E-H, both modes)",
                         description="Sec. VI in simulation: objects E-H (arm and torso under tight and loose "
-                                    "covers) explored by the simulated UR5 with a fingertip force sensor, after one "
+                                    "covers) explored by a simulated UR5 with a fingertip force sensor, after one "
                                     "capture of a simulated depth camera; visual-tactile GPIOIS vs tactile-only "
                                     "GPIS until 1.5 m of travel. Writes Fig. 9/10-like figures, records, logs and "
                                     "a summary table with the Sec. VI-B claims as measured.")
     s3.add_argument("--object", default="all", choices=["all", "E", "F", "G", "H"], help="object(s) to explore")
+    s3.add_argument("--world", default="penalty", choices=["penalty", "mujoco"],
+                    help="penalty: static force-field cover; mujoco: cloth and foam on MuJoCo's contact physics")
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
     s3.add_argument("--max-travel", type=float, default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
-    s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes (CI)")
-    s3.add_argument("--quiet", action="store_true", help="no progress bars")
+    s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
+    s3.add_argument("--quiet", action="store_true", help="no progress output")
     s3.set_defaults(func=_simulate3d)
-    fit = sub.add_parser("fit", help="learn K_t on a dataset or log; save a checkpoint and a figure",
+    sw = sub.add_parser("study", parents=[common], formatter_class=fmt,
+                        help="objects x modes x seeds, on Ray when installed; statistics, paired tests, figures",
+                        description="Run every (object, mode, seed) as one task (a Ray task when the 'ray' extra is "
+                                    "installed, else in-process), skip runs already on disk, and write runs.csv, "
+                                    "summary.json/md (medians, 95 % intervals, paired VT - T with Wilcoxon p-values, "
+                                    "the paper's claims judged with stated rules) and figures with bands.")
+    sw.add_argument("--world", default="2d", choices=["2d", "3d", "mujoco"], help="which world")
+    sw.add_argument("--objects", default="A,B,C,D", help="comma-separated object names")
+    sw.add_argument("--modes", default="visual-tactile,tactile",
+                    help="comma-separated: visual-tactile, tactile, visual-tactile+taps, local, local+taps")
+    sw.add_argument("--seeds", type=_positive_int, default=10, help="seeds per object and mode (seed 0 = unperturbed)")
+    sw.add_argument("--out", default="outputs/study", help="output folder")
+    sw.add_argument("--workers", type=_positive_int, default=None, help="parallel runs (default: the CPU count)")
+    sw.add_argument("--address", default=None, help="join an existing Ray cluster (e.g. ray://host:10001 or auto)")
+    sw.add_argument("--max-travel", type=float, default=None, help="travel budget per run [m] (3-D worlds)")
+    sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
+    sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
+    sw.add_argument("--quiet", action="store_true", help="no progress output")
+    sw.set_defaults(func=_study)
+    fit = sub.add_parser("fit", parents=[common], formatter_class=fmt,
+                         help="learn K_t on a dataset or log; save a checkpoint and a figure",
                          description="Fit GPIOIS (GPIS if there are no outer observations) on a torch_gpioius "
-                                     "dataset or exploration log (docs/data-format.md): prints K_t, the similarity "
-                                     "and the marginal likelihood; with --out saves model.pt and fit.png.")
+                                     "dataset or exploration log (docs/data-format.md): prints K_t, the correlation, "
+                                     "the paper's similarity and the marginal likelihood; with --out saves model.pt, "
+                                     "fit.png and fit.json.")
     fit.add_argument("dataset", help="dataset or exploration log file (.gpioius)")
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
     fit.add_argument("--theta", type=float, default=None, help="IMQ theta [m] (default: the file's, else 0.1)")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 (default: the file's, else 0.006)")
     fit.set_defaults(func=_fit)
-    rep = sub.add_parser("replay", help="re-run the estimation of an exploration log step by step",
+    rep = sub.add_parser("replay", parents=[common], formatter_class=fmt,
+                         help="re-run the estimation of an exploration log step by step",
                          description="Rebuild the model after each logged step, re-learn K_t, and write per-step "
                                      "records (similarity, uncertainty, Hausdorff when the scene is known) and a "
-                                     "transition figure.")
+                                     "figure of their transitions (transition.png).")
     rep.add_argument("log", help="exploration log (.gpioius) written by explore(log=...) or `gpioius simulate`")
     rep.add_argument("--out", default="outputs/replay", help="output folder")
-    rep.add_argument("--every", type=int, default=1, help="replay every k-th step (the last is always included)")
-    rep.add_argument("--quiet", action="store_true", help="no progress bar")
+    rep.add_argument("--every", type=_positive_int, default=1, help="replay every k-th step (the last always)")
+    rep.add_argument("--quiet", action="store_true", help="no progress output")
     rep.set_defaults(func=_replay)
-    args = parser.parse_args(argv)
+    for extra in _EXTRA_COMMANDS:
+        extra(sub, common, fmt)
+    return parser
+
+
+#: Commands registered by other modules (import-bag, view, export): functions (subparsers, common, formatter).
+_EXTRA_COMMANDS: list = []
+
+
+def main(argv: list[str] | None = None) -> int:
+    from .threads import torch_threads
+
+    args = build_parser().parse_args(argv)
     try:
-        return args.func(args)
-    except (ValueError, OSError, RuntimeError) as exc:
-        print(f"gpioius: error: {exc}", file=sys.stderr)
+        with torch_threads(getattr(args, "threads", 1)):
+            return args.func(args)
+    except (ValueError, OSError, RuntimeError, ImportError) as exc:
+        message = " ".join(str(exc).split())
+        print(f"gpioius: error: {message}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("gpioius: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -11,7 +11,8 @@ from skimage import measure
 
 from .geometry import predict_task
 
-__all__ = ["GridField", "evaluate_grid", "zero_level_curves", "zero_level_mesh", "closed_curves"]
+__all__ = ["GridField", "evaluate_grid", "zero_level_curves", "zero_level_mesh", "closed_curves", "touched_pieces",
+           "surface_samples", "clip_mesh"]
 
 
 @dataclass
@@ -33,11 +34,9 @@ class GridField:
         return tuple(float(a[1] - a[0]) for a in self.axes)
 
 
-def _check_bounds(bounds, dim: int) -> np.ndarray:
-    b = np.asarray(bounds, dtype=np.float64)
-    if b.shape != (dim, 2) or not np.isfinite(b).all() or not (b[:, 1] > b[:, 0]).all():
-        raise ValueError(f"bounds: expected {dim} finite (min, max) pairs with min < max [m], got {b.tolist()}")
-    return b
+#: Largest grid :func:`evaluate_grid` builds (4 million nodes, ~100 MB of results): a finer request is a mistake
+#: (explore(metrics_resolution=1e-5) asked for 25 GiB).
+MAX_GRID_POINTS = 4_000_000
 
 
 def evaluate_grid(model, bounds, resolution: float, task: int = 0) -> GridField:
@@ -45,17 +44,26 @@ def evaluate_grid(model, bounds, resolution: float, task: int = 0) -> GridField:
 
     Args:
         model: ``GPIS`` or ``GPIOIS``.
-        bounds: `(d, 2)` min/max per axis [m], base frame.
+        bounds: `(2, d)` box [min corner; max corner] [m], base frame (trimesh's ``mesh.bounds`` layout).
         resolution: grid spacing [m] (the last cell may be slightly smaller to hit the max bound).
         task: 0 (inner) or 1 (outer).
 
     Returns:
         ``GridField``.
+
+    Raises:
+        ValueError: a bad box, a non-positive resolution, or a grid of more than ``MAX_GRID_POINTS`` nodes.
     """
-    b = _check_bounds(bounds, model.dim)
-    if not resolution > 0:
-        raise ValueError(f"resolution: must be positive [m], got {resolution}")
-    axes = tuple(np.linspace(lo, hi, max(2, int(np.ceil((hi - lo) / resolution)) + 1)) for lo, hi in b)
+    from ._validation import as_float
+    from .sim.bounds import as_bounds
+
+    b = as_bounds(bounds, model.dim)
+    resolution = as_float(resolution, "resolution", positive=True, unit="m")
+    counts = [max(2, int(np.ceil((hi - lo) / resolution)) + 1) for lo, hi in b.T]
+    if float(np.prod(np.asarray(counts, dtype=np.float64))) > MAX_GRID_POINTS:
+        raise ValueError(f"resolution: {resolution:g} m over a {np.ptp(b, axis=0).round(3).tolist()} m box needs "
+                         f"{'x'.join(map(str, counts))} grid nodes (more than {MAX_GRID_POINTS}); use a coarser one")
+    axes = tuple(np.linspace(lo, hi, n) for (lo, hi), n in zip(b.T, counts))
     mesh = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, len(axes))
     x0 = model.train_inputs[0]
     with torch.no_grad():
@@ -70,7 +78,7 @@ def zero_level_curves(model, bounds, resolution: float = 0.005, task: int = 0,
 
     Args:
         model: a 2-D ``GPIS`` or ``GPIOIS``.
-        bounds: `(2, 2)` [[x_min, x_max], [y_min, y_max]] [m].
+        bounds: `(2, 2)` box [[x_min, y_min], [x_max, y_max]] [m].
         resolution: grid spacing [m]; curve vertices are linearly interpolated between grid nodes.
         task: 0 (inner) or 1 (outer).
         field: a precomputed ``GridField`` (skips the evaluation).
@@ -100,7 +108,7 @@ def zero_level_mesh(model, bounds, resolution: float = 0.01, task: int = 0,
 
     Args:
         model: a 3-D ``GPIS`` or ``GPIOIS``.
-        bounds: `(3, 2)` min/max per axis [m].
+        bounds: `(2, 3)` box [min corner; max corner] [m].
         resolution: grid spacing [m].
         task: 0 (inner) or 1 (outer).
         field: a precomputed ``GridField``.
@@ -117,3 +125,64 @@ def zero_level_mesh(model, bounds, resolution: float = 0.01, task: int = 0,
     verts, faces, _, _ = measure.marching_cubes(f.mean, level=0.0, spacing=f.spacing, gradient_direction="descent")  # mu < 0 inside
     verts = verts + np.array([a[0] for a in f.axes])
     return trimesh.Trimesh(vertices=verts, faces=faces, process=True)
+
+
+def _distances_to_piece(points: np.ndarray, piece) -> np.ndarray:
+    """Exact distance from `(n, d)` points to one piece: a `(k, d)` polyline or a ``trimesh.Trimesh``."""
+    if isinstance(piece, trimesh.Trimesh):
+        return np.abs(trimesh.proximity.ProximityQuery(piece).on_surface(points)[1])
+    from .metrics import _distance_to_segments, _segments
+
+    return _distance_to_segments(points, _segments([piece]))
+
+
+def touched_pieces(surface, contacts, radius: float = 0.01, min_fraction: float = 0.05):
+    """The pieces of an estimated zero set that the fingertip slid along: the estimate a user means.
+
+    A GPIS mean can dip below zero in unobserved space (beside a corner, under a loose cover) and create
+    pieces of {mu = 0} that no contact supports. Distance to the nearest contact does not separate them (such a
+    blob can lie within 2 cm of a corner contact); how many contacts a piece passes through does: the object's
+    piece passes within a few millimetres of nearly all of them, a blob of none.
+
+    A piece (a connected polyline in 2-D, a connected component of the mesh in 3-D) is kept when at least
+    ``max(1, ceil(min_fraction * n))`` of the ``n`` contacts lie within ``radius`` of it.
+
+    Args:
+        surface: list of `(k, 2)` polylines (:func:`zero_level_curves`), or a ``trimesh.Trimesh``
+            (:func:`zero_level_mesh`), or None.
+        contacts: `(n, d)` contact positions [m].
+        radius: how close a contact must be to count as on the piece [m].
+        min_fraction: the fraction of all contacts a piece must pass through.
+
+    Returns:
+        The kept polylines (a list), or one ``trimesh.Trimesh`` of the kept components (None if none is kept).
+    """
+    contacts = np.asarray(contacts, dtype=np.float64)
+    need = max(1, int(np.ceil(min_fraction * len(contacts))))
+    if surface is None or len(contacts) == 0:
+        return None if isinstance(surface, trimesh.Trimesh) or surface is None else []
+    if isinstance(surface, trimesh.Trimesh):
+        parts = surface.split(only_watertight=False)
+        kept = [p for p in parts if int((_distances_to_piece(contacts, p) <= radius).sum()) >= need]
+        return trimesh.util.concatenate(kept) if kept else None
+    return [c for c in surface if len(c) >= 2 and int((_distances_to_piece(contacts, c) <= radius).sum()) >= need]
+
+
+def surface_samples(mesh: trimesh.Trimesh | None, spacing: float, seed: int = 0) -> np.ndarray:
+    """`(n, 3)` points on a mesh: its vertices plus area-uniform samples, about one per ``spacing``^2 [m]."""
+    if mesh is None or len(mesh.faces) == 0:
+        return np.zeros((0, 3))
+    count = int(min(max(mesh.area / spacing**2, 100), 400_000))
+    pts, _ = trimesh.sample.sample_surface(mesh, count, seed=seed)
+    return np.concatenate([np.asarray(mesh.vertices), pts])
+
+
+def clip_mesh(mesh: trimesh.Trimesh | None, lower, upper) -> trimesh.Trimesh | None:
+    """The faces of ``mesh`` whose centres lie in the box ``lower <= c <= upper`` [m]; None if none do."""
+    if mesh is None:
+        return None
+    c = mesh.triangles_center
+    keep = ((c >= np.asarray(lower)) & (c <= np.asarray(upper))).all(axis=1)
+    if not keep.any():
+        return None
+    return mesh.submesh([np.flatnonzero(keep)], append=True)

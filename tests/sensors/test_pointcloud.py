@@ -137,7 +137,9 @@ def test_bad_inputs():
     with pytest.raises(ValueError, match="NaN"):
         PointCloud(np.array([[0.0, np.nan, 0.0]]))
     with pytest.raises(ValueError, match=r"\(n, 3\)"):
-        PointCloud(np.zeros((4, 2)))
+        PointCloud(np.zeros((4, 4)))
+    with pytest.raises(ValueError, match="origin"):
+        PointCloud(np.zeros((4, 2)), origin=np.zeros(3))
     with pytest.raises(ValueError, match="rigid"):
         SimulatedDepthCamera(trimesh.creation.box(), PinholeCamera.kinect_v2(), 2 * np.eye(4))
     with pytest.raises(ValueError, match="focal"):

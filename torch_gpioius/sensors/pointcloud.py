@@ -8,13 +8,14 @@ camera's rays crossed in front of it (y = 1), then average both into voxels as t
 from __future__ import annotations
 
 import abc
+import dataclasses
 import os
 from dataclasses import dataclass
 
 import numpy as np
 import trimesh
 
-from ..importers import load_point_cloud, voxel_average
+from ..io.importers import load_point_cloud, voxel_average
 
 __all__ = ["PointCloud", "PointCloudSource", "FilePointCloud", "PinholeCamera", "SimulatedDepthCamera", "look_at"]
 
@@ -33,31 +34,36 @@ class PointCloud:
 
     def __post_init__(self) -> None:
         p = np.asarray(self.points, dtype=np.float64)
-        if p.ndim != 2 or p.shape[1] != 3:
-            raise ValueError(f"points: expected (n, 3) [m], got shape {p.shape}")
+        if p.ndim != 2 or p.shape[1] not in (2, 3):
+            raise ValueError(f"points: expected (n, 3) (or (n, 2) in a 2-D world) [m], got shape {p.shape}")
         if not np.isfinite(p).all():
             raise ValueError("points: contain NaN or inf")
         self.points = p
         if self.origin is not None:
             o = np.asarray(self.origin, dtype=np.float64).reshape(-1)
-            if o.shape != (3,) or not np.isfinite(o).all():
-                raise ValueError(f"origin: expected a finite (3,) position [m], got {self.origin!r}")
+            if o.shape != (p.shape[1],) or not np.isfinite(o).all():
+                raise ValueError(f"origin: expected a finite ({p.shape[1]},) position [m], got {self.origin!r}")
             self.origin = o
 
     def __len__(self) -> int:
         return len(self.points)
 
+    @property
+    def sees_free_space(self) -> bool:
+        """Whether :meth:`free_space` can say where the view was free (it needs the camera's ``origin``)."""
+        return self.origin is not None
+
     def voxel_averaged(self, voxel: float) -> "PointCloud":
         """One mean point per occupied voxel of edge ``voxel`` [m] (paper: 0.05 m)."""
         if len(self) == 0:
             return self
-        return PointCloud(voxel_average(self.points, voxel), self.origin)
+        return dataclasses.replace(self, points=voxel_average(self.points, voxel))
 
     def cropped(self, lower, upper) -> "PointCloud":
-        """The points inside the box ``lower <= p <= upper`` (`(3,)` each) [m]."""
+        """The points inside the box ``lower <= p <= upper`` (`(d,)` each) [m]."""
         lo, hi = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
         keep = ((self.points >= lo) & (self.points <= hi)).all(axis=1)
-        return PointCloud(self.points[keep], self.origin)
+        return dataclasses.replace(self, points=self.points[keep])
 
     def free_space(self, offset: float) -> np.ndarray:
         """`(n, 3)` free-space points: each seen point moved ``offset`` [m] back along its ray to the camera.

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Callable, Mapping, Protocol
 
+import numpy as np
 import torch
 
 from .base import ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorTimeout
@@ -141,6 +142,26 @@ class SimulatedForceSensor(ForceSensor):
     def tare(self) -> None:
         """Reset the drift (the simulated offset) to zero."""
         self._offset_t0 = float(self.clock())
+
+    def get_state(self) -> dict:
+        """Numeric state (noise generator, counters, last sample) for logs: :meth:`set_state` resumes from it."""
+        last = self._last
+        return {"rng": self._gen.get_state().numpy().copy(),
+                "counters": np.array([self._reads, self._counter, int(self._disconnected)], dtype=np.int64),
+                "offset_t0": np.array([self._offset_t0]),
+                "last": (np.r_[last.force.numpy(), last.status, last.counter, last.timestamp] if last is not None
+                         else np.zeros(0))}
+
+    def set_state(self, state: dict) -> None:
+        """Restore a state from :meth:`get_state`."""
+        self._gen.set_state(torch.as_tensor(np.asarray(state["rng"], dtype=np.uint8)))
+        self._reads, self._counter, disc = (int(v) for v in np.asarray(state["counters"]))
+        self._disconnected = bool(disc)
+        self._offset_t0 = float(np.asarray(state["offset_t0"]).reshape(-1)[0])
+        last = np.asarray(state["last"], dtype=np.float64)
+        self._last = (ForceReading(torch.as_tensor(last[:3]), int(last[3]), int(last[4]), float(last[5]))
+                      if last.size else None)
+        self._last_status = self._last.status if self._last is not None else 0
 
     def __repr__(self) -> str:
         return f"SimulatedForceSensor(noise_std={self.noise_std}, dropout={self.dropout}, faults={self.faults})"

@@ -1,8 +1,27 @@
-"""Simulated worlds: 2-D polygons (Sec. V) and 3-D meshes with a depth camera and a robot (Sec. VI)."""
+"""Simulated worlds behind the exploration loop's interfaces: the 2-D polygon world (Sec. V), the 3-D penalty
+world (Sec. VI with a kinematic UR5, a penalty contact model and a ray-cast depth camera), and the MuJoCo world
+(a UR5 with a fingertip force sensor on real contact physics, cloth and foam covers; optional extra ``mujoco``)."""
 
-from .scene2d import Scene2D, paper_objects_2d, rectangle
-from .scene3d import Scene3D, paper_objects_3d, sphere_scene
+from .bounds import as_bounds
+from .penalty import ROBOT_STUDY_DEFAULTS, Scene3D, estimate_metrics_3d, paper_objects_3d, simulated_ur5, sphere_scene
+from .plane import (PlanarCamera, PlanarContact, PlanarForceSensor, PlanarGate, PlanarRobot, PlanarView, Scene2D,
+                    paper_objects_2d, rectangle)
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
-__all__ = ["Scene2D", "paper_objects_2d", "rectangle", "Scene3D", "paper_objects_3d", "sphere_scene", "MeshSDF",
-           "capsule", "mesh_from_sdf", "offset", "rounded_box", "smooth_union"]
+__all__ = ["as_bounds", "Scene2D", "paper_objects_2d", "rectangle", "PlanarCamera", "PlanarContact",
+           "PlanarForceSensor", "PlanarGate", "PlanarRobot", "PlanarView", "Scene3D", "paper_objects_3d",
+           "sphere_scene", "simulated_ur5", "estimate_metrics_3d", "ROBOT_STUDY_DEFAULTS", "MeshSDF", "capsule",
+           "mesh_from_sdf", "offset", "rounded_box", "smooth_union", "MujocoScene"]
+
+
+def __getattr__(name):
+    # MuJoCo is an optional extra: `import torch_gpioius.sim` works without it; using the world names the extra.
+    if name == "MujocoScene":
+        from .mujoco import MujocoScene
+
+        return MujocoScene
+    if name == "mujoco_objects_3d":
+        from .mujoco import mujoco_objects_3d
+
+        return mujoco_objects_3d
+    raise AttributeError(f"module 'torch_gpioius.sim' has no attribute {name!r}")

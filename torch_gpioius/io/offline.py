@@ -13,16 +13,28 @@ from tqdm.auto import tqdm
 
 from .checkpoints import save_checkpoint
 from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
-from .gpiois import GPIOIS, INNER
-from .metrics import hausdorff_distance, uncertainty_measure
-from .surfaces import closed_curves, evaluate_grid, zero_level_curves, zero_level_mesh
+from ..models.gpiois import GPIOIS, INNER
+from ..metrics import hausdorff_distance, uncertainty_measure
+from ..surfaces import closed_curves, evaluate_grid, zero_level_curves, zero_level_mesh
 
 __all__ = ["fit_dataset", "replay_log", "data_bounds"]
 
 
 def data_bounds(x: np.ndarray, pad: float = 0.05) -> np.ndarray:
-    """`(d, 2)` axis-aligned bounds of `(n, d)` points, padded by ``pad`` [m]."""
-    return np.stack([x.min(0) - pad, x.max(0) + pad], axis=-1)
+    """`(2, d)` box [min corner; max corner] of `(n, d)` points, padded by ``pad`` [m]."""
+    return np.stack([x.min(0) - pad, x.max(0) + pad])
+
+
+def _markers(ax, ds: Dataset, dim: int) -> None:
+    """The observations on top of a figure, each kind with its own marker and a legend entry."""
+    kinds = [((0, 0), dict(marker="o", color="k", s=6), "contacts (inner, y = 0)"),
+             ((0, 1), dict(marker="o", facecolors="none", edgecolors="tab:orange", s=10), "inner free space (y = 1)"),
+             ((1, 0), dict(marker="^", color="tab:cyan", s=8), "outer surface seen (y = 0)"),
+             ((1, 1), dict(marker="x", color="0.5", s=8, linewidths=0.6), "outer free space (y = 1)")]
+    for (task, y), style, label in kinds:
+        m = (ds.task == task) & (ds.y == y)
+        if m.any():
+            ax.scatter(*ds.x[m, :dim].T, label=label, **style)
 
 
 def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float) -> None:
@@ -31,34 +43,34 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from ..metrics import prior_variance
+
     bounds = data_bounds(ds.x, pad=max(0.05, 2 * resolution))
+    prior = prior_variance(model, INNER)
     if ds.x.shape[1] == 2:
         field = evaluate_grid(model, bounds, resolution, INNER)
         curves = zero_level_curves(model, bounds, resolution, INNER, field=field)
-        fig, ax = plt.subplots(figsize=(6, 5))
-        im = ax.imshow(field.var.T, origin="lower", extent=bounds.reshape(-1), cmap="viridis")
-        fig.colorbar(im, ax=ax, label="posterior variance of F_in")
-        for c in curves:
-            ax.plot(c[:, 0], c[:, 1], "r-", lw=2)
-        for task, marker in ((0, "k."), (1, "w.")):
-            for y, alpha in ((0, 1.0), (1, 0.35)):
-                m = (ds.task == task) & (ds.y == y)
-                if m.any():
-                    ax.plot(ds.x[m, 0], ds.x[m, 1], marker, ms=3, alpha=alpha)
+        fig, ax = plt.subplots(figsize=(7, 5.5))
+        extent = [bounds[0, 0], bounds[1, 0], bounds[0, 1], bounds[1, 1]]
+        im = ax.imshow(field.var.T / prior, origin="lower", extent=extent, cmap="Purples", vmin=0, vmax=1)
+        fig.colorbar(im, ax=ax, label="$V_{in}$ / prior variance")
+        for j, c in enumerate(curves):
+            ax.plot(c[:, 0], c[:, 1], "-", color="tab:red", lw=2, label="estimate $\\mu_{in} = 0$" if j == 0 else None)
+        _markers(ax, ds, 2)
         ax.set(xlabel="x [m]", ylabel="y [m]", title=title, aspect="equal")
     else:
         mesh = zero_level_mesh(model, bounds, resolution, INNER)
-        fig = plt.figure(figsize=(6, 5))
+        fig = plt.figure(figsize=(7, 5.5))
         ax = fig.add_subplot(projection="3d")
         if mesh is not None:
             _, var = model.predict(torch.as_tensor(mesh.triangles_center), task=INNER)
             surf = ax.plot_trisurf(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.vertices[:, 2],
-                                   triangles=mesh.faces, cmap="viridis", linewidth=0)
-            surf.set_array(var.detach().numpy())
-            fig.colorbar(surf, ax=ax, label="posterior variance of F_in", shrink=0.6)
-        inner = ds.task == 0
-        ax.scatter(*ds.x[inner & (ds.y == 0)].T, c="k", s=4)
+                                   triangles=mesh.faces, cmap="Purples", linewidth=0, vmin=0, vmax=1)
+            surf.set_array(var.detach().numpy() / prior)
+            fig.colorbar(surf, ax=ax, label="$V_{in}$ / prior variance on the estimate", shrink=0.6)
+        _markers(ax, ds, 3)
         ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title=title)
+    ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -73,8 +85,10 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
     """
     ds = load_dataset(path)
     model = ds.to_model(theta=theta, noise=noise).fit()
+    # 15 significant digits: theta passes through GPyTorch's positive constraint (softplus and back), which
+    # leaves rounding in the last digit (0.10000000000000002) that a reader should not see
     info = {"n": len(ds), "n_inner": int((ds.task == 0).sum()), "n_outer": int((ds.task == 1).sum()),
-            "theta": float(model.theta), "noise": float(model.noise),
+            "theta": float(f"{model.theta:.15g}"), "noise": float(f"{model.noise:.15g}"),
             "mll": float(model.log_marginal_likelihood())}
     if isinstance(model, GPIOIS):
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
@@ -85,7 +99,7 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
         info["checkpoint"] = str(save_checkpoint(model, out / "model.pt", extra={"dataset": str(path)}))
         res = resolution or (0.005 if ds.x.shape[1] == 2 else 0.02)
         fig = out / "fit.png"
-        _plot_estimate(model, ds, fig, f"{Path(path).name}: mu_in = 0 over the variance", res)
+        _plot_estimate(model, ds, fig, f"{Path(path).name}: estimated inner shape over its variance", res)
         info["figure"] = str(fig)
         (out / "fit.json").write_text(json.dumps(info, indent=2))
     return info
@@ -118,7 +132,7 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
         chosen.append(steps[-1])
     truth = None
     if header.get("dim") == 2 and header.get("scene"):
-        from .sim import paper_objects_2d
+        from ..sim import paper_objects_2d
 
         scene = paper_objects_2d().get(header["scene"])
         truth = None if scene is None else scene.inner_boundary
@@ -152,22 +166,47 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
         w.writeheader()
         w.writerows(rows)
     (out / "records.json").write_text(json.dumps(rows, indent=1))
-    if snapshots:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-
-        fig, axes = plt.subplots(1, len(snapshots), figsize=(3.2 * len(snapshots), 3.4), squeeze=False)
-        for ax, (k, (curves, touched)) in zip(axes[0], snapshots.items()):
-            if truth is not None:
-                ax.plot(*np.vstack([truth, truth[:1]]).T, "k--", lw=1)
-            for c in curves:
-                ax.plot(c[:, 0], c[:, 1], "r-")
-            ax.plot(touched[:, 0], touched[:, 1], "b.", ms=2)
-            ax.set(title=f"step {k}", aspect="equal")
-            ax.tick_params(labelsize=6)
-        fig.tight_layout()
-        fig.savefig(out / "transition.png", dpi=110)
-        plt.close(fig)
+    _plot_replay(rows, snapshots, truth, out / "transition.png", path.name)
     return rows
+
+
+def _plot_replay(rows: list[dict], snapshots: dict, truth, path: Path, name: str) -> None:
+    """The replay's transitions (uncertainty, Hausdorff, similarity over the steps) and, for 2-D logs, the
+    estimate at a few steps."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ncols = max(3, len(snapshots))
+    fig, axes = plt.subplots(2 if snapshots else 1, ncols, figsize=(3.4 * ncols, 6.6 if snapshots else 3.4),
+                             squeeze=False)
+    steps = [r["step"] for r in rows]
+    panels = (("uncertainty", "uncertainty, eq. (23)\n[V / prior variance]"),
+              ("hausdorff", "Hausdorff distance [cm]"), ("similarity", "paper's similarity K_t[0,1]/K_t[0,0]"))
+    for ax, (key, label) in zip(axes[0], panels):
+        v = np.array([r[key] for r in rows], dtype=float) * (100 if key == "hausdorff" else 1)
+        if np.isfinite(v).any():
+            ax.plot(steps, v, ".-")
+        else:
+            ax.text(0.5, 0.5, "not available\n(" + ("unknown scene" if key == "hausdorff" else "tactile log") + ")",
+                    ha="center", va="center", transform=ax.transAxes, color="0.4")
+        ax.set(xlabel="step", ylabel=label)
+    for ax in axes[0][3:]:
+        ax.axis("off")
+    if snapshots:
+        for ax, (k, (curves, touched)) in zip(axes[1], snapshots.items()):
+            if truth is not None:
+                ax.plot(*np.vstack([truth, truth[:1]]).T, "k--", lw=1, label="true inner shape")
+            for j, c in enumerate(curves):
+                ax.plot(c[:, 0], c[:, 1], "r-", label="estimate $\\mu_{in} = 0$" if j == 0 else None)
+            ax.plot(touched[:, 0], touched[:, 1], "b.", ms=2, label="contacts")
+            ax.set(title=f"step {k}", aspect="equal", xlabel="x [m]", ylabel="y [m]")
+            ax.tick_params(labelsize=6)
+        axes[1][0].legend(fontsize=6)
+        for ax in axes[1][len(snapshots):]:
+            ax.axis("off")
+    fig.suptitle(f"replay of {name}", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -7,7 +7,7 @@ import pytest
 import torch_gpioius as tg
 
 from torch_gpioius.cli import main
-from torch_gpioius.study import FRACTIONS, check_claims, run_study
+from torch_gpioius.studies.study2d import FRACTIONS, check_claims, run_study
 
 
 def test_cli_smoke_writes_figures_records_and_summary(tmp_path, capsys):
@@ -51,7 +51,7 @@ def test_cli_fit_and_replay_on_the_shipped_example(tmp_path):
 
     from torch_gpioius.cli import main
 
-    data = Path(__file__).resolve().parents[1] / "data" / "example_2d.gpioius"
+    data = Path(__file__).resolve().parents[2] / "data" / "example_2d.gpioius"
     assert main(["fit", str(data), "--out", str(tmp_path / "fit")]) == 0
     model = tg.load_checkpoint(tmp_path / "fit" / "model.pt")
     assert 0 < model.similarity < 2 and (tmp_path / "fit" / "fit.png").stat().st_size > 0

@@ -68,9 +68,9 @@ def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None
     Raises:
         CheckpointError: invalid model state or ``extra``, or the write failed (names the cause).
     """
-    from . import __version__
-    from .gpiois import GPIOIS
-    from .gpis import GPIS
+    from .. import __version__
+    from ..models.gpiois import GPIOIS
+    from ..models.gpis import GPIS
 
     if not isinstance(model, (GPIOIS, GPIS)):
         raise CheckpointError(f"save_checkpoint: expected a GPIOIS or GPIS, got {type(model).__name__}")
@@ -118,8 +118,8 @@ def load_checkpoint(path: str | os.PathLike):
         CheckpointError: not a checkpoint, a pickle that is not plain data (tampered), another format
             version, or contents that no longer match their SHA-256.
     """
-    from .gpiois import GPIOIS
-    from .gpis import GPIS
+    from ..models.gpiois import GPIOIS
+    from ..models.gpis import GPIS
 
     path = Path(path)
     try:

@@ -6,8 +6,8 @@ import torch
 from gpytorch.distributions import MultivariateNormal
 from torch import Tensor
 
-from ._base import ImplicitSurfaceGP
-from ._validation import as_labels, as_points
+from .base import ImplicitSurfaceGP
+from .._validation import as_labels, as_points
 
 __all__ = ["GPIS"]
 

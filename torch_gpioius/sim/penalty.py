@@ -1,5 +1,10 @@
-"""3-D world of the paper's robot experiment (Sec. VI): a rigid inner mesh under a soft outer mesh, a depth
+"""3-D penalty world of the paper's robot experiment (Sec. VI): a rigid inner mesh under a soft outer mesh, a depth
 camera that sees the outer one, and an exploration range for the fingertip (eq. 25).
+
+The hardware is a kinematic UR5 (``kinematics.SimulatedUR5``) behind its safety gate, a simulated fingertip force
+sensor over a penalty contact model (the inner object 1000 N/m, the cover a static force field of a few N/m that
+the fingertip passes through), a simulated depth camera, and the :class:`torch_gpioius.contact.ContactController`.
+The cover does not move: for cloth that the fingertip pushes aside, see the MuJoCo world.
 
 Frames: everything is in the UR5 base frame [m] (z up); the objects stand in front of the robot.
 """
@@ -11,13 +16,79 @@ import math
 import numpy as np
 import trimesh
 
+import torch
+
+from ..exploration.observations import ObservationPolicy
+from ..exploration.stopping import TravelBudget
+from ..exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
 from ..metrics import hausdorff_distance
 from ..planning import RangePenalty
 from ..sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
 from ..sensors.simulated import PenaltyContact
+from ..surfaces import surface_samples
+from .bounds import as_bounds
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
-__all__ = ["Scene3D", "paper_objects_3d", "sphere_scene"]
+__all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d",
+           "ROBOT_STUDY_DEFAULTS"]
+
+#: The robot study's settings (Sec. VI-A): theta 0.15, sigma^2 0.08, alpha 1 cm, 1.5 m of travel, the range
+#: penalty of eq. (25), the camera averaged in 5 cm voxels and cropped to 15 cm around the range.
+ROBOT_STUDY_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_steps=400,
+                                           stop=(TravelBudget(1.5),),
+                                           policy=ObservationPolicy(voxel=0.05, crop_margin=0.15),
+                                           metrics_every=1, approach_travel=2.0)
+
+
+def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
+                  q_home=(0.0, -1.2, 1.5, -1.9, -1.57, 0.0), margin: float = 0.1):
+    """A kinematic UR5 placed by IK with its fingertip at ``start`` pointing along ``direction``, behind a gate
+    whose workspace box is the exploration range [``lower``, ``upper``] and the start, grown by ``margin`` [m]."""
+    from kinematics import UR5, SafetyGate, SimulatedUR5, tool_rotation
+
+    ur5 = UR5(tool_offset=(0.0, 0.0, tool_length))
+    T = torch.eye(4, dtype=torch.float64)
+    T[:3, :3] = tool_rotation(direction)
+    T[:3, 3] = torch.as_tensor(start, dtype=torch.float64)
+    q0 = ur5.inverse_kinematics(T, q_init=torch.as_tensor(q_home, dtype=torch.float64))
+    lo = np.minimum(lower, start) - margin
+    hi = np.maximum(upper, start) + margin
+    return SimulatedUR5(ur5, q0, SafetyGate(ur5, lo.tolist(), hi.tolist()))
+
+
+def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float = 0.003, contacts=None) -> Measurement:
+    """Uncertainty (eq. 23) and Hausdorff distance (eq. 24) of the estimated inner surface, in the range.
+
+    The estimate {mu_in = 0} is meshed by marching cubes on a grid over the exploration range grown by 5 cm,
+    then both it and the true inner mesh are restricted to the exploration range (the robot can neither
+    touch nor be judged on what lies outside it, e.g. under the arm). The Hausdorff distance is computed
+    between dense surface samples (``spacing``) with k-d trees, so it is within about ``spacing`` of the
+    exact surface-to-surface value. With ``contacts``, also the distance of the touched pieces only
+    (:func:`torch_gpioius.surfaces.touched_pieces`).
+
+    Returns:
+        :class:`Measurement` (``surface``: the estimated mesh in the range, or None); NaN metrics when the estimate
+        has no surface in the range.
+    """
+    from ..metrics import uncertainty_measure
+    from ..surfaces import clip_mesh, evaluate_grid, touched_pieces, zero_level_mesh
+
+    truth = scene.inner_samples_in_range(spacing)
+    field = evaluate_grid(model, scene.bounds(0.05), resolution, 0)
+    mesh = clip_mesh(zero_level_mesh(model, None, field=field), scene.range[0], scene.range[1])
+    if mesh is None:
+        return Measurement()
+    est = surface_samples(mesh, spacing)
+    est = est[scene.in_range(est)]
+    h = hausdorff_distance(est, truth) if len(est) else float("nan")
+    ht = float("nan")
+    if contacts is not None and len(contacts):
+        touched = touched_pieces(mesh, contacts)
+        if touched is not None:
+            t = surface_samples(touched, spacing)
+            t = t[scene.in_range(t)]
+            ht = hausdorff_distance(t, truth) if len(t) else float("nan")
+    return Measurement(h, ht, uncertainty_measure(model, mesh, 0), None, mesh)
 
 
 def _mesh(m, name: str) -> trimesh.Trimesh:
@@ -30,19 +101,22 @@ def _mesh(m, name: str) -> trimesh.Trimesh:
     return m
 
 
-class Scene3D:
-    """A covered object in 3-D, seen by a depth camera and touched by the UR5's fingertip.
+class Scene3D(World):
+    """A covered object in 3-D, seen by a depth camera and touched by the UR5's fingertip (the penalty world).
 
     Args:
         inner: closed mesh of the rigid inner object [m], base frame.
         outer: closed mesh of the cover's outer surface [m] (must contain the inner one).
         start: `(3,)` fingertip start position [m], outside the outer mesh.
         direction: `(3,)` approach direction (normalised here); the tool points along it.
-        bounds: `(3, 2)` exploration range [[x_min, x_max], [y_min, y_max], [z_min, z_max]] [m]: the range
-            penalty C (eq. 25) keeps the planner inside it, and the metrics are evaluated inside it.
+        bounds: `(2, 3)` exploration range [min corner; max corner] [m] (trimesh's ``mesh.bounds`` layout): the
+            range penalty C (eq. 25) keeps the planner inside it, and the metrics are evaluated inside it.
         name: label for figures and records.
         camera: point-cloud source seeing the outer mesh (default: :meth:`default_camera`).
         cover_stiffness: stiffness of the cover in the simulated force model [N/m].
+        sensor_noise: force-sensor noise per axis [N] (the OptoForce OMD-20 is specified to about 0.01-0.03 N).
+        seed: seed of the sensor and camera noise.
+        defaults: overrides of :data:`ROBOT_STUDY_DEFAULTS`.
 
     Raises:
         ValueError: open or invalid meshes, an outer mesh not containing the inner one, a start inside the outer
@@ -50,7 +124,8 @@ class Scene3D:
     """
 
     def __init__(self, inner: trimesh.Trimesh, outer: trimesh.Trimesh, start, direction, bounds, name: str = "",
-                 camera=None, cover_stiffness: float = 5.0) -> None:
+                 camera=None, cover_stiffness: float = 5.0, sensor_noise: float = 0.02, seed: int = 0,
+                 defaults: ExplorationDefaults | None = None) -> None:
         self.inner, self.outer = _mesh(inner, "inner"), _mesh(outer, "outer")
         self.inner_sdf, self.outer_sdf = MeshSDF(self.inner), MeshSDF(self.outer)
         # containment on at most 2000 inner vertices (trimesh's ray-based contains needs GBs for large meshes)
@@ -64,10 +139,7 @@ class Scene3D:
         if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) == 0:
             raise ValueError("direction: must be a finite non-zero 3-vector")
         self.direction = d / np.linalg.norm(d)
-        b = np.asarray(bounds, dtype=np.float64)
-        if b.shape != (3, 2) or not np.isfinite(b).all() or not (b[:, 1] > b[:, 0]).all():
-            raise ValueError(f"bounds: expected (3, 2) finite [min, max] per axis with min < max [m], got {bounds!r}")
-        self.range = b
+        self.range = as_bounds(bounds, 3)
         if float(self.outer_sdf(self.start[None])[0][0]) <= 0:
             raise ValueError("start: must lie outside the outer mesh")
         if not cover_stiffness >= 0:
@@ -75,10 +147,90 @@ class Scene3D:
         self.name = name
         self._inner_samples: dict[float, np.ndarray] = {}
         self.cover_stiffness = float(cover_stiffness)
-        self.camera = camera if camera is not None else self.default_camera()
+        if isinstance(sensor_noise, bool) or not (isinstance(sensor_noise, (int, float)) and
+                                                  math.isfinite(sensor_noise) and 0 <= sensor_noise <= 1.0):
+            raise ValueError(f"sensor_noise: must be in [0, 1] N, got {sensor_noise!r}")
+        self.sensor_noise, self.seed = float(sensor_noise), int(seed)
+        self._camera = camera
+        self._defaults = defaults or ROBOT_STUDY_DEFAULTS
         self.first_contact()  # raises if the approach misses
 
     dim = 3
+
+    # ------------------------------------------------------------------ the World interface
+    @property
+    def defaults(self) -> ExplorationDefaults:
+        return self._defaults
+
+    @property
+    def camera(self):
+        """The point-cloud source (default: :meth:`default_camera`)."""
+        if self._camera is None:
+            self._camera = self.default_camera()
+        return self._camera
+
+    def hardware(self) -> Hardware:
+        from ..contact import ContactController
+        from ..sensors.simulated import SimulatedForceSensor
+
+        robot = simulated_ur5(self.start, self.direction, self.range[0], self.range[1])
+        sensor = SimulatedForceSensor(self.contact_model(), robot.read_pose, clock=lambda: robot.time,
+                                      noise_std=self.sensor_noise, seed=self.seed)
+        return Hardware(robot, sensor, self.camera, ContactController(robot, sensor))
+
+    def penalty(self) -> RangePenalty:
+        return self.range_penalty()
+
+    def crop_box(self) -> np.ndarray:
+        return self.range
+
+    def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
+        return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
+
+    def fingerprint(self) -> str:
+        return geometry_hash(self.inner.vertices, self.inner.faces, self.outer.vertices, self.outer.faces,
+                             self.start, self.direction, self.range,
+                             [self.cover_stiffness, self.sensor_noise, self.seed])
+
+    def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
+        return {"joints": hw.robot.read_joints().numpy(), "clock": np.array([hw.robot.time]),
+                **{f"sensor_{k}": v for k, v in hw.sensor.get_state().items()}}
+
+    def restore(self, hw: Hardware, state: dict[str, np.ndarray]) -> None:
+        hw.robot.set_state(torch.as_tensor(state["joints"]), float(np.asarray(state["clock"]).reshape(-1)[0]))
+        hw.sensor.set_state({k[len("sensor_"):]: v for k, v in state.items() if k.startswith("sensor_")})
+
+    def perturbed(self, seed: int) -> "Scene3D":
+        """The same objects with a seeded perturbation (seed 0: unchanged): the start moved uniformly within a
+        2 cm disc across the approach, the approach direction turned by up to 10 deg (uniform on the cap), and the
+        force-sensor and camera noise drawn from ``seed``. A perturbed approach must still hit the object."""
+        if seed == 0:
+            return self
+        rng = np.random.default_rng([seed, 3])
+        d = self.direction
+        u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(d, u)
+        for _ in range(100):
+            r, phi = 0.02 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+            start = self.start + r * (math.cos(phi) * u + math.sin(phi) * v)
+            cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
+            sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
+            direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
+            camera = None
+            if self._camera is None or isinstance(self._camera, SimulatedDepthCamera):
+                base = self.camera
+                camera = SimulatedDepthCamera(base.mesh, base.intrinsics, base.T_base_camera, noise_a=base.noise_a,
+                                              noise_b=base.noise_b, dropout=base.dropout, seed=seed,
+                                              engine=base.engine)
+            try:
+                return Scene3D(self.inner, self.outer, start, direction, self.range, name=self.name,
+                               camera=camera if camera is not None else self._camera,
+                               cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=seed,
+                               defaults=self._defaults)
+            except ValueError:
+                continue
+        raise ValueError(f"seed {seed}: no perturbed approach hits the object")
 
     # ------------------------------------------------------------------ geometry
     def first_contact(self) -> np.ndarray:
@@ -89,19 +241,17 @@ class Scene3D:
         return hits[np.argmin(np.linalg.norm(hits - self.start, axis=1))]
 
     def bounds(self, margin: float = 0.05) -> np.ndarray:
-        """`(3, 2)` grid box for surfaces and metrics: the exploration range grown by ``margin`` [m]."""
-        return self.range + np.array([-margin, margin])
+        """`(2, 3)` grid box [min; max] for surfaces and metrics: the exploration range grown by ``margin`` [m]."""
+        return self.range + np.array([[-margin], [margin]])
 
     def in_range(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` bool: points `(n, 3)` inside the exploration range."""
         p = np.asarray(points, dtype=np.float64)
-        return ((p >= self.range[:, 0]) & (p <= self.range[:, 1])).all(axis=1)
+        return ((p >= self.range[0]) & (p <= self.range[1])).all(axis=1)
 
     def inner_samples_in_range(self, spacing: float = 0.003) -> np.ndarray:
         """`(n, 3)` samples of the true inner surface inside the exploration range, about one per ``spacing``^2
         (the reference of the Hausdorff metric; computed once per spacing)."""
-        from ..exploration3d import surface_samples
-
         if spacing not in self._inner_samples:
             pts = surface_samples(self.inner, spacing)
             self._inner_samples[spacing] = pts[self.in_range(pts)]
@@ -109,7 +259,7 @@ class Scene3D:
 
     def range_penalty(self, beta: float = 100.0) -> RangePenalty:
         """The paper's C(x) (eq. 25, beta = 100) for this scene's exploration range."""
-        return RangePenalty(self.range[:, 0], self.range[:, 1], beta=beta)
+        return RangePenalty(self.range[0], self.range[1], beta=beta)
 
     def inner_outer_hausdorff(self, spacing: float = 0.003) -> float:
         """Hausdorff distance between the inner and outer surfaces [m] (the whole meshes).
@@ -117,8 +267,6 @@ class Scene3D:
         Both surfaces are sampled every ``spacing`` (vertices plus area-uniform samples) and compared with k-d
         trees: within about ``spacing`` of the exact value, seconds instead of minutes for 10^5 faces.
         """
-        from ..exploration3d import surface_samples
-
         return hausdorff_distance(surface_samples(self.inner, spacing), surface_samples(self.outer, spacing))
 
     def contact_model(self, k_inner: float = 1000.0) -> PenaltyContact:
@@ -130,13 +278,13 @@ class Scene3D:
         """A Kinect v2 (half resolution; depth noise 1.5 mm + 1.5 mm/m^2 * z^2) looking at the centre of the
         exploration range from 1.1 m, from behind the approach (so that it sees what the robot will touch),
         30 cm to the side and 30 cm up."""
-        target = self.range.mean(axis=1)
+        target = self.range.mean(axis=0)
         back = -self.direction
         side = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
         eye = target + back + 0.3 * side / np.linalg.norm(side) + np.array([0.0, 0.0, 0.3])
         eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
         return SimulatedDepthCamera(self.outer, PinholeCamera.kinect_v2(scale), look_at(eye, target),
-                                    noise_a=0.0015, noise_b=0.0015, seed=0)
+                                    noise_a=0.0015, noise_b=0.0015, seed=self.seed)
 
     def __repr__(self) -> str:
         return (f"Scene3D({self.name!r}, inner volume={self.inner.volume * 1e6:.0f} cm^3, "
@@ -156,8 +304,8 @@ def sphere_scene(radius: float = 0.08, cover: float = 0.01, center=(0.5, 0.0, 0.
     inner.apply_translation(c)
     outer.apply_translation(c)
     reach = radius + cover + 0.05
-    bounds = np.stack([c - reach, c + reach], axis=1)
-    bounds[2, 0] = c[2] - 0.3 * radius
+    bounds = np.stack([c - reach, c + reach])
+    bounds[0, 2] = c[2] - 0.3 * radius
     return Scene3D(inner, outer, start=c + [0.01, 0.005, reach + 0.05], direction=(0, 0, -1), bounds=bounds,
                    name=name)
 
@@ -190,7 +338,7 @@ def paper_objects_3d(resolution: float = 0.006) -> dict[str, Scene3D]:
                           capsule(elbow + sag, hand + 0.6 * sag, 0.075), k=0.04)
     arm_box = [[0.25, 0.75], [-0.40, 0.40], [0.05, 0.45]]
     arm_mesh = mesh_from_sdf(arm, arm_box, resolution)
-    arm_range = [[0.36, 0.66], [-0.24, 0.24], [0.24, 0.42]]
+    arm_range = [[0.36, -0.24, 0.24], [0.66, 0.24, 0.42]]
     arm_start, down = (0.51, -0.06, 0.45), (0.0, 0.0, -1.0)
 
     torso = smooth_union(rounded_box((0.62, 0.0, 0.24), (0.09, 0.15, 0.18), 0.06),
@@ -199,7 +347,7 @@ def paper_objects_3d(resolution: float = 0.006) -> dict[str, Scene3D]:
     poncho = smooth_union(offset(torso, 0.01), rounded_box((0.62, 0.0, 0.25), (0.17, 0.26, 0.24), 0.08), k=0.03)
     torso_box = [[0.32, 0.92], [-0.4, 0.4], [-0.1, 0.62]]
     torso_mesh = mesh_from_sdf(torso, torso_box, resolution)
-    torso_range = [[0.34, 0.62], [-0.24, 0.24], [0.10, 0.56]]
+    torso_range = [[0.34, -0.24, 0.10], [0.62, 0.24, 0.56]]
     torso_start, forward = (0.34, 0.03, 0.27), (1.0, 0.0, 0.0)
 
     return {

@@ -47,9 +47,9 @@ import math
 import torch
 from torch import Tensor
 
-from .inference import bordered, robust_cholesky
-from .kernels import imq
-from .tolerances import tol
+from .dense import bordered, robust_cholesky
+from ..kernels import imq
+from ..tolerances import tol
 
 __all__ = ["StructuredExactInference"]
 

@@ -255,7 +255,7 @@ def check_meta(meta: dict, where: str) -> dict:
     Raises:
         DatasetError: naming ``where`` and the field.
     """
-    from .tolerances import tol
+    from ..tolerances import tol
 
     if not isinstance(meta, dict):
         raise DatasetError(f"{where}: header metadata must be a JSON object, got {type(meta).__name__}")
@@ -349,8 +349,8 @@ class Dataset:
 
         ``theta``/``noise`` default to the header's values, then to 0.1 / 0.006.
         """
-        from .gpiois import GPIOIS
-        from .gpis import GPIS
+        from ..models.gpiois import GPIOIS
+        from ..models.gpis import GPIS
 
         if len(self) == 0:
             raise DatasetError("the dataset is empty: nothing to fit")

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .exploration import Trace, explore
-from .geometry import predict_task
-from .study import figure_similarity, write_records
+from ..exploration import Trace, explore
+from .figures import figure_3d_object, figure_similarity
+from .study2d import write_records
 
 __all__ = ["run_study_3d", "summarize_3d", "check_claims_3d"]
 
@@ -95,7 +95,7 @@ def check_claims_3d(rows: list[dict]) -> list[dict]:
     return claims
 
 
-def _markdown(rows: list[dict], claims: list[dict]) -> str:
+def _markdown(rows: list[dict], claims: list[dict] | None) -> str:
     def h(v):
         return "-" if v is None or np.isnan(v) else f"{100 * v:.1f}"
 
@@ -112,66 +112,18 @@ def _markdown(rows: list[dict], claims: list[dict]) -> str:
             f"{r.get('steps_vt', '-')} / {r.get('steps_t', '-')} | "
             f"{r.get('median_plan_ms_vt', float('nan')):.0f} / {r.get('median_plan_ms_t', float('nan')):.0f} | "
             f"{r.get('robot_time_s_vt', float('nan')):.0f} / {r.get('robot_time_s_t', float('nan')):.0f} |")
+    if claims is None:
+        lines += ["", "Smoke run (a few centimetres of travel): the paper's claims are not judged on it."]
+        return "\n".join(lines) + "\n"
     lines += ["", "| claim (Sec. VI-B) | measured | holds |", "|---|---|---|"]
     for c in claims:
         lines.append(f"| {c['claim']} | {c['measured']} | {'yes' if c['holds'] else '**no**'} |")
     return "\n".join(lines) + "\n"
 
 
-def _figure_object(name: str, scene, pair: dict[str, Trace], path: Path) -> None:
-    """Fig. 9-like: per mode, the explored path over the final estimate coloured by its variance; and the
-    transitions of the uncertainty measure and the Hausdorff distance over the travel."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import torch
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-
-    fig = plt.figure(figsize=(15, 4.4))
-    for j, mode in enumerate(MODES):
-        ax = fig.add_subplot(1, 4, j + 1, projection="3d")
-        tr = pair.get(mode)
-        if tr is None:
-            continue
-        mesh = tr.final_mesh
-        if mesh is not None:
-            x0 = tr.model.train_inputs[0]
-            with torch.no_grad():
-                _, var = predict_task(tr.model, torch.as_tensor(np.array(mesh.triangles_center), dtype=x0.dtype), 0)
-            v = var.numpy()
-            cmap = plt.get_cmap("viridis")
-            colors = cmap((v - v.min()) / max(v.max() - v.min(), 1e-12))
-            ax.add_collection3d(Poly3DCollection(mesh.triangles, facecolors=colors, edgecolor="none", alpha=0.85))
-        truth = scene.inner.vertices[scene.in_range(scene.inner.vertices)][::7]
-        ax.scatter(*truth.T, s=0.3, c="0.6")
-        ax.plot(*tr.path.T, "-", color="tab:green", lw=1)
-        ax.scatter(*tr.contacts[0], c="red", s=12)
-        lo, hi = scene.range[:, 0], scene.range[:, 1]
-        ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), zlim=(lo[2], hi[2]), xlabel="x [m]", ylabel="y [m]",
-               zlabel="z [m]", title=f"{name}: {mode}\n(colour: posterior variance; green: path)")
-        ax.set_box_aspect(hi - lo)
-        ax.tick_params(labelsize=6)
-    for k, (key, label) in enumerate((("uncertainty", "uncertainty measure (eq. 23)"),
-                                      ("hausdorff", "Hausdorff distance [cm]"))):
-        ax = fig.add_subplot(1, 4, 3 + k)
-        for mode, style in zip(MODES, ("-", "--")):
-            tr = pair.get(mode)
-            if tr is None:
-                continue
-            y = getattr(tr, key) * (100 if key == "hausdorff" else 1)
-            ok = ~np.isnan(y)
-            ax.plot(tr.travel[ok], y[ok], style, marker=".", ms=3, label=mode)
-        ax.set(xlabel="travel [m]", title=label)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-
-
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
                  metrics_every: int = 5, modes=MODES, progress: bool = True, mesh_resolution: float = 0.006,
-                 **explore_kwargs) -> dict:
+                 smoke: bool = False, world: str = "penalty", **explore_kwargs) -> dict:
     """Run the simulated robot study on objects E-H and write figures, records, logs and the summary.
 
     Writes into ``out``: ``fig9_<object>.png``, ``fig10_similarity.png``, ``records.csv`` / ``records.json``
@@ -186,34 +138,46 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         modes: which modes to run.
         progress: progress bars.
         mesh_resolution: marching-cubes spacing of the object meshes [m].
+        smoke: a CI run: figures and records as usual, but the claims are not judged.
+        world: "penalty" (``tg.sim.paper_objects_3d``) or "mujoco" (``tg.sim.mujoco_objects_3d``: cloth and foam
+            covers on MuJoCo's contact physics; needs the ``mujoco`` extra).
         **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, ...).
     """
-    from tqdm.auto import tqdm
-
-    from .sim import paper_objects_3d
+    from .._progress import progress as reporter
 
     unknown = [o for o in objects if o not in OBJECTS]
     if unknown:   # before building the meshes (seconds)
         raise ValueError(f"objects: unknown {unknown}; choose among {list(OBJECTS)}")
-    scenes = paper_objects_3d(mesh_resolution)
+    if world == "penalty":
+        from ..sim import paper_objects_3d
+
+        scenes = paper_objects_3d(mesh_resolution)
+    elif world == "mujoco":
+        from ..sim.mujoco import mujoco_objects_3d
+
+        scenes = mujoco_objects_3d(objects, smoke=smoke)
+    else:
+        raise ValueError(f"world: must be 'penalty' or 'mujoco', got {world!r}")
     out = Path(out)
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     traces: dict[str, dict[str, Trace]] = {}
     jobs = [(o, m) for o in objects for m in modes]
-    with tqdm(jobs, desc="3-D study", disable=not progress) as bar:
-        for name, mode in bar:
-            bar.set_postfix_str(f"object {name}, {mode}")
-            traces.setdefault(name, {})[mode] = explore(
-                scenes[name], mode=mode, max_travel=max_travel, metrics_every=metrics_every, progress=progress,
-                log=out / "logs" / f"{name}_{mode}.gpioius", **explore_kwargs)
+    bar = reporter(len(jobs), "3-D study", progress)
+    for name, mode in jobs:
+        bar.set_postfix_str(f"object {name}, {mode}")
+        traces.setdefault(name, {})[mode] = explore(
+            scenes[name], mode=mode, max_travel=max_travel, metrics_every=metrics_every, progress=progress,
+            log=out / "logs" / f"{name}_{mode}.gpioius", **explore_kwargs)
+        bar.update(1)
+    bar.close()
     hio = {name: scenes[name].inner_outer_hausdorff() for name in objects}
     for name in objects:
-        _figure_object(name, scenes[name], traces[name], out / f"fig9_{name}.png")
+        figure_3d_object(name, scenes[name], traces[name], out / f"fig9_{name}.png")
     figure_similarity(traces, out / "fig10_similarity.png", "Similarity transitions (cf. Fig. 10)")
     write_records(traces, out)
     rows = summarize_3d(traces, hio)
-    claims = check_claims_3d(rows)
+    claims = None if smoke else check_claims_3d(rows)
     (out / "summary.json").write_text(json.dumps({"rows": rows, "claims": claims}, indent=1))
     (out / "summary.md").write_text(_markdown(rows, claims))
     return {"traces": traces, "rows": rows, "claims": claims, "seconds": time.perf_counter() - t0}

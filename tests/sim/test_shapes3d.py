@@ -66,7 +66,7 @@ def test_paper_objects_are_valid_and_ordered_by_cover_looseness():
     assert dh["E"] < 0.015 and dh["G"] < 0.015                   # tight: 8 mm covers
     assert dh["F"] > 0.04 and dh["H"] > 0.1                       # loose
     for s in objs.values():
-        assert s.in_range(s.first_contact()[None])[0] or s.first_contact()[2] >= s.range[2, 0]
+        assert s.in_range(s.first_contact()[None])[0] or s.first_contact()[2] >= s.range[0, 2]
         assert float(s.inner_sdf(s.first_contact()[None])[0][0]) == pytest.approx(0.0, abs=1e-9)
 
 
@@ -82,7 +82,11 @@ def test_scene_validation():
     with pytest.raises(ValueError, match="misses"):
         Scene3D(inner, outer, s.start, (0, 0, 1), b)
     with pytest.raises(ValueError, match="bounds"):
-        Scene3D(inner, outer, s.start, s.direction, b[:, ::-1])
+        Scene3D(inner, outer, s.start, s.direction, b[::-1])          # max corner first
+    with pytest.raises(ValueError, match=r"\[min, max\]-per-axis layout: pass its transpose"):
+        Scene3D(inner, outer, s.start, s.direction, b.T)              # the (3, 2) layout of 0.1
+    s2 = Scene3D(inner, outer, s.start, s.direction, outer.bounds)    # trimesh's mesh.bounds works as is
+    np.testing.assert_array_equal(s2.range, outer.bounds)
     with pytest.raises(ValueError, match="watertight|closed"):
         Scene3D(trimesh.Trimesh(inner.vertices, inner.faces[:-1]), outer, s.start, s.direction, b)
     with pytest.raises(ValueError, match="direction"):

@@ -7,7 +7,7 @@ import pytest
 
 import torch_gpioius as tg
 from torch_gpioius.cli import main
-from torch_gpioius.study3d import check_claims_3d, run_study_3d
+from torch_gpioius.studies.study3d import check_claims_3d, run_study_3d
 
 
 def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):

@@ -19,7 +19,7 @@ CHILD = """
 import sys
 import torch_gpioius as tg
 from torch_gpioius.sim import paper_objects_2d
-import torch_gpioius.exploration as ex
+import torch_gpioius.exploration.loop as ex
 orig = ex.LogWriter.append
 def append(self, kind, meta, arrays):
     orig(self, kind, meta, arrays)            # durable (fsync) when this returns

@@ -19,8 +19,8 @@ import math
 import torch
 from torch import Tensor
 
-from .kernels import imq
-from .tolerances import tol
+from ..kernels import imq
+from ..tolerances import tol
 
 __all__ = ["DenseExactInference", "JitterWarning", "NotPositiveDefiniteError", "robust_cholesky"]
 

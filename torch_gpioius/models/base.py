@@ -9,11 +9,11 @@ from gpytorch.likelihoods import GaussianLikelihood
 from gpytorch.means import ConstantMean
 from torch import Tensor
 
-from ._validation import as_float, as_points, task_id
-from .inference import DenseExactInference
-from .kernels import InverseMultiquadricKernel
-from .settings import exact_arithmetic
-from .tolerances import tol
+from .._validation import as_float, as_points, task_id
+from ..inference.dense import DenseExactInference
+from ..kernels import InverseMultiquadricKernel
+from ..settings import exact_arithmetic
+from ..tolerances import tol
 
 __all__ = ["ImplicitSurfaceGP"]
 

@@ -9,12 +9,12 @@ from gpytorch.distributions import MultivariateNormal
 from gpytorch.kernels import IndexKernel
 from torch import Tensor
 
-from ._base import ImplicitSurfaceGP
-from ._validation import as_labels, as_points, as_tasks, task_id
-from .inference import DenseExactInference
-from .optim import FitResult, maximize_mll
-from .structured import StructuredExactInference
-from .tolerances import tol
+from .base import ImplicitSurfaceGP
+from .._validation import as_labels, as_points, as_tasks, task_id
+from ..inference.dense import DenseExactInference
+from ..inference.optim import FitResult, maximize_mll
+from ..inference.structured import StructuredExactInference
+from ..tolerances import tol
 
 __all__ = ["GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
 

@@ -1,0 +1,236 @@
+"""The world behind the exploration loop: a robot, a force sensor and a point-cloud source, one interface each.
+
+STYLE.md 13: the loop plans, moves, senses and records through these and never asks which world it runs in.
+Every world -- the 2-D polygon world, the 3-D penalty world, MuJoCo, a real UR5 with an OptoForce and a
+camera -- is a :class:`World` that supplies
+
+* :meth:`World.hardware`: a :class:`Hardware` with the robot (Cartesian moves behind a safety gate), the force
+  sensor, the point-cloud source, and the contact controller that turns a planned step into force-guarded motion
+  (:class:`torch_gpioius.contact.ContactController` on a robot arm; a geometric one in the 2-D world);
+* where to start: ``start``, ``direction`` (the approach), and the exploration range (``bounds``, eq. 25);
+* :attr:`World.defaults`: the world's own settings (theta, sigma^2, alpha, stop rules, observation policy);
+* :meth:`World.measure`: the ground-truth metrics (eq. 23-24) where the truth is known;
+* :meth:`World.fingerprint`, :meth:`World.snapshot` / :meth:`World.restore`: what logs and resume need;
+* :meth:`World.perturbed`: the same world with a seeded perturbation (start, approach, sensor and camera noise)
+  for studies over seeds.
+"""
+
+from __future__ import annotations
+
+import abc
+import hashlib
+import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from .observations import ObservationPolicy
+from .stopping import StopRule, TravelBudget
+
+__all__ = ["World", "Hardware", "Toucher", "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash"]
+
+
+class Toucher(Protocol):
+    """The contact-control interface the loop uses (``ContactController`` and the 2-D geometric one)."""
+
+    def approach(self, direction, max_travel: float = ...) -> Any: ...
+
+    def slide(self, step, normal) -> Any: ...
+
+
+@dataclass
+class Hardware:
+    """One world's hardware: the three interfaces of the loop, and the controller built from robot and sensor.
+
+    Attributes:
+        robot: Cartesian moves behind a safety gate (``move_cartesian(dx, speed)``, ``tool_position()``,
+            ``stop()``, a ``time`` clock) -- a :class:`kinematics.RobotBackend` on an arm.
+        sensor: a :class:`torch_gpioius.sensors.ForceSensor`.
+        camera: a :class:`torch_gpioius.sensors.PointCloudSource`.
+        controller: ``approach(direction, max_travel)`` and ``slide(step, normal)`` returning
+            :class:`torch_gpioius.contact.ContactResult`.
+    """
+
+    robot: Any
+    sensor: Any
+    camera: Any
+    controller: Toucher
+
+
+@dataclass(frozen=True)
+class ExplorationDefaults:
+    """A world's own exploration settings; every one can be overridden in :func:`torch_gpioius.explore`.
+
+    Attributes:
+        theta: IMQ kernel parameter theta_x [m].
+        noise: sigma^2.
+        step: alpha, the planned step [m].
+        max_steps: cap on planning steps.
+        stop: the world's stop rules (:mod:`torch_gpioius.exploration.stopping`).
+        policy: the observation policy.
+        metrics_every: ground-truth metrics every k steps (and always at the last).
+        approach_travel: the approach gives up after this distance [m].
+    """
+
+    theta: float
+    noise: float
+    step: float = 0.01
+    max_steps: int = 400
+    stop: tuple[StopRule, ...] = ()
+    policy: ObservationPolicy = field(default_factory=ObservationPolicy)
+    metrics_every: int = 1
+    approach_travel: float = 2.0
+
+
+@dataclass
+class Measurement:
+    """Ground-truth metrics of an estimate (NaN where the truth is unknown, e.g. on a real robot).
+
+    Attributes:
+        hausdorff: eq. (24) between the whole zero set {mu_in = 0} and the true inner surface [m].
+        hausdorff_touched: the same for the touched pieces only (:func:`torch_gpioius.surfaces.touched_pieces`).
+        uncertainty: eq. (23), relative to the prior variance.
+        centre: centroid of the estimated inner region {mu_in < 0} (2-D; None otherwise or if empty).
+        surface: the estimated surface (2-D: list of polylines; 3-D: a ``trimesh.Trimesh`` in the range, or None).
+    """
+
+    hausdorff: float = math.nan
+    hausdorff_touched: float = math.nan
+    uncertainty: float = math.nan
+    centre: np.ndarray | None = None
+    surface: Any = None
+
+
+def geometry_hash(*arrays) -> str:
+    """SHA-256 (first 16 hex digits) of numeric arrays: a world's geometry fingerprint for logs and resume."""
+    h = hashlib.sha256()
+    for a in arrays:
+        a = np.ascontiguousarray(np.asarray(a, dtype=np.float64))
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    return h.hexdigest()[:16]
+
+
+class World(abc.ABC):
+    """Base class of the worlds the exploration loop runs in (see the module docstring).
+
+    Subclasses set ``name``, ``dim``, ``start`` `(d,)` [m], ``direction`` `(d,)` (unit) and implement
+    :meth:`hardware`, :meth:`penalty`, :attr:`defaults`; worlds with a known truth implement :meth:`measure`.
+    """
+
+    name: str = ""
+    dim: int = 3
+    start: np.ndarray
+    direction: np.ndarray
+
+    @property
+    @abc.abstractmethod
+    def defaults(self) -> ExplorationDefaults:
+        """This world's exploration settings."""
+
+    @abc.abstractmethod
+    def hardware(self) -> Hardware:
+        """A fresh :class:`Hardware` (robot at the start pose, sensor, camera, controller)."""
+
+    def penalty(self):
+        """C(x) of eq. (19)/(25) for this world (default: zero)."""
+        from ..planning import ZeroPenalty
+
+        return ZeroPenalty()
+
+    def crop_box(self) -> np.ndarray | None:
+        """`(2, d)` box [min; max] the camera's cloud is cropped to (None: no crop); see ``policy.crop_margin``."""
+        return None
+
+    def measure(self, model, contacts: np.ndarray, resolution: float | None = None) -> Measurement:
+        """Ground-truth metrics of ``model``'s inner estimate; a world without a known truth returns NaNs."""
+        return Measurement()
+
+    def fingerprint(self) -> str:
+        """A digest of everything that defines this world's geometry (resume refuses a log from another)."""
+        return geometry_hash(self.start, self.direction)
+
+    def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
+        """The hardware state needed to resume after a step (e.g. the robot's joints); numeric arrays only."""
+        return {}
+
+    def restore(self, hw: Hardware, state: dict[str, np.ndarray]) -> None:
+        """Put ``hw`` back into a state from :meth:`snapshot`."""
+        if state:
+            raise ValueError(f"{type(self).__name__}: cannot restore a hardware state on resume")
+
+    def perturbed(self, seed: int) -> "World":
+        """This world with a seeded perturbation (seed 0 is the world itself); see the study module."""
+        if seed == 0:
+            return self
+        raise NotImplementedError(f"{type(self).__name__} does not support seeded perturbations")
+
+    def describe(self) -> dict:
+        """JSON-able description for log headers."""
+        return {"world": type(self).__name__, "scene": self.name, "dim": self.dim,
+                "scene_fingerprint": self.fingerprint()}
+
+
+class RobotWorld(World):
+    """A real robot: a UR5 (``kinematics.RTDEUR5``), a force sensor (``OptoForceDAQ``) and a point-cloud source.
+
+    The hardware objects are given; the loop drives them exactly as it drives the simulated ones. A reference
+    world with the true geometry (e.g. a ``Scene3D`` built from a scan of the object) gives the metrics; without
+    one the metrics are the uncertainty only.
+
+    Args:
+        robot: a connected :class:`kinematics.RobotBackend` whose fingertip is at the start pose, pointing along
+            ``direction``, with a :class:`kinematics.SafetyGate` sized for the task.
+        sensor: a :class:`torch_gpioius.sensors.ForceSensor` (tared, free of contact).
+        camera: a :class:`torch_gpioius.sensors.PointCloudSource` in the base frame.
+        direction: `(3,)` approach direction (base frame).
+        bounds: `(2, 3)` exploration range [min corner; max corner] [m] (the eq. 25 penalty keeps the planner in it).
+        name: label for records.
+        reference: an optional world with the true geometry (used for :meth:`measure` only).
+        config: :class:`torch_gpioius.contact.ContactConfig` for the controller.
+        defaults: overrides of the robot study's defaults (theta 0.15, sigma^2 0.08, 1.5 m of travel).
+    """
+
+    dim = 3
+
+    def __init__(self, robot, sensor, camera, direction, bounds, *, name: str = "robot", reference: World | None =
+                 None, config=None, defaults: ExplorationDefaults | None = None) -> None:
+        from ..contact import ContactController
+        from ..sim.bounds import as_bounds
+
+        self.robot, self.sensor, self.camera = robot, sensor, camera
+        self.start = np.asarray(robot.tool_position().detach().cpu().numpy(), dtype=np.float64)
+        d = np.asarray(direction, dtype=np.float64).reshape(-1)
+        if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) == 0:
+            raise ValueError("direction: must be a finite non-zero 3-vector")
+        self.direction = d / np.linalg.norm(d)
+        self.range = as_bounds(bounds, 3)
+        self.name, self.reference = name, reference
+        self.controller = ContactController(robot, sensor, config)
+        self._defaults = defaults or ExplorationDefaults(
+            theta=0.15, noise=0.08, stop=(TravelBudget(1.5),),
+            policy=ObservationPolicy(voxel=0.05, crop_margin=0.15), metrics_every=5)
+
+    @property
+    def defaults(self) -> ExplorationDefaults:
+        return self._defaults
+
+    def hardware(self) -> Hardware:
+        return Hardware(self.robot, self.sensor, self.camera, self.controller)
+
+    def penalty(self):
+        from ..planning import RangePenalty
+
+        return RangePenalty(self.range[0], self.range[1], beta=100.0)
+
+    def crop_box(self):
+        return self.range
+
+    def measure(self, model, contacts, resolution=None):
+        if self.reference is not None:
+            return self.reference.measure(model, contacts, resolution)
+        return Measurement()
+
+    def fingerprint(self) -> str:
+        return geometry_hash(self.direction, self.range)
