@@ -20,7 +20,7 @@ import math
 from dataclasses import dataclass
 
 __all__ = ["DHRow", "UR5_DH", "UR5_JOINT_NAMES", "UR5_JOINT_LIMITS", "UR5_VELOCITY_LIMITS", "UR5_EFFORT_LIMITS",
-           "ur5_urdf"]
+           "UR5_LINK_MASSES", "UR5_LINK_COMS", "ur5_urdf"]
 
 
 @dataclass(frozen=True)
@@ -51,6 +51,17 @@ UR5_JOINT_LIMITS: tuple[tuple[float, float], ...] = ((-2 * math.pi, 2 * math.pi)
 UR5_VELOCITY_LIMITS: tuple[float, ...] = (math.pi,) * 6
 #: Joint torque limits [N m] (base/shoulder/elbow size 3, wrist size 1), carried into the URDF for completeness.
 UR5_EFFORT_LIMITS: tuple[float, ...] = (150.0, 150.0, 150.0, 28.0, 28.0, 28.0)
+#: Link masses [kg], Universal Robots' published dynamics parameters of the UR5 (CB3), beside its DH table.
+UR5_LINK_MASSES: tuple[float, ...] = (3.7, 8.393, 2.275, 1.219, 1.219, 0.1879)
+#: Link centres of mass [m] in the DH frame of each link (frame i after its row's transform), from the same table.
+UR5_LINK_COMS: tuple[tuple[float, float, float], ...] = (
+    (0.0, -0.02561, 0.00193),
+    (0.2125, 0.0, 0.11336),
+    (0.15, 0.0, 0.0265),
+    (0.0, -0.0018, 0.01634),
+    (0.0, 0.0018, 0.01634),
+    (0.0, 0.0, -0.001159),
+)
 
 
 def _fmt(v: float) -> str:

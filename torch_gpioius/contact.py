@@ -43,6 +43,12 @@ class ContactConfig:
         max_step: largest planned step :meth:`ContactController.slide` accepts [m] (a few times the planner's
             alpha = 1 cm). A larger one is refused, never split into many gate-approved sub-steps.
         max_approach: longest approach :meth:`ContactController.approach` accepts [m].
+        approach_step: step of the approach while ``|F|`` is below ``near_force`` [m] (then ``normal_step``).
+        near_force: ``|F|`` below which the approach takes ``approach_step`` [N].
+        tip_radius: radius of the fingertip's sphere around the tool point [m] (0: a point fingertip).
+        tip_stiffness: stiffness of the fingertip itself [N/m] (``inf``: rigid). With both, the recorded contact is
+            the point of the sphere on the surface: ``tool - (tip_radius - |F| / tip_stiffness) n`` with ``n`` the
+            measured force direction (the fingertip deflects back by ``|F| / tip_stiffness`` when pressed).
     """
 
     contact_force: float = 1.0
@@ -57,11 +63,16 @@ class ContactConfig:
     max_reading_age: float = 0.25
     max_step: float = 0.03
     max_approach: float = 2.0
+    approach_step: float = 0.001
+    near_force: float = 0.3
+    tip_radius: float = 0.0
+    tip_stiffness: float = math.inf
 
     #: Upper ends of the accepted ranges (what the OptoForce OMD-20-SE-40N and a UR5 in contact work allow).
     BOUNDS = {"contact_force": 40.0, "retreat_force": 40.0, "max_force": 40.0, "max_force_jump": 40.0,
               "tangential_step": 0.01, "normal_step": 0.005, "max_normal_travel": 0.2, "retreat_distance": 0.05,
-              "speed": 0.25, "max_reading_age": 1.0, "max_step": 0.1, "max_approach": 3.0}
+              "speed": 0.25, "max_reading_age": 1.0, "max_step": 0.1, "max_approach": 3.0, "approach_step": 0.01,
+              "near_force": 40.0}
 
     def __post_init__(self) -> None:
         for name, hi in self.BOUNDS.items():
@@ -71,6 +82,15 @@ class ContactConfig:
         if not self.contact_force < self.retreat_force < self.max_force:
             raise ValueError("ContactConfig: need 0 < contact_force < retreat_force < max_force, got "
                              f"{self.contact_force}, {self.retreat_force}, {self.max_force}")
+        if isinstance(self.tip_radius, bool) or not (isinstance(self.tip_radius, (int, float)) and
+                                                      0 <= self.tip_radius <= 0.05):
+            raise ValueError(f"ContactConfig.tip_radius: must be in [0, 0.05] m, got {self.tip_radius!r}")
+        if isinstance(self.tip_stiffness, bool) or not (isinstance(self.tip_stiffness, (int, float)) and
+                                                         self.tip_stiffness > 0):
+            raise ValueError(f"ContactConfig.tip_stiffness: must be positive [N/m] (inf: rigid), got "
+                             f"{self.tip_stiffness!r}")
+        if self.near_force >= self.contact_force:
+            raise ValueError("ContactConfig: near_force must be below contact_force")
         if self.tangential_step > self.max_step:
             raise ValueError("ContactConfig: tangential_step must not exceed max_step")
 
@@ -219,7 +239,14 @@ class ContactController:
         free = torch.stack(log.free) if log.free else torch.zeros(0, 3, dtype=torch.float64)
         full = torch.cat([start[None], path])
         travel = float((full[1:] - full[:-1]).norm(dim=-1).sum())
-        return ContactResult(in_contact, path[-1].clone(), free, path, forces, travel)
+        contact = path[-1].clone()
+        cfg = self.config
+        if in_contact and (cfg.tip_radius > 0 or math.isfinite(cfg.tip_stiffness)):
+            f = forces[-1]
+            n = f / f.norm().clamp_min(1e-12)
+            deflection = float(f.norm()) / cfg.tip_stiffness if math.isfinite(cfg.tip_stiffness) else 0.0
+            contact = contact - (cfg.tip_radius - deflection) * n
+        return ContactResult(in_contact, contact, free, path, forces, travel)
 
     def approach(self, direction: torch.Tensor, max_travel: float = 0.3) -> ContactResult:
         """Move along ``direction`` until contact, then settle into the contact band.
@@ -239,8 +266,9 @@ class ContactController:
         f = self.read_force(-d)
         moved = 0.0
         while float(f.norm()) < cfg.contact_force and moved < max_travel:
-            f = self._move(d * cfg.normal_step, log, -d)
-            moved += cfg.normal_step
+            step = cfg.approach_step if float(f.norm()) < cfg.near_force else cfg.normal_step
+            f = self._move(d * step, log, -d)
+            moved += step
         if float(f.norm()) < cfg.contact_force:
             return self._result(False, log, start)
         ok, f = self._regulate(-d, f, log)

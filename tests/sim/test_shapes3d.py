@@ -36,13 +36,13 @@ def test_primitives_match_closed_forms():
 
 def test_meshed_capsule_has_the_analytic_volume_and_closed_surface():
     sdf = capsule((0, -0.1, 0), (0, 0.1, 0), 0.05)
-    mesh = mesh_from_sdf(sdf, [[-0.1, 0.1], [-0.2, 0.2], [-0.1, 0.1]], 0.004)
+    mesh = mesh_from_sdf(sdf, [[-0.1, -0.2, -0.1], [0.1, 0.2, 0.1]], 0.004)
     assert mesh.is_watertight and mesh.volume > 0
     exact = math.pi * 0.05**2 * 0.2 + 4 / 3 * math.pi * 0.05**3
     assert mesh.volume == pytest.approx(exact, rel=0.01)
     assert np.abs(sdf(mesh.vertices)).max() < 0.004 * 0.1
     with pytest.raises(ValueError, match="touches the bounds"):
-        mesh_from_sdf(sdf, [[-0.04, 0.04], [-0.2, 0.2], [-0.1, 0.1]], 0.004)
+        mesh_from_sdf(sdf, [[-0.04, -0.2, -0.1], [0.04, 0.2, 0.1]], 0.004)
 
 
 def test_mesh_sdf_matches_trimesh_and_the_analytic_sphere():

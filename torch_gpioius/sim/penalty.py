@@ -336,7 +336,7 @@ def paper_objects_3d(resolution: float = 0.006) -> dict[str, Scene3D]:
     sag = np.array([0.0, 0.0, -0.025])
     sleeve = smooth_union(offset(arm, 0.01), capsule(shoulder + sag, elbow + sag, 0.09),
                           capsule(elbow + sag, hand + 0.6 * sag, 0.075), k=0.04)
-    arm_box = [[0.25, 0.75], [-0.40, 0.40], [0.05, 0.45]]
+    arm_box = [[0.25, -0.40, 0.05], [0.75, 0.40, 0.45]]
     arm_mesh = mesh_from_sdf(arm, arm_box, resolution)
     arm_range = [[0.36, -0.24, 0.24], [0.66, 0.24, 0.42]]
     arm_start, down = (0.51, -0.06, 0.45), (0.0, 0.0, -1.0)
@@ -345,7 +345,7 @@ def paper_objects_3d(resolution: float = 0.006) -> dict[str, Scene3D]:
                          capsule((0.62, -0.14, 0.40), (0.62, 0.14, 0.40), 0.06),
                          capsule((0.62, 0.0, 0.42), (0.62, 0.0, 0.53), 0.045), k=0.05)
     poncho = smooth_union(offset(torso, 0.01), rounded_box((0.62, 0.0, 0.25), (0.17, 0.26, 0.24), 0.08), k=0.03)
-    torso_box = [[0.32, 0.92], [-0.4, 0.4], [-0.1, 0.62]]
+    torso_box = [[0.32, -0.4, -0.1], [0.92, 0.4, 0.62]]
     torso_mesh = mesh_from_sdf(torso, torso_box, resolution)
     torso_range = [[0.34, -0.24, 0.10], [0.62, 0.24, 0.56]]
     torso_start, forward = (0.34, 0.03, 0.27), (1.0, 0.0, 0.0)

@@ -83,7 +83,7 @@ def mesh_from_sdf(sdf: SDF, bounds, resolution: float = 0.005) -> trimesh.Trimes
 
     Args:
         sdf: the shape.
-        bounds: `(3, 2)` min/max per axis [m]; must enclose the shape with at least one cell of margin.
+        bounds: `(2, 3)` box [min corner; max corner] [m]; must enclose the shape with at least one cell of margin.
         resolution: grid spacing [m].
 
     Returns:
@@ -92,8 +92,10 @@ def mesh_from_sdf(sdf: SDF, bounds, resolution: float = 0.005) -> trimesh.Trimes
     Raises:
         ValueError: the shape is empty or touches the bounds (the mesh would be open).
     """
-    b = np.asarray(bounds, dtype=np.float64)
-    axes = [np.arange(lo, hi + resolution / 2, resolution) for lo, hi in b]
+    from .bounds import as_bounds
+
+    b = as_bounds(bounds, 3)
+    axes = [np.arange(lo, hi + resolution / 2, resolution) for lo, hi in b.T]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     d = sdf(grid).reshape(tuple(len(a) for a in axes))
     if not (d.min() < 0 < d.max()):
@@ -103,7 +105,7 @@ def mesh_from_sdf(sdf: SDF, bounds, resolution: float = 0.005) -> trimesh.Trimes
         raise ValueError("mesh_from_sdf: the shape touches the bounds; enlarge them")
     verts, faces, _, _ = measure.marching_cubes(d, level=0.0, spacing=(resolution,) * 3,
                                                 gradient_direction="descent")
-    mesh = trimesh.Trimesh(vertices=verts + b[:, 0], faces=faces, process=True)
+    mesh = trimesh.Trimesh(vertices=verts + b[0], faces=faces, process=True)
     # marching cubes emits zero-area triangles where the surface passes through a grid node; they leave
     # edges with a single neighbour once their duplicate vertices are merged
     mesh.update_faces(mesh.nondegenerate_faces())

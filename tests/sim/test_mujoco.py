@@ -1,0 +1,189 @@
+"""The MuJoCo world: the generated UR5 against the project's kinematics, physics sanity against independent
+expectations (a fingertip pressed into cloth over a box, a settling cloth, a quiet sensor), the gate under every
+command, determinism, and bad input."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+mujoco = pytest.importorskip("mujoco")
+
+import torch_gpioius as tg  # noqa: E402
+from kinematics import UR5  # noqa: E402
+from torch_gpioius.sim.mujoco import (MujocoInstability, MujocoScene, arm_primitives, mujoco_objects_3d,  # noqa: E402
+                                      union_sdf, ur5_mjcf)
+from torch_gpioius.sim.mujoco.primitives import as_primitives  # noqa: E402
+
+BOX = [{"type": "box", "size": (0.06, 0.06, 0.06), "pos": (0.5, 0.0, 0.2)}]
+BOX_RANGE = [[0.38, -0.12, 0.2], [0.62, 0.12, 0.36]]
+
+
+def box_scene(cover="loose", seed=0, **kw):
+    """A 12 cm box under a cloth cap built 3 cm off it that settles under gravity; the fingertip comes from above."""
+    opts = dict(slack=0.03) if cover == "loose" else dict(gap=0.008)
+    opts.update(kw)
+    return MujocoScene.from_primitives(BOX, cover, start=(0.505, 0.004, 0.40), direction=(0, 0, -1), bounds=BOX_RANGE,
+                                       name="box", seed=seed, base="cap", centre=(0.5, 0.0, 0.2), facing=(0, 0, 1),
+                                       half_angle=80.0, spacing=0.025, **opts)
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return box_scene()
+
+
+def test_the_generated_ur5_has_the_project_kinematics():
+    body, act, sens = ur5_mjcf(tool_offset=(0.0, 0.0, 0.05))
+    m = mujoco.MjModel.from_xml_string(f'<mujoco><compiler angle="radian" autolimits="true"/><worldbody>{body}'
+                                       f'</worldbody><actuator>{act}</actuator></mujoco>')
+    d = mujoco.MjData(m)
+    ur5 = UR5(tool_offset=(0.0, 0.0, 0.05))
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        q = rng.uniform(-3.0, 3.0, 6)
+        d.qpos[:6] = q
+        mujoco.mj_forward(m, d)
+        T = ur5.forward_kinematics(torch.tensor(q)).numpy()
+        np.testing.assert_allclose(d.site("ft_site").xpos, T[:3, 3], atol=1e-12)
+        np.testing.assert_allclose(d.site("ft_site").xmat.reshape(3, 3), T[:3, :3], atol=1e-12)
+    # UR's published masses are carried (the cylinder inertias are ours)
+    assert [round(float(m.body(f"link_{i}").mass[0]), 4) for i in range(1, 7)] == [3.7, 8.393, 2.275, 1.219, 1.219,
+                                                                                  0.1879]
+
+
+def test_a_dropped_cloth_settles_and_stays_finite(scene):
+    v = scene.cover_vertices()
+    assert np.isfinite(v).all()
+    gap = union_sdf(scene.primitives, v)
+    assert gap.min() > -1e-3                                   # rests on the box, does not sink into it
+    assert np.median(gap[v[:, 2] > 0.26]) < 0.03               # it came down from 3 cm onto the box top
+    hw = scene.hardware()
+    physics = hw.robot.physics
+    physics.step(100)
+    assert physics.kinetic_energy() < 1e-3                     # at rest
+    np.testing.assert_allclose(scene.cover_vertices(physics), v, atol=2e-3)
+
+
+def test_the_sensor_reads_zero_within_its_noise_in_free_space(scene):
+    hw = scene.hardware()
+    readings = []
+    for _ in range(60):
+        hw.robot.physics.step(5)
+        readings.append(hw.sensor.read().force.numpy())
+    f = np.array(readings)
+    assert np.abs(f.mean(axis=0)).max() < 4 * 0.02 / math.sqrt(len(f))      # unbiased after the tare
+    assert np.allclose(f.std(axis=0), 0.02, rtol=0.4)                       # the OMD-20 noise model
+
+
+def sheet_over_box(height=0.025, n=13, width=0.3):
+    """A square cloth pinned along its edges ``height`` above the box top (a tent): the fingertip meets the cloth
+    first and the box only after pushing the cloth down by ``height``."""
+    from torch_gpioius.sim.mujoco.covers import CoverMesh
+    g = np.linspace(-width / 2, width / 2, n)
+    xx, yy = np.meshgrid(g, g, indexing="ij")
+    verts = np.c_[0.5 + xx.ravel(), yy.ravel(), np.full(n * n, 0.26 + height)]
+    faces = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a, b, c, d = i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1
+            faces += [(a, b, c), (a, c, d)]
+    edge = np.flatnonzero((np.abs(xx.ravel()) > width / 2 - 1e-9) | (np.abs(yy.ravel()) > width / 2 - 1e-9))
+    cover = CoverMesh(verts, np.asarray(faces), edge, 2, "tight", 0.002, 5e4, 0.2, 1e-3, 0.02, 0.15)
+    return MujocoScene(as_primitives(BOX), cover, (0.505, 0.004, 0.40), (0, 0, -1), BOX_RANGE, name="sheet")
+
+
+def test_a_fingertip_pressed_into_cloth_over_a_box():
+    """The force stays small while the fingertip pushes the cloth, then rises at the box; the recorded contact lies
+    within 5 mm of the box; the cloth under the fingertip moved."""
+    scene = sheet_over_box()
+    hw = scene.hardware()
+    before = scene.cover_vertices(hw.robot.physics)
+    top = 0.26
+    cloth_above = before[np.linalg.norm(before[:, :2] - scene.start[:2], axis=1) < 0.02][:, 2].max()
+    assert cloth_above > top + 0.004                         # the settled cloth lies above the box here
+    res = hw.controller.approach(torch.tensor([0.0, 0.0, -1.0], dtype=torch.float64), max_travel=0.3)
+    assert res.in_contact
+    z = res.path[:, 2].numpy()
+    force = res.forces.norm(dim=1).numpy()
+    tip = scene.tip_radius
+    pushing = (z - tip < cloth_above) & (z - tip > top + 0.006)     # below the settled cloth, well above the box
+    assert pushing.any() and force[pushing].max() < 1.0             # the cloth gives way
+    assert force[-1] >= 1.0
+    box_distance = float(union_sdf(scene.primitives, res.contact.numpy()[None])[0])
+    assert abs(box_distance) < 0.005
+    after = scene.cover_vertices(hw.robot.physics)
+    under = np.linalg.norm(before[:, :2] - res.contact.numpy()[:2], axis=1) < 0.03
+    assert np.linalg.norm(after - before, axis=1)[under].max() > 0.002
+
+
+def _assert_commands_within_gate(robot):
+    gate, ur5 = robot.gate, robot.ur5
+    lo, hi = ur5.lower + gate.joint_margin, ur5.upper - gate.joint_margin
+    prev = torch.as_tensor(robot.log[0][1])
+    for _, q, speed in robot.log[1:]:
+        q = torch.as_tensor(q)
+        assert bool(((q >= lo) & (q <= hi)).all())
+        dq = (q - prev).abs()
+        if float(dq.max()) > 0:
+            assert bool((speed * dq / dq.max() <= gate.max_joint_speed * (1 + 1e-9)).all())
+        s = torch.linspace(0, 1, 32, dtype=torch.float64)[:, None]
+        tips = ur5.position(prev + s * (q - prev))
+        assert bool(((tips >= gate.workspace_lower - 1e-9) & (tips <= gate.workspace_upper + 1e-9)).all())
+        prev = q
+
+
+def test_a_short_exploration_keeps_to_the_gate_and_repeats_with_its_seed(scene):
+    made = []
+    original = scene.hardware
+    scene.hardware = lambda: made.append(original()) or made[-1]
+    try:
+        a = tg.explore(scene, mode="visual-tactile", max_travel=0.05, metrics_every=100)
+        b = tg.explore(scene, mode="visual-tactile", max_travel=0.05, metrics_every=100)
+    finally:
+        del scene.hardware
+    assert a.terminated == "travel" and a.n_steps >= 4
+    np.testing.assert_array_equal(a.contacts, b.contacts)               # the same seed: the same trajectory
+    for hw in made:
+        _assert_commands_within_gate(hw.robot)
+    assert np.isfinite(a.hausdorff[-1]) and np.isfinite(a.task_covariance[-1]).all()
+    c = tg.explore(scene.perturbed(1), mode="visual-tactile", max_travel=0.03, metrics_every=100)
+    assert np.abs(c.contacts[0] - a.contacts[0]).max() > 1e-4           # another seed starts elsewhere
+
+
+def test_bad_input_gets_named_errors():
+    with pytest.raises(ValueError, match=r"inner\[0\].*positive"):
+        as_primitives([{"type": "capsule", "size": (0.05, -0.1), "pos": (0, 0, 0)}])
+    with pytest.raises(ValueError, match=r"inner\[0\].*type"):
+        as_primitives([{"type": "torus", "size": (0.05,), "pos": (0, 0, 0)}])
+    with pytest.raises(ValueError, match="intersects the body"):
+        box_scene("tight", gap=0.001)                              # closer than the cloth's own radius
+    with pytest.raises(ValueError, match="start"):
+        MujocoScene.from_primitives(BOX, "loose", start=(0.5, 0.0, 0.275), direction=(0, 0, -1), bounds=BOX_RANGE,
+                                    base="cap", centre=(0.5, 0.0, 0.2), facing=(0, 0, 1), half_angle=80.0,
+                                    spacing=0.03, slack=0.03)        # between the box and its cover
+    with pytest.raises(ValueError, match="cover"):
+        MujocoScene.from_primitives(BOX, "silk", start=(0.5, 0, 0.4), direction=(0, 0, -1), bounds=BOX_RANGE)
+
+
+def test_a_blow_up_is_an_error_not_nan(scene):
+    hw = scene.hardware()
+    physics = hw.robot.physics
+    physics.data.qvel[-1] = float("nan")          # MuJoCo would reset the state and only count a warning
+    with pytest.raises(MujocoInstability, match="NaN"):
+        physics.step(1)
+    hw = scene.hardware()
+    hw.robot.physics.data.qvel[hw.robot._dadr] = 3.0          # every arm joint at its speed limit: ~1 J
+    hw.robot.physics.max_kinetic_energy = 0.1
+    with pytest.raises(MujocoInstability, match="kinetic energy"):
+        hw.robot.physics.step(1)
+
+
+@pytest.mark.slow
+def test_objects_e_to_h_build_and_settle():
+    scenes = mujoco_objects_3d()
+    for name, sc in scenes.items():
+        assert union_sdf(sc.primitives, sc.cover_vertices()).min() > -2e-3, name
+        assert sc.real_time_factor(0.2) > 0.1
+    assert len(arm_primitives()) == 3

@@ -1,0 +1,344 @@
+"""The MuJoCo world: a UR5 with a compliant fingertip force sensor, a rigid inner object made of primitives, and a
+cloth or foam cover that the fingertip pushes aside, on MuJoCo's contact physics.
+
+Everything the loop uses goes through the interfaces of :mod:`torch_gpioius.exploration.world`: the robot
+(:class:`MujocoUR5`, behind the same ``SafetyGate`` as every backend), the force sensor (:class:`MujocoForceSensor`),
+the camera (:class:`MujocoDepthCamera`, seeing the settled cover) and the unchanged
+:class:`torch_gpioius.contact.ContactController`. Metrics use the exact signed distance of the primitives.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import torch
+
+from ...exploration.observations import ObservationPolicy
+from ...exploration.stopping import TravelBudget
+from ...exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
+from ..bounds import as_bounds
+from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
+from .primitives import Primitive, as_primitives, union_sdf, union_surface_samples
+
+__all__ = ["MujocoScene", "MUJOCO_DEFAULTS"]
+
+#: The robot study's settings in the MuJoCo world (as the penalty world's; the camera at half Kinect resolution).
+MUJOCO_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_steps=400, stop=(TravelBudget(1.5),),
+                                      policy=ObservationPolicy(voxel=0.05, crop_margin=0.15), metrics_every=1,
+                                      approach_travel=0.5)
+
+
+def _require_mujoco():
+    try:
+        import mujoco  # noqa: F401
+    except ImportError as exc:   # pragma: no cover - depends on the environment
+        raise ImportError("the MuJoCo world needs the 'mujoco' package: pip install torch_gpioius[mujoco]") from exc
+
+
+class MujocoScene(World):
+    """A covered object on MuJoCo's physics, explored by a simulated UR5 with a fingertip force sensor.
+
+    Build it with :meth:`from_primitives`. On construction the model is compiled, the arm placed at the start (its
+    fingertip at ``start``, pointing along ``direction``), and the cover settled under gravity; every
+    :meth:`hardware` call starts from that settled state.
+
+    Args:
+        primitives: the inner object (:func:`torch_gpioius.sim.mujoco.primitives.as_primitives`).
+        cover: the :class:`~torch_gpioius.sim.mujoco.covers.CoverMesh`.
+        start: `(3,)` fingertip start [m], outside the cover.
+        direction: `(3,)` approach direction.
+        bounds: `(2, 3)` exploration range [min corner; max corner] [m].
+        name: label.
+        seed: seed of the sensor and camera noise.
+        sensor_noise: force noise per axis [N] (OptoForce OMD-20: ~0.02 N).
+        timestep: physics timestep [s].
+        settle_time: simulated time the cover settles before exploring [s].
+        camera_scale: image scale of the Kinect v2 model.
+        defaults: overrides of :data:`MUJOCO_DEFAULTS`.
+
+    Raises:
+        ImportError: MuJoCo is not installed (names the extra).
+        ValueError: a start inside the cover, a cover that intersects the body at rest, bad bounds.
+        MujocoInstability: the cover does not settle (NaN or runaway energy).
+    """
+
+    dim = 3
+
+    def __init__(self, primitives: list[Primitive], cover: CoverMesh, start, direction, bounds, *, name: str = "",
+                 seed: int = 0, sensor_noise: float = 0.02, timestep: float = 0.004, settle_time: float = 1.0,
+                 camera_scale: float = 0.5, defaults: ExplorationDefaults | None = None,
+                 tool_length: float = 0.05, tip_radius: float = 0.004) -> None:
+        _require_mujoco()
+        self.primitives, self.cover = list(primitives), cover
+        self.start = np.asarray(start, dtype=np.float64).reshape(-1)
+        d = np.asarray(direction, dtype=np.float64).reshape(-1)
+        if self.start.shape != (3,) or not np.isfinite(self.start).all():
+            raise ValueError(f"start: expected a finite (3,) position [m], got {start!r}")
+        if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) == 0:
+            raise ValueError("direction: must be a finite non-zero 3-vector")
+        self.direction = d / np.linalg.norm(d)
+        self.range = as_bounds(bounds, 3)
+        self.name, self.seed = name, int(seed)
+        self.sensor_noise, self.timestep, self.settle_time = float(sensor_noise), float(timestep), float(settle_time)
+        self.camera_scale, self.tool_length, self.tip_radius = float(camera_scale), float(tool_length), float(tip_radius)
+        self._defaults = defaults or MUJOCO_DEFAULTS
+        self._samples: dict[float, np.ndarray] = {}
+        # the cover must start outside the body (its elements' radius included)
+        depth = union_sdf(self.primitives, cover.vertices) - cover.radius
+        if depth.min() < -1e-9:
+            raise ValueError(f"cover: intersects the body at rest ({-depth.min() * 1e3:.1f} mm deep at vertex "
+                             f"{int(depth.argmin())}); give it more gap or slack")
+        if union_sdf(self.primitives, self.start[None])[0] <= 0:
+            raise ValueError("start: lies inside the inner object")
+        self._build()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_primitives(cls, inner, cover: str = "loose", start=None, direction=None, bounds=None, *,
+                        name: str = "", seed: int = 0, base: str = "auto", spacing: float = 0.025,
+                        axis=None, centre=None, facing=None, half_angle: float = 100.0, **cover_options
+                        ) -> "MujocoScene":
+        """A MuJoCo scene from primitives and a cover kind.
+
+        Args:
+            inner: list of ``{"type", "size", "pos", "quat"}`` in MuJoCo's conventions (SI, base frame, w-x-y-z).
+            cover: "tight" (a cloth shell ``gap`` off the body), "loose" (a cloth built ``slack`` off the body that
+                settles under gravity) or "foam" (a soft 3-D shell of ``thickness``).
+            start: `(3,)` fingertip start [m], outside the cover; direction: `(3,)` approach direction.
+            bounds: `(2, 3)` exploration range [min corner; max corner] [m].
+            base: how the cover is shaped: "tube" (around ``axis``, a polyline `(k, 3)`: limbs), "cap" (around
+                ``centre``, facing ``facing`` within ``half_angle`` degrees: torsos), or "auto" (a tube along the
+                primitives' longest extent when ``axis`` is given, else a cap facing the approach).
+            spacing: cloth vertex spacing [m].
+            **cover_options: ``gap``, ``slack``, ``thickness``, ``radius``, ``young``, ``poisson``, ``damping``,
+                ``density`` (:func:`~torch_gpioius.sim.mujoco.covers.make_cover`), and the scene's keywords
+                (``sensor_noise``, ``timestep``, ``settle_time``, ``camera_scale``, ``defaults``).
+
+        Raises:
+            ValueError: a primitive with a non-positive size, an unknown cover, missing start / direction / bounds.
+        """
+        _require_mujoco()
+        prims = as_primitives(inner)
+        if cover not in COVER_KINDS:
+            raise ValueError(f"cover: must be one of {COVER_KINDS}, got {cover!r}")
+        if start is None or direction is None or bounds is None:
+            raise ValueError("from_primitives: start, direction and bounds are required")
+        scene_kw = {k: cover_options.pop(k) for k in ("sensor_noise", "timestep", "settle_time", "camera_scale",
+                                                      "defaults") if k in cover_options}
+        if base == "auto":
+            base = "tube" if axis is not None else "cap"
+        if base == "tube":
+            if axis is None:
+                raise ValueError("base='tube' needs axis, a (k, 3) polyline along the limb")
+            mesh_base = tube_base(axis, spacing)
+        elif base == "cap":
+            c = np.mean([p.pos for p in prims], axis=0) if centre is None else np.asarray(centre, dtype=np.float64)
+            f = -np.asarray(direction, dtype=np.float64) if facing is None else np.asarray(facing, dtype=np.float64)
+            # the typical distance of the surface from the centre, along a few directions of the cap
+            probe = cap_base(c, f, half_angle, 1.0, 1.0)
+            radius = float(np.median(np.linalg.norm(shrink_wrap(prims, *probe[:2], 0.0) - c, axis=1)))
+            mesh_base = cap_base(c, f, half_angle, spacing, radius)
+        else:
+            raise ValueError(f"base: must be 'auto', 'tube' or 'cap', got {base!r}")
+        mesh = make_cover(prims, cover, mesh_base, **cover_options)
+        return cls(prims, mesh, start, direction, bounds, name=name, seed=seed, **scene_kw)
+
+    def _xml(self) -> str:
+        from .covers import cover_flexcomp
+        from .ur5 import ur5_mjcf
+
+        body, actuators, sensors = ur5_mjcf(tool_offset=(0.0, 0.0, self.tool_length), tip_radius=self.tip_radius)
+        geoms = "\n".join(p.mjcf(f"inner_{i}") for i, p in enumerate(self.primitives))
+        return f"""<mujoco model="{self.name or 'covered object'}">
+<compiler angle="radian" autolimits="true"/>
+<option timestep="{self.timestep}" solver="CG" tolerance="1e-6" integrator="discrete"><flag energy="enable"/></option>
+<size memory="64M"/>
+<worldbody>
+{geoms}
+{cover_flexcomp(self.cover)}
+{body}
+</worldbody>
+<actuator>{actuators}</actuator>
+<sensor>{sensors}</sensor>
+</mujoco>"""
+
+    def _build(self) -> None:
+        import mujoco
+
+        from kinematics import UR5, tool_rotation
+
+        from .hardware import MujocoPhysics
+
+        self.model = mujoco.MjModel.from_xml_string(self._xml())
+        physics = MujocoPhysics(self.model)
+        self.ur5 = UR5(tool_offset=(0.0, 0.0, self.tool_length))
+        T = torch.eye(4, dtype=torch.float64)
+        T[:3, :3] = tool_rotation(self.direction)
+        T[:3, 3] = torch.as_tensor(self.start)
+        self.q_start = self.ur5.inverse_kinematics(
+            T, q_init=torch.tensor([0.0, -1.2, 1.5, -1.9, -1.57, 0.0], dtype=torch.float64))
+        robot = self._robot(physics)
+        robot.place(self.q_start)
+        physics.step(max(1, int(round(self.settle_time / self.timestep))))      # the cover settles
+        self.settled = physics.get_state()
+        verts = self.cover_vertices(physics)
+        depth = union_sdf(self.primitives, verts) - 0.5 * self.cover.radius
+        if depth.min() < -0.005:
+            raise ValueError(f"cover: settles {-depth.min() * 1e3:.1f} mm into the body; it is too heavy or too soft "
+                             "for its contact")
+        # the start must lie outside the cover: looking back from the start (against the approach), nothing of
+        # the cover may be there, and the fingertip must not touch it
+        back = self._flex_ray(physics, self.start, -self.direction)
+        if back is not None:
+            raise ValueError("start: lies inside the cover (the cover is behind it along the approach); start "
+                             "outside the cover")
+        if np.linalg.norm(verts - self.start, axis=1).min() < self.tip_radius + self.cover.radius + 0.005:
+            raise ValueError("start: touches the cover; start at least 5 mm outside it")
+        self._physics0 = physics
+
+    def _robot(self, physics):
+        from kinematics import SafetyGate
+
+        from .hardware import MujocoUR5
+
+        lo = np.minimum(self.range[0], self.start) - 0.1
+        hi = np.maximum(self.range[1], self.start) + 0.1
+        return MujocoUR5(physics, self.ur5, SafetyGate(self.ur5, lo.tolist(), hi.tolist()))
+
+    def _flex_ray(self, physics, origin, direction) -> float | None:
+        import mujoco
+
+        vid = np.zeros(1, np.int32)
+        d = mujoco.mj_rayFlex(physics.model, physics.data, 0, False, False, True, False, 0,
+                              np.asarray(origin, dtype=np.float64), np.asarray(direction, dtype=np.float64), vid, None)
+        return None if d < 0 else float(d)
+
+    def cover_vertices(self, physics=None) -> np.ndarray:
+        """`(n, 3)` current cover vertex positions [m] (after settling when no physics is given)."""
+        physics = physics or self._physics0
+        return np.asarray(physics.data.flexvert_xpos, dtype=np.float64).copy()
+
+    # ------------------------------------------------------------------ the World interface
+    @property
+    def defaults(self) -> ExplorationDefaults:
+        return self._defaults
+
+    def hardware(self) -> Hardware:
+        from ...contact import ContactConfig, ContactController
+        from ...sensors.pointcloud import PinholeCamera, look_at
+        from .hardware import MujocoDepthCamera, MujocoForceSensor, MujocoPhysics
+
+        physics = MujocoPhysics(self.model)
+        physics.set_state(self.settled)
+        robot = self._robot(physics)
+        robot._target = np.asarray(self.q_start.numpy(), dtype=np.float64)
+        sensor = MujocoForceSensor(physics, noise_std=self.sensor_noise, seed=self.seed)
+        sensor.tare()
+        target = self.range.mean(axis=0)
+        back = -self.direction
+        side = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
+        eye = target + back + 0.3 * side / np.linalg.norm(side) + np.array([0.0, 0.0, 0.3])
+        eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
+        camera = MujocoDepthCamera(physics, PinholeCamera.kinect_v2(self.camera_scale), look_at(eye, target),
+                                   noise_a=0.0015, noise_b=0.0015, seed=self.seed)
+        config = ContactConfig(speed=0.08, approach_step=0.003, tip_radius=self.tip_radius, tip_stiffness=1000.0)
+        return Hardware(robot, sensor, camera, ContactController(robot, sensor, config))
+
+    def penalty(self):
+        from ...planning import RangePenalty
+
+        return RangePenalty(self.range[0], self.range[1], beta=100.0)
+
+    def crop_box(self) -> np.ndarray:
+        return self.range
+
+    def bounds(self, margin: float = 0.05) -> np.ndarray:
+        """`(2, 3)` grid box [min; max] for surfaces and metrics: the exploration range grown by ``margin`` [m]."""
+        return self.range + np.array([[-margin], [margin]])
+
+    def in_range(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float64)
+        return ((p >= self.range[0]) & (p <= self.range[1])).all(axis=1)
+
+    def inner_samples_in_range(self, spacing: float = 0.003) -> np.ndarray:
+        """`(n, 3)` samples of the true inner surface (the primitives' union) inside the exploration range."""
+        if spacing not in self._samples:
+            pts = union_surface_samples(self.primitives, spacing)
+            self._samples[spacing] = pts[self.in_range(pts)]
+        return self._samples[spacing]
+
+    @property
+    def inner(self):
+        """The inner surface as a ``trimesh.Trimesh`` (marching cubes of the exact union SDF at 5 mm; for figures and
+        exports; the metrics use the exact SDF)."""
+        if getattr(self, "_inner_mesh", None) is None:
+            from ..shapes3d import mesh_from_sdf
+
+            box = self.range + np.array([[-0.3], [0.3]])
+            self._inner_mesh = mesh_from_sdf(lambda p: union_sdf(self.primitives, p), box, 0.005)
+        return self._inner_mesh
+
+    def inner_outer_hausdorff(self, spacing: float = 0.003) -> float:
+        """Hausdorff distance [m] between the inner surface and the settled cover (in the exploration range)."""
+        from ...metrics import hausdorff_distance
+
+        verts = self.cover_vertices()
+        return hausdorff_distance(self.inner_samples_in_range(spacing), verts[self.in_range(verts)])
+
+    def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
+        from ..penalty import estimate_metrics_3d
+
+        return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
+
+    def fingerprint(self) -> str:
+        prim = np.array([list(p.size) + [0.0] * (3 - len(p.size)) + list(p.pos) + list(p.quat)
+                         for p in self.primitives])
+        return geometry_hash(prim, self.cover.vertices, self.cover.elements, self.start, self.direction, self.range,
+                             [self.seed, self.sensor_noise, self.timestep, self.settle_time])
+
+    def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
+        return {**{f"robot_{k}": v for k, v in hw.robot.get_state().items()},
+                **{f"sensor_{k}": v for k, v in hw.sensor.get_state().items()}}
+
+    def restore(self, hw: Hardware, state: dict[str, np.ndarray]) -> None:
+        hw.robot.set_state({k[6:]: v for k, v in state.items() if k.startswith("robot_")})
+        hw.sensor.set_state({k[7:]: v for k, v in state.items() if k.startswith("sensor_")})
+
+    def perturbed(self, seed: int) -> "MujocoScene":
+        """The same object and cover with a seeded perturbation (seed 0: unchanged): the start moved within a 2 cm
+        disc across the approach, the approach turned by up to 10 deg, and the sensor and camera noise from
+        ``seed``."""
+        if seed == 0:
+            return self
+        rng = np.random.default_rng([seed, 5])
+        d = self.direction
+        u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(d, u)
+        r, phi = 0.02 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+        start = self.start + r * (math.cos(phi) * u + math.sin(phi) * v)
+        cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
+        sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
+        direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
+        return MujocoScene(self.primitives, self.cover, start, direction, self.range, name=self.name, seed=seed,
+                           sensor_noise=self.sensor_noise, timestep=self.timestep, settle_time=self.settle_time,
+                           camera_scale=self.camera_scale, defaults=self._defaults, tool_length=self.tool_length,
+                           tip_radius=self.tip_radius)
+
+    def real_time_factor(self, seconds: float = 1.0) -> float:
+        """Simulated seconds per wall-clock second of the settled scene with the arm holding still."""
+        import time
+
+        from .hardware import MujocoPhysics
+
+        physics = MujocoPhysics(self.model)
+        physics.set_state(self.settled)
+        n = max(1, int(round(seconds / self.timestep)))
+        t0 = time.perf_counter()
+        physics.step(n)
+        return n * self.timestep / (time.perf_counter() - t0)
+
+    def __repr__(self) -> str:
+        return (f"MujocoScene({self.name!r}, {len(self.primitives)} primitives, {self.cover.kind} cover with "
+                f"{len(self.cover.vertices)} vertices)")
