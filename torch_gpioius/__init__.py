@@ -24,12 +24,12 @@ from .inference import (DenseExactInference, JitterWarning, NotPositiveDefiniteE
 from .io import (CheckpointError, Dataset, DatasetError, checkpoints, datasets, importers,  # noqa: E402
                  load_checkpoint, load_dataset, offline, save_checkpoint, save_dataset)
 from .kernels import InverseMultiquadricKernel  # noqa: E402
-from .models import GPIOIS, GPIS, INNER, OUTER, UnidentifiedSimilarityWarning  # noqa: E402
+from .models import GPIOIS, GPIS, INNER, OUTER, LocalGPIOIS, UnidentifiedSimilarityWarning  # noqa: E402
 from .settings import exact_arithmetic  # noqa: E402
 from .threads import torch_threads  # noqa: E402
 from .tolerances import tol  # noqa: E402
 
-__all__ = ["GPIOIS", "GPIS", "INNER", "OUTER", "InverseMultiquadricKernel", "DenseExactInference",
+__all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "InverseMultiquadricKernel", "DenseExactInference",
            "StructuredExactInference", "JitterWarning", "NotPositiveDefiniteError", "UnidentifiedSimilarityWarning",
            "exact_arithmetic", "tol", "torch_threads", "__version__", "ObservationPolicy", "Trace", "World",
            "RobotWorld", "explore", "models", "inference", "exploration", "io", "geometry", "metrics", "planning",

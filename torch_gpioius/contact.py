@@ -274,6 +274,45 @@ class ContactController:
         ok, f = self._regulate(-d, f, log)
         return self._result(ok, log, start)
 
+    def lift(self, direction: torch.Tensor, *, step: float = 0.005, until_force_below: float = 0.1,
+             extra: float = 0.01, max_distance: float = 0.2) -> ContactResult:
+        """Move away along ``direction`` in ``step`` moves until ``|F|`` drops below ``until_force_below`` (the cover
+        no longer pushes), then ``extra`` further; at most ``max_distance`` in all (an evidence-seeking tap).
+
+        Args:
+            direction: `(3,)` direction to lift along (the measured force direction: away from the surface).
+            step: length of each move [m] (at most ``config.max_step``).
+            until_force_below: the force [N] below which the cover counts as left behind.
+            extra: distance [m] moved after that.
+            max_distance: the longest lift [m].
+
+        Returns:
+            :class:`ContactResult` with ``in_contact=False``; its ``free_space`` holds the positions with
+            ``|F| < contact_force``.
+
+        Raises:
+            ContactFault: a sensing or force fault; SafetyViolation: a move the gate refuses.
+        """
+        d = _unit(direction, "direction")
+        cfg = self.config
+        for name, v, hi in (("step", step, cfg.max_step), ("until_force_below", until_force_below, cfg.contact_force),
+                            ("extra", extra, 0.1), ("max_distance", max_distance, cfg.max_approach)):
+            if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= hi):
+                raise ValueError(f"lift: {name} must be in (0, {hi:g}], got {v!r}")
+        log = _Log()
+        start = self.robot.read_pose()[:3, 3].clone()
+        f = self.read_force(d)
+        moved, beyond = 0.0, None
+        while moved < max_distance - 1e-12:
+            if beyond is None and float(f.norm()) < until_force_below:
+                beyond = moved
+            if beyond is not None and moved - beyond >= extra - 1e-12:
+                break
+            s = min(step, max_distance - moved)
+            f = self._move(d * s, log, d)
+            moved += s
+        return self._result(False, log, start)
+
     def slide(self, step: torch.Tensor, normal: torch.Tensor) -> ContactResult:
         """Execute one planned step: tangential motion in sub-steps, contact regulated along the normal.
 

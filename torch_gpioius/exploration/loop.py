@@ -49,11 +49,12 @@ class _State:
     normal: torch.Tensor | None = None
     steps: int = 0
     taps: int = 0
+    last_tap: int = 0
     terminated: str | None = None
     centre: np.ndarray | None = None
     surface: object = None
     rec: dict = field(default_factory=lambda: {k: [] for k in ("h", "ht", "u", "s", "rho", "ci", "travel", "time",
-                                                                 "kt", "sim", "taps")})
+                                                                 "kt", "sim", "taps", "regions")})
 
 
 def _check_int(value, name: str, lo: int, hi: int) -> int:
@@ -66,7 +67,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
             theta: float | None = None, noise: float | None = None, max_steps: int | None = None,
             max_travel: float | None = None, stop: tuple[StopRule, ...] | None = None,
             policy: ObservationPolicy | None = None, penalty=None, metrics_every: int | None = None,
-            metrics_resolution: float | None = None, interval_every: int | None = None, progress: bool = False,
+            metrics_resolution: float | None = None, interval_every: int | None = None, regions: int | None = None,
+            progress: bool = False,
             log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None) -> Trace:
     """Explore ``world`` and record per-step metrics: the same loop for every world.
 
@@ -99,6 +101,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
         metrics_resolution: grid of the metrics [m] (default: the world's).
         interval_every: compute the profile-likelihood interval of the task correlation every k steps
             (visual-tactile; default: never, it costs a few fits).
+        regions: visual-tactile with a similarity per region of the outer shape (:class:`torch_gpioius.LocalGPIOIS`
+            with this many regions) instead of one (GPIOIS).
         progress: report progress (a bar on a terminal, plain lines otherwise).
         log: write a crash-safe exploration log here (docs/data-format.md): one record per completed step, durable
             (fsync) before the next step begins.
@@ -120,6 +124,10 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
         raise ValueError(f"evidence: must be one of {EVIDENCE}, got {evidence!r}")
     if evidence is not None and mode != "visual-tactile":
         raise ValueError("evidence: evidence-seeking taps are about the similarity; they need mode='visual-tactile'")
+    if regions is not None:
+        regions = _check_int(regions, "regions", 1, 64)
+        if mode != "visual-tactile":
+            raise ValueError("regions: a similarity per region needs mode='visual-tactile'")
     d = world.defaults
     step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
     theta = d.theta if theta is None else theta
@@ -142,7 +150,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
     params = {**world.describe(), "mode": mode, "evidence": evidence, "step_length": step, "theta": float(theta),
               "noise": float(noise), "max_steps": max_steps, "stop": [r.describe() for r in rules],
               "metrics_every": metrics_every, "metrics_resolution": metrics_resolution,
-              "interval_every": interval_every, "policy": dataclasses.asdict(policy), "penalty": type(penalty).__name__}
+              "interval_every": interval_every, "regions": regions, "policy": dataclasses.asdict(policy),
+              "penalty": type(penalty).__name__}
     hw = world.hardware()
     taps = None
     if evidence == "taps":
@@ -159,7 +168,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
         if s.terminated is None:
             writer = LogWriter(resume_from, resume=True)
     else:
-        s = _start(world, hw, mode, theta, noise, policy, d.approach_travel)
+        s = _start(world, hw, mode, theta, noise, policy, d.approach_travel, regions)
 
     def measure(final: bool) -> None:
         k = s.steps
@@ -178,7 +187,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
         s.rec["s"].append(s.model.similarity if vt else math.nan)
         s.rec["rho"].append(s.model.correlation if vt else math.nan)
         ci = (math.nan, math.nan)
-        if vt and interval_every is not None and (s.steps % interval_every == 0 or final):
+        if regions is not None:
+            s.rec["regions"].append(s.model.region_correlations().numpy())
+        elif vt and interval_every is not None and (s.steps % interval_every == 0 or final):
             ci = s.model.similarity_interval(kind="correlation")
         s.rec["ci"].append(tuple(float(v) for v in ci))
         s.rec["kt"].append(s.model.task_covariance.numpy() if vt else np.full((2, 2), np.nan))
@@ -200,6 +211,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
                   "normal": np.full(world.dim, np.nan) if s.normal is None else s.normal.numpy(),
                   "path": res.path.numpy(), "positions": res.path.numpy(), "forces": res.forces.numpy(),
                   "timestamps": np.full(len(res.path), r["sim"][-1])}
+        if regions is not None:
+            arrays["local_params"] = s.model.params.numpy()
         arrays.update({f"world_{k}": np.asarray(v) for k, v in world.snapshot(hw).items()})
         writer.append("step", meta, arrays)
 
@@ -226,7 +239,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
     else:
         bar.update(s.steps)
     while s.terminated is None:
-        if s.steps >= max_steps:
+        if s.steps + s.taps >= max_steps:          # a tap counts as a step of the budget
             s.terminated = "max_steps"
             break
         s.steps += 1
@@ -250,23 +263,24 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
         s.normal = res.force_normal
         t1 = time.perf_counter()
         x_new, y_new, removed = _ingest(s, res, policy, mode)
-        tap_travel = 0.0
-        if taps is not None and taps.due(s):
-            tap = taps.tap(s, hw, world, policy)
-            if tap is not None:
-                x_tap, y_tap, removed_tap, tap_travel = tap
-                x_new = np.concatenate([x_new, x_tap]) if len(x_tap) else x_new
-                y_new = np.concatenate([y_new, y_tap]) if len(y_tap) else y_new
-                removed = np.concatenate([removed, removed_tap]) if len(removed_tap) else removed
+        tap = taps.tap(s, hw, world, policy) if taps is not None and taps.due(s) else None
         t2 = time.perf_counter()
         if mode == "visual-tactile":
             s.model.fit(multi_start=False)
         else:
             s.model.fit()
-        dt = t_plan + (t2 - t1) + (time.perf_counter() - t2)   # plan + ingest + re-learn; motion excluded
+        dt = t_plan + (time.perf_counter() - t1)   # plan + ingest + re-learn; motion excluded
         done = next((reason for r in motion_rules if (reason := r.check(s.contacts, s.travel, None))), None)
         record(dt, final=done is not None)
         log_step(x_new, y_new, np.zeros(len(x_new), np.int64), removed, res)
+        if tap is not None and writer is not None:
+            x_tap, y_tap, removed_tap, _ = tap
+            writer.append("tap", {"step": s.steps, "taps": s.taps, "travel": s.travel},
+                          {"x": x_tap, "y": y_tap, "task": np.zeros(len(x_tap), np.int64),
+                           "removed": np.asarray(removed_tap, dtype=np.int64), "contact": s.contacts[-1],
+                           "normal": s.normal.numpy(),
+                           **{f"world_{k}": np.asarray(v) for k, v in world.snapshot(hw).items()}})
+        del t2
         if budget:
             bar.update(min(round(s.travel * 100), round(budget * 100)) - bar.n)
         else:
@@ -291,11 +305,13 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
                  retracted=s.retracted, sim_time=np.asarray(r["sim"]),
                  final_mesh=s.surface if world.dim == 3 else None, hausdorff_touched=np.asarray(r["ht"]),
                  correlation=np.asarray(r["rho"]), correlation_interval=np.asarray(r["ci"]).reshape(-1, 2),
-                 taps=np.asarray(r["taps"], dtype=np.int64), world=type(world).__name__, evidence=evidence)
+                 taps=np.asarray(r["taps"], dtype=np.int64), world=type(world).__name__, evidence=evidence,
+                 region_correlation=np.asarray(r["regions"]).reshape(len(r["h"]), -1) if regions else
+                 np.zeros((len(r["h"]), 0)))
 
 
 def _start(world: World, hw: Hardware, mode: str, theta: float, noise: float, policy: ObservationPolicy,
-           approach_travel: float) -> _State:
+           approach_travel: float, regions: int | None = None) -> _State:
     """Vision (visual-tactile), approach to the first contact, and the initial model."""
     x_out = y_out = None
     if mode == "visual-tactile":
@@ -314,8 +330,14 @@ def _start(world: World, hw: Hardware, mode: str, theta: float, noise: float, po
     x_in = np.concatenate([contact[None], free])
     y_in = np.r_[0.0, np.ones(len(free))]
     if mode == "visual-tactile":
-        model = GPIOIS(np.concatenate([x_in, x_out]), np.concatenate([y_in, y_out]),
-                       np.r_[np.full(len(x_in), INNER), np.full(len(x_out), OUTER)], theta=theta, noise=noise)
+        args = (np.concatenate([x_in, x_out]), np.concatenate([y_in, y_out]),
+                np.r_[np.full(len(x_in), INNER), np.full(len(x_out), OUTER)])
+        if regions is not None:
+            from ..models.local import LocalGPIOIS
+
+            model = LocalGPIOIS(*args, regions=regions, theta=theta, noise=noise)
+        else:
+            model = GPIOIS(*args, theta=theta, noise=noise)
     else:
         model = GPIS(x_in, y_in, theta=theta, noise=noise)
     s = _State(model=model, contacts=[contact], path=list(first.path.numpy()), normal=first.force_normal)

@@ -42,7 +42,7 @@ def restore_run(path: str | os.PathLike, params: dict, world, hw):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", TornLogWarning)
         records = list(read_records(path))
-        states = [ds for rec, ds in replay(path) if rec.kind == "step"]
+        states = [ds for rec, ds in replay(path) if rec.kind in ("step", "tap")]
     if not records or records[0].kind != "header":
         raise DatasetError(f"{path}: no header record; not an exploration log")
     header = records[0].meta
@@ -71,9 +71,18 @@ def restore_run(path: str | os.PathLike, params: dict, world, hw):
         ci = r.meta.get("ci", [math.nan, math.nan])
         s.rec["ci"].append(tuple(float(math.nan if v is None else v) for v in ci))
         s.rec["kt"].append(np.asarray(r.arrays["kt"], dtype=np.float64))
-    last, data = steps[-1], states[-1]    # the training set after the last step (removals and additions replayed)
+    last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
+    taps = [r for r in records[1:] if r.kind == "tap"]
     theta, noise = header["theta"], header["noise"]
-    if header["mode"] == "visual-tactile":
+    if header["mode"] == "visual-tactile" and header.get("regions"):
+        from ..models.local import LocalGPIOIS
+
+        model = LocalGPIOIS(data.x, data.y, data.task, regions=int(header["regions"]), theta=theta, noise=noise)
+        model.params.copy_(torch.as_tensor(last.arrays["local_params"]))
+        model._engine = None
+        for r in steps:
+            s.rec["regions"].append(np.full(model.regions, math.nan))
+    elif header["mode"] == "visual-tactile":
         model = GPIOIS(data.x, data.y, data.task, theta=theta, noise=noise,
                        task_covariance=torch.as_tensor(last.arrays["kt"]))
     else:
@@ -87,6 +96,13 @@ def restore_run(path: str | os.PathLike, params: dict, world, hw):
         v = np.asarray(last.arrays.get(name, np.full(world.dim, np.nan)), dtype=np.float64)
         setattr(s, name, None if np.isnan(v).any() else torch.as_tensor(v))
     s.terminated = end[-1].meta["terminated"] if end else None
-    state = {k[len("world_"):]: v for k, v in last.arrays.items() if k.startswith("world_")}
+    after = taps[-1] if taps and taps[-1].meta.get("step") == s.steps else last
+    if after is not last:                        # the last step ended with a tap: its travel, contact and state
+        s.travel = float(after.meta["travel"])
+        s.taps = int(after.meta["taps"])
+        s.contacts[-1] = np.asarray(after.arrays["contact"], dtype=np.float64)
+        s.normal = torch.as_tensor(np.asarray(after.arrays["normal"], dtype=np.float64))
+        s.last_tap = s.steps
+    state = {k[len("world_"):]: v for k, v in after.arrays.items() if k.startswith("world_")}
     world.restore(hw, state)
     return s

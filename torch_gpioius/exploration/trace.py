@@ -36,6 +36,8 @@ class Trace:
         correlation_interval: `(n, 2)` profile-likelihood interval of the correlation (NaN where not computed).
         taps: `(n,)` cumulative number of evidence-seeking taps (``evidence="taps"``).
         world: the world's class name.
+        evidence: the evidence-seeking policy ("taps") or None.
+        region_correlation: `(n, R)` task correlation of each region (``regions=R``; `(n, 0)` otherwise).
     """
 
     mode: str
@@ -59,6 +61,7 @@ class Trace:
     taps: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     world: str = ""
     evidence: str | None = None
+    region_correlation: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     @property
     def n_steps(self) -> int:
@@ -77,6 +80,8 @@ class Trace:
                 row["correlation"] = float(self.correlation[i])
             if len(self.correlation_interval):
                 row["correlation_lo"], row["correlation_hi"] = (float(v) for v in self.correlation_interval[i])
+            if self.region_correlation.size:
+                row.update({f"correlation_region_{r}": float(v) for r, v in enumerate(self.region_correlation[i])})
             if self.evidence:
                 row["evidence"] = self.evidence
                 row["taps"] = int(self.taps[i]) if len(self.taps) else 0

@@ -25,7 +25,8 @@ from torch import Tensor
 
 from ..tolerances import tol
 
-__all__ = ["FitResult", "chol_params_to_task_covariance", "task_covariance_to_chol_params", "maximize_mll"]
+__all__ = ["FitResult", "chol_params_to_task_covariance", "task_covariance_to_chol_params", "maximize_mll",
+           "newton_maximize"]
 
 
 @dataclass
@@ -94,23 +95,23 @@ def _evaluate_trial(evaluate, phi: np.ndarray):
     return f, g, h
 
 
-def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0: Tensor) -> FitResult:
-    """Maximise the marginal likelihood over K_t by projected, damped Newton steps.
+def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+    """Maximise a smooth function of a few parameters within bounds by projected, Levenberg-damped Newton steps.
 
     Args:
-        evaluate: maps a `(2, 2)` K_t to ``(mll, grad (3,), hess (3, 3))`` in ``p = (K_t00, K_t01, K_t11)``.
-        kt0: `(2, 2)` starting K_t (positive definite; clamped to the parameter bounds).
+        value: ``phi (k,) -> (f, grad (k,), hess (k, k))`` in NumPy, or ``(-inf, None, None)`` where the function
+            cannot be evaluated (a rejected trial point).
+        phi0: `(k,)` start (clamped to the bounds).
+        lower, upper: `(k,)` bounds (``+-inf`` for none).
 
     Returns:
-        The ``FitResult``. Convergence: projected gradient infinity-norm <= ``tol.fit_gtol``, or a Newton
-        decrement below ``tol.fit_ftol * max(1, |mll|)``.
+        ``(phi, f, projected_gradient_norm, iterations, converged)``; convergence as in :func:`maximize_mll`.
     """
-    lo, hi = tol.log_chol_bounds
-    lower = np.array([lo, -math.inf, lo])
-    upper = np.array([hi, math.inf, hi])
-    phi = task_covariance_to_chol_params(kt0)
-    f, g, h = evaluate(chol_params_to_task_covariance(phi))
-    grad, hess = _chain(phi, g, h)
+    phi = np.minimum(np.maximum(np.asarray(phi0, dtype=np.float64), lower), upper)
+    f, grad, hess = value(phi)
+    if grad is None:
+        raise torch.linalg.LinAlgError("newton_maximize: the starting point cannot be evaluated")
+    k = len(phi)
     damping = 0.0
     converged = False
     it = 0
@@ -129,21 +130,56 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         min_eig = float(np.linalg.eigvalsh(neg_h).min())
         shift = max(damping, 0.0 if min_eig > 1e-12 * max(1.0, abs(f)) else -min_eig + 1e-8 * max(1.0, abs(f)))
         while True:
-            step = np.zeros(3)
+            step = np.zeros(k)
             step[idx] = np.linalg.solve(neg_h + shift * np.eye(len(idx)), grad[idx])
             candidate = np.minimum(np.maximum(phi + step, lower), upper)
             decrement = float(grad @ (candidate - phi))
             if shift == 0.0 and 0 <= decrement <= tol.fit_ftol * max(1.0, abs(f)):
                 # Newton-decrement stop: the pure Newton step predicts a gain below tolerance; near a
                 # non-degenerate maximum its error is quadratic in that gain, so take it without re-evaluating.
-                return FitResult(chol_params_to_task_covariance(candidate), f, pg_norm, it, True)
-            f_new, g_new, h_new = _evaluate_trial(evaluate, candidate)
+                return candidate, f, pg_norm, it, True
+            f_new, g_new, h_new = value(candidate)
             if f_new >= f - 1e-12 * max(1.0, abs(f)) and math.isfinite(f_new):
                 break
             shift = max(10.0 * shift, 1e-6 * max(1.0, abs(f)))
             if shift > 1e12 * max(1.0, abs(f)):
-                return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, False)
+                return phi, f, pg_norm, it, False
         damping = shift / 10.0 if shift > 0 else 0.0
-        phi, f = candidate, f_new
-        grad, hess = _chain(phi, g_new, h_new)
+        phi, f, grad, hess = candidate, f_new, g_new, h_new
+    return phi, f, pg_norm, it, converged
+
+
+def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0: Tensor) -> FitResult:
+    """Maximise the marginal likelihood over K_t by projected, damped Newton steps (:func:`newton_maximize` in the
+    Cholesky parameters ``phi``).
+
+    Args:
+        evaluate: maps a `(2, 2)` K_t to ``(mll, grad (3,), hess (3, 3))`` in ``p = (K_t00, K_t01, K_t11)``.
+        kt0: `(2, 2)` starting K_t (positive definite; clamped to the parameter bounds).
+
+    Returns:
+        The ``FitResult``. Convergence: projected gradient infinity-norm <= ``tol.fit_gtol``, or a Newton
+        decrement below ``tol.fit_ftol * max(1, |mll|)``.
+    """
+    lo, hi = tol.log_chol_bounds
+    lower = np.array([lo, -math.inf, lo])
+    upper = np.array([hi, math.inf, hi])
+
+    def value(phi):
+        f, g, h = _evaluate_trial(evaluate, phi)
+        if g is None:
+            return f, None, None
+        grad, hess = _chain(phi, g, h)
+        return f, grad, hess
+
+    phi0 = task_covariance_to_chol_params(kt0)
+    f0, g0, h0 = evaluate(chol_params_to_task_covariance(phi0))      # the start must evaluate (errors propagate)
+    first = [(f0, *_chain(phi0, g0, h0))]
+
+    def value_first(phi):
+        if first:
+            return first.pop()
+        return value(phi)
+
+    phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper)
     return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged)

@@ -7,5 +7,7 @@ Both are ``gpytorch.models.ExactGP`` subclasses whose arithmetic runs in the exa
 from .base import ImplicitSurfaceGP
 from .gpiois import GPIOIS, INNER, OUTER, UnidentifiedSimilarityWarning
 from .gpis import GPIS
+from .local import LocalGPIOIS, kmeans_regions
 
-__all__ = ["ImplicitSurfaceGP", "GPIS", "GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
+__all__ = ["ImplicitSurfaceGP", "GPIS", "GPIOIS", "LocalGPIOIS", "kmeans_regions", "INNER", "OUTER",
+           "UnidentifiedSimilarityWarning"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import torch
@@ -10,7 +11,7 @@ from gpytorch.kernels import IndexKernel
 from torch import Tensor
 
 from .base import ImplicitSurfaceGP
-from .._validation import as_labels, as_points, as_tasks, task_id
+from .._validation import as_float, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.optim import FitResult, maximize_mll
 from ..inference.structured import StructuredExactInference
@@ -172,6 +173,40 @@ class GPIOIS(ImplicitSurfaceGP):
         kt = self.task_covariance
         if float(kt.abs().max()) > tol.task_covariance_max:
             raise ValueError(f"task_covariance: entries above {tol.task_covariance_max:g} are outside the supported range")
+
+    def similarity_interval(self, level: float = 0.95, kind: str = "correlation") -> tuple[float, float]:
+        """Profile-likelihood interval of the similarity between the shapes at ``level`` (docs/theory.md).
+
+        The other two parameters of K_t are maximised out at every value of the similarity; the interval is where
+        twice the drop of the log marginal likelihood stays below the chi-square quantile (at ``rho = +-1``, the
+        boundary of the parameter space, below the quantile of the ``1/2 chi2_0 + 1/2 chi2_1`` mixture). Call
+        :meth:`fit` first: the interval is built around the fitted K_t.
+
+        Args:
+            level: confidence level in (0, 1).
+            kind: "correlation" (``K01 / sqrt(K00 K11)``, in [-1, 1], the similarity studies report first) or
+                "ratio" (the paper's ``K01 / K00``, unbounded: an endpoint the data never rule out is ``+-inf``).
+
+        Returns:
+            ``(lo, hi)``. With one task only (unidentified, see :attr:`identified`) the whole range: ``(-1, 1)`` or
+            ``(-inf, inf)``.
+        """
+        from ..inference.interval import correlation_interval, ratio_interval
+
+        if kind not in ("correlation", "ratio"):
+            raise ValueError(f"kind: must be 'correlation' or 'ratio', got {kind!r}")
+        level = as_float(level, "level", lo=0.5, hi=0.9999)
+        if not self.identified:
+            return (-1.0, 1.0) if kind == "correlation" else (-math.inf, math.inf)
+        engine = self._inference()
+        x0 = self.train_inputs[0]
+
+        def evaluate(kt: Tensor):
+            return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
+
+        kt = self.task_covariance
+        lo, hi, _ = (correlation_interval if kind == "correlation" else ratio_interval)(evaluate, kt, level)
+        return float(lo), float(hi)
 
     def _engine_class(self):
         if self.inference == "dense":

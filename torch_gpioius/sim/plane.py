@@ -132,19 +132,27 @@ class PlanarForceSensor(ForceSensor):
         tolerance: distance to the boundary that counts as touching [m].
     """
 
-    def __init__(self, scene: "Scene2D", robot: PlanarRobot, contact_force: float = 2.5, tolerance: float = 1e-9):
+    def __init__(self, scene: "Scene2D", robot: PlanarRobot, contact_force: float = 2.5, tolerance: float = 1e-9,
+                 cover_stiffness: float = 1.0):
         self.scene, self.robot = scene, robot
         self.contact_force, self.tolerance = float(contact_force), float(tolerance)
+        self.cover_stiffness = float(cover_stiffness)
         self._counter = 0
 
     def force_at(self, p: np.ndarray) -> np.ndarray:
-        """`(2,)` force at a fingertip position [N]."""
+        """`(2,)` force at a fingertip position [N]: the settled contact force on the inner shape, else the soft
+        cover's push (``cover_stiffness`` times the depth inside the outer shape, 1 N/m: below 0.4 N in the paper's
+        objects, far below the 1 N contact threshold), along the outer boundary's outward normal."""
         boundary = self.scene.inner.exterior
         q = np.asarray(boundary.interpolate(boundary.project(Point(p))).coords[0])
         inside = self.scene.inner.contains(Point(p))
-        if not inside and np.linalg.norm(p - q) > self.tolerance:
-            return np.zeros(2)
-        return self.contact_force * self.scene.outward_normal(q)
+        if inside or np.linalg.norm(p - q) <= self.tolerance:
+            return self.contact_force * self.scene.outward_normal(q)
+        if self.cover_stiffness > 0 and self.scene.outer.contains(Point(p)):
+            ring = self.scene.outer.exterior
+            o = np.asarray(ring.interpolate(ring.project(Point(p))).coords[0])
+            return self.cover_stiffness * float(np.linalg.norm(o - p)) * self.scene.outward_normal(o, which="outer")
+        return np.zeros(2)
 
     def read(self) -> ForceReading:
         self._counter = (self._counter + 1) & 0xFFFF
@@ -229,6 +237,28 @@ class PlanarContact:
         self.robot.move_to(contact)
         free = free_space_along(start, contact, self.sensing_step)
         return self._result([start, contact], free, float(np.linalg.norm(contact - start)))
+
+    def lift(self, direction, *, step: float = 0.005, until_force_below: float = 0.1, extra: float = 0.01,
+             max_distance: float = 0.2) -> ContactResult:
+        """Move away along ``direction`` in ``step`` moves until the force drops below ``until_force_below``, then
+        ``extra`` further (at most ``max_distance``); see :meth:`torch_gpioius.contact.ContactController.lift`."""
+        d = np.asarray(direction, dtype=np.float64).reshape(2)
+        d = d / np.linalg.norm(d)
+        x = self.robot.tool_position().numpy()
+        points, moved, beyond = [x], 0.0, None
+        while moved < max_distance - 1e-12:
+            if beyond is None and np.linalg.norm(self.sensor.force_at(points[-1])) < until_force_below:
+                beyond = moved
+            if beyond is not None and moved - beyond >= extra - 1e-12:
+                break
+            s = min(step, max_distance - moved)
+            self.robot.move_to(points[-1] + s * d)
+            points.append(points[-1] + s * d)
+            moved += s
+        free = np.array([p for p in points[1:] if np.linalg.norm(self.sensor.force_at(p)) < self.contact_force])
+        res = self._result(points, free.reshape(-1, 2), moved)
+        res.in_contact = False
+        return res
 
     def slide(self, step, normal=None) -> ContactResult:
         x = self.robot.tool_position().numpy()

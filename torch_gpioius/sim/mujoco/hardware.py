@@ -6,6 +6,7 @@ the settled cover with ``mujoco.mj_multiRay``.
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -243,20 +244,14 @@ class MujocoForceSensor(ForceSensor):
         self._offset = self._raw().copy()
 
     def get_state(self) -> dict[str, np.ndarray]:
-        bg = self._rng.bit_generator.state
-        return {"offset": self._offset.copy(), "counter": np.array([self._counter]),
-                "rng_key": np.asarray(bg["state"]["key"], dtype=np.uint32),
-                "rng_pos": np.array([bg["state"]["pos"], bg["has_gauss"]], dtype=np.int64),
-                "rng_gauss": np.array([bg["gauss"]])}
+        # the generator's state holds 128-bit integers: stored as its JSON text, in bytes
+        rng = np.frombuffer(json.dumps(self._rng.bit_generator.state).encode(), dtype=np.uint8)
+        return {"offset": self._offset.copy(), "counter": np.array([self._counter]), "rng": rng.copy()}
 
     def set_state(self, state: dict) -> None:
         self._offset = np.asarray(state["offset"], dtype=np.float64).copy()
         self._counter = int(np.asarray(state["counter"]).reshape(-1)[0])
-        pos, has_gauss = (int(v) for v in np.asarray(state["rng_pos"]))
-        self._rng.bit_generator.state = {"bit_generator": "MT19937",
-                                         "state": {"key": np.asarray(state["rng_key"], dtype=np.uint32), "pos": pos},
-                                         "has_gauss": has_gauss,
-                                         "gauss": float(np.asarray(state["rng_gauss"]).reshape(-1)[0])}
+        self._rng.bit_generator.state = json.loads(np.asarray(state["rng"], dtype=np.uint8).tobytes().decode())
 
 
 class MujocoDepthCamera(PointCloudSource):

@@ -1,0 +1,504 @@
+"""Studies as statistics: objects x modes x seeds (x worlds), one task per run, on Ray when installed.
+
+``gpioius study --world 2d|3d|mujoco --objects A,D --modes visual-tactile,tactile --seeds N --out DIR``
+(or :func:`run_sweep`) runs every (object, mode, seed) once and writes, as each run finishes:
+
+* ``DIR/runs/<object>_<mode>_<seed>.json``: the run's summary and per-step series (atomic: written to a temporary
+  file and renamed, so a killed run leaves nothing half-written and a re-run skips finished runs);
+* ``DIR/logs/<object>_<mode>_<seed>.gpioius``: its crash-safe exploration log.
+
+Then it aggregates: ``DIR/runs.csv`` (one row per run: ``object, mode, seed, final_hausdorff_m``, ...),
+``DIR/summary.json`` (``{object: {mode: {"final_hausdorff_m": {"median", "lo", "hi", ...}, "n", ...}}}`` plus the
+paired differences and the claims), ``DIR/summary.md`` and the figures.
+
+A seed perturbs the world (:meth:`torch_gpioius.exploration.world.World.perturbed`): the start within a 2 cm disc
+across the approach, the approach direction within 10 degrees, the force-sensor and the camera noise; seed 0 is
+the unperturbed world. Each run uses one torch thread.
+
+**Distributed.** With the ``ray`` extra each run is a Ray task (``num_cpus=1``, retried up to 3 times if its worker
+dies; a retried run starts afresh and overwrites its own log, and its result file is written once, atomically, so
+nothing is lost or duplicated). By default a local Ray starts embedded in the command (``workers`` CPUs); with
+``address`` the command joins an existing cluster. Without Ray the runs execute sequentially in-process.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import time
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .stats import median_interval, paired_difference
+
+__all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "MODES", "WORLDS", "FRACTIONS"]
+
+#: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants (issue 17).
+MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps")
+WORLDS = ("2d", "3d", "mujoco")
+#: Fractions of the reference travel at which the Hausdorff distance is reported.
+FRACTIONS = (0.10, 0.25, 0.50, 1.00)
+DEFAULT_OBJECTS = {"2d": ("A", "B", "C", "D"), "3d": ("E", "F", "G", "H"), "mujoco": ("E", "F", "G", "H")}
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One run of a sweep."""
+
+    world: str
+    object: str
+    mode: str
+    seed: int
+    out: str
+    smoke: bool = False
+    max_travel: float | None = None
+    max_steps: int | None = None
+    threads: int = 1
+
+    @property
+    def key(self) -> str:
+        return f"{self.object}_{self.mode}_{self.seed}"
+
+
+@lru_cache(maxsize=4)
+def _objects(world: str, smoke: bool) -> dict:
+    if world == "2d":
+        from ..sim import paper_objects_2d
+
+        return paper_objects_2d()
+    if world == "3d":
+        from ..sim import paper_objects_3d
+
+        return paper_objects_3d(0.01 if smoke else 0.006)
+    raise ValueError(world)
+
+
+def make_world(world: str, name: str, seed: int, smoke: bool = False):
+    """The world of one run: the named object, perturbed by ``seed`` (seed 0: the unperturbed object)."""
+    if world not in WORLDS:
+        raise ValueError(f"world: must be one of {WORLDS}, got {world!r}")
+    if world == "mujoco":
+        from ..sim.mujoco import mujoco_objects_3d
+
+        base = _mujoco_object(name, smoke)
+        return base.perturbed(seed)
+    scenes = _objects(world, smoke)
+    if name not in scenes:
+        raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {sorted(scenes)}")
+    return scenes[name].perturbed(seed)
+
+
+@lru_cache(maxsize=8)
+def _mujoco_object(name: str, smoke: bool):
+    from ..sim.mujoco import mujoco_objects_3d
+
+    return mujoco_objects_3d([name], smoke=smoke)[name]
+
+
+def _explore_kwargs(spec: RunSpec) -> dict:
+    mode, evidence = spec.mode, None
+    if mode.endswith("+taps"):
+        mode, evidence = mode[: -len("+taps")], "taps"
+    kw: dict = {"evidence": evidence}
+    if mode == "local":
+        kw["mode"], kw["regions"] = "visual-tactile", 4
+    else:
+        kw["mode"] = mode
+    if spec.world != "2d":
+        kw["metrics_every"] = 5
+        kw["max_travel"] = spec.max_travel if spec.max_travel is not None else (0.06 if spec.smoke else 1.5)
+    if spec.max_steps is not None:
+        kw["max_steps"] = spec.max_steps
+    elif spec.smoke:
+        kw["max_steps"] = 12 if spec.world == "2d" else 40
+    if kw["mode"] == "visual-tactile":
+        kw["interval_every"] = 1000 if spec.smoke else 10
+    return kw
+
+
+def _atomic_json(path: Path, data: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, allow_nan=True))
+    with open(tmp, "rb+") as f:
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def run_one(spec: RunSpec) -> dict:
+    """Run one (object, mode, seed) and write its result file; returns the result (also when already on disk)."""
+    from ..exploration import explore
+    from ..threads import torch_threads
+
+    out = Path(spec.out)
+    result_path = out / "runs" / f"{spec.key}.json"
+    if result_path.exists():
+        try:
+            return json.loads(result_path.read_text())
+        except (OSError, ValueError):
+            pass                                    # unreadable: run again (the rename makes this rare)
+    for sub in ("runs", "logs", "running"):
+        (out / sub).mkdir(parents=True, exist_ok=True)
+    marker = out / "running" / f"{spec.key}.pid"
+    marker.write_text(str(os.getpid()))
+    t0 = time.perf_counter()
+    with torch_threads(spec.threads):
+        world = make_world(spec.world, spec.object, spec.seed, spec.smoke)
+        trace = explore(world, log=out / "logs" / f"{spec.key}.gpioius", **_explore_kwargs(spec))
+    record = {"world": spec.world, "object": spec.object, "mode": spec.mode, "seed": spec.seed,
+              "terminated": trace.terminated, "steps": trace.n_steps - 1, "travel_m": float(trace.travel[-1]),
+              "wall_s": time.perf_counter() - t0,
+              "median_step_ms": 1e3 * float(np.median(trace.step_time[1:])) if trace.n_steps > 1 else math.nan,
+              "taps": int(trace.taps[-1]) if len(trace.taps) else 0,
+              "series": {"travel": trace.travel.tolist(), "hausdorff": trace.hausdorff.tolist(),
+                         "hausdorff_touched": trace.hausdorff_touched.tolist(),
+                         "uncertainty": trace.uncertainty.tolist(), "similarity": trace.similarity.tolist(),
+                         "correlation": trace.correlation.tolist(),
+                         "correlation_lo": trace.correlation_interval[:, 0].tolist(),
+                         "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
+    _atomic_json(result_path, record)
+    try:
+        marker.unlink()
+    except OSError:
+        pass
+    return record
+
+
+# ---------------------------------------------------------------------------------------------- aggregation
+def _last_finite(v) -> float:
+    v = np.asarray(v, dtype=float)
+    ok = np.flatnonzero(np.isfinite(v))
+    return float(v[ok[-1]]) if len(ok) else math.nan
+
+
+def _at_travel(series: dict, key: str, distance: float) -> float:
+    """The first measured value at or after ``distance`` of travel (the last one if the run ended before)."""
+    t = np.asarray(series["travel"], dtype=float)
+    v = np.asarray(series[key], dtype=float)
+    ok = np.flatnonzero(np.isfinite(v) & (t >= distance - 1e-12))
+    if len(ok):
+        return float(v[ok[0]])
+    return _last_finite(v)
+
+
+def _reference_travel(run: dict, runs_by_key: dict) -> float:
+    """3-D: the travel budget; 2-D: the tactile run of the same object and seed (the paper's table), else own."""
+    if run["world"] != "2d":
+        return float(run.get("budget_m") or max(run["travel_m"], 1e-9))
+    tactile = runs_by_key.get((run["object"], "tactile", run["seed"]))
+    return float((tactile or run)["travel_m"])
+
+
+def _row(run: dict, runs_by_key: dict) -> dict:
+    s = run["series"]
+    ref = _reference_travel(run, runs_by_key)
+    row = {"world": run["world"], "object": run["object"], "mode": run["mode"], "seed": run["seed"],
+           "final_hausdorff_m": _last_finite(s["hausdorff"]),
+           "final_hausdorff_touched_m": _last_finite(s["hausdorff_touched"]),
+           "final_uncertainty": _last_finite(s["uncertainty"]),
+           "final_correlation": _last_finite(s["correlation"]),
+           "final_correlation_lo": _last_finite(s["correlation_lo"]),
+           "final_correlation_hi": _last_finite(s["correlation_hi"]),
+           "final_similarity": _last_finite(s["similarity"]),
+           "travel_m": run["travel_m"], "steps": run["steps"], "terminated": run["terminated"], "taps": run["taps"],
+           "wall_s": run["wall_s"], "median_step_ms": run["median_step_ms"], "reference_travel_m": ref}
+    for f in FRACTIONS:
+        p = int(round(100 * f))
+        row[f"hausdorff_{p}_m"] = _at_travel(s, "hausdorff", f * ref)
+        row[f"uncertainty_{p}"] = _at_travel(s, "uncertainty", f * ref)
+    return row
+
+
+def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool = False) -> dict:
+    """Read the run files of ``out`` (those of ``specs``, or all) and write runs.csv, summary.json/md and figures."""
+    out = Path(out)
+    paths = ([out / "runs" / f"{s.key}.json" for s in specs] if specs is not None
+             else sorted((out / "runs").glob("*.json")))
+    runs = [json.loads(p.read_text()) for p in paths if p.exists()]
+    if not runs:
+        raise ValueError(f"{out}: no finished runs to aggregate")
+    by_key = {(r["object"], r["mode"], r["seed"]): r for r in runs}
+    for r in runs:
+        if r["world"] != "2d":
+            r["budget_m"] = specs[0].max_travel if specs and specs[0].max_travel else (0.06 if smoke else 1.5)
+    rows = sorted((_row(r, by_key) for r in runs), key=lambda x: (x["object"], x["mode"], x["seed"]))
+    fields = list(rows[0])
+    with open(out / "runs.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=fields)
+        w.writeheader()
+        w.writerows(rows)
+    summary = _summarize(rows)
+    claims = None if smoke else _claims(rows[0]["world"], summary)
+    (out / "summary.json").write_text(json.dumps({**summary, "claims": claims}, indent=1, allow_nan=True))
+    (out / "summary.md").write_text(_markdown(rows[0]["world"], summary, claims, len(rows)))
+    from .sweep_figures import figure_paired, figure_similarity_bands, figure_transition_bands
+
+    for obj in sorted({r["object"] for r in runs}):
+        figure_transition_bands(obj, [r for r in runs if r["object"] == obj], out / f"transitions_{obj}.png")
+    figure_similarity_bands(runs, out / "similarity_bands.png")
+    figure_paired(rows, out / "paired_final_hausdorff.png")
+    return {"rows": rows, "summary": summary, "claims": claims}
+
+
+METRICS = ["final_hausdorff_m", "final_hausdorff_touched_m", "final_uncertainty", "final_correlation",
+           "final_similarity"] + [f"hausdorff_{int(round(100 * f))}_m" for f in FRACTIONS]
+
+
+def _summarize(rows: list[dict]) -> dict:
+    """``{object: {mode: {metric: median_interval, "n": runs}}}`` and paired VT - T differences per object."""
+    out: dict = {"objects": {}, "paired": {}}
+    objects = sorted({r["object"] for r in rows})
+    modes = sorted({r["mode"] for r in rows})
+    for obj in objects:
+        out["objects"][obj] = {}
+        for mode in modes:
+            rs = [r for r in rows if r["object"] == obj and r["mode"] == mode]
+            if not rs:
+                continue
+            entry = {m: median_interval([r[m] for r in rs]) for m in METRICS}
+            entry["n"] = len(rs)
+            entry["taps"] = median_interval([r["taps"] for r in rs])
+            entry["travel_m"] = median_interval([r["travel_m"] for r in rs])
+            out["objects"][obj][mode] = entry
+        tactile = {r["seed"]: r for r in rows if r["object"] == obj and r["mode"] == "tactile"}
+        for mode in modes:
+            if mode == "tactile":
+                continue
+            other = {r["seed"]: r for r in rows if r["object"] == obj and r["mode"] == mode}
+            seeds = sorted(set(tactile) & set(other))
+            if not seeds:
+                continue
+            out["paired"].setdefault(obj, {})[mode] = {
+                m: paired_difference([other[s][m] for s in seeds], [tactile[s][m] for s in seeds])
+                for m in ("final_hausdorff_m", "hausdorff_10_m", "hausdorff_25_m", "hausdorff_50_m")}
+    return out
+
+
+# ---------------------------------------------------------------------------------------------- claims
+def _cm(v: float) -> str:
+    return "n/a" if not math.isfinite(v) else f"{100 * v:.1f}"
+
+
+def _no_harm(summary: dict, obj: str, mode: str = "visual-tactile") -> tuple[bool | None, str]:
+    """"No harm": the upper end of the 95 % interval of the median paired difference VT - T of the final Hausdorff
+    distance is at most max(10 % of the median tactile value, 0.5 cm)."""
+    pair = summary["paired"].get(obj, {}).get(mode, {}).get("final_hausdorff_m")
+    t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff_m")
+    if pair is None or t is None or not math.isfinite(pair["hi"]):
+        return None, "no paired runs"
+    allowed = max(0.1 * t["median"], 0.005)
+    return bool(pair["hi"] <= allowed), (f"median VT - T {_cm(pair['median'])} cm, 95 % interval [{_cm(pair['lo'])}, "
+                                         f"{_cm(pair['hi'])}] cm (allowed {_cm(allowed)} cm), Wilcoxon p = "
+                                         f"{pair['p_wilcoxon']:.3g}, n = {pair['n']}")
+
+
+def _early_benefit(summary: dict, obj: str, key: str, mode: str = "visual-tactile") -> tuple[bool | None, str]:
+    """"Accurate from the beginning": at the given point of travel the 95 % interval of the median paired
+    difference VT - T lies below 0, and the median visual-tactile distance is at most half the tactile one."""
+    pair = summary["paired"].get(obj, {}).get(mode, {}).get(key)
+    vt = summary["objects"][obj].get(mode, {}).get(key)
+    t = summary["objects"][obj].get("tactile", {}).get(key)
+    if pair is None or vt is None or t is None:
+        return None, "no paired runs"
+    holds = pair["hi"] < 0 and vt["median"] <= 0.5 * t["median"]
+    return bool(holds), (f"VT {_cm(vt['median'])} [{_cm(vt['lo'])}, {_cm(vt['hi'])}] cm vs T {_cm(t['median'])} "
+                         f"[{_cm(t['lo'])}, {_cm(t['hi'])}] cm; paired VT - T {_cm(pair['median'])} "
+                         f"[{_cm(pair['lo'])}, {_cm(pair['hi'])}] cm, p = {pair['p_wilcoxon']:.3g}")
+
+
+def _claims(world: str, summary: dict) -> list[dict]:
+    objs = summary["objects"]
+    claims = []
+
+    def add(claim: str, rule: str, result: tuple[bool | None, str]) -> None:
+        claims.append({"claim": claim, "rule": rule, "holds": result[0], "measured": result[1]})
+
+    rule_early = ("95 % interval of the median paired VT - T below 0 and median VT <= half median T")
+    rule_harm = ("upper end of the 95 % interval of the median paired VT - T (final) <= max(10 % of median T, 0.5 cm)")
+    if world == "2d":
+        if "A" in objs:
+            add("A: visual-tactile close to the inner shape from the beginning (25 % of travel)", rule_early,
+                _early_benefit(summary, "A", "hausdorff_25_m"))
+        if "B" in objs:
+            add("B: VT better early (10 % of travel)", rule_early, _early_benefit(summary, "B", "hausdorff_10_m"))
+            add("B: about equal at the end", rule_harm + ", both ways",
+                _equal(summary, "B"))
+        if "D" in objs:
+            add("D: both reach about the same final Hausdorff", rule_harm + ", both ways", _equal(summary, "D"))
+        if "A" in objs and "D" in objs:
+            a = objs["A"].get("visual-tactile", {}).get("final_correlation")
+            d = objs["D"].get("visual-tactile", {}).get("final_correlation")
+            if a and d:
+                add("Final similarity A clearly above D (task correlation)", "95 % intervals of the medians disjoint, A "
+                    "above", (bool(a["lo"] > d["hi"]), f"A {a['median']:.2f} [{a['lo']:.2f}, {a['hi']:.2f}] vs D "
+                              f"{d['median']:.2f} [{d['lo']:.2f}, {d['hi']:.2f}]"))
+    else:
+        for obj in ("E", "G"):
+            if obj in objs:
+                add(f"{obj} (tight): visual-tactile accurate from the beginning (10 % of travel)", rule_early,
+                    _early_benefit(summary, obj, "hausdorff_10_m"))
+        if "F" in objs and "visual-tactile" in objs["F"]:
+            vt = objs["F"]["visual-tactile"]
+            add("F (loose, arm recognisable): estimate first affected by the outer shape, then shrinks to the inner",
+                "median VT Hausdorff at the end below its value at 10 % (intervals disjoint)",
+                (bool(vt["final_hausdorff_m"]["hi"] < vt["hausdorff_10_m"]["lo"]),
+                 f"VT {_cm(vt['hausdorff_10_m']['median'])} cm at 10 % -> {_cm(vt['final_hausdorff_m']['median'])} "
+                 "cm at the end"))
+        if "H" in objs:
+            add("H (loose garment): no harm from vision", rule_harm, _no_harm(summary, "H"))
+        corr = {o: objs[o]["visual-tactile"]["final_correlation"] for o in objs if "visual-tactile" in objs[o]}
+        if "H" in corr and len(corr) > 1:
+            others = [c["lo"] for o, c in corr.items() if o != "H"]
+            add("Fig. 10: H has the lowest similarity (task correlation)",
+                "H's median the lowest and the upper end of its 95 % interval below every other lower end",
+                (bool(corr["H"]["hi"] < min(others)), ", ".join(f"{o} {c['median']:.2f} [{c['lo']:.2f}, {c['hi']:.2f}]"
+                                                                for o, c in sorted(corr.items()))))
+    for obj in sorted(objs):
+        if world == "2d" or obj != "H":
+            add(f"{obj}: no harm from vision", rule_harm, _no_harm(summary, obj))
+    return claims
+
+
+def _equal(summary: dict, obj: str) -> tuple[bool | None, str]:
+    pair = summary["paired"].get(obj, {}).get("visual-tactile", {}).get("final_hausdorff_m")
+    t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff_m")
+    if pair is None or t is None:
+        return None, "no paired runs"
+    allowed = max(0.1 * t["median"], 0.005)
+    return bool(-allowed <= pair["lo"] and pair["hi"] <= allowed), (
+        f"paired VT - T {_cm(pair['median'])} [{_cm(pair['lo'])}, {_cm(pair['hi'])}] cm (allowed +-{_cm(allowed)} cm)")
+
+
+def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int) -> str:
+    lines = [f"{n_runs} runs ({world} world). Medians over seeds with distribution-free 95 % intervals "
+             "(order statistics; the coverage is stated where fewer seeds make it lower). H: Hausdorff distance of the "
+             "whole estimated zero set to the true inner surface, at 10 / 25 / 50 % of the reference travel and at "
+             "the end; H touched: the touched estimate only; rho: task correlation; S: the paper's ratio.", "",
+             "| object | mode | n | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | H final [cm] | H touched final [cm] | "
+             "U final | rho final | S final (paper) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+
+    def cell(d: dict, scale: float = 100.0, fmt: str = ".1f") -> str:
+        if d["n"] == 0:
+            return "-"
+        return f"{scale * d['median']:{fmt}} [{scale * d['lo']:{fmt}}, {scale * d['hi']:{fmt}}]"
+
+    for obj, modes in sorted(summary["objects"].items()):
+        for mode, e in sorted(modes.items()):
+            lines.append(f"| {obj} | {mode} | {e['n']} | {cell(e['hausdorff_10_m'])} | {cell(e['hausdorff_25_m'])} | "
+                         f"{cell(e['hausdorff_50_m'])} | {cell(e['final_hausdorff_m'])} | "
+                         f"{cell(e['final_hausdorff_touched_m'])} | {cell(e['final_uncertainty'], 1, '.3f')} | "
+                         f"{cell(e['final_correlation'], 1, '.2f')} | {cell(e['final_similarity'], 1, '.2f')} |")
+    lines += ["", "Paired differences (same seed): mode - tactile, final Hausdorff [cm], with the Wilcoxon signed-rank "
+              "p-value.", "", "| object | mode | n | median [95 % interval] | p |", "|---|---|---|---|---|"]
+    for obj, modes in sorted(summary["paired"].items()):
+        for mode, d in sorted(modes.items()):
+            p = d["final_hausdorff_m"]
+            lines.append(f"| {obj} | {mode} | {p['n']} | {cell(p)} | {p['p_wilcoxon']:.3g} |")
+    if claims is None:
+        lines += ["", "Smoke sweep: the paper's claims are not judged on it."]
+    else:
+        lines += ["", "| claim | rule | measured | holds |", "|---|---|---|---|"]
+        for c in claims:
+            holds = "n/a" if c["holds"] is None else ("yes" if c["holds"] else "**no**")
+            lines.append(f"| {c['claim']} | {c['rule']} | {c['measured']} | {holds} |")
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------- execution
+def _ray_available() -> bool:
+    try:
+        import ray  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile"), seeds: int = 10,
+              out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
+              max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
+              progress: bool = True, threads: int = 1, backend: str = "auto") -> dict:
+    """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
+
+    Args:
+        world: "2d", "3d" (penalty) or "mujoco".
+        objects: names (default: the world's paper objects).
+        modes: among :data:`MODES`.
+        seeds: seeds 0 .. seeds-1 per object and mode.
+        out: output folder.
+        workers: parallel runs (default: the CPU count).
+        address: join an existing Ray cluster instead of starting one.
+        max_travel: travel budget per run in the 3-D worlds [m] (default 1.5).
+        max_steps: cap on steps per run.
+        smoke: tiny runs for CI; the claims are not judged.
+        progress: report progress.
+        threads: torch threads per run.
+        backend: "auto" (Ray when installed), "ray" or "local" (sequential, in-process).
+
+    Returns:
+        ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
+    """
+    from .._progress import progress as reporter
+
+    if world not in WORLDS:
+        raise ValueError(f"world: must be one of {WORLDS}, got {world!r}")
+    objects = tuple(objects or DEFAULT_OBJECTS[world])
+    bad = [m for m in modes if m not in MODES]
+    if bad:
+        raise ValueError(f"modes: unknown {bad}; choose among {MODES}")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise ValueError(f"seeds: must be a positive integer, got {seeds!r}")
+    for name in objects:        # fail before starting anything
+        if name not in DEFAULT_OBJECTS[world]:
+            raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {DEFAULT_OBJECTS[world]}")
+    out = Path(out)
+    (out / "runs").mkdir(parents=True, exist_ok=True)
+    specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads)
+             for o in objects for m in modes for s in range(seeds)]
+    todo = [s for s in specs if not (out / "runs" / f"{s.key}.json").exists()]
+    use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
+    t0 = time.perf_counter()
+    bar = reporter(len(todo), f"study ({world})", progress)
+    if todo and use_ray:
+        _run_on_ray(todo, workers, address, bar)
+        used = "Ray" + (f" at {address}" if address else f" (local, {workers or os.cpu_count()} workers)")
+    else:
+        for spec in todo:
+            bar.set_postfix_str(spec.key)
+            run_one(spec)
+            bar.update(1)
+        used = "in-process (sequential)"
+    bar.close()
+    seconds = time.perf_counter() - t0
+    result = aggregate(out, specs, smoke)
+    result.update(runs=len(specs), skipped=len(specs) - len(todo), seconds=seconds, backend=used)
+    return result
+
+
+def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, bar) -> None:
+    import ray
+
+    started_here = not ray.is_initialized()
+    if started_here:
+        kw = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
+                  runtime_env={"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}})
+        if address:
+            ray.init(address=address, **kw)
+        else:
+            ray.init(num_cpus=workers or os.cpu_count(), **kw)
+    try:
+        task = ray.remote(num_cpus=1, max_retries=3, retry_exceptions=False)(run_one)
+        pending = {task.remote(s): s for s in specs}
+        while pending:
+            done, _ = ray.wait(list(pending), num_returns=1)
+            for ref in done:
+                spec = pending.pop(ref)
+                ray.get(ref)        # re-raises a run's own error (after Ray's retries of worker deaths)
+                bar.set_postfix_str(spec.key)
+                bar.update(1)
+    finally:
+        if started_here:
+            ray.shutdown()
