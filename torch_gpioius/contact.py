@@ -275,9 +275,10 @@ class ContactController:
         return self._result(ok, log, start)
 
     def lift(self, direction: torch.Tensor, *, step: float = 0.005, until_force_below: float = 0.1,
-             extra: float = 0.01, max_distance: float = 0.2) -> ContactResult:
+             extra: float = 0.01, max_distance: float = 0.2, inside=None) -> ContactResult:
         """Move away along ``direction`` in ``step`` moves until ``|F|`` drops below ``until_force_below`` (the cover
-        no longer pushes), then ``extra`` further; at most ``max_distance`` in all (an evidence-seeking tap).
+        no longer pushes) and ``inside(position)`` is False (e.g. beyond the outer surface the camera saw), then
+        ``extra`` further; at most ``max_distance`` in all (an evidence-seeking tap).
 
         Args:
             direction: `(3,)` direction to lift along (the measured force direction: away from the surface).
@@ -285,6 +286,7 @@ class ContactController:
             until_force_below: the force [N] below which the cover counts as left behind.
             extra: distance [m] moved after that.
             max_distance: the longest lift [m].
+            inside: optional predicate on the `(3,)` position: keep lifting while it is True.
 
         Returns:
             :class:`ContactResult` with ``in_contact=False``; its ``free_space`` holds the positions with
@@ -304,7 +306,8 @@ class ContactController:
         f = self.read_force(d)
         moved, beyond = 0.0, None
         while moved < max_distance - 1e-12:
-            if beyond is None and float(f.norm()) < until_force_below:
+            here = log.path[-1] if log.path else start
+            if beyond is None and float(f.norm()) < until_force_below and not (inside is not None and inside(here)):
                 beyond = moved
             if beyond is not None and moved - beyond >= extra - 1e-12:
                 break

@@ -4,8 +4,8 @@ A sliding fingertip occupies the gap between a loose cover and the body only on 
 evidence that the cover is not the body is gathered at the start; the learned correlation then sits on 1, vision
 pulls the estimate onto the cover, and the planner (which follows the inner variance) has no reason to go where
 the estimate is wrong (docs/results-3d.md, object H). A *tap* gathers that evidence on purpose: lift the fingertip
-along the measured force direction until the cover's force on it vanishes (plus a margin), then come back down to
-the body. The readings below the contact threshold are inner free space, the re-approach ends on the body again.
+along the measured force direction until the cover's force on it vanishes and it is beyond the outer surface the
+camera saw (``mu_out >= 0``; plus a margin), then come back down to the body. The readings below the contact threshold are inner free space, the re-approach ends on the body again.
 
 **When to tap** (:meth:`TapPolicy.due`), from the model's own state, at most every ``min_steps`` steps:
 
@@ -90,9 +90,17 @@ class TapPolicy:
 
         normal = state.normal
         state.last_tap = state.steps
+        model = state.model
+        x0 = model.train_inputs[0]
+
+        def inside_outer(p) -> bool:     # still inside the outer surface the camera saw
+            with torch.no_grad():
+                q = torch.as_tensor(p, dtype=x0.dtype).reshape(1, -1)
+                return float(model.predict(q, task=1)[0][0]) < 0.0
+
         try:
             lift = hw.controller.lift(normal, step=self.lift_step, until_force_below=self.vanish_force,
-                                      extra=self.extra_lift, max_distance=self.max_lift)
+                                      extra=self.extra_lift, max_distance=self.max_lift, inside=inside_outer)
             back = hw.controller.approach(-normal, max_travel=float(lift.travel) + 0.05)
         except RuntimeError:          # refused or faulted: no tap this time
             return None

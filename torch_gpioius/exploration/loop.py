@@ -257,9 +257,11 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
         s.travel += res.travel
         s.path.extend(res.path.numpy())
         if not res.in_contact:
-            s.steps -= 1
-            s.terminated = "lost-contact"
-            break
+            res = _recover(s, hw, res)
+            if res is None:
+                s.steps -= 1
+                s.terminated = "lost-contact"
+                break
         s.normal = res.force_normal
         t1 = time.perf_counter()
         x_new, y_new, removed = _ingest(s, res, policy, mode)
@@ -290,6 +292,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence: str | None 
         if done:
             s.terminated = done
     bar.close()
+    if (mode == "visual-tactile" and regions is None and interval_every is not None and s.rec["ci"]
+            and math.isnan(s.rec["ci"][-1][0])):           # the final record always gets its interval
+        s.rec["ci"][-1] = tuple(float(v) for v in s.model.similarity_interval(kind="correlation"))
     if len(s.rec["h"]) > 1 and math.isnan(s.rec["h"][-1]):   # always measure the final estimate
         m = world.measure(s.model, np.asarray(s.contacts), metrics_resolution)
         s.rec["h"][-1], s.rec["ht"][-1], s.rec["u"][-1], s.surface = m.hausdorff, m.hausdorff_touched, \
@@ -343,6 +348,30 @@ def _start(world: World, hw: Hardware, mode: str, theta: float, noise: float, po
     s = _State(model=model, contacts=[contact], path=list(first.path.numpy()), normal=first.force_normal)
     s.first = first
     return s
+
+
+def _recover(s: _State, hw: Hardware, lost):
+    """Contact was lost during a step (the surface curved away, or a cover dragged the fingertip): one re-approach
+    from where the fingertip is, along the estimated inward normal there, for at most 10 cm. Returns the merged
+    result of the step and the re-approach, or None (the run then ends on "lost-contact")."""
+    from ..contact import ContactResult
+    from ..geometry import surface_geometry
+
+    here = lost.path[-1]
+    geo = surface_geometry(s.model, here.reshape(1, -1).to(s.model.train_inputs[0]), 0)
+    if not bool(geo.normal_defined[0]):
+        return None
+    try:
+        back = hw.controller.approach(-geo.normal[0], max_travel=0.1)
+    except RuntimeError:
+        return None
+    if not back.in_contact:
+        return None
+    s.travel += back.travel
+    s.path.extend(back.path.numpy())
+    return ContactResult(True, back.contact, torch.cat([lost.free_space, back.free_space]),
+                         torch.cat([lost.path, back.path]), torch.cat([lost.forces, back.forces]),
+                         lost.travel + back.travel)
 
 
 def _ingest(s: _State, res, policy: ObservationPolicy, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -239,7 +239,7 @@ class PlanarContact:
         return self._result([start, contact], free, float(np.linalg.norm(contact - start)))
 
     def lift(self, direction, *, step: float = 0.005, until_force_below: float = 0.1, extra: float = 0.01,
-             max_distance: float = 0.2) -> ContactResult:
+             max_distance: float = 0.2, inside=None) -> ContactResult:
         """Move away along ``direction`` in ``step`` moves until the force drops below ``until_force_below``, then
         ``extra`` further (at most ``max_distance``); see :meth:`torch_gpioius.contact.ContactController.lift`."""
         d = np.asarray(direction, dtype=np.float64).reshape(2)
@@ -247,7 +247,8 @@ class PlanarContact:
         x = self.robot.tool_position().numpy()
         points, moved, beyond = [x], 0.0, None
         while moved < max_distance - 1e-12:
-            if beyond is None and np.linalg.norm(self.sensor.force_at(points[-1])) < until_force_below:
+            if beyond is None and np.linalg.norm(self.sensor.force_at(points[-1])) < until_force_below and not (
+                    inside is not None and inside(torch.as_tensor(points[-1]))):
                 beyond = moved
             if beyond is not None and moved - beyond >= extra - 1e-12:
                 break

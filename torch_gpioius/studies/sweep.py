@@ -213,18 +213,22 @@ def _row(run: dict, runs_by_key: dict) -> dict:
     return row
 
 
-def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool = False) -> dict:
-    """Read the run files of ``out`` (those of ``specs``, or all) and write runs.csv, summary.json/md and figures."""
+def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool = False, world: str | None = None,
+              max_travel: float | None = None) -> dict:
+    """Read the run files of ``out`` (those of ``specs``, or every finished run of ``world`` there: a folder
+    accumulates runs, e.g. more modes or seeds later) and write runs.csv, summary.json/md and figures."""
     out = Path(out)
     paths = ([out / "runs" / f"{s.key}.json" for s in specs] if specs is not None
              else sorted((out / "runs").glob("*.json")))
     runs = [json.loads(p.read_text()) for p in paths if p.exists()]
+    if world is not None:
+        runs = [r for r in runs if r["world"] == world]
     if not runs:
         raise ValueError(f"{out}: no finished runs to aggregate")
     by_key = {(r["object"], r["mode"], r["seed"]): r for r in runs}
     for r in runs:
         if r["world"] != "2d":
-            r["budget_m"] = specs[0].max_travel if specs and specs[0].max_travel else (0.06 if smoke else 1.5)
+            r["budget_m"] = max_travel if max_travel else (0.06 if smoke else 1.5)
     rows = sorted((_row(r, by_key) for r in runs), key=lambda x: (x["object"], x["mode"], x["seed"]))
     fields = list(rows[0])
     with open(out / "runs.csv", "w", newline="") as fh:
@@ -378,8 +382,9 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
              "(order statistics; the coverage is stated where fewer seeds make it lower). H: Hausdorff distance of the "
              "whole estimated zero set to the true inner surface, at 10 / 25 / 50 % of the reference travel and at "
              "the end; H touched: the touched estimate only; rho: task correlation; S: the paper's ratio.", "",
-             "| object | mode | n | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | H final [cm] | H touched final [cm] | "
-             "U final | rho final | S final (paper) |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| object | mode | n (interval coverage) | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | H final [cm] | "
+             "H touched final [cm] | U final | rho final | S final (paper) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(d: dict, scale: float = 100.0, fmt: str = ".1f") -> str:
         if d["n"] == 0:
@@ -388,7 +393,9 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
 
     for obj, modes in sorted(summary["objects"].items()):
         for mode, e in sorted(modes.items()):
-            lines.append(f"| {obj} | {mode} | {e['n']} | {cell(e['hausdorff_10_m'])} | {cell(e['hausdorff_25_m'])} | "
+            cov = e["final_hausdorff_m"]["coverage"]
+            lines.append(f"| {obj} | {mode} | {e['n']} ({100 * cov:.0f} %) | {cell(e['hausdorff_10_m'])} | "
+                         f"{cell(e['hausdorff_25_m'])} | "
                          f"{cell(e['hausdorff_50_m'])} | {cell(e['final_hausdorff_m'])} | "
                          f"{cell(e['final_hausdorff_touched_m'])} | {cell(e['final_uncertainty'], 1, '.3f')} | "
                          f"{cell(e['final_correlation'], 1, '.2f')} | {cell(e['final_similarity'], 1, '.2f')} |")
@@ -473,7 +480,7 @@ def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile
         used = "in-process (sequential)"
     bar.close()
     seconds = time.perf_counter() - t0
-    result = aggregate(out, specs, smoke)
+    result = aggregate(out, None, smoke, world=world, max_travel=max_travel)
     result.update(runs=len(specs), skipped=len(specs) - len(todo), seconds=seconds, backend=used)
     return result
 

@@ -275,7 +275,9 @@ class MujocoScene(World):
         if getattr(self, "_inner_mesh", None) is None:
             from ..shapes3d import mesh_from_sdf
 
-            box = self.range + np.array([[-0.3], [0.3]])
+            # the grid is offset by an irrational fraction of a cell: box faces lying exactly on grid planes make
+            # marching cubes emit degenerate triangles that leave the mesh open
+            box = self.range + np.array([[-0.3], [0.3]]) + 0.005 * (math.sqrt(2) - 1)
             self._inner_mesh = mesh_from_sdf(lambda p: union_sdf(self.primitives, p), box, 0.005)
         return self._inner_mesh
 

@@ -1,0 +1,107 @@
+"""Studies over seeds: the statistics against closed forms, a sequential sweep that skips finished runs and
+reproduces itself, seeds that perturb the world, and a real local Ray sweep that survives a killed worker."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.stats import wilcoxon
+
+from torch_gpioius.studies.stats import median_interval, paired_difference
+from torch_gpioius.studies.sweep import make_world, run_sweep
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_order_statistic_interval_of_the_median():
+    x = np.arange(10.0)[::-1]                     # n = 10: ranks 2 and 9, coverage 1 - 2 P(Bin(10, 1/2) <= 1)
+    m = median_interval(x)
+    assert (m["median"], m["lo"], m["hi"], m["n"]) == (4.5, 1.0, 8.0, 10)
+    assert m["coverage"] == pytest.approx(1 - 2 * (1 + 10) / 1024)
+    small = median_interval([3.0, 1.0, 2.0])     # no 95 % interval exists: the range, with its coverage
+    assert (small["lo"], small["hi"]) == (1.0, 3.0) and small["coverage"] == pytest.approx(0.75)
+    assert np.isnan(median_interval([np.nan])["median"])
+    a, b = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.5]), np.array([1.5, 2.1, 3.9, 4.2, 6.0, 6.0])
+    d = paired_difference(a, b)
+    assert d["p_wilcoxon"] == pytest.approx(wilcoxon(a - b).pvalue)
+    assert d["median"] == pytest.approx(np.median(a - b)) and d["wins"] == 5
+
+
+def test_seed_zero_is_the_unperturbed_world_and_seeds_perturb_it():
+    from torch_gpioius.sim import paper_objects_2d
+    base = paper_objects_2d()["A"]
+    assert make_world("2d", "A", 0).fingerprint() == base.fingerprint()
+    w1, w2 = make_world("2d", "A", 1), make_world("2d", "A", 2)
+    assert w1.fingerprint() != base.fingerprint() != w2.fingerprint()
+    shift = np.linalg.norm(w1.start - base.start)
+    angle = np.degrees(np.arccos(np.clip(w1.direction @ base.direction, -1, 1)))
+    assert shift <= 0.02 + 1e-12 and angle <= 10 + 1e-9
+    assert make_world("2d", "A", 1).fingerprint() == w1.fingerprint()      # deterministic in the seed
+
+
+def test_sequential_sweep_writes_its_outputs_skips_finished_runs_and_repeats(tmp_path):
+    a = run_sweep("2d", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)
+    assert a["runs"] == 4 and a["skipped"] == 0
+    rows = list(csv.DictReader(open(tmp_path / "a" / "runs.csv")))
+    assert {"object", "mode", "seed", "final_hausdorff_m"} <= set(rows[0]) and len(rows) == 4
+    summary = json.loads((tmp_path / "a" / "summary.json").read_text())
+    entry = summary["objects"]["A"]["visual-tactile"]
+    assert {"median", "lo", "hi"} <= set(entry["final_hausdorff_m"]) and entry["n"] == 2
+    for name in ("transitions_A.png", "similarity_bands.png", "paired_final_hausdorff.png", "summary.md"):
+        assert (tmp_path / "a" / name).stat().st_size > 0
+    assert len(list((tmp_path / "a" / "logs").glob("*.gpioius"))) == 4
+    again = run_sweep("2d", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)
+    assert again["skipped"] == 4
+    b = run_sweep("2d", objects=["A"], seeds=2, out=tmp_path / "b", smoke=True, backend="local", progress=False)
+    rows_b = list(csv.DictReader(open(tmp_path / "b" / "runs.csv")))
+    for ra, rb in zip(rows, rows_b):                               # the same seed gives identical numbers
+        assert ra["final_hausdorff_m"] == rb["final_hausdorff_m"] and ra["travel_m"] == rb["travel_m"]
+
+
+def test_bad_sweep_arguments(tmp_path):
+    with pytest.raises(ValueError, match="world"):
+        run_sweep("4d", out=tmp_path)
+    with pytest.raises(ValueError, match="modes"):
+        run_sweep("2d", modes=["visual"], out=tmp_path)
+    with pytest.raises(ValueError, match="objects"):
+        run_sweep("2d", objects=["Q"], out=tmp_path)
+    with pytest.raises(ValueError, match="seeds"):
+        run_sweep("2d", seeds=0, out=tmp_path)
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
+def test_a_real_ray_sweep_survives_a_killed_worker(tmp_path):
+    pytest.importorskip("ray")
+    out = tmp_path / "sweep"
+    cmd = [sys.executable, "-m", "torch_gpioius.cli", "study", "--world", "2d", "--objects", "A,D", "--seeds", "2",
+           "--smoke", "--max-steps", "25", "--workers", "2", "--out", str(out), "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                            env=dict(os.environ, OMP_NUM_THREADS="1"))
+    killed = None
+    deadline = time.monotonic() + 240
+    while killed is None and time.monotonic() < deadline and proc.poll() is None:
+        for marker in (out / "running").glob("*.pid") if (out / "running").exists() else []:
+            try:
+                pid = int(marker.read_text())
+                os.kill(pid, signal.SIGKILL)
+                killed = marker.stem
+                break
+            except (ValueError, ProcessLookupError, FileNotFoundError):
+                continue
+        time.sleep(0.01)
+    stdout, stderr = proc.communicate(timeout=600)
+    assert killed is not None, "no run was caught running"
+    assert proc.returncode == 0, stderr[-2000:]
+    rows = list(csv.DictReader(open(out / "runs.csv")))
+    keys = [(r["object"], r["mode"], r["seed"]) for r in rows]
+    assert len(keys) == 8 and len(set(keys)) == 8                 # nothing lost, nothing duplicated
+    assert len(list((out / "runs").glob("*.json"))) == 8 and not list((out / "runs").glob("*.tmp"))
+    assert killed in {p.stem for p in (out / "runs").glob("*.json")}   # the killed run was retried to the end
+    assert "on Ray" in stdout
