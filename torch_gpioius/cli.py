@@ -81,6 +81,41 @@ def _replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import_bag(args: argparse.Namespace) -> int:
+    from .exploration.observations import ObservationPolicy
+    from .io.datasets import save_dataset
+    from .io.rosbag import BagTopics, import_bag
+
+    def numbers(text: str | None, n: int, what: str):
+        if text is None:
+            return None
+        try:
+            v = [float(p) for p in text.replace(",", " ").split()]
+        except ValueError:
+            v = []
+        if len(v) != n:
+            raise ValueError(f"{what}: expected {n} numbers, got {text!r}")
+        return v
+
+    tool = numbers(args.tool_offset, 3, "--tool-offset")
+    crop = numbers(args.crop, 6, "--crop")
+    topics = BagTopics(cloud=args.cloud, wrench=args.wrench, joints=args.joints, tf=tuple(args.tf))
+    ds = import_bag(args.bag, topics=topics, base_frame=args.base_frame, camera_transform=args.camera_transform,
+                    tool_offset=tool, tip_radius=args.tip_radius, contact_force=args.contact_force,
+                    contact_spacing=args.contact_spacing, max_gap=args.max_gap,
+                    policy=ObservationPolicy(voxel=args.voxel), crop=None if crop is None else [crop[:3], crop[3:]])
+    path = save_dataset(ds, args.out)
+    c = ds.meta["counts"]
+    frames = ", ".join(ds.meta["camera_frames"]) or "none"
+    print(f"{args.bag}: {c['wrench']} wrench samples, {c['joint_states']} joint states, {c['clouds']} cloud(s) with "
+          f"{c['cloud_points']} finite points in {frames} -> {ds.meta['frame']}")
+    print(f"inner: {c['contacts']} contacts (|F| >= {args.contact_force:g} N), {c['free_space']} free-space points; "
+          f"outer: {c['outer_surface']} surface + {c['outer_free_space']} free-space points "
+          f"({args.voxel * 100:g} cm voxels)")
+    print(f"wrote {path}; next: gpioius fit {path} --out outputs/fit")
+    return 0
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -170,13 +205,31 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--every", type=_positive_int, default=1, help="replay every k-th step (the last always)")
     rep.add_argument("--quiet", action="store_true", help="no progress output")
     rep.set_defaults(func=_replay)
-    for extra in _EXTRA_COMMANDS:
-        extra(sub, common, fmt)
+    bag = sub.add_parser("import-bag", parents=[common], formatter_class=fmt,
+                         help="turn a ROS 2 bag (MCAP or sqlite3) into a .gpioius dataset",
+                         description="Read a ROS 2 bag recorded on a UR5 with a fingertip force sensor and a depth "
+                                     "camera (the 'rosbag' extra, no ROS install needed): fingertip positions by the "
+                                     "UR5's forward kinematics at the interpolated joint states, |F| >= 1 N a contact, "
+                                     "free space below, point clouds into the base frame through tf and voxel-averaged. "
+                                     "Writes a dataset for `gpioius fit` and `gpioius replay` (docs/tutorials/rosbag.md).")
+    bag.add_argument("bag", help="bag folder (with metadata.yaml) or .mcap/.db3 file")
+    bag.add_argument("--out", required=True, help="dataset to write (.gpioius)")
+    bag.add_argument("--cloud", default="/camera/depth/points", help="sensor_msgs/PointCloud2 topic")
+    bag.add_argument("--wrench", default="/wrench", help="geometry_msgs/WrenchStamped topic of the fingertip sensor")
+    bag.add_argument("--joints", default="/joint_states", help="sensor_msgs/JointState topic of the UR5")
+    bag.add_argument("--tf", nargs="*", default=["/tf_static", "/tf"], help="tf2_msgs/TFMessage topics")
+    bag.add_argument("--base-frame", default="base", help="the robot's base frame in tf")
+    bag.add_argument("--camera-transform", default=None,
+                     help="T_base_cloudframe as 'x y z qx qy qz qw' (replaces the tf lookup)")
+    bag.add_argument("--tool-offset", default="0 0 0", help="fingertip centre in the flange frame 'x y z' [m]")
+    bag.add_argument("--tip-radius", type=float, default=0.0, help="fingertip radius [m] (contact = centre - r F/|F|)")
+    bag.add_argument("--contact-force", type=float, default=1.0, help="|F| of a contact [N] (paper: 1.0)")
+    bag.add_argument("--contact-spacing", type=float, default=0.005, help="thin contacts to this spacing [m]")
+    bag.add_argument("--max-gap", type=float, default=0.1, help="longest joint-state gap to interpolate over [s]")
+    bag.add_argument("--voxel", type=float, default=0.05, help="voxel edge for the cloud [m] (paper: 0.05)")
+    bag.add_argument("--crop", default=None, help="keep cloud points in 'xmin ymin zmin xmax ymax zmax' [m]")
+    bag.set_defaults(func=_import_bag)
     return parser
-
-
-#: Commands registered by other modules (import-bag, view, export): functions (subparsers, common, formatter).
-_EXTRA_COMMANDS: list = []
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-__all__ = ["ObservationPolicy", "thin_points", "free_space_along", "retract_free_space", "vision_observations"]
+__all__ = ["ObservationPolicy", "thin_points", "thin_indices", "free_space_along", "retract_free_space", "vision_observations"]
 
 
 @dataclass(frozen=True)
@@ -55,6 +55,26 @@ class ObservationPolicy:
                 raise ValueError(f"ObservationPolicy.{name}: must be in (0, 1] m, got {v!r}")
 
 
+def thin_indices(points: np.ndarray, spacing: float, avoid: np.ndarray, margin: float) -> np.ndarray:
+    """Indices of the greedy subset of ``points`` `(n, d)` that :func:`thin_points` keeps, in order: `(k,)` int64."""
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.size == 0:
+        return np.empty(0, dtype=np.int64)
+    candidates = np.arange(len(pts))
+    avoid = np.asarray(avoid, dtype=np.float64).reshape(-1, pts.shape[1])
+    if len(avoid):
+        candidates = candidates[np.linalg.norm(pts[:, None] - avoid[None], axis=-1).min(axis=1) >= margin]
+    kept = np.empty((len(candidates), pts.shape[1]))
+    out: list[int] = []
+    limit = spacing * (1.0 - 1e-9)
+    for i in candidates:
+        p = pts[i]
+        if not out or bool((np.sqrt(((kept[:len(out)] - p) ** 2).sum(axis=1)) >= limit).all()):
+            kept[len(out)] = p
+            out.append(int(i))
+    return np.asarray(out, dtype=np.int64)
+
+
 def thin_points(points: np.ndarray, spacing: float, avoid: np.ndarray, margin: float) -> np.ndarray:
     """Greedy subset of ``points`` `(n, d)` with neighbours at least ``spacing`` apart (to rounding) and every point
     at least ``margin`` from each of ``avoid`` `(k, d)` [m]; the order of ``points`` is kept.
@@ -65,15 +85,7 @@ def thin_points(points: np.ndarray, spacing: float, avoid: np.ndarray, margin: f
     pts = np.asarray(points, dtype=np.float64)
     if pts.size == 0:
         return pts.reshape(0, pts.shape[-1] if pts.ndim == 2 else 0)
-    avoid = np.asarray(avoid, dtype=np.float64).reshape(-1, pts.shape[1])
-    if len(avoid):
-        pts = pts[np.linalg.norm(pts[:, None] - avoid[None], axis=-1).min(axis=1) >= margin]
-    kept: list[np.ndarray] = []
-    limit = spacing * (1.0 - 1e-9)
-    for p in pts:
-        if all(np.linalg.norm(p - q) >= limit for q in kept):
-            kept.append(p)
-    return np.asarray(kept, dtype=np.float64).reshape(-1, pts.shape[1])
+    return pts[thin_indices(pts, spacing, avoid, margin)]
 
 
 def free_space_along(a: np.ndarray, b: np.ndarray, spacing: float, include_end: bool = True) -> np.ndarray:

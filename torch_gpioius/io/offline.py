@@ -63,7 +63,7 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
         fig = plt.figure(figsize=(7, 5.5))
         ax = fig.add_subplot(projection="3d")
         if mesh is not None:
-            _, var = model.predict(torch.as_tensor(mesh.triangles_center), task=INNER)
+            _, var = model.predict(torch.tensor(np.asarray(mesh.triangles_center)), task=INNER)
             surf = ax.plot_trisurf(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.vertices[:, 2],
                                    triangles=mesh.faces, cmap="Purples", linewidth=0, vmin=0, vmax=1)
             surf.set_array(var.detach().numpy() / prior)
@@ -126,7 +126,14 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
         header = next(iter(read_records(path))).meta
     steps = sorted(states)
     if not steps:
-        raise DatasetError(f"{path}: no step records: this is a dataset, not an exploration log (use `fit`)")
+        # a dataset (an import, a saved run): replay by its step column, each state holding the observations that
+        # had arrived by that step
+        full = load_dataset(path)
+        steps = sorted({int(k) for k in full.step[full.step > 0]})
+        if not steps:
+            raise DatasetError(f"{path}: every observation has step 0, nothing to replay step by step (use `fit`)")
+        states = {k: Dataset(*(a[full.step <= k] for a in (full.x, full.y, full.task, full.step)), meta=full.meta)
+                  for k in steps}
     chosen = steps[::max(1, every)]
     if chosen[-1] != steps[-1]:
         chosen.append(steps[-1])

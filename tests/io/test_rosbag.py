@@ -1,0 +1,217 @@
+"""ROS 2 bag import: bags written by rosbags' own writer with real message types, checked against the known object."""
+
+import copy
+import dataclasses
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rosbags")
+
+from torch_gpioius.cli import main  # noqa: E402
+from torch_gpioius.io.datasets import load_dataset  # noqa: E402
+from torch_gpioius.io.rosbag import (BagImportError, BagTopics, decode_point_cloud2, example_bag_messages,  # noqa: E402
+                                     import_bag, parse_transform, write_bag)
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return example_bag_messages()
+
+
+@pytest.fixture(scope="module")
+def mcap_bag(recording, tmp_path_factory):
+    return write_bag(tmp_path_factory.mktemp("bags") / "run", recording[0], storage="mcap")
+
+
+def _import(path, truth, **kw):
+    return import_bag(path, tool_offset=truth["tool_offset"], tip_radius=truth["tip_radius"], **kw)
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_import_matches_the_known_object(recording, tmp_path, storage):
+    msgs, truth = recording
+    bag = write_bag(tmp_path / "run", msgs, storage=storage)
+    ds = _import(bag, truth)
+    c, r, R = truth["center"], truth["radius"], truth["cover_radius"]
+    contacts = ds.x[(ds.task == 0) & (ds.y == 0)]
+    free = ds.x[(ds.task == 0) & (ds.y == 1)]
+    seen = ds.x[(ds.task == 1) & (ds.y == 0)]
+    seen_free = ds.x[(ds.task == 1) & (ds.y == 1)]
+    # contacts lie on the inner sphere: interpolation of joints between 3.2 mm samples on a 8.5 cm arc errs by
+    # ~1e-5 m; 2e-4 m leaves a margin
+    assert len(contacts) >= 10
+    np.testing.assert_allclose(np.linalg.norm(contacts - c, axis=1), r, atol=2e-4)
+    # and they are thinned to the spacing, in time order with steps 1..k
+    d = np.linalg.norm(contacts[:, None] - contacts[None], axis=-1) + np.eye(len(contacts))
+    assert d.min() >= 0.005 * (1 - 1e-9)
+    np.testing.assert_array_equal(ds.step[(ds.task == 0) & (ds.y == 0)], np.arange(1, len(contacts) + 1))
+    # free space: outside the body by at least the tip radius, and the margin away from every contact
+    assert len(free) >= 5
+    assert (np.linalg.norm(free - c, axis=1) >= r + truth["tip_radius"] - 1e-6).all()
+    assert np.linalg.norm(free[:, None] - contacts[None], axis=-1).min() >= 0.02
+    # the cloud is in the base frame: voxel means of the 10 cm cover lie within the chord error of a 5 cm voxel
+    # on a 10 cm sphere (< 5 mm), on the cap that faces the camera (cos >= R / |eye - c| = 0.15 there)
+    np.testing.assert_allclose(np.linalg.norm(seen - c, axis=1), R, atol=5e-3)
+    eye = truth["T_base_optical"][:3, 3]
+    facing = (seen - c) @ (eye - c) / np.linalg.norm(eye - c) / np.linalg.norm(seen - c, axis=1)
+    assert facing.min() > R / np.linalg.norm(eye - c) - 0.1 and np.median(facing) > 0.4
+    assert (np.linalg.norm(seen_free - c, axis=1) > R - 5e-3).all()
+    assert (ds.step[ds.task == 1] == 0).all()
+    assert ds.meta["camera_frames"] == ["camera_depth_optical_frame"] and ds.meta["frame"] == "base"
+    assert ds.trace["positions"].shape == (ds.meta["counts"]["wrench"], 3)
+
+
+def test_cloud_without_voxels_is_exact(recording, mcap_bag):
+    from torch_gpioius.exploration.observations import ObservationPolicy
+
+    msgs, truth = recording
+    ds = _import(mcap_bag, truth, policy=ObservationPolicy(voxel=None))
+    c, R = truth["center"], truth["cover_radius"]
+    seen = ds.x[(ds.task == 1) & (ds.y == 0)]
+    free = ds.x[(ds.task == 1) & (ds.y == 1)]
+    # float32 coordinates of ~0.7 m: ~1e-7 m rounding; 1e-5 leaves a margin
+    assert len(seen) == ds.meta["counts"]["cloud_points"] > 100
+    np.testing.assert_allclose(np.linalg.norm(seen - c, axis=1), R, atol=1e-5)
+    eye = truth["T_base_optical"][:3, 3]
+    np.testing.assert_allclose(np.linalg.norm(free - seen, axis=1), 0.05, atol=1e-9)
+    assert (np.linalg.norm(free - c, axis=1) > R).all()
+    # free space lies on the ray to the camera
+    ray = (eye - seen) / np.linalg.norm(eye - seen, axis=1, keepdims=True)
+    np.testing.assert_allclose((free - seen) / 0.05, ray, atol=1e-9)
+
+
+def test_camera_transform_replaces_tf(recording, mcap_bag):
+    msgs, truth = recording
+    via_tf = _import(mcap_bag, truth)
+    T = truth["T_base_optical"]
+    from scipy.spatial.transform import Rotation
+
+    given = " ".join(f"{v:.17g}" for v in [*T[:3, 3], *Rotation.from_matrix(T[:3, :3]).as_quat()])
+    via_arg = _import(mcap_bag, truth, camera_transform=given)
+    np.testing.assert_allclose(via_arg.x, via_tf.x, atol=1e-9)
+    wrong = _import(mcap_bag, truth, camera_transform="0 0 0 0 0 0 1")
+    seen = wrong.x[(wrong.task == 1) & (wrong.y == 0)]
+    assert np.abs(np.linalg.norm(seen - truth["center"], axis=1) - truth["cover_radius"]).max() > 0.1
+
+
+def test_cli_import_then_fit_and_replay(mcap_bag, recording, tmp_path, capsys):
+    truth = recording[1]
+    out = tmp_path / "run.gpioius"
+    assert main(["import-bag", str(mcap_bag), "--out", str(out), "--tool-offset", "0 0 0.05",
+                 "--tip-radius", str(truth["tip_radius"])]) == 0
+    text = capsys.readouterr().out
+    assert "wrench samples" in text and "camera_depth_optical_frame -> base" in text
+    ds = load_dataset(out)
+    assert (ds.task == 0).any() and (ds.task == 1).any()
+    assert main(["fit", str(out), "--out", str(tmp_path / "fit")]) == 0
+    fitted = capsys.readouterr().out
+    assert "correlation = " in fitted
+    assert main(["replay", str(out), "--out", str(tmp_path / "replay"), "--every", "8", "--quiet"]) == 0
+
+
+def _with(msgs, topic, fn):
+    """A copy of the messages where those on ``topic`` pass through ``fn(list) -> list``."""
+    keep = [m for m in msgs if m.topic != topic]
+    return keep + fn([copy.deepcopy(m) for m in msgs if m.topic == topic])
+
+
+def _nan_cloud(ms):
+    out = []
+    for m in ms:
+        data = np.asarray(m.msg.data).copy()
+        cells = data.reshape(m.msg.height, -1)[:, :m.msg.width * m.msg.point_step].reshape(m.msg.height,
+                                                                                           m.msg.width, -1)
+        cells[..., 0:12] = np.full((m.msg.height, m.msg.width, 3), np.nan, np.float32).view(np.uint8).reshape(
+            m.msg.height, m.msg.width, 12)
+        out.append(dataclasses.replace(m, msg=dataclasses.replace(m.msg, data=data)))
+    return out
+
+
+def _rename_fields(ms):
+    return [dataclasses.replace(m, msg=dataclasses.replace(m.msg, fields=[dataclasses.replace(f, name=n) for f, n in
+                                                                           zip(m.msg.fields, "abcd")])) for m in ms]
+
+
+def _gap(ms):
+    t = np.array([m.t_ns for m in ms])
+    mid = t[len(t) // 2]
+    return [m for m in ms if not (mid <= m.t_ns < mid + 500_000_000)]
+
+
+def _backwards(ms):
+    a, b = ms[10], ms[11]
+    return ms[:10] + [dataclasses.replace(a, msg=b.msg), dataclasses.replace(b, msg=a.msg)] + ms[12:]
+
+
+FAULTS = {
+    "missing topic": (lambda m: [x for x in m if x.topic != "/wrench"], "topic /wrench is not in the bag"),
+    "empty topic": (lambda m: _with(m, "/joint_states", lambda ms: []), "topic /joint_states is not in the bag"),
+    "time gap": (lambda m: _with(m, "/joint_states", _gap), "topic /joint_states: a gap of 0.5"),
+    "all-NaN cloud": (lambda m: _with(m, "/camera/depth/points", _nan_cloud), "topic /camera/depth/points: every point"),
+    "no x/y/z": (lambda m: _with(m, "/camera/depth/points", _rename_fields), "has no x/y/z field"),
+    "clock backwards": (lambda m: _with(m, "/wrench", _backwards), "topic /wrench: the clock runs backwards"),
+    "no camera pose": (lambda m: [x for x in m if x.topic != "/tf_static"], "no transform from"),
+}
+
+
+@pytest.mark.parametrize("fault", sorted(FAULTS))
+def test_bad_bags_give_one_line_naming_topic_and_cause(recording, tmp_path, fault, capsys):
+    msgs, truth = recording
+    change, expected = FAULTS[fault]
+    bag = write_bag(tmp_path / "bad", change(list(msgs)), storage="mcap")
+    with pytest.raises(BagImportError, match=expected.replace("/", "/").replace(".", r"\.")):
+        _import(bag, truth)
+    assert main(["import-bag", str(bag), "--out", str(tmp_path / "x.gpioius")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("gpioius: error:") and "\n" not in err and expected.split(":")[0].split()[-1] in err
+    assert not (tmp_path / "x.gpioius").exists()
+
+
+def test_wrong_message_type_empty_bag_and_not_a_bag(recording, mcap_bag, tmp_path):
+    truth = recording[1]
+    with pytest.raises(BagImportError, match="topic /joint_states carries sensor_msgs/msg/JointState, expected "
+                                              "geometry_msgs/msg/WrenchStamped"):
+        _import(mcap_bag, truth, topics=BagTopics(wrench="/joint_states"))
+    empty = write_bag(tmp_path / "empty", [], storage="sqlite3")
+    with pytest.raises(BagImportError, match="the bag has no topics"):
+        _import(empty, truth)
+    junk = tmp_path / "junk.mcap"
+    junk.write_bytes(b"not a bag at all")
+    with pytest.raises(BagImportError, match="not a readable ROS 2 bag"):
+        _import(junk, truth)
+    with pytest.raises(BagImportError, match="no such bag"):
+        _import(tmp_path / "nowhere", truth)
+
+
+def test_no_contact_and_bad_arguments(recording, tmp_path):
+    msgs, truth = recording
+    bag = write_bag(tmp_path / "b", msgs, storage="mcap")
+    with pytest.raises(BagImportError, match=r"topic /wrench: no sample reaches \|F\| >= 50 N"):
+        _import(bag, truth, contact_force=50.0)
+    with pytest.raises(ValueError, match="max_gap"):
+        _import(bag, truth, max_gap=float("nan"))
+    for bad in ("1 2 3", "0 0 0 0 0 0 0", "a b c d e f g"):
+        with pytest.raises(ValueError, match="transform|quaternion"):
+            parse_transform(bad)
+
+
+def test_decode_point_cloud2_layouts():
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE).types
+    field, header = ts["sensor_msgs/msg/PointField"], ts["std_msgs/msg/Header"]
+    pts = np.array([[1.0, 2.0, 3.0], [np.nan, 0.0, 0.0], [-4.0, 5.5, 6.25]])
+    # big-endian float64, fields in z, x, y order with an int field between, unorganised
+    rec = np.zeros(3, dtype=np.dtype({"names": ["z", "i", "x", "y"], "formats": [">f8", ">i4", ">f8", ">f8"],
+                                      "offsets": [0, 8, 12, 20], "itemsize": 32}))
+    rec["x"], rec["y"], rec["z"] = pts.T
+    msg = ts["sensor_msgs/msg/PointCloud2"](
+        header=header(stamp=ts["builtin_interfaces/msg/Time"](sec=0, nanosec=0), frame_id="c"), height=1, width=3,
+        fields=[field(name="z", offset=0, datatype=8, count=1), field(name="i", offset=8, datatype=5, count=1),
+                field(name="x", offset=12, datatype=8, count=1), field(name="y", offset=20, datatype=8, count=1)],
+        is_bigendian=True, point_step=32, row_step=96, data=rec.view(np.uint8), is_dense=False)
+    np.testing.assert_array_equal(decode_point_cloud2(msg), pts[[0, 2]])
+    short = dataclasses.replace(msg, data=rec.view(np.uint8)[:50])
+    with pytest.raises(BagImportError, match="does not hold 1 x 3 points"):
+        decode_point_cloud2(short)

@@ -1,0 +1,669 @@
+"""Import a ROS 2 bag (MCAP or sqlite3) recorded on a UR5 with a depth camera and a fingertip force sensor.
+
+The bag is read with `rosbags <https://gitlab.com/ternaris/rosbags>`_ (pure Python, no ROS install). What becomes
+what:
+
+* **Inner (touch, task 0).** For every ``geometry_msgs/WrenchStamped`` sample the fingertip position is the UR5's
+  forward kinematics (the project's CB3 model and ``tool_offset``) at the ``sensor_msgs/JointState`` positions
+  linearly interpolated to the wrench's time. ``|F| >= contact_force`` (1 N, Sec. VI) is a contact (y = 0),
+  thinned to ``contact_spacing``; below it the fingertip was in free space (y = 1), thinned with the exploration's
+  own rule (:func:`torch_gpioius.exploration.observations.thin_points`: ``free_space_spacing`` apart and
+  ``free_space_margin`` away from every contact).
+* **Outer (vision, task 1, step 0).** Every ``sensor_msgs/PointCloud2`` is decoded (any field layout, organised or
+  not, NaN points dropped), moved to the base frame through ``/tf_static`` (and ``/tf``) or a transform given by
+  the caller, and then goes through the exploration's vision rule
+  (:func:`torch_gpioius.exploration.observations.vision_observations`): the seen surface (y = 0) and free space
+  ``vision_free_offset`` in front of it towards the camera (y = 1), averaged in ``voxel`` cubes (paper: 5 cm).
+
+Times are the messages' header stamps (the sensor's clock), or the bag's receive time where a stamp is zero.
+Every problem with a bag raises :class:`BagImportError` with one line naming the topic and the cause.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+import torch
+
+from .datasets import Dataset, DatasetError
+
+__all__ = ["BagImportError", "BagTopics", "BagMessage", "import_bag", "decode_point_cloud2", "parse_transform", "write_bag",
+           "example_bag_messages"]
+
+#: ``sensor_msgs/PointField`` datatype codes -> numpy scalar types.
+_POINTFIELD_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
+_TYPES = {
+    "cloud": "sensor_msgs/msg/PointCloud2",
+    "wrench": "geometry_msgs/msg/WrenchStamped",
+    "joints": "sensor_msgs/msg/JointState",
+    "tf": "tf2_msgs/msg/TFMessage",
+}
+
+
+class BagImportError(DatasetError):
+    """A bag that cannot be imported; the message names the topic and the cause."""
+
+
+@dataclass(frozen=True)
+class BagTopics:
+    """Topic names in the bag.
+
+    Attributes:
+        cloud: ``sensor_msgs/PointCloud2`` of the depth camera (outer shape).
+        wrench: ``geometry_msgs/WrenchStamped`` of the fingertip force sensor.
+        joints: ``sensor_msgs/JointState`` of the UR5 (names as in the UR driver, e.g. ``shoulder_pan_joint``).
+        tf: ``tf2_msgs/TFMessage`` topics to take the camera's pose from; missing ones are skipped.
+    """
+
+    cloud: str = "/camera/depth/points"
+    wrench: str = "/wrench"
+    joints: str = "/joint_states"
+    tf: tuple[str, ...] = ("/tf_static", "/tf")
+
+
+# ----------------------------------------------------------------------------------------------- point clouds
+def decode_point_cloud2(msg, *, topic: str = "PointCloud2") -> np.ndarray:
+    """The finite x, y, z points of a ``sensor_msgs/PointCloud2`` in its own frame.
+
+    Handles any field order and padding (``point_step``), row padding of organised clouds (``row_step``), both
+    byte orders, float32/float64 and integer coordinates; points with a NaN or inf coordinate are dropped (an
+    organised cloud marks missing depth so).
+
+    Args:
+        msg: the deserialised message (``rosbags`` dataclass or anything with the same attributes).
+        topic: used in error messages.
+
+    Returns:
+        `(n, 3)` float64 [m] in ``msg.header.frame_id``.
+
+    Raises:
+        BagImportError: no x/y/z field, a field with count != 1, sizes that do not match the data.
+    """
+    fields = {f.name: f for f in msg.fields}
+    missing = [c for c in "xyz" if c not in fields]
+    if missing:
+        raise BagImportError(f"{topic}: the point cloud has no {'/'.join(missing)} field "
+                             f"(fields: {', '.join(fields) or 'none'})")
+    height, width, step, row_step = int(msg.height), int(msg.width), int(msg.point_step), int(msg.row_step)
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if row_step < width * step or data.size < height * row_step:
+        raise BagImportError(f"{topic}: the point cloud's data ({data.size} bytes) does not hold {height} x {width} "
+                             f"points of {step} bytes (row_step {row_step})")
+    order = ">" if msg.is_bigendian else "<"
+    names, formats, offsets = [], [], []
+    for c in "xyz":
+        f = fields[c]
+        if int(f.datatype) not in _POINTFIELD_DTYPES or int(f.count) != 1:
+            raise BagImportError(f"{topic}: field {c!r} has datatype {f.datatype} and count {f.count}; expected one "
+                                 "number (PointField datatypes 1-8)")
+        names.append(c)
+        formats.append(order + _POINTFIELD_DTYPES[int(f.datatype)])
+        offsets.append(int(f.offset))
+        if int(f.offset) + np.dtype(formats[-1]).itemsize > step:
+            raise BagImportError(f"{topic}: field {c!r} at offset {f.offset} lies beyond point_step {step}")
+    dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": step})
+    rows = data[:height * row_step].reshape(height, row_step)[:, :width * step]
+    pts = np.ascontiguousarray(rows).view(dtype).reshape(-1)
+    xyz = np.stack([pts[c].astype(np.float64) for c in "xyz"], axis=1)
+    return xyz[np.isfinite(xyz).all(axis=1)]
+
+
+# ----------------------------------------------------------------------------------------------- transforms
+def _quat_matrix(q: Sequence[float]) -> np.ndarray:
+    x, y, z, w = (float(v) for v in q)
+    n = math.sqrt(x * x + y * y + z * z + w * w)
+    if not math.isfinite(n) or n < 1e-9:
+        raise ValueError(f"quaternion {tuple(q)} (x, y, z, w) is not a rotation")
+    x, y, z, w = x / n, y / n, z / n, w / n
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def _homogeneous(t: Sequence[float], q: Sequence[float]) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = _quat_matrix(q)
+    T[:3, 3] = np.asarray(t, dtype=np.float64)
+    return T
+
+
+def parse_transform(value) -> np.ndarray:
+    """A `(4, 4)` transform from ``"x y z qx qy qz qw"`` (ROS ``static_transform_publisher`` order, metres, a unit
+    quaternion), from 7 numbers, or from a `(4, 4)` matrix.
+
+    Raises:
+        ValueError: anything else (wrong count, NaN, a zero quaternion, a matrix that is not rigid).
+    """
+    if isinstance(value, str):
+        parts = value.replace(",", " ").split()
+        try:
+            value = [float(p) for p in parts]
+        except ValueError:
+            raise ValueError(f"transform {value!r}: expected 7 numbers 'x y z qx qy qz qw'") from None
+    a = np.asarray(value, dtype=np.float64)
+    if a.shape == (7,):
+        if not np.isfinite(a).all():
+            raise ValueError(f"transform {a.tolist()}: contains NaN or inf")
+        return _homogeneous(a[:3], a[3:])
+    if a.shape == (4, 4):
+        R = a[:3, :3]
+        if (not np.isfinite(a).all() or not np.allclose(R @ R.T, np.eye(3), atol=1e-6)
+                or abs(np.linalg.det(R) - 1) > 1e-6 or not np.allclose(a[3], [0, 0, 0, 1])):
+            raise ValueError("transform: a (4, 4) matrix must be rigid (orthonormal rotation, last row 0 0 0 1)")
+        return a.copy()
+    raise ValueError(f"transform: expected 'x y z qx qy qz qw', 7 numbers or a (4, 4) matrix, got shape {a.shape}")
+
+
+class _TfBuffer:
+    """Parent links from TFMessages: static ones, and dynamic ones looked up at the latest stamp not after t."""
+
+    def __init__(self) -> None:
+        self.links: dict[str, tuple[str, list[tuple[float, np.ndarray]]]] = {}
+
+    def add(self, parent: str, child: str, stamp: float, T: np.ndarray, static: bool) -> None:
+        parent, child = parent.lstrip("/"), child.lstrip("/")
+        entry = self.links.setdefault(child, (parent, []))
+        if entry[0] != parent:
+            raise BagImportError(f"tf: frame {child!r} has two parents ({entry[0]!r} and {parent!r})")
+        entry[1].append((-math.inf if static else stamp, T))
+
+    def lookup(self, target: str, source: str, t: float) -> np.ndarray:
+        """``T_target_source`` at time ``t``: follows parents from both frames to a common ancestor."""
+        def chain(frame: str) -> list[tuple[str, np.ndarray]]:
+            # [(frame, I), (parent, T_parent_frame), (grandparent, T_grandparent_parent), ...]
+            out, seen = [(frame, np.eye(4))], {frame}
+            while frame in self.links:
+                parent, samples = self.links[frame]
+                before = [s for s in samples if s[0] <= t]
+                if not before:
+                    break
+                out.append((parent, max(before, key=lambda s: s[0])[1]))
+                if parent in seen:
+                    raise BagImportError(f"tf: the frames form a loop at {parent!r}")
+                seen.add(parent)
+                frame = parent
+            return out
+
+        def to_root(links: list[tuple[str, np.ndarray]]) -> dict[str, np.ndarray]:
+            # T_frame_0 for every ancestor frame of the chain's first frame
+            acc, out = np.eye(4), {links[0][0]: np.eye(4)}
+            for frame, T_parent_child in links[1:]:
+                acc = T_parent_child @ acc
+                out[frame] = acc
+            return out
+
+        src, tgt = to_root(chain(source.lstrip("/"))), to_root(chain(target.lstrip("/")))
+        common = [f for f in src if f in tgt]
+        if not common:
+            raise LookupError(f"no transform from {source!r} to {target!r} at t = {t:.3f} s in the bag's tf "
+                              f"(known frames: {', '.join(sorted(set(self.links) | {p for p, _ in self.links.values()})) or 'none'})")
+        f = common[0]
+        return np.linalg.inv(tgt[f]) @ src[f]
+
+
+# ----------------------------------------------------------------------------------------------- reading
+def _stamp(msg, bag_time_ns: int) -> float:
+    h = getattr(msg, "header", None)
+    if h is not None and (h.stamp.sec or h.stamp.nanosec):
+        return h.stamp.sec + h.stamp.nanosec * 1e-9
+    return bag_time_ns * 1e-9
+
+
+def _open(path: Path):
+    try:
+        from rosbags.highlevel import AnyReader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError as exc:  # pragma: no cover - the extra is missing
+        raise ImportError("import_bag needs the 'rosbag' extra: pip install 'torch_gpioius[rosbag]'") from exc
+    if not path.exists():
+        raise BagImportError(f"{path}: no such bag")
+    try:
+        reader = AnyReader([path], default_typestore=get_typestore(Stores.ROS2_HUMBLE))
+        reader.open()
+    except Exception as exc:  # rosbags raises its own error types for every kind of unreadable bag
+        raise BagImportError(f"{path}: not a readable ROS 2 bag ({type(exc).__name__}: {exc})") from None
+    return reader
+
+
+def _messages(reader, path: Path, topic: str, kind: str, *, required: bool = True) -> list[tuple[float, object]]:
+    conns = [c for c in reader.connections if c.topic == topic]
+    if not conns:
+        if not required:
+            return []
+        have = ", ".join(sorted({f"{c.topic} ({c.msgtype})" for c in reader.connections})) or "none"
+        raise BagImportError(f"{path}: topic {topic} is not in the bag (topics: {have})")
+    wrong = [c.msgtype for c in conns if c.msgtype != _TYPES[kind]]
+    if wrong:
+        raise BagImportError(f"{path}: topic {topic} carries {wrong[0]}, expected {_TYPES[kind]}")
+    out = []
+    try:
+        for conn, t_ns, raw in reader.messages(connections=conns):
+            msg = reader.deserialize(raw, conn.msgtype)
+            out.append((_stamp(msg, t_ns) if kind != "tf" else t_ns * 1e-9, msg))
+    except BagImportError:
+        raise
+    except Exception as exc:
+        raise BagImportError(f"{path}: topic {topic}: cannot decode a message ({type(exc).__name__}: {exc})") from None
+    if required and not out:
+        raise BagImportError(f"{path}: topic {topic} has no messages")
+    if kind != "tf":
+        times = np.array([t for t, _ in out])
+        back = np.flatnonzero(np.diff(times) < 0)
+        if back.size:
+            i = int(back[0])
+            raise BagImportError(f"{path}: topic {topic}: the clock runs backwards at message {i + 1} "
+                                 f"({times[i]:.6f} s -> {times[i + 1]:.6f} s)")
+    return out
+
+
+def _joint_table(path: Path, topic: str, msgs: list, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+    times, rows = [], []
+    for t, msg in msgs:
+        index = {n: i for i, n in enumerate(msg.name)}
+        absent = [n for n in names if n not in index]
+        if absent:
+            raise BagImportError(f"{path}: topic {topic}: joint {absent[0]!r} is missing (names: "
+                                 f"{', '.join(msg.name) or 'none'})")
+        pos = np.asarray(msg.position, dtype=np.float64)
+        if pos.shape != (len(msg.name),):
+            raise BagImportError(f"{path}: topic {topic}: {len(msg.name)} names but {pos.size} positions")
+        row = pos[[index[n] for n in names]]
+        if not np.isfinite(row).all():
+            raise BagImportError(f"{path}: topic {topic}: a joint position at t = {t:.6f} s is NaN or inf")
+        times.append(t)
+        rows.append(row)
+    return np.asarray(times), np.asarray(rows)
+
+
+def _interpolate(path: Path, topic: str, t_joint: np.ndarray, q: np.ndarray, t: np.ndarray,
+                 max_gap: float) -> np.ndarray:
+    """Joint positions at times ``t`` by linear interpolation, refusing extrapolation and long gaps."""
+    if len(t_joint) < 2:
+        raise BagImportError(f"{path}: topic {topic}: {len(t_joint)} joint state(s); interpolation needs two")
+    i = np.searchsorted(t_joint, t, side="right")
+    outside = (i == 0) | ((i == len(t_joint)) & (t > t_joint[-1]))
+    if outside.any():
+        k = int(np.flatnonzero(outside)[0])
+        raise BagImportError(f"{path}: topic {topic}: a wrench at t = {t[k]:.6f} s lies outside the joint states "
+                             f"({t_joint[0]:.6f} - {t_joint[-1]:.6f} s)")
+    i = np.clip(i, 1, len(t_joint) - 1)
+    t0, t1 = t_joint[i - 1], t_joint[i]
+    gap = t1 - t0
+    if (gap > max_gap).any():
+        k = int(np.argmax(gap))
+        raise BagImportError(f"{path}: topic {topic}: a gap of {gap[k]:.3f} s between joint states at "
+                             f"t = {t0[k]:.6f} s exceeds max_gap = {max_gap:g} s")
+    w = np.where(gap > 0, (t - t0) / np.where(gap > 0, gap, 1.0), 0.0)[:, None]
+    return q[i - 1] * (1 - w) + q[i] * w
+
+
+def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_frame: str = "base",
+               camera_transform=None, tool_offset: Sequence[float] = (0.0, 0.0, 0.0), tip_radius: float = 0.0,
+               contact_force: float = 1.0, contact_spacing: float = 0.005, max_gap: float = 0.1,
+               joint_names: Sequence[str] | None = None, policy=None, crop=None,
+               theta: float | None = None, noise: float | None = None) -> Dataset:
+    """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
+
+    Args:
+        bag: the bag folder (sqlite3 or MCAP, with ``metadata.yaml``) or a single ``.mcap`` / ``.db3`` file.
+        topics: topic names (:class:`BagTopics` defaults).
+        base_frame: the robot's base frame name in tf (the UR driver's ``base``; ``base_link`` in some setups).
+        camera_transform: ``T_base_cloudframe`` as ``"x y z qx qy qz qw"``, 7 numbers or a `(4, 4)` matrix; given,
+            it replaces the tf lookup for the clouds (a camera calibrated outside ROS).
+        tool_offset: `(3,)` fingertip centre in the flange frame [m] (as :class:`kinematics.UR5`).
+        tip_radius: radius of the fingertip [m]; the contact point is the tip centre moved ``tip_radius``
+            against the measured force (the wrench is taken to be in the tool frame). 0 keeps the tip centre.
+        contact_force: ``|F|`` at and above which a sample is a contact [N] (Sec. VI: 1.0).
+        contact_spacing: contacts closer than this to a kept earlier one are dropped [m].
+        max_gap: the longest gap between joint states the interpolation bridges [s].
+        joint_names: the six joint names in base-to-tool order (default: the UR driver's).
+        policy: :class:`torch_gpioius.exploration.observations.ObservationPolicy` for free space and the voxel
+            (default: the exploration's, with the paper's 5 cm voxel).
+        crop: `(2, 3)` box [min; max] [m] to crop the cloud to (tables and walls are not the object); None keeps all.
+        theta, noise: stored in the header as the dataset's defaults for fitting.
+
+    Returns:
+        The dataset: inner contacts (y 0) and free space (y 1) with steps 1..k in time order, outer observations
+        at step 0; ``trace`` holds the fingertip ``positions``, ``forces`` [N] (sensor frame) and ``timestamps``
+        [s] of every wrench sample; ``meta`` records the bag, topics, frames and thresholds.
+
+    Raises:
+        BagImportError: one line naming the topic and the cause (missing topic, wrong type, empty, a time gap,
+            a backwards clock, an all-NaN cloud, no x/y/z fields, an unknown camera frame).
+        ValueError: bad arguments.
+    """
+    from kinematics.dh import UR5_JOINT_NAMES
+    from kinematics.ur5 import UR5
+
+    from ..exploration.observations import ObservationPolicy, thin_indices, vision_observations
+    from ..sensors.pointcloud import PointCloud
+
+    topics = topics or BagTopics()
+    policy = policy or ObservationPolicy(voxel=0.05)
+    names = tuple(joint_names or UR5_JOINT_NAMES)
+    for name, value, lo, hi in (("contact_force", contact_force, 1e-3, 1e3), ("contact_spacing", contact_spacing, 0,
+                                1.0), ("max_gap", max_gap, 1e-4, 60.0), ("tip_radius", tip_radius, 0, 0.1)):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and
+                                                                                  lo <= value <= hi):
+            raise ValueError(f"import_bag: {name} must be in [{lo:g}, {hi:g}], got {value!r}")
+    if len(names) != 6:
+        raise ValueError(f"import_bag: joint_names needs the 6 UR5 joints, got {len(names)}")
+    T_fixed = parse_transform(camera_transform) if camera_transform is not None else None
+    if crop is not None:
+        from ..sim.bounds import as_bounds
+
+        crop = as_bounds(crop, 3)
+    path = Path(bag)
+    ur5 = UR5(tool_offset=tool_offset)
+
+    reader = _open(path)
+    try:
+        if not list(reader.connections):
+            raise BagImportError(f"{path}: the bag has no topics")
+        wrenches = _messages(reader, path, topics.wrench, "wrench")
+        joint_msgs = _messages(reader, path, topics.joints, "joints")
+        clouds = _messages(reader, path, topics.cloud, "cloud")
+        tf = _TfBuffer()
+        if T_fixed is None:
+            for tf_topic in topics.tf:
+                for t, msg in _messages(reader, path, tf_topic, "tf", required=False):
+                    for ts in msg.transforms:
+                        tr, rot = ts.transform.translation, ts.transform.rotation
+                        tf.add(ts.header.frame_id, ts.child_frame_id, _stamp(ts, int(t * 1e9)),
+                               _homogeneous((tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w)),
+                               static="static" in tf_topic)
+    finally:
+        reader.close()
+
+    # ---- inner: fingertip at every wrench sample
+    t_w = np.array([t for t, _ in wrenches])
+    forces = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for _, m in wrenches], dtype=np.float64)
+    if not np.isfinite(forces).all():
+        k = int(np.flatnonzero(~np.isfinite(forces).all(axis=1))[0])
+        raise BagImportError(f"{path}: topic {topics.wrench}: the force at t = {t_w[k]:.6f} s is NaN or inf")
+    t_j, q_j = _joint_table(path, topics.joints, joint_msgs, names)
+    q = _interpolate(path, topics.joints, t_j, q_j, t_w, max_gap)
+    with torch.no_grad():
+        T = ur5.forward_kinematics(torch.as_tensor(q)).numpy()
+    tips = T[:, :3, 3]
+    magnitude = np.linalg.norm(forces, axis=1)
+    touching = magnitude >= contact_force
+    if not touching.any():
+        raise BagImportError(f"{path}: topic {topics.wrench}: no sample reaches |F| >= {contact_force:g} N "
+                             f"(largest {magnitude.max():.3g} N): no contact to learn the inner shape from")
+    contact_pts = tips.copy()
+    if tip_radius > 0:
+        direction = np.einsum("nij,nj->ni", T[:, :3, :3], forces) / np.maximum(magnitude, 1e-12)[:, None]
+        contact_pts = tips - tip_radius * direction
+    idx_c = np.flatnonzero(touching)
+    keep_c = idx_c[thin_indices(contact_pts[idx_c], contact_spacing, np.empty((0, 3)), 0.0)] if contact_spacing > 0 \
+        else idx_c
+    contacts = contact_pts[keep_c]
+    # step of each sample: 1 + the number of kept contacts strictly before it (free space arrives with the next
+    # contact, as in the exploration); contacts get 1..k
+    order = np.searchsorted(keep_c, np.arange(len(t_w)), side="left")
+    step_of = np.minimum(order + 1, len(keep_c))
+    free_idx = np.flatnonzero(~touching)
+    keep_f = free_idx[thin_indices(tips[free_idx], policy.free_space_spacing, contacts, policy.free_space_margin)]
+    free, free_steps = tips[keep_f], step_of[keep_f]
+
+    # ---- outer: clouds in the base frame, then the exploration's vision rule
+    surface, free_out, n_raw = [], [], 0
+    base = base_frame.lstrip("/")
+    cloud_frames = set()
+    for t, msg in clouds:
+        pts = decode_point_cloud2(msg, topic=topics.cloud)
+        n_raw += len(pts)
+        if len(pts) == 0:
+            continue
+        frame = msg.header.frame_id.lstrip("/")
+        cloud_frames.add(frame)
+        if T_fixed is not None:
+            T_bc = T_fixed
+        else:
+            try:
+                T_bc = tf.lookup(base, frame, t)
+            except LookupError as exc:
+                raise BagImportError(f"{path}: topic {topics.cloud}: {exc}; pass camera_transform / "
+                                     "--camera-transform") from None
+        pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
+        cloud = PointCloud(pts_b, origin=T_bc[:3, 3])
+        no_voxel = ObservationPolicy(vision_free_offset=policy.vision_free_offset, voxel=None,
+                                     free_space_spacing=policy.free_space_spacing,
+                                     free_space_margin=policy.free_space_margin)
+        try:
+            x, y = vision_observations(cloud, no_voxel, crop)
+        except ValueError:
+            continue  # nothing of this cloud inside the crop box
+        surface.append(x[y == 0])
+        free_out.append(x[y == 1])
+    if n_raw == 0:
+        raise BagImportError(f"{path}: topic {topics.cloud}: every point of every cloud is NaN or inf")
+    if not surface:
+        raise BagImportError(f"{path}: topic {topics.cloud}: no cloud point lies inside the crop box {crop.tolist()}")
+    from .importers import voxel_average
+
+    seen = np.concatenate(surface)
+    free_o = np.concatenate(free_out) if free_out else np.empty((0, 3))
+    if policy.voxel:
+        seen = voxel_average(seen, policy.voxel)
+        free_o = voxel_average(free_o, policy.voxel) if len(free_o) else free_o
+
+    x = np.concatenate([contacts, free, seen, free_o])
+    y = np.concatenate([np.zeros(len(contacts)), np.ones(len(free)), np.zeros(len(seen)), np.ones(len(free_o))])
+    task = np.concatenate([np.zeros(len(contacts) + len(free)), np.ones(len(seen) + len(free_o))]).astype(np.int64)
+    step = np.concatenate([np.arange(1, len(contacts) + 1), np.asarray(free_steps, dtype=np.int64),
+                           np.zeros(len(seen) + len(free_o), np.int64)]).astype(np.int64)
+    meta = {"source": f"rosbag:{path.name}", "frame": base, "bag_topics": {"cloud": topics.cloud,
+            "wrench": topics.wrench, "joints": topics.joints}, "camera_frames": sorted(cloud_frames),
+            "contact_force": contact_force, "contact_spacing": contact_spacing, "tip_radius": tip_radius,
+            "tool_offset": [float(v) for v in tool_offset], "voxel_size": policy.voxel,
+            "counts": {"wrench": len(wrenches), "joint_states": len(joint_msgs), "clouds": len(clouds),
+                       "cloud_points": int(n_raw), "contacts": int(len(contacts)), "free_space": int(len(free)),
+                       "outer_surface": int(len(seen)), "outer_free_space": int(len(free_o))}}
+    if theta is not None:
+        meta["theta"] = theta
+    if noise is not None:
+        meta["noise"] = noise
+    trace = {"positions": tips, "forces": forces, "timestamps": t_w - t_w[0]}
+    return Dataset(x, y, task, step, meta=meta, trace=trace)
+
+
+# ----------------------------------------------------------------------------------------------- writing
+@dataclass
+class BagMessage:
+    """One message to write: ``topic``, ROS ``msgtype`` (e.g. ``sensor_msgs/msg/JointState``), receive time
+    ``t_ns`` [ns] and the ``rosbags`` message object."""
+
+    topic: str
+    msgtype: str
+    t_ns: int
+    msg: object
+
+
+def write_bag(path: str | os.PathLike, messages: Sequence[BagMessage], *, storage: str = "mcap") -> Path:
+    """Write messages into a new ROS 2 bag with ``rosbags``' writer (``storage`` ``"mcap"`` or ``"sqlite3"``).
+
+    Messages are written in time order. Returns the bag's folder. Refuses to overwrite an existing path.
+    """
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    plugins = {"mcap": StoragePlugin.MCAP, "sqlite3": StoragePlugin.SQLITE3}
+    if storage not in plugins:
+        raise ValueError(f"write_bag: storage must be one of {sorted(plugins)}, got {storage!r}")
+    path = Path(path)
+    if path.exists():
+        raise FileExistsError(f"write_bag: {path} exists")
+    typestore = get_typestore(Stores.ROS2_HUMBLE)
+    with Writer(path, version=9, storage_plugin=plugins[storage]) as writer:
+        conns: dict[tuple[str, str], object] = {}
+        for m in sorted(messages, key=lambda m: m.t_ns):
+            key = (m.topic, m.msgtype)
+            if key not in conns:
+                conns[key] = writer.add_connection(m.topic, m.msgtype, typestore=typestore)
+            writer.write(conns[key], int(m.t_ns), typestore.serialize_cdr(m.msg, m.msgtype))
+    return path
+
+
+def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """``T_base_optical`` of a camera at ``eye`` looking at ``target`` (optical frame: z forward, x right, y down)."""
+    z = (target - eye) / np.linalg.norm(target - eye)
+    x = np.cross(z, [0.0, 0.0, 1.0])
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, y, z], axis=1)
+    T[:3, 3] = eye
+    return T
+
+
+def _matrix_quat(R: np.ndarray) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of a rotation matrix (Shepperd's method)."""
+    from scipy.spatial.transform import Rotation
+
+    return tuple(float(v) for v in Rotation.from_matrix(R).as_quat())
+
+
+def example_bag_messages(*, center=(-0.55, -0.109, 0.0), radius: float = 0.08, cover_radius: float = 0.1,
+                         tip_radius: float = 0.005, tool_offset=(0.0, 0.0, 0.05), speed: float = 0.08,
+                         joint_rate: float = 25.0, wrench_rate: float = 100.0, press_force: float = 2.5,
+                         image=(36, 48), seed: int = 0) -> tuple[list[BagMessage], dict]:
+    """A synthetic recording of a UR5 touching a sphere under a spherical cover, as ROS 2 messages.
+
+    The fingertip (a ball of ``tip_radius`` at ``tool_offset`` from the flange) approaches the sphere from above,
+    slides along two arcs on it pressing with ``press_force``, lifts and re-presses; the joints (UR driver names)
+    come from :meth:`kinematics.UR5.cartesian_step` along that path. A depth camera whose optical frame hangs off
+    ``base -> camera_link -> camera_depth_optical_frame`` in ``/tf_static`` sees the cover (an organised cloud with
+    NaN where rays miss, an ``rgb`` field and row padding). Used by the tests, the rosbag tutorial and as a
+    template for what :func:`import_bag` expects.
+
+    Returns:
+        ``(messages, truth)``; ``truth`` has ``center`` `(3,)`, ``radius``, ``cover_radius``, ``tip_radius``,
+        ``tool_offset``, ``T_base_optical`` `(4, 4)` and ``contact_path`` `(k, 3)` (true contact points) [m].
+    """
+    from kinematics.dh import UR5_JOINT_NAMES
+    from kinematics.ur5 import UR5
+    from rosbags.typesys import Stores, get_typestore
+
+    ts = get_typestore(Stores.ROS2_HUMBLE).types
+    rng = np.random.default_rng(seed)
+    c = np.asarray(center, dtype=np.float64)
+    ur5 = UR5(tool_offset=tool_offset)
+    q = torch.tensor([0.0, -1.2, 1.5, -1.9, -1.57, 0.0], dtype=torch.float64)
+
+    # the fingertip centre's path: (position, pressing?) every speed/joint_rate metres
+    r_tip = radius + tip_radius
+
+    def arc(a0, a1, axis):  # points on the sphere of radius r_tip, angles from +z towards axis
+        n = max(2, int(abs(a1 - a0) * r_tip / (speed / joint_rate)))
+        a = np.linspace(a0, a1, n)
+        d = np.outer(np.cos(a), [0, 0, 1.0]) + np.outer(np.sin(a), axis)
+        return c + r_tip * d
+
+    def line(p0, p1):
+        n = max(2, int(np.linalg.norm(p1 - p0) / (speed / joint_rate)))
+        return p0 + np.outer(np.linspace(0, 1, n), p1 - p0)
+
+    top = c + [0, 0, r_tip]
+    start = ur5.position(q).numpy()
+    segs = [(line(start, top + [0, 0, 0.08]), False), (line(top + [0, 0, 0.08], top), False),
+            (arc(0.0, 0.7, np.array([1.0, 0, 0])), True)]
+    end = segs[-1][0][-1]
+    out = c + (end - c) * (r_tip + 0.04) / r_tip
+    segs += [(line(end, out), False)]
+    p2 = c + r_tip * np.array([0.0, np.sin(0.4), np.cos(0.4)])
+    segs += [(line(out, c + (p2 - c) * (r_tip + 0.04) / r_tip), False),
+             (line(c + (p2 - c) * (r_tip + 0.04) / r_tip, p2), False), (arc(0.4, 0.9, np.array([0, 1.0, 0])), True),
+             (line(c + r_tip * np.array([0, np.sin(0.9), np.cos(0.9)]), c + (r_tip + 0.05) *
+                   np.array([0, np.sin(0.9), np.cos(0.9)])), False)]
+    path = np.concatenate([s[0] for s in segs])
+    pressing = np.concatenate([np.full(len(s[0]), s[1]) for s in segs])
+    # all path points at once: batched resolved-rate steps from the home pose until every one is reached
+    qs = q.expand(len(path), 6).clone()
+    target = torch.as_tensor(path)
+    for _ in range(100):
+        err = target - ur5.position(qs)
+        if float(err.norm(dim=1).max()) < 1e-10:
+            break
+        qs = ur5.cartesian_step(qs, err)
+    reached = ur5.position(qs).detach().numpy()
+    R = ur5.forward_kinematics(qs).detach().numpy()[:, :3, :3]
+    t_joint = np.arange(len(path)) / joint_rate
+
+    def header(t: float, frame: str):
+        sec = int(math.floor(t))
+        return ts["std_msgs/msg/Header"](stamp=ts["builtin_interfaces/msg/Time"](sec=sec, nanosec=int(round(
+            (t - sec) * 1e9)) % 1_000_000_000), frame_id=frame)
+
+    t0 = 1_700_000_000.0
+    msgs: list[BagMessage] = []
+    for t, qq in zip(t_joint, qs.detach().numpy()):
+        m = ts["sensor_msgs/msg/JointState"](header=header(t0 + t, ""), name=list(UR5_JOINT_NAMES), position=qq,
+                                             velocity=np.zeros(6), effort=np.zeros(6))
+        msgs.append(BagMessage("/joint_states", "sensor_msgs/msg/JointState", int((t0 + t) * 1e9), m))
+    t_wrench = np.arange(0.003, t_joint[-1], 1.0 / wrench_rate)
+    contact_path = []
+    for t in t_wrench:
+        i = min(int(t * joint_rate), len(path) - 2)
+        w = t * joint_rate - i
+        p = reached[i] * (1 - w) + reached[i + 1] * w
+        on = pressing[i] and pressing[i + 1]
+        n = (p - c) / np.linalg.norm(p - c)
+        f_base = n * press_force if on else rng.normal(0.0, 0.05, 3)
+        if on:
+            contact_path.append(p - tip_radius * n)
+        f_tool = R[i].T @ f_base
+        m = ts["geometry_msgs/msg/WrenchStamped"](header=header(t0 + t, "tool0"), wrench=ts[
+            "geometry_msgs/msg/Wrench"](force=ts["geometry_msgs/msg/Vector3"](x=f_tool[0], y=f_tool[1], z=f_tool[2]),
+                                        torque=ts["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)))
+        msgs.append(BagMessage("/wrench", "geometry_msgs/msg/WrenchStamped", int((t0 + t) * 1e9), m))
+
+    # camera: base -> camera_link (x forward) -> camera_depth_optical_frame (z forward), looking at the object
+    T_bo = _look_at(c + np.array([0.5, 0.3, 0.35]), c)
+    R_link_optical = np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]])  # REP 103: optical z = link x
+    T_lo = np.eye(4)
+    T_lo[:3, :3] = R_link_optical
+    T_lo[:3, 3] = [0.0, 0.015, 0.0]
+    T_bl = T_bo @ np.linalg.inv(T_lo)
+
+    def tf_stamped(parent, child, T):
+        tr, qx = T[:3, 3], _matrix_quat(T[:3, :3])
+        return ts["geometry_msgs/msg/TransformStamped"](
+            header=header(t0, parent), child_frame_id=child, transform=ts["geometry_msgs/msg/Transform"](
+                translation=ts["geometry_msgs/msg/Vector3"](x=tr[0], y=tr[1], z=tr[2]),
+                rotation=ts["geometry_msgs/msg/Quaternion"](x=qx[0], y=qx[1], z=qx[2], w=qx[3])))
+
+    tf = ts["tf2_msgs/msg/TFMessage"](transforms=[tf_stamped("base", "camera_link", T_bl),
+                                                  tf_stamped("camera_link", "camera_depth_optical_frame", T_lo)])
+    msgs.append(BagMessage("/tf_static", "tf2_msgs/msg/TFMessage", int(t0 * 1e9), tf))
+    h, w = image
+    u, v = np.meshgrid(np.linspace(-0.35, 0.35, w), np.linspace(-0.27, 0.27, h))
+    rays = np.stack([u, v, np.ones_like(u)], axis=-1)
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    o = np.linalg.inv(T_bo)[:3] @ np.append(c, 1.0)  # sphere centre in the optical frame
+    b = rays @ o
+    disc = b * b - (o @ o - cover_radius ** 2)
+    depth = np.where(disc >= 0, b - np.sqrt(np.maximum(disc, 0)), np.nan)
+    pts = (rays * depth[..., None]).astype(np.float32)
+    step, pad = 32, 8
+    rec = np.zeros((h, w * step + pad), dtype=np.uint8)
+    cells = rec[:, :w * step].reshape(h, w, step)
+    cells[..., 0:12] = pts.view(np.uint8).reshape(h, w, 12)
+    cells[..., 16:20] = np.full((h, w), 0x00FF8800, dtype=np.uint32).view(np.uint8).reshape(h, w, 4)
+    field = ts["sensor_msgs/msg/PointField"]
+    cloud = ts["sensor_msgs/msg/PointCloud2"](
+        header=header(t0 + 0.01, "camera_depth_optical_frame"), height=h, width=w,
+        fields=[field(name="x", offset=0, datatype=7, count=1), field(name="y", offset=4, datatype=7, count=1),
+                field(name="z", offset=8, datatype=7, count=1), field(name="rgb", offset=16, datatype=7, count=1)],
+        is_bigendian=False, point_step=step, row_step=w * step + pad, data=rec.reshape(-1), is_dense=False)
+    msgs.append(BagMessage("/camera/depth/points", "sensor_msgs/msg/PointCloud2", int((t0 + 0.01) * 1e9), cloud))
+    truth = {"center": c, "radius": radius, "cover_radius": cover_radius, "tip_radius": tip_radius,
+             "tool_offset": tuple(tool_offset), "T_base_optical": T_bo, "contact_path": np.asarray(contact_path),
+             "path_error": float(np.abs(reached - path).max())}
+    return msgs, truth
