@@ -116,6 +116,24 @@ def _import_bag(args: argparse.Namespace) -> int:
     return 0
 
 
+def _export(args: argparse.Namespace) -> int:
+    from .io.export import export_run
+
+    info = export_run(args.run, args.mesh, outer=args.outer, step=args.step, resolution=args.resolution)
+    size = f" ({info['vertices']} vertices, {info['faces']} faces)" if "vertices" in info else ""
+    for key in ("inner", "outer"):
+        if info[key]:
+            print(f"wrote the {key} estimate at step {info['step']} to {info[key]}{size if key == 'inner' else ''}")
+    return 0
+
+
+def _view(args: argparse.Namespace) -> int:
+    from .viewer import serve
+
+    serve(args.run, port=args.port, open_browser=not args.no_browser, resolution=args.resolution)
+    return 0
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -229,6 +247,29 @@ def build_parser() -> argparse.ArgumentParser:
     bag.add_argument("--voxel", type=float, default=0.05, help="voxel edge for the cloud [m] (paper: 0.05)")
     bag.add_argument("--crop", default=None, help="keep cloud points in 'xmin ymin zmin xmax ymax zmax' [m]")
     bag.set_defaults(func=_import_bag)
+    ex = sub.add_parser("export", parents=[common], formatter_class=fmt,
+                        help="write the estimated surfaces of a run as PLY/OBJ/STL/GLB meshes (SVG/DXF curves in 2-D)",
+                        description="Rebuild the model of a log or dataset at a step with the run's own learned K_t and "
+                                    "write {mu = 0} through trimesh, coloured by the posterior variance (PLY meshes "
+                                    "also carry a 'variance' vertex property).")
+    ex.add_argument("run", help="exploration log or dataset (.gpioius)")
+    ex.add_argument("--mesh", default=None, help="file for the inner estimate (.ply .obj .stl .glb .off; 2-D: .svg "
+                                                 ".dxf .ply .obj)")
+    ex.add_argument("--outer", default=None, help="file for the outer estimate (visual-tactile runs)")
+    ex.add_argument("--step", type=int, default=None, help="step to export (default: the last)")
+    ex.add_argument("--resolution", type=float, default=None, help="grid spacing [m] (default 5 mm 2-D, 1 cm 3-D)")
+    ex.set_defaults(func=_export)
+    vw = sub.add_parser("view", parents=[common], formatter_class=fmt,
+                        help="serve an interactive 3-D page of a run (viser): steps, contacts, path, estimate",
+                        description="Serve a local web page (the 'viewer' extra) showing a log, a dataset or every log "
+                                    "of a study folder: the point cloud, contacts and free space, the path, the "
+                                    "estimated inner surface coloured by its variance, the true shapes when known, "
+                                    "and the similarity over the steps, with a step slider. Ctrl-C stops it.")
+    vw.add_argument("run", help="exploration log, dataset (.gpioius) or study folder (with logs/)")
+    vw.add_argument("--port", type=int, default=8080, help="port of the page on localhost")
+    vw.add_argument("--no-browser", action="store_true", help="do not open a browser")
+    vw.add_argument("--resolution", type=float, default=None, help="grid spacing of the estimate [m]")
+    vw.set_defaults(func=_view)
     return parser
 
 

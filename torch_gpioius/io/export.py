@@ -1,0 +1,146 @@
+"""Write estimated surfaces for other tools: meshes (PLY, OBJ, STL, GLB, OFF through trimesh) in 3-D, polylines
+(SVG, DXF, or a PLY/OBJ line set) in 2-D, coloured by the posterior variance."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .datasets import DatasetError
+
+__all__ = ["export_run", "write_surface", "MESH_FORMATS", "CURVE_FORMATS"]
+
+#: File endings trimesh writes meshes to.
+MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")
+#: File endings a 2-D estimate (closed polylines) is written to.
+CURVE_FORMATS = (".svg", ".dxf", ".ply", ".obj")
+
+
+def _colours(variance: np.ndarray, prior: float) -> np.ndarray:
+    """`(n, 4)` uint8 RGBA: matplotlib's Purples over variance / prior variance in [0, 1]."""
+    from matplotlib import colormaps
+
+    return (colormaps["Purples"](np.clip(variance / prior, 0.0, 1.0)) * 255).round().astype(np.uint8)
+
+
+def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> Path:
+    """Write one estimated surface.
+
+    Args:
+        surface: a :class:`trimesh.Trimesh` (3-D) or a list of `(m, 2)` closed polylines [m] (2-D).
+        variance: `(V,)` posterior variance at the mesh vertices, or a list of `(m,)` per polyline.
+        path: output file; the ending picks the format (:data:`MESH_FORMATS` / :data:`CURVE_FORMATS`).
+        prior: prior variance, to which the colours are scaled.
+
+    Returns:
+        the path written. PLY meshes also carry the variance as a vertex property ``variance``.
+
+    Raises:
+        ValueError: a format that does not suit the surface.
+    """
+    import trimesh
+
+    path = Path(path)
+    ext = path.suffix.lower()
+    if isinstance(surface, trimesh.Trimesh):
+        if ext not in MESH_FORMATS:
+            raise ValueError(f"{path}: a 3-D estimate is a mesh; write one of {', '.join(MESH_FORMATS)}")
+        mesh = surface.copy()
+        mesh.visual.vertex_colors = _colours(np.asarray(variance), prior)
+        mesh.vertex_attributes["variance"] = np.asarray(variance, dtype=np.float64)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        if ext == ".ply":
+            path.write_bytes(trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=True))
+        else:
+            mesh.export(path)
+        return path
+    if ext not in CURVE_FORMATS:
+        raise ValueError(f"{path}: a 2-D estimate is a set of closed curves; write one of {', '.join(CURVE_FORMATS)}")
+    curves = [np.asarray(c, dtype=np.float64) for c in surface]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if ext in (".svg", ".dxf"):
+        entities, vertices = [], []
+        for c in curves:
+            start = sum(len(v) for v in vertices)
+            vertices.append(c)
+            entities.append(trimesh.path.entities.Line(np.arange(start, start + len(c))))
+        p = trimesh.path.Path2D(entities=entities, vertices=np.concatenate(vertices))
+        p.export(str(path), file_type=ext[1:])
+        return path
+    # PLY / OBJ: a line set in the z = 0 plane with the variance as colours
+    vertices = np.concatenate([np.column_stack([c, np.zeros(len(c))]) for c in curves])
+    offsets = np.cumsum([0] + [len(c) for c in curves])
+    edges = np.concatenate([np.column_stack([np.arange(a, b - 1), np.arange(a + 1, b)])
+                            for a, b in zip(offsets[:-1], offsets[1:])])
+    colours = _colours(np.concatenate([np.asarray(v) for v in variance]), prior)
+    if ext == ".ply":
+        # trimesh writes no edges to PLY: a minimal ASCII PLY with vertex colours and edge elements
+        lines = ["ply", "format ascii 1.0", f"element vertex {len(vertices)}", "property double x", "property double y",
+                 "property double z", "property uchar red", "property uchar green", "property uchar blue",
+                 f"element edge {len(edges)}", "property int vertex1", "property int vertex2", "end_header"]
+        lines += [f"{x!r} {y!r} {z!r} {r} {g} {b}" for (x, y, z), (r, g, b, _) in zip(vertices.tolist(), colours)]
+        lines += [f"{a} {b}" for a, b in edges]
+        path.write_text("\n".join(lines) + "\n")
+    else:
+        lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
+        for a, b in zip(offsets[:-1], offsets[1:]):
+            lines.append("l " + " ".join(str(i + 1) for i in range(a, b)))
+        path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
+               outer: str | os.PathLike | None = None, step: int | None = None,
+               resolution: float | None = None, bounds=None) -> dict:
+    """Write the estimated inner (and outer) surface of a log or dataset after ``step`` (default: the last).
+
+    The model is rebuilt with the run's own learned K_t at that step (no re-learning; datasets are fitted).
+
+    Args:
+        run: exploration log or dataset (``.gpioius``).
+        mesh: file for the inner estimate ``{mu_in = 0}``.
+        outer: file for the outer estimate ``{mu_out = 0}`` (visual-tactile runs).
+        step: which step (the last recorded one at or before it).
+        resolution: grid spacing [m] (default 5 mm in 2-D, 1 cm in 3-D).
+        bounds: `(2, d)` box [min; max] [m] (default: the observations padded by 5 cm).
+
+    Returns:
+        ``{"step", "inner", "outer", "vertices", "faces"}`` (paths written, and the inner mesh's size in 3-D).
+
+    Raises:
+        DatasetError / ValueError: unreadable run, a format that does not suit, no surface in the box, an outer
+            export of a run without outer observations.
+    """
+    from ..metrics import prior_variance
+    from ..sim.bounds import as_bounds
+    from .offline import data_bounds
+    from .runs import estimate_surface, load_run
+
+    if mesh is None and outer is None:
+        raise ValueError("export: nothing to write (give a mesh and/or an outer file)")
+    history = load_run(run)
+    k = history.steps[-1] if step is None else history.nearest_step(int(step))
+    if step is not None and int(step) < history.steps[0]:
+        raise ValueError(f"export: step {step} precedes the run's first step {history.steps[0]}")
+    model = history.model_at(k)
+    ds = history.states[k]
+    dim = history.dim
+    box = data_bounds(ds.x) if bounds is None else as_bounds(bounds, dim)
+    res = resolution or (0.005 if dim == 2 else 0.01)
+    out = {"step": k, "inner": None, "outer": None}
+    for task, target in ((0, mesh), (1, outer)):
+        if target is None:
+            continue
+        if task == 1 and getattr(model, "num_tasks", 1) < 2:
+            raise ValueError(f"export: {history.path.name} has no outer model at step {k} (a tactile-only run); "
+                             "drop --outer")
+        surface, var = estimate_surface(model, box, res, task)
+        if surface is None or (dim == 2 and not surface):
+            raise DatasetError(f"export: the {'inner' if task == 0 else 'outer'} estimate at step {k} does not cross "
+                               "the box of the observations")
+        out["inner" if task == 0 else "outer"] = str(write_surface(surface, var, target, prior_variance(model, task)))
+        if task == 0 and dim == 3:
+            out.update(vertices=len(surface.vertices), faces=len(surface.faces))
+    return out

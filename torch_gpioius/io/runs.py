@@ -1,0 +1,199 @@
+"""A run as a sequence of steps, for viewers and exports: observations, path, learned parameters and the model at
+each step of an exploration log, or of a dataset by its step column, and the true shapes when the run names a
+built-in world."""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from .datasets import Dataset, DatasetError, load_dataset, replay
+
+__all__ = ["RunHistory", "load_run", "known_truth", "estimate_surface"]
+
+
+@dataclass
+class RunHistory:
+    """Every step of one run.
+
+    Attributes:
+        path: the file read.
+        meta: its header (world, scene, mode, theta, noise, ...).
+        steps: `(K,)` step numbers, increasing (0 = before exploring, when the file has it).
+        states: the observations after each step (:class:`Dataset`), keyed by step.
+        params: per step, what the run had learned: ``kt`` `(2, 2)` (visual-tactile), ``local_params`` (local
+            model), ``similarity`` / ``correlation`` / ``hausdorff`` as recorded (NaN when not).
+        trajectory: `(m, d)` fingertip positions in time order [m]; ``trajectory_step`` `(m,)` the step each
+            belongs to.
+    """
+
+    path: Path
+    meta: dict
+    steps: list[int]
+    states: dict[int, Dataset]
+    params: dict[int, dict] = field(default_factory=dict)
+    trajectory: np.ndarray | None = None
+    trajectory_step: np.ndarray | None = None
+
+    @property
+    def dim(self) -> int:
+        return int(self.meta["dim"])
+
+    @property
+    def name(self) -> str:
+        return self.path.stem
+
+    def nearest_step(self, step: int) -> int:
+        """The last recorded step at or before ``step`` (the first one if ``step`` precedes them all)."""
+        i = int(np.searchsorted(self.steps, step, side="right")) - 1
+        return self.steps[max(i, 0)]
+
+    def model_at(self, step: int):
+        """The model of the run after ``step``: rebuilt from the observations with the logged K_t / local
+        parameters (no re-learning), or fitted where the file records none (datasets)."""
+        from ..models.gpiois import GPIOIS
+        from ..models.gpis import GPIS
+
+        k = self.nearest_step(step)
+        ds, p = self.states[k], self.params.get(k, {})
+        theta = float(self.meta.get("theta") or 0.1)
+        noise = float(self.meta.get("noise") or 0.006)
+        has_outer = bool((ds.task == 1).any())
+        if not has_outer or self.meta.get("mode") == "tactile":
+            inner = ds.task == 0
+            model = GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise)
+            return model
+        if "local_params" in p and self.meta.get("regions"):
+            from ..models.local import LocalGPIOIS
+
+            model = LocalGPIOIS(ds.x, ds.y, ds.task, regions=int(self.meta["regions"]), theta=theta, noise=noise)
+            with torch.no_grad():
+                model.params.copy_(torch.as_tensor(p["local_params"]))
+            model._engine = None
+            return model
+        if "kt" in p and np.isfinite(p["kt"]).all():
+            return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]))
+        return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise).fit()
+
+    def series(self, key: str) -> np.ndarray:
+        """`(K,)` a recorded per-step value (``similarity``, ``correlation``, ``hausdorff``) over :attr:`steps`."""
+        return np.array([self.params.get(k, {}).get(key, math.nan) for k in self.steps], dtype=np.float64)
+
+
+def load_run(path: str | os.PathLike) -> RunHistory:
+    """Read a log or a dataset (see :class:`RunHistory`).
+
+    A log gives one state per step record (and the state before exploring); a dataset gives one state per value
+    of its step column (observations with ``step <= k``).
+
+    Raises:
+        DatasetError: unreadable or invalid files (names the file and the field), or a file with no observation.
+    """
+    path = Path(path)
+    states: dict[int, Dataset] = {}
+    params: dict[int, dict] = {}
+    traj, traj_step = [], []
+    header = None
+    for rec, ds in replay(path):
+        header = ds.meta
+        if rec.kind == "step":
+            k = int(rec.meta["step"])
+            states[k] = ds
+            a = rec.arrays
+            p = {"similarity": float(rec.meta.get("s", math.nan)), "correlation": float(rec.meta.get("rho", math.nan)),
+                 "hausdorff": float(rec.meta.get("h", math.nan) if rec.meta.get("h") is not None else math.nan)}
+            for key in ("kt", "local_params", "contact"):
+                if key in a:
+                    p[key] = np.asarray(a[key], dtype=np.float64)
+            params[k] = p
+            if "path" in a and len(a["path"]):
+                traj.append(np.asarray(a["path"], dtype=np.float64))
+                traj_step.append(np.full(len(a["path"]), k))
+        elif rec.kind == "observations" and not states:
+            states[0] = ds
+    if header is None:
+        raise DatasetError(f"{path}: no observations")
+    if not any(k > 0 for k in states):   # a dataset: states by its step column
+        full = load_dataset(path)
+        ks = sorted({0, *(int(k) for k in full.step)})
+        states = {k: Dataset(*(a[full.step <= k] for a in (full.x, full.y, full.task, full.step)), meta=full.meta,
+                             trace=full.trace) for k in ks if (full.step <= k).any()}
+        if "positions" in full.trace and len(full.trace["positions"]):
+            traj = [full.trace["positions"]]
+            traj_step = [np.zeros(len(full.trace["positions"]), np.int64)]
+    if not states:
+        raise DatasetError(f"{path}: the file holds no observations")
+    trajectory = np.concatenate(traj) if traj else None
+    return RunHistory(path, dict(header), sorted(states), states, params, trajectory,
+                      np.concatenate(traj_step) if traj_step else None)
+
+
+def known_truth(meta: dict) -> dict | None:
+    """The true shapes of a built-in world named by a header (``world`` and ``scene``), or None.
+
+    Returns:
+        2-D: ``{"inner": [(m, 2)], "outer": [(m, 2)]}`` closed polylines [m]; 3-D: ``{"inner": Trimesh, "outer":
+        Trimesh | None}`` (MuJoCo covers settle at run time: their outer shape is what the camera saw). None when
+        the world is not built in (a real robot, a user's scene) or its optional dependency is missing.
+    """
+    world, name = meta.get("world"), meta.get("scene")
+    try:
+        if world == "Scene2D":
+            from ..sim import paper_objects_2d
+
+            scene = paper_objects_2d().get(name)
+            return None if scene is None else {"inner": [scene.inner_boundary], "outer": [scene.outer_boundary]}
+        if world == "Scene3D":
+            from ..sim import paper_objects_3d
+
+            scene = paper_objects_3d().get(name)
+            return None if scene is None else {"inner": scene.inner, "outer": scene.outer}
+        if world == "MujocoScene":
+            from ..sim.mujoco import objects as mo
+            from ..sim.mujoco.primitives import as_primitives, union_sdf
+            from ..sim.shapes3d import mesh_from_sdf
+
+            if name not in mo.OBJECTS:
+                return None
+            arm = name in ("E", "F")
+            prims = as_primitives(mo.arm_primitives() if arm else mo.torso_primitives())
+            box = np.asarray(mo.ARM_RANGE if arm else mo.TORSO_RANGE) + np.array([[-0.3], [0.3]]) + 0.005 * (
+                math.sqrt(2) - 1)   # offset grid: see MujocoScene.inner
+            return {"inner": mesh_from_sdf(lambda p: union_sdf(prims, p), box, 0.005), "outer": None}
+    except ImportError:
+        return None
+    return None
+
+
+def estimate_surface(model, bounds: np.ndarray, resolution: float, task: int = 0):
+    """The estimated surface ``{mu = 0}`` of ``task`` and its posterior variance.
+
+    Returns:
+        2-D: ``(curves, variances)`` lists of `(m, 2)` polylines [m] and `(m,)` variances at their vertices;
+        3-D: ``(mesh, variance)``, a :class:`trimesh.Trimesh` and `(V,)` variances at its vertices; ``(None, None)``
+        (3-D) or ``([], [])`` (2-D) when the level set does not cross the box.
+    """
+    from ..surfaces import zero_level_curves, zero_level_mesh
+
+    if bounds.shape[1] == 2:
+        curves = zero_level_curves(model, bounds, resolution, task)
+        var = []
+        for c in curves:
+            var.append(_variance(model, np.asarray(c), task))
+        return curves, var
+    mesh = zero_level_mesh(model, bounds, resolution, task)
+    if mesh is None:
+        return None, None
+    return mesh, _variance(model, np.asarray(mesh.vertices), task)
+
+
+def _variance(model, x: np.ndarray, task: int) -> np.ndarray:
+    with torch.no_grad():
+        if getattr(model, "num_tasks", 1) > 1:
+            return model.predict(torch.tensor(x), task=task)[1].numpy()
+        return model.predict(torch.tensor(x))[1].numpy()

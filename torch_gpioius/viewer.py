@@ -1,0 +1,311 @@
+"""Interactive viewer of a run in the browser, on `viser <https://viser.studio>`_ (the ``viewer`` extra).
+
+``gpioius view run.gpioius`` serves a local page that shows, for the step picked with a slider:
+
+* the camera's point cloud (outer surface seen, grey) and the free space in front of it (light blue);
+* the contacts (black) and free-space points (cyan) touched so far, and the fingertip's path (orange);
+* the estimated inner surface {mu_in = 0} coloured by its posterior variance (white: certain, purple: the prior),
+  a mesh in 3-D, a curve in the z = 0 plane in 2-D;
+* the true inner (green) and outer (grey) shapes when the run names a built-in world;
+* the similarity and correlation over the steps, with the current step marked.
+
+A study folder (with ``logs/``) gets a dropdown of its runs. Estimates are computed on demand with the run's own
+learned K_t at each step (:meth:`torch_gpioius.io.runs.RunHistory.model_at`) and cached.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import threading
+import time
+import warnings
+import webbrowser
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["RunViewer", "serve", "run_files"]
+
+_GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (150, 150, 150), (150, 200, 255), (20, 20, 20), (0, 190, 210), (255, 140, 0)
+_GREEN = (30, 160, 60)
+
+
+def run_files(source: str | os.PathLike) -> list[Path]:
+    """The runs a source names: the file itself, or a study folder's ``logs/*.gpioius`` (else ``*.gpioius``).
+
+    Raises:
+        FileNotFoundError: the path does not exist, or a folder holds no ``.gpioius`` file.
+    """
+    p = Path(source)
+    if p.is_file():
+        return [p]
+    if p.is_dir():
+        files = sorted((p / "logs").glob("*.gpioius")) or sorted(p.glob("*.gpioius"))
+        if not files:
+            raise FileNotFoundError(f"{p}: a folder without .gpioius files (expected a study folder with logs/)")
+        return files
+    raise FileNotFoundError(f"{p}: no such run, dataset or study folder")
+
+
+def _segments(polyline: np.ndarray) -> np.ndarray:
+    """`(m - 1, 2, 3)` segments of a `(m, d)` polyline (2-D lifted to z = 0)."""
+    p = np.asarray(polyline, dtype=np.float64)
+    if p.shape[1] == 2:
+        p = np.column_stack([p, np.zeros(len(p))])
+    return np.stack([p[:-1], p[1:]], axis=1)
+
+
+def _lift(x: np.ndarray) -> np.ndarray:
+    x = np.asarray(x, dtype=np.float64)
+    return np.column_stack([x, np.zeros(len(x))]) if x.shape[1] == 2 else x
+
+
+class RunViewer:
+    """A viser server showing one or more runs (see the module docstring).
+
+    Args:
+        source: a log, a dataset, or a study folder.
+        host: interface to serve on.
+        port: TCP port (viser moves to the next free one if taken; see :attr:`port`).
+        resolution: grid spacing of the estimates [m] (default 5 mm in 2-D, 1.5 cm in 3-D).
+
+    Attributes:
+        server: the ``viser.ViserServer``.
+        port: the port actually served.
+        step_slider: the GUI slider (index into the run's steps).
+    """
+
+    def __init__(self, source: str | os.PathLike, *, host: str = "127.0.0.1", port: int = 8080,
+                 resolution: float | None = None) -> None:
+        try:
+            import viser
+        except ImportError as exc:  # pragma: no cover - extra missing
+            raise ImportError("gpioius view needs the 'viewer' extra: pip install 'torch_gpioius[viewer]'") from exc
+        from .io.runs import load_run
+
+        self.files = run_files(source)
+        self._load_run = load_run
+        self._runs: dict[Path, object] = {}
+        self._cache: dict[tuple[Path, int], tuple] = {}
+        self._lock = threading.RLock()
+        self._handles: dict[str, object] = {}
+        self.resolution = resolution
+        self.run = self._get(self.files[0])        # validates the first run before serving anything
+        self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        self.port = self.server.get_port()
+        self.server.scene.set_up_direction("+z")
+        self._build_gui()
+        self._show_run(self.files[0])
+
+    # ---------------------------------------------------------------------------------------------------- data
+    def _get(self, path: Path):
+        if path not in self._runs:
+            self._runs[path] = self._load_run(path)
+        return self._runs[path]
+
+    def _estimate(self, k: int):
+        key = (self.run.path, k)
+        if key not in self._cache:
+            from .io.offline import data_bounds
+            from .io.runs import estimate_surface
+            from .metrics import prior_variance
+            from .models.gpiois import UnidentifiedSimilarityWarning
+
+            with warnings.catch_warnings():   # a dataset's step 0 has no touch yet: its similarity is unidentified
+                warnings.simplefilter("ignore", UnidentifiedSimilarityWarning)
+                model = self.run.model_at(k)
+            p = self.run.params.setdefault(k, {})
+            if not math.isfinite(p.get("similarity", math.nan)) and hasattr(model, "similarity"):
+                # datasets record no similarity: fill in what the fitted model says, as the steps are visited
+                p["similarity"], p["correlation"] = float(model.similarity), float(model.correlation)
+                i = self.run.steps.index(k)
+                self._series[1][i], self._series[2][i] = p["similarity"], p["correlation"]
+            ds = self.run.states[k]
+            res = self.resolution or (0.005 if self.run.dim == 2 else 0.015)
+            inner = ds.task == 0
+            if not (inner & (ds.y == 0)).any():
+                self._cache[key] = (None, None, 1.0)
+            else:
+                surface, var = estimate_surface(model, data_bounds(ds.x), res, 0)
+                self._cache[key] = (surface, var, prior_variance(model, 0))
+        return self._cache[key]
+
+    # ---------------------------------------------------------------------------------------------------- GUI
+    def _build_gui(self) -> None:
+        from viser import uplot
+
+        gui = self.server.gui
+        self.run_dropdown = gui.add_dropdown("run", [p.name for p in self.files], initial_value=self.files[0].name,
+                                             visible=len(self.files) > 1)
+        self.step_slider = gui.add_slider("step", min=0, max=1, step=1, initial_value=0)
+        self.info = gui.add_markdown("")
+        self.layers = {name: gui.add_checkbox(name, True) for name in
+                       ("point cloud", "touches", "path", "estimate", "true shapes")}
+        self.plot = gui.add_uplot(data=(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1)),
+                                  series=(uplot.Series(label="step"),
+                                          uplot.Series(label="similarity", stroke="purple", width=2),
+                                          uplot.Series(label="correlation", stroke="teal", width=2),
+                                          uplot.Series(label="this step", stroke="red", width=0,
+                                                       points={"show": True, "size": 8, "fill": "red"})),
+                                  title="similarity over steps", aspect=1.6,
+                                  scales={"x": uplot.Scale(time=False)},
+                                  axes=(uplot.Axis(label="step"), uplot.Axis()))
+
+        @self.run_dropdown.on_update
+        def _(_event) -> None:
+            self._show_run(next(p for p in self.files if p.name == self.run_dropdown.value))
+
+        @self.step_slider.on_update
+        def _(_event) -> None:
+            self.show(self.run.steps[int(self.step_slider.value)])
+
+        for box in self.layers.values():
+            @box.on_update
+            def _(_event) -> None:
+                self.show(self.run.steps[int(self.step_slider.value)])
+
+    def _show_run(self, path: Path) -> None:
+        with self._lock:
+            self.run = self._get(path)
+            steps = self.run.steps
+            self.server.scene.reset()
+            self._handles = {}
+            truth = self._truth()
+            if truth is not None:
+                self._draw_truth(truth)
+            self._frame_camera()
+            s, r = self.run.series("similarity"), self.run.series("correlation")
+            self._series = (np.asarray(steps, dtype=np.float64), s, r)
+        self.step_slider.max = max(len(steps) - 1, 1)
+        self.step_slider.value = len(steps) - 1
+        self.show(steps[-1])
+
+    def _frame_camera(self) -> None:
+        """Point the initial camera at the run's observations: from above in 2-D, from a diagonal in 3-D."""
+        x = self.run.states[self.run.steps[-1]].x
+        lo, hi = x.min(axis=0), x.max(axis=0)
+        centre, size = _lift(((lo + hi) / 2)[None])[0], float(np.max(hi - lo))
+        cam = self.server.initial_camera
+        cam.look_at = tuple(centre)
+        if self.run.dim == 2:
+            cam.up = (0.0, 1.0, 0.0)
+            cam.position = tuple(centre + [0.0, -1e-3, 1.4 * size])
+        else:
+            cam.up = (0.0, 0.0, 1.0)
+            cam.position = tuple(centre + 1.1 * size * np.array([-0.8, -0.9, 0.7]))
+        for client in self.server.get_clients().values():
+            client.camera.look_at, client.camera.position = cam.look_at, cam.position
+
+    def _truth(self):
+        from .io.runs import known_truth
+
+        if not hasattr(self.run, "_truth"):
+            self.run._truth = known_truth(self.run.meta)
+        return self.run._truth
+
+    def _draw_truth(self, truth: dict) -> None:
+        scene = self.server.scene
+        if self.run.dim == 2:
+            for name, colour in (("inner", _GREEN), ("outer", _GREY)):
+                segs = np.concatenate([_segments(np.vstack([c, c[:1]])) for c in truth[name]])
+                self._handles[f"/truth/{name}"] = scene.add_line_segments(f"/truth/{name}", segs, colour, thickness=2.0, thickness_units="screen")
+        else:
+            m = truth["inner"]
+            self._handles["/truth/inner"] = scene.add_mesh_simple("/truth/inner", m.vertices, m.faces, color=_GREEN, wireframe=True, opacity=0.3)
+            if truth.get("outer") is not None:
+                o = truth["outer"]
+                self._handles["/truth/outer"] = scene.add_mesh_simple("/truth/outer", o.vertices, o.faces, color=_GREY, opacity=0.15,
+                                      side="double")
+
+    # ---------------------------------------------------------------------------------------------------- drawing
+    def show(self, step: int) -> None:
+        """Draw the run after ``step`` (the last recorded step at or before it)."""
+        with self._lock:
+            run = self.run
+            k = run.nearest_step(step)
+            ds = run.states[k]
+            scene = self.server.scene
+            size = 0.004 if run.dim == 2 else 0.006
+            on = {name: bool(box.value) for name, box in self.layers.items()}
+            groups = {"/cloud/seen": ((ds.task == 1) & (ds.y == 0), _GREY, "point cloud"),
+                      "/cloud/free": ((ds.task == 1) & (ds.y == 1), _LIGHT_BLUE, "point cloud"),
+                      "/touch/contacts": ((ds.task == 0) & (ds.y == 0), _BLACK, "touches"),
+                      "/touch/free": ((ds.task == 0) & (ds.y == 1), _CYAN, "touches")}
+            for name, (mask, colour, layer) in groups.items():
+                pts = _lift(ds.x[mask]) if mask.any() else np.zeros((1, 3))
+                self._handles[name] = scene.add_point_cloud(name, pts, colour, point_size=size * (1.6 if "contacts" in name else 1.0),
+                                      point_shape="circle", visible=bool(on[layer] and mask.any()))
+            upto = (run.trajectory[run.trajectory_step <= k] if run.trajectory is not None and k > 0
+                    else np.zeros((0, run.dim)))
+            shown = len(upto) > 1
+            self._handles["/path"] = scene.add_line_segments(
+                "/path", _segments(upto if shown else np.zeros((2, run.dim))), _ORANGE, thickness=2.0,
+                thickness_units="screen", visible=on["path"] and shown)
+            surface, var, prior = self._estimate(k)
+            self._draw_estimate(surface, var, prior, visible=on["estimate"])
+            for name in ("/truth/inner", "/truth/outer"):
+                handle = self._handle(name)
+                if handle is not None:
+                    handle.visible = on["true shapes"]
+            steps, s, r = self._series
+            mark = np.full(len(steps), np.nan)
+            mark[run.steps.index(k)] = s[run.steps.index(k)] if math.isfinite(s[run.steps.index(k)]) else 0.0
+            self.plot.data = (steps, s, r, mark)
+            p = run.params.get(k, {})
+            fmt = (lambda v: "n/a" if v is None or not math.isfinite(v) else f"{v:.3f}")
+            h = p.get("hausdorff", math.nan)
+            self.info.content = (
+                f"**{run.name}** ({run.meta.get('world', 'data')} {run.meta.get('scene', '')}, "
+                f"{run.meta.get('mode', 'dataset')})  \n"
+                f"step **{k}** of {run.steps[-1]}: {int(((ds.task == 0) & (ds.y == 0)).sum())} contacts, "
+                f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points  \n"
+                f"similarity {fmt(p.get('similarity'))}, correlation {fmt(p.get('correlation'))}, "
+                f"Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}")
+        self.shown_step = k
+
+    def _handle(self, name: str):
+        return self._handles.get(name)
+
+    def _draw_estimate(self, surface, var, prior: float, visible: bool) -> None:
+        from matplotlib import colormaps
+
+        scene = self.server.scene
+        cmap = colormaps["Purples"]
+        if surface is None or (self.run.dim == 2 and not surface):
+            handle = self._handle("/estimate")
+            if handle is not None:
+                handle.visible = False
+            return
+        if self.run.dim == 2:
+            segs, colours = [], []
+            for c, v in zip(surface, var):
+                segs.append(_segments(c))
+                mid = 0.5 * (v[:-1] + v[1:])
+                rgb = (cmap(np.clip(0.35 + 0.65 * mid / prior, 0, 1))[:, :3] * 255).astype(np.uint8)
+                colours.append(np.repeat(rgb[:, None], 2, axis=1))
+            self._handles["/estimate"] = scene.add_line_segments("/estimate", np.concatenate(segs), np.concatenate(colours), thickness=4.0,
+                                    thickness_units="screen", visible=visible)
+        else:
+            mesh = surface.copy()
+            mesh.visual.vertex_colors = (cmap(np.clip(0.3 + 0.7 * var / prior, 0, 1)) * 255).astype(np.uint8)
+            self._handles["/estimate"] = scene.add_mesh_trimesh("/estimate", mesh, visible=visible)
+
+    def close(self) -> None:
+        """Stop the server."""
+        self.server.stop()
+
+
+def serve(source: str | os.PathLike, *, port: int = 8080, open_browser: bool = True,
+          resolution: float | None = None, host: str = "127.0.0.1") -> None:
+    """Serve :class:`RunViewer` until interrupted (Ctrl-C), printing its address."""
+    viewer = RunViewer(source, host=host, port=port, resolution=resolution)
+    url = f"http://{'localhost' if host in ('127.0.0.1', '0.0.0.0') else host}:{viewer.port}"
+    print(f"gpioius view: {len(viewer.files)} run(s) at {url} (Ctrl-C to stop)", flush=True)
+    if open_browser:
+        webbrowser.open(url)
+    try:
+        while True:
+            time.sleep(1.0)
+    finally:
+        viewer.close()
