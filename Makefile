@@ -6,7 +6,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo demo3d test test-all clean
+.PHONY: setup demo demo3d test test-all docs clean
 
 setup: $(STAMP)
 
@@ -15,7 +15,8 @@ $(STAMP): setup.cfg pyproject.toml
 	$(PY) -m pip install --quiet --upgrade pip
 	# The pinned CPU torch first (local wheel on our machines); setup.cfg keeps a range it satisfies.
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[test,raycast]"
+	# every optional world and tool, so that the suite exercises them all (MuJoCo, Ray, rosbags, viser, docs)
+	$(PY) -m pip install --quiet -e ".[test,raycast,mujoco,ray,rosbag,viewer,docs]"
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -29,6 +30,9 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q
+
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 clean:
 	rm -rf $(VENV) outputs *.egg-info

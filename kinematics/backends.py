@@ -205,8 +205,8 @@ class RTDEUR5(RobotBackend):
         acceleration: joint acceleration for moveJ [rad/s^2].
         state_tolerance: largest allowed difference [rad] between the joints we last commanded and the
             joints the robot reports before the next command (guards against external motion).
-        control, receive: already-connected ``RTDEControlInterface`` / ``RTDEReceiveInterface`` objects
-            (tests pass mocks); created from ``host`` when None.
+        control: an already-connected ``RTDEControlInterface`` (tests pass mocks); created from ``host`` when None.
+        receive: an already-connected ``RTDEReceiveInterface``; created from ``host`` when None.
     """
 
     def __init__(self, host: str, ur5: UR5, gate: SafetyGate | None = None, *, acceleration: float = 0.5,

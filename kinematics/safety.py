@@ -80,7 +80,8 @@ class SafetyGate:
 
     Args:
         ur5: kinematic model used to map joint paths to fingertip positions.
-        workspace_lower, workspace_upper: `(3,)` corners of the allowed fingertip box in the base frame [m].
+        workspace_lower: `(3,)` lower corner of the allowed fingertip box in the base frame [m].
+        workspace_upper: `(3,)` upper corner of that box [m].
         max_joint_speed: joint speed limit [rad/s] (scalar or `(6,)`), in (0, the UR5's 180 deg/s]; default a
             quarter of that, a conservative speed for contact work.
         max_tool_speed: fingertip speed limit for Cartesian steps [m/s], in (0, 1].

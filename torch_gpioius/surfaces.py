@@ -44,7 +44,7 @@ def evaluate_grid(model, bounds, resolution: float, task: int = 0) -> GridField:
 
     Args:
         model: ``GPIS`` or ``GPIOIS``.
-        bounds: `(2, d)` box [min corner; max corner] [m], base frame (trimesh's ``mesh.bounds`` layout).
+        bounds: `(2, d)` box `[min corner; max corner]` [m], base frame (trimesh's ``mesh.bounds`` layout).
         resolution: grid spacing [m] (the last cell may be slightly smaller to hit the max bound).
         task: 0 (inner) or 1 (outer).
 
@@ -78,7 +78,7 @@ def zero_level_curves(model, bounds, resolution: float = 0.005, task: int = 0,
 
     Args:
         model: a 2-D ``GPIS`` or ``GPIOIS``.
-        bounds: `(2, 2)` box [[x_min, y_min], [x_max, y_max]] [m].
+        bounds: `(2, 2)` box `[[x_min, y_min], [x_max, y_max]]` [m].
         resolution: grid spacing [m]; curve vertices are linearly interpolated between grid nodes.
         task: 0 (inner) or 1 (outer).
         field: a precomputed ``GridField`` (skips the evaluation).
@@ -108,7 +108,7 @@ def zero_level_mesh(model, bounds, resolution: float = 0.01, task: int = 0,
 
     Args:
         model: a 3-D ``GPIS`` or ``GPIOIS``.
-        bounds: `(2, 3)` box [min corner; max corner] [m].
+        bounds: `(2, 3)` box `[min corner; max corner]` [m].
         resolution: grid spacing [m].
         task: 0 (inner) or 1 (outer).
         field: a precomputed ``GridField``.

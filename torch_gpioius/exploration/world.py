@@ -185,7 +185,7 @@ class RobotWorld(World):
         sensor: a :class:`torch_gpioius.sensors.ForceSensor` (tared, free of contact).
         camera: a :class:`torch_gpioius.sensors.PointCloudSource` in the base frame.
         direction: `(3,)` approach direction (base frame).
-        bounds: `(2, 3)` exploration range [min corner; max corner] [m] (the eq. 25 penalty keeps the planner in it).
+        bounds: `(2, 3)` exploration range `[min corner; max corner]` [m] (the eq. 25 penalty keeps the planner in it).
         name: label for records.
         reference: an optional world with the true geometry (used for :meth:`measure` only).
         config: :class:`torch_gpioius.contact.ContactConfig` for the controller.

@@ -102,7 +102,8 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         value: ``phi (k,) -> (f, grad (k,), hess (k, k))`` in NumPy, or ``(-inf, None, None)`` where the function
             cannot be evaluated (a rejected trial point).
         phi0: `(k,)` start (clamped to the bounds).
-        lower, upper: `(k,)` bounds (``+-inf`` for none).
+        lower: `(k,)` lower bounds (``-inf`` for none).
+        upper: `(k,)` upper bounds (``+inf`` for none).
 
     Returns:
         ``(phi, f, projected_gradient_norm, iterations, converged)``; convergence as in :func:`maximize_mll`.

@@ -104,7 +104,7 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
         outer: file for the outer estimate ``{mu_out = 0}`` (visual-tactile runs).
         step: which step (the last recorded one at or before it).
         resolution: grid spacing [m] (default 5 mm in 2-D, 1 cm in 3-D).
-        bounds: `(2, d)` box [min; max] [m] (default: the observations padded by 5 cm).
+        bounds: `(2, d)` box `[min; max]` [m] (default: the observations padded by 5 cm).
 
     Returns:
         ``{"step", "inner", "outer", "vertices", "faces"}`` (paths written, and the inner mesh's size in 3-D).

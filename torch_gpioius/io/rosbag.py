@@ -324,8 +324,9 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         joint_names: the six joint names in base-to-tool order (default: the UR driver's).
         policy: :class:`torch_gpioius.exploration.observations.ObservationPolicy` for free space and the voxel
             (default: the exploration's, with the paper's 5 cm voxel).
-        crop: `(2, 3)` box [min; max] [m] to crop the cloud to (tables and walls are not the object); None keeps all.
-        theta, noise: stored in the header as the dataset's defaults for fitting.
+        crop: `(2, 3)` box `[min; max]` [m] to crop the cloud to (tables and walls are not the object); None keeps all.
+        theta: IMQ length scale [m] stored in the header as the dataset's default for fitting.
+        noise: noise variance stored in the header likewise.
 
     Returns:
         The dataset: inner contacts (y 0) and free space (y 1) with steps 1..k in time order, outer observations
@@ -511,18 +512,6 @@ def write_bag(path: str | os.PathLike, messages: Sequence[BagMessage], *, storag
     return path
 
 
-def _look_at(eye: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """``T_base_optical`` of a camera at ``eye`` looking at ``target`` (optical frame: z forward, x right, y down)."""
-    z = (target - eye) / np.linalg.norm(target - eye)
-    x = np.cross(z, [0.0, 0.0, 1.0])
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, y, z], axis=1)
-    T[:3, 3] = eye
-    return T
-
-
 def _matrix_quat(R: np.ndarray) -> tuple[float, float, float, float]:
     """(x, y, z, w) of a rotation matrix (Shepperd's method)."""
     from scipy.spatial.transform import Rotation
@@ -550,6 +539,8 @@ def example_bag_messages(*, center=(-0.55, -0.109, 0.0), radius: float = 0.08, c
     from kinematics.dh import UR5_JOINT_NAMES
     from kinematics.ur5 import UR5
     from rosbags.typesys import Stores, get_typestore
+
+    from ..sensors.pointcloud import look_at
 
     ts = get_typestore(Stores.ROS2_HUMBLE).types
     rng = np.random.default_rng(seed)
@@ -625,7 +616,7 @@ def example_bag_messages(*, center=(-0.55, -0.109, 0.0), radius: float = 0.08, c
         msgs.append(BagMessage("/wrench", "geometry_msgs/msg/WrenchStamped", int((t0 + t) * 1e9), m))
 
     # camera: base -> camera_link (x forward) -> camera_depth_optical_frame (z forward), looking at the object
-    T_bo = _look_at(c + np.array([0.5, 0.3, 0.35]), c)
+    T_bo = look_at(c + np.array([0.5, 0.3, 0.35]), c)
     R_link_optical = np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]])  # REP 103: optical z = link x
     T_lo = np.eye(4)
     T_lo[:3, :3] = R_link_optical

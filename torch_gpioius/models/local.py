@@ -51,9 +51,12 @@ class LocalGPIOIS(ImplicitSurfaceGP):
     likelihood (projected Newton with the exact gradient and Hessian). With ``regions=1`` it equals GPIOIS.
 
     Args:
-        train_x, train_y, train_task: as :class:`torch_gpioius.GPIOIS`.
+        train_x: `(n, d)` positions [m], as :class:`torch_gpioius.GPIOIS`.
+        train_y: `(n,)` labels (0 surface, 1 free space).
+        train_task: `(n,)` task ids (0 inner, 1 outer).
         regions: number of regions R.
-        theta, noise: as GPIOIS.
+        theta: IMQ length scale [m], as GPIOIS.
+        noise: observation noise variance sigma^2, as GPIOIS.
         centres: `(R, d)` region centres [m] (default: k-means on the outer surface points).
         tau: smoothing length of the memberships [m] (default: from the centres, :func:`kmeans_regions`).
         inference: "structured" (default when there are outer points) or "dense" (the reference).

@@ -8,7 +8,7 @@ __all__ = ["as_bounds"]
 
 
 def as_bounds(bounds, dim: int, name: str = "bounds") -> np.ndarray:
-    """Validate a box given as `(2, d)` [min corner; max corner] [m] and return it as a float64 array.
+    """Validate a box given as `(2, d)` `[min corner; max corner]` [m] and return it as a float64 array.
 
     Raises:
         ValueError: wrong shape (a `(d, 2)` box of [min, max] rows is named as such), NaN/inf, or min >= max.

@@ -109,7 +109,7 @@ class Scene3D(World):
         outer: closed mesh of the cover's outer surface [m] (must contain the inner one).
         start: `(3,)` fingertip start position [m], outside the outer mesh.
         direction: `(3,)` approach direction (normalised here); the tool points along it.
-        bounds: `(2, 3)` exploration range [min corner; max corner] [m] (trimesh's ``mesh.bounds`` layout): the
+        bounds: `(2, 3)` exploration range `[min corner; max corner]` [m] (trimesh's ``mesh.bounds`` layout): the
             range penalty C (eq. 25) keeps the planner inside it, and the metrics are evaluated inside it.
         name: label for figures and records.
         camera: point-cloud source seeing the outer mesh (default: :meth:`default_camera`).

@@ -50,7 +50,7 @@ class PlanarGate:
     """The 2-D world's safety gate: a workspace box and the longest single move; refuses, never clips.
 
     Args:
-        bounds: `(2, 2)` box [min corner; max corner] [m].
+        bounds: `(2, 2)` box `[min corner; max corner]` [m].
         max_step: longest single Cartesian move [m].
     """
 

@@ -83,7 +83,7 @@ def mesh_from_sdf(sdf: SDF, bounds, resolution: float = 0.005) -> trimesh.Trimes
 
     Args:
         sdf: the shape.
-        bounds: `(2, 3)` box [min corner; max corner] [m]; must enclose the shape with at least one cell of margin.
+        bounds: `(2, 3)` box `[min corner; max corner]` [m]; must enclose the shape with at least one cell of margin.
         resolution: grid spacing [m].
 
     Returns:

@@ -48,7 +48,7 @@ class MujocoScene(World):
         cover: the :class:`~torch_gpioius.sim.mujoco.covers.CoverMesh`.
         start: `(3,)` fingertip start [m], outside the cover.
         direction: `(3,)` approach direction.
-        bounds: `(2, 3)` exploration range [min corner; max corner] [m].
+        bounds: `(2, 3)` exploration range `[min corner; max corner]` [m].
         name: label.
         seed: seed of the sensor and camera noise.
         sensor_noise: force noise per axis [N] (OptoForce OMD-20: ~0.02 N).
@@ -106,7 +106,7 @@ class MujocoScene(World):
             cover: "tight" (a cloth shell ``gap`` off the body), "loose" (a cloth built ``slack`` off the body that
                 settles under gravity) or "foam" (a soft 3-D shell of ``thickness``).
             start: `(3,)` fingertip start [m], outside the cover; direction: `(3,)` approach direction.
-            bounds: `(2, 3)` exploration range [min corner; max corner] [m].
+            bounds: `(2, 3)` exploration range `[min corner; max corner]` [m].
             base: how the cover is shaped: "tube" (around ``axis``, a polyline `(k, 3)`: limbs), "cap" (around
                 ``centre``, facing ``facing`` within ``half_angle`` degrees: torsos), or "auto" (a tube along the
                 primitives' longest extent when ``axis`` is given, else a cap facing the approach).
