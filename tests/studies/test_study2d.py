@@ -19,6 +19,9 @@ def test_cli_smoke_writes_figures_records_and_summary(tmp_path, capsys):
     assert modes == {"visual-tactile", "tactile"}
     assert {r["object"] for r in records} == {"A", "B", "C", "D"}
     assert "| D |" in capsys.readouterr().out
+    # the final estimates as SVG curves next to the figures
+    assert (tmp_path / "curves" / "A_visual-tactile_inner.svg").stat().st_size > 0
+    assert (tmp_path / "curves" / "A_tactile_inner.svg").stat().st_size > 0
 
 
 def test_cli_bad_object_exits_nonzero():

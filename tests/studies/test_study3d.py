@@ -19,6 +19,10 @@ def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):
     assert {r["mode"] for r in records} == {"visual-tactile", "tactile"}
     assert all("contact_z" in r and "robot_time_s" in r for r in records)
     assert "| G |" in capsys.readouterr().out
+    import trimesh
+
+    mesh = trimesh.load(tmp_path / "meshes" / "G_visual-tactile_inner.ply")
+    assert len(mesh.faces) > 0 and len(mesh.visual.vertex_colors) == len(mesh.vertices)
     # the logs replay: the training set of the last step has the inner contacts of the records
     ds = tg.load_dataset(tmp_path / "logs" / "G_tactile.gpioius")
     touched = ds.x[(ds.task == 0) & (ds.y == 0)]

@@ -10,7 +10,7 @@ import numpy as np
 
 from .datasets import DatasetError
 
-__all__ = ["export_run", "write_surface", "MESH_FORMATS", "CURVE_FORMATS"]
+__all__ = ["export_run", "export_model", "write_surface", "MESH_FORMATS", "CURVE_FORMATS"]
 
 #: File endings trimesh writes meshes to.
 MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")
@@ -130,17 +130,44 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
     box = data_bounds(ds.x) if bounds is None else as_bounds(bounds, dim)
     res = resolution or (0.005 if dim == 2 else 0.01)
     out = {"step": k, "inner": None, "outer": None}
+    # every check before anything is written: a refused export leaves no partial output
+    for target in (mesh, outer):
+        if target is not None:
+            ext = Path(target).suffix.lower()
+            allowed = MESH_FORMATS if dim == 3 else CURVE_FORMATS
+            if ext not in allowed:
+                kind = "a mesh" if dim == 3 else "a set of closed curves"
+                raise ValueError(f"{target}: a {dim}-D estimate is {kind}; write one of {', '.join(allowed)}")
+    if outer is not None and getattr(model, "num_tasks", 1) < 2:
+        raise ValueError(f"export: {history.path.name} has no outer model at step {k} (a tactile-only run); "
+                         "drop --outer")
+    surfaces = {}
     for task, target in ((0, mesh), (1, outer)):
         if target is None:
             continue
-        if task == 1 and getattr(model, "num_tasks", 1) < 2:
-            raise ValueError(f"export: {history.path.name} has no outer model at step {k} (a tactile-only run); "
-                             "drop --outer")
         surface, var = estimate_surface(model, box, res, task)
         if surface is None or (dim == 2 and not surface):
             raise DatasetError(f"export: the {'inner' if task == 0 else 'outer'} estimate at step {k} does not cross "
                                "the box of the observations")
+        surfaces[task] = (surface, var, target)
+    for task, (surface, var, target) in surfaces.items():
         out["inner" if task == 0 else "outer"] = str(write_surface(surface, var, target, prior_variance(model, task)))
         if task == 0 and dim == 3:
             out.update(vertices=len(surface.vertices), faces=len(surface.faces))
     return out
+
+
+def export_model(model, path: str | os.PathLike, bounds, resolution: float, task: int = 0) -> Path | None:
+    """Write the estimate ``{mu_task = 0}`` of a fitted model inside ``bounds`` `(2, d)` [m] at ``resolution`` [m].
+
+    Returns:
+        the path written, or None when the level set does not cross the box (nothing is written then).
+    """
+    from ..metrics import prior_variance
+    from .runs import estimate_surface
+
+    bounds = np.asarray(bounds, dtype=np.float64)
+    surface, var = estimate_surface(model, bounds, resolution, task)
+    if surface is None or (bounds.shape[1] == 2 and not surface):
+        return None
+    return write_surface(surface, var, path, prior_variance(model, task))

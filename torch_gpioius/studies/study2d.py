@@ -189,6 +189,14 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
     for name in objects:
         figure_2d_object(name, scenes[name], traces[name], out / f"fig4_{name}.png")
     figure_similarity(traces, out / "fig5_similarity.png")
+    from ..io.export import export_model
+
+    for name, by_mode in traces.items():     # the final estimates as SVG curves (inner; outer for visual-tactile)
+        for mode, tr in by_mode.items():
+            export_model(tr.model, out / "curves" / f"{name}_{mode}_inner.svg", scenes[name].bounds(0.08), 0.005, 0)
+            if mode == "visual-tactile":
+                export_model(tr.model, out / "curves" / f"{name}_{mode}_outer.svg", scenes[name].bounds(0.08), 0.005,
+                             1)
     write_records(traces, out)
     rows = summarize(traces)
     claims = None if smoke else check_claims(rows)

@@ -121,6 +121,19 @@ def _markdown(rows: list[dict], claims: list[dict] | None) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _write_meshes(traces: dict, scenes: dict, out: Path, resolution: float) -> None:
+    """The final inner estimate of every run (and the outer one of visual-tactile runs) as PLY meshes coloured by
+    their variance, in ``out/meshes/<object>_<mode>_{inner,outer}.ply`` (for MeshLab, Blender, ``gpioius view``)."""
+    from ..io.export import export_model
+
+    for name, by_mode in traces.items():
+        box = scenes[name].range + np.array([[-0.05], [0.05]])
+        for mode, tr in by_mode.items():
+            export_model(tr.model, out / "meshes" / f"{name}_{mode}_inner.ply", box, resolution, 0)
+            if mode == "visual-tactile":
+                export_model(tr.model, out / "meshes" / f"{name}_{mode}_outer.ply", box, resolution, 1)
+
+
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
                  metrics_every: int = 5, modes=MODES, progress: bool = True, mesh_resolution: float = 0.006,
                  smoke: bool = False, world: str = "penalty", **explore_kwargs) -> dict:
@@ -175,6 +188,7 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     for name in objects:
         figure_3d_object(name, scenes[name], traces[name], out / f"fig9_{name}.png")
     figure_similarity(traces, out / "fig10_similarity.png", "Similarity transitions (cf. Fig. 10)")
+    _write_meshes(traces, scenes, out, 0.02 if smoke else 0.01)
     write_records(traces, out)
     rows = summarize_3d(traces, hio)
     claims = None if smoke else check_claims_3d(rows)
