@@ -40,7 +40,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
-from torch_gpioius.optim import _chain, chol_params_to_task_covariance, task_covariance_to_chol_params
+from torch_gpioius.inference.optim import _chain, chol_params_to_task_covariance, task_covariance_to_chol_params
 from torch_gpioius.planning import plan_direction
 
 THETA, NOISE, STEP = 0.15, 0.08, 0.01
@@ -102,7 +102,7 @@ def naive_step(x, y, t, kt_init, contact):
     nrm = g_mu[0] / g_mu[0].norm()
     pg = g_v[0] - (g_v[0] @ nrm) * nrm
     direction = STEP * pg / pg.norm()
-    return (model.task_covariance, -float(loss) * n, float(mean), float(var), direction.detach())
+    return (model.task_covariance, -float(loss) * n, float(mean.detach()), float(var.detach()), direction.detach())
 
 
 def run(n_outer: int, n_inner: int, steps: int, naive: bool):
