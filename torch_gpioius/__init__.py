@@ -13,6 +13,7 @@ checkpoints, importers), ``studies``, ``cli``.
 from __future__ import annotations
 
 import sys as _sys
+from importlib import import_module as _import_module
 
 __version__ = "0.2.0"
 
@@ -21,8 +22,9 @@ from . import exploration, inference, io, models  # noqa: E402
 from .exploration import ObservationPolicy, RobotWorld, Trace, World, explore  # noqa: E402
 from .inference import (DenseExactInference, JitterWarning, NotPositiveDefiniteError,  # noqa: E402
                         StructuredExactInference)
-from .io import (CheckpointError, Dataset, DatasetError, checkpoints, datasets, importers,  # noqa: E402
-                 load_checkpoint, load_dataset, offline, save_checkpoint, save_dataset)
+from .io import (BagImportError, CheckpointError, Dataset, DatasetError, RunHistory, checkpoints,  # noqa: E402
+                 datasets, export_run, import_bag, importers, load_checkpoint, load_dataset, load_run, offline,
+                 save_checkpoint, save_dataset)
 from .kernels import InverseMultiquadricKernel  # noqa: E402
 from .models import GPIOIS, GPIS, INNER, OUTER, LocalGPIOIS, UnidentifiedSimilarityWarning  # noqa: E402
 from .settings import exact_arithmetic  # noqa: E402
@@ -34,12 +36,15 @@ __all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "InverseMultiquadr
            "exact_arithmetic", "tol", "torch_threads", "__version__", "ObservationPolicy", "Trace", "World",
            "RobotWorld", "explore", "models", "inference", "exploration", "io", "geometry", "metrics", "planning",
            "surfaces", "sim", "checkpoints", "datasets", "importers", "offline", "Dataset", "DatasetError",
-           "CheckpointError", "load_dataset", "save_dataset", "load_checkpoint", "save_checkpoint"]
+           "CheckpointError", "load_dataset", "save_dataset", "load_checkpoint", "save_checkpoint", "import_bag",
+           "BagImportError", "export_run", "load_run", "RunHistory"]
 
 # Module paths of the 0.1 layout keep working (``from torch_gpioius.gpiois import GPIOIS``, ...): each old name
 # points at the module that holds the code now.
 for _old, _new in {"gpiois": models.gpiois, "gpis": models.gpis, "_base": models.base,
                    "structured": inference.structured, "optim": inference.optim, "datasets": io.datasets,
-                   "checkpoints": io.checkpoints, "importers": io.importers, "offline": io.offline}.items():
+                   "checkpoints": io.checkpoints, "importers": io.importers, "offline": io.offline,
+                   "study": _import_module(f"{__name__}.studies.study2d"),
+                   "study3d": _import_module(f"{__name__}.studies.study3d")}.items():
     _sys.modules.setdefault(f"{__name__}.{_old}", _new)
-del _old, _new
+del _old, _new, _import_module
