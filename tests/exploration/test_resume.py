@@ -75,3 +75,29 @@ def test_resume_refuses_other_parameters(tmp_path):
         tg.explore(paper_objects_2d()["B"], max_steps=2, resume_from=log)
     done = tg.explore(paper_objects_2d()["A"], max_steps=2, resume_from=log)   # already finished: returns it
     assert done.n_steps == 3
+
+
+def _cut_after_step(log, k):
+    """Truncate a log right after the record of step ``k`` (what a crash after that step leaves behind)."""
+    end = next(r.end for r in read_records(log) if r.kind == "step" and r.meta["step"] == k)
+    with open(log, "r+b") as f:
+        f.truncate(end)
+
+
+def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path):
+    """The penalty world: the robot's joints and clock and the sensor's noise generator travel in the log, so a
+    run cut after step 4 and resumed ends where the uninterrupted run ends."""
+    from torch_gpioius.sim import sphere_scene
+
+    scene = sphere_scene(subdivisions=3)
+    scene.sensor_noise = 0.02             # a noisy sensor: resuming must restore its generator too
+    kw = dict(mode="visual-tactile", max_travel=0.1, metrics_every=100, progress=False)
+    log = tmp_path / "run.gpioius"
+    reference = tg.explore(scene, log=log, **kw)
+    assert reference.n_steps > 6
+    _cut_after_step(log, 4)
+    resumed = tg.explore(scene, resume_from=log, **kw)
+    assert resumed.n_steps == reference.n_steps and resumed.terminated == reference.terminated
+    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
+    assert np.abs(resumed.path - reference.path).max() < 1e-9
+    assert np.abs(resumed.task_covariance - reference.task_covariance).max() < 1e-9
