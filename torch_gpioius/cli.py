@@ -119,6 +119,14 @@ def _import_bag(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace) -> int:
     from .io.export import export_run
 
+    if args.mcap:
+        from .io.foxglove import export_mcap
+
+        if args.mesh or args.outer or args.step is not None:
+            raise ValueError("export: --mcap writes every step; it does not combine with --mesh, --outer or --step")
+        info = export_mcap(args.run, args.mcap, resolution=args.resolution)
+        print(f"wrote {info['messages']} messages ({info['steps']} steps) with Foxglove schemas to {info['path']}")
+        return 0
     info = export_run(args.run, args.mesh, outer=args.outer, step=args.step, resolution=args.resolution)
     size = f" ({info['vertices']} vertices, {info['faces']} faces)" if "vertices" in info else ""
     for key in ("inner", "outer"):
@@ -248,7 +256,8 @@ def build_parser() -> argparse.ArgumentParser:
     bag.add_argument("--crop", default=None, help="keep cloud points in 'xmin ymin zmin xmax ymax zmax' [m]")
     bag.set_defaults(func=_import_bag)
     ex = sub.add_parser("export", parents=[common], formatter_class=fmt,
-                        help="write the estimated surfaces of a run as PLY/OBJ/STL/GLB meshes (SVG/DXF curves in 2-D)",
+                        help="write the estimated surfaces of a run as PLY/OBJ/STL/GLB meshes (SVG/DXF curves in 2-D), or the "
+                             "whole run as MCAP for Foxglove",
                         description="Rebuild the model of a log or dataset at a step with the run's own learned K_t and "
                                     "write {mu = 0} through trimesh, coloured by the posterior variance (PLY meshes "
                                     "also carry a 'variance' vertex property).")
@@ -257,6 +266,8 @@ def build_parser() -> argparse.ArgumentParser:
                                                  ".dxf .ply .obj)")
     ex.add_argument("--outer", default=None, help="file for the outer estimate (visual-tactile runs)")
     ex.add_argument("--step", type=int, default=None, help="step to export (default: the last)")
+    ex.add_argument("--mcap", default=None, help="write the whole run as MCAP with Foxglove schemas (the 'foxglove' "
+                                                 "extra) for scrubbing in Foxglove")
     ex.add_argument("--resolution", type=float, default=None, help="grid spacing [m] (default 5 mm 2-D, 1 cm 3-D)")
     ex.set_defaults(func=_export)
     vw = sub.add_parser("view", parents=[common], formatter_class=fmt,

@@ -1,0 +1,75 @@
+"""MCAP export with Foxglove schemas, read back with the mcap library and the schemas stored in the file."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytest.importorskip("foxglove")
+mcap_reader = pytest.importorskip("mcap.reader")
+
+import torch_gpioius as tg  # noqa: E402
+from torch_gpioius.cli import main  # noqa: E402
+from torch_gpioius.io.foxglove import MCAP_TOPICS, export_mcap  # noqa: E402
+from torch_gpioius.io.runs import load_run  # noqa: E402
+
+
+def _decoder(schema):
+    """A protobuf message class from the FileDescriptorSet stored in an MCAP schema record."""
+    from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
+
+    fds = descriptor_pb2.FileDescriptorSet.FromString(schema.data)
+    pool = descriptor_pool.DescriptorPool()
+    for fd in fds.file:
+        pool.Add(fd)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
+
+
+@pytest.fixture(scope="module")
+def log_2d(tmp_path_factory):
+    path = tmp_path_factory.mktemp("runs") / "A.gpioius"
+    tg.explore(tg.sim.paper_objects_2d()["A"], mode="visual-tactile", max_steps=6, log=path, progress=False)
+    return path
+
+
+def test_topics_schemas_and_contents(log_2d, tmp_path):
+    out = tmp_path / "run.mcap"
+    info = export_mcap(log_2d, out, every=2)
+    run = load_run(log_2d)
+    assert info["steps"] == 4                                   # steps 0, 2, 4, 6
+    with open(out, "rb") as f:
+        reader = mcap_reader.make_reader(f)
+        summary = reader.get_summary()
+        topics = {c.topic: c for c in summary.channels.values()}
+        assert set(topics) == set(MCAP_TOPICS)
+        counts = summary.statistics.channel_message_counts
+        assert counts[topics["/gpioius/cloud"].id] == 1 and counts[topics["/gpioius/contacts"].id] == 4
+        assert summary.schemas[topics["/gpioius/estimate"].schema_id].name == "foxglove.SceneUpdate"
+        last = {}
+        for schema, channel, message in reader.iter_messages():
+            last[channel.topic] = (schema, message)
+    schema, message = last["/gpioius/contacts"]
+    pc = _decoder(schema).FromString(message.data)
+    pts = np.frombuffer(pc.data, dtype=np.float32).reshape(-1, 3)
+    ds = run.states[6]
+    truth = ds.x[(ds.task == 0) & (ds.y == 0)]
+    np.testing.assert_allclose(pts[:, :2], truth, atol=1e-6)      # float32 of positions below 1 m
+    assert np.all(pts[:, 2] == 0) and pc.frame_id == "scene"
+    schema, message = last["/gpioius/estimate"]
+    update = _decoder(schema).FromString(message.data)
+    assert update.entities[0].id == "estimate" and len(update.entities[0].lines[0].points) > 20
+    metrics = json.loads(last["/gpioius/metrics"][1].data)
+    assert metrics["step"] == 6 and metrics["similarity"] == pytest.approx(run.params[6]["similarity"], rel=1e-12)
+
+
+def test_cli_and_refusals(log_2d, tmp_path, capsys):
+    out = tmp_path / "a.mcap"
+    assert main(["export", str(log_2d), "--mcap", str(out)]) == 0
+    assert "Foxglove schemas" in capsys.readouterr().out and out.stat().st_size > 0
+    for argv, expected in ((["export", str(log_2d), "--mcap", str(out)], "exists"),
+                           (["export", str(log_2d), "--mcap", str(tmp_path / "b.bag")], "must end in .mcap"),
+                           (["export", str(log_2d), "--mcap", str(tmp_path / "c.mcap"), "--step", "3"],
+                            "does not combine")):
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert expected in err and "\n" not in err
