@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["figure_2d_object", "figure_3d_object", "figure_similarity", "FRACTION_MARKS"]
+__all__ = ["figure_2d_object", "figure_3d_object", "figure_similarity", "figure_regions", "FRACTION_MARKS"]
 
 MODES = ("visual-tactile", "tactile")
 STYLE = {"visual-tactile": dict(color="tab:red", ls="-"), "tactile": dict(color="tab:blue", ls="--")}
@@ -223,5 +223,59 @@ def figure_similarity(traces: dict, path: Path, title: str = "Similarity transit
         ax.title.set_fontsize(9)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def figure_regions(trace, path: Path, title: str = "") -> None:
+    """The local model's similarity per region: the seen outer surface coloured by the local correlation there
+    (``LocalGPIOIS.correlation_at``), the contacts, the region centres with their final correlations, and each
+    region's correlation over the travel.
+
+    Args:
+        trace: a :class:`torch_gpioius.Trace` of a run with ``regions=R`` (its ``model`` is a ``LocalGPIOIS``).
+        path: output PNG.
+        title: figure title.
+    """
+    import torch
+
+    plt = _plt()
+    model = trace.model
+    if not hasattr(model, "correlation_at"):
+        raise ValueError("figure_regions: the run has no similarity per region (explore(..., regions=R))")
+    x = model.train_inputs[0].cpu().numpy()
+    y = model.train_targets.cpu().numpy()
+    task = model.train_inputs[1].reshape(-1).cpu().numpy()
+    seen = x[(task == 1) & (y == 0)]
+    rho = model.correlation_at(torch.as_tensor(seen)).cpu().numpy()
+    contacts, _ = _inner_observations(model)
+    centres = model.centres.cpu().numpy()
+    final = model.region_correlations().cpu().numpy()
+    dim = x.shape[1]
+    fig = plt.figure(figsize=(12, 4.8))
+    ax = fig.add_subplot(1, 2, 1, projection="3d" if dim == 3 else None)
+    sc = ax.scatter(*seen.T, c=rho, cmap="coolwarm_r", vmin=-1, vmax=1, s=10, label="seen outer surface")
+    ax.scatter(*contacts.T, c="k", s=6, label="contacts")
+    for r, (c, v) in enumerate(zip(centres, final)):
+        ax.scatter(*c, marker="X", s=90, c=[v], cmap="coolwarm_r", vmin=-1, vmax=1, edgecolors="k")
+        ax.text(*c, f" {r}: {v:.2f}", fontsize=8)
+    fig.colorbar(sc, ax=ax, label="local task correlation at the seen surface", shrink=0.8)
+    ax.set(xlabel="x [m]", ylabel="y [m]", title="similarity by region (X: region centres)")
+    if dim == 3:
+        ax.set_zlabel("z [m]")
+    else:
+        ax.set_aspect("equal")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8)
+    ax2 = fig.add_subplot(1, 2, 2)
+    rc = np.asarray(trace.region_correlation)
+    for r in range(rc.shape[1]):
+        ax2.plot(trace.travel, rc[:, r], label=f"region {r}")
+    ax2.set(xlabel="travel since first contact [m]", ylabel="task correlation of the region", ylim=(-1.05, 1.05),
+            title="region correlations over the run")
+    ax2.legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=110)
     plt.close(fig)

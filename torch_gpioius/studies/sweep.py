@@ -160,6 +160,13 @@ def run_one(spec: RunSpec) -> dict:
                          "correlation": trace.correlation.tolist(),
                          "correlation_lo": trace.correlation_interval[:, 0].tolist(),
                          "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
+    if getattr(trace.model, "regions", None) and len(trace.region_correlation):
+        # the local model's regions: the seen surface coloured by its correlation, and each region over the run
+        from .figures import figure_regions
+
+        record["region_correlation"] = np.asarray(trace.region_correlation)[-1].tolist()
+        figure_regions(trace, out / "figures" / f"regions_{spec.key}.png",
+                       f"{spec.world} {spec.object}, {spec.mode}, seed {spec.seed}")
     _atomic_json(result_path, record)
     try:
         marker.unlink()
