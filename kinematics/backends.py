@@ -132,6 +132,13 @@ class RobotBackend(abc.ABC):
         step = float(dx.norm())
         biggest = float((q_next - q).abs().max())
         joint_speed = biggest * speed / step if step > 0 else float(self.gate.max_joint_speed.min())
+        if biggest > 0:
+            # near a singularity a slow fingertip step can need fast joints: slow the whole move down so that every
+            # joint keeps its limit (as the UR's moveL scales its speed), rather than asking the gate for more
+            dq = (q_next - q).abs()
+            moving = dq > 0
+            cap = float((self.gate.max_joint_speed[moving] * biggest / dq[moving]).min())
+            joint_speed = min(joint_speed, cap)
         self.gate.check_joint_move(q, q_next, max(joint_speed, 1e-12), max_move=self.gate.max_joint_step)
         self._send_joint_move(q_next, max(joint_speed, 1e-12))
         return realised

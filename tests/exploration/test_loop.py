@@ -58,3 +58,58 @@ def test_bad_mode():
     scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
     with pytest.raises(ValueError, match="mode"):
         tg.explore(scene, mode="vision")
+
+
+
+def test_lost_contact_falls_back_to_the_last_contact():
+    """When the re-approach along the estimated normal finds nothing, the loop heads back to the last contact;
+    travel and path count both re-approaches, and only a second miss ends the run."""
+    import torch
+
+    from torch_gpioius.contact import ContactResult
+    from torch_gpioius.exploration.loop import _recover, _State
+    from torch_gpioius.exploration.world import Hardware
+
+    def result(ok, points):
+        p = torch.as_tensor(np.asarray(points, dtype=float))
+        return ContactResult(ok, p[-1], p[:-1], p, torch.ones_like(p), float((p[1:] - p[:-1]).norm(dim=1).sum()))
+
+    class Controller:
+        """Replays approaches: the first goes 10 cm without contact; the second touches the last contact or not."""
+
+        def __init__(self, second_hits):
+            self.second_hits, self.calls, self.at = second_hits, [], None
+
+        def approach(self, direction, max_travel=0.3):
+            d = np.asarray(direction, dtype=float)
+            self.calls.append((d, max_travel))
+            if len(self.calls) == 1:
+                self.at = here + 0.1 * d
+                return result(False, [here, self.at])
+            end = last if self.second_hits else self.at + max_travel * d
+            return result(self.second_hits, [self.at, end])
+
+    # a circle of radius 10 cm that the model knows; contact lost at (0.2, 0.05); the last contact at (0.1, 0)
+    a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    ring = np.stack([np.cos(a), np.sin(a)], -1)
+    model = tg.GPIS(np.concatenate([0.1 * ring, 0.2 * ring]), np.r_[np.zeros(24), np.ones(24)], theta=0.1,
+                    noise=1e-3)
+    here, last = np.array([0.2, 0.05]), np.array([0.1, 0.0])
+    lost = result(False, [[0.15, 0.0], here])
+    for second_hits in (True, False):
+        s = _State(model=model, contacts=[last])
+        ctl = Controller(second_hits)
+        out = _recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost)
+        assert len(ctl.calls) == 2
+        (d1, _), (d2, reach) = ctl.calls
+        assert np.dot(d1, here) < 0                                  # first: inward along the estimated normal
+        gap = np.linalg.norm(last - ctl.at)
+        assert np.allclose(d2, (last - ctl.at) / gap, atol=1e-12)    # second: towards the last contact
+        assert reach == pytest.approx(gap + 0.05)
+        if second_hits:
+            assert out is not None and out.in_contact and np.allclose(out.contact.numpy(), last)
+            assert out.travel == pytest.approx(lost.travel + 0.1 + gap)
+            assert s.travel == pytest.approx(0.1 + gap)              # the loop had counted the lost step itself
+            assert len(out.path) == len(lost.path) + 4
+        else:
+            assert out is None

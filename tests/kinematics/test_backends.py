@@ -53,6 +53,22 @@ def test_gate_refuses_and_leaves_the_robot_where_it_was(robot, ur5):
     assert_refused(robot, lambda: robot.move_cartesian(t(float("nan"), 0, 0)), "finite")
 
 
+def test_a_cartesian_step_that_needs_fast_joints_is_slowed_not_refused(ur5):
+    # A slow joint limit makes the 2 cm/s fingertip speed need joints faster than allowed (as near a singularity):
+    # the step still runs, slower, and no joint exceeds its limit (computed from the simulated clock).
+    limit = t(0.02, 0.02, 0.02, 0.02, 0.02, 0.02)
+    robot = SimulatedUR5(ur5, Q0, gate=SafetyGate(ur5, max_joint_speed=limit))
+    q0 = robot.read_joints()
+    with torch.no_grad():
+        needed = (ur5.cartesian_step(q0, t(0.01, 0, 0)) - q0).abs().max() * 0.02 / 0.01
+    assert float(needed) > 0.02                  # the unscaled move would break the limit
+    realised = robot.move_cartesian(t(0.01, 0, 0), speed=0.02)
+    assert torch.allclose(realised, t(0.01, 0, 0), atol=1e-9)
+    times, qs = robot.trajectory()
+    speed = (qs[1] - qs[0]).abs() / (times[1] - times[0])
+    assert bool((speed <= limit * (1 + 1e-9)).all()) and float(speed.max()) == pytest.approx(0.02, rel=1e-9)
+
+
 def test_workspace_box_is_checked_along_the_path(ur5):
     # Swinging the base moves the fingertip on an arc: a box around the chord holds both ends, not the arc.
     q_start, q_end = t(*Q0), t(*Q0)

@@ -351,22 +351,43 @@ def _start(world: World, hw: Hardware, mode: str, theta: float, noise: float, po
 
 
 def _recover(s: _State, hw: Hardware, lost):
-    """Contact was lost during a step (the surface curved away, or a cover dragged the fingertip): one re-approach
-    from where the fingertip is, along the estimated inward normal there, for at most 10 cm. Returns the merged
-    result of the step and the re-approach, or None (the run then ends on "lost-contact")."""
+    """Contact was lost during a step (the surface curved away, or a cover dragged the fingertip): a re-approach
+    from where the fingertip is, along the estimated inward normal there, for at most 10 cm; if that finds nothing,
+    one towards the last contact, for its distance + 5 cm. Returns the merged result of the step and the
+    re-approaches, or None (the run then ends on "lost-contact")."""
     from ..contact import ContactResult
     from ..geometry import surface_geometry
 
     here = lost.path[-1]
     geo = surface_geometry(s.model, here.reshape(1, -1).to(s.model.train_inputs[0]), 0)
-    if not bool(geo.normal_defined[0]):
-        return None
-    try:
-        back = hw.controller.approach(-geo.normal[0], max_travel=0.1)
-    except RuntimeError:
-        return None
-    if not back.in_contact:
-        return None
+    back = None
+    if bool(geo.normal_defined[0]):
+        try:
+            back = hw.controller.approach(-geo.normal[0], max_travel=0.1)
+        except RuntimeError:
+            back = None
+    if back is None or not back.in_contact:
+        # the estimate's normal led nowhere (an outer-shape normal can point past a loose cover's gap): head back
+        # towards the last contact, which is on the object, as an operator would
+        if back is not None:
+            s.travel += back.travel
+            s.path.extend(back.path.numpy())
+            lost = ContactResult(False, lost.contact, torch.cat([lost.free_space, back.free_space]),
+                                 torch.cat([lost.path, back.path]), torch.cat([lost.forces, back.forces]),
+                                 lost.travel + back.travel)
+            here = back.path[-1]
+        to_last = torch.as_tensor(s.contacts[-1], dtype=here.dtype) - here
+        dist = float(to_last.norm())
+        if not dist > 1e-6:
+            return None
+        try:
+            reach = dist + 0.05
+            limit = getattr(getattr(hw.controller, "config", None), "max_approach", None)
+            back = hw.controller.approach(to_last / dist, max_travel=min(reach, limit) if limit else reach)
+        except RuntimeError:
+            return None
+        if not back.in_contact:
+            return None
     s.travel += back.travel
     s.path.extend(back.path.numpy())
     return ContactResult(True, back.contact, torch.cat([lost.free_space, back.free_space]),
