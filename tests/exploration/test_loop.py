@@ -113,3 +113,38 @@ def test_lost_contact_falls_back_to_the_last_contact():
             assert len(out.path) == len(lost.path) + 4
         else:
             assert out is None
+
+
+@pytest.mark.parametrize("kwargs, field", [
+    (dict(metrics_resolution=1e-5), "metrics_resolution"),     # a 25 GiB grid before the check existed
+    (dict(step=1e6), "step"),                                   # MemoryError before
+    (dict(step=float("nan")), "step"),
+    (dict(theta=1e-170), "theta"),                              # an endless jitter loop before
+    (dict(noise=-1.0), "noise"),
+    (dict(max_steps=-1), "max_steps"),
+    (dict(max_travel=float("inf")), "max_travel"),
+    (dict(regions=0), "regions"),
+    (dict(evidence="poke"), "evidence"),
+])
+def test_bad_exploration_settings_are_named_before_anything_moves(kwargs, field):
+    scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
+    with pytest.raises(ValueError, match=field):
+        tg.explore(scene, **kwargs)
+
+
+def test_resume_compares_the_geometry_not_the_name(tmp_path):
+    """Issue 14, item 11: a different geometry under the same name, or two unnamed scenes, must not share a log."""
+    log = tmp_path / "run.gpioius"
+    a = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0), name="A")
+    tg.explore(a, mode="tactile", max_steps=2, log=log)
+    other = Scene2D(_polygon_circle(0.11), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0), name="A")
+    with pytest.raises(ValueError, match="geometry"):
+        tg.explore(other, mode="tactile", max_steps=2, resume_from=log)
+    log2 = tmp_path / "unnamed.gpioius"
+    tg.explore(Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0)),
+               mode="tactile", max_steps=2, log=log2)
+    with pytest.raises(ValueError, match="geometry"):
+        tg.explore(Scene2D(_polygon_circle(0.10), _polygon_circle(0.15), start=(-0.25, 0.0), direction=(1, 0)),
+                   mode="tactile", max_steps=2, resume_from=log2)
+    same = tg.explore(a, mode="tactile", max_steps=2, resume_from=log)     # the same world resumes
+    assert same.n_steps == 3
