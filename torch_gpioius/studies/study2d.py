@@ -179,6 +179,8 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
     jobs = [(o, m) for o in objects for m in MODES]
     (out / "logs").mkdir(exist_ok=True)
     bar = reporter(len(jobs), "2-D study", progress)
+    # the correlation's 95 % profile-likelihood interval every 10 steps and at the end (the figures' bands)
+    explore_kwargs.setdefault("interval_every", 1000 if smoke else 10)
     for name, mode in jobs:
         bar.set_postfix_str(f"object {name}, {mode}")
         log = out / "logs" / f"{name}_{mode}.gpioius"   # crash-safe exploration log (docs/data-format.md)
