@@ -61,6 +61,12 @@ def test_cli_fit_and_replay_on_the_shipped_example(tmp_path):
     assert main(["replay", str(data), "--out", str(tmp_path / "rep"), "--every", "20", "--quiet"]) == 0
     rows = (tmp_path / "rep" / "records.csv").read_text().splitlines()
     assert rows[0].startswith("step,") and len(rows) == 1 + 3          # steps 0, 20, 40
+    import csv
+
+    last = list(csv.DictReader(rows))[-1]
+    full = tg.load_dataset(data, upto_step=int(last["step"])).to_model().fit()
+    assert float(last["correlation"]) == pytest.approx(full.correlation, abs=1e-6)   # both measures recorded
+    assert float(last["similarity"]) == pytest.approx(full.similarity, abs=1e-6)
     assert (tmp_path / "rep" / "transition.png").stat().st_size > 0
 
 

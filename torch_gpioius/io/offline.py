@@ -157,6 +157,7 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
             model.fit()
         kt = model.task_covariance if isinstance(model, GPIOIS) else None
         row = {"step": k, "n": len(ds), "similarity": model.similarity if kt is not None else float("nan"),
+               "correlation": model.correlation if kt is not None else float("nan"),
                "uncertainty": float("nan"), "hausdorff": float("nan")}
         if ds.x.shape[1] == 2:
             bounds = data_bounds(ds.x)
@@ -178,19 +179,21 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
 
 
 def _plot_replay(rows: list[dict], snapshots: dict, truth, path: Path, name: str) -> None:
-    """The replay's transitions (uncertainty, Hausdorff, similarity over the steps) and, for 2-D logs, the
+    """The replay's transitions (uncertainty, Hausdorff, correlation and the paper's similarity over the steps) and, for 2-D logs, the
     estimate at a few steps."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ncols = max(3, len(snapshots))
+    ncols = max(4, len(snapshots))
     fig, axes = plt.subplots(2 if snapshots else 1, ncols, figsize=(3.4 * ncols, 6.6 if snapshots else 3.4),
                              squeeze=False)
     steps = [r["step"] for r in rows]
     panels = (("uncertainty", "uncertainty, eq. (23)\n[V / prior variance]"),
-              ("hausdorff", "Hausdorff distance [cm]"), ("similarity", "paper's similarity K_t[0,1]/K_t[0,0]"))
+              ("hausdorff", "Hausdorff distance [cm]"),
+              ("correlation", "task correlation\n$K_t[0,1]/\\sqrt{K_t[0,0]K_t[1,1]}$"),
+              ("similarity", "paper's similarity K_t[0,1]/K_t[0,0]\n(a ratio: can exceed 1)"))
     for ax, (key, label) in zip(axes[0], panels):
         v = np.array([r[key] for r in rows], dtype=float) * (100 if key == "hausdorff" else 1)
         if np.isfinite(v).any():
@@ -199,7 +202,7 @@ def _plot_replay(rows: list[dict], snapshots: dict, truth, path: Path, name: str
             ax.text(0.5, 0.5, "not available\n(" + ("unknown scene" if key == "hausdorff" else "tactile log") + ")",
                     ha="center", va="center", transform=ax.transAxes, color="0.4")
         ax.set(xlabel="step", ylabel=label)
-    for ax in axes[0][3:]:
+    for ax in axes[0][len(panels):]:
         ax.axis("off")
     if snapshots:
         for ax, (k, (curves, touched)) in zip(axes[1], snapshots.items()):
