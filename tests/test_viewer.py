@@ -115,6 +115,16 @@ def test_viewer_in_headless_chromium(which, log_2d, dataset_3d, tmp_path):
             page.screenshot(path=str(shots / f"viewer_{tag}_last.png"))
             # not blank: a rendered scene has many distinct colours, a blank canvas one
             assert last.std() > 5.0 and len(np.unique(last.reshape(-1, 3), axis=0)) > 50
+            # the similarity chart draws its lines (a NaN anywhere in uPlot's auto-ranged data blanked it once);
+            # a log records both measures at every step (a dataset's are fitted as steps are visited)
+            from PIL import Image
+
+            chart = np.asarray(Image.open(io.BytesIO(page.locator(".uplot canvas").first.screenshot()))
+                               .convert("RGB"), dtype=float)
+            purple = (chart[..., 0] > 90) & (chart[..., 2] > 90) & (chart[..., 1] < 60)      # similarity
+            teal = (chart[..., 0] < 60) & (chart[..., 1] > 90) & (chart[..., 2] > 90)        # correlation
+            if which == "2d log":
+                assert purple.sum() > 20 and teal.sum() > 20, (purple.sum(), teal.sum())
             slider = page.get_by_role("slider").first
             slider.focus()
             page.keyboard.press("Home")                        # move the slider to the first step

@@ -90,6 +90,7 @@ class RunViewer:
         self._cache: dict[tuple[Path, int], tuple] = {}
         self._lock = threading.RLock()
         self._handles: dict[str, object] = {}
+        self._y_range: tuple[float, float] | None = None
         self.resolution = resolution
         self.run = self._get(self.files[0])        # validates the first run before serving anything
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
@@ -221,6 +222,8 @@ class RunViewer:
     # ---------------------------------------------------------------------------------------------------- drawing
     def show(self, step: int) -> None:
         """Draw the run after ``step`` (the last recorded step at or before it)."""
+        from viser import uplot
+
         with self._lock:
             run = self.run
             k = run.nearest_step(step)
@@ -252,6 +255,15 @@ class RunViewer:
             mark = np.full(len(steps), np.nan)
             mark[run.steps.index(k)] = s[run.steps.index(k)] if math.isfinite(s[run.steps.index(k)]) else 0.0
             self.plot.data = (steps, s, r, mark)
+            # uPlot has no NaN: a NaN in auto-ranged data makes the y range NaN and the whole chart blank (the
+            # "this step" marker, and unidentified or not yet fitted steps, are NaN). Fix the y range from the
+            # finite values instead; NaN points are then simply not drawn.
+            finite = np.concatenate([s[np.isfinite(s)], r[np.isfinite(r)]])
+            y = (min(float(finite.min()) if len(finite) else 0.0, 0.0) - 0.05,
+                 max(float(finite.max()) if len(finite) else 1.0, 1.0) + 0.05)
+            if y != self._y_range:
+                self._y_range = y
+                self.plot.scales = {"x": uplot.Scale(time=False), "y": uplot.Scale(auto=False, range=y)}
             p = run.params.get(k, {})
             fmt = (lambda v: "n/a" if v is None or not math.isfinite(v) else f"{v:.3f}")
             h = p.get("hausdorff", math.nan)
