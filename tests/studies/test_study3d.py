@@ -55,3 +55,19 @@ def test_full_study_runs(tmp_path):
     result = run_study_3d(out=tmp_path, progress=False)
     assert {r["object"] for r in result["rows"]} == {"E", "F", "G", "H"}
     assert all(tr.terminated == "travel" for pair in result["traces"].values() for tr in pair.values())
+
+
+def test_cli_smoke_runs_the_mujoco_study(tmp_path, capsys):
+    """`gpioius simulate3d --world mujoco --smoke`: the MuJoCo study end to end in its CI form (coarse cloth, a
+    quarter-resolution camera, 6 cm of travel): records, logs, figures and meshes as in the penalty world."""
+    pytest.importorskip("mujoco")
+    assert main(["simulate3d", "--world", "mujoco", "--object", "E", "--smoke", "--quiet", "--out",
+                 str(tmp_path)]) == 0
+    for name in ("fig9_E.png", "fig10_similarity.png", "records.csv", "summary.md", "logs/E_visual-tactile.gpioius",
+                 "logs/E_tactile.gpioius"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    records = json.loads((tmp_path / "records.json").read_text())
+    assert {r["mode"] for r in records} == {"visual-tactile", "tactile"}
+    travel = max(r["travel_m"] for r in records)
+    assert 0.05 < travel < 0.2                                   # the smoke budget, not the study's 1.5 m
+    assert "| E |" in capsys.readouterr().out
