@@ -141,8 +141,9 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
     from ..surfaces import clip_mesh
 
     plt = _plt()
-    fig = plt.figure(figsize=(16, 5.2))
-    grid = fig.add_gridspec(2, 4, width_ratios=[1.25, 1.25, 0.06, 1.1], wspace=0.35)
+    fig = plt.figure(figsize=(17, 5.2))
+    # an empty column between the colour bar and the transitions keeps the bar's label clear of their y labels
+    grid = fig.add_gridspec(2, 5, width_ratios=[1.25, 1.25, 0.06, 0.3, 1.1], wspace=0.35)
     norm = colors.Normalize(0.0, 1.0)
     cmap = plt.get_cmap("viridis")
     lo, hi = scene.range[0], scene.range[1]
@@ -186,8 +187,8 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
             ax.legend(handles=handles, fontsize=6, loc="upper left")
     cax = fig.add_subplot(grid[:, 2])
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), cax=cax, label="$V_{in}$ / prior variance on the estimate")
-    ax_u = fig.add_subplot(grid[0, 3])
-    ax_h = fig.add_subplot(grid[1, 3], sharex=ax_u)
+    ax_u = fig.add_subplot(grid[0, 4])
+    ax_h = fig.add_subplot(grid[1, 4], sharex=ax_u)
     _transitions(ax_u, ax_h, pair)
     fig.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.1)
     fig.savefig(path, dpi=110)
