@@ -52,7 +52,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
     @property
     def theta(self) -> float:
         """IMQ kernel parameter theta_x [m]."""
-        return float(self.covar_module.theta.reshape(-1)[0])
+        return float(self.covar_module.theta.detach().reshape(-1)[0])
 
     @property
     def noise(self) -> float:
