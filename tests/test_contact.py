@@ -115,3 +115,17 @@ def test_config_validation():
     robot, sensor, ctl, c = setup()
     with pytest.raises(ValueError, match="normal"):
         ctl.slide(torch.tensor([0.01, 0.0, 0.0], dtype=torch.float64), torch.zeros(3, dtype=torch.float64))
+
+
+def test_an_approach_that_starts_in_the_contact_band_reports_the_measured_normal():
+    """No move is needed when the fingertip already presses with 1-5 N (e.g. a tap's re-approach that the cover
+    never let go of): the result still carries the measured force, so its normal is the sensor's, not a zero
+    vector that the next slide would refuse."""
+    robot, sensor, ctl, c = setup(noise_std=0.0)
+    first = ctl.approach(DOWN)
+    assert first.in_contact
+    again = ctl.approach(DOWN)                       # already in the band: nothing to move
+    assert again.in_contact and again.travel == 0.0
+    assert torch.allclose(again.force_normal, first.force_normal, atol=1e-9)
+    assert float(again.force_normal.norm()) == pytest.approx(1.0)
+    ctl.slide(torch.tensor([0.005, 0.0, 0.0], dtype=torch.float64), again.force_normal)   # usable as is

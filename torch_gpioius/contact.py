@@ -233,9 +233,17 @@ class ContactController:
                 return True, f
         return cfg.contact_force <= float(f.norm()) <= cfg.retreat_force, f
 
-    def _result(self, in_contact: bool, log: _Log, start: torch.Tensor) -> ContactResult:
+    def _result(self, in_contact: bool, log: _Log, start: torch.Tensor, last_force: torch.Tensor | None = None
+                ) -> ContactResult:
         path = torch.stack(log.path) if log.path else start[None]
-        forces = torch.stack(log.forces) if log.forces else torch.zeros(1, 3, dtype=torch.float64)
+        if log.forces:
+            forces = torch.stack(log.forces)
+        elif last_force is not None:
+            # no move was needed (an approach that starts in the contact band): the reading taken at the start is
+            # the measured force, and its direction the normal (a zero vector here once ended a run)
+            forces = torch.as_tensor(last_force, dtype=torch.float64).reshape(1, 3)
+        else:
+            forces = torch.zeros(1, 3, dtype=torch.float64)
         free = torch.stack(log.free) if log.free else torch.zeros(0, 3, dtype=torch.float64)
         full = torch.cat([start[None], path])
         travel = float((full[1:] - full[:-1]).norm(dim=-1).sum())
@@ -270,9 +278,9 @@ class ContactController:
             f = self._move(d * step, log, -d)
             moved += step
         if float(f.norm()) < cfg.contact_force:
-            return self._result(False, log, start)
+            return self._result(False, log, start, f)
         ok, f = self._regulate(-d, f, log)
-        return self._result(ok, log, start)
+        return self._result(ok, log, start, f)
 
     def lift(self, direction: torch.Tensor, *, step: float = 0.005, until_force_below: float = 0.1,
              extra: float = 0.01, max_distance: float = 0.2, inside=None) -> ContactResult:
@@ -314,7 +322,7 @@ class ContactController:
             s = min(step, max_distance - moved)
             f = self._move(d * s, log, d)
             moved += s
-        return self._result(False, log, start)
+        return self._result(False, log, start, f)
 
     def slide(self, step: torch.Tensor, normal: torch.Tensor) -> ContactResult:
         """Execute one planned step: tangential motion in sub-steps, contact regulated along the normal.
