@@ -355,44 +355,46 @@ def _recover(s: _State, hw: Hardware, lost):
     from where the fingertip is, along the estimated inward normal there, for at most 10 cm; if that finds nothing,
     one towards the last contact, for its distance + 5 cm. Returns the merged result of the step and the
     re-approaches, or None (the run then ends on "lost-contact")."""
-    from ..contact import ContactResult
     from ..geometry import surface_geometry
 
+    def approach(direction, reach: float):
+        try:
+            r = hw.controller.approach(direction, max_travel=reach)
+        except RuntimeError:          # refused or faulted: no re-approach
+            return None
+        s.travel += r.travel
+        s.path.extend(r.path.numpy())
+        return r
+
+    res = lost
     here = lost.path[-1]
     geo = surface_geometry(s.model, here.reshape(1, -1).to(s.model.train_inputs[0]), 0)
-    back = None
     if bool(geo.normal_defined[0]):
-        try:
-            back = hw.controller.approach(-geo.normal[0], max_travel=0.1)
-        except RuntimeError:
-            back = None
-    if back is None or not back.in_contact:
-        # the estimate's normal led nowhere (an outer-shape normal can point past a loose cover's gap): head back
-        # towards the last contact, which is on the object, as an operator would
+        back = approach(-geo.normal[0], 0.1)
         if back is not None:
-            s.travel += back.travel
-            s.path.extend(back.path.numpy())
-            lost = ContactResult(False, lost.contact, torch.cat([lost.free_space, back.free_space]),
-                                 torch.cat([lost.path, back.path]), torch.cat([lost.forces, back.forces]),
-                                 lost.travel + back.travel)
-            here = back.path[-1]
-        to_last = torch.as_tensor(s.contacts[-1], dtype=here.dtype) - here
-        dist = float(to_last.norm())
-        if not dist > 1e-6:
-            return None
-        try:
-            reach = dist + 0.05
-            limit = getattr(getattr(hw.controller, "config", None), "max_approach", None)
-            back = hw.controller.approach(to_last / dist, max_travel=min(reach, limit) if limit else reach)
-        except RuntimeError:
-            return None
-        if not back.in_contact:
-            return None
-    s.travel += back.travel
-    s.path.extend(back.path.numpy())
-    return ContactResult(True, back.contact, torch.cat([lost.free_space, back.free_space]),
-                         torch.cat([lost.path, back.path]), torch.cat([lost.forces, back.forces]),
-                         lost.travel + back.travel)
+            res = _then(res, back)
+            if back.in_contact:
+                return res
+    # the estimate's normal led nowhere (an outer-shape normal can point past a loose cover's gap): head back
+    # towards the last contact, which is on the object, as an operator would
+    here = res.path[-1]
+    to_last = torch.as_tensor(s.contacts[-1], dtype=here.dtype) - here
+    dist = float(to_last.norm())
+    if not dist > 1e-6:
+        return None
+    limit = getattr(getattr(hw.controller, "config", None), "max_approach", None)
+    back = approach(to_last / dist, min(dist + 0.05, limit) if limit else dist + 0.05)
+    if back is None or not back.in_contact:
+        return None
+    return _then(res, back)
+
+
+def _then(a, b):
+    """Result ``a`` followed by result ``b``, as one: ``b``'s end state, both paths, readings and free space."""
+    from ..contact import ContactResult
+
+    return ContactResult(b.in_contact, b.contact, torch.cat([a.free_space, b.free_space]), torch.cat([a.path, b.path]),
+                         torch.cat([a.forces, b.forces]), a.travel + b.travel)
 
 
 def _ingest(s: _State, res, policy: ObservationPolicy, mode: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
