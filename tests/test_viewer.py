@@ -125,9 +125,20 @@ def test_viewer_in_headless_chromium(which, log_2d, dataset_3d, tmp_path):
             teal = (chart[..., 0] < 60) & (chart[..., 1] > 90) & (chart[..., 2] > 90)        # correlation
             if which == "2d log":
                 assert purple.sum() > 20 and teal.sum() > 20, (purple.sum(), teal.sum())
-            slider = page.get_by_role("slider").first
-            slider.focus()
-            page.keyboard.press("Home")                        # move the slider to the first step
+            # the chart's legend names the series without cursor placeholders, and the scene has a colour key
+            assert "--" not in page.locator(".u-legend").first.inner_text()
+            assert page.get_by_text("colour key").count() == 1 and page.get_by_text("touch: contacts").count() == 1
+            # arrow keys in the step box step the run and leave the camera where it is (a slider thumb also
+            # turned the camera)
+            client = next(iter(viewer.server.get_clients().values()))
+            before = np.array(client.camera.position)
+            box = page.get_by_label("step", exact=True)
+            box.focus()
+            page.keyboard.press("ArrowDown")
+            _wait(lambda: viewer.shown_step == viewer.run.steps[-2])
+            time.sleep(1.0)
+            np.testing.assert_allclose(np.array(client.camera.position), before, atol=1e-9)
+            page.get_by_role("button", name="first").click()   # the buttons go to the first step
             _wait(lambda: viewer.shown_step == viewer.run.steps[0])
             time.sleep(3.0)
             first = _canvas_png(page)
@@ -138,3 +149,76 @@ def test_viewer_in_headless_chromium(which, log_2d, dataset_3d, tmp_path):
     finally:
         viewer.close()
     print(f"screenshots: {shots}/viewer_{tag}_last.png, {shots}/viewer_{tag}_first.png")
+
+
+def test_origin_rule():
+    from torch_gpioius.viewer import origin_allowed
+
+    assert origin_allowed(None, "127.0.0.1:8080", "127.0.0.1")                  # not a browser page
+    for origin, host in (("http://127.0.0.1:8080", "127.0.0.1:8080"), ("http://localhost:8080", "localhost:8080"),
+                         ("http://[::1]:8080", "[::1]:8080")):
+        assert origin_allowed(origin, host, "127.0.0.1")
+    assert not origin_allowed("https://evil.example", "127.0.0.1:8080", "127.0.0.1")     # another site's page
+    assert not origin_allowed("http://localhost:9999", "localhost:8080", "127.0.0.1")    # another local port
+    assert not origin_allowed("null", "127.0.0.1:8080", "127.0.0.1")                     # sandboxed frames, files
+    # DNS rebinding: the attacker's name resolves to 127.0.0.1, so Host and Origin agree, but Host is not ours
+    assert not origin_allowed("http://rebind.evil.example:8080", "rebind.evil.example:8080", "127.0.0.1")
+    assert origin_allowed("http://lab-pc:8080", "lab-pc:8080", "0.0.0.0")              # bound to all: by name too
+    assert origin_allowed("http://10.0.0.5:8080", "10.0.0.5:8080", "10.0.0.5")
+    assert not origin_allowed("http://10.0.0.5:8080", None, "10.0.0.5")
+
+
+def test_cross_site_pages_cannot_open_the_websocket(log_2d):
+    """A page of another origin is refused at the handshake (403) and sees nothing of the run; the viewer's own
+    page gets its connection."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    viewer = RunViewer(log_2d, port=_free_port())
+    try:
+        uri = f"ws://127.0.0.1:{viewer.port}"
+        with pytest.raises(InvalidStatus) as refused:
+            connect(uri, origin="https://evil.example", open_timeout=10).close()
+        assert refused.value.response.status_code == 403
+        with connect(uri, origin=f"http://127.0.0.1:{viewer.port}", subprotocols=["viser-v" + __import__(
+                "viser").__version__], open_timeout=10) as ws:
+            assert ws.recv(timeout=10)                        # the scene streams to the viewer's own page
+    finally:
+        viewer.close()
+
+
+def test_bad_ports_and_unreadable_runs_fail_fast_and_are_named(log_2d, tmp_path, capsys):
+    from torch_gpioius.cli import main
+    from torch_gpioius.viewer import check_port
+
+    for port in (70000, -5, 1.5, True):
+        with pytest.raises(ValueError, match=r"port: must be an integer in \[0, 65535\]"):
+            check_port(port)
+    t0 = time.time()
+    assert main(["view", str(log_2d), "--port", "70000", "--no-browser"]) == 2      # used to hang for ever
+    assert "port: must be an integer" in capsys.readouterr().err and time.time() - t0 < 30
+    study = tmp_path / "study"
+    (study / "logs").mkdir(parents=True)
+    shutil.copy(log_2d, study / "logs" / "good.gpioius")
+    (study / "logs" / "bad.gpioius").write_bytes(b"GPIOIUS\x00\x00\x01garbage")
+    viewer = RunViewer(study, port=_free_port())
+    try:
+        assert [p.name for p in viewer.files] == ["good.gpioius"]                  # the corrupt run is left out
+        assert "bad.gpioius" in str(list(viewer.skipped)) and "no header record" in next(iter(viewer.skipped.values()))
+    finally:
+        viewer.close()
+    (study / "logs" / "good.gpioius").unlink()
+    from torch_gpioius.io.datasets import DatasetError
+    with pytest.raises(DatasetError, match="no readable run: .*bad.gpioius"):
+        RunViewer(study, port=_free_port())
+
+
+def test_the_initial_view_holds_the_whole_object():
+    """The camera stands where the bounding sphere fills half the view's height (it used to open zoomed in)."""
+    import math
+
+    from torch_gpioius.viewer import frame_distance
+
+    for radius, fov in ((0.1, math.radians(75)), (0.5, math.radians(50))):
+        d = frame_distance(radius, fov, fill=0.5)
+        assert math.tan(math.asin(radius / d)) == pytest.approx(0.5 * math.tan(fov / 2), rel=1e-12)

@@ -3,6 +3,9 @@
 Every command runs its GP arithmetic on ``--threads`` torch threads (default 1: on 2-core machines under load two
 threads per process made runs 2-3x slower with identical results; docs/performance.md). Bad input prints one
 line ``gpioius: error: ...`` and exits with status 2.
+
+No command replaces what exists unless given ``--force``: an output file must be new, an output folder new, empty
+or written before by the same command (:mod:`torch_gpioius.io.outputs`).
 """
 
 from __future__ import annotations
@@ -15,8 +18,10 @@ __all__ = ["main"]
 
 
 def _simulate(args: argparse.Namespace) -> int:
+    from .io.outputs import claim_folder
     from .studies.study2d import run_study
 
+    claim_folder(args.out, "simulate", args.force)
     objects = ["A", "B", "C", "D"] if args.object == "all" else [args.object]
     max_steps = 12 if args.smoke else args.max_steps
     result = run_study(objects, out=args.out, max_steps=max_steps, progress=not args.quiet, smoke=args.smoke)
@@ -26,8 +31,10 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _simulate3d(args: argparse.Namespace) -> int:
+    from .io.outputs import claim_folder
     from .studies.study3d import run_study_3d
 
+    claim_folder(args.out, "simulate3d", args.force, world=args.world)
     objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
     travel = 0.06 if args.smoke else args.max_travel
     result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
@@ -44,7 +51,7 @@ def _study(args: argparse.Namespace) -> int:
     result = run_sweep(world=args.world, objects=args.objects.split(","), modes=args.modes.split(","),
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
-                       progress=not args.quiet, threads=args.threads)
+                       progress=not args.quiet, threads=args.threads, force=args.force)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -54,14 +61,20 @@ def _study(args: argparse.Namespace) -> int:
 def _fit(args: argparse.Namespace) -> int:
     from .io.offline import fit_dataset
 
+    if args.out:
+        from .io.outputs import claim_folder
+
+        claim_folder(args.out, "fit", args.force)
     info = fit_dataset(args.dataset, args.out, theta=args.theta, noise=args.noise)
     print(f"{args.dataset}: {info['n']} observations ({info['n_inner']} inner, {info['n_outer']} outer), "
           f"theta = {info['theta']:g} m, sigma^2 = {info['noise']:g}")
     if "task_covariance" in info:
         kt = info["task_covariance"]
         print(f"K_t = [[{kt[0][0]:.5g}, {kt[0][1]:.5g}], [{kt[1][0]:.5g}, {kt[1][1]:.5g}]]")
-        print(f"correlation = {info['correlation']:.4f}   (the paper's similarity K_t[0,1]/K_t[0,0] = "
-              f"{info['similarity']:.4f})")
+        lo, hi = info["correlation_interval"]
+        print(f"correlation = {info['correlation']:.4f}, 95 % profile-likelihood interval [{lo:.2f}, {hi:.2f}]   "
+              f"(the paper's similarity K_t[0,1]/K_t[0,0] = {info['similarity']:.4f})")
+        print("  " + _interval_reading(lo, hi))
     else:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")
@@ -70,9 +83,23 @@ def _fit(args: argparse.Namespace) -> int:
     return 0
 
 
+def _interval_reading(lo: float, hi: float) -> str:
+    """One line on what a correlation interval says (docs/theory.md, the profile interval)."""
+    if lo <= 0.0 <= hi and hi < 1.0:
+        return ("the data cannot tell whether the outer shape predicts the inner one (the interval holds 0), but they "
+                "rule out that it predicts it perfectly (it excludes 1)")
+    if lo <= 0.0 <= hi:
+        return "the data cannot tell yet how much the outer shape predicts the inner one (the interval holds 0 and 1)"
+    if hi >= 1.0:
+        return "the outer shape predicts the inner one; the data cannot rule out a perfect match (the interval holds 1)"
+    return "the outer shape predicts the inner one in part: the interval excludes both 0 and 1"
+
+
 def _replay(args: argparse.Namespace) -> int:
     from .io.offline import replay_log
+    from .io.outputs import claim_folder
 
+    claim_folder(args.out, "replay", args.force)
     rows = replay_log(args.log, args.out, every=args.every, progress=not args.quiet)
     last = rows[-1]
     print(f"replayed {len(rows)} steps of {args.log}; last step {last['step']}: similarity {last['similarity']:.3f}, "
@@ -97,14 +124,21 @@ def _import_bag(args: argparse.Namespace) -> int:
             raise ValueError(f"{what}: expected {n} numbers, got {text!r}")
         return v
 
+    from .io.outputs import check_new_file
+
+    out = check_new_file(args.out, args.force, "--out")       # before the (long) import
+    window = None
+    if args.start is not None or args.end is not None:      # an open end: later than any recording
+        window = (0.0 if args.start is None else args.start, 1e12 if args.end is None else args.end)
     tool = numbers(args.tool_offset, 3, "--tool-offset")
     crop = numbers(args.crop, 6, "--crop")
     topics = BagTopics(cloud=args.cloud, wrench=args.wrench, joints=args.joints, tf=tuple(args.tf))
     ds = import_bag(args.bag, topics=topics, base_frame=args.base_frame, camera_transform=args.camera_transform,
                     tool_offset=tool, tip_radius=args.tip_radius, contact_force=args.contact_force,
                     contact_spacing=args.contact_spacing, max_gap=args.max_gap,
-                    policy=ObservationPolicy(voxel=args.voxel), crop=None if crop is None else [crop[:3], crop[3:]])
-    path = save_dataset(ds, args.out)
+                    policy=ObservationPolicy(voxel=args.voxel), crop=None if crop is None else [crop[:3], crop[3:]],
+                    time_window=window)
+    path = save_dataset(ds, out, overwrite=args.force)
     c = ds.meta["counts"]
     frames = ", ".join(ds.meta["camera_frames"]) or "none"
     print(f"{args.bag}: {c['wrench']} wrench samples, {c['joint_states']} joint states, {c['clouds']} cloud(s) with "
@@ -124,10 +158,11 @@ def _export(args: argparse.Namespace) -> int:
 
         if args.mesh or args.outer or args.step is not None:
             raise ValueError("export: --mcap writes every step; it does not combine with --mesh, --outer or --step")
-        info = export_mcap(args.run, args.mcap, resolution=args.resolution)
+        info = export_mcap(args.run, args.mcap, resolution=args.resolution, force=args.force)
         print(f"wrote {info['messages']} messages ({info['steps']} steps) with Foxglove schemas to {info['path']}")
         return 0
-    info = export_run(args.run, args.mesh, outer=args.outer, step=args.step, resolution=args.resolution)
+    info = export_run(args.run, args.mesh, outer=args.outer, step=args.step, resolution=args.resolution,
+                      force=args.force)
     size = f" ({info['vertices']} vertices, {info['faces']} faces)" if "vertices" in info else ""
     for key in ("inner", "outer"):
         if info[key]:
@@ -138,7 +173,7 @@ def _export(args: argparse.Namespace) -> int:
 def _view(args: argparse.Namespace) -> int:
     from .viewer import serve
 
-    serve(args.run, port=args.port, open_browser=not args.no_browser, resolution=args.resolution)
+    serve(args.run, port=args.port, open_browser=not args.no_browser, resolution=args.resolution, host=args.host)
     return 0
 
 
@@ -152,11 +187,25 @@ def _positive_int(text: str) -> int:
     return v
 
 
+class _Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows each option's default once: not when its help already says it, nor for options without one."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if "default" in text.lower() or action.default in (None, False, argparse.SUPPRESS) or not action.option_strings:
+            return text
+        return text + " (default: %(default)s)"
+
+
+def _force(p: argparse.ArgumentParser, what: str) -> None:
+    p.add_argument("--force", action="store_true", help=f"write even if {what} (files of the same names are replaced)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    """The ``gpioius`` argument parser (every help text shows its defaults)."""
+    """The ``gpioius`` argument parser (every help text shows its default once)."""
     from . import __version__
 
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = _Formatter
     parser = argparse.ArgumentParser(prog="gpioius", formatter_class=fmt,
                                      description="Visuo-tactile inner-shape estimation (GPIOIS).")
     parser.add_argument("--version", action="version", version=f"gpioius {__version__}")
@@ -174,6 +223,7 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--max-steps", type=int, default=400, help="cap on planning steps per run")
     sim.add_argument("--smoke", action="store_true", help="12 steps per run, claims not judged (CI)")
     sim.add_argument("--quiet", action="store_true", help="no progress output")
+    _force(sim, "--out holds files that `gpioius simulate` did not write")
     sim.set_defaults(func=_simulate)
     s3 = sub.add_parser("simulate3d", parents=[common], formatter_class=fmt,
                         help="run the robot study in simulation (objects E-H, both modes)",
@@ -190,6 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
     s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
     s3.add_argument("--quiet", action="store_true", help="no progress output")
+    _force(s3, "--out holds files that `gpioius simulate3d` (of this world) did not write")
     s3.set_defaults(func=_simulate3d)
     sw = sub.add_parser("study", parents=[common], formatter_class=fmt,
                         help="objects x modes x seeds, on Ray when installed; statistics, paired tests, figures",
@@ -201,7 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--objects", default="A,B,C,D", help="comma-separated object names")
     sw.add_argument("--modes", default="visual-tactile,tactile",
                     help="comma-separated: visual-tactile, tactile, visual-tactile+taps, local, local+taps")
-    sw.add_argument("--seeds", type=_positive_int, default=10, help="seeds per object and mode (seed 0 = unperturbed)")
+    sw.add_argument("--seeds", type=_positive_int, default=10,
+                    help="seeds per object and mode (seed 0 = unperturbed; at most 10000)")
     sw.add_argument("--out", default="outputs/study", help="output folder")
     sw.add_argument("--workers", type=_positive_int, default=None, help="parallel runs (default: the CPU count)")
     sw.add_argument("--address", default=None, help="join an existing Ray cluster (e.g. ray://host:10001 or auto)")
@@ -209,6 +261,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
+    _force(sw, "--out holds files that are not a study of this world")
     sw.set_defaults(func=_study)
     fit = sub.add_parser("fit", parents=[common], formatter_class=fmt,
                          help="learn K_t on a dataset or log; save a checkpoint and a figure",
@@ -220,6 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
     fit.add_argument("--theta", type=float, default=None, help="IMQ theta [m] (default: the file's, else 0.1)")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 (default: the file's, else 0.006)")
+    _force(fit, "--out holds files that `gpioius fit` did not write")
     fit.set_defaults(func=_fit)
     rep = sub.add_parser("replay", parents=[common], formatter_class=fmt,
                          help="re-run the estimation of an exploration log step by step",
@@ -230,6 +284,7 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--out", default="outputs/replay", help="output folder")
     rep.add_argument("--every", type=_positive_int, default=1, help="replay every k-th step (the last always)")
     rep.add_argument("--quiet", action="store_true", help="no progress output")
+    _force(rep, "--out holds files that `gpioius replay` did not write")
     rep.set_defaults(func=_replay)
     bag = sub.add_parser("import-bag", parents=[common], formatter_class=fmt,
                          help="turn a ROS 2 bag (MCAP or sqlite3) into a .gpioius dataset",
@@ -254,6 +309,11 @@ def build_parser() -> argparse.ArgumentParser:
     bag.add_argument("--max-gap", type=float, default=0.1, help="longest joint-state gap to interpolate over [s]")
     bag.add_argument("--voxel", type=float, default=0.05, help="voxel edge for the cloud [m] (paper: 0.05)")
     bag.add_argument("--crop", default=None, help="keep cloud points in 'xmin ymin zmin xmax ymax zmax' [m]")
+    bag.add_argument("--start", type=float, default=None,
+                     help="import from this many seconds after the first wrench sample (default: the beginning)")
+    bag.add_argument("--end", type=float, default=None,
+                     help="import up to this many seconds after the first wrench sample (default: the end)")
+    _force(bag, "--out exists")
     bag.set_defaults(func=_import_bag)
     ex = sub.add_parser("export", parents=[common], formatter_class=fmt,
                         help="write the estimated surfaces of a run as PLY/OBJ/STL/GLB meshes (SVG/DXF curves in 2-D), or the "
@@ -269,6 +329,7 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--mcap", default=None, help="write the whole run as MCAP with Foxglove schemas (the 'foxglove' "
                                                  "extra) for scrubbing in Foxglove")
     ex.add_argument("--resolution", type=float, default=None, help="grid spacing [m] (default 5 mm 2-D, 1 cm 3-D)")
+    _force(ex, "an output file exists (a link there is replaced, never followed)")
     ex.set_defaults(func=_export)
     vw = sub.add_parser("view", parents=[common], formatter_class=fmt,
                         help="serve an interactive 3-D page of a run (viser): steps, contacts, path, estimate",
@@ -277,7 +338,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "estimated inner surface coloured by its variance, the true shapes when known, "
                                     "and the similarity over the steps, with a step slider. Ctrl-C stops it.")
     vw.add_argument("run", help="exploration log, dataset (.gpioius) or study folder (with logs/)")
-    vw.add_argument("--port", type=int, default=8080, help="port of the page on localhost")
+    vw.add_argument("--port", type=int, default=8080, help="TCP port of the page (0: any free port)")
+    vw.add_argument("--host", default="127.0.0.1",
+                    help="interface to serve on; 0.0.0.0 serves every interface (other machines can then connect)")
     vw.add_argument("--no-browser", action="store_true", help="do not open a browser")
     vw.add_argument("--resolution", type=float, default=None, help="grid spacing of the estimate [m]")
     vw.set_defaults(func=_view)
@@ -298,6 +361,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("gpioius: interrupted", file=sys.stderr)
         return 130
+    except Exception as exc:
+        if type(exc).__module__.split(".")[0] == "mujoco":    # MuJoCo's own FatalError (e.g. its arena is full)
+            message = " ".join(str(exc).split())
+            print(f"gpioius: error: MuJoCo: {message}", file=sys.stderr)
+            return 2
+        raise
 
 
 if __name__ == "__main__":  # pragma: no cover

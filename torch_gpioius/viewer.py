@@ -9,14 +9,24 @@
 * the true inner (green) and outer (grey) shapes when the run names a built-in world;
 * the similarity and correlation over the steps, with the current step marked.
 
-A study folder (with ``logs/``) gets a dropdown of its runs. Estimates are computed on demand with the run's own
-learned K_t at each step (:meth:`torch_gpioius.io.runs.RunHistory.model_at`) and cached.
+A study folder (with ``logs/``) gets a dropdown of its runs; every run is read and checked before the address is
+printed (a run that cannot be read is named and left out), so a browser never connects to a half-loaded viewer.
+Estimates are computed on demand with the run's own learned K_t at each step
+(:meth:`torch_gpioius.io.runs.RunHistory.model_at`) and cached.
+
+The step is picked with a number box (arrow keys or typing) and first / previous / next / last buttons: arrow keys
+in a form field never move the 3-D camera, while viser's slider thumb passes them on to the camera as well.
+
+**Security.** The page binds 127.0.0.1 unless told otherwise (``host``). Its WebSocket refuses a handshake whose
+``Origin`` is another site (cross-site WebSocket hijacking: any page the user opens could otherwise read the run and
+drive the GUI) and one whose ``Host`` is not this machine's (DNS rebinding); see :func:`origin_allowed`.
 """
 
 from __future__ import annotations
 
 import math
 import os
+import sys
 import threading
 import time
 import warnings
@@ -25,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RunViewer", "serve", "run_files"]
+__all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "COLOUR_KEY"]
 
 _GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (150, 150, 150), (150, 200, 255), (20, 20, 20), (0, 190, 210), (255, 140, 0)
 _GREEN = (30, 160, 60)
@@ -61,6 +71,97 @@ def _lift(x: np.ndarray) -> np.ndarray:
     return np.column_stack([x, np.zeros(len(x))]) if x.shape[1] == 2 else x
 
 
+#: What each colour in the scene is (the GUI shows it as a key).
+COLOUR_KEY = (("camera: seen outer surface", _GREY), ("camera: free space in front of it", _LIGHT_BLUE),
+              ("touch: contacts", _BLACK), ("touch: free space", _CYAN), ("fingertip path", _ORANGE),
+              ("true inner shape", _GREEN))
+
+_LOOPBACK = ("localhost", "127.0.0.1", "::1")
+
+
+def check_port(port) -> int:
+    """A TCP port to serve on: an integer in [0, 65535] (0: any free port).
+
+    Raises:
+        ValueError: anything else (a port of 70000 or -5 used to crash viser's server thread and hang the command).
+    """
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
+        raise ValueError(f"port: must be an integer in [0, 65535] (0: any free port), got {port!r}")
+    return port
+
+
+def origin_allowed(origin: str | None, host_header: str | None, bound_host: str) -> bool:
+    """Whether a WebSocket handshake may proceed (RFC 6455, section 10.2).
+
+    * No ``Origin`` header: not a browser page (browsers always send one): allowed.
+    * The ``Host`` the client asked for must name this machine: a loopback name, or the interface the viewer was
+      bound to (any name when bound to all interfaces, ``0.0.0.0`` / ``::``, which the user asked for). A page
+      that re-points its own domain name at 127.0.0.1 (DNS rebinding) is refused here.
+    * The ``Origin`` must be the viewer's own page: scheme http(s) and the same host and port as ``Host``. Any
+      other site's page is refused (cross-site WebSocket hijacking).
+    """
+    from urllib.parse import urlsplit
+
+    if origin is None:
+        return True
+    if not host_header:
+        return False
+    try:
+        o = urlsplit(origin)
+        h = urlsplit(f"//{host_header}")
+        o_port = o.port or (443 if o.scheme == "https" else 80)
+        h_port = h.port or 80
+    except ValueError:
+        return False
+    allowed = set(_LOOPBACK)
+    if bound_host not in ("0.0.0.0", "::", ""):
+        allowed.add(bound_host.strip("[]").lower())
+    elif h.hostname:
+        allowed.add(h.hostname)
+    return (o.scheme in ("http", "https") and h.hostname in allowed and o.hostname == h.hostname
+            and o_port == h_port)
+
+
+class _Proxy:
+    """An attribute proxy: ``overrides`` first, then the wrapped object."""
+
+    def __init__(self, wrapped, **overrides) -> None:
+        self._wrapped, self._overrides = wrapped, overrides
+
+    def __getattr__(self, name):
+        if name in self._overrides:
+            return self._overrides[name]
+        return getattr(self._wrapped, name)
+
+
+def _install_origin_check(bound_host: str) -> None:
+    """Make the WebSocket server of viewers created from now on check the handshake with :func:`origin_allowed`.
+
+    viser (1.1) has no option for it: its ``WebsockServer`` calls ``websockets.asyncio.server.serve`` through the
+    ``websockets`` name of its ``viser.infra._infra`` module. That one name is replaced by a proxy whose ``serve``
+    wraps viser's own ``process_request`` with the check; nothing else in viser or in ``websockets`` changes.
+    """
+    import http
+
+    from viser.infra import _infra
+
+    real = getattr(_infra.websockets, "_wrapped_websockets", _infra.websockets)
+    real_serve = real.asyncio.server.serve
+
+    def serve(handler, host, port, *args, process_request=None, **kwargs):
+        def check(connection, request):
+            if request.headers.get("Upgrade", "").lower() == "websocket" and not origin_allowed(
+                    request.headers.get("Origin"), request.headers.get("Host"), bound_host):
+                return connection.respond(http.HTTPStatus.FORBIDDEN, "gpioius view: cross-origin WebSocket refused\n")
+            return process_request(connection, request) if process_request is not None else None
+
+        return real_serve(handler, host, port, *args, process_request=check, **kwargs)
+
+    server_mod = _Proxy(real.asyncio.server, serve=serve)
+    proxy = _Proxy(real, asyncio=_Proxy(real.asyncio, server=server_mod), _wrapped_websockets=real)
+    _infra.websockets = proxy
+
+
 class RunViewer:
     """A viser server showing one or more runs (see the module docstring).
 
@@ -73,26 +174,48 @@ class RunViewer:
     Attributes:
         server: the ``viser.ViserServer``.
         port: the port actually served.
-        step_slider: the GUI slider (index into the run's steps).
+        step_box: the GUI number box of the step (an index into the run's steps).
+        skipped: runs of the source that could not be read, ``{path: reason}``.
     """
 
     def __init__(self, source: str | os.PathLike, *, host: str = "127.0.0.1", port: int = 8080,
-                 resolution: float | None = None) -> None:
+                 resolution: float | None = None, progress: bool = False) -> None:
         try:
             import viser
         except ImportError as exc:  # pragma: no cover - extra missing
             raise ImportError("gpioius view needs the 'viewer' extra: pip install 'torch_gpioius[viewer]'") from exc
+        from .io.datasets import DatasetError
         from .io.runs import load_run
 
-        self.files = run_files(source)
-        self._load_run = load_run
+        check_port(port)
+        if not isinstance(host, str) or not host:
+            raise ValueError(f"host: expected an interface name or address, got {host!r}")
+        if resolution is not None:
+            from ._validation import as_float
+
+            resolution = as_float(resolution, "resolution", lo=1e-3, hi=0.5, unit="m")
+        files = run_files(source)
         self._runs: dict[Path, object] = {}
+        #: runs that could not be read: ``{path: reason}`` (left out of the dropdown, listed in the panel)
+        self.skipped: dict[Path, str] = {}
+        for i, f in enumerate(files):             # every run is read and checked before anything is served
+            if progress:
+                print(f"gpioius view: reading {f.name} ({i + 1}/{len(files)})", file=sys.stderr, flush=True)
+            try:
+                self._runs[f] = load_run(f)
+            except DatasetError as exc:
+                self.skipped[f] = " ".join(str(exc).split())
+        self.files = [f for f in files if f in self._runs]
+        if not self.files:
+            raise DatasetError("gpioius view: no readable run: " + "; ".join(self.skipped.values()))
         self._cache: dict[tuple[Path, int], tuple] = {}
         self._lock = threading.RLock()
         self._handles: dict[str, object] = {}
         self._y_range: tuple[float, float] | None = None
         self.resolution = resolution
-        self.run = self._get(self.files[0])        # validates the first run before serving anything
+        self.host = host
+        self.run = self._runs[self.files[0]]
+        _install_origin_check(host)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.port = self.server.get_port()
         self.server.scene.set_up_direction("+z")
@@ -101,8 +224,6 @@ class RunViewer:
 
     # ---------------------------------------------------------------------------------------------------- data
     def _get(self, path: Path):
-        if path not in self._runs:
-            self._runs[path] = self._load_run(path)
         return self._runs[path]
 
     def _estimate(self, k: int):
@@ -139,8 +260,13 @@ class RunViewer:
         gui = self.server.gui
         self.run_dropdown = gui.add_dropdown("run", [p.name for p in self.files], initial_value=self.files[0].name,
                                              visible=len(self.files) > 1)
-        self.step_slider = gui.add_slider("step", min=0, max=1, step=1, initial_value=0)
+        # a number box, not a slider: arrow keys in a form field step it without also turning the camera
+        self.step_box = gui.add_number("step", initial_value=0, min=0, max=1, step=1)
+        self.step_buttons = gui.add_button_group("steps", ("first", "previous", "next", "last"))
         self.info = gui.add_markdown("")
+        if self.skipped:
+            gui.add_markdown("**Left out** (unreadable): " + "; ".join(f"`{p.name}`: {why}" for p, why in
+                                                                     self.skipped.items()))
         self.layers = {name: gui.add_checkbox(name, True) for name in
                        ("point cloud", "touches", "path", "estimate", "true shapes")}
         self.plot = gui.add_uplot(data=(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1)),
@@ -151,20 +277,37 @@ class RunViewer:
                                                        points={"show": True, "size": 8, "fill": "red"})),
                                   title="similarity over steps", aspect=1.6,
                                   scales={"x": uplot.Scale(time=False)},
-                                  axes=(uplot.Axis(label="step"), uplot.Axis()))
+                                  axes=(uplot.Axis(label="step", incrs=[1, 2, 5, 10, 20, 50, 100, 200, 500, 1000]),
+                                        uplot.Axis()),
+                                  legend=uplot.Legend(live=False))
+        gui.add_html(_colour_key_html())
 
         @self.run_dropdown.on_update
         def _(_event) -> None:
             self._show_run(next(p for p in self.files if p.name == self.run_dropdown.value))
 
-        @self.step_slider.on_update
+        @self.step_box.on_update
         def _(_event) -> None:
-            self.show(self.run.steps[int(self.step_slider.value)])
+            self.show(self.run.steps[self._step_index()])
+
+        @self.step_buttons.on_click
+        def _(_event) -> None:
+            i, last = self._step_index(), len(self.run.steps) - 1
+            target = {"first": 0, "previous": max(i - 1, 0), "next": min(i + 1, last), "last": last}
+            self.step_box.value = target[self.step_buttons.value]
 
         for box in self.layers.values():
             @box.on_update
             def _(_event) -> None:
-                self.show(self.run.steps[int(self.step_slider.value)])
+                self.show(self.run.steps[self._step_index()])
+
+    def _step_index(self) -> int:
+        """The step box's value as an index into the run's steps (clamped: a typed number may be anything)."""
+        try:
+            v = int(round(float(self.step_box.value)))
+        except (TypeError, ValueError):
+            v = 0
+        return min(max(v, 0), len(self.run.steps) - 1)
 
     def _show_run(self, path: Path) -> None:
         with self._lock:
@@ -178,23 +321,28 @@ class RunViewer:
             self._frame_camera()
             s, r = self.run.series("similarity"), self.run.series("correlation")
             self._series = (np.asarray(steps, dtype=np.float64), s, r)
-        self.step_slider.max = max(len(steps) - 1, 1)
-        self.step_slider.value = len(steps) - 1
+        self.step_box.max = max(len(steps) - 1, 1)
+        self.step_box.value = len(steps) - 1
         self.show(steps[-1])
 
     def _frame_camera(self) -> None:
-        """Point the initial camera at the run's observations: from above in 2-D, from a diagonal in 3-D."""
+        """Point the initial camera at the run's observations, from above in 2-D and from a diagonal in 3-D, far
+        enough that their bounding sphere fills at most half the view's height (:func:`frame_distance`): the whole
+        object is in view and clear of the control panel on the right."""
         x = self.run.states[self.run.steps[-1]].x
         lo, hi = x.min(axis=0), x.max(axis=0)
-        centre, size = _lift(((lo + hi) / 2)[None])[0], float(np.max(hi - lo))
+        centre = _lift(((lo + hi) / 2)[None])[0]
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3)
         cam = self.server.initial_camera
+        distance = frame_distance(radius, float(cam.fov))
         cam.look_at = tuple(centre)
         if self.run.dim == 2:
             cam.up = (0.0, 1.0, 0.0)
-            cam.position = tuple(centre + [0.0, -1e-3, 1.4 * size])
+            cam.position = tuple(centre + [0.0, -1e-3 * distance, distance])
         else:
             cam.up = (0.0, 0.0, 1.0)
-            cam.position = tuple(centre + 1.1 * size * np.array([-0.8, -0.9, 0.7]))
+            view = np.array([-0.8, -0.9, 0.7])
+            cam.position = tuple(centre + distance * view / np.linalg.norm(view))
         for client in self.server.get_clients().values():
             client.camera.look_at, client.camera.position = cam.look_at, cam.position
 
@@ -308,11 +456,46 @@ class RunViewer:
         self.server.stop()
 
 
+def frame_distance(radius: float, fov: float, fill: float = 0.5) -> float:
+    """Distance [m] from which a sphere of ``radius`` [m] spans ``fill`` of a perspective view's height.
+
+    The sphere's silhouette seen from distance ``d`` has angular radius ``asin(r / d)``; it spans ``fill`` of the
+    view's vertical field ``fov`` [rad] when ``tan(asin(r / d)) = fill * tan(fov / 2)``.
+    """
+    t = fill * math.tan(fov / 2)
+    return radius * math.sqrt(1.0 + 1.0 / (t * t))
+
+
+def _colour_key_html() -> str:
+    """The colour key of the scene as static HTML (swatches and labels; no script)."""
+    rows = "".join(f'<div style="display:flex;align-items:center;gap:6px;margin:1px 0">'
+                   f'<span style="width:12px;height:12px;border-radius:50%;background:rgb{c};display:inline-block">'
+                   f'</span>{label}</div>' for label, c in COLOUR_KEY)
+    bar = ('<div style="display:flex;align-items:center;gap:6px;margin:3px 0"><span style="width:48px;height:10px;'
+           'background:linear-gradient(to right,#fcfbfd,#3f007d);display:inline-block;flex:none"></span>'
+           'estimate (&mu;_in = 0) by its variance: white certain, purple the prior</div>')
+    return f'<div style="font-size:0.8em;padding:2px 4px"><b>colour key</b>{rows}{bar}</div>'
+
+
+def _browser_host(host: str) -> str:
+    """How a browser on this machine reaches an interface (``localhost`` for loopback and all interfaces)."""
+    if host in ("127.0.0.1", "0.0.0.0", "::", "::1", "localhost"):
+        return "localhost"
+    return f"[{host}]" if ":" in host else host
+
+
 def serve(source: str | os.PathLike, *, port: int = 8080, open_browser: bool = True,
           resolution: float | None = None, host: str = "127.0.0.1") -> None:
-    """Serve :class:`RunViewer` until interrupted (Ctrl-C), printing its address."""
-    viewer = RunViewer(source, host=host, port=port, resolution=resolution)
-    url = f"http://{'localhost' if host in ('127.0.0.1', '0.0.0.0') else host}:{viewer.port}"
+    """Serve :class:`RunViewer` until interrupted (Ctrl-C); the address is printed once every run is loaded.
+
+    Raises:
+        ValueError: a bad port, host or resolution.
+        DatasetError: no run of the source could be read.
+    """
+    viewer = RunViewer(source, host=host, port=port, resolution=resolution, progress=True)
+    url = f"http://{_browser_host(host)}:{viewer.port}"
+    for path, why in viewer.skipped.items():
+        print(f"gpioius view: left out {path}: {why}", file=sys.stderr, flush=True)
     print(f"gpioius view: {len(viewer.files)} run(s) at {url} (Ctrl-C to stop)", flush=True)
     if open_browser:
         webbrowser.open(url)

@@ -288,3 +288,49 @@ def test_boolean_and_complex_coordinates_are_refused(tmp_path, x, match):
                                                                  "step": np.zeros(3, int)})])
     with pytest.raises(DatasetError, match=match):
         tg.load_dataset(p)
+
+
+def test_a_flipped_bit_in_a_datasets_last_record_is_corruption_not_a_torn_write(tmp_path):
+    """A dataset is written whole and atomically (its header says ``file: dataset``): its last record can never be
+    torn, so a bad checksum there is an error. A log's may be (its writer can be killed mid-record)."""
+    p = tg.save_dataset(small_dataset(), tmp_path / "d.gpioius")
+    assert next(read_records(p)).meta["file"] == "dataset"
+    blob = bytearray(p.read_bytes())
+    blob[-40] ^= 0x01                    # inside the last record (the trace)
+    p.write_bytes(bytes(blob))
+    with pytest.raises(DatasetError, match="d.gpioius: the last record .* fails its checksum; the header says this "
+                                           "file is a dataset"):
+        tg.load_dataset(p)
+    cut = tmp_path / "cut.gpioius"
+    cut.write_bytes(p.read_bytes()[:-30])        # a dataset cut short is corrupt too (e.g. a partial copy)
+    with pytest.raises(DatasetError, match="is cut off .* the header says this file is a dataset"):
+        tg.load_dataset(cut)
+    log = tmp_path / "log.gpioius"
+    log_with_steps(log)
+    assert next(read_records(log)).meta["file"] == "log"
+    blob = bytearray(log.read_bytes())
+    blob[-40] ^= 0x01
+    log.write_bytes(bytes(blob))
+    with pytest.warns(TornLogWarning, match="fails its checksum"):
+        tg.load_dataset(log)
+    with pytest.raises(DatasetError, match="'file' must be one of"):
+        tg.save_dataset(tg.Dataset(np.zeros((1, 2)), [0], [0], [0], meta={"file": "spreadsheet"}), tmp_path / "x")
+
+
+def test_atomic_writes_use_a_temporary_name_of_their_own(tmp_path, monkeypatch):
+    """Two writers of one path never share a temporary file (they used to share ``<name>.tmp`` and one crashed)."""
+    import os as _os
+    from torch_gpioius.io.outputs import atomic_write
+
+    seen = []
+    real = _os.replace
+
+    def spy(src, dst):
+        seen.append(str(src))
+        return real(src, dst)
+
+    monkeypatch.setattr(_os, "replace", spy)
+    atomic_write(tmp_path / "r.json", "{}")
+    atomic_write(tmp_path / "r.json", "{}")
+    assert len(set(seen)) == 2 and all(str(_os.getpid()) in s for s in seen)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]

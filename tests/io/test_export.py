@@ -81,3 +81,32 @@ def test_bad_requests_are_one_line_and_leave_nothing(log_2d, dataset_3d, tmp_pat
     with pytest.raises(ValueError, match="no outer model"):
         export_run(tactile, tmp_path / "i.svg", outer=tmp_path / "o.svg")
     assert not (tmp_path / "i.svg").exists()
+
+
+def test_one_rule_for_existing_files_links_and_two_outputs_in_one_file(log_2d, dataset_3d, tmp_path, capsys):
+    """Nothing that exists is replaced without --force; with it a link is replaced, never followed; two outputs
+    may not name one file (``--mesh X --outer X`` lost the inner estimate)."""
+    target = tmp_path / "precious.ply"
+    target.write_text("someone's mesh\n")
+    link = tmp_path / "inner.ply"
+    link.symlink_to(target)
+    assert main(["export", str(dataset_3d), "--mesh", str(link)]) == 2
+    assert "inner.ply: exists; pass --force" in capsys.readouterr().err
+    assert main(["export", str(dataset_3d), "--mesh", str(link), "--force"]) == 0
+    assert target.read_text() == "someone's mesh\n"                 # the link's target is untouched
+    assert not link.is_symlink() and trimesh.load(link).vertices.shape[1] == 3
+    same = tmp_path / "both.ply"
+    assert main(["export", str(dataset_3d), "--mesh", str(same), "--outer", str(same)]) == 2
+    assert "--outer and --mesh name the same file" in capsys.readouterr().err and not same.exists()
+    assert main(["export", str(dataset_3d), "--mesh", str(tmp_path / "i.ply"), "--resolution", "0"]) == 2
+    assert "resolution: must be positive" in capsys.readouterr().err          # 0 used to mean the default
+    assert main(["export", str(log_2d), "--mcap", str(tmp_path / "nodir" / "b.mcap")]) == 2
+    assert f"the folder {tmp_path / 'nodir'} does not exist" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["out.SVG", "out.DXF", "out.Obj"])
+def test_upper_case_endings_write_the_format(log_2d, tmp_path, name):
+    """``--mesh out.SVG`` raised a KeyError inside trimesh; the ending's case does not matter."""
+    export_run(log_2d, tmp_path / name)
+    text = (tmp_path / name).read_text()
+    assert {"SVG": "<svg", "DXF": "SECTION", "Obj": "v "}[name.split(".")[1]] in text

@@ -105,3 +105,74 @@ def test_a_real_ray_sweep_survives_a_killed_worker(tmp_path):
     assert len(list((out / "runs").glob("*.json"))) == 8 and not list((out / "runs").glob("*.tmp"))
     assert killed in {p.stem for p in (out / "runs").glob("*.json")}   # the killed run was retried to the end
     assert "on Ray" in stdout
+    assert "Token authentication" not in stdout + stderr           # Ray's banner is not printed
+
+
+def test_a_second_study_into_the_same_folder_is_refused_while_the_first_runs(tmp_path):
+    """Two drivers on one --out used to share temporary files and corrupt each other's logs; now the folder is
+    locked for the whole sweep and the second driver stops at once, naming the first one's pid."""
+    from torch_gpioius.io.outputs import FolderLock
+
+    out = tmp_path / "s"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import sys, time; from torch_gpioius.io.outputs import "
+                               "FolderLock; l = FolderLock(sys.argv[1]).acquire(); print('locked', flush=True); "
+                               "time.sleep(60)", str(out)], stdout=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        assert holder.stdout.readline().strip() == "locked"
+        with pytest.raises(RuntimeError, match=rf"another gpioius study \(pid {holder.pid}\) is writing there"):
+            run_sweep("2d", objects=["A"], seeds=1, out=out, smoke=True, backend="local", progress=False)
+    finally:
+        holder.kill()
+        holder.wait()
+    assert not (out / "runs").exists()                            # nothing was written by the refused sweep
+    with FolderLock(out):                                         # the kernel released the dead holder's lock
+        pass
+
+
+def test_study_folders_belong_to_one_world_and_are_never_someone_elses(tmp_path):
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "runs.csv").write_text("my,own,table\n")
+    with pytest.raises(FileExistsError, match="not empty and was not written by `gpioius study`; pass --force"):
+        run_sweep("2d", objects=["A"], seeds=1, out=foreign, smoke=True, backend="local", progress=False)
+    assert (foreign / "runs.csv").read_text() == "my,own,table\n"
+    out = tmp_path / "s"
+    run_sweep("2d", objects=["A"], modes=["tactile", "tactile"], seeds=1, out=out, smoke=True, backend="local",
+              progress=False)
+    assert sorted(p.name for p in (out / "runs").glob("*.json")) == ["A_tactile_0.json"]    # a mode counts once
+    assert not (out / "running").exists()                         # no empty running/ folder is left behind
+    with pytest.raises(FileExistsError, match=r"world='2d'.* this one is world='3d'"):
+        run_sweep("3d", objects=["E"], seeds=1, out=out, smoke=True, backend="local", progress=False)
+    with pytest.raises(ValueError, match=r"seeds: must be an integer in \[1, 10000\]"):
+        run_sweep("2d", seeds=100_000_000, out=tmp_path / "big")
+
+
+def test_damaged_and_foreign_run_files_are_named_and_damaged_runs_done_again(tmp_path):
+    from torch_gpioius.studies.sweep import RunFileError, aggregate, read_run_file
+
+    out = tmp_path / "s"
+    run_sweep("2d", objects=["A"], modes=["tactile"], seeds=2, out=out, smoke=True, backend="local", progress=False)
+    good = out / "runs" / "A_tactile_0.json"
+    run = json.loads(good.read_text())
+    bad_cases = {"truncated": good.read_text()[:40], "not an object": "[1, 2]",
+                 "negative Hausdorff": json.dumps({**run, "series": {**run["series"], "hausdorff":
+                                                                     [-0.1] * len(run["series"]["hausdorff"])}}),
+                 "missing series": json.dumps({k: v for k, v in run.items() if k != "series"}),
+                 "string seed": json.dumps({**run, "seed": "0"})}
+    match = {"truncated": "not a readable run result", "not an object": "a JSON object",
+             "negative Hausdorff": r"'series.hausdorff' holds a negative value", "missing series": "'series'",
+             "string seed": "'seed' must be a non-negative integer"}
+    for case, text in bad_cases.items():
+        p = out / "runs" / "A_tactile_1.json"
+        p.write_text(text)
+        with pytest.raises(RunFileError, match=rf"A_tactile_1.json: .*{match[case]}"):
+            read_run_file(p)
+        with pytest.raises(RunFileError, match="A_tactile_1.json"):
+            aggregate(out, world="2d")
+    # a sweep sets the damaged file aside (kept, renamed) and does that run again
+    with pytest.warns(RuntimeWarning, match="A_tactile_1.json: damaged or foreign result, renamed"):
+        again = run_sweep("2d", objects=["A"], modes=["tactile"], seeds=2, out=out, smoke=True, backend="local",
+                          progress=False)
+    assert again["skipped"] == 1 and (out / "runs" / "A_tactile_1.json.invalid").exists()
+    assert read_run_file(out / "runs" / "A_tactile_1.json")["seed"] == 1

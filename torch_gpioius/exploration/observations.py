@@ -18,6 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..voxels import voxel_average
+
 __all__ = ["ObservationPolicy", "thin_points", "thin_indices", "free_space_along", "retract_free_space", "vision_observations"]
 
 
@@ -145,8 +147,6 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
     if policy.vision_free_offset is not None and cloud.sees_free_space:
         free = cloud.free_space(policy.vision_free_offset)
         if policy.voxel and len(free):
-            from ..io.importers import voxel_average
-
             free = voxel_average(free, policy.voxel)
         if len(free):
             xs.append(free)

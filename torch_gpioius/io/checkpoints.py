@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import secrets
 from pathlib import Path
 
 import torch
@@ -92,7 +93,7 @@ def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None
         "sha256": _digest(state, tensors), "extra": dict(extra or {}),
     }
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")   # unique to this writer
     try:
         torch.save(payload, tmp)
         with open(tmp, "rb+") as f:

@@ -32,7 +32,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-__all__ = ["FORMAT_VERSION", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
+__all__ = ["FORMAT_VERSION", "FILE_KINDS", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
            "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta", "step_number"]
 
 MAGIC = b"GPIOIUS\x00"
@@ -44,6 +44,10 @@ _MAX_RECORD = 1 << 29
 #: Largest number of arrays in one record payload.
 _MAX_MEMBERS = 64
 UNITS = "m"
+#: What a file is, recorded in its header's ``file`` field: a ``dataset`` is written whole and atomically by
+#: :func:`save_dataset` (it can never end in a torn record: a bad last record is corruption); a ``log`` is appended
+#: to record by record (:class:`LogWriter`) and may end in a torn record when its writer was killed.
+FILE_KINDS = ("dataset", "log")
 
 
 class DatasetError(ValueError):
@@ -161,6 +165,7 @@ def read_records(path: str | os.PathLike, *, allow_torn_tail: bool = True) -> It
             raise DatasetError(f"{path}: format version {version} is not supported (this torch_gpioius reads "
                                f"version {FORMAT_VERSION}); convert it with the matching release")
         pos = len(MAGIC) + 2
+        atomic = False      # the header says the file was written whole (a dataset): no torn tail is possible
         while True:
             rec_head = f.read(_REC_HEAD.size)
             if not rec_head:
@@ -187,6 +192,10 @@ def read_records(path: str | os.PathLike, *, allow_torn_tail: bool = True) -> It
                         raise DatasetError(f"{path}: record at byte {pos} fails its CRC-32 check (file corrupted)")
                     torn = f"the last record (byte {pos}) fails its checksum"
             if torn is not None:
+                if atomic:
+                    raise DatasetError(f"{path}: {torn}; the header says this file is a dataset, which is written "
+                                       "whole and atomically and so can never end in a torn record: the file is "
+                                       "corrupt")
                 if not allow_torn_tail:
                     raise DatasetError(f"{path}: truncated: {torn}")
                 warnings.warn(f"{path}: {torn}; ignoring it (the writer was probably killed)", TornLogWarning,
@@ -194,6 +203,8 @@ def read_records(path: str | os.PathLike, *, allow_torn_tail: bool = True) -> It
                 return
             rec = _decode(path, pos, data)
             rec.end = end
+            if pos == len(MAGIC) + 2 and rec.kind == "header" and rec.meta.get("file") == "dataset":
+                atomic = True
             yield rec
             pos = end
             del start
@@ -273,6 +284,9 @@ def check_meta(meta: dict, where: str) -> dict:
     v = meta.get("voxel_size")
     if v is not None and not (_number(v) and v > 0):
         raise DatasetError(f"{where}: header field 'voxel_size' must be a positive number [m] or null, got {v!r}")
+    v = meta.get("file")
+    if v is not None and v not in FILE_KINDS:
+        raise DatasetError(f"{where}: header field 'file' must be one of {FILE_KINDS}, got {v!r}")
     for k in ("frame", "source", "scene", "mode", "scene_fingerprint"):
         v = meta.get(k)
         if v is not None and not isinstance(v, str):
@@ -374,19 +388,28 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def save_dataset(ds: Dataset, path: str | os.PathLike) -> Path:
+def save_dataset(ds: Dataset, path: str | os.PathLike, *, overwrite: bool = True) -> Path:
     """Write ``ds`` atomically (temporary file, fsync, rename): a crash leaves the old file or the new one.
 
     Everything is validated with the reader's own rules and encoded *before* the file is touched, so a save
     that would write something :func:`load_dataset` refuses fails and leaves a good file in place; a failed
-    write (disk full) removes its temporary file.
+    write (disk full) removes its temporary file. The header records ``file: "dataset"``, so a reader treats a
+    bad last record as corruption, never as a torn write. A symbolic link at ``path`` is replaced, not followed.
+
+    Args:
+        ds: the dataset.
+        path: the file to write.
+        overwrite: replace an existing file (the command line passes False unless ``--force``).
 
     Raises:
         DatasetError: invalid metadata, observations or trace (nothing was written).
+        FileExistsError: ``path`` exists and ``overwrite`` is False.
         OSError: the write failed (the previous file, if any, is unchanged).
     """
     path = Path(path)
-    meta = check_meta(dict(ds.meta), f"save_dataset({path})")
+    if not overwrite and os.path.lexists(path):
+        raise FileExistsError(f"{path}: exists; pass --force (overwrite=True) to replace it")
+    meta = check_meta({**ds.meta, "file": "dataset"}, f"save_dataset({path})")
     x, y, task, step = validate_observations(ds.x, ds.y, ds.task, ds.step, where=f"save_dataset({path})",
                                              dim=meta["dim"])
     trace = _check_trace(dict(ds.trace), f"save_dataset({path})")
@@ -398,21 +421,9 @@ def save_dataset(ds: Dataset, path: str | os.PathLike) -> Path:
 
 
 def _atomic_write(path: Path, blob: bytes) -> None:
-    """Write ``blob`` to a temporary file beside ``path``, fsync, rename; remove the temporary file on failure."""
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(blob)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            tmp.unlink()
-        except OSError:
-            pass
-        raise
-    _fsync_dir(path)
+    from .outputs import atomic_write
+
+    atomic_write(path, blob)
 
 
 class LogWriter:
@@ -436,7 +447,7 @@ class LogWriter:
             self._f.truncate(end)
             self._f.seek(end)
         else:
-            meta = dict(meta or {})
+            meta = {**(meta or {}), "file": "log"}
             meta.setdefault("units", UNITS)
             check_meta(meta, f"LogWriter({self.path})")
             self._f = open(self.path, "wb")

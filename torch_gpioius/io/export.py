@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from .datasets import DatasetError
+from .outputs import atomic_write, check_distinct, check_new_file
 
-__all__ = ["export_run", "export_model", "write_surface", "MESH_FORMATS", "CURVE_FORMATS"]
+__all__ = ["export_run", "export_model", "write_surface", "grid_resolution", "MESH_FORMATS", "CURVE_FORMATS"]
 
 #: File endings trimesh writes meshes to.
 MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")
@@ -25,8 +26,21 @@ def _colours(variance: np.ndarray, prior: float) -> np.ndarray:
     return (colormaps["Purples"](np.clip(variance / prior, 0.0, 1.0)) * 255).round().astype(np.uint8)
 
 
+def grid_resolution(resolution, dim: int, default_2d: float = 0.005, default_3d: float = 0.01) -> float:
+    """The grid spacing [m] of an estimate: ``resolution`` checked (1 mm to 50 cm), or the default when None.
+
+    Raises:
+        ValueError: zero, negative, NaN or out of range (0 used to mean the default silently).
+    """
+    from .._validation import as_float
+
+    if resolution is None:
+        return default_2d if dim == 2 else default_3d
+    return as_float(resolution, "resolution", lo=1e-3, hi=0.5, positive=True, unit="m")
+
+
 def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> Path:
-    """Write one estimated surface.
+    """Write one estimated surface (atomically: a link at ``path`` is replaced, never followed).
 
     Args:
         surface: a :class:`trimesh.Trimesh` (3-D) or a list of `(m, 2)` closed polylines [m] (2-D).
@@ -52,10 +66,8 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
         mesh.vertex_attributes["variance"] = np.asarray(variance, dtype=np.float64)
         path.parent.mkdir(parents=True, exist_ok=True)
         if ext == ".ply":
-            path.write_bytes(trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=True))
-        else:
-            mesh.export(path)
-        return path
+            return atomic_write(path, trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=True))
+        return atomic_write(path, mesh.export(file_type=ext[1:]))
     if ext not in CURVE_FORMATS:
         raise ValueError(f"{path}: a 2-D estimate is a set of closed curves; write one of {', '.join(CURVE_FORMATS)}")
     curves = [np.asarray(c, dtype=np.float64) for c in surface]
@@ -67,8 +79,7 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
             vertices.append(c)
             entities.append(trimesh.path.entities.Line(np.arange(start, start + len(c))))
         p = trimesh.path.Path2D(entities=entities, vertices=np.concatenate(vertices))
-        p.export(str(path), file_type=ext[1:])
-        return path
+        return atomic_write(path, p.export(file_type=ext[1:]))
     # PLY / OBJ: a line set in the z = 0 plane with the variance as colours
     vertices = np.concatenate([np.column_stack([c, np.zeros(len(c))]) for c in curves])
     offsets = np.cumsum([0] + [len(c) for c in curves])
@@ -82,18 +93,16 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
                  f"element edge {len(edges)}", "property int vertex1", "property int vertex2", "end_header"]
         lines += [f"{x!r} {y!r} {z!r} {r} {g} {b}" for (x, y, z), (r, g, b, _) in zip(vertices.tolist(), colours)]
         lines += [f"{a} {b}" for a, b in edges]
-        path.write_text("\n".join(lines) + "\n")
-    else:
-        lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
-        for a, b in zip(offsets[:-1], offsets[1:]):
-            lines.append("l " + " ".join(str(i + 1) for i in range(a, b)))
-        path.write_text("\n".join(lines) + "\n")
-    return path
+        return atomic_write(path, "\n".join(lines) + "\n")
+    lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
+    for a, b in zip(offsets[:-1], offsets[1:]):
+        lines.append("l " + " ".join(str(i + 1) for i in range(a, b)))
+    return atomic_write(path, "\n".join(lines) + "\n")
 
 
 def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
                outer: str | os.PathLike | None = None, step: int | None = None,
-               resolution: float | None = None, bounds=None) -> dict:
+               resolution: float | None = None, bounds=None, force: bool = False) -> dict:
     """Write the estimated inner (and outer) surface of a log or dataset after ``step`` (default: the last).
 
     The model is rebuilt with the run's own learned K_t at that step (no re-learning; datasets are fitted).
@@ -105,13 +114,18 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
         step: which step (the last recorded one at or before it).
         resolution: grid spacing [m] (default 5 mm in 2-D, 1 cm in 3-D).
         bounds: `(2, d)` box `[min; max]` [m] (default: the observations padded by 5 cm).
+        force: replace existing files (a link there is replaced, never followed).
+
+    2-D curves are written in metres, the base frame's unit (an SVG's viewBox is then a few tenths wide: scale it
+    by 1000 in a drawing program for millimetres); see docs/data-format.md.
 
     Returns:
         ``{"step", "inner", "outer", "vertices", "faces"}`` (paths written, and the inner mesh's size in 3-D).
 
     Raises:
         DatasetError / ValueError: unreadable run, a format that does not suit, no surface in the box, an outer
-            export of a run without outer observations.
+            export of a run without outer observations, both outputs naming one file, a bad resolution.
+        FileExistsError: an output exists and ``force`` is False.
     """
     from ..metrics import prior_variance
     from ..sim.bounds import as_bounds
@@ -120,6 +134,10 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
 
     if mesh is None and outer is None:
         raise ValueError("export: nothing to write (give a mesh and/or an outer file)")
+    check_distinct(**{"--mesh": mesh, "--outer": outer})
+    for target in (mesh, outer):
+        if target is not None:
+            check_new_file(target, force, "export")
     history = load_run(run)
     k = history.steps[-1] if step is None else history.nearest_step(int(step))
     if step is not None and int(step) < history.steps[0]:
@@ -128,7 +146,7 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
     ds = history.states[k]
     dim = history.dim
     box = data_bounds(ds.x) if bounds is None else as_bounds(bounds, dim)
-    res = resolution or (0.005 if dim == 2 else 0.01)
+    res = grid_resolution(resolution, dim)
     out = {"step": k, "inner": None, "outer": None}
     # every check before anything is written: a refused export leaves no partial output
     for target in (mesh, outer):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 import os
+import secrets
 from pathlib import Path
 
 import numpy as np
@@ -34,36 +35,33 @@ def _lift(x: np.ndarray) -> np.ndarray:
 
 
 def export_mcap(run: str | os.PathLike, path: str | os.PathLike, *, every: int | None = None,
-                resolution: float | None = None) -> dict:
+                resolution: float | None = None, force: bool = False) -> dict:
     """Write a log or dataset as MCAP with Foxglove schemas (see the module docstring for the topics).
 
     Args:
         run: exploration log or dataset (``.gpioius``).
-        path: the ``.mcap`` file to write (refused if it exists).
+        path: the ``.mcap`` file to write (refused if it exists, unless ``force``; written to a temporary file and
+            renamed, so a link there is replaced, never followed).
         every: export every k-th step (the last always); default about 50 steps in all.
         resolution: grid spacing of the estimates [m] (default 5 mm in 2-D, 1.5 cm in 3-D).
+        force: replace an existing file.
 
     Returns:
         ``{"path", "steps", "messages"}``.
 
     Raises:
-        ImportError: without ``foxglove-sdk``. FileExistsError: ``path`` exists. DatasetError: an unreadable run.
+        ImportError: without ``foxglove-sdk``. FileExistsError: ``path`` exists. FileNotFoundError: its folder does
+            not exist (names it). DatasetError: an unreadable run. ValueError: a bad resolution or step.
     """
     try:
-        import foxglove
-        from foxglove import channels as ch
-        from foxglove import messages as fm
+        import foxglove  # noqa: F401
     except ImportError as exc:  # pragma: no cover - extra missing
         raise ImportError("MCAP export needs the 'foxglove' extra: pip install 'torch_gpioius[foxglove]'") from exc
-    from matplotlib import colormaps
+    from .export import grid_resolution
+    from .outputs import check_new_file
+    from .runs import load_run
 
-    from ..metrics import prior_variance
-    from .offline import data_bounds
-    from .runs import estimate_surface, load_run
-
-    path = Path(path)
-    if path.exists():
-        raise FileExistsError(f"export: {path} exists; choose another name")
+    path = check_new_file(path, force, "MCAP")
     if path.suffix.lower() != ".mcap":
         raise ValueError(f"export: {path}: an MCAP file must end in .mcap")
     history = load_run(run)
@@ -74,8 +72,30 @@ def export_mcap(run: str | os.PathLike, path: str | os.PathLike, *, every: int |
     chosen = steps[::k_every]
     if chosen[-1] != steps[-1]:
         chosen.append(steps[-1])
+    res = grid_resolution(resolution, history.dim, 0.005, 0.015)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    try:
+        n_messages = _write_mcap(tmp, history, chosen, res)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return {"path": str(path), "steps": len(chosen), "messages": n_messages}
+
+
+def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
+    """Write the chosen steps of a run to ``file``; returns the number of messages."""
+    import foxglove
+    from foxglove import channels as ch
+    from foxglove import messages as fm
+    from matplotlib import colormaps
+
+    from ..metrics import prior_variance
+    from .offline import data_bounds
+    from .runs import estimate_surface
+
+    steps = history.steps
     frame = str(history.meta.get("frame", "base"))
-    res = resolution or (0.005 if history.dim == 2 else 0.015)
     cmap = colormaps["Purples"]
 
     def cloud_msg(points: np.ndarray, t: int):
@@ -95,7 +115,7 @@ def export_mcap(run: str | os.PathLike, path: str | os.PathLike, *, every: int |
 
     ctx = foxglove.Context()
     n_messages = 0
-    with foxglove.open_mcap(str(path), context=ctx):
+    with foxglove.open_mcap(str(file), context=ctx):
         cloud = ch.PointCloudChannel("/gpioius/cloud", context=ctx)
         contacts = ch.PointCloudChannel("/gpioius/contacts", context=ctx)
         free = ch.PointCloudChannel("/gpioius/free_space", context=ctx)
@@ -146,4 +166,4 @@ def export_mcap(run: str | os.PathLike, path: str | os.PathLike, *, every: int |
                 row[key] = None if v is None or not math.isfinite(v) else float(v)
             metrics.log(row, log_time=t_ns)
             n_messages += 1
-    return {"path": str(path), "steps": len(chosen), "messages": n_messages}
+    return n_messages

@@ -10,51 +10,18 @@ from pathlib import Path
 
 import numpy as np
 
+from ..voxels import VOXEL_RANGE, voxel_average  # noqa: F401  (re-exported: the 0.2 home of voxel_average)
 from .datasets import Dataset, DatasetError
 
 __all__ = ["load_point_cloud", "load_contacts_csv", "voxel_average", "dataset_from_files"]
 
 _SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
-#: Accepted voxel edge lengths [m].
-VOXEL_RANGE = (1e-4, 10.0)
 
 
 def _scale(units: str, path: Path) -> float:
     if units not in _SCALE:
         raise DatasetError(f"{path}: units must be one of {sorted(_SCALE)}, got {units!r}")
     return _SCALE[units]
-
-
-def voxel_average(points: np.ndarray, voxel: float) -> np.ndarray:
-    """Average the points in each occupied cubic voxel (the paper's 5 cm Kinect averaging).
-
-    Args:
-        points: `(n, d)` [m].
-        voxel: edge length [m], in [1e-4, 10] (a finer or coarser grid is a unit mistake: 1e-300 overflowed the
-            voxel indices and collapsed every point into one; inf did the same); voxels are aligned to the
-            origin of the frame.
-
-    Returns:
-        `(k, d)` one mean point per occupied voxel, in lexicographic voxel order.
-
-    Raises:
-        ValueError: a voxel size outside the range, or voxel indices that do not fit in int64.
-    """
-    if isinstance(voxel, bool) or not isinstance(voxel, (int, float, np.floating)) or not (
-            math.isfinite(voxel) and VOXEL_RANGE[0] <= voxel <= VOXEL_RANGE[1]):
-        raise ValueError(f"voxel size must be a number in [{VOXEL_RANGE[0]:g}, {VOXEL_RANGE[1]:g}] m, got {voxel!r}")
-    points = np.asarray(points, dtype=np.float64)
-    if len(points) == 0:
-        return points
-    scaled = np.floor(points / voxel)
-    if np.abs(scaled).max() >= 2.0**62:
-        raise ValueError(f"voxel size {voxel:g} m: voxel indices overflow for points up to {np.abs(points).max():g} m")
-    keys = scaled.astype(np.int64)
-    _, inv = np.unique(keys, axis=0, return_inverse=True)
-    inv = inv.reshape(-1)
-    sums = np.zeros((inv.max() + 1, points.shape[1]))
-    np.add.at(sums, inv, points)
-    return sums / np.bincount(inv)[:, None]
 
 
 def _read_pcd(path: Path) -> np.ndarray:

@@ -12,6 +12,7 @@ import torch
 from tqdm.auto import tqdm
 
 from .checkpoints import save_checkpoint
+from .outputs import atomic_write
 from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
 from ..models.gpiois import GPIOIS, INNER
 from ..metrics import hausdorff_distance, uncertainty_measure
@@ -81,7 +82,9 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
     """Learn K_t on a dataset (or the final state of a log); save a checkpoint and a figure.
 
     Returns:
-        ``{"n", "task_covariance", "similarity", "correlation", "mll", "checkpoint", "figure"}``.
+        ``{"n", "task_covariance", "similarity", "correlation", "correlation_interval", "mll", "checkpoint",
+        "figure"}``; ``correlation_interval`` is the 95 % profile-likelihood interval of the correlation
+        (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
     ds = load_dataset(path)
     model = ds.to_model(theta=theta, noise=noise).fit()
@@ -92,16 +95,18 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
             "mll": float(model.log_marginal_likelihood())}
     if isinstance(model, GPIOIS):
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
-                    correlation=model.correlation)
+                    correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)))
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         info["checkpoint"] = str(save_checkpoint(model, out / "model.pt", extra={"dataset": str(path)}))
-        res = resolution or (0.005 if ds.x.shape[1] == 2 else 0.02)
+        from .export import grid_resolution
+
+        res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
         fig = out / "fit.png"
         _plot_estimate(model, ds, fig, f"{Path(path).name}: estimated inner shape over its variance", res)
         info["figure"] = str(fig)
-        (out / "fit.json").write_text(json.dumps(info, indent=2))
+        atomic_write(out / "fit.json", json.dumps(info, indent=2))
     return info
 
 
@@ -159,8 +164,8 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
         row = {"step": k, "n": len(ds), "similarity": model.similarity if kt is not None else float("nan"),
                "correlation": model.correlation if kt is not None else float("nan"),
                "uncertainty": float("nan"), "hausdorff": float("nan")}
+        bounds = data_bounds(ds.x)
         if ds.x.shape[1] == 2:
-            bounds = data_bounds(ds.x)
             curves = zero_level_curves(model, bounds, resolution, INNER)
             if curves:
                 row["uncertainty"] = uncertainty_measure(model, curves, INNER)
@@ -168,17 +173,25 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
                     row["hausdorff"] = hausdorff_distance(curves, [truth], spacing=2e-3)
             if i in shots:
                 snapshots[k] = (curves, ds.x[(ds.task == 0) & (ds.y == 0)])
+        else:
+            mesh = zero_level_mesh(model, bounds, max(resolution, 0.02), INNER)
+            if mesh is not None:
+                row["uncertainty"] = uncertainty_measure(model, mesh, INNER)
         rows.append(row)
     with open(out / "records.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
     (out / "records.json").write_text(json.dumps(rows, indent=1))
-    _plot_replay(rows, snapshots, truth, out / "transition.png", path.name)
+    why = {"hausdorff": "no known true shape (not a built-in 2-D scene)",
+           "uncertainty": "no estimated surface in the box of the observations",
+           "correlation": "tactile-only data (no outer observations)",
+           "similarity": "tactile-only data (no outer observations)"}
+    _plot_replay(rows, snapshots, truth, out / "transition.png", path.name, why)
     return rows
 
 
-def _plot_replay(rows: list[dict], snapshots: dict, truth, path: Path, name: str) -> None:
+def _plot_replay(rows: list[dict], snapshots: dict, truth, path: Path, name: str, why: dict[str, str]) -> None:
     """The replay's transitions (uncertainty, Hausdorff, correlation and the paper's similarity over the steps) and, for 2-D logs, the
     estimate at a few steps."""
     import matplotlib
@@ -199,8 +212,8 @@ def _plot_replay(rows: list[dict], snapshots: dict, truth, path: Path, name: str
         if np.isfinite(v).any():
             ax.plot(steps, v, ".-")
         else:
-            ax.text(0.5, 0.5, "not available\n(" + ("unknown scene" if key == "hausdorff" else "tactile log") + ")",
-                    ha="center", va="center", transform=ax.transAxes, color="0.4")
+            ax.text(0.5, 0.5, "not available:\n" + why[key].replace(" (", "\n("), ha="center", va="center",
+                    transform=ax.transAxes, color="0.4", fontsize=8)
         ax.set(xlabel="step", ylabel=label)
     for ax in axes[0][len(panels):]:
         ax.axis("off")

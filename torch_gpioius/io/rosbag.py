@@ -67,7 +67,12 @@ class BagTopics:
 
 
 # ----------------------------------------------------------------------------------------------- point clouds
-def decode_point_cloud2(msg, *, topic: str = "PointCloud2") -> np.ndarray:
+#: Largest plausible distance of a depth-camera point from its optical frame [m]: a point beyond it was decoded
+#: with the wrong byte order or datatype (a Kinect sees to ~5 m, a lidar to a few hundred).
+MAX_CLOUD_RANGE = 1000.0
+
+
+def decode_point_cloud2(msg, *, topic: str = "PointCloud2", max_range: float = MAX_CLOUD_RANGE) -> np.ndarray:
     """The finite x, y, z points of a ``sensor_msgs/PointCloud2`` in its own frame.
 
     Handles any field order and padding (``point_step``), row padding of organised clouds (``row_step``), both
@@ -77,13 +82,21 @@ def decode_point_cloud2(msg, *, topic: str = "PointCloud2") -> np.ndarray:
     Args:
         msg: the deserialised message (``rosbags`` dataclass or anything with the same attributes).
         topic: used in error messages.
+        max_range: a finite point farther than this from the frame's origin [m] means the bytes were decoded
+            wrongly (the ``is_bigendian`` flag or a datatype does not match the data): refused, never imported.
 
     Returns:
         `(n, 3)` float64 [m] in ``msg.header.frame_id``.
 
     Raises:
-        BagImportError: no x/y/z field, a field with count != 1, sizes that do not match the data.
+        BagImportError: no x/y/z field, a repeated field name, x/y/z fields whose bytes overlap, a field with
+            count != 1, sizes that do not match the data, implausible coordinates.
     """
+    names_all = [f.name for f in msg.fields]
+    repeated = sorted({n for n in names_all if names_all.count(n) > 1})
+    if repeated:
+        raise BagImportError(f"{topic}: the point cloud declares field {repeated[0]!r} {names_all.count(repeated[0])} "
+                             f"times (fields: {', '.join(names_all)}); which one holds the data is ambiguous")
     fields = {f.name: f for f in msg.fields}
     missing = [c for c in "xyz" if c not in fields]
     if missing:
@@ -91,11 +104,13 @@ def decode_point_cloud2(msg, *, topic: str = "PointCloud2") -> np.ndarray:
                              f"(fields: {', '.join(fields) or 'none'})")
     height, width, step, row_step = int(msg.height), int(msg.width), int(msg.point_step), int(msg.row_step)
     data = np.asarray(msg.data, dtype=np.uint8)
+    if height * width == 0:
+        return np.zeros((0, 3))
     if row_step < width * step or data.size < height * row_step:
         raise BagImportError(f"{topic}: the point cloud's data ({data.size} bytes) does not hold {height} x {width} "
                              f"points of {step} bytes (row_step {row_step})")
     order = ">" if msg.is_bigendian else "<"
-    names, formats, offsets = [], [], []
+    names, formats, offsets, spans = [], [], [], []
     for c in "xyz":
         f = fields[c]
         if int(f.datatype) not in _POINTFIELD_DTYPES or int(f.count) != 1:
@@ -104,13 +119,28 @@ def decode_point_cloud2(msg, *, topic: str = "PointCloud2") -> np.ndarray:
         names.append(c)
         formats.append(order + _POINTFIELD_DTYPES[int(f.datatype)])
         offsets.append(int(f.offset))
-        if int(f.offset) + np.dtype(formats[-1]).itemsize > step:
+        size = np.dtype(formats[-1]).itemsize
+        if int(f.offset) < 0 or int(f.offset) + size > step:
             raise BagImportError(f"{topic}: field {c!r} at offset {f.offset} lies beyond point_step {step}")
+        spans.append((int(f.offset), int(f.offset) + size, c))
+    spans.sort()
+    for (a0, a1, ca), (b0, b1, cb) in zip(spans[:-1], spans[1:]):
+        if b0 < a1:
+            raise BagImportError(f"{topic}: fields {ca!r} (bytes {a0}-{a1 - 1}) and {cb!r} (bytes {b0}-{b1 - 1}) "
+                                 "overlap; each coordinate needs its own bytes")
     dtype = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": step})
     rows = data[:height * row_step].reshape(height, row_step)[:, :width * step]
     pts = np.ascontiguousarray(rows).view(dtype).reshape(-1)
     xyz = np.stack([pts[c].astype(np.float64) for c in "xyz"], axis=1)
-    return xyz[np.isfinite(xyz).all(axis=1)]
+    xyz = xyz[np.isfinite(xyz).all(axis=1)]
+    if len(xyz):
+        far = np.linalg.norm(xyz, axis=1) > max_range
+        if far.any():
+            raise BagImportError(f"{topic}: {int(far.sum())} of {len(xyz)} points lie farther than {max_range:g} m "
+                                 f"from the camera (up to {float(np.abs(xyz).max()):.3g} m): the data do not decode "
+                                 f"as the message declares (is_bigendian={bool(msg.is_bigendian)}, datatypes "
+                                 f"{[int(fields[c].datatype) for c in 'xyz']}); check the recorder's byte order")
+    return xyz
 
 
 # ----------------------------------------------------------------------------------------------- transforms
@@ -230,7 +260,7 @@ def _open(path: Path):
     return reader
 
 
-def _messages(reader, path: Path, topic: str, kind: str, *, required: bool = True) -> list[tuple[float, object]]:
+def _connections(reader, path: Path, topic: str, kind: str, *, required: bool = True) -> list:
     conns = [c for c in reader.connections if c.topic == topic]
     if not conns:
         if not required:
@@ -240,31 +270,61 @@ def _messages(reader, path: Path, topic: str, kind: str, *, required: bool = Tru
     wrong = [c.msgtype for c in conns if c.msgtype != _TYPES[kind]]
     if wrong:
         raise BagImportError(f"{path}: topic {topic} carries {wrong[0]}, expected {_TYPES[kind]}")
-    out = []
+    return conns
+
+
+def _iter_messages(reader, path: Path, topic: str, kind: str, *, required: bool = True):
+    """``(time [s], message)`` of a topic one at a time (nothing is held), checked: the type, a decodable message,
+    a clock that never runs backwards, and (``required``) at least one message."""
+    conns = _connections(reader, path, topic, kind, required=required)
+    if not conns:
+        return
+    last, count = -math.inf, 0
     try:
         for conn, t_ns, raw in reader.messages(connections=conns):
             msg = reader.deserialize(raw, conn.msgtype)
-            out.append((_stamp(msg, t_ns) if kind != "tf" else t_ns * 1e-9, msg))
+            t = _stamp(msg, t_ns) if kind != "tf" else t_ns * 1e-9
+            if kind != "tf" and t < last:
+                raise BagImportError(f"{path}: topic {topic}: the clock runs backwards at message {count} "
+                                     f"({last:.6f} s -> {t:.6f} s)")
+            last, count = t, count + 1
+            yield t, msg
     except BagImportError:
         raise
     except Exception as exc:
         raise BagImportError(f"{path}: topic {topic}: cannot decode a message ({type(exc).__name__}: {exc})") from None
-    if required and not out:
+    if required and not count:
         raise BagImportError(f"{path}: topic {topic} has no messages")
-    if kind != "tf":
-        times = np.array([t for t, _ in out])
-        back = np.flatnonzero(np.diff(times) < 0)
-        if back.size:
-            i = int(back[0])
-            raise BagImportError(f"{path}: topic {topic}: the clock runs backwards at message {i + 1} "
-                                 f"({times[i]:.6f} s -> {times[i + 1]:.6f} s)")
-    return out
 
 
-def _joint_table(path: Path, topic: str, msgs: list, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+def _messages(reader, path: Path, topic: str, kind: str, *, required: bool = True) -> list[tuple[float, object]]:
+    """Every message of a (small) topic, as :func:`_iter_messages` checks them."""
+    return list(_iter_messages(reader, path, topic, kind, required=required))
+
+
+#: Fastest joint speed of a UR5 (CB3 and e-Series: 180 deg/s on every joint) [rad/s].
+UR5_MAX_JOINT_SPEED = math.pi
+#: Joint states may imply speeds up to this factor above the limit before they are refused (stamps jitter).
+JOINT_SPEED_SLACK = 1.25
+
+
+def _joint_table(path: Path, topic: str, msgs: list, names: Sequence[str],
+                 max_joint_speed: float = UR5_MAX_JOINT_SPEED) -> tuple[np.ndarray, np.ndarray]:
+    """`(m,)` times and `(m, 6)` joint positions in ``names`` order, checked.
+
+    A message that names a joint twice is refused (which copy is the joint's is ambiguous: taking the last one put
+    contacts ~0.6 m off). So is a pair of consecutive states that would need a joint faster than
+    ``max_joint_speed`` (by more than :data:`JOINT_SPEED_SLACK`): the robot cannot move so, and bags carry no
+    checksums, so this is how a flipped bit in a joint value shows.
+    """
     times, rows = [], []
     for t, msg in msgs:
-        index = {n: i for i, n in enumerate(msg.name)}
+        listed = list(msg.name)
+        twice = sorted({n for n in listed if listed.count(n) > 1})
+        if twice:
+            raise BagImportError(f"{path}: topic {topic}: the joint state at t = {t:.6f} s names joint {twice[0]!r} "
+                                 f"{listed.count(twice[0])} times; which value is the joint's is ambiguous")
+        index = {n: i for i, n in enumerate(listed)}
         absent = [n for n in names if n not in index]
         if absent:
             raise BagImportError(f"{path}: topic {topic}: joint {absent[0]!r} is missing (names: "
@@ -277,7 +337,18 @@ def _joint_table(path: Path, topic: str, msgs: list, names: Sequence[str]) -> tu
             raise BagImportError(f"{path}: topic {topic}: a joint position at t = {t:.6f} s is NaN or inf")
         times.append(t)
         rows.append(row)
-    return np.asarray(times), np.asarray(rows)
+    times, q = np.asarray(times), np.asarray(rows)
+    if len(times) > 1:
+        dq, dt = np.abs(np.diff(q, axis=0)), np.diff(times)[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            speed = np.where(dq > 0, dq / dt, 0.0)
+        limit = max_joint_speed * JOINT_SPEED_SLACK
+        if (speed > limit).any():
+            i, j = np.unravel_index(int(np.argmax(speed)), speed.shape)
+            raise BagImportError(f"{path}: topic {topic}: joint {names[j]!r} moves {dq[i, j]:.4g} rad in "
+                                 f"{dt[i, 0]:.4g} s at t = {times[i]:.6f} s ({speed[i, j]:.3g} rad/s; the robot's "
+                                 f"limit is {max_joint_speed:.3g} rad/s): a corrupt joint value")
+    return times, q
 
 
 def _interpolate(path: Path, topic: str, t_joint: np.ndarray, q: np.ndarray, t: np.ndarray,
@@ -302,11 +373,16 @@ def _interpolate(path: Path, topic: str, t_joint: np.ndarray, q: np.ndarray, t: 
     return q[i - 1] * (1 - w) + q[i] * w
 
 
+def _window_text(w0: float, w1: float) -> str:
+    return f"{w0:g}-{w1:g} s" if w1 < 1e11 else f"from {w0:g} s on"
+
+
 def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_frame: str = "base",
                camera_transform=None, tool_offset: Sequence[float] = (0.0, 0.0, 0.0), tip_radius: float = 0.0,
                contact_force: float = 1.0, contact_spacing: float = 0.005, max_gap: float = 0.1,
                joint_names: Sequence[str] | None = None, policy=None, crop=None,
-               theta: float | None = None, noise: float | None = None) -> Dataset:
+               theta: float | None = None, noise: float | None = None, time_window=None,
+               max_joint_speed: float = UR5_MAX_JOINT_SPEED) -> Dataset:
     """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
 
     Args:
@@ -327,6 +403,13 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         crop: `(2, 3)` box `[min; max]` [m] to crop the cloud to (tables and walls are not the object); None keeps all.
         theta: IMQ length scale [m] stored in the header as the dataset's default for fitting.
         noise: noise variance stored in the header likewise.
+        time_window: ``(start, end)`` [s] after the first wrench sample: only wrench samples and clouds stamped
+            inside it are imported (joint states and tf are read whole, for interpolation and lookups).
+        max_joint_speed: the robot's fastest joint speed [rad/s] (UR5: pi); joint states that would need a joint
+            faster than that (by more than 25 %) are refused as corrupt.
+
+    Clouds are read one at a time and averaged into the voxels as they come (:class:`torch_gpioius.voxels.
+    VoxelAccumulator`), so memory holds one cloud and the occupied voxels, not the recording.
 
     Returns:
         The dataset: inner contacts (y 0) and free space (y 1) with steps 1..k in time order, outer observations
@@ -335,7 +418,9 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
 
     Raises:
         BagImportError: one line naming the topic and the cause (missing topic, wrong type, empty, a time gap,
-            a backwards clock, an all-NaN cloud, no x/y/z fields, an unknown camera frame).
+            a backwards clock, an empty or all-NaN cloud, no x/y/z fields or repeated/overlapping ones, implausible
+            coordinates, a joint named twice or moving faster than the robot can, a NaN or non-rotation tf, an
+            unknown camera frame).
         ValueError: bad arguments.
     """
     from kinematics.dh import UR5_JOINT_NAMES
@@ -362,99 +447,142 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
     path = Path(bag)
     ur5 = UR5(tool_offset=tool_offset)
 
+    if time_window is not None:
+        try:
+            w0, w1 = (float(v) for v in time_window)
+        except (TypeError, ValueError):
+            raise ValueError(f"import_bag: time_window must be (start, end) in seconds, got {time_window!r}") from None
+        if not (math.isfinite(w0) and math.isfinite(w1) and 0 <= w0 < w1):
+            raise ValueError(f"import_bag: time_window must satisfy 0 <= start < end (finite seconds), got "
+                             f"{time_window!r}")
+    from ..voxels import VoxelAccumulator
+
     reader = _open(path)
     try:
         if not list(reader.connections):
             raise BagImportError(f"{path}: the bag has no topics")
         wrenches = _messages(reader, path, topics.wrench, "wrench")
         joint_msgs = _messages(reader, path, topics.joints, "joints")
-        clouds = _messages(reader, path, topics.cloud, "cloud")
+        _connections(reader, path, topics.cloud, "cloud")       # present and typed, before any work
         tf = _TfBuffer()
         if T_fixed is None:
             for tf_topic in topics.tf:
                 for t, msg in _messages(reader, path, tf_topic, "tf", required=False):
                     for ts in msg.transforms:
                         tr, rot = ts.transform.translation, ts.transform.rotation
-                        tf.add(ts.header.frame_id, ts.child_frame_id, _stamp(ts, int(t * 1e9)),
-                               _homogeneous((tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w)),
-                               static="static" in tf_topic)
-    finally:
-        reader.close()
+                        stamp = _stamp(ts, int(t * 1e9))
+                        where = (f"{path}: topic {tf_topic}: the transform {ts.header.frame_id} -> "
+                                 f"{ts.child_frame_id} at t = {stamp:.6f} s")
+                        try:
+                            if not all(math.isfinite(v) for v in (tr.x, tr.y, tr.z)):
+                                raise ValueError(f"translation {(tr.x, tr.y, tr.z)} is not finite")
+                            T_link = _homogeneous((tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w))
+                        except ValueError as exc:
+                            raise BagImportError(f"{where}: {exc}") from None
+                        tf.add(ts.header.frame_id, ts.child_frame_id, stamp, T_link, static="static" in tf_topic)
 
-    # ---- inner: fingertip at every wrench sample
-    t_w = np.array([t for t, _ in wrenches])
-    forces = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for _, m in wrenches], dtype=np.float64)
-    if not np.isfinite(forces).all():
-        k = int(np.flatnonzero(~np.isfinite(forces).all(axis=1))[0])
-        raise BagImportError(f"{path}: topic {topics.wrench}: the force at t = {t_w[k]:.6f} s is NaN or inf")
-    t_j, q_j = _joint_table(path, topics.joints, joint_msgs, names)
-    q = _interpolate(path, topics.joints, t_j, q_j, t_w, max_gap)
-    with torch.no_grad():
-        T = ur5.forward_kinematics(torch.as_tensor(q)).numpy()
-    tips = T[:, :3, 3]
-    magnitude = np.linalg.norm(forces, axis=1)
-    touching = magnitude >= contact_force
-    if not touching.any():
-        raise BagImportError(f"{path}: topic {topics.wrench}: no sample reaches |F| >= {contact_force:g} N "
-                             f"(largest {magnitude.max():.3g} N): no contact to learn the inner shape from")
-    contact_pts = tips.copy()
-    if tip_radius > 0:
-        direction = np.einsum("nij,nj->ni", T[:, :3, :3], forces) / np.maximum(magnitude, 1e-12)[:, None]
-        contact_pts = tips - tip_radius * direction
-    idx_c = np.flatnonzero(touching)
-    keep_c = idx_c[thin_indices(contact_pts[idx_c], contact_spacing, np.empty((0, 3)), 0.0)] if contact_spacing > 0 \
-        else idx_c
-    contacts = contact_pts[keep_c]
-    # step of each sample: 1 + the number of kept contacts strictly before it (free space arrives with the next
-    # contact, as in the exploration); contacts get 1..k
-    order = np.searchsorted(keep_c, np.arange(len(t_w)), side="left")
-    step_of = np.minimum(order + 1, len(keep_c))
-    free_idx = np.flatnonzero(~touching)
-    keep_f = free_idx[thin_indices(tips[free_idx], policy.free_space_spacing, contacts, policy.free_space_margin)]
-    free, free_steps = tips[keep_f], step_of[keep_f]
+        # ---- inner: fingertip at every wrench sample
+        t_w = np.array([t for t, _ in wrenches])
+        t_first = float(t_w[0])
+        if time_window is not None:
+            inside = (t_w >= t_first + w0) & (t_w <= t_first + w1)
+            if not inside.any():
+                raise BagImportError(f"{path}: topic {topics.wrench}: no sample in the time window "
+                                     f"{_window_text(w0, w1)} after the first one (the topic spans "
+                                     f"{t_w[-1] - t_first:.3f} s)")
+            wrenches = [w for w, keep in zip(wrenches, inside) if keep]
+            t_w = t_w[inside]
+        forces = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for _, m in wrenches],
+                          dtype=np.float64)
+        if not np.isfinite(forces).all():
+            k = int(np.flatnonzero(~np.isfinite(forces).all(axis=1))[0])
+            raise BagImportError(f"{path}: topic {topics.wrench}: the force at t = {t_w[k]:.6f} s is NaN or inf")
+        t_j, q_j = _joint_table(path, topics.joints, joint_msgs, names, max_joint_speed)
+        q = _interpolate(path, topics.joints, t_j, q_j, t_w, max_gap)
+        with torch.no_grad():
+            T = ur5.forward_kinematics(torch.as_tensor(q)).numpy()
+        tips = T[:, :3, 3]
+        magnitude = np.linalg.norm(forces, axis=1)
+        touching = magnitude >= contact_force
+        if not touching.any():
+            raise BagImportError(f"{path}: topic {topics.wrench}: no sample reaches |F| >= {contact_force:g} N "
+                                 f"(largest {magnitude.max():.3g} N): no contact to learn the inner shape from")
+        contact_pts = tips.copy()
+        if tip_radius > 0:
+            direction = np.einsum("nij,nj->ni", T[:, :3, :3], forces) / np.maximum(magnitude, 1e-12)[:, None]
+            contact_pts = tips - tip_radius * direction
+        idx_c = np.flatnonzero(touching)
+        keep_c = idx_c[thin_indices(contact_pts[idx_c], contact_spacing, np.empty((0, 3)), 0.0)] \
+            if contact_spacing > 0 else idx_c
+        contacts = contact_pts[keep_c]
+        # step of each sample: 1 + the number of kept contacts strictly before it (free space arrives with the next
+        # contact, as in the exploration); contacts get 1..k
+        order = np.searchsorted(keep_c, np.arange(len(t_w)), side="left")
+        step_of = np.minimum(order + 1, len(keep_c))
+        free_idx = np.flatnonzero(~touching)
+        keep_f = free_idx[thin_indices(tips[free_idx], policy.free_space_spacing, contacts, policy.free_space_margin)]
+        free, free_steps = tips[keep_f], step_of[keep_f]
 
-    # ---- outer: clouds in the base frame, then the exploration's vision rule
-    surface, free_out, n_raw = [], [], 0
-    base = base_frame.lstrip("/")
-    cloud_frames = set()
-    for t, msg in clouds:
-        pts = decode_point_cloud2(msg, topic=topics.cloud)
-        n_raw += len(pts)
-        if len(pts) == 0:
-            continue
-        frame = msg.header.frame_id.lstrip("/")
-        cloud_frames.add(frame)
-        if T_fixed is not None:
-            T_bc = T_fixed
-        else:
-            try:
-                T_bc = tf.lookup(base, frame, t)
-            except LookupError as exc:
-                raise BagImportError(f"{path}: topic {topics.cloud}: {exc}; pass camera_transform / "
-                                     "--camera-transform") from None
-        pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
-        cloud = PointCloud(pts_b, origin=T_bc[:3, 3])
+        # ---- outer: one cloud at a time into the base frame, the exploration's vision rule, then the voxels
+        base = base_frame.lstrip("/")
+        cloud_frames = set()
+        n_clouds = n_raw = n_declared = n_used = 0
         no_voxel = ObservationPolicy(vision_free_offset=policy.vision_free_offset, voxel=None,
                                      free_space_spacing=policy.free_space_spacing,
                                      free_space_margin=policy.free_space_margin)
-        try:
-            x, y = vision_observations(cloud, no_voxel, crop)
-        except ValueError:
-            continue  # nothing of this cloud inside the crop box
-        surface.append(x[y == 0])
-        free_out.append(x[y == 1])
+        if policy.voxel:
+            seen_acc, free_acc = VoxelAccumulator(policy.voxel), VoxelAccumulator(policy.voxel)
+        else:
+            seen_all, free_all = [], []
+        for t, msg in _iter_messages(reader, path, topics.cloud, "cloud"):
+            if time_window is not None and not t_first + w0 <= t <= t_first + w1:
+                continue
+            n_clouds += 1
+            n_declared += int(msg.height) * int(msg.width)
+            pts = decode_point_cloud2(msg, topic=topics.cloud)
+            n_raw += len(pts)
+            if len(pts) == 0:
+                continue
+            frame = msg.header.frame_id.lstrip("/")
+            cloud_frames.add(frame)
+            if T_fixed is not None:
+                T_bc = T_fixed
+            else:
+                try:
+                    T_bc = tf.lookup(base, frame, t)
+                except LookupError as exc:
+                    raise BagImportError(f"{path}: topic {topics.cloud}: {exc}; pass camera_transform / "
+                                         "--camera-transform") from None
+            pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
+            del pts
+            try:
+                x, y = vision_observations(PointCloud(pts_b, origin=T_bc[:3, 3]), no_voxel, crop)
+            except ValueError:
+                continue  # nothing of this cloud inside the crop box
+            n_used += 1
+            if policy.voxel:
+                seen_acc.add(x[y == 0])
+                free_acc.add(x[y == 1])
+            else:
+                seen_all.append(x[y == 0])
+                free_all.append(x[y == 1])
+    finally:
+        reader.close()
+    window = "" if time_window is None else f" in the time window {_window_text(w0, w1)}"
+    if n_clouds == 0:
+        raise BagImportError(f"{path}: topic {topics.cloud}: no cloud{window}")
+    if n_declared == 0:
+        raise BagImportError(f"{path}: topic {topics.cloud}: every cloud{window} is empty (0 points declared)")
     if n_raw == 0:
-        raise BagImportError(f"{path}: topic {topics.cloud}: every point of every cloud is NaN or inf")
-    if not surface:
+        raise BagImportError(f"{path}: topic {topics.cloud}: every point of every cloud{window} is NaN or inf "
+                             f"({n_declared} points, no depth)")
+    if not n_used:
         raise BagImportError(f"{path}: topic {topics.cloud}: no cloud point lies inside the crop box {crop.tolist()}")
-    from .importers import voxel_average
-
-    seen = np.concatenate(surface)
-    free_o = np.concatenate(free_out) if free_out else np.empty((0, 3))
     if policy.voxel:
-        seen = voxel_average(seen, policy.voxel)
-        free_o = voxel_average(free_o, policy.voxel) if len(free_o) else free_o
-
+        seen, free_o = seen_acc.mean(), free_acc.mean()
+    else:
+        seen = np.concatenate(seen_all)
+        free_o = np.concatenate(free_all) if free_all else np.empty((0, 3))
     x = np.concatenate([contacts, free, seen, free_o])
     y = np.concatenate([np.zeros(len(contacts)), np.ones(len(free)), np.zeros(len(seen)), np.ones(len(free_o))])
     task = np.concatenate([np.zeros(len(contacts) + len(free)), np.ones(len(seen) + len(free_o))]).astype(np.int64)
@@ -464,7 +592,8 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             "wrench": topics.wrench, "joints": topics.joints}, "camera_frames": sorted(cloud_frames),
             "contact_force": contact_force, "contact_spacing": contact_spacing, "tip_radius": tip_radius,
             "tool_offset": [float(v) for v in tool_offset], "voxel_size": policy.voxel,
-            "counts": {"wrench": len(wrenches), "joint_states": len(joint_msgs), "clouds": len(clouds),
+            "time_window": None if time_window is None else [w0, w1],
+            "counts": {"wrench": len(wrenches), "joint_states": len(joint_msgs), "clouds": n_clouds,
                        "cloud_points": int(n_raw), "contacts": int(len(contacts)), "free_space": int(len(free)),
                        "outer_surface": int(len(seen)), "outer_free_space": int(len(free_o))}}
     if theta is not None:

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from ..io.importers import load_point_cloud, voxel_average
+from ..io.importers import load_point_cloud
+from ..voxels import voxel_average
 
 __all__ = ["PointCloud", "PointCloudSource", "FilePointCloud", "PinholeCamera", "SimulatedDepthCamera", "look_at"]
 

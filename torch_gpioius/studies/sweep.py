@@ -36,7 +36,8 @@ import numpy as np
 
 from .stats import median_interval, paired_difference
 
-__all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "MODES", "WORLDS", "FRACTIONS"]
+__all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
+           "FRACTIONS", "MAX_SEEDS"]
 
 #: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants (issue 17).
 MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps")
@@ -122,11 +123,78 @@ def _explore_kwargs(spec: RunSpec) -> dict:
 
 
 def _atomic_json(path: Path, data: dict) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, allow_nan=True))
-    with open(tmp, "rb+") as f:
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    from ..io.outputs import atomic_write
+
+    atomic_write(path, json.dumps(data, allow_nan=True))
+
+
+class RunFileError(ValueError):
+    """A run's result file (``runs/<key>.json``) is unreadable or invalid; the message names the file and field."""
+
+
+_SERIES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "similarity", "correlation", "correlation_lo",
+           "correlation_hi")
+
+
+def _number(v, *, allow_nan: bool = True) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and (allow_nan or math.isfinite(v))
+
+
+def read_run_file(path: str | Path) -> dict:
+    """Read and validate one run's result file (what :func:`run_one` writes).
+
+    Checks the fields aggregation reads: names and seed, counts, travel and times, and the per-step series (equal
+    lengths; numbers or NaN; distances, uncertainty and travel not negative; correlations in [-1, 1]).
+
+    Raises:
+        RunFileError: naming the file and the first bad field (a truncated or edited file, or a foreign one).
+    """
+    path = Path(path)
+    try:
+        run = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, ValueError) as exc:
+        raise RunFileError(f"{path}: not a readable run result ({type(exc).__name__}: {exc})") from None
+    if not isinstance(run, dict):
+        raise RunFileError(f"{path}: a run result is a JSON object, got {type(run).__name__}")
+
+    def bad(field: str, why: str):
+        return RunFileError(f"{path}: field {field!r} {why}")
+
+    for k in ("world", "object", "mode", "terminated"):
+        if not isinstance(run.get(k), str):
+            raise bad(k, f"must be a string, got {run.get(k)!r}")
+    if run["world"] not in WORLDS:
+        raise bad("world", f"must be one of {WORLDS}, got {run['world']!r}")
+    if run["mode"] not in MODES:
+        raise bad("mode", f"must be one of {MODES}, got {run['mode']!r}")
+    for k in ("seed", "steps", "taps"):
+        v = run.get(k)
+        if not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+            raise bad(k, f"must be a non-negative integer, got {v!r}")
+    for k in ("travel_m", "wall_s"):
+        v = run.get(k)
+        if not (_number(v, allow_nan=False) and v >= 0):
+            raise bad(k, f"must be a non-negative number, got {v!r}")
+    if not _number(run.get("median_step_ms")):
+        raise bad("median_step_ms", f"must be a number or NaN, got {run.get('median_step_ms')!r}")
+    series = run.get("series")
+    if not isinstance(series, dict):
+        raise bad("series", "is missing or not an object")
+    lengths = set()
+    for k in _SERIES:
+        v = series.get(k)
+        if not isinstance(v, list) or not all(_number(e) for e in v):
+            raise bad(f"series.{k}", "must be a list of numbers (NaN where not measured)")
+        a = np.asarray(v, dtype=float)
+        if k in ("travel", "hausdorff", "hausdorff_touched", "uncertainty") and (a < 0).any():
+            raise bad(f"series.{k}", f"holds a negative value ({float(a[a < 0][0])!r}); it is a distance or a "
+                                     "variance")
+        if k.startswith("correlation") and (np.abs(a[np.isfinite(a)]) > 1 + 1e-9).any():
+            raise bad(f"series.{k}", "holds a correlation outside [-1, 1]")
+        lengths.add(len(v))
+    if len(lengths) != 1 or 0 in lengths:
+        raise bad("series", f"its lists must be non-empty and of one length, got lengths {sorted(lengths)}")
+    return run
 
 
 def run_one(spec: RunSpec) -> dict:
@@ -138,9 +206,9 @@ def run_one(spec: RunSpec) -> dict:
     result_path = out / "runs" / f"{spec.key}.json"
     if result_path.exists():
         try:
-            return json.loads(result_path.read_text())
-        except (OSError, ValueError):
-            pass                                    # unreadable: run again (the rename makes this rare)
+            return read_run_file(result_path)
+        except RunFileError:
+            _set_aside(result_path)                 # damaged: kept for inspection, and the run is done again
     for sub in ("runs", "logs", "running"):
         (out / sub).mkdir(parents=True, exist_ok=True)
     marker = out / "running" / f"{spec.key}.pid"
@@ -173,6 +241,29 @@ def run_one(spec: RunSpec) -> dict:
     except OSError:
         pass
     return record
+
+
+def _set_aside(path: Path) -> Path:
+    """Rename a damaged result file to ``<name>.invalid`` (kept for inspection) so that its run is done again."""
+    import warnings
+
+    bad = path.with_name(path.name + ".invalid")
+    os.replace(path, bad)
+    warnings.warn(f"{path}: damaged or foreign result, renamed to {bad.name}; the run will be done again",
+                  RuntimeWarning, stacklevel=3)
+    return bad
+
+
+def _finished(path: Path) -> bool:
+    """Whether a run's result file exists and is valid (a damaged one is set aside, so the run is done again)."""
+    if not path.exists():
+        return False
+    try:
+        read_run_file(path)
+        return True
+    except RunFileError:
+        _set_aside(path)
+        return False
 
 
 # ---------------------------------------------------------------------------------------------- aggregation
@@ -227,7 +318,7 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
     out = Path(out)
     paths = ([out / "runs" / f"{s.key}.json" for s in specs] if specs is not None
              else sorted((out / "runs").glob("*.json")))
-    runs = [json.loads(p.read_text()) for p in paths if p.exists()]
+    runs = [read_run_file(p) for p in paths if p.exists()]
     if world is not None:
         runs = [r for r in runs if r["world"] == world]
     if not runs:
@@ -431,17 +522,25 @@ def _ray_available() -> bool:
     return True
 
 
+#: Most seeds a sweep accepts per object and mode (a study over more is a mistake, not a request).
+MAX_SEEDS = 10_000
+
+
 def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile"), seeds: int = 10,
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
-              progress: bool = True, threads: int = 1, backend: str = "auto") -> dict:
+              progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
+
+    The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
+    (runs accumulate there; finished runs are skipped, damaged result files are set aside and their runs done
+    again). While a sweep runs it holds a lock on the folder, so a second sweep into it is refused at once.
 
     Args:
         world: "2d", "3d" (penalty) or "mujoco".
-        objects: names (default: the world's paper objects).
-        modes: among :data:`MODES`.
-        seeds: seeds 0 .. seeds-1 per object and mode.
+        objects: names (default: the world's paper objects); repeated names count once.
+        modes: among :data:`MODES`; repeated modes count once.
+        seeds: seeds 0 .. seeds-1 per object and mode (at most :data:`MAX_SEEDS`).
         out: output folder.
         workers: parallel runs (default: the CPU count).
         address: join an existing Ray cluster instead of starting one.
@@ -451,43 +550,61 @@ def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile
         progress: report progress.
         threads: torch threads per run.
         backend: "auto" (Ray when installed), "ray" or "local" (sequential, in-process).
+        force: write into a non-empty folder that is not this world's study folder.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
+
+    Raises:
+        ValueError: a bad argument (names it).
+        FileExistsError: ``out`` holds something else and ``force`` is False.
+        RuntimeError: another sweep is writing to ``out``.
     """
     from .._progress import progress as reporter
+    from ..io.outputs import FolderLock, claim_folder
 
     if world not in WORLDS:
         raise ValueError(f"world: must be one of {WORLDS}, got {world!r}")
-    objects = tuple(objects or DEFAULT_OBJECTS[world])
+    objects = tuple(dict.fromkeys(objects or DEFAULT_OBJECTS[world]))
+    modes = tuple(dict.fromkeys(modes))
     bad = [m for m in modes if m not in MODES]
     if bad:
         raise ValueError(f"modes: unknown {bad}; choose among {MODES}")
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
-        raise ValueError(f"seeds: must be a positive integer, got {seeds!r}")
+    if not modes:
+        raise ValueError("modes: at least one mode is needed")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
+        raise ValueError(f"seeds: must be an integer in [1, {MAX_SEEDS}], got {seeds!r}")
     for name in objects:        # fail before starting anything
         if name not in DEFAULT_OBJECTS[world]:
             raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {DEFAULT_OBJECTS[world]}")
-    out = Path(out)
-    (out / "runs").mkdir(parents=True, exist_ok=True)
-    specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads)
-             for o in objects for m in modes for s in range(seeds)]
-    todo = [s for s in specs if not (out / "runs" / f"{s.key}.json").exists()]
-    use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
-    t0 = time.perf_counter()
-    bar = reporter(len(todo), f"study ({world})", progress)
-    if todo and use_ray:
-        _run_on_ray(todo, workers, address, bar)
-        used = "Ray" + (f" at {address}" if address else f" (local, {workers or os.cpu_count()} workers)")
-    else:
-        for spec in todo:
-            bar.set_postfix_str(spec.key)
-            run_one(spec)
-            bar.update(1)
-        used = "in-process (sequential)"
-    bar.close()
-    seconds = time.perf_counter() - t0
-    result = aggregate(out, None, smoke, world=world, max_travel=max_travel)
+    out = claim_folder(out, "study", force, world=world)
+    with FolderLock(out, "gpioius study"):
+        (out / "runs").mkdir(parents=True, exist_ok=True)
+        running = out / "running"
+        for stale in running.glob("*.pid") if running.exists() else []:   # we hold the lock: nobody else runs
+            stale.unlink(missing_ok=True)
+        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads)
+                 for o in objects for m in modes for s in range(seeds)]
+        todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
+        use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
+        t0 = time.perf_counter()
+        bar = reporter(len(todo), f"study ({world})", progress)
+        try:
+            if todo and use_ray:
+                _run_on_ray(todo, workers, address, bar)
+                used = "Ray" + (f" at {address}" if address else f" (local, {workers or os.cpu_count()} workers)")
+            else:
+                for spec in todo:
+                    bar.set_postfix_str(spec.key)
+                    run_one(spec)
+                    bar.update(1)
+                used = "in-process (sequential)"
+        finally:
+            bar.close()
+            if running.exists() and not any(running.iterdir()):
+                running.rmdir()
+        seconds = time.perf_counter() - t0
+        result = aggregate(out, None, smoke, world=world, max_travel=max_travel)
     result.update(runs=len(specs), skipped=len(specs) - len(todo), seconds=seconds, backend=used)
     return result
 
@@ -496,6 +613,11 @@ def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, 
     import ray
 
     started_here = not ray.is_initialized()
+    set_auth = started_here and not address and "RAY_AUTH_MODE" not in os.environ
+    if set_auth:
+        # A new local Ray cluster turns token authentication on by itself and prints a banner saying so whenever the
+        # mode is unset; asking for that same mode explicitly keeps the cluster secured and the output clean.
+        os.environ["RAY_AUTH_MODE"] = "token"
     if started_here:
         kw = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
                   runtime_env={"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}})
@@ -516,3 +638,5 @@ def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, 
     finally:
         if started_here:
             ray.shutdown()
+        if set_auth:
+            os.environ.pop("RAY_AUTH_MODE", None)

@@ -1,0 +1,88 @@
+"""The command line: help texts, the one rule for existing outputs, what `fit` and `replay` report."""
+
+import re
+
+import numpy as np
+import pytest
+
+from torch_gpioius.cli import build_parser, main
+
+ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "data" / "example_2d.gpioius"
+
+
+def _subparsers():
+    parser = build_parser()
+    action = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+    return action.choices
+
+
+def test_every_option_shows_its_default_once():
+    for name, sub in _subparsers().items():
+        text = sub.format_help()
+        assert "(default: None)" not in text, name
+        for entry in re.split(r"\n  (?=-)", text):                  # one option's help per entry
+            assert entry.count("(default") <= 1, (name, entry)
+
+
+def test_fit_prints_the_interval_and_what_it_means(capsys):
+    import torch_gpioius as tg
+
+    assert main(["fit", str(EXAMPLE)]) == 0
+    out = capsys.readouterr().out
+    m = re.search(r"correlation = (-?[\d.]+), 95 % profile-likelihood interval \[(-?[\d.]+), (-?[\d.]+)\]", out)
+    assert m, out
+    model = tg.load_dataset(EXAMPLE).to_model().fit()
+    lo, hi = model.similarity_interval(0.95)
+    assert (float(m[2]), float(m[3])) == (round(lo, 2), round(hi, 2))
+    assert float(m[2]) <= float(m[1]) <= float(m[3])
+    assert "the data cannot tell" in out or "predicts the inner one" in out
+
+
+def test_commands_never_write_into_someone_elses_folder(tmp_path, capsys):
+    theirs = tmp_path / "results"
+    theirs.mkdir()
+    (theirs / "summary.md").write_text("their table\n")
+    for argv in (["simulate", "--smoke", "--object", "A", "--out", str(theirs)],
+                 ["fit", str(EXAMPLE), "--out", str(theirs)], ["replay", str(EXAMPLE), "--out", str(theirs)],
+                 ["study", "--smoke", "--objects", "A", "--seeds", "1", "--out", str(theirs)]):
+        assert main(argv) == 2, argv
+        assert "was not written by `gpioius" in capsys.readouterr().err
+    assert sorted(p.name for p in theirs.iterdir()) == ["summary.md"]
+    assert (theirs / "summary.md").read_text() == "their table\n"
+    # a folder a command wrote itself it may write again (make demo twice)
+    mine = tmp_path / "fit"
+    assert main(["fit", str(EXAMPLE), "--out", str(mine)]) == 0
+    assert main(["fit", str(EXAMPLE), "--out", str(mine)]) == 0
+    assert main(["replay", str(EXAMPLE), "--out", str(mine), "--quiet"]) == 2      # but not another command's
+    capsys.readouterr()
+
+
+def test_replay_labels_what_is_missing_by_its_cause(tmp_path, monkeypatch):
+    """A visual-tactile 3-D dataset was labelled "tactile log" wherever a panel was empty."""
+    from matplotlib.figure import Figure
+
+    from torch_gpioius.io.datasets import Dataset, save_dataset
+    from torch_gpioius.io.offline import replay_log
+
+    rng = np.random.default_rng(2)
+    d = rng.standard_normal((90, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    x = np.concatenate([0.06 * d[:20], 0.12 * d[20:30], 0.08 * d[30:]])
+    y = np.concatenate([np.zeros(20), np.ones(10), np.zeros(60)])
+    task = np.concatenate([np.zeros(30), np.ones(60)]).astype(np.int64)
+    step = np.concatenate([np.arange(20) + 1, np.arange(10) + 1, np.zeros(60)]).astype(np.int64)
+    data = save_dataset(Dataset(x, y, task, step, meta={"theta": 0.1, "noise": 0.006}), tmp_path / "vt.gpioius")
+    texts = []
+    real = Figure.savefig
+
+    def grab(fig, *args, **kwargs):
+        texts.extend(t.get_text() for ax in fig.axes for t in ax.texts)
+        return real(fig, *args, **kwargs)
+
+    monkeypatch.setattr(Figure, "savefig", grab)
+    rows = replay_log(data, tmp_path / "replay", every=5, progress=False)
+    assert all(np.isfinite(r["correlation"]) for r in rows)
+    assert np.isfinite(rows[-1]["uncertainty"])                     # 3-D uncertainty is computed too
+    joined = " ".join(texts)
+    assert "tactile" not in joined and "no known true shape" in joined

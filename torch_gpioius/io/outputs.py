@@ -1,0 +1,199 @@
+"""Where commands write: one rule for existing files, atomic writes, output folders a command owns, and a lock.
+
+**The rule.** No command replaces something that already exists unless it is told to (``--force``, or
+``force=True`` / ``overwrite=True`` in Python):
+
+* a single output file (``export --mesh``, ``import-bag --out``, ``export --mcap``) must not exist yet;
+* an output folder (``simulate``, ``simulate3d``, ``study``, ``fit --out``, ``replay --out``) must be new, empty, or
+  one that the same command wrote before (it records itself in :data:`MARKER`), so ``make demo`` can run twice
+  while someone else's folder of results is never overwritten;
+* two outputs of one command may not name the same file.
+
+**Atomic writes.** Files are written to a temporary file beside the target whose name is unique to the process
+and call, flushed, fsynced and renamed over the target: a crash leaves the old file or the new one, two writers
+never share a temporary file, and a symbolic link at the target is replaced, never followed (the rename replaces
+the link itself).
+
+**The lock.** :class:`FolderLock` holds an exclusive ``flock`` on a file in an output folder for as long as a
+writer works there; a second writer is refused at once with the holder's process id. The kernel releases the lock
+when its holder dies, so a killed run never leaves a stale lock behind.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import secrets
+from pathlib import Path
+
+__all__ = ["MARKER", "atomic_write", "check_new_file", "check_distinct", "claim_folder", "FolderLock"]
+
+#: The file by which a command marks an output folder as its own (JSON: command, version, and e.g. the world).
+MARKER = ".gpioius-output.json"
+#: Files of ours that do not make a folder someone's output (the lock of a writer that may still be starting).
+_HOUSEKEEPING = (".lock",)
+
+
+def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
+    """Write ``data`` to ``path`` atomically (see the module docstring); remove the temporary file on failure.
+
+    Returns:
+        the path written.
+    """
+    path = Path(path)
+    blob = data.encode() if isinstance(data, str) else data
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(blob)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+        raise
+    _fsync_dir(path)
+    return path
+
+
+def _fsync_dir(path: Path) -> None:
+    try:
+        fd = os.open(path.parent, os.O_RDONLY)
+    except OSError:  # pragma: no cover - platforms without directory fds
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def check_new_file(path: str | os.PathLike, force: bool = False, what: str = "output") -> Path:
+    """``path`` as a :class:`~pathlib.Path` if it may be written: it does not exist (nor does a link of that name),
+    or ``force``; its folder must exist.
+
+    Raises:
+        FileExistsError: it exists and ``force`` is False (names the path and the option).
+        FileNotFoundError: its folder does not exist (names the folder).
+        IsADirectoryError: it is a folder.
+    """
+    p = Path(path)
+    if p.is_dir() and not p.is_symlink():
+        raise IsADirectoryError(f"{p}: is a folder; the {what} must be a file")
+    if os.path.lexists(p) and not force:
+        raise FileExistsError(f"{p}: exists; pass --force to replace it (or choose another {what} file)")
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise FileNotFoundError(f"{p}: the folder {parent} does not exist")
+    return p
+
+
+def check_distinct(**paths) -> None:
+    """Refuse two outputs that name the same file (``--mesh X --outer X`` would lose one of them).
+
+    Args:
+        **paths: option name -> path (None entries are skipped).
+
+    Raises:
+        ValueError: naming both options.
+    """
+    seen: dict[str, str] = {}
+    for name, p in paths.items():
+        if p is None:
+            continue
+        key = os.path.realpath(os.path.abspath(p))
+        if key in seen:
+            raise ValueError(f"{name} and {seen[key]} name the same file {p}; give each output its own file")
+        seen[key] = name
+
+
+def claim_folder(path: str | os.PathLike, command: str, force: bool = False, **identity) -> Path:
+    """Make ``path`` an output folder of ``command`` (see the module docstring) and record it there.
+
+    Args:
+        path: the folder (created with its parents if missing).
+        command: the command that writes it (e.g. "study").
+        force: write into a non-empty folder that another command, or no command, wrote.
+        **identity: JSON-able facts that must also match for a folder to be re-used (e.g. ``world="2d"`` for a
+            study, whose runs and tables belong to one world).
+
+    Returns:
+        the folder.
+
+    Raises:
+        FileExistsError: the folder holds someone else's files (names what it holds and the option).
+        NotADirectoryError: ``path`` is a file.
+    """
+    from .. import __version__
+
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise NotADirectoryError(f"{p}: is a file; the output must be a folder")
+    if p.is_dir() and any(c.name not in _HOUSEKEEPING for c in p.iterdir()) and not force:
+        marker = p / MARKER
+        try:
+            info = json.loads(marker.read_text())
+            if not isinstance(info, dict):
+                raise ValueError
+        except (OSError, ValueError):
+            raise FileExistsError(f"{p}: exists, is not empty and was not written by `gpioius {command}`; pass "
+                                  "--force to write into it (files of the same names are replaced) or choose "
+                                  "another --out") from None
+        want = {"command": command, **identity}
+        clash = {k: info.get(k) for k, v in want.items() if info.get(k) != v}
+        if clash:
+            held = ", ".join(f"{k}={v!r}" for k, v in clash.items())
+            asked = ", ".join(f"{k}={want[k]!r}" for k in clash)
+            raise FileExistsError(f"{p}: holds the output of another run ({held}); this one is {asked}; pass --force "
+                                  "to write into it anyway or choose another --out")
+    p.mkdir(parents=True, exist_ok=True)
+    atomic_write(p / MARKER, json.dumps({"command": command, **identity, "version": __version__}))
+    return p
+
+
+class FolderLock:
+    """An exclusive, non-blocking ``flock`` on ``folder/.lock`` (see the module docstring); a context manager.
+
+    Raises:
+        RuntimeError: another process holds the lock (names its pid and the folder).
+    """
+
+    def __init__(self, folder: str | os.PathLike, what: str = "writer") -> None:
+        self.path = Path(folder) / ".lock"
+        self.what = what
+        self._fd: int | None = None
+
+    def acquire(self) -> "FolderLock":
+        import fcntl
+
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            try:
+                holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "unknown"
+            finally:
+                os.close(fd)
+            raise RuntimeError(f"{self.path.parent}: another {self.what} (pid {holder}) is writing there; wait for it "
+                               "to finish or choose another --out") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        self._fd = fd
+        return self
+
+    def release(self) -> None:
+        if self._fd is not None:
+            import fcntl
+
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self) -> "FolderLock":
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
