@@ -45,6 +45,38 @@ def test_tutorial_runs(page, tmp_path):
     assert done.returncode == 0, f"{page.name} failed:\n{done.stdout[-3000:]}\n{done.stderr[-5000:]}"
 
 
+def _readme_block() -> str:
+    text = (ROOT / "README.md").read_text()
+    section = text[text.index("## Use it"):]
+    return _BLOCK.search(section).group(2)
+
+
+def test_the_readme_python_block_runs_as_written(tmp_path):
+    """The README's "Use it" block, extracted and run from a folder that holds the repository's data/ as the root
+    does (it stopped at its first line with a NameError once)."""
+    (tmp_path / "data").symlink_to(ROOT / "data")
+    script = tmp_path / "readme.py"
+    script.write_text(_readme_block())
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OMP_NUM_THREADS": "1", "MPLBACKEND": "Agg"}
+    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=900)
+    assert done.returncode == 0, f"README block failed:\n{done.stdout[-3000:]}\n{done.stderr[-5000:]}"
+
+
+def test_every_long_readme_line_says_its_time_and_the_venv_is_explained():
+    block = _readme_block()
+    for line in block.splitlines():
+        if "tg.explore(" in line or "paper_objects_3d()" in line:
+            assert re.search(r"~\d+ s", line), f"no time given: {line}"
+    text = (ROOT / "README.md").read_text()
+    quick = text[text.index("## Quick start"):text.index("## Use it")]
+    assert "source .venv/bin/activate" in quick and ".venv/bin/gpioius" in quick
+    for page in TUTORIALS:
+        body = page.read_text()
+        first_cmd = body.find("gpioius ")
+        assert "source .venv/bin/activate" in body[:max(first_cmd, 0)] or first_cmd < 0, page.name
+
+
 def test_three_tutorials_exist():
     assert {p.stem for p in TUTORIALS} >= {"own-data", "rosbag", "real-robot"}
 
@@ -57,3 +89,19 @@ def test_mkdocs_build_strict(tmp_path):
                           env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
     assert done.returncode == 0, done.stderr[-6000:]
     assert (tmp_path / "site" / "reference" / "models" / "index.html").exists()
+
+
+def test_the_own_data_tutorial_quotes_what_its_code_prints(tmp_path):
+    """The explanation of the tutorial's result quotes the full-size output; it must be what the code prints."""
+    page = ROOT / "docs" / "tutorials" / "own-data.md"
+    text = page.read_text()
+    quoted = re.search(r"```text\n(.*?)```", text, re.S).group(1).strip().splitlines()
+    blocks = [b for lang, b in _BLOCK.findall(text) if lang == "python"][:2]
+    script = tmp_path / "own.py"
+    script.write_text("\n".join(blocks))
+    env = {k: v for k, v in os.environ.items() if k != "CI"}
+    env.update(PYTHONPATH=str(ROOT), OMP_NUM_THREADS="1", MPLBACKEND="Agg")
+    done = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().splitlines() == quoted

@@ -122,3 +122,14 @@ def test_exploration_with_regions_records_them_and_resumes(tmp_path):
     resumed = tg.explore(scene, regions=4, max_steps=14, resume_from=log)
     np.testing.assert_allclose(resumed.contacts, full.contacts, atol=1e-9)
     assert math.isclose(resumed.correlation[-1], full.correlation[-1], abs_tol=1e-7)
+
+
+def test_coincident_outer_points_name_the_regions_not_tau():
+    """The caller never passed tau; coincident outer points made k-means stack centres and tau 0 ("tau: must be
+    a positive length"), an error about an argument nobody gave."""
+    x = np.concatenate([np.tile([[0.1, 0.2]], (10, 1)), [[0.0, 0.0], [0.05, 0.0]]])
+    y = np.concatenate([np.zeros(10), [0.0, 1.0]])
+    task = np.concatenate([np.ones(10), [0, 0]]).astype(np.int64)
+    with pytest.raises(ValueError, match=r"regions: 4 regions need at least 4 distinct outer surface points, got 1 "
+                                         r"distinct among 10"):
+        tg.LocalGPIOIS(x, y, task, regions=4)

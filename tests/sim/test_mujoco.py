@@ -23,10 +23,11 @@ BOX_RANGE = [[0.38, -0.12, 0.2], [0.62, 0.12, 0.36]]
 def box_scene(cover="loose", seed=0, **kw):
     """A 12 cm box under a cloth cap built 3 cm off it that settles under gravity; the fingertip comes from above."""
     opts = dict(slack=0.03) if cover == "loose" else dict(gap=0.008)
+    opts = dict(name="box", spacing=0.025, **opts)
     opts.update(kw)
     return MujocoScene.from_primitives(BOX, cover, start=(0.505, 0.004, 0.40), direction=(0, 0, -1), bounds=BOX_RANGE,
-                                       name="box", seed=seed, base="cap", centre=(0.5, 0.0, 0.2), facing=(0, 0, 1),
-                                       half_angle=80.0, spacing=0.025, **opts)
+                                       seed=seed, base="cap", centre=(0.5, 0.0, 0.2), facing=(0, 0, 1),
+                                       half_angle=80.0, **opts)
 
 
 @pytest.fixture(scope="module")
@@ -178,7 +179,7 @@ def test_a_run_cut_after_a_step_resumes_to_the_same_end(scene, tmp_path):
 
 
 def test_bad_input_gets_named_errors():
-    with pytest.raises(ValueError, match=r"inner\[0\].*positive"):
+    with pytest.raises(ValueError, match=r"inner\[0\].*between 1 mm and 2 m"):
         as_primitives([{"type": "capsule", "size": (0.05, -0.1), "pos": (0, 0, 0)}])
     with pytest.raises(ValueError, match=r"inner\[0\].*type"):
         as_primitives([{"type": "torus", "size": (0.05,), "pos": (0, 0, 0)}])
@@ -190,6 +191,55 @@ def test_bad_input_gets_named_errors():
                                     spacing=0.03, slack=0.03)        # between the box and its cover
     with pytest.raises(ValueError, match="cover"):
         MujocoScene.from_primitives(BOX, "silk", start=(0.5, 0, 0.4), direction=(0, 0, -1), bounds=BOX_RANGE)
+
+
+NAN = float("nan")
+
+
+@pytest.mark.parametrize("option, value, message", [
+    ("spacing", 0.0, "spacing: 0 m is below the supported minimum"),          # ZeroDivisionError
+    ("spacing", -0.02, "spacing: -0.02 m is below"),
+    ("spacing", 1e-5, "spacing: 1e-05 m is below"),                          # tried to allocate 2.3 GiB
+    ("spacing", 0.001, "spacing: 0.001 m is below"),                         # mujoco.FatalError
+    ("spacing", NAN, "spacing: must be finite"),                             # "cannot convert float NaN"
+    ("timestep", 0.0, "timestep: 0 s is below"),                             # ZeroDivisionError
+    ("settle_time", -1.0, "settle_time: -1 s is below"),
+    ("settle_time", 1e5, "settle_time: 100000 s is above"),                  # hung
+    ("camera_scale", 50.0, "camera_scale: 50 is above"),                     # tried to allocate 4 GiB
+    ("sensor_noise", NAN, "sensor_noise: must be finite"),
+    ("young", -5.0, "cover option young: -5 Pa is below"),                   # negative stiffness was accepted
+    ("slack", NAN, "cover option slack: must be finite"),
+])
+def test_mujoco_options_are_bounded_before_anything_is_built(option, value, message):
+    import time
+
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        box_scene(**{option: value})
+    assert time.perf_counter() - t0 < 5.0                  # refused up front, not after a settle
+
+
+def test_too_many_or_tiny_primitives_and_names_that_are_not_xml():
+    many = [{"type": "sphere", "size": (0.01,), "pos": (0.5, 0.0, 0.2)}] * 500
+    with pytest.raises(ValueError, match="500 primitives; at most 64"):
+        MujocoScene.from_primitives(many, "tight", start=(0.5, 0, 0.4), direction=(0, 0, -1), bounds=BOX_RANGE)
+    with pytest.raises(ValueError, match=r"inner\[0\]: a box needs 3 size value\(s\) between 1 mm and 2 m"):
+        as_primitives([{"type": "box", "size": (1e-5, 0.01, 0.01), "pos": (0.5, 0, 0.2)}])    # a MuJoCo XML error
+    odd = box_scene("tight", name='box" <model> & "x')                      # was pasted into the XML unescaped
+    assert odd.model.names.decode().split("\x00")[0] == 'box" <model> & "x'
+
+
+def test_a_blow_up_is_reported_within_a_few_steps():
+    """The check runs every ``CHECK_EVERY`` steps of a long ``step(n)``, not only at its end."""
+    from torch_gpioius.sim.mujoco.hardware import MujocoPhysics
+
+    scene = box_scene("tight")
+    physics = MujocoPhysics(scene.model)
+    physics.set_state(scene.settled)
+    physics.data.qvel[-1] = float("nan")
+    with pytest.raises(MujocoInstability, match="NaN"):
+        physics.step(10_000)
+    assert physics.time < scene.settle_time + 30 * scene.timestep
 
 
 def test_a_blow_up_is_an_error_not_nan(scene):

@@ -19,6 +19,10 @@ def test_cli_smoke_writes_figures_records_and_summary(tmp_path, capsys):
     assert modes == {"visual-tactile", "tactile"}
     assert {r["object"] for r in records} == {"A", "B", "C", "D"}
     assert "| D |" in capsys.readouterr().out
+    # the summary says what its columns are and where the claims are judged (a user read "no" with no pointer)
+    summary = (tmp_path / "summary.md").read_text()
+    assert "docs/results.md" in summary and "one run" in summary
+    assert "H 100 %" in summary and "tactile-only run's** final travel" in summary and "**own** end" in summary
     # the final estimates as SVG curves next to the figures
     assert (tmp_path / "curves" / "A_visual-tactile_inner.svg").stat().st_size > 0
     assert (tmp_path / "curves" / "A_tactile_inner.svg").stat().st_size > 0
@@ -28,6 +32,18 @@ def test_cli_bad_object_exits_nonzero():
     with pytest.raises(SystemExit) as exc:
         main(["simulate", "--object", "Z"])
     assert exc.value.code != 0
+
+
+def test_the_claims_table_points_to_the_explanations():
+    from torch_gpioius.studies.study2d import _markdown
+
+    row = {f"{k}_{int(f * 100)}": 0.01 for k in ("H_vt", "H_t") for f in FRACTIONS}
+    row.update({f"S_{int(f * 100)}": 0.9 for f in FRACTIONS}, object="A", steps_vt=1, steps_t=1, terminated_vt="x",
+               terminated_t="x", travel_vt_m=1.0, travel_tactile_m=1.0, H_vt_final=0.01, H_t_final=0.01,
+               Ht_vt_final=0.01, Ht_t_final=0.01, rho_final=0.5, S_final=0.5, median_step_s_vt=0.01,
+               median_step_s_t=0.01)
+    text = _markdown([row], [{"claim": "x", "measured": "y", "holds": False}])
+    assert "docs/results.md explains each" in text and "holds on this run" in text
 
 
 def test_check_claims_on_hand_made_rows():

@@ -37,9 +37,17 @@ def kmeans_regions(points: np.ndarray, regions: int, seed: int = 0) -> tuple[np.
         raise ValueError(f"regions: {regions} regions need at least as many outer surface points, got {len(pts)}")
     if regions == 1:
         return pts.mean(axis=0, keepdims=True), 1.0
+    distinct = len(np.unique(pts, axis=0))
+    if distinct < regions:
+        raise ValueError(f"regions: {regions} regions need at least {regions} distinct outer surface points, got "
+                         f"{distinct} distinct among {len(pts)} (coincident points)")
     centres, _ = kmeans2(pts, regions, minit="++", seed=np.random.default_rng(seed))
     d = np.linalg.norm(centres[:, None] - centres[None], axis=-1) + np.diag(np.full(regions, np.inf))
-    return centres, float(0.5 * np.median(d.min(axis=1)))
+    tau = float(0.5 * np.median(d.min(axis=1)))
+    if not tau > 0:
+        raise ValueError(f"regions: k-means placed several of the {regions} region centres at one point (the outer "
+                         f"surface points take {distinct} distinct positions); use fewer regions")
+    return centres, tau
 
 
 class LocalGPIOIS(ImplicitSurfaceGP):

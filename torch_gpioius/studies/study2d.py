@@ -108,9 +108,29 @@ def check_claims(rows: list[dict]) -> list[dict]:
     return out
 
 
+#: What the summary's columns mean, written above its tables (``make demo``'s summary.md is read on its own).
+PREAMBLE = """\
+# 2-D reproduction: one run per object and mode (the paper's protocol, seed 0)
+
+This is one run per object and mode, as the paper ran them. A sliding exploration amplifies rounding over a hundred
+contacts, so one run is an anecdote: the evidence is the study over 10 seeds, which judges the same claims with
+intervals (`gpioius study --world 2d --seeds 10`, results in docs/results.md, "Over seeds"). docs/results.md,
+"The claims, as measured on this run", explains each "no" below.
+
+* **VT** = visual-tactile (GPIOIS, vision + touch), **T** = tactile only (GPIS).
+* **H p %** = Hausdorff distance [cm] between the estimate {mu_in = 0} and the true inner boundary, for both modes
+  at the same travel: p % of the **tactile-only run's** final travel. "H 100 %" is therefore VT's estimate at the
+  travel where T stopped, which is not VT's end when VT travels further (B, D).
+* **final H** = each run's Hausdorff distance at its **own** end ("touched estimate": only the pieces of the zero
+  set along which the fingertip slid).
+* **S** = the paper's similarity K_t[0,1] / K_t[0,0], a ratio of amplitudes that can exceed 1; the correlation
+  K_t[0,1] / sqrt(K_t[0,0] K_t[1,1]) is in [-1, 1].
+"""
+
+
 def _markdown(rows: list[dict], claims: list[dict] | None) -> str:
     pct = [f"{int(round(f * 100))}" for f in FRACTIONS]
-    lines = ["| object | " + " | ".join(f"H {p} % VT / T [cm]" for p in pct) + " | "
+    lines = [PREAMBLE, "| object | " + " | ".join(f"H {p} % VT / T [cm]" for p in pct) + " | "
              + " | ".join(f"S {p} %" for p in pct) + " |",
              "|---|" + "---|" * (2 * len(pct))]
     for r in rows:
@@ -129,7 +149,8 @@ def _markdown(rows: list[dict], claims: list[dict] | None) -> str:
     if claims is None:
         lines += ["", "Smoke run (a few steps per run): the paper's claims are not judged on it."]
         return "\n".join(lines) + "\n"
-    lines += ["", "| claim | measured | holds |", "|---|---|---|"]
+    lines += ["", "The paper's claims, as measured on this one run (docs/results.md explains each \"no\"; the 10-seed "
+              "study judges them with intervals):", "", "| claim | measured | holds on this run |", "|---|---|---|"]
     for c in claims:
         holds = "n/a (judged in docs)" if c["holds"] is None else ("yes" if c["holds"] else "**no**")
         lines.append(f"| {c['claim']} | {c['measured']} | {holds} |")

@@ -200,11 +200,22 @@ def make_cover(prims: list[Primitive], kind: str, base: tuple, *, gap: float = 0
     Raises:
         ValueError: an unknown kind or a non-positive distance.
     """
+    from ..._validation import as_float
+
     if kind not in COVER_KINDS:
         raise ValueError(f"cover: must be one of {COVER_KINDS}, got {kind!r}")
-    for name, v in (("gap", gap), ("slack", slack), ("thickness", thickness), ("radius", radius)):
-        if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-            raise ValueError(f"cover option {name}: must be a positive distance [m], got {v!r}")
+    gap, slack, thickness, radius = (as_float(v, f"cover option {n}", lo=lo, hi=hi, positive=True, unit="m")
+                                     for n, v, lo, hi in (("gap", gap, 0.0, 0.2), ("slack", slack, 0.0, 0.5),
+                                                          ("thickness", thickness, 0.0, 0.2),
+                                                          ("radius", radius, 0.0005, 0.02)))
+    if young is not None:
+        young = as_float(young, "cover option young", lo=1.0, hi=1e9, unit="Pa")
+    if poisson is not None:
+        poisson = as_float(poisson, "cover option poisson", lo=0.0, hi=0.49)
+    if damping is not None:
+        damping = as_float(damping, "cover option damping", lo=0.0, hi=10.0)
+    if density is not None:
+        density = as_float(density, "cover option density", lo=1e-3, hi=1e4, positive=True)
     origins, dirs, faces, boundary = base
     if kind == "foam":
         inner = shrink_wrap(prims, origins, dirs, gap)

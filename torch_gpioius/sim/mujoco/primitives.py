@@ -157,11 +157,12 @@ def as_primitives(specs) -> list[Primitive]:
             quat = np.asarray(spec.get("quat", (1.0, 0.0, 0.0, 0.0)), dtype=np.float64).reshape(-1)
         except (TypeError, ValueError):
             raise ValueError(f"inner[{i}]: size, pos and quat must be numbers") from None
-        if size.shape != (_SIZES[kind],) or not np.isfinite(size).all() or (size <= 0).any():
-            raise ValueError(f"inner[{i}]: a {kind} needs {_SIZES[kind]} positive size value(s) [m], got "
+        if size.shape != (_SIZES[kind],) or not np.isfinite(size).all() or (size < 1e-3).any() or (size > 2).any():
+            raise ValueError(f"inner[{i}]: a {kind} needs {_SIZES[kind]} size value(s) between 1 mm and 2 m, got "
                              f"{spec.get('size')!r}")
-        if pos.shape != (3,) or not np.isfinite(pos).all():
-            raise ValueError(f"inner[{i}]: pos must be a finite (3,) position [m], got {spec.get('pos')!r}")
+        if pos.shape != (3,) or not np.isfinite(pos).all() or (np.abs(pos) > 10).any():
+            raise ValueError(f"inner[{i}]: pos must be a finite (3,) position within 10 m of the base [m], got "
+                             f"{spec.get('pos')!r}")
         if quat.shape != (4,) or not np.isfinite(quat).all() or np.linalg.norm(quat) < 1e-9:
             raise ValueError(f"inner[{i}]: quat must be a non-zero (4,) quaternion w-x-y-z, got {spec.get('quat')!r}")
         quat = quat / np.linalg.norm(quat)

@@ -21,7 +21,25 @@ from ..bounds import as_bounds
 from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
 from .primitives import Primitive, as_primitives, union_sdf, union_surface_samples
 
-__all__ = ["MujocoScene", "MUJOCO_DEFAULTS"]
+__all__ = ["MujocoScene", "MUJOCO_DEFAULTS", "SCENE_LIMITS", "MAX_PRIMITIVES", "MAX_COVER_VERTICES"]
+
+#: Accepted ranges of the scene's numeric options, ``name: (lo, hi, unit)``: outside them MuJoCo either cannot
+#: compile the model, divides by zero, or needs gigabytes or hours (``camera_scale=50`` asked for 4 GiB,
+#: ``settle_time=1e5`` for days of simulation).
+SCENE_LIMITS = {"sensor_noise": (0.0, 1.0, "N"), "timestep": (1e-4, 0.01, "s"), "settle_time": (0.0, 10.0, "s"),
+                "camera_scale": (0.05, 1.0, ""), "tool_length": (0.01, 0.3, "m"), "tip_radius": (0.001, 0.02, "m"),
+                "spacing": (0.005, 0.1, "m"), "half_angle": (1.0, 180.0, "deg")}
+#: Most primitives in one inner object (500 blew up at the first step).
+MAX_PRIMITIVES = 64
+#: Most cover vertices (a 1 mm spacing asked MuJoCo for more memory than its arena has).
+MAX_COVER_VERTICES = 20_000
+
+
+def _limited(value, name: str) -> float:
+    from ..._validation import as_float
+
+    lo, hi, unit = SCENE_LIMITS[name]
+    return as_float(value, name, lo=lo, hi=hi, unit=unit)
 
 #: The robot study's settings in the MuJoCo world (as the penalty world's; the camera at half Kinect resolution).
 MUJOCO_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_steps=400, stop=(TravelBudget(1.5),),
@@ -70,6 +88,16 @@ class MujocoScene(World):
                  camera_scale: float = 0.5, defaults: ExplorationDefaults | None = None,
                  tool_length: float = 0.05, tip_radius: float = 0.004) -> None:
         _require_mujoco()
+        if len(primitives) > MAX_PRIMITIVES:
+            raise ValueError(f"inner: {len(primitives)} primitives; at most {MAX_PRIMITIVES} are supported")
+        if len(cover.vertices) > MAX_COVER_VERTICES:
+            raise ValueError(f"cover: {len(cover.vertices)} vertices; at most {MAX_COVER_VERTICES} (a coarser spacing)")
+        if not isinstance(name, str):
+            raise ValueError(f"name: expected a string, got {name!r}")
+        sensor_noise, timestep, settle_time, camera_scale, tool_length, tip_radius = (
+            _limited(v, k) for v, k in ((sensor_noise, "sensor_noise"), (timestep, "timestep"),
+                                        (settle_time, "settle_time"), (camera_scale, "camera_scale"),
+                                        (tool_length, "tool_length"), (tip_radius, "tip_radius")))
         self.primitives, self.cover = list(primitives), cover
         self.start = np.asarray(start, dtype=np.float64).reshape(-1)
         d = np.asarray(direction, dtype=np.float64).reshape(-1)
@@ -120,6 +148,9 @@ class MujocoScene(World):
         """
         _require_mujoco()
         prims = as_primitives(inner)
+        if len(prims) > MAX_PRIMITIVES:
+            raise ValueError(f"inner: {len(prims)} primitives; at most {MAX_PRIMITIVES} are supported")
+        spacing, half_angle = _limited(spacing, "spacing"), _limited(half_angle, "half_angle")
         if cover not in COVER_KINDS:
             raise ValueError(f"cover: must be one of {COVER_KINDS}, got {cover!r}")
         if start is None or direction is None or bounds is None:
@@ -141,6 +172,9 @@ class MujocoScene(World):
             mesh_base = cap_base(c, f, half_angle, spacing, radius)
         else:
             raise ValueError(f"base: must be 'auto', 'tube' or 'cap', got {base!r}")
+        if len(mesh_base[0]) * (2 if cover == "foam" else 1) > MAX_COVER_VERTICES:
+            raise ValueError(f"spacing: {spacing:g} m gives a cover of {len(mesh_base[0])} vertices; at most "
+                             f"{MAX_COVER_VERTICES} are supported (use a coarser spacing)")
         mesh = make_cover(prims, cover, mesh_base, **cover_options)
         return cls(prims, mesh, start, direction, bounds, name=name, seed=seed, **scene_kw)
 
@@ -150,7 +184,9 @@ class MujocoScene(World):
 
         body, actuators, sensors = ur5_mjcf(tool_offset=(0.0, 0.0, self.tool_length), tip_radius=self.tip_radius)
         geoms = "\n".join(p.mjcf(f"inner_{i}") for i, p in enumerate(self.primitives))
-        return f"""<mujoco model="{self.name or 'covered object'}">
+        from xml.sax.saxutils import quoteattr
+
+        return f"""<mujoco model={quoteattr(self.name or 'covered object')}>
 <compiler angle="radian" autolimits="true"/>
 <option timestep="{self.timestep}" solver="CG" tolerance="1e-6" integrator="discrete"><flag energy="enable"/></option>
 <size memory="64M"/>
