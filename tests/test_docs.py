@@ -3,6 +3,7 @@
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -81,14 +82,51 @@ def test_three_tutorials_exist():
     assert {p.stem for p in TUTORIALS} >= {"own-data", "rosbag", "real-robot"}
 
 
-def test_mkdocs_build_strict(tmp_path):
+def test_mkdocs_build_strict_offline_with_rendered_math(tmp_path):
+    """The site builds with --strict, fetches nothing from the network (no web fonts, no CDN: MathJax is copied in
+    from the django-static-mathjax package), and its equations render in a browser."""
     pytest.importorskip("mkdocs")
     pytest.importorskip("mkdocstrings_handlers.python")
-    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(tmp_path / "site")],
+    pytest.importorskip("mathjax")
+    site = tmp_path / "site"
+    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--site-dir", str(site)],
                           cwd=ROOT, capture_output=True, text=True, timeout=600,
                           env={**os.environ, "NO_MKDOCS_2_WARNING": "1"})
     assert done.returncode == 0, done.stderr[-6000:]
-    assert (tmp_path / "site" / "reference" / "models" / "index.html").exists()
+    assert (site / "reference" / "models" / "index.html").exists()
+    assert (site / "assets" / "mathjax" / "tex-mml-chtml.js").stat().st_size > 500_000
+    assert any((site / "assets" / "mathjax" / "output" / "chtml" / "fonts" / "woff-v2").glob("*.woff"))
+    for page in site.rglob("*.html"):
+        html = page.read_text()
+        assert "fonts.googleapis" not in html and "fonts.gstatic" not in html, page
+        for src in re.findall(r'<script[^>]+src="([^"]+)"', html):
+            assert not re.match(r"(https?:)?//", src), (page, src)      # every script is served by the site
+    theory = (site / "theory" / "index.html").read_text()
+    assert theory.count('class="arithmatex"') >= 6 and "mathjax/tex-mml-chtml.js" in theory
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    playwright = pytest.importorskip("playwright.sync_api") if chromium else None
+    if chromium is None:
+        pytest.skip("no Chromium to render the math in (CI installs Debian's)")
+    import functools
+    import http.server
+    import threading
+
+    handler = functools.partial(http.server.SimpleHTTPRequestHandler, directory=str(site))
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    try:
+        with playwright.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=chromium, args=["--no-sandbox"])
+            page = browser.new_page()
+            failed = []
+            page.on("requestfailed", lambda r: failed.append(r.url))
+            page.goto(f"http://127.0.0.1:{httpd.server_address[1]}/theory/")
+            page.wait_for_selector("mjx-container", timeout=60_000)
+            assert page.locator("mjx-container").count() >= 6
+            assert not [u for u in failed if not u.startswith("http://127.0.0.1")], failed
+            browser.close()
+    finally:
+        httpd.shutdown()
 
 
 def test_the_own_data_tutorial_quotes_what_its_code_prints(tmp_path):

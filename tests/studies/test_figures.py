@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import torch_gpioius as tg
-from torch_gpioius.studies.figures import figure_regions
+from torch_gpioius.studies.figures import figure_2d_object, figure_regions
 
 
 def test_region_figure_of_a_local_run(tmp_path):
@@ -15,3 +15,104 @@ def test_region_figure_of_a_local_run(tmp_path):
     plain = tg.explore(tg.sim.paper_objects_2d()["C"], mode="visual-tactile", max_steps=3, progress=False)
     with pytest.raises(ValueError, match="no similarity per region"):
         figure_regions(plain, tmp_path / "x.png")
+
+
+@pytest.fixture(scope="module")
+def short_pair(tmp_path_factory):
+    """Both modes on object D for a few steps, with their logs (for the early snapshots)."""
+    out = tmp_path_factory.mktemp("pair")
+    scene = tg.sim.paper_objects_2d()["D"]
+    pair = {m: tg.explore(scene, mode=m, max_steps=14, log=out / f"{m}.gpioius", progress=False)
+            for m in ("visual-tactile", "tactile")}
+    return scene, pair, out
+
+
+def _renderer(fig):
+    """A renderer for a figure the figure functions already closed (closing detaches pyplot's canvas)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    FigureCanvasAgg(fig).draw()
+    return fig.canvas.get_renderer()
+
+
+def _tick_texts(fig):
+    return [t.get_text() for ax in fig.axes for t in ax.get_xticklabels() + ax.get_yticklabels()]
+
+
+def test_fig4_keeps_legends_off_the_data_and_shows_both_modes_early(short_pair, tmp_path):
+    from torch_gpioius.studies.study2d import _snapshot
+
+    scene, pair, logs = short_pair
+    early = {m: _snapshot(logs / f"{m}.gpioius", pair[m], 0.1 * float(pair["tactile"].travel[-1])) for m in pair}
+    fig = figure_2d_object("D", scene, pair, tmp_path / "fig4.png", early=early)
+    renderer = _renderer(fig)
+    data_axes = [ax for ax in fig.axes if ax.images or len(ax.lines) > 2]
+    assert len(data_axes) >= 6                                      # 2 x 2 maps and 2 transition panels
+    assert not any(ax.get_legend() for ax in fig.axes)             # no legend inside any panel
+    for legend in fig.legends:
+        box = legend.get_window_extent(renderer)
+        assert not any(box.overlaps(ax.get_window_extent(renderer)) for ax in data_axes)
+    titles = [ax.get_title() for ax in fig.axes]
+    assert sum("at 10 % of the travel" in t for t in titles) == 2 and sum(": final" in t for t in titles) == 2
+    assert not any("times" in t for t in _tick_texts(fig))          # no "2x10^0" minor tick labels
+    # a "touched pieces" curve is drawn only where it differs from the whole estimate's (it hid under it)
+    for ax in fig.axes:
+        for line in ax.lines:
+            if "touched pieces" in line.get_label():
+                whole = next(ln for ln in ax.lines if ln.get_label() == line.get_label().split(",")[0])
+                assert not np.allclose(np.interp(whole.get_xdata(), line.get_xdata(), line.get_ydata()),
+                                       whole.get_ydata())
+
+
+def test_fraction_labels_never_overprint(tmp_path):
+    """10, 25 and 50 % of a short run lie close together; their labels printed as "1025 %50 %"."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from torch_gpioius.studies.figures import fraction_labels
+
+    fig, ax = plt.subplots(figsize=(4, 3))
+    ax.set_xlim(0, 3.0)
+    labels = fraction_labels(ax, [0.09, 0.23, 0.47], ["10 %", "25 %", "50 %"])
+    renderer = fig.canvas.get_renderer()
+    boxes = [t.get_window_extent(renderer) for t in labels]
+    assert all(not a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    plt.close(fig)
+
+
+def test_fig5_gives_each_object_its_own_panel_and_band(short_pair, tmp_path):
+    from torch_gpioius.studies.figures import figure_similarity
+
+    scene, pair, _ = short_pair
+    fig = figure_similarity({"A": pair, "D": pair}, tmp_path / "fig5.png")
+    bands = [len([c for c in ax.collections if c.get_label().startswith("95 %")]) for ax in fig.axes]
+    assert max(bands) <= 1 and len([ax for ax in fig.axes if ax.get_title().startswith("object")]) == 2
+
+
+def test_paired_figure_labels_every_panel_with_plain_numbers(tmp_path):
+    from torch_gpioius.studies.sweep_figures import figure_paired
+
+    rows = [{"object": o, "mode": m, "seed": s, "final_hausdorff_m": v}
+            for o, base in (("A", 0.005), ("B", 0.1)) for m, f in (("tactile", 1.0), ("visual-tactile", 1.9))
+            for s, v in enumerate(base * f * np.array([1.0, 1.05, 0.97]))]
+    fig = figure_paired(rows, tmp_path / "p.png")
+    _renderer(fig)
+    for ax in fig.axes:
+        assert ax.get_ylabel()
+        shown = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
+        assert len(shown) >= 2 and not any("times" in t for t in shown), shown   # A spans 0.5-1 cm: < a decade
+
+
+def test_svg_curves_are_millimetres_upright(short_pair, tmp_path):
+    import re
+
+    from torch_gpioius.io.export import export_run
+
+    _, _, logs = short_pair
+    export_run(logs / "visual-tactile.gpioius", tmp_path / "d.svg")
+    text = (tmp_path / "d.svg").read_text()
+    width = float(re.search(r'width="([\d.]+)mm"', text).group(1))
+    box = [float(v) for v in re.search(r'viewBox="([^"]+)"', text).group(1).split()]
+    assert width == pytest.approx(box[2], rel=1e-3) and 50 < width < 1000      # a ~0.2 m shape: ~200 mm wide

@@ -48,6 +48,10 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
         path: output file; the ending picks the format (:data:`MESH_FORMATS` / :data:`CURVE_FORMATS`).
         prior: prior variance, to which the colours are scaled.
 
+    Units: meshes and PLY/OBJ line sets are in metres (the base frame, as everything here); SVG and DXF drawings
+    are in millimetres, and an SVG stands upright (its y axis points down, so y is negated) and declares its size
+    in millimetres.
+
     Returns:
         the path written. PLY meshes also carry the variance as a vertex property ``variance``.
 
@@ -73,13 +77,21 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
     curves = [np.asarray(c, dtype=np.float64) for c in surface]
     path.parent.mkdir(parents=True, exist_ok=True)
     if ext in (".svg", ".dxf"):
+        # drawings are in millimetres, the unit CAD and drawing programs expect (metres made an SVG 0.3 units wide);
+        # SVG's y axis points down, so y is negated there and the drawing stands upright
+        flip = np.array([1000.0, -1000.0 if ext == ".svg" else 1000.0])
         entities, vertices = [], []
         for c in curves:
             start = sum(len(v) for v in vertices)
-            vertices.append(c)
+            vertices.append(c * flip)
             entities.append(trimesh.path.entities.Line(np.arange(start, start + len(c))))
         p = trimesh.path.Path2D(entities=entities, vertices=np.concatenate(vertices))
-        return atomic_write(path, p.export(file_type=ext[1:]))
+        text = p.export(file_type=ext[1:])
+        if ext == ".svg":
+            (x0, y0), (x1, y1) = p.bounds
+            text = text.replace('width="100%"', f'width="{x1 - x0:.3f}mm"', 1).replace(
+                'height="100%"', f'height="{y1 - y0:.3f}mm"', 1)
+        return atomic_write(path, text)
     # PLY / OBJ: a line set in the z = 0 plane with the variance as colours
     vertices = np.concatenate([np.column_stack([c, np.zeros(len(c))]) for c in curves])
     offsets = np.cumsum([0] + [len(c) for c in curves])
@@ -116,8 +128,8 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
         bounds: `(2, d)` box `[min; max]` [m] (default: the observations padded by 5 cm).
         force: replace existing files (a link there is replaced, never followed).
 
-    2-D curves are written in metres, the base frame's unit (an SVG's viewBox is then a few tenths wide: scale it
-    by 1000 in a drawing program for millimetres); see docs/data-format.md.
+    2-D curves go to SVG and DXF in millimetres (SVG upright, sized in mm), to PLY and OBJ in metres; see
+    :func:`write_surface` and docs/data-format.md.
 
     Returns:
         ``{"step", "inner", "outer", "vertices", "faces"}`` (paths written, and the inner mesh's size in 3-D).

@@ -6,11 +6,13 @@ variance, and the paper's similarity labelled as a ratio of amplitudes that can 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["figure_2d_object", "figure_3d_object", "figure_similarity", "figure_regions", "FRACTION_MARKS"]
+__all__ = ["figure_2d_object", "figure_3d_object", "figure_similarity", "figure_regions", "FRACTION_MARKS",
+           "log_axis", "legend_below", "fraction_labels", "Snapshot"]
 
 MODES = ("visual-tactile", "tactile")
 STYLE = {"visual-tactile": dict(color="tab:red", ls="-"), "tactile": dict(color="tab:blue", ls="--")}
@@ -31,6 +33,48 @@ def _at_travel(trace, distance: float) -> int:
     return int(min(np.searchsorted(trace.travel, distance - 1e-12), trace.n_steps - 1))
 
 
+def log_axis(ax, axis: str = "y") -> None:
+    """A log-scaled axis with plain numbers on its ticks ("0.5", "1", "2", "5", "10"), no minor-tick labels
+    (matplotlib labels minor ticks "2x10^0, 3x10^0" once a range spans less than a decade), and enough major ticks
+    to read a value off a range narrower than a decade."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    a = ax.yaxis if axis == "y" else ax.xaxis
+    (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
+    a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    a.set_minor_formatter(NullFormatter())
+
+
+def legend_below(fig, handles, labels, ncol: int = 4, fontsize: float = 7, bottom: float = 0.0):
+    """One legend for the whole figure in a strip under every axes (never on top of data)."""
+    by_label = dict(zip(labels, handles))
+    return fig.legend(list(by_label.values()), list(by_label), loc="lower center", ncol=ncol, fontsize=fontsize,
+                      frameon=False, bbox_to_anchor=(0.5, bottom))
+
+
+def fraction_labels(ax, xs, texts, fontsize: float = 7) -> list:
+    """Labels at data x positions above the top of ``ax``, moved up a line where they would overprint a neighbour
+    (10, 25 and 50 % of a short run lie close together)."""
+    fig = ax.figure
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    placed, out = [], []
+    for x, text in sorted(zip(xs, texts)):
+        level = 0
+        while True:
+            t = ax.annotate(text, (x, 1.0), xycoords=("data", "axes fraction"), xytext=(0, 2 + 9 * level),
+                            textcoords="offset points", fontsize=fontsize, ha="center", va="bottom", color="0.35")
+            box = t.get_window_extent(renderer)
+            if not any(box.overlaps(b) for b in placed):
+                placed.append(box)
+                out.append(t)
+                break
+            t.remove()
+            level += 1
+    return out
+
+
 def _inner_observations(model) -> tuple[np.ndarray, np.ndarray]:
     """`(k, d)` inner contacts (y = 0) and inner free space (y = 1) of a fitted model."""
     x = model.train_inputs[0].cpu().numpy()
@@ -41,7 +85,8 @@ def _inner_observations(model) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _transitions(ax_u, ax_h, pair: dict, reference: str = "tactile") -> None:
-    """Uncertainty and Hausdorff over travel for both modes; the 10/25/50 % points of the reference run marked."""
+    """Uncertainty and Hausdorff over travel for both modes; the 10/25/50 % points of the reference run marked. The
+    legend entries go to the figure's legend (:func:`legend_below`), never over the curves."""
     ref = pair.get(reference) or next(iter(pair.values()))
     total = float(ref.travel[-1])
     for mode in MODES:
@@ -53,80 +98,135 @@ def _transitions(ax_u, ax_h, pair: dict, reference: str = "tactile") -> None:
             ok = ~np.isnan(y)
             ax.plot(tr.travel[ok], scale * y[ok], label=mode, **st)
         if len(tr.hausdorff_touched):
-            ok = ~np.isnan(tr.hausdorff_touched)
-            ax_h.plot(tr.travel[ok], 100 * tr.hausdorff_touched[ok], color=st["color"], ls=":", lw=1,
-                      label=f"{mode}, touched pieces")
+            # the touched pieces only where they differ from the whole zero set: drawn under an equal solid line
+            # they were invisible, yet had a legend entry
+            whole, touched = tr.hausdorff, tr.hausdorff_touched
+            ok = ~np.isnan(touched)
+            differs = ok & ~np.isclose(touched, whole, rtol=1e-9, atol=0.0, equal_nan=False)
+            if differs.any():
+                ax_h.plot(tr.travel[ok], 100 * touched[ok], color=st["color"], ls=":", lw=1.4, zorder=3,
+                          label=f"{mode}, touched pieces only (where they differ)")
         for f in FRACTION_MARKS:
             ok = np.flatnonzero(~np.isnan(tr.hausdorff) & (tr.travel >= f * total - 1e-12))
             if len(ok):
                 i = ok[0]
-                ax_h.plot(tr.travel[i], 100 * tr.hausdorff[i], "o", color=st["color"], ms=5, mfc="white")
+                ax_h.plot(tr.travel[i], 100 * tr.hausdorff[i], "o", color=st["color"], ms=5, mfc="white", zorder=4)
     for f in FRACTION_MARKS:
         for ax in (ax_u, ax_h):
             ax.axvline(f * total, color="0.75", lw=0.6, zorder=0)
-        ax_h.annotate(f"{int(f * 100)} %", (f * total, 1.0), xycoords=("data", "axes fraction"), fontsize=7,
-                      ha="center", va="bottom", color="0.4")
     ax_u.set_ylabel("uncertainty, eq. (23)\n[V / prior variance]")
-    ax_u.set_yscale("log")
-    ax_u.legend(fontsize=7)
+    log_axis(ax_u)
     ax_h.set_ylabel("Hausdorff distance [cm]")
     ax_h.set_xlabel("travel since first contact [m]")
-    ax_h.set_yscale("log")
-    ax_h.legend(fontsize=6, loc="upper right")
+    log_axis(ax_h)
+    fraction_labels(ax_u, [f * total for f in FRACTION_MARKS], [f"{int(f * 100)} %" for f in FRACTION_MARKS])
 
 
-def figure_2d_object(name: str, scene, pair: dict, path: Path, resolution: float = 0.004) -> None:
-    """Fig. 4: per mode the variance map, the true shapes, the estimate (touched pieces solid, other pieces of the
-    zero set dotted), the path, and the contacts and free space as markers on top; then the transitions."""
+@dataclass
+class Snapshot:
+    """The state of a run at one step, for a map: its model, the fingertip's path and the contacts so far.
+
+    Attributes:
+        model: the model after the step (rebuilt from the log with the K_t learned then).
+        path: `(k, 2)` fingertip positions up to the step [m].
+        travel: travel since the first contact [m].
+        hausdorff: the step's recorded Hausdorff distance [m] (NaN if not measured).
+    """
+
+    model: object
+    path: np.ndarray
+    travel: float
+    hausdorff: float
+
+
+def _map(ax, scene, model, path: np.ndarray, b: np.ndarray, resolution: float, title: str):
+    """One Fig. 4 map: the variance, the true shapes, the estimate (touched pieces solid), the path, the
+    observations; returns the image (for the colour bar)."""
     from ..metrics import prior_variance
     from ..surfaces import evaluate_grid, touched_pieces, zero_level_curves
 
-    plt = _plt()
-    fig = plt.figure(figsize=(15, 5.2))
-    grid = fig.add_gridspec(2, 3, width_ratios=[1.15, 1.15, 1.0])
-    b = scene.bounds(0.08)
     extent = [b[0, 0], b[1, 0], b[0, 1], b[1, 1]]
+    f = evaluate_grid(model, b, resolution, 0)
+    rel_var = f.var / prior_variance(model, 0)   # fraction of the prior variance: comparable across modes
+    im = ax.imshow(rel_var.T, origin="lower", extent=extent, cmap="Purples", vmin=0, vmax=1)
+    ax.fill(*scene.inner_boundary.T, color="tab:green", alpha=0.35, lw=0, label="true inner shape")
+    ax.plot(*scene.outer_boundary.T, "k-.", lw=1.2, label="outer shape (seen)")
+    if len(path):
+        ax.plot(*np.asarray(path).T, "-", color="0.35", lw=0.7, label="fingertip path")
+    contacts, free = _inner_observations(model)
+    curves = zero_level_curves(model, b, resolution, 0, field=f)
+    touched = touched_pieces(curves, contacts)
+    ids = {id(c) for c in touched}
+    for j, c in enumerate(touched):
+        ax.plot(*c.T, "-", color="tab:red", lw=1.8, label="estimate $\\mu_{in}=0$ (touched)")
+    for c in (c for c in curves if id(c) not in ids):
+        ax.plot(*c.T, ":", color="tab:red", lw=1.4, label="untouched pieces of $\\mu_{in}=0$")
+    ax.plot(*contacts.T, "o", color="k", ms=2.2, label="contacts ($y=0$)")
+    if len(free):
+        ax.plot(*free.T, "o", mfc="none", mec="tab:orange", ms=3.5, mew=0.8, label="inner free space ($y=1$)")
+    ax.plot(*scene.start, "ks", ms=5, label="start")
+    ax.set_aspect("equal")
+    ax.set_xlim(extent[:2])
+    ax.set_ylim(extent[2:])
+    ax.set_title(title, fontsize=8.5)
+    ax.set_xlabel("x [m]", fontsize=8)
+    ax.set_ylabel("y [m]", fontsize=8)
+    ax.tick_params(labelsize=7)
+    return im
+
+
+def _h_text(h: float) -> str:
+    return "no closed estimate" if not np.isfinite(h) else f"Hausdorff {100 * h:.1f} cm"
+
+
+def figure_2d_object(name: str, scene, pair: dict, path: Path, resolution: float = 0.004,
+                     early: dict | None = None, early_fraction: float = 0.10):
+    """Fig. 4: per mode the variance map, the true shapes, the estimate (touched pieces solid, other pieces of the
+    zero set dotted), the path, and the contacts and free space; then the transitions.
+
+    With ``early`` (``{mode: Snapshot}``) a first row shows both modes at ``early_fraction`` of the tactile run's
+    travel, where the paper's point ("vision helps early") shows; the second row shows the final state. Every
+    legend sits in a strip under the panels, never on the data.
+
+    Returns:
+        the ``matplotlib.figure.Figure`` (already written to ``path``).
+    """
+    plt = _plt()
+    rows = 2 if early else 1
+    b = scene.bounds(0.08)
+    aspect = float((b[1, 1] - b[0, 1]) / (b[1, 0] - b[0, 0]))          # a map's height / width
+    fig = plt.figure(figsize=(16, rows * max(4.6 * aspect + 1.3, 3.2) + 1.0))
+    # an empty column between the colour bar and the transitions keeps the bar's label clear of their y labels
+    grid = fig.add_gridspec(rows * 2, 5, width_ratios=[1.15, 1.15, 0.04, 0.28, 1.0], wspace=0.25, hspace=0.55,
+                            left=0.04, right=0.98, top=0.93, bottom=0.11 + 0.03 * (2 - rows))
+    im = None
     for k, mode in enumerate(MODES):
-        ax = fig.add_subplot(grid[:, k])
         tr = pair.get(mode)
         if tr is None:
             continue
-        f = evaluate_grid(tr.model, b, resolution, 0)
-        rel_var = f.var / prior_variance(tr.model, 0)   # fraction of the prior variance: comparable across modes
-        im = ax.imshow(rel_var.T, origin="lower", extent=extent, cmap="Purples", vmin=0, vmax=1)
-        ax.fill(*scene.inner_boundary.T, color="tab:green", alpha=0.35, lw=0, label="true inner shape")
-        ax.plot(*scene.outer_boundary.T, "k-.", lw=1.2, label="outer shape (seen)")
-        ax.plot(*tr.path.T, "-", color="0.35", lw=0.7, label="fingertip path")
-        curves = zero_level_curves(tr.model, b, resolution, 0, field=f)
-        touched = touched_pieces(curves, tr.contacts)
-        ids = {id(c) for c in touched}
-        for j, c in enumerate(touched):
-            ax.plot(*c.T, "-", color="tab:red", lw=1.8, label="estimate $\\mu_{in}=0$ (touched)" if j == 0 else None)
-        others = [c for c in curves if id(c) not in ids]
-        for j, c in enumerate(others):
-            ax.plot(*c.T, ":", color="tab:red", lw=1.4, label="untouched pieces of $\\mu_{in}=0$" if j == 0 else None)
-        contacts, free = _inner_observations(tr.model)
-        ax.plot(*contacts.T, "o", color="k", ms=2.2, label="contacts ($y=0$)")
-        if len(free):
-            ax.plot(*free.T, "o", mfc="none", mec="tab:orange", ms=3.5, mew=0.8, label="inner free space ($y=1$)")
-        ax.plot(*scene.start, "ks", ms=5, label="start")
-        ax.set_aspect("equal")
-        ax.set_xlim(extent[:2])
-        ax.set_ylim(extent[2:])
-        title = "visual-tactile (GPIOIS)" if mode == "visual-tactile" else "tactile only (GPIS)"
-        ax.set_title(f"object {name}: {title}\nfinal Hausdorff {100 * tr.hausdorff[-1]:.1f} cm, {tr.n_steps - 1} "
-                     f"steps ({tr.terminated})", fontsize=9)
-        ax.set_xlabel("x [m]")
-        ax.set_ylabel("y [m]")
-        if k == 0:
-            ax.legend(loc="lower left", fontsize=6, framealpha=0.85)
-        fig.colorbar(im, ax=ax, fraction=0.035, label="$V_{in}$ / prior variance")
-    ax_u = fig.add_subplot(grid[0, 2])
-    ax_h = fig.add_subplot(grid[1, 2], sharex=ax_u)
+        label = "visual-tactile (GPIOIS)" if mode == "visual-tactile" else "tactile only (GPIS)"
+        if early:
+            snap = early[mode]
+            im = _map(fig.add_subplot(grid[0:2, k]), scene, snap.model, snap.path, b, resolution,
+                      f"{name}, {label}: at {int(round(100 * early_fraction))} % of the travel\n"
+                      f"({snap.travel:.2f} m, {_h_text(snap.hausdorff)})")
+        im = _map(fig.add_subplot(grid[2 * rows - 2:2 * rows, k]), scene, tr.model, tr.path, b, resolution,
+                  f"{name}, {label}: final\n({tr.travel[-1]:.2f} m, {tr.n_steps - 1} steps, {tr.terminated}; "
+                  f"{_h_text(tr.hausdorff[-1])})")
+    if im is not None:
+        fig.colorbar(im, cax=fig.add_subplot(grid[:, 2]), label="$V_{in}$ / prior variance")
+    ax_u = fig.add_subplot(grid[0:rows, 4])
+    ax_h = fig.add_subplot(grid[rows:2 * rows, 4], sharex=ax_u)
     _transitions(ax_u, ax_h, pair)
-    fig.tight_layout()
+    handles, labels = [], []
+    for ax in fig.axes:
+        h, lab = ax.get_legend_handles_labels()
+        handles += h
+        labels += lab
+    legend_below(fig, handles, labels, ncol=6)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return fig
 
 
 def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
@@ -164,9 +264,9 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
             rel = var.numpy() / prior_variance(tr.model, 0)
             ax.add_collection3d(Poly3DCollection(mesh.triangles, facecolors=cmap(norm(rel)), edgecolor="none",
                                                  alpha=0.8))
-        ax.plot(*tr.path.T, "-", color="tab:orange", lw=1, label="fingertip path")
-        ax.scatter(*tr.contacts.T, s=2, c="k", label="contacts")
-        ax.scatter(*tr.contacts[0], s=25, c="red", marker="*", label="first contact")
+        ax.plot(*tr.path.T, "-", color="tab:orange", lw=1)
+        ax.scatter(*tr.contacts.T, s=2, c="k")
+        ax.scatter(*tr.contacts[0], s=25, c="red", marker="*")
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(lo[2], hi[2])
@@ -176,56 +276,67 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
         ax.set_zlabel("z [m]", fontsize=7, labelpad=0)
         ax.tick_params(labelsize=6, pad=0)
         ax.set_title(f"{name}: {mode}\nfinal Hausdorff {100 * tr.hausdorff[-1]:.1f} cm", fontsize=9)
-        if j == 0:
-            from matplotlib.lines import Line2D
-            from matplotlib.patches import Patch
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
-            handles = [Line2D([], [], color="tab:orange", label="fingertip path"),
-                       Line2D([], [], ls="", marker="o", ms=2, color="k", label="contacts"),
-                       Patch(facecolor="none", edgecolor="0.55", label="true inner surface (wire)"),
-                       Patch(facecolor=cmap(0.6), label="estimate $\\mu_{in}=0$, coloured by $V_{in}$")]
-            ax.legend(handles=handles, fontsize=6, loc="upper left")
+    handles = [Line2D([], [], color="tab:orange", label="fingertip path"),
+               Line2D([], [], ls="", marker="o", ms=2, color="k", label="contacts"),
+               Line2D([], [], ls="", marker="*", ms=6, color="red", label="first contact"),
+               Patch(facecolor="none", edgecolor="0.55", label="true inner surface (wire)"),
+               Patch(facecolor=cmap(0.6), label="estimate $\\mu_{in}=0$, coloured by $V_{in}$")]
     cax = fig.add_subplot(grid[:, 2])
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), cax=cax, label="$V_{in}$ / prior variance on the estimate")
     ax_u = fig.add_subplot(grid[0, 4])
     ax_h = fig.add_subplot(grid[1, 4], sharex=ax_u)
     _transitions(ax_u, ax_h, pair)
-    fig.subplots_adjust(left=0.02, right=0.98, top=0.9, bottom=0.1)
+    h, lab = ax_h.get_legend_handles_labels()
+    fig.subplots_adjust(left=0.02, right=0.98, top=0.88, bottom=0.2)
+    legend_below(fig, handles + h, [x.get_label() for x in handles] + lab, ncol=5)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return fig
 
 
-def figure_similarity(traces: dict, path: Path, title: str = "Similarity transitions (cf. Fig. 5)") -> None:
-    """Fig. 5 / Fig. 10 for single runs: left the task correlation (with its profile-likelihood interval where it
-    was computed), right the paper's similarity ``K_t[0,1] / K_t[0,0]``: a ratio of amplitudes, not a
-    correlation, which can exceed 1."""
+def figure_similarity(traces: dict, path: Path, title: str = "Similarity transitions (cf. Fig. 5)"):
+    """Fig. 5 / Fig. 10 for single runs, one column per object (four overlapping interval bands merged into one
+    grey-brown mass): top the task correlation with its 95 % profile-likelihood interval where it was computed,
+    bottom the paper's similarity ``K_t[0,1] / K_t[0,0]`` (a ratio of amplitudes, not a correlation: it can exceed
+    1).
+
+    Returns:
+        the ``matplotlib.figure.Figure`` (already written to ``path``).
+    """
     plt = _plt()
-    fig, (ax_c, ax_s) = plt.subplots(1, 2, figsize=(11, 4))
-    for i, (name, pair) in enumerate(traces.items()):
-        tr = pair.get("visual-tactile")
-        if tr is None:
-            continue
+    names = [n for n, pair in traces.items() if pair.get("visual-tactile") is not None]
+    cols = max(len(names), 1)
+    fig, axes = plt.subplots(2, cols, figsize=(3.3 * cols + 0.8, 6.2), squeeze=False, sharey="row")
+    for i, name in enumerate(names):
+        tr = traces[name]["visual-tactile"]
+        ax_c, ax_s = axes[0, i], axes[1, i]
         color = f"C{i}"
+        ci = tr.correlation_interval
+        if len(ci) and np.isfinite(ci).any():
+            ok = np.isfinite(ci).all(axis=1)
+            ax_c.fill_between(tr.travel[ok], ci[ok, 0], ci[ok, 1], color=color, alpha=0.25, lw=0,
+                              label="95 % profile-likelihood interval")
         if len(tr.correlation):
-            ax_c.plot(tr.travel, tr.correlation, color=color, label=f"object {name}")
-            ci = tr.correlation_interval
-            if len(ci) and np.isfinite(ci).any():
-                ok = np.isfinite(ci).all(axis=1)
-                ax_c.fill_between(tr.travel[ok], ci[ok, 0], ci[ok, 1], color=color, alpha=0.2, lw=0)
-        ax_s.plot(tr.travel, tr.similarity, color=color, label=f"object {name}")
-    ax_c.set(xlabel="travel since first contact [m]", ylabel="correlation $K_t[0,1]/\\sqrt{K_t[0,0]K_t[1,1]}$",
-             ylim=(-1.05, 1.05), title="task correlation (band: 95 % profile-likelihood interval)")
-    ax_s.axhline(1.0, color="0.6", lw=0.6, ls="--")
-    ax_s.axhline(0.0, color="k", lw=0.5)
-    ax_s.set(xlabel="travel since first contact [m]", ylabel="paper's similarity $K_t[0,1]/K_t[0,0]$",
-             title="the paper's similarity (a ratio of amplitudes: can exceed 1)")
-    for ax in (ax_c, ax_s):
-        ax.legend(fontsize=7)
-        ax.title.set_fontsize(9)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+            ax_c.plot(tr.travel, tr.correlation, color=color, label="correlation")
+        ax_s.plot(tr.travel, tr.similarity, color=color, label="paper's ratio")
+        ax_s.axhline(1.0, color="0.6", lw=0.6, ls="--")
+        ax_s.axhline(0.0, color="k", lw=0.5)
+        ax_c.set(title=f"object {name}", ylim=(-1.05, 1.05))
+        ax_s.set_xlabel("travel since first contact [m]", fontsize=8)
+        for ax in (ax_c, ax_s):
+            ax.tick_params(labelsize=7)
+    axes[0, 0].set_ylabel("task correlation\n$K_t[0,1]/\\sqrt{K_t[0,0]K_t[1,1]}$", fontsize=8)
+    axes[1, 0].set_ylabel("paper's similarity $K_t[0,1]/K_t[0,0]$\n(a ratio: can exceed 1)", fontsize=8)
+    fig.suptitle(title + ": the correlation with its interval (top), the paper's ratio (bottom)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    h, lab = axes[0, 0].get_legend_handles_labels()
+    legend_below(fig, h + [plt.Line2D([], [], color="0.3")], lab + ["paper's ratio (dashed: 1)"], ncol=3)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return fig
 
 
 def figure_regions(trace, path: Path, title: str = "") -> None:

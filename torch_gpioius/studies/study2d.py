@@ -12,13 +12,28 @@ import numpy as np
 
 from ..exploration import Trace, explore
 from ..sim import paper_objects_2d
-from .figures import figure_2d_object, figure_similarity
+from .figures import Snapshot, figure_2d_object, figure_similarity
 
 __all__ = ["run_study", "summarize", "check_claims", "write_records", "FRACTIONS"]
 
 #: Points of the tactile-only run's travel at which the table reports the estimates.
 FRACTIONS = (0.10, 0.25, 0.50, 1.00)
 MODES = ("visual-tactile", "tactile")
+
+
+#: The fraction of the tactile run's travel at which fig4 shows both modes' maps beside the final ones.
+EARLY = 0.10
+
+
+def _snapshot(log: Path, trace: Trace, travel: float) -> Snapshot:
+    """A run's state at the first step with at least ``travel`` [m], rebuilt from its log with the K_t it had then."""
+    from ..io.runs import load_run
+
+    i = _at_travel(trace, travel)             # record i is the state after step i
+    run = load_run(log)
+    k = run.nearest_step(i)
+    path = run.trajectory[run.trajectory_step <= k] if run.trajectory is not None else np.zeros((0, 2))
+    return Snapshot(run.model_at(k), path, float(trace.travel[i]), float(trace.hausdorff[i]))
 
 
 def _at_travel(trace: Trace, distance: float) -> int:
@@ -210,7 +225,10 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
         bar.update(1)
     bar.close()
     for name in objects:
-        figure_2d_object(name, scenes[name], traces[name], out / f"fig4_{name}.png")
+        early = {mode: _snapshot(out / "logs" / f"{name}_{mode}.gpioius", traces[name][mode],
+                                 EARLY * float(traces[name]["tactile"].travel[-1])) for mode in MODES}
+        figure_2d_object(name, scenes[name], traces[name], out / f"fig4_{name}.png", early=early,
+                         early_fraction=EARLY)
     figure_similarity(traces, out / "fig5_similarity.png")
     from ..io.export import export_model
 

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .figures import legend_below, log_axis
+
 __all__ = ["figure_transition_bands", "figure_similarity_bands", "figure_paired"]
 
 COLORS = {"visual-tactile": "tab:red", "tactile": "tab:blue", "visual-tactile+taps": "tab:purple",
@@ -54,63 +56,83 @@ def _bands(ax, runs: list[dict], key: str, scale: float, grid: np.ndarray) -> No
         ax.fill_between(grid, lo, hi, color=c, alpha=0.2, lw=0)
 
 
-def figure_transition_bands(obj: str, runs: list[dict], path: Path) -> None:
+def figure_transition_bands(obj: str, runs: list[dict], path: Path):
     """Fig. 4 / Fig. 9 transitions over seeds: Hausdorff and uncertainty against travel, median lines and
-    interquartile bands per mode."""
+    interquartile bands per mode; the legend under the panels.
+
+    Returns:
+        the ``matplotlib.figure.Figure`` (already written to ``path``).
+    """
     plt = _plt()
-    fig, (ax_h, ax_u) = plt.subplots(1, 2, figsize=(11, 4))
+    fig, (ax_h, ax_u) = plt.subplots(1, 2, figsize=(11, 4.4))
     t_max = max(max(r["series"]["travel"]) for r in runs)
     grid = np.linspace(0.0, t_max, 300)
     _bands(ax_h, runs, "hausdorff", 100.0, grid)
     _bands(ax_u, runs, "uncertainty", 1.0, grid)
-    ax_h.set(xlabel="travel since first contact [m]", ylabel="Hausdorff distance [cm]", yscale="log",
+    ax_h.set(xlabel="travel since first contact [m]", ylabel="Hausdorff distance [cm]",
              title=f"object {obj}: Hausdorff distance (median, band: interquartile range over seeds)")
     ax_u.set(xlabel="travel since first contact [m]", ylabel="uncertainty, eq. (23) [V / prior variance]",
-             yscale="log", title=f"object {obj}: uncertainty")
+             title=f"object {obj}: uncertainty")
     for ax in (ax_h, ax_u):
-        ax.legend(fontsize=7)
+        log_axis(ax)
         ax.title.set_fontsize(9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    h, lab = ax_h.get_legend_handles_labels()
+    legend_below(fig, h, lab, ncol=3)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return fig
 
 
-def figure_similarity_bands(runs: list[dict], path: Path) -> None:
-    """Fig. 5 / Fig. 10 over seeds: the task correlation (left) and the paper's ratio (right) against travel,
-    median and interquartile band per object, visual-tactile runs only."""
+def figure_similarity_bands(runs: list[dict], path: Path):
+    """Fig. 5 / Fig. 10 over seeds, one column per object: the task correlation (top) and the paper's ratio
+    (bottom) against travel, median and interquartile band, visual-tactile runs only.
+
+    Returns:
+        the ``matplotlib.figure.Figure`` (already written to ``path``).
+    """
+    import warnings
+
     plt = _plt()
-    fig, (ax_c, ax_s) = plt.subplots(1, 2, figsize=(11, 4))
     vt = [r for r in runs if r["mode"] == "visual-tactile"]
+    objects = sorted({r["object"] for r in vt})
+    cols = max(len(objects), 1)
+    fig, axes = plt.subplots(2, cols, figsize=(3.2 * cols + 0.8, 6.0), squeeze=False, sharey="row")
     if vt:
         t_max = max(max(r["series"]["travel"]) for r in vt)
         grid = np.linspace(0.0, t_max, 300)
-        for i, obj in enumerate(sorted({r["object"] for r in vt})):
+        for i, obj in enumerate(objects):
             rs = [r for r in vt if r["object"] == obj]
-            for ax, key in ((ax_c, "correlation"), (ax_s, "similarity")):
+            for ax, key in ((axes[0, i], "correlation"), (axes[1, i], "similarity")):
                 ys = np.array([_on_grid(r, key, grid) for r in rs])
-                import warnings
-
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", RuntimeWarning)
                     med = np.nanmedian(ys, axis=0)
                     lo, hi = np.nanpercentile(ys, 25, axis=0), np.nanpercentile(ys, 75, axis=0)
-                ax.plot(grid, med, color=f"C{i}", label=f"object {obj} ({len(rs)} seeds)")
-                ax.fill_between(grid, lo, hi, color=f"C{i}", alpha=0.2, lw=0)
-    ax_c.set(xlabel="travel since first contact [m]", ylabel="task correlation", ylim=(-1.05, 1.05),
-             title="task correlation (median, band: interquartile range over seeds)")
-    ax_s.axhline(1.0, color="0.6", lw=0.6, ls="--")
-    ax_s.set(xlabel="travel since first contact [m]", ylabel="paper's similarity $K_t[0,1]/K_t[0,0]$",
-             title="the paper's similarity (a ratio of amplitudes: can exceed 1)")
-    for ax in (ax_c, ax_s):
-        ax.legend(fontsize=7)
-        ax.title.set_fontsize(9)
-    fig.tight_layout()
+                ax.fill_between(grid, lo, hi, color=f"C{i}", alpha=0.25, lw=0, label="interquartile range")
+                ax.plot(grid, med, color=f"C{i}", label="median")
+                ax.tick_params(labelsize=7)
+            axes[0, i].set(title=f"object {obj} ({len(rs)} seeds)", ylim=(-1.05, 1.05))
+            axes[1, i].axhline(1.0, color="0.6", lw=0.6, ls="--")
+            axes[1, i].set_xlabel("travel since first contact [m]", fontsize=8)
+    axes[0, 0].set_ylabel("task correlation", fontsize=8)
+    axes[1, 0].set_ylabel("paper's similarity $K_t[0,1]/K_t[0,0]$\n(a ratio: can exceed 1)", fontsize=8)
+    fig.suptitle("similarity over seeds (visual-tactile): median and interquartile band", fontsize=10)
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    h, lab = axes[0, 0].get_legend_handles_labels()
+    legend_below(fig, h, lab, ncol=2)
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return fig
 
 
-def figure_paired(rows: list[dict], path: Path, key: str = "final_hausdorff_m") -> None:
-    """Final Hausdorff distance per seed, tactile-only and every other mode side by side, a line per seed."""
+def figure_paired(rows: list[dict], path: Path, key: str = "final_hausdorff_m"):
+    """Final Hausdorff distance per seed, tactile-only and every other mode side by side, a line per seed; each
+    panel has its own labelled log axis.
+
+    Returns:
+        the ``matplotlib.figure.Figure`` (already written to ``path``).
+    """
     plt = _plt()
     objects = sorted({r["object"] for r in rows})
     modes = ["tactile"] + sorted({r["mode"] for r in rows} - {"tactile"})
@@ -127,9 +149,11 @@ def figure_paired(rows: list[dict], path: Path, key: str = "final_hausdorff_m") 
                 ax.plot([j - 0.2, j + 0.2], [np.median(vals)] * 2, color=COLORS.get(m, "k"), lw=3)
         ax.set_xticks(range(len(modes)), [m.replace("visual-tactile", "VT").replace("tactile", "T") for m in modes],
                       fontsize=7)
-        ax.set(title=f"object {obj}", ylabel="final Hausdorff distance [cm]" if obj == objects[0] else None)
-        ax.set_yscale("log")
+        ax.set(title=f"object {obj}", ylabel="final Hausdorff distance [cm]")
+        log_axis(ax)
+        ax.tick_params(labelsize=7)
     fig.suptitle("final Hausdorff distance per seed (grey: one seed across modes; bar: median)", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+    return fig
