@@ -48,7 +48,8 @@ def _simulate3d(args: argparse.Namespace) -> int:
 def _study(args: argparse.Namespace) -> int:
     from .studies.sweep import run_sweep
 
-    result = run_sweep(world=args.world, objects=args.objects.split(","), modes=args.modes.split(","),
+    objects = None if args.objects is None else args.objects.split(",")
+    result = run_sweep(world=args.world, objects=objects, modes=args.modes.split(","),
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force)
@@ -249,7 +250,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "summary.json/md (medians, 95 % intervals, paired VT - T with Wilcoxon p-values, "
                                     "the paper's claims judged with stated rules) and figures with bands.")
     sw.add_argument("--world", default="2d", choices=["2d", "3d", "mujoco"], help="which world")
-    sw.add_argument("--objects", default="A,B,C,D", help="comma-separated object names")
+    sw.add_argument("--objects", default=None,
+                    help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D)")
     sw.add_argument("--modes", default="visual-tactile,tactile",
                     help="comma-separated: visual-tactile, tactile, visual-tactile+taps, local, local+taps")
     sw.add_argument("--seeds", type=_positive_int, default=10,

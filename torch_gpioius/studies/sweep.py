@@ -609,15 +609,33 @@ def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile
     return result
 
 
+class _DropMessage:
+    """A logging filter that drops records whose message starts with ``prefix``."""
+
+    def __init__(self, prefix: str) -> None:
+        self.prefix = prefix
+
+    def filter(self, record) -> bool:
+        return not record.getMessage().startswith(self.prefix)
+
+
+def _quiet_ray_auth_banner() -> None:
+    """Drop the notice a new local Ray cluster logs on every start ("Token authentication is enabled for this Ray
+    cluster. Set RAY_AUTH_MODE=disabled to opt out ..."). Ray's behaviour is left as it is (token authentication
+    stays on by default); only that one message is not printed. Setting ``RAY_AUTH_MODE`` instead would have to
+    happen before Ray is imported, or its cached settings disagree with the cluster it starts."""
+    import logging
+
+    log = logging.getLogger("ray._private.authentication.authentication_token_setup")
+    if not any(isinstance(f, _DropMessage) for f in log.filters):
+        log.addFilter(_DropMessage("Token authentication is enabled for this Ray cluster"))
+
+
 def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, bar) -> None:
     import ray
 
     started_here = not ray.is_initialized()
-    set_auth = started_here and not address and "RAY_AUTH_MODE" not in os.environ
-    if set_auth:
-        # A new local Ray cluster turns token authentication on by itself and prints a banner saying so whenever the
-        # mode is unset; asking for that same mode explicitly keeps the cluster secured and the output clean.
-        os.environ["RAY_AUTH_MODE"] = "token"
+    _quiet_ray_auth_banner()
     if started_here:
         kw = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
                   runtime_env={"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}})
@@ -638,5 +656,3 @@ def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, 
     finally:
         if started_here:
             ray.shutdown()
-        if set_auth:
-            os.environ.pop("RAY_AUTH_MODE", None)
