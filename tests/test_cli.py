@@ -86,3 +86,19 @@ def test_replay_labels_what_is_missing_by_its_cause(tmp_path, monkeypatch):
     assert np.isfinite(rows[-1]["uncertainty"])                     # 3-D uncertainty is computed too
     joined = " ".join(texts)
     assert "tactile" not in joined and "no known true shape" in joined
+
+
+def test_study_defaults_to_the_worlds_own_objects(monkeypatch, tmp_path):
+    """`gpioius study --world mujoco` failed: the default --objects were the 2-D A-D."""
+    import torch_gpioius.studies.sweep as sweep
+
+    seen = {}
+
+    def fake(**kw):
+        seen.update(kw)
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(sweep, "run_sweep", fake)
+    assert main(["study", "--world", "mujoco", "--smoke", "--out", str(tmp_path / "s")]) == 2
+    assert seen["objects"] is None and seen["world"] == "mujoco"
+    assert sweep.DEFAULT_OBJECTS["mujoco"] == ("E", "F", "G", "H")

@@ -74,9 +74,10 @@ def uncertainty_measure(model, surface: Shape, task: int = 0, spacing: float = 0
 
 
 def prior_variance(model, task: int = 0) -> float:
-    """Prior variance of F_task at any point: ``K_t[task, task] / theta`` (``1 / theta`` for GPIS)."""
+    """Prior variance of F_task at any point: ``k(x, x) K_t[task, task]`` (``k(x, x)`` for GPIS; ``1 / theta`` for the
+    inverse multiquadric)."""
     scale = 1.0 if getattr(model, "num_tasks", 1) == 1 else float(model.task_covariance[task, task])
-    return scale / model.theta
+    return model.covar_module.prior_variance(scale)
 
 
 def _weighted_points(surface: Shape, spacing: float) -> tuple[np.ndarray, np.ndarray]:

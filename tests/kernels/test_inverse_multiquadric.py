@@ -43,3 +43,11 @@ def test_bad_theta():
     import pytest
     with pytest.raises(ValueError, match="theta"):
         InverseMultiquadricKernel(theta=-1.0)
+
+
+from tests.kernels.contract import KernelContract  # noqa: E402
+
+
+class TestContract(KernelContract):
+    def make(self):
+        return InverseMultiquadricKernel(theta=0.12)

@@ -8,7 +8,8 @@ Notation (paper eq. 9-16): the Gram matrix of the data is
 
     G = K_x ∘ B[t_i, t_j] + sigma^2 I,
 
-with ``K_x`` the IMQ kernel matrix (eq. 5), ``B = K_t`` the 2x2 task covariance (eq. 10; ``B = [[1]]`` for the
+with ``K_x`` the kernel matrix (the inverse multiquadric of eq. 5 by default; any
+:class:`~torch_gpioius.kernels.ExactKernel`), ``B = K_t`` the 2x2 task covariance (eq. 10; ``B = [[1]]`` for the
 single-task GPIS), and residuals ``r = y - m`` with prior mean ``m = 1`` (eq. 2).
 """
 
@@ -19,10 +20,11 @@ import math
 import torch
 from torch import Tensor
 
-from ..kernels import imq
+from ..kernels import ExactKernel, InverseMultiquadricKernel
 from ..tolerances import tol
 
-__all__ = ["DenseExactInference", "JitterWarning", "NotPositiveDefiniteError", "robust_cholesky"]
+__all__ = ["DenseExactInference", "JitterWarning", "NotPositiveDefiniteError", "robust_cholesky", "bordered",
+           "engine_kernel"]
 
 
 class JitterWarning(RuntimeWarning):
@@ -71,6 +73,18 @@ def robust_cholesky(a: Tensor, what: str = "Gram matrix") -> tuple[Tensor, float
         "task covariance")
 
 
+def engine_kernel(kernel, theta: float | None = None) -> ExactKernel:
+    """The kernel object of an engine: an :class:`ExactKernel`, or the inverse multiquadric with ``theta`` [m] (given
+    as ``theta=`` or as a float in the kernel's place)."""
+    if kernel is None and theta is not None:
+        kernel = theta
+    if isinstance(kernel, ExactKernel):
+        return kernel
+    if isinstance(kernel, bool) or not isinstance(kernel, (int, float)):
+        raise TypeError(f"kernel: expected an ExactKernel or a theta [m], got {type(kernel).__name__}")
+    return InverseMultiquadricKernel(float(kernel))
+
+
 def bordered(k: Tensor, k_new_old: Tensor, k_new_new: Tensor) -> Tensor:
     """Symmetric kernel matrix `(n + k, n + k)` grown by new rows `(k, n)` and the new block `(k, k)`."""
     return torch.cat([torch.cat([k, k_new_old.T], dim=1), torch.cat([k_new_old, k_new_new], dim=1)], dim=0)
@@ -83,27 +97,29 @@ class DenseExactInference:
         x: `(n, d)` training points [m].
         y: `(n,)` labels, 0 on a surface, 1 in free space.
         task: `(n,)` long task ids (0 inner, 1 outer; all 0 for GPIS).
-        theta: IMQ parameter theta_x [m].
+        kernel: the :class:`~torch_gpioius.kernels.ExactKernel` (or a float: theta [m] of the inverse multiquadric).
         noise: noise variance sigma^2 on the whole diagonal (eq. 12).
         mean: constant prior mean m (eq. 2).
+        theta: the inverse multiquadric's theta [m], when no ``kernel`` is given.
     """
 
-    def __init__(self, x: Tensor, y: Tensor, task: Tensor, theta: float, noise: float, mean: float = 1.0):
-        self.theta = float(theta)
+    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel=None, noise: float = 0.006, mean: float = 1.0, *,
+                 theta: float | None = None):
+        self.kernel = engine_kernel(kernel, theta)
         self.noise = float(noise)
         self.mean = float(mean)
         self.x = x.detach()
         self.y = y.detach()
         self.task = task.detach()
-        self.kx = imq(self.x, self.x, self.theta)
+        self.kx = self.kernel.value(self.x, self.x)
         self._invalidate()
 
     # ------------------------------------------------------------------ data
     def append(self, x: Tensor, y: Tensor, task: Tensor) -> None:
         """Append observations, extending the cached kernel matrix by the new rows only (O(n k))."""
         x, y, task = x.detach(), y.detach(), task.detach()
-        k_new_old = imq(x, self.x, self.theta)
-        k_new_new = imq(x, x, self.theta)
+        k_new_old = self.kernel.value(x, self.x)
+        k_new_new = self.kernel.value(x, x)
         self.kx = bordered(self.kx, k_new_old, k_new_new)
         self.x = torch.cat([self.x, x])
         self.y = torch.cat([self.y, y])
@@ -178,9 +194,9 @@ class DenseExactInference:
             parts = [self.predict(xq[i:i + chunk], task, b, chunk) for i in range(0, xq.shape[0], chunk)]
             return torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
         gi = self.gram_inverse(b)
-        kq = imq(xq, self.x, self.theta) * b[task][self.task]
+        kq = self.kernel.value(xq, self.x) * b[task][self.task]
         mean = self.mean + kq @ alpha
-        prior = b[task, task] / self.theta
+        prior = self.kernel.prior_variance(b[task, task])
         var = prior - ((kq @ gi) * kq).sum(-1)
         return mean, var.clamp_min(0.0)
 

@@ -39,11 +39,10 @@ import math
 import torch
 from torch import Tensor
 
-from ..kernels import imq
-from .dense import robust_cholesky
+from .dense import engine_kernel, robust_cholesky
 from .structured import StructuredExactInference
 
-__all__ = ["region_weights", "LocalDenseInference", "LocalStructuredInference"]
+__all__ = ["region_weights", "loadings", "LocalDenseInference", "LocalStructuredInference"]
 
 
 def region_weights(x: Tensor, centres: Tensor, tau: float) -> Tensor:
@@ -52,7 +51,7 @@ def region_weights(x: Tensor, centres: Tensor, tau: float) -> Tensor:
     return torch.softmax(-d2 / (2.0 * tau * tau), dim=-1)
 
 
-def _loadings(task: Tensor, wts: Tensor, p: Tensor) -> tuple[Tensor, Tensor]:
+def loadings(task: Tensor, wts: Tensor, p: Tensor) -> tuple[Tensor, Tensor]:
     """`(n,)` loadings on F_out (lambda) and on H (eta) of observations with tasks ``task`` and weights ``wts``."""
     beta = wts @ p[2:]
     inner = task == 0
@@ -65,16 +64,18 @@ class LocalDenseInference:
     """The dense reference engine of the local model: one Cholesky of the full Gram matrix (see the module docs).
 
     Args:
-        x: `(n, d)` points; y: `(n,)` labels; task: `(n,)` ids; theta, noise, mean: as GPIOIS.
+        x: `(n, d)` points; y: `(n,)` labels; task: `(n,)` ids; kernel, noise, mean: as GPIOIS (a float kernel is
+            the inverse multiquadric's theta).
         centres: `(R, d)` region centres [m]; tau: smoothing length [m].
     """
 
-    def __init__(self, x: Tensor, y: Tensor, task: Tensor, theta: float, noise: float, mean: float,
+    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel, noise: float, mean: float,
                  centres: Tensor, tau: float) -> None:
-        self.theta, self.noise, self.mean, self.tau = float(theta), float(noise), float(mean), float(tau)
+        self.kernel = engine_kernel(kernel, None)
+        self.noise, self.mean, self.tau = float(noise), float(mean), float(tau)
         self.x, self.y, self.task = x.detach(), y.detach(), task.detach()
         self.centres = centres.detach().to(self.x)
-        self.kx = imq(self.x, self.x, self.theta)
+        self.kx = self.kernel.value(self.x, self.x)
         self.wts = region_weights(self.x, self.centres, self.tau)
         self._key = None
 
@@ -86,7 +87,7 @@ class LocalDenseInference:
         from .dense import bordered
 
         x, y, task = x.detach(), y.detach(), task.detach()
-        self.kx = bordered(self.kx, imq(x, self.x, self.theta), imq(x, x, self.theta))
+        self.kx = bordered(self.kx, self.kernel.value(x, self.x), self.kernel.value(x, x))
         self.x, self.y, self.task = torch.cat([self.x, x]), torch.cat([self.y, y]), torch.cat([self.task, task])
         self.wts = torch.cat([self.wts, region_weights(x, self.centres, self.tau)])
         self._key = None
@@ -99,7 +100,7 @@ class LocalDenseInference:
         return True
 
     def gram(self, p: Tensor) -> Tensor:
-        lam, eta = _loadings(self.task, self.wts, p)
+        lam, eta = loadings(self.task, self.wts, p)
         g = self.kx * (p[1] * torch.outer(lam, lam) + p[0] * torch.outer(eta, eta))
         g.diagonal().add_(self.noise)
         return g
@@ -118,16 +119,16 @@ class LocalDenseInference:
         p = p.detach()
         if self._gi is None:
             self._gi = torch.cholesky_inverse(self._chol)
-        lam, eta = _loadings(self.task, self.wts, p)
+        lam, eta = loadings(self.task, self.wts, p)
         if task == 0:
             lq = region_weights(xq, self.centres, self.tau) @ p[2:]
             eq = torch.ones_like(lq)
         else:
             lq = torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device)
             eq = torch.zeros_like(lq)
-        kq = imq(xq, self.x, self.theta) * (p[1] * lq.unsqueeze(1) * lam + p[0] * eq.unsqueeze(1) * eta)
+        kq = self.kernel.value(xq, self.x) * (p[1] * lq.unsqueeze(1) * lam + p[0] * eq.unsqueeze(1) * eta)
         mean = self.mean + kq @ alpha
-        prior = (p[1] * lq * lq + p[0] * eq * eq) / self.theta
+        prior = self.kernel.prior_variance(p[1] * lq * lq + p[0] * eq * eq)
         var = prior - ((kq @ self._gi) * kq).sum(-1)
         return mean, var.clamp_min(0.0)
 
@@ -144,7 +145,7 @@ class LocalDenseInference:
         if self._gi is None:
             self._gi = torch.cholesky_inverse(self._chol)
         w = self._gi
-        lam, eta = _loadings(self.task, self.wts, p)
+        lam, eta = loadings(self.task, self.wts, p)
         inner = (self.task == 0).to(lam.dtype)
         dl = self.wts * inner.unsqueeze(1)                                    # d lambda / d beta_r, (n, R)
         kx, c = self.kx, float(p[1])
@@ -173,9 +174,9 @@ class LocalStructuredInference(StructuredExactInference):
     """The structured exact engine of the local model (see the module docstring): the rotation, the inner rows and
     the Chebyshev store of :class:`StructuredExactInference`, with the region loadings of the inner points."""
 
-    def __init__(self, x: Tensor, y: Tensor, task: Tensor, theta: float, noise: float, mean: float,
+    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel, noise: float, mean: float,
                  centres: Tensor, tau: float) -> None:
-        super().__init__(x, y, task, theta, noise, mean)
+        super().__init__(x, y, task, kernel, noise, mean)
         self.centres, self.tau = centres.detach().to(self.xo), float(tau)
         self.wi = region_weights(self.xi, self.centres, self.tau)            # (N_i, R)
 
@@ -185,7 +186,7 @@ class LocalStructuredInference(StructuredExactInference):
             ys = torch.cat([self.yi, self.yo, y.detach()])
             ts = torch.cat([torch.zeros(len(self.xi), dtype=torch.long, device=x.device),
                             torch.ones(len(self.xo), dtype=torch.long, device=x.device), task.detach()])
-            self.__init__(xs, ys, ts, self.theta, self.noise, self.mean, self.centres, self.tau)
+            self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean, self.centres, self.tau)
             return
         super().append(x, y, task)
         self.wi = torch.cat([self.wi, region_weights(x.detach(), self.centres, self.tau)])
@@ -251,13 +252,13 @@ class LocalStructuredInference(StructuredExactInference):
         else:
             lq = torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device)
             eq = 0.0
-        k_o = imq(xq, self.xo, self.theta)
+        k_o = self.kernel.value(xq, self.xo)
         w = k_o @ self.u                                       # (m, N_o)
         mean = self.mean + c * lq * (w @ self._alpha_rot(f))
         quad = (c * lq) ** 2 * (w * w * f["d"]).sum(-1)
-        prior = (c * lq * lq + a1 * eq) / self.theta
+        prior = self.kernel.prior_variance(c * lq * lq + a1 * eq)
         if self.n_inner:
-            k_i = imq(xq, self.xi, self.theta)
+            k_i = self.kernel.value(xq, self.xi)
             beta_i = f["beta_i"]
             cross = c * lq.unsqueeze(1) * beta_i + a1 * eq               # (m, N_i) kernel scales query-inner
             mean = mean + (cross * k_i) @ f["alpha_i"]

@@ -47,8 +47,7 @@ import math
 import torch
 from torch import Tensor
 
-from .dense import bordered, robust_cholesky
-from ..kernels import imq
+from .dense import bordered, engine_kernel, robust_cholesky
 from ..tolerances import tol
 
 __all__ = ["StructuredExactInference"]
@@ -140,13 +139,10 @@ def _tril(n: int, device) -> tuple[Tensor, Tensor]:
     return idx[0], idx[1]
 
 
-def _kernel_rows(xq: Tensor, x_train: Tensor, theta: float) -> Tensor:
-    """`(1 + d, m, n)`: IMQ kernel values ``k(xq_i, x_j)`` and their derivatives ``-(xq_i - x_j) k^3`` in each
-    coordinate of the query point."""
-    k = imq(xq, x_train, theta)
-    diff = xq.unsqueeze(1) - x_train.unsqueeze(0)                                  # (m, n, d)
-    dk = -(diff * (k * k * k).unsqueeze(-1)).permute(2, 0, 1)                      # (d, m, n)
-    return torch.cat([k.unsqueeze(0), dk])
+def _kernel_rows(xq: Tensor, x_train: Tensor, kernel) -> Tensor:
+    """`(1 + d, m, n)`: kernel values ``k(xq_i, x_j)`` and their derivatives in each coordinate of the query point."""
+    k = kernel.value(xq, x_train)
+    return torch.cat([k.unsqueeze(0), kernel.gradient(xq, x_train, k)])
 
 
 class _Rows:
@@ -312,13 +308,15 @@ class StructuredExactInference:
         x: `(n, d)` training points [m] (any order of tasks).
         y: `(n,)` labels.
         task: `(n,)` task ids; at least one outer (1) point.
-        theta: IMQ parameter [m].
+        kernel: the :class:`~torch_gpioius.kernels.ExactKernel` (or a float: theta [m] of the inverse multiquadric).
         noise: sigma^2 > 0.
         mean: prior mean m.
     """
 
-    def __init__(self, x: Tensor, y: Tensor, task: Tensor, theta: float, noise: float, mean: float = 1.0):
-        self.theta, self.noise, self.mean = float(theta), float(noise), float(mean)
+    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel=None, noise: float = 0.006, mean: float = 1.0, *,
+                 theta: float | None = None):
+        self.kernel = engine_kernel(kernel, theta)
+        self.noise, self.mean = float(noise), float(mean)
         x, y, task = x.detach(), y.detach(), task.detach()
         inner, outer = task == 0, task == 1
         if not bool(outer.any()):
@@ -327,11 +325,11 @@ class StructuredExactInference:
         self.xi, self.yi = x[inner], y[inner]
         kind = dict(dtype=x.dtype, device=x.device)
         self._kind = kind
-        lam, self.u = torch.linalg.eigh(imq(self.xo, self.xo, self.theta))
+        lam, self.u = torch.linalg.eigh(self.kernel.value(self.xo, self.xo))
         self.lam = lam.clamp_min(0.0)  # K_oo is PSD; clamp rounding below zero
         self.rt = self.u.T @ (self.yo - self.mean)
-        self.kii = imq(self.xi, self.xi, self.theta)
-        self._p = _Rows(imq(self.xi, self.xo, self.theta) @ self.u if len(self.xi)
+        self.kii = self.kernel.value(self.xi, self.xi)
+        self._p = _Rows(self.kernel.value(self.xi, self.xo) @ self.u if len(self.xi)
                         else torch.zeros(0, len(self.xo), **kind))
         self._series = None  # _ChebyshevStore of the current window of K_t[1,1]
         self._rotated = None  # (contacts, (1 + d, k, N_o) rotated kernel rows and x-derivatives) of the last append
@@ -364,15 +362,16 @@ class StructuredExactInference:
             ys = torch.cat([self.yi, self.yo, y])
             ts = torch.cat([torch.zeros(len(self.xi), dtype=torch.long, device=x.device),
                             torch.ones(len(self.xo), dtype=torch.long, device=x.device), task])
-            self.__init__(xs, ys, ts, self.theta, self.noise, self.mean)
+            self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean)
             return
-        self.kii = bordered(self.kii, imq(x, self.xi, self.theta), imq(x, x, self.theta))
+        self.kii = bordered(self.kii, self.kernel.value(x, self.xi), self.kernel.value(x, x))
         # The rows of P and, from the same pass over U, the rotated kernel x-derivatives at the new surface
         # contacts (y = 0): the planner plans from the contact just added, and U (N_o^2 doubles) is the largest
         # thing read per step. Free-space points get no derivative rows.
         dim, n_o = x.shape[1], len(self.xo)
         contacts = x[y == 0]
-        rows = torch.cat([imq(x, self.xo, self.theta), _kernel_rows(contacts, self.xo, self.theta)[1:].reshape(-1, n_o)])
+        rows = torch.cat([self.kernel.value(x, self.xo),
+                          _kernel_rows(contacts, self.xo, self.kernel)[1:].reshape(-1, n_o)])
         rotated = rows @ self.u
         p_new = rotated[:len(x)]
         self._rotated = (contacts, torch.cat([rotated[:len(x)][y == 0].unsqueeze(0),
@@ -467,17 +466,17 @@ class StructuredExactInference:
             parts = [self.predict(xq[i:i + chunk], task, b, chunk) for i in range(0, xq.shape[0], chunk)]
             return torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
         b0, b1, beta = b[task, 0], b[task, 1], f["beta"]
-        k_o = imq(xq, self.xo, self.theta)
+        k_o = self.kernel.value(xq, self.xo)
         w = k_o @ self.u                                  # (m, N_o) rotated outer kernel vectors
         mean = self.mean + b1 * (w @ self._alpha_rot(f))
         quad = b1 * b1 * (w * w * f["d"]).sum(-1)
         if self.n_inner:
-            k_i = imq(xq, self.xi, self.theta)
+            k_i = self.kernel.value(xq, self.xi)
             mean = mean + b0 * (k_i @ f["alpha_i"])
             z = b0 * k_i - beta * b1 * ((w * f["d"]) @ self.p.T)   # (m, N_i)
             y = torch.linalg.solve_triangular(f["chol"], z.T, upper=False)
             quad = quad + (y * y).sum(0)
-        var = b[task, task] / self.theta - quad
+        var = self.kernel.prior_variance(b[task, task]) - quad
         return mean, var.clamp_min(0.0)
 
     def predict_with_gradients(self, xq: Tensor, task: int, b: Tensor,
@@ -511,7 +510,7 @@ class StructuredExactInference:
             if bool(hit.any(1).all()):
                 w_all = rotated[:, hit.to(torch.int8).argmax(1)]
         if w_all is None:
-            w_all = (_kernel_rows(xq, self.xo, self.theta).reshape(-1, len(self.xo)) @ self.u).view(1 + dim, m, -1)
+            w_all = (_kernel_rows(xq, self.xo, self.kernel).reshape(-1, len(self.xo)) @ self.u).view(1 + dim, m, -1)
         w, dw = w_all[0], w_all[1:]
         d = f["d"]
         alpha_rot = self._alpha_rot(f)
@@ -520,7 +519,7 @@ class StructuredExactInference:
         quad = b1 * b1 * (w * w * d).sum(-1)
         g_quad = 2 * b1 * b1 * (dw * (w * d)).sum(-1)
         if self.n_inner:
-            k_all = _kernel_rows(xq, self.xi, self.theta)                    # (1 + d, m, N_i)
+            k_all = _kernel_rows(xq, self.xi, self.kernel)                   # (1 + d, m, N_i)
             mean = mean + b0 * (k_all[0] @ f["alpha_i"])
             g_mean = g_mean + b0 * (k_all[1:] @ f["alpha_i"])
             z_all = b0 * k_all - beta * b1 * ((w_all * d) @ self.p.T)        # (1 + d, m, N_i)
@@ -528,7 +527,7 @@ class StructuredExactInference:
             y = y.T.reshape(1 + dim, m, -1)
             quad = quad + (y[0] * y[0]).sum(-1)
             g_quad = g_quad + 2 * (y[1:] * y[0]).sum(-1)
-        var = b[task, task] / self.theta - quad
+        var = self.kernel.prior_variance(b[task, task]) - quad
         g_var = torch.where(var > 0, -g_quad, torch.zeros_like(g_quad))
         return mean, var.clamp_min(0.0), g_mean.T.contiguous(), g_var.T.contiguous()
 

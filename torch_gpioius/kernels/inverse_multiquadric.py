@@ -1,14 +1,14 @@
-"""Inverse multiquadric kernel, eq. (5) of the paper."""
+"""Inverse multiquadric kernel, eq. (5) of the paper: the default kernel of every model."""
 
 from __future__ import annotations
 
 import torch
 from gpytorch.constraints import Interval, Positive
-from gpytorch.kernels import Kernel
 from torch import Tensor
 
-from ._validation import as_float
-from .tolerances import tol
+from .._validation import as_float
+from ..tolerances import tol
+from .base import ExactKernel
 
 __all__ = ["InverseMultiquadricKernel", "imq"]
 
@@ -37,7 +37,7 @@ def imq(x1: Tensor, x2: Tensor, theta: Tensor | float, diag: bool = False) -> Te
     return (dist.pow(2) + theta**2).rsqrt()
 
 
-class InverseMultiquadricKernel(Kernel):
+class InverseMultiquadricKernel(ExactKernel):
     r"""Inverse multiquadric (IMQ) kernel of eq. (5), a ``gpytorch.kernels.Kernel``.
 
     .. math::
@@ -61,6 +61,8 @@ class InverseMultiquadricKernel(Kernel):
 
     has_lengthscale = False
     is_stationary = True
+    #: The name :meth:`describe` gives (and :func:`torch_gpioius.kernels.from_description` reads).
+    kind = "InverseMultiquadric"
 
     def __init__(self, theta: float = 0.1, learn_theta: bool = False, theta_constraint: Interval | None = None,
                  **kwargs):
@@ -86,6 +88,31 @@ class InverseMultiquadricKernel(Kernel):
         if not bool(torch.isfinite(value).all()) or not bool(((value >= lo) & (value <= hi)).all()):
             raise ValueError(f"theta: must be finite within [{lo:g}, {hi:g}] m, got {value.flatten()[:4].tolist()}")
         self.initialize(raw_theta=self.raw_theta_constraint.inverse_transform(value.expand_as(self.raw_theta)))
+
+    def _theta(self) -> float:
+        """theta as a Python float (the exact engines take the parameters as constants)."""
+        return float(self.theta.detach().reshape(-1)[0])
+
+    def value(self, x1: Tensor, x2: Tensor) -> Tensor:
+        """`(n, m)` values ``(|a - b|^2 + theta^2)^(-1/2)`` [1/m], differentiable in the points."""
+        return imq(x1, x2, self._theta())
+
+    def gradient(self, x1: Tensor, x2: Tensor, value: Tensor | None = None) -> Tensor:
+        """`(d, n, m)`: ``dk/da = -(a - b) k^3``."""
+        k = self.value(x1, x2) if value is None else value
+        diff = x1.unsqueeze(1) - x2.unsqueeze(0)                                       # (n, m, d)
+        return -(diff * (k * k * k).unsqueeze(-1)).permute(2, 0, 1)
+
+    def prior_variance(self, scale: float | Tensor = 1.0):
+        """``k(x, x) * scale = scale / theta``."""
+        return scale / self._theta()
+
+    def second_derivative_at_zero(self) -> float:
+        """``kappa''(0) = -1 / theta^3`` for ``kappa(r) = (r^2 + theta^2)^(-1/2)``."""
+        return -1.0 / self._theta() ** 3
+
+    def describe(self) -> dict:
+        return {"kernel": self.kind, "theta": self._theta()}
 
     def forward(self, x1: Tensor, x2: Tensor, diag: bool = False, last_dim_is_batch: bool = False,
                 **params) -> Tensor:

@@ -11,7 +11,7 @@ from torch import Tensor
 
 from .._validation import as_float, as_points, task_id
 from ..inference.dense import DenseExactInference
-from ..kernels import InverseMultiquadricKernel
+from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
 from ..settings import exact_arithmetic
 from ..tolerances import tol
 
@@ -31,28 +31,40 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
     """Base class: an ``ExactGP`` with constant prior mean fixed at ``m = 1`` and fixed noise (eq. 1-3).
 
     Subclasses define ``forward`` and the task structure; this class owns the exact inference engine
-    (``DenseExactInference``), keeps it in step with the data and hyper-parameters, and validates input.
+    (``DenseExactInference``), keeps it in step with the data and hyper-parameters, and validates input. The kernel
+    is ``covar_module`` (an :class:`~torch_gpioius.kernels.ExactKernel`; the paper's inverse multiquadric with
+    ``theta`` unless ``kernel`` is given).
     """
 
     #: Number of tasks of the model (1 for GPIS, 2 for GPIOIS).
     num_tasks: int = 1
 
-    def __init__(self, train_inputs: tuple[Tensor, ...], train_y: Tensor, theta: float, noise: float,
-                 learn_theta: bool = False):
+    def __init__(self, train_inputs: tuple[Tensor, ...], train_y: Tensor, theta: float | None, noise: float,
+                 learn_theta: bool = False, kernel: ExactKernel | None = None):
         likelihood = _fixed_likelihood(noise)
+        if kernel is None:
+            kernel = InverseMultiquadricKernel(0.1 if theta is None else theta, learn_theta=learn_theta)
+        kernel = as_kernel(kernel, theta)
         super().__init__(train_inputs, train_y, likelihood)
         self.mean_module = ConstantMean().double()
         self.mean_module.constant.data.fill_(1.0)
         self.mean_module.constant.requires_grad_(False)
-        self.covar_module = InverseMultiquadricKernel(theta, learn_theta=learn_theta).double()
+        self.covar_module = kernel.double()
         self._engine: DenseExactInference | None = None
         self._engine_key: tuple | None = None
 
     # ------------------------------------------------------------------ properties
     @property
-    def theta(self) -> float:
-        """IMQ kernel parameter theta_x [m]."""
-        return float(self.covar_module.theta.detach().reshape(-1)[0])
+    def kernel(self) -> ExactKernel:
+        """The kernel (``covar_module``)."""
+        return self.covar_module
+
+    @property
+    def theta(self) -> float | None:
+        """The inverse multiquadric's theta_x [m] (eq. 5); None for another kernel (see :attr:`kernel`)."""
+        if isinstance(self.covar_module, InverseMultiquadricKernel):
+            return float(self.covar_module.theta.detach().reshape(-1)[0])
+        return None
 
     @property
     def noise(self) -> float:
@@ -90,15 +102,15 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
     def _key(self, n: int) -> tuple:
         """What an engine built for n observations depends on: hyper-parameters, size, dtype and device."""
         x = self.train_inputs[0]
-        return (self.theta, self.noise, self.prior_mean, n, x.dtype, x.device)
+        return (tuple(self.covar_module.describe().items()), self.noise, self.prior_mean, n, x.dtype, x.device)
 
     def _inference(self):
         """The exact engine for the current data and hyper-parameters (rebuilt only when they change)."""
         x = self.train_inputs[0]
         key = self._key(x.shape[0])
         if self._engine is None or self._engine_key != key:
-            self._engine = self._engine_class()(x, self.train_targets, self._train_task(), self.theta, self.noise,
-                                                self.prior_mean)
+            self._engine = self._engine_class()(x, self.train_targets, self._train_task(), self.covar_module,
+                                                self.noise, self.prior_mean)
             self._engine_key = key
         return self._engine
 
@@ -132,7 +144,8 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
                 continue
             if torch.is_tensor(value) and value.is_floating_point() and not bool(torch.isfinite(value).all()):
                 raise ValueError(f"{name}: contains NaN or inf")
-        as_float(self.theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        if self.theta is not None:
+            as_float(self.theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
         as_float(self.noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
         if self.prior_mean != 1.0:
             raise ValueError(f"prior mean: must be m = 1 (eq. 2; free space is labelled 1), got {self.prior_mean}")

@@ -48,7 +48,7 @@ class GPIOIS(ImplicitSurfaceGP):
         train_x: `(n, d)` observed points [m], base frame.
         train_y: `(n,)` labels, 0 on a surface (touched or seen), 1 in free space.
         train_task: `(n,)` task ids, 0 inner (tactile), 1 outer (visual).
-        theta: IMQ kernel parameter theta_x [m].
+        theta: IMQ kernel parameter theta_x [m] (eq. 5; ignored when ``kernel`` is given).
         noise: noise variance sigma^2.
         task_covariance: `(2, 2)` initial K_t (default identity: no assumed relation between the shapes).
         learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
@@ -56,6 +56,8 @@ class GPIOIS(ImplicitSurfaceGP):
             Cholesky of the full Gram matrix, the reference), "structured" (``StructuredExactInference``: fixed
             outer set, inner Schur complement; agrees with dense to ~1e-10, 100x faster at N_o = 2000), or
             "auto" (structured when there are outer points and sigma^2 >= 1e-8, else dense).
+        kernel: any :class:`~torch_gpioius.kernels.ExactKernel` (e.g. ``tg.kernels.Matern52(0.1)``) in place of the
+            inverse multiquadric; both engines stay exact for it.
 
     Raises:
         ValueError: NaN/inf coordinates, empty data, mismatched lengths, labels or task ids outside {0, 1}.
@@ -69,13 +71,14 @@ class GPIOIS(ImplicitSurfaceGP):
     num_tasks = 2
 
     def __init__(self, train_x, train_y, train_task, theta: float = 0.1, noise: float = 0.006,
-                 task_covariance: Tensor | None = None, learn_theta: bool = False, inference: str = "auto"):
+                 task_covariance: Tensor | None = None, learn_theta: bool = False, inference: str = "auto",
+                 kernel=None):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")
         if inference not in ("auto", "dense", "structured"):
             raise ValueError(f"inference: must be 'auto', 'dense' or 'structured', got {inference!r}")
-        super().__init__((x, t.unsqueeze(-1)), y, theta, noise, learn_theta)
+        super().__init__((x, t.unsqueeze(-1)), y, theta, noise, learn_theta, kernel)
         self.inference = inference
         self.task_covar_module = IndexKernel(num_tasks=2, rank=2).double()
         self.task_covar_module.raw_var.data.fill_(_ZERO_VAR_RAW)

@@ -22,9 +22,10 @@ class GPIS(ImplicitSurfaceGP):
     Args:
         train_x: `(n, d)` observed points [m], base frame.
         train_y: `(n,)` labels in {0, 1}.
-        theta: IMQ kernel parameter theta_x [m].
+        theta: IMQ kernel parameter theta_x [m] (eq. 5; ignored when ``kernel`` is given).
         noise: noise variance sigma^2.
         learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
+        kernel: any :class:`~torch_gpioius.kernels.ExactKernel` in place of the inverse multiquadric.
 
     Raises:
         ValueError: NaN/inf coordinates, empty data, wrong shapes, labels outside {0, 1}.
@@ -32,10 +33,11 @@ class GPIS(ImplicitSurfaceGP):
 
     num_tasks = 1
 
-    def __init__(self, train_x, train_y, theta: float = 0.1, noise: float = 0.006, learn_theta: bool = False):
+    def __init__(self, train_x, train_y, theta: float = 0.1, noise: float = 0.006, learn_theta: bool = False,
+                 kernel=None):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
-        super().__init__((x,), y, theta, noise, learn_theta)
+        super().__init__((x,), y, theta, noise, learn_theta, kernel)
 
     def forward(self, x: Tensor) -> MultivariateNormal:
         """GPyTorch prior of F at `(n, d)` points."""

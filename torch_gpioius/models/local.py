@@ -68,6 +68,7 @@ class LocalGPIOIS(ImplicitSurfaceGP):
         centres: `(R, d)` region centres [m] (default: k-means on the outer surface points).
         tau: smoothing length of the memberships [m] (default: from the centres, :func:`kmeans_regions`).
         inference: "structured" (default when there are outer points) or "dense" (the reference).
+        kernel: any :class:`~torch_gpioius.kernels.ExactKernel` in place of the inverse multiquadric.
 
     Raises:
         ValueError: bad data (as GPIOIS), fewer outer surface points than regions, a bad region count.
@@ -76,7 +77,7 @@ class LocalGPIOIS(ImplicitSurfaceGP):
     num_tasks = 2
 
     def __init__(self, train_x, train_y, train_task, regions: int = 4, theta: float = 0.1, noise: float = 0.006,
-                 centres=None, tau: float | None = None, inference: str = "auto"):
+                 centres=None, tau: float | None = None, inference: str = "auto", kernel=None):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")
@@ -84,7 +85,7 @@ class LocalGPIOIS(ImplicitSurfaceGP):
             raise ValueError(f"regions: must be an integer in [1, 64], got {regions!r}")
         if inference not in ("auto", "dense", "structured"):
             raise ValueError(f"inference: must be 'auto', 'dense' or 'structured', got {inference!r}")
-        super().__init__((x, t.unsqueeze(-1)), y, theta, noise)
+        super().__init__((x, t.unsqueeze(-1)), y, theta, noise, kernel=kernel)
         self.inference = inference
         if centres is None:
             seen = x[(t == OUTER) & (y == 0)].numpy()
@@ -118,10 +119,10 @@ class LocalGPIOIS(ImplicitSurfaceGP):
     # ------------------------------------------------------------------ GPyTorch idiom
     def forward(self, x: Tensor, task: Tensor) -> MultivariateNormal:
         """Prior at `(n, d)` points with `(n, 1)` task ids (the loadings of the module docstring)."""
-        from ..inference.local import _loadings
+        from ..inference.local import loadings
 
         p = self.params
-        lam, eta = _loadings(task.reshape(-1), region_weights(x, self.centres.to(x), self.tau), p.to(x))
+        lam, eta = loadings(task.reshape(-1), region_weights(x, self.centres.to(x), self.tau), p.to(x))
         k = self.covar_module(x).to_dense()
         cov = k * (p[1] * torch.outer(lam, lam) + p[0] * torch.outer(eta, eta))
         return MultivariateNormal(self.mean_module(x), cov)
@@ -153,7 +154,7 @@ class LocalGPIOIS(ImplicitSurfaceGP):
         dense = self.inference == "dense" or not has_outer or self.noise < 1e-8
         cls = LocalDenseInference if dense else LocalStructuredInference
         centres, tau = self.centres, self.tau
-        return lambda x, y, task, theta, noise, mean: cls(x, y, task, theta, noise, mean, centres, tau)
+        return lambda x, y, task, kernel, noise, mean: cls(x, y, task, kernel, noise, mean, centres, tau)
 
     def _key(self, n: int) -> tuple:
         return super()._key(n) + (tuple(self.centres.reshape(-1).tolist()), self.tau)

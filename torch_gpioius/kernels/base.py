@@ -1,0 +1,71 @@
+"""What the exact engines need of a kernel: the contract a new kernel implements (:class:`ExactKernel`).
+
+The models keep their kernel as ``covar_module`` (the GPyTorch idiom); the exact engines (dense, structured, local),
+the metrics and the planner's closed-form gradients read it through four methods, all with the kernel's parameters
+taken as constants:
+
+* :meth:`ExactKernel.value` -- ``k(x1_i, x2_j)``, `(n, m)`, differentiable in the points;
+* :meth:`ExactKernel.gradient` -- ``dk(x1_i, x2_j) / dx1_i``, `(d, n, m)`, in closed form (the planner queries it
+  for every step; autograd would need a backward pass per output);
+* :meth:`ExactKernel.prior_variance` -- ``k(x, x)`` times an amplitude (the prior variance of a task);
+* :meth:`ExactKernel.second_derivative_at_zero` -- ``kappa''(0)`` of the radial profile ``k = kappa(|a - b|)``:
+  the variance of a directional derivative of the process, ``-kappa''(0)`` per unit direction (for gradient or
+  normal observations and for checks of smoothness).
+
+Stationarity is part of the contract: ``k(a, b)`` depends on ``a - b`` only (isotropic kernels on ``|a - b|``).
+:meth:`ExactKernel.describe` names the kernel and its parameters for logs, checkpoints and resume, and
+:func:`torch_gpioius.kernels.from_description` rebuilds it. ``tests/kernels/contract.py`` holds the checks every
+kernel must pass (values against ``forward``, gradients against autograd, the second derivative against finite
+differences, positive definite Gram matrices); a new kernel's test file subclasses it.
+"""
+
+from __future__ import annotations
+
+import abc
+
+from gpytorch.kernels import Kernel
+from torch import Tensor
+
+__all__ = ["ExactKernel"]
+
+
+class ExactKernel(Kernel, abc.ABC):
+    """A stationary ``gpytorch.kernels.Kernel`` that the exact engines can use (see the module docstring).
+
+    Subclasses implement :meth:`value`, :meth:`gradient`, :meth:`prior_variance`,
+    :meth:`second_derivative_at_zero` and :meth:`describe`; :meth:`forward` (GPyTorch's entry point) defaults to
+    :meth:`value`, so a subclass whose parameters are fixed need not write it. Registered kernels (the
+    ``@register_kernel`` decorator of :mod:`torch_gpioius.kernels`) can be rebuilt from :meth:`describe`.
+    """
+
+    is_stationary = True
+    has_lengthscale = False
+
+    @abc.abstractmethod
+    def value(self, x1: Tensor, x2: Tensor) -> Tensor:
+        """`(n, m)` kernel values between `(n, d)` and `(m, d)` points [m], parameters as constants."""
+
+    @abc.abstractmethod
+    def gradient(self, x1: Tensor, x2: Tensor, value: Tensor | None = None) -> Tensor:
+        """`(d, n, m)` derivatives ``dk(x1_i, x2_j) / dx1_i`` in closed form; ``value`` (`(n, m)`, from :meth:`value`)
+        may be passed to save its recomputation."""
+
+    @abc.abstractmethod
+    def prior_variance(self, scale: float | Tensor = 1.0):
+        """``k(x, x) * scale``: the prior variance of a process with amplitude ``scale`` (e.g. ``K_t[t, t]``)."""
+
+    @abc.abstractmethod
+    def second_derivative_at_zero(self) -> float:
+        """``kappa''(0)`` of the radial profile ``k(a, b) = kappa(|a - b|)`` [1 / m^2 in the kernel's units]."""
+
+    @abc.abstractmethod
+    def describe(self) -> dict:
+        """JSON-able ``{"kernel": name, **parameters}`` (logs, checkpoints, resume)."""
+
+    def forward(self, x1: Tensor, x2: Tensor, diag: bool = False, last_dim_is_batch: bool = False, **params) -> Tensor:
+        """GPyTorch's entry point: the kernel matrix `(..., n, m)` (or its diagonal with ``diag=True``)."""
+        if last_dim_is_batch:
+            raise NotImplementedError(f"{type(self).__name__}: last_dim_is_batch is not supported")
+        if diag:
+            return self.prior_variance(1.0) * x1.new_ones(x1.shape[:-1])
+        return self.value(x1, x2)
