@@ -45,7 +45,7 @@ def main() -> None:
         wall = time.perf_counter() - t
         n = trace.n_steps - 1
         gp = float(np.sum(trace.step_time[1:]))
-        sim_time = float(trace.sim_time[-1] - trace.sim_time[0]) if hasattr(trace, "sim_time") else float("nan")
+        sim_time = float(trace.robot_time[-1] - trace.robot_time[0])
         print(f"| {name} | {len(scene.cover.vertices)} | {build:.1f} | {rtf:.2f} | {n} | "
               f"{1e3 * float(np.median(trace.step_time[1:])):.0f} | {(wall - gp) / max(n, 1):.2f} | "
               f"{sim_time / max(n, 1):.2f} |", flush=True)

@@ -5,7 +5,7 @@ the bound; the gate never clips a command into a different motion. Limits: joint
 margin), joint speed, a workspace box for the fingertip along the whole joint-space path, the largest joint
 move and the largest Cartesian step.
 
-Every limit is validated where it is set (STYLE.md 15, as a UR controller refuses an invalid safety
+Every limit is validated where it is set (docs/robot.md; as a UR controller refuses an invalid safety
 configuration): a NaN, an infinity, a negative value or a value beyond what the hardware allows raises
 ``ValueError`` at construction *and* on later assignment (``gate.max_joint_speed = nan`` is refused too), so no
 setting can switch a check off.

@@ -42,7 +42,7 @@ def kt_from_chol(phi):
 def richardson_derivative(f, x, h, directions=None):
     """Derivatives of ``f`` at ``x`` by Richardson-extrapolated central differences, with an error estimate.
 
-    A reference has an error of its own (STYLE.md 14): a central difference D(h) errs by ~h^2 f''' (truncation)
+    A reference has an error of its own (docs/architecture.md, "Tests"): a central difference D(h) errs by ~h^2 f''' (truncation)
     plus ~r / h, where r is the rounding noise of one evaluation of f, which for a linear solve is
     cond * eps * |f|, not eps * |f|, and moves with the BLAS blocking (thread count, CPU). The estimate here is
     R(h/2) with R(h) = (4 D(h/2) - D(h)) / 3 (fourth order); its error is estimated as |R(h) - R(h/2)| (the

@@ -5,7 +5,7 @@ import torch
 
 from kinematics import UR5, SimulatedUR5
 from torch_gpioius.contact import ContactConfig, ContactController, ContactFault
-from torch_gpioius.sensors import PenaltyContact, SimulatedForceSensor, SphereSDF
+from torch_gpioius.sensors import ForceFieldContact, SimulatedForceSensor, SphereSDF
 
 Q0 = [0.0, -1.2, 1.5, -1.9, -1.57, 0.0]
 R_IN, R_OUT = 0.10, 0.13
@@ -18,7 +18,7 @@ def setup(faults=None, with_object=True, **sensor_kw):
     center = p0 - torch.tensor([0.0, 0.0, R_OUT + 0.02], dtype=torch.float64)   # sphere 2 cm below the tip
     if not with_object:
         center = center - 1.0
-    world = PenaltyContact(SphereSDF(center, R_IN), SphereSDF(center, R_OUT))
+    world = ForceFieldContact(SphereSDF(center, R_IN), SphereSDF(center, R_OUT))
     sensor = SimulatedForceSensor(world, robot.read_pose, clock=lambda: robot.time, faults=faults, **sensor_kw)
     return robot, sensor, ContactController(robot, sensor), center
 

@@ -1,25 +1,29 @@
 """torch_gpioius: visuo-tactile inner-shape estimation with Gaussian process inner-outer implicit surfaces.
 
-Conventions (DESIGN.md): SI units, float64, ``y = 0`` on a surface and ``y = 1`` in free space, prior mean 1,
+Conventions (docs/theory.md, "Conventions"): SI units, float64, ``y = 0`` on a surface and ``y = 1`` in free space, prior mean 1,
 ``mu < 0`` inside; task 0 is the inner (tactile) shape, task 1 the outer (visual) shape; boxes are ``(2, d)``
 [min corner; max corner].
 
-Layout (the data flow): ``kernels`` -> ``models`` (GPIS, GPIOIS) -> ``inference`` (exact engines, the K_t fit)
--> ``geometry`` / ``surfaces`` / ``metrics`` -> ``planning`` -> ``exploration`` (one loop, behind the robot,
-force-sensor and point-cloud interfaces) <- ``sim`` (the worlds) and ``sensors``; ``io`` (datasets, logs,
-checkpoints, importers), ``studies``, ``cli``.
+Layers, each importing only those before it (docs/architecture.md): ``kernels`` -> ``inference`` (exact engines,
+the K_t fit) -> ``models`` (GPIS, GPIOIS, LocalGPIOIS) -> ``geometry`` / ``surfaces`` / ``metrics`` -> ``planning``
+-> ``sensors`` / ``contact`` -> ``exploration`` (public types, contracts, one loop, the world registry) -> ``sim``
+(the worlds) -> ``io`` (datasets, logs and resume, checkpoints, importers, exports) -> ``session``
+(``tg.explore``: the loop with its log) -> ``studies``, ``viewer``, ``cli``.
 """
 
 from __future__ import annotations
 
 import sys as _sys
+import types as _types
+import warnings as _warnings
 from importlib import import_module as _import_module
 
-__version__ = "0.2.0"
+from ._version import __version__  # noqa: E402
 
-from . import geometry, metrics, planning, sim, surfaces  # noqa: E402
+from . import geometry, kernels, metrics, planning, sim, surfaces  # noqa: E402
 from . import exploration, inference, io, models  # noqa: E402
-from .exploration import ObservationPolicy, RobotWorld, Trace, World, explore  # noqa: E402
+from .exploration import ObservationPolicy, Observations, RobotWorld, Trace, World  # noqa: E402
+from .session import explore  # noqa: E402
 from .inference import (DenseExactInference, JitterWarning, NotPositiveDefiniteError,  # noqa: E402
                         StructuredExactInference)
 from .io import (BagImportError, CheckpointError, Dataset, DatasetError, RunHistory, checkpoints,  # noqa: E402
@@ -34,17 +38,32 @@ from .tolerances import tol  # noqa: E402
 __all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "InverseMultiquadricKernel", "DenseExactInference",
            "StructuredExactInference", "JitterWarning", "NotPositiveDefiniteError", "UnidentifiedSimilarityWarning",
            "exact_arithmetic", "tol", "torch_threads", "__version__", "ObservationPolicy", "Trace", "World",
-           "RobotWorld", "explore", "models", "inference", "exploration", "io", "geometry", "metrics", "planning",
+           "RobotWorld", "Observations", "explore", "kernels", "models", "inference", "exploration", "io", "geometry", "metrics", "planning",
            "surfaces", "sim", "checkpoints", "datasets", "importers", "offline", "Dataset", "DatasetError",
            "CheckpointError", "load_dataset", "save_dataset", "load_checkpoint", "save_checkpoint", "import_bag",
            "BagImportError", "export_run", "load_run", "RunHistory"]
 
-# Module paths of the 0.1 layout keep working (``from torch_gpioius.gpiois import GPIOIS``, ...): each old name
-# points at the module that holds the code now.
-for _old, _new in {"gpiois": models.gpiois, "gpis": models.gpis, "_base": models.base,
-                   "structured": inference.structured, "optim": inference.optim, "datasets": io.datasets,
-                   "checkpoints": io.checkpoints, "importers": io.importers, "offline": io.offline,
-                   "study": _import_module(f"{__name__}.studies.study2d"),
-                   "study3d": _import_module(f"{__name__}.studies.study3d")}.items():
-    _sys.modules.setdefault(f"{__name__}.{_old}", _new)
-del _old, _new, _import_module
+# Module paths of the 0.1 layout keep working with a DeprecationWarning (``from torch_gpioius.gpiois import GPIOIS``):
+# each old path is a stand-in module that warns and forwards every name to the module that holds the code now.
+_MOVED = {"gpiois": "models.gpiois", "gpis": "models.gpis", "_base": "models.base", "structured": "inference.structured",
+          "optim": "inference.optim", "study": "studies.study2d", "study3d": "studies.study3d"}
+
+
+class _MovedModule(_types.ModuleType):
+    def __init__(self, old: str, new: str) -> None:
+        super().__init__(old)
+        self._new = new
+
+    def __getattr__(self, name: str):
+        if name.startswith("__"):
+            raise AttributeError(name)
+        _warnings.warn(f"{self.__name__} is {self._new} now", DeprecationWarning, stacklevel=2)
+        return getattr(_import_module(self._new), name)
+
+
+for _old, _new in _MOVED.items():
+    _sys.modules.setdefault(f"{__name__}.{_old}", _MovedModule(f"{__name__}.{_old}", f"{__name__}.{_new}"))
+# the io modules of 0.1 are also attributes of the package (tg.datasets, ...): their module paths stay the real ones
+for _old in ("datasets", "checkpoints", "importers", "offline"):
+    _sys.modules.setdefault(f"{__name__}.{_old}", getattr(io, _old))
+del _old, _new

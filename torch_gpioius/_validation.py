@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["as_points", "as_labels", "as_tasks", "as_float", "task_id", "TASK_NAMES"]
+__all__ = ["as_points", "as_labels", "as_tasks", "as_float", "as_bounds", "task_id", "TASK_NAMES"]
 
 #: Task names accepted beside the ids: 0 is the inner (tactile) shape, 1 the outer (visual) one.
 TASK_NAMES = {"inner": 0, "outer": 1}
@@ -132,3 +133,26 @@ def as_tasks(task, n: int, name: str = "task", device: torch.device | None = Non
         bad = sorted(set(t[(t != 0) & (t != 1)].tolist()))[:5]
         raise ValueError(f"{name}: task ids must be 0 (inner) or 1 (outer), got {bad}")
     return t.to(dtype=torch.long, device=device)
+
+
+def as_bounds(bounds, dim: int, name: str = "bounds") -> np.ndarray:
+    """Validate a box (boxes as the ecosystem writes them, like trimesh's ``mesh.bounds``) given as `(2, d)` `[min corner; max corner]` [m] and return it as a float64 array.
+
+    Raises:
+        ValueError: wrong shape (a `(d, 2)` box of [min, max] rows is named as such), NaN/inf, or min >= max.
+    """
+    try:
+        b = np.asarray(bounds, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected a (2, {dim}) array [min corner; max corner] [m], got {bounds!r}") from None
+    if b.shape != (2, dim):
+        hint = (" (that is the [min, max]-per-axis layout: pass its transpose, e.g. mesh.bounds or "
+                "np.asarray(b).T)") if b.shape == (dim, 2) else ""
+        raise ValueError(f"{name}: expected shape (2, {dim}) = [min corner; max corner] like trimesh's mesh.bounds, "
+                         f"got {b.shape}{hint}")
+    if not np.isfinite(b).all():
+        raise ValueError(f"{name}: contains NaN or inf")
+    if not (b[1] > b[0]).all():
+        hint = " (an [[min, max] per axis] box? transpose it)" if dim == 2 else ""
+        raise ValueError(f"{name}: the max corner must exceed the min corner on every axis, got {b.tolist()}{hint}")
+    return b

@@ -38,7 +38,7 @@ def _simulate3d(args: argparse.Namespace) -> int:
     objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
     travel = 0.06 if args.smoke else args.max_travel
     result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
-                          progress=not args.quiet, mesh_resolution=0.01 if args.smoke else 0.006,
+                          progress=not args.quiet,
                           smoke=args.smoke, world=args.world)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
@@ -178,6 +178,22 @@ def _view(args: argparse.Namespace) -> int:
     return 0
 
 
+def _world_name(text: str) -> str:
+    """A world's current name from any name it has had ("3d" and "penalty" are "forcefield" now)."""
+    from .exploration.registry import canonical_world_name
+
+    name = canonical_world_name(text)
+    if name != text:
+        print(f"gpioius: note: world {text!r} is called {name!r} now", file=sys.stderr)
+    return name
+
+
+def _study_worlds() -> list[str]:
+    from .exploration.registry import world_names
+
+    return [w for w in world_names() if w != "robot"]
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -204,7 +220,7 @@ def _force(p: argparse.ArgumentParser, what: str) -> None:
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``gpioius`` argument parser (every help text shows its default once)."""
-    from . import __version__
+    from ._version import __version__
 
     fmt = _Formatter
     parser = argparse.ArgumentParser(prog="gpioius", formatter_class=fmt,
@@ -234,8 +250,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "GPIS until 1.5 m of travel. Writes Fig. 9/10-like figures, records, logs and "
                                     "a summary table with the Sec. VI-B claims as measured.")
     s3.add_argument("--object", default="all", choices=["all", "E", "F", "G", "H"], help="object(s) to explore")
-    s3.add_argument("--world", default="penalty", choices=["penalty", "mujoco"],
-                    help="penalty: static force-field cover; mujoco: cloth and foam on MuJoCo's contact physics")
+    s3.add_argument("--world", default="forcefield", type=_world_name, choices=["forcefield", "mujoco"],
+                    help="forcefield: a static force-field cover; mujoco: cloth and foam on MuJoCo's contact physics")
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
     s3.add_argument("--max-travel", type=float, default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
@@ -249,7 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
                                     "installed, else in-process), skip runs already on disk, and write runs.csv, "
                                     "summary.json/md (medians, 95 % intervals, paired VT - T with Wilcoxon p-values, "
                                     "the paper's claims judged with stated rules) and figures with bands.")
-    sw.add_argument("--world", default="2d", choices=["2d", "3d", "mujoco"], help="which world")
+    sw.add_argument("--world", default="planar", type=_world_name, choices=_study_worlds(),
+                    help="which world (planar: 2-D objects A-D; forcefield, mujoco: 3-D objects E-H)")
     sw.add_argument("--objects", default=None,
                     help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D)")
     sw.add_argument("--modes", default="visual-tactile,tactile",

@@ -9,7 +9,9 @@ import torch
 import trimesh
 from skimage import measure
 
+from ._validation import as_bounds
 from .geometry import predict_task
+from .polylines import distance_to_segments, segments
 
 __all__ = ["GridField", "evaluate_grid", "zero_level_curves", "zero_level_mesh", "closed_curves", "touched_pieces",
            "surface_samples", "clip_mesh"]
@@ -55,8 +57,6 @@ def evaluate_grid(model, bounds, resolution: float, task: int = 0) -> GridField:
         ValueError: a bad box, a non-positive resolution, or a grid of more than ``MAX_GRID_POINTS`` nodes.
     """
     from ._validation import as_float
-    from .sim.bounds import as_bounds
-
     b = as_bounds(bounds, model.dim)
     resolution = as_float(resolution, "resolution", positive=True, unit="m")
     counts = [max(2, int(np.ceil((hi - lo) / resolution)) + 1) for lo, hi in b.T]
@@ -131,9 +131,7 @@ def _distances_to_piece(points: np.ndarray, piece) -> np.ndarray:
     """Exact distance from `(n, d)` points to one piece: a `(k, d)` polyline or a ``trimesh.Trimesh``."""
     if isinstance(piece, trimesh.Trimesh):
         return np.abs(trimesh.proximity.ProximityQuery(piece).on_surface(points)[1])
-    from .metrics import _distance_to_segments, _segments
-
-    return _distance_to_segments(points, _segments([piece]))
+    return distance_to_segments(points, segments([piece]))
 
 
 def touched_pieces(surface, contacts, radius: float = 0.01, min_fraction: float = 0.05):

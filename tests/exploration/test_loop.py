@@ -67,8 +67,8 @@ def test_lost_contact_falls_back_to_the_last_contact():
     import torch
 
     from torch_gpioius.contact import ContactResult
-    from torch_gpioius.exploration.loop import _recover, _State
-    from torch_gpioius.exploration.world import Hardware
+    from torch_gpioius.exploration import ExplorationState, Hardware
+    from torch_gpioius.exploration.loop import recover
 
     def result(ok, points):
         p = torch.as_tensor(np.asarray(points, dtype=float))
@@ -97,9 +97,9 @@ def test_lost_contact_falls_back_to_the_last_contact():
     here, last = np.array([0.2, 0.05]), np.array([0.1, 0.0])
     lost = result(False, [[0.15, 0.0], here])
     for second_hits in (True, False):
-        s = _State(model=model, contacts=[last])
+        s = ExplorationState(model=model, contacts=[last])
         ctl = Controller(second_hits)
-        out = _recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost)
+        out = recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost)
         assert len(ctl.calls) == 2
         (d1, _), (d2, reach) = ctl.calls
         assert np.dot(d1, here) < 0                                  # first: inward along the estimated normal

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import torch_gpioius as tg
-from torch_gpioius.datasets import TornLogWarning, read_records
+from torch_gpioius.io.datasets import TornLogWarning, read_records
 from torch_gpioius.sim import paper_objects_2d
 
 STEPS = 24
@@ -19,7 +19,7 @@ CHILD = """
 import sys
 import torch_gpioius as tg
 from torch_gpioius.sim import paper_objects_2d
-import torch_gpioius.exploration.loop as ex
+import torch_gpioius.io.datasets as ex
 orig = ex.LogWriter.append
 def append(self, kind, meta, arrays):
     orig(self, kind, meta, arrays)            # durable (fsync) when this returns
@@ -85,7 +85,7 @@ def _cut_after_step(log, k):
 
 
 def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path):
-    """The penalty world: the robot's joints and clock and the sensor's noise generator travel in the log, so a
+    """The force-field world: the robot's joints and clock and the sensor's noise generator travel in the log, so a
     run cut after step 4 and resumed ends where the uninterrupted run ends."""
     from torch_gpioius.sim import sphere_scene
 

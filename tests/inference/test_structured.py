@@ -9,7 +9,7 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
 from torch_gpioius.planning import plan_direction
-from torch_gpioius.structured import StructuredExactInference
+from torch_gpioius.inference.structured import StructuredExactInference
 from torch_gpioius.tolerances import tol
 
 REL = 1e-6  # the tolerance; the engine achieves ~1e-10

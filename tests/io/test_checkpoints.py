@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import torch_gpioius as tg
-from torch_gpioius.checkpoints import CheckpointError
+from torch_gpioius.io.checkpoints import CheckpointError
 
 
 def fitted():
@@ -73,7 +73,7 @@ def test_other_version_is_refused(tmp_path):
 
 def _tamper(p, edit):
     """Edit a saved checkpoint and recompute its (unkeyed) hash, as an attacker or a buggy tool could."""
-    from torch_gpioius.checkpoints import _digest
+    from torch_gpioius.io.checkpoints import _digest
     payload = torch.load(p, weights_only=True)
     edit(payload)
     payload["sha256"] = _digest(payload["state_dict"], payload["tensors"])
@@ -106,7 +106,7 @@ def test_bad_extra_and_failed_writes_keep_the_good_file(tmp_path, monkeypatch):
     before = p.read_bytes()
     with pytest.raises(CheckpointError, match="extra"):
         tg.save_checkpoint(m, p, extra={"o": object()})
-    import torch_gpioius.checkpoints as ck
+    import torch_gpioius.io.checkpoints as ck
 
     def full(*a, **k):
         raise RuntimeError("basic_ios::clear: iostream error")

@@ -9,12 +9,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import torch_gpioius as tg
-from torch_gpioius.datasets import FORMAT_VERSION, MAGIC, DatasetError, LogWriter, TornLogWarning, read_records
+from torch_gpioius.io.datasets import FORMAT_VERSION, MAGIC, DatasetError, LogWriter, TornLogWarning, read_records
 
 
 def write_raw(path, records):
     """A file written record by record without the writers' validation (what another tool might produce)."""
-    from torch_gpioius.datasets import _encode
+    from torch_gpioius.io.datasets import _encode
     path.write_bytes(MAGIC + struct.pack(">H", FORMAT_VERSION) + b"".join(_encode(*r) for r in records))
     return path
 
@@ -250,7 +250,7 @@ def test_string_trace_arrays_and_failed_writes_leave_no_damage(tmp_path, monkeyp
     with pytest.raises(DatasetError, match="trace array"):
         tg.Dataset(np.zeros((2, 2)), np.zeros(2), np.zeros(2, int), np.zeros(2, int),
                    trace={"positions": np.array(["a", "b"])})
-    import torch_gpioius.datasets as dsm
+    import torch_gpioius.io.datasets as dsm
 
     def full_disk(fd):
         raise OSError(28, "No space left on device")

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from torch_gpioius.datasets import DatasetError
-from torch_gpioius.importers import dataset_from_files, load_contacts_csv, load_point_cloud, voxel_average
+from torch_gpioius.io.datasets import DatasetError
+from torch_gpioius.io.importers import dataset_from_files, load_contacts_csv, load_point_cloud
+from torch_gpioius.voxels import voxel_average
 
 PTS = np.array([[0.01, 0.02, 0.03], [0.04, -0.05, 0.06], [0.2, 0.1, -0.3], [0.021, 0.022, 0.023]])
 

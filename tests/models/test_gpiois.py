@@ -243,7 +243,7 @@ def test_typical_fit_shows_no_warning(two_shape_data):
 def test_a_trial_point_that_cannot_be_factorised_is_rejected_quietly():
     """maximize_mll on a concave quadratic whose evaluation fails (as a Cholesky would) far from the start: the
     optimiser backs off and converges to the optimum without surfacing the failure."""
-    from torch_gpioius.optim import maximize_mll
+    from torch_gpioius.inference.optim import maximize_mll
     target = torch.tensor([0.3, 0.1, 0.5], dtype=torch.float64)
     calls = {"failed": 0}
 

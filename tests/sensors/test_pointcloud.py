@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from torch_gpioius.importers import voxel_average
-from torch_gpioius.sensors import FilePointCloud, PinholeCamera, PointCloud, SimulatedDepthCamera, look_at
+from torch_gpioius.voxels import voxel_average
+from torch_gpioius.io import FilePointCloud
+from torch_gpioius.sensors import PinholeCamera, PointCloud, SimulatedDepthCamera, look_at
 
 C, R = np.array([0.5, 0.0, 0.25]), 0.1
 EYE = np.array([0.5, -0.8, 0.9])

@@ -5,7 +5,7 @@ import math
 import pytest
 import torch
 
-from torch_gpioius.sensors import (PenaltyContact, SensorDisconnected, SimulatedForceSensor, SphereSDF)
+from torch_gpioius.sensors import (ForceFieldContact, SensorDisconnected, SimulatedForceSensor, SphereSDF)
 
 
 def pose_at(p, R=None):
@@ -18,7 +18,7 @@ def pose_at(p, R=None):
 
 def test_penalty_force_inner_and_cover():
     c = torch.zeros(3, dtype=torch.float64)
-    world = PenaltyContact(SphereSDF(c, 0.1), SphereSDF(c, 0.12), k_inner=1000.0, k_cover=10.0)
+    world = ForceFieldContact(SphereSDF(c, 0.1), SphereSDF(c, 0.12), k_inner=1000.0, k_cover=10.0)
     f_cover = world(torch.tensor([0.0, 0.0, 0.11], dtype=torch.float64))     # 1 cm into the cover only
     assert torch.allclose(f_cover, torch.tensor([0.0, 0.0, 0.1], dtype=torch.float64))
     f = world(torch.tensor([0.0, 0.0, 0.097], dtype=torch.float64))        # 3 mm into the inner sphere
@@ -27,7 +27,7 @@ def test_penalty_force_inner_and_cover():
 
 
 def test_reading_is_in_the_sensor_frame():
-    world = PenaltyContact(SphereSDF(torch.zeros(3, dtype=torch.float64), 0.1))
+    world = ForceFieldContact(SphereSDF(torch.zeros(3, dtype=torch.float64), 0.1))
     a = math.pi / 2
     Rz = torch.tensor([[math.cos(a), -math.sin(a), 0], [math.sin(a), math.cos(a), 0], [0, 0, 1]], dtype=torch.float64)
     s = SimulatedForceSensor(world, lambda: pose_at([0.098, 0.0, 0.0], Rz))
@@ -37,7 +37,7 @@ def test_reading_is_in_the_sensor_frame():
 
 
 def test_noise_drift_and_tare():
-    world = PenaltyContact(SphereSDF(torch.zeros(3, dtype=torch.float64), 0.1))
+    world = ForceFieldContact(SphereSDF(torch.zeros(3, dtype=torch.float64), 0.1))
     t = [0.0]
     s = SimulatedForceSensor(world, lambda: pose_at([1.0, 0.0, 0.0]), clock=lambda: t[0], drift=(0.0, 0.0, 0.5))
     t[0] = 2.0
@@ -51,7 +51,7 @@ def test_noise_drift_and_tare():
 
 
 def test_dropouts_repeat_the_previous_sample_and_disconnect_persists():
-    world = PenaltyContact(SphereSDF(torch.zeros(3, dtype=torch.float64), 0.1))
+    world = ForceFieldContact(SphereSDF(torch.zeros(3, dtype=torch.float64), 0.1))
     s = SimulatedForceSensor(world, lambda: pose_at([1.0, 0.0, 0.0]), dropout=0.5, seed=1)
     counters = [s.read().counter for _ in range(200)]
     repeats = sum(a == b for a, b in zip(counters, counters[1:]))

@@ -160,7 +160,7 @@ def test_a_run_cut_after_a_step_resumes_to_the_same_end(scene, tmp_path):
     updated engine of the uninterrupted run); the arm's rest detection is a threshold, so such a difference can
     change one settling by a time step a few steps later: the contacts agree exactly for two steps after the cut
     and within 1 mm to the end (measured: 9e-6 m)."""
-    from torch_gpioius.datasets import read_records
+    from torch_gpioius.io.datasets import read_records
 
     kw = dict(mode="visual-tactile", max_travel=0.06, metrics_every=100, progress=False)
     log = tmp_path / "run.gpioius"

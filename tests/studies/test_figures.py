@@ -94,7 +94,7 @@ def test_fig5_gives_each_object_its_own_panel_and_band(short_pair, tmp_path):
 def test_paired_figure_labels_every_panel_with_plain_numbers(tmp_path):
     from torch_gpioius.studies.sweep_figures import figure_paired
 
-    rows = [{"object": o, "mode": m, "seed": s, "final_hausdorff_m": v}
+    rows = [{"object": o, "mode": m, "seed": s, "final_hausdorff": v}
             for o, base in (("A", 0.005), ("B", 0.1)) for m, f in (("tactile", 1.0), ("visual-tactile", 1.9))
             for s, v in enumerate(base * f * np.array([1.0, 1.05, 0.97]))]
     fig = figure_paired(rows, tmp_path / "p.png")

@@ -17,7 +17,7 @@ def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):
         assert (tmp_path / name).stat().st_size > 0, name
     records = json.loads((tmp_path / "records.json").read_text())
     assert {r["mode"] for r in records} == {"visual-tactile", "tactile"}
-    assert all("contact_z" in r and "robot_time_s" in r for r in records)
+    assert all("contact_z" in r and "robot_time" in r for r in records)
     assert "| G |" in capsys.readouterr().out
     import trimesh
 
@@ -59,7 +59,7 @@ def test_full_study_runs(tmp_path):
 
 def test_cli_smoke_runs_the_mujoco_study(tmp_path, capsys):
     """`gpioius simulate3d --world mujoco --smoke`: the MuJoCo study end to end in its CI form (coarse cloth, a
-    quarter-resolution camera, 6 cm of travel): records, logs, figures and meshes as in the penalty world."""
+    quarter-resolution camera, 6 cm of travel): records, logs, figures and meshes as in the force-field world."""
     pytest.importorskip("mujoco")
     assert main(["simulate3d", "--world", "mujoco", "--object", "E", "--smoke", "--quiet", "--out",
                  str(tmp_path)]) == 0
@@ -68,6 +68,6 @@ def test_cli_smoke_runs_the_mujoco_study(tmp_path, capsys):
         assert (tmp_path / name).stat().st_size > 0, name
     records = json.loads((tmp_path / "records.json").read_text())
     assert {r["mode"] for r in records} == {"visual-tactile", "tactile"}
-    travel = max(r["travel_m"] for r in records)
+    travel = max(r["travel"] for r in records)
     assert 0.05 < travel < 0.2                                   # the smoke budget, not the study's 1.5 m
     assert "| E |" in capsys.readouterr().out

@@ -37,50 +37,50 @@ def test_order_statistic_interval_of_the_median():
 def test_seed_zero_is_the_unperturbed_world_and_seeds_perturb_it():
     from torch_gpioius.sim import paper_objects_2d
     base = paper_objects_2d()["A"]
-    assert make_world("2d", "A", 0).fingerprint() == base.fingerprint()
-    w1, w2 = make_world("2d", "A", 1), make_world("2d", "A", 2)
+    assert make_world("planar", "A", 0).fingerprint() == base.fingerprint()
+    w1, w2 = make_world("planar", "A", 1), make_world("planar", "A", 2)
     assert w1.fingerprint() != base.fingerprint() != w2.fingerprint()
     shift = np.linalg.norm(w1.start - base.start)
     angle = np.degrees(np.arccos(np.clip(w1.direction @ base.direction, -1, 1)))
     assert shift <= 0.02 + 1e-12 and angle <= 10 + 1e-9
-    assert make_world("2d", "A", 1).fingerprint() == w1.fingerprint()      # deterministic in the seed
+    assert make_world("planar", "A", 1).fingerprint() == w1.fingerprint()      # deterministic in the seed
 
 
 def test_sequential_sweep_writes_its_outputs_skips_finished_runs_and_repeats(tmp_path):
-    a = run_sweep("2d", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)
+    a = run_sweep("planar", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)
     assert a["runs"] == 4 and a["skipped"] == 0
     rows = list(csv.DictReader(open(tmp_path / "a" / "runs.csv")))
-    assert {"object", "mode", "seed", "final_hausdorff_m"} <= set(rows[0]) and len(rows) == 4
+    assert {"object", "mode", "seed", "final_hausdorff"} <= set(rows[0]) and len(rows) == 4
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     entry = summary["objects"]["A"]["visual-tactile"]
-    assert {"median", "lo", "hi"} <= set(entry["final_hausdorff_m"]) and entry["n"] == 2
+    assert {"median", "lo", "hi"} <= set(entry["final_hausdorff"]) and entry["n"] == 2
     for name in ("transitions_A.png", "similarity_bands.png", "paired_final_hausdorff.png", "summary.md"):
         assert (tmp_path / "a" / name).stat().st_size > 0
     assert len(list((tmp_path / "a" / "logs").glob("*.gpioius"))) == 4
-    again = run_sweep("2d", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)
+    again = run_sweep("planar", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)
     assert again["skipped"] == 4
-    b = run_sweep("2d", objects=["A"], seeds=2, out=tmp_path / "b", smoke=True, backend="local", progress=False)
+    b = run_sweep("planar", objects=["A"], seeds=2, out=tmp_path / "b", smoke=True, backend="local", progress=False)
     rows_b = list(csv.DictReader(open(tmp_path / "b" / "runs.csv")))
     for ra, rb in zip(rows, rows_b):                               # the same seed gives identical numbers
-        assert ra["final_hausdorff_m"] == rb["final_hausdorff_m"] and ra["travel_m"] == rb["travel_m"]
+        assert ra["final_hausdorff"] == rb["final_hausdorff"] and ra["travel"] == rb["travel"]
 
 
 def test_bad_sweep_arguments(tmp_path):
     with pytest.raises(ValueError, match="world"):
         run_sweep("4d", out=tmp_path)
     with pytest.raises(ValueError, match="modes"):
-        run_sweep("2d", modes=["visual"], out=tmp_path)
+        run_sweep("planar", modes=["visual"], out=tmp_path)
     with pytest.raises(ValueError, match="objects"):
-        run_sweep("2d", objects=["Q"], out=tmp_path)
+        run_sweep("planar", objects=["Q"], out=tmp_path)
     with pytest.raises(ValueError, match="seeds"):
-        run_sweep("2d", seeds=0, out=tmp_path)
+        run_sweep("planar", seeds=0, out=tmp_path)
 
 
 @pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
 def test_a_real_ray_sweep_survives_a_killed_worker(tmp_path):
     pytest.importorskip("ray")
     out = tmp_path / "sweep"
-    cmd = [sys.executable, "-m", "torch_gpioius.cli", "study", "--world", "2d", "--objects", "A,D", "--seeds", "2",
+    cmd = [sys.executable, "-m", "torch_gpioius.cli", "study", "--world", "planar", "--objects", "A,D", "--seeds", "2",
            "--smoke", "--max-steps", "25", "--workers", "2", "--out", str(out), "--quiet"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT,
                             env=dict(os.environ, OMP_NUM_THREADS="1"))
@@ -121,7 +121,7 @@ def test_a_second_study_into_the_same_folder_is_refused_while_the_first_runs(tmp
     try:
         assert holder.stdout.readline().strip() == "locked"
         with pytest.raises(RuntimeError, match=rf"another gpioius study \(pid {holder.pid}\) is writing there"):
-            run_sweep("2d", objects=["A"], seeds=1, out=out, smoke=True, backend="local", progress=False)
+            run_sweep("planar", objects=["A"], seeds=1, out=out, smoke=True, backend="local", progress=False)
     finally:
         holder.kill()
         holder.wait()
@@ -135,24 +135,24 @@ def test_study_folders_belong_to_one_world_and_are_never_someone_elses(tmp_path)
     foreign.mkdir()
     (foreign / "runs.csv").write_text("my,own,table\n")
     with pytest.raises(FileExistsError, match="not empty and was not written by `gpioius study`; pass --force"):
-        run_sweep("2d", objects=["A"], seeds=1, out=foreign, smoke=True, backend="local", progress=False)
+        run_sweep("planar", objects=["A"], seeds=1, out=foreign, smoke=True, backend="local", progress=False)
     assert (foreign / "runs.csv").read_text() == "my,own,table\n"
     out = tmp_path / "s"
-    run_sweep("2d", objects=["A"], modes=["tactile", "tactile"], seeds=1, out=out, smoke=True, backend="local",
+    run_sweep("planar", objects=["A"], modes=["tactile", "tactile"], seeds=1, out=out, smoke=True, backend="local",
               progress=False)
     assert sorted(p.name for p in (out / "runs").glob("*.json")) == ["A_tactile_0.json"]    # a mode counts once
     assert not (out / "running").exists()                         # no empty running/ folder is left behind
-    with pytest.raises(FileExistsError, match=r"world='2d'.* this one is world='3d'"):
-        run_sweep("3d", objects=["E"], seeds=1, out=out, smoke=True, backend="local", progress=False)
+    with pytest.raises(FileExistsError, match=r"world='planar'.* this one is world='forcefield'"):
+        run_sweep("forcefield", objects=["E"], seeds=1, out=out, smoke=True, backend="local", progress=False)
     with pytest.raises(ValueError, match=r"seeds: must be an integer in \[1, 10000\]"):
-        run_sweep("2d", seeds=100_000_000, out=tmp_path / "big")
+        run_sweep("planar", seeds=100_000_000, out=tmp_path / "big")
 
 
 def test_damaged_and_foreign_run_files_are_named_and_damaged_runs_done_again(tmp_path):
     from torch_gpioius.studies.sweep import RunFileError, aggregate, read_run_file
 
     out = tmp_path / "s"
-    run_sweep("2d", objects=["A"], modes=["tactile"], seeds=2, out=out, smoke=True, backend="local", progress=False)
+    run_sweep("planar", objects=["A"], modes=["tactile"], seeds=2, out=out, smoke=True, backend="local", progress=False)
     good = out / "runs" / "A_tactile_0.json"
     run = json.loads(good.read_text())
     bad_cases = {"truncated": good.read_text()[:40], "not an object": "[1, 2]",
@@ -172,7 +172,7 @@ def test_damaged_and_foreign_run_files_are_named_and_damaged_runs_done_again(tmp
             aggregate(out, world="2d")
     # a sweep sets the damaged file aside (kept, renamed) and does that run again
     with pytest.warns(RuntimeWarning, match="A_tactile_1.json: damaged or foreign result, renamed"):
-        again = run_sweep("2d", objects=["A"], modes=["tactile"], seeds=2, out=out, smoke=True, backend="local",
+        again = run_sweep("planar", objects=["A"], modes=["tactile"], seeds=2, out=out, smoke=True, backend="local",
                           progress=False)
     assert again["skipped"] == 1 and (out / "runs" / "A_tactile_1.json.invalid").exists()
     assert read_run_file(out / "runs" / "A_tactile_1.json")["seed"] == 1

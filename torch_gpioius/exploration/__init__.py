@@ -1,13 +1,35 @@
-"""Active visuo-tactile exploration: one loop (:func:`explore`) for every world, behind the robot, force-sensor
-and point-cloud interfaces of :mod:`torch_gpioius.exploration.world`."""
+"""Active visuo-tactile exploration: public types, the contracts of its parts, and one loop for every world.
 
-from .evidence import TapPolicy
-from .loop import EVIDENCE, MODES, explore
-from .observations import ObservationPolicy, free_space_along, retract_free_space, thin_points, vision_observations
+* types: :class:`Observations` (a batch), :class:`ExplorationState`, :class:`StepRecord`, :class:`ExploreConfig`,
+  :class:`Run`, :class:`Trace`;
+* contracts (:mod:`~torch_gpioius.exploration.protocols`): :class:`Toucher`, :class:`TouchModel`,
+  :class:`EvidencePolicy`, :class:`Recorder`; stop rules (:class:`StopRule`); worlds (:class:`World`,
+  :class:`Hardware`) and their registry (:func:`register_world`);
+* the loop: :func:`explore` / :func:`run` (``torch_gpioius.explore`` adds the crash-safe log and resume).
+"""
+
+from .config import MODES, ExploreConfig, Run
+from .evidence import EVIDENCE_POLICIES, Evidence, TapPolicy, evidence_policy
+from .loop import begin, explore, run
+from .observations import (Observations, ObservationPolicy, free_space_along, retract_free_space, thin_points,
+                           vision_observations)
+from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel
+from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
+from .registry import WorldEntry, make_world, register_world, world_entry, world_names
+from .state import RECORD_FIELDS, ExplorationState, StepRecord
 from .stopping import OnceAround, StopRule, TravelBudget, gone_around, largest_uncovered_gap
+from .touch import TOUCH_MODELS, PointTouch, touch_model
 from .trace import Trace
-from .world import ExplorationDefaults, Hardware, Measurement, RobotWorld, World
+from .world import ExplorationDefaults, Hardware, Measurement, RobotWorld, World, geometry_hash
 
-__all__ = ["explore", "MODES", "EVIDENCE", "TapPolicy", "ObservationPolicy", "free_space_along", "retract_free_space",
-           "thin_points", "vision_observations", "OnceAround", "StopRule", "TravelBudget", "gone_around",
-           "largest_uncovered_gap", "Trace", "ExplorationDefaults", "Hardware", "Measurement", "RobotWorld", "World"]
+#: Evidence policies by shorthand: None (the paper's exploration) and the registered names.
+EVIDENCE = (None, *EVIDENCE_POLICIES)
+
+__all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations",
+           "ObservationPolicy", "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel",
+           "EvidencePolicy", "Recorder", "MetricsRecorder", "IntervalRecorder", "ProgressRecorder", "Evidence",
+           "TapPolicy", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch", "TOUCH_MODELS", "touch_model",
+           "StopRule", "OnceAround", "TravelBudget", "gone_around", "largest_uncovered_gap", "World", "Hardware",
+           "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash", "register_world", "world_entry",
+           "world_names", "make_world", "WorldEntry", "free_space_along", "retract_free_space", "thin_points",
+           "vision_observations"]

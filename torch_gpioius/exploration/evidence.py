@@ -7,7 +7,7 @@ the estimate is wrong (docs/results-3d.md, object H). A *tap* gathers that evide
 along the measured force direction until the cover's force on it vanishes and it is beyond the outer surface the
 camera saw (``mu_out >= 0``; plus a margin), then come back down to the body. The readings below the contact threshold are inner free space, the re-approach ends on the body again.
 
-**When to tap** (:meth:`TapPolicy.due`), from the model's own state, at most every ``min_steps`` steps:
+**When to tap** (:meth:`TapPolicy.due`), from the exploration's state, at most every ``min_steps`` steps:
 
 1. *the similarity is not yet settled*: the profile-likelihood interval of the task correlation
    (:meth:`torch_gpioius.GPIOIS.similarity_interval`) still contains 1;
@@ -16,22 +16,45 @@ camera saw (``mu_out >= 0``; plus a margin), then come back down to the body. Th
    ``free_space_margin`` away from contacts, so over a tight cover it would record nothing: no tap.
 
 A tap's travel (lift and re-approach) counts in the travel budget, and each tap counts as a step of the step budget.
+
+A policy is any object with ``due(state)`` and ``gather(state, toucher)`` (the
+:class:`~torch_gpioius.exploration.protocols.EvidencePolicy` contract): ``explore(..., evidence=MyPolicy())``. It
+reads the public state and moves through the toucher; it returns an :class:`Evidence`, and the loop turns that into
+observations exactly as it does a sliding step's touch.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
 
 import numpy as np
 import torch
 
-__all__ = ["TapPolicy"]
+__all__ = ["Evidence", "TapPolicy", "EVIDENCE_POLICIES", "evidence_policy"]
+
+
+@dataclass
+class Evidence:
+    """What an evidence policy gathered; the loop turns it into observations as it does a step's touch.
+
+    Attributes:
+        touches: the contact controller's results, in order (for a tap: the lift, then the re-approach). Their
+            travel counts in the travel budget, their free space (``|F|`` below the contact threshold) becomes inner
+            free space.
+        contact: `(d,)` where the fingertip rests on the body afterwards [m], or None if it did not come back to it.
+        normal: the measured contact normal there `(d,)`, or None.
+        min_move: a contact that moved less than this from the previous one [m] is not a new observation.
+    """
+
+    touches: list = field(default_factory=list)
+    contact: np.ndarray | None = None
+    normal: torch.Tensor | None = None
+    min_move: float = 0.005
 
 
 @dataclass(frozen=True)
 class TapPolicy:
-    """When and how to tap.
+    """When and how to tap (see the module docstring).
 
     Attributes:
         min_steps: steps between two taps (and before the first).
@@ -55,13 +78,14 @@ class TapPolicy:
     extra_lift: float = 0.01
     max_lift: float = 0.2
     local_correlation: float = 0.9
+    name: str = "taps"
 
     def due(self, state) -> bool:
-        """Whether to tap after the current step (see the module docstring)."""
-        if state.steps - getattr(state, "last_tap", 0) < self.min_steps:
+        """Whether to tap after the current step (see the module docstring); reads the state, changes nothing."""
+        if state.steps - state.last_evidence < self.min_steps:
             return False
         model = state.model
-        x = torch.as_tensor(state.contacts[-1], dtype=model.train_inputs[0].dtype).reshape(1, -1)
+        x = torch.as_tensor(state.contact, dtype=model.train_inputs[0].dtype).reshape(1, -1)
         xg = x.clone().requires_grad_(True)
         mu, _ = model.predict(xg, task=1)
         grad, = torch.autograd.grad(mu.sum(), xg)
@@ -71,25 +95,17 @@ class TapPolicy:
             return False
         if hasattr(model, "correlation_at"):       # a similarity per region: its point estimate at the contact
             return float(model.correlation_at(x.detach())[0]) >= self.local_correlation
-        from ..inference.interval import plausible_correlation
+        return model.correlation_plausible(1.0, self.level)
 
-        engine = model._inference()
-        x0 = model.train_inputs[0]
-        return plausible_correlation(lambda kt: engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device)),
-                                     model.task_covariance, 1.0, self.level)
-
-    def tap(self, state, hw, world, policy) -> tuple[np.ndarray, np.ndarray, np.ndarray, float] | None:
-        """Lift along the measured force direction until the cover lets go, then re-approach the body.
+    def gather(self, state, toucher) -> Evidence | None:
+        """Lift along the measured force direction until the cover lets go and the fingertip is beyond the outer
+        surface the camera saw, then re-approach the body.
 
         Returns:
-            ``(x_new (k, d), y_new (k,), removed (j,), travel)``: the inner observations the tap adds (free space
-            y = 1 and, when it lands elsewhere, the new contact y = 0), the indices retracted, the travel [m]; None
-            when the robot refused the tap (the exploration then continues without it).
+            the :class:`Evidence` (lift and re-approach), or None when the robot refused (the exploration goes on
+            without it).
         """
-        from .observations import retract_free_space, thin_points
-
         normal = state.normal
-        state.last_tap = state.steps
         model = state.model
         x0 = model.train_inputs[0]
 
@@ -99,34 +115,37 @@ class TapPolicy:
                 return float(model.predict(q, task=1)[0][0]) < 0.0
 
         try:
-            lift = hw.controller.lift(normal, step=self.lift_step, until_force_below=self.vanish_force,
-                                      extra=self.extra_lift, max_distance=self.max_lift, inside=inside_outer)
-            back = hw.controller.approach(-normal, max_travel=float(lift.travel) + 0.05)
+            lift = toucher.lift(normal, step=self.lift_step, until_force_below=self.vanish_force,
+                                extra=self.extra_lift, max_distance=self.max_lift, inside=inside_outer)
+            back = toucher.approach(-normal, max_travel=float(lift.travel) + 0.05)
         except RuntimeError:          # refused or faulted: no tap this time
             return None
-        travel = float(lift.travel + back.travel)
-        state.travel += travel
-        state.taps += 1
-        state.path.extend(lift.path.numpy())
-        state.path.extend(back.path.numpy())
-        free = np.concatenate([lift.free_space.numpy(), back.free_space.numpy()])
-        xs, ys = [], []
-        removed = np.zeros(0, dtype=np.int64)
-        if back.in_contact:
-            contact = back.contact.numpy()
-            if np.linalg.norm(contact - state.contacts[-1]) >= 0.005:
-                removed = retract_free_space(state.model, contact, policy.free_space_margin)
-                state.retracted += len(removed)
-                xs.append(contact[None])
-                ys.append(np.zeros(1))
-            state.contacts[-1] = contact
-            state.normal = back.force_normal
-        free = thin_points(free, policy.free_space_spacing, np.asarray(state.contacts), policy.free_space_margin)
-        if len(free):
-            xs.append(free)
-            ys.append(np.ones(len(free)))
-        if not xs:
-            return np.zeros((0, state.contacts[-1].shape[0])), np.zeros(0), removed, travel
-        x_new, y_new = np.concatenate(xs), np.concatenate(ys)
-        state.model.add_observations(x_new, y_new, 0)
-        return x_new, y_new, removed, travel
+        return Evidence([lift, back], back.contact.numpy() if back.in_contact else None,
+                        back.force_normal if back.in_contact else None)
+
+    def describe(self) -> dict:
+        return asdict(self)
+
+
+#: Evidence policies by their shorthand (``explore(..., evidence="taps")``).
+EVIDENCE_POLICIES: dict[str, type] = {"taps": TapPolicy}
+
+
+def evidence_policy(evidence) -> object | None:
+    """The policy ``evidence`` names (None: the paper's exploration), or ``evidence`` itself if it is a policy
+    (any object with ``due(state)`` and ``gather(state, toucher)``).
+
+    Raises:
+        ValueError: an unknown name or an object without those methods.
+    """
+    if evidence is None:
+        return None
+    if isinstance(evidence, str):
+        if evidence not in EVIDENCE_POLICIES:
+            raise ValueError(f"evidence: must be None, one of {sorted(EVIDENCE_POLICIES)} or a policy object, got "
+                             f"{evidence!r}")
+        return EVIDENCE_POLICIES[evidence]()
+    if not (callable(getattr(evidence, "due", None)) and callable(getattr(evidence, "gather", None))):
+        raise ValueError(f"evidence: a policy needs due(state) and gather(state, toucher), got "
+                         f"{type(evidence).__name__}")
+    return evidence

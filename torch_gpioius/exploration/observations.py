@@ -18,9 +18,96 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ..models.gpiois import INNER, OUTER
 from ..voxels import voxel_average
 
-__all__ = ["ObservationPolicy", "thin_points", "thin_indices", "free_space_along", "retract_free_space", "vision_observations"]
+__all__ = ["Observations", "ObservationPolicy", "thin_points", "thin_indices", "free_space_along",
+           "retract_free_space", "vision_observations", "INNER", "OUTER"]
+
+@dataclass
+class Observations:
+    """A batch of observations: the one unit that flows from a sensor through the model to the log, resume, exports
+    and the viewer.
+
+    A point touch gives one surface point (``y = 0``) and the free space the fingertip crossed (``y = 1``); a tactile
+    patch gives many surface points with normals and the free space in front of the pad; one camera capture gives
+    the seen surface and free space in front of it (task 1).
+
+    Attributes:
+        x: `(n, d)` positions [m] in the world's frame (the robot base frame on a robot).
+        y: `(n,)` labels: 0 on a surface, 1 in free space.
+        task: `(n,)` 0 inner (touch), 1 outer (vision).
+        normal: `(n, d)` outward unit normals where a sensor measured one (NaN rows where it did not), or None.
+        step: the exploration step the batch arrived at (0: before exploring).
+        source: what produced it ("vision", "touch", "evidence", "patch", ...).
+
+    Raises:
+        ValueError: wrong shapes, NaN or inf positions, labels or task ids outside {0, 1}, normals that are not unit
+            vectors (names the field).
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    task: np.ndarray
+    normal: np.ndarray | None = None
+    step: int = 0
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        x = np.asarray(self.x, dtype=np.float64)
+        if x.ndim != 2 or x.shape[1] not in (2, 3):
+            raise ValueError(f"Observations.x: expected (n, 2) or (n, 3) positions [m], got shape {x.shape}")
+        n = len(x)
+        y = np.asarray(self.y, dtype=np.float64).reshape(-1)
+        task = np.asarray(self.task).reshape(-1)
+        if task.size == 1 and n != 1:
+            task = np.full(n, task.item())
+        if y.shape != (n,) or task.shape != (n,):
+            raise ValueError(f"Observations: y and task must have shape ({n},), got {y.shape} and {task.shape}")
+        if not np.isfinite(x).all():
+            raise ValueError("Observations.x: contains NaN or inf")
+        if not np.isin(y, (0.0, 1.0)).all():
+            raise ValueError("Observations.y: labels must be 0 (surface) or 1 (free space)")
+        if not np.isin(task, (0, 1)).all():
+            raise ValueError("Observations.task: ids must be 0 (inner) or 1 (outer)")
+        self.x, self.y, self.task = x, y, task.astype(np.int64)
+        if self.normal is not None:
+            nrm = np.asarray(self.normal, dtype=np.float64)
+            if nrm.shape != x.shape:
+                raise ValueError(f"Observations.normal: expected shape {x.shape}, got {nrm.shape}")
+            known = np.isfinite(nrm).all(axis=1)
+            if not np.allclose(np.linalg.norm(nrm[known], axis=1), 1.0, atol=1e-6):
+                raise ValueError("Observations.normal: normals must be unit vectors (NaN rows where unknown)")
+            self.normal = nrm
+        if isinstance(self.step, bool) or not isinstance(self.step, (int, np.integer)) or self.step < 0:
+            raise ValueError(f"Observations.step: must be a non-negative integer, got {self.step!r}")
+        self.step = int(self.step)
+
+    def __len__(self) -> int:
+        return len(self.x)
+
+    @property
+    def dim(self) -> int:
+        return self.x.shape[1]
+
+    @classmethod
+    def empty(cls, dim: int, step: int = 0, source: str = "") -> "Observations":
+        """No observation (a touch that added nothing)."""
+        return cls(np.zeros((0, dim)), np.zeros(0), np.zeros(0, np.int64), step=step, source=source)
+
+    @classmethod
+    def concat(cls, batches: list["Observations"], source: str | None = None) -> "Observations":
+        """The batches one after another (normals kept where any batch has them; the first batch's step)."""
+        batches = [b for b in batches if b is not None]
+        if not batches:
+            raise ValueError("Observations.concat: no batch")
+        normals = None
+        if any(b.normal is not None for b in batches):
+            normals = np.concatenate([b.normal if b.normal is not None else np.full(b.x.shape, np.nan)
+                                      for b in batches])
+        return cls(np.concatenate([b.x for b in batches]), np.concatenate([b.y for b in batches]),
+                   np.concatenate([b.task for b in batches]), normals, batches[0].step,
+                   batches[0].source if source is None else source)
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,10 @@
 * robot study (Sec. VI-A-2): "terminates when the travel length reaches 1.5 m" -> :class:`TravelBudget`.
 
 Every run also stops at ``max_steps``, when contact is lost, or when the robot refuses a command.
+
+A rule is asked ``check(state)`` with the public :class:`~torch_gpioius.exploration.state.ExplorationState`; one
+that needs the estimate (its centre) says so with ``uses_estimate = True`` and is asked after the step's
+measurement, the others before it (so that the measurement knows the step is the last).
 """
 
 from __future__ import annotations
@@ -55,9 +59,16 @@ def gone_around(points: np.ndarray, centre: np.ndarray | None, max_gap: float) -
 
 @dataclass(frozen=True)
 class StopRule:
-    """Base of the stop rules: ``check`` returns the termination reason, or None to go on."""
+    """Base of the stop rules: ``check(state)`` returns the termination reason, or None to go on.
 
-    def check(self, contacts: np.ndarray, travel: float, centre: np.ndarray | None) -> str | None:
+    Attributes:
+        uses_estimate: the rule reads the state's estimate (``state.centre``), so it is asked after the step's
+            measurement rather than before.
+    """
+
+    uses_estimate = False
+
+    def check(self, state) -> str | None:
         raise NotImplementedError
 
     def describe(self) -> dict:
@@ -76,12 +87,13 @@ class OnceAround(StopRule):
 
     closure_gap: float = 0.05
     min_steps: int = 10
+    uses_estimate = True
 
-    def check(self, contacts, travel, centre):
-        contacts = np.asarray(contacts)
+    def check(self, state):
+        contacts = np.asarray(state.contacts)
         if contacts.shape[1] != 2:
             return None
-        if len(contacts) > self.min_steps and gone_around(contacts, centre, self.closure_gap):
+        if len(contacts) > self.min_steps and gone_around(contacts, state.centre, self.closure_gap):
             return "once-around"
         return None
 
@@ -98,5 +110,5 @@ class TravelBudget(StopRule):
                                                      and math.isfinite(self.max_travel) and self.max_travel > 0):
             raise ValueError(f"max_travel: must be a positive distance [m], got {self.max_travel!r}")
 
-    def check(self, contacts, travel, centre):
-        return "travel" if travel >= self.max_travel else None
+    def check(self, state):
+        return "travel" if state.travel >= self.max_travel else None

@@ -1,7 +1,9 @@
-"""The record of one exploration: per-step metrics, the path, the contacts and the final model."""
+"""The record of one exploration: per-step values (the vocabulary of
+:data:`~torch_gpioius.exploration.state.RECORD_FIELDS`), the path, the contacts and the final model."""
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -23,21 +25,22 @@ class Trace:
         travel: `(n,)` fingertip travel since the first contact [m].
         path: `(k, d)` every position the fingertip occupied, approach included [m].
         contacts: `(n, d)` contact positions [m].
-        model: the final fitted model (``GPIOIS`` or ``GPIS``).
+        model: the final fitted model (``GPIOIS``, ``GPIS`` or ``LocalGPIOIS``).
         step_time: `(n,)` wall time of each planning step (plan + ingest + re-learn; robot motion excluded) [s].
         terminated: why it stopped: "once-around", "travel", "max_steps", "lost-contact" or "refused: ...".
         task_covariance: `(n, 2, 2)` learned K_t per record (NaN in tactile mode).
         retracted: free-space samples removed because a later contact landed within the margin.
-        sim_time: `(n,)` robot clock at each record [s].
+        robot_time: `(n,)` robot clock at each record [s].
         final_mesh: 3-D only: the last estimated inner surface within the exploration range (``trimesh``).
         hausdorff_touched: `(n,)` Hausdorff distance [m] between the *touched* pieces of {mu_in = 0} (those the
             fingertip slid along, :func:`torch_gpioius.surfaces.touched_pieces`) and the true inner surface.
         correlation: `(n,)` task correlation K_t[0,1] / sqrt(K_t[0,0] K_t[1,1]) (NaN in tactile mode).
         correlation_interval: `(n, 2)` profile-likelihood interval of the correlation (NaN where not computed).
-        taps: `(n,)` cumulative number of evidence-seeking taps (``evidence="taps"``).
-        world: the world's class name.
-        evidence: the evidence-seeking policy ("taps") or None.
+        taps: `(n,)` cumulative number of evidence actions (taps).
+        world: the world's registry name ("planar", "forcefield", "mujoco", "robot", or a user's).
+        evidence: the evidence policy's name ("taps") or None.
         region_correlation: `(n, R)` task correlation of each region (``regions=R``; `(n, 0)` otherwise).
+        touch: the touch model's name ("point", "patch").
     """
 
     mode: str
@@ -53,7 +56,7 @@ class Trace:
     terminated: str
     task_covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 2, 2)))
     retracted: int = 0
-    sim_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    robot_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
     final_mesh: object = None
     hausdorff_touched: np.ndarray = field(default_factory=lambda: np.zeros(0))
     correlation: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -62,20 +65,53 @@ class Trace:
     world: str = ""
     evidence: str | None = None
     region_correlation: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    touch: str = "point"
+
+    @classmethod
+    def from_state(cls, state, world, config) -> "Trace":
+        """The trace of a finished exploration from its state and records."""
+        recs = state.records
+
+        def col(name):
+            return np.array([getattr(r, name) for r in recs], dtype=np.float64)
+
+        regions = [np.asarray(r.region_correlation, dtype=np.float64).reshape(-1) for r in recs]
+        width = max((len(r) for r in regions), default=0)
+        return cls(mode=config.mode, scene_name=world.name, hausdorff=col("hausdorff"),
+                   uncertainty=col("uncertainty"), similarity=col("similarity"), travel=col("travel"),
+                   path=np.asarray(state.path), contacts=np.asarray(state.contacts), model=state.model,
+                   step_time=col("step_time"), terminated=state.terminated,
+                   task_covariance=np.array([r.task_covariance for r in recs], dtype=np.float64).reshape(-1, 2, 2),
+                   retracted=state.retracted, robot_time=col("robot_time"),
+                   final_mesh=state.surface if world.dim == 3 else None, hausdorff_touched=col("hausdorff_touched"),
+                   correlation=col("correlation"),
+                   correlation_interval=np.array([r.correlation_interval for r in recs],
+                                                 dtype=np.float64).reshape(-1, 2),
+                   taps=np.array([r.taps for r in recs], dtype=np.int64), world=getattr(world, "kind", ""),
+                   evidence=None if config.evidence is None else getattr(config.evidence, "name", "custom"),
+                   region_correlation=(np.stack([np.pad(r, (0, width - len(r)), constant_values=np.nan)
+                                                 for r in regions]) if width else np.zeros((len(recs), 0))),
+                   touch=getattr(config.touch, "name", "custom"))
 
     @property
     def n_steps(self) -> int:
         return len(self.travel)
 
+    @property
+    def sim_time(self) -> np.ndarray:
+        """Deprecated name of :attr:`robot_time`."""
+        warnings.warn("Trace.sim_time is robot_time now", DeprecationWarning, stacklevel=2)
+        return self.robot_time
+
     def records(self) -> list[dict]:
-        """Per-step records as dicts (JSON/CSV friendly)."""
+        """Per-step records as dicts (JSON/CSV friendly), in the vocabulary of the logs and ``runs.csv``."""
         out = []
         for i in range(self.n_steps):
-            row = {"object": self.scene_name, "mode": self.mode, "step": i, "travel_m": float(self.travel[i]),
-                   "hausdorff_m": float(self.hausdorff[i]), "uncertainty": float(self.uncertainty[i]),
+            row = {"object": self.scene_name, "mode": self.mode, "step": i, "travel": float(self.travel[i]),
+                   "hausdorff": float(self.hausdorff[i]), "uncertainty": float(self.uncertainty[i]),
                    "similarity": float(self.similarity[i])}
             if len(self.hausdorff_touched):
-                row["hausdorff_touched_m"] = float(self.hausdorff_touched[i])
+                row["hausdorff_touched"] = float(self.hausdorff_touched[i])
             if len(self.correlation):
                 row["correlation"] = float(self.correlation[i])
             if len(self.correlation_interval):
@@ -86,8 +122,8 @@ class Trace:
                 row["evidence"] = self.evidence
                 row["taps"] = int(self.taps[i]) if len(self.taps) else 0
             row.update({f"contact_{a}": float(v) for a, v in zip("xyz", self.contacts[i])})
-            row["step_time_s"] = float(self.step_time[i])
-            if len(self.sim_time):
-                row["robot_time_s"] = float(self.sim_time[i])
+            row["step_time"] = float(self.step_time[i])
+            if len(self.robot_time):
+                row["robot_time"] = float(self.robot_time[i])
             out.append(row)
         return out

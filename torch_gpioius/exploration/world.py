@@ -1,7 +1,6 @@
 """The world behind the exploration loop: a robot, a force sensor and a point-cloud source, one interface each.
 
-STYLE.md 13: the loop plans, moves, senses and records through these and never asks which world it runs in.
-Every world -- the 2-D polygon world, the 3-D penalty world, MuJoCo, a real UR5 with an OptoForce and a
+The loop plans, moves, senses and records through these and never asks which world it runs in. Every world -- the 2-D polygon world, the 3-D force-field world, MuJoCo, a real UR5 with an OptoForce and a
 camera -- is a :class:`World` that supplies
 
 * :meth:`World.hardware`: a :class:`Hardware` with the robot (Cartesian moves behind a safety gate), the force
@@ -21,22 +20,18 @@ import abc
 import hashlib
 import math
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from .._validation import as_bounds
+from ..contact import ContactController
 from .observations import ObservationPolicy
+from .protocols import Toucher
+from .registry import register_world
 from .stopping import StopRule, TravelBudget
 
 __all__ = ["World", "Hardware", "Toucher", "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash"]
-
-
-class Toucher(Protocol):
-    """The contact-control interface the loop uses (``ContactController`` and the 2-D geometric one)."""
-
-    def approach(self, direction, max_travel: float = ...) -> Any: ...
-
-    def slide(self, step, normal) -> Any: ...
 
 
 @dataclass
@@ -117,8 +112,12 @@ class World(abc.ABC):
 
     Subclasses set ``name``, ``dim``, ``start`` `(d,)` [m], ``direction`` `(d,)` (unit) and implement
     :meth:`hardware`, :meth:`penalty`, :attr:`defaults`; worlds with a known truth implement :meth:`measure`.
+    A world registers itself by name (:func:`torch_gpioius.exploration.registry.register_world`), which sets
+    :attr:`kind`.
     """
 
+    #: The registry name of the world's kind ("planar", "forcefield", "mujoco", "robot", or a user's).
+    kind: str = ""
     name: str = ""
     dim: int = 3
     start: np.ndarray
@@ -168,8 +167,13 @@ class World(abc.ABC):
 
     def describe(self) -> dict:
         """JSON-able description for log headers."""
-        return {"world": type(self).__name__, "scene": self.name, "dim": self.dim,
+        return {"world": self.kind or type(self).__name__, "scene": self.name, "dim": self.dim,
                 "scene_fingerprint": self.fingerprint()}
+
+    def truth(self) -> dict | None:
+        """The true shapes for viewers and exports: 2-D ``{"inner": [(m, 2)], "outer": [(m, 2)]}`` closed polylines,
+        3-D ``{"inner": Trimesh, "outer": Trimesh | None}`` [m]; None where the world does not know them."""
+        return None
 
 
 class RobotWorld(World):
@@ -196,9 +200,6 @@ class RobotWorld(World):
 
     def __init__(self, robot, sensor, camera, direction, bounds, *, name: str = "robot", reference: World | None =
                  None, config=None, defaults: ExplorationDefaults | None = None) -> None:
-        from ..contact import ContactController
-        from ..sim.bounds import as_bounds
-
         self.robot, self.sensor, self.camera = robot, sensor, camera
         self.start = np.asarray(robot.tool_position().detach().cpu().numpy(), dtype=np.float64)
         d = np.asarray(direction, dtype=np.float64).reshape(-1)
@@ -234,3 +235,6 @@ class RobotWorld(World):
 
     def fingerprint(self) -> str:
         return geometry_hash(self.direction, self.range)
+
+
+register_world("robot", RobotWorld, description="a real UR5 with a fingertip force sensor and a depth camera")

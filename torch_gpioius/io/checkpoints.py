@@ -69,7 +69,7 @@ def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None
     Raises:
         CheckpointError: invalid model state or ``extra``, or the write failed (names the cause).
     """
-    from .. import __version__
+    from .._version import __version__
     from ..models.gpiois import GPIOIS
     from ..models.gpis import GPIS
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validation import as_bounds
 from .datasets import DatasetError
 from .outputs import atomic_write, check_distinct, check_new_file
 
@@ -140,7 +141,6 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
         FileExistsError: an output exists and ``force`` is False.
     """
     from ..metrics import prior_variance
-    from ..sim.bounds import as_bounds
     from .offline import data_bounds
     from .runs import estimate_surface, load_run
 

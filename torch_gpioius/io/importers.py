@@ -10,10 +10,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..sensors.pointcloud import PointCloud, PointCloudSource
 from ..voxels import VOXEL_RANGE, voxel_average  # noqa: F401  (re-exported: the 0.2 home of voxel_average)
 from .datasets import Dataset, DatasetError
 
-__all__ = ["load_point_cloud", "load_contacts_csv", "voxel_average", "dataset_from_files"]
+__all__ = ["load_point_cloud", "load_contacts_csv", "voxel_average", "dataset_from_files", "FilePointCloud"]
 
 _SCALE = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 
@@ -274,3 +275,28 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud: str | os.Pa
     if noise is not None:
         meta["noise"] = noise
     return Dataset(x, y, task, step, meta=meta)
+
+
+class FilePointCloud(PointCloudSource):
+    """A recorded point cloud (PLY, PCD, XYZ or NPZ with ``points``), e.g. a saved Kinect frame.
+
+    Args:
+        path: the file (format from the extension; see :func:`load_point_cloud`).
+        units: the file's units ("m", "cm", "mm").
+        T_base_camera: `(4, 4)` pose of the frame the file is written in, in the base frame (identity: the file
+            is already in the base frame).
+        origin: `(3,)` optical centre in the *file's* frame [file units converted to m]; None if unknown.
+    """
+
+    def __init__(self, path: str | os.PathLike, *, units: str = "m", T_base_camera=None, origin=None) -> None:
+        self.path, self.units = path, units
+        self.T_base_camera = np.eye(4) if T_base_camera is None else np.asarray(T_base_camera, dtype=np.float64)
+        if self.T_base_camera.shape != (4, 4) or not np.isfinite(self.T_base_camera).all():
+            raise ValueError("T_base_camera: expected a finite (4, 4) homogeneous transform")
+        self.origin = None if origin is None else np.asarray(origin, dtype=np.float64)
+
+    def capture(self) -> PointCloud:
+        pts = load_point_cloud(self.path, units=self.units)
+        R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
+        origin = None if self.origin is None else R @ self.origin + t
+        return PointCloud(pts @ R.T + t, origin)

@@ -143,11 +143,11 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
     if chosen[-1] != steps[-1]:
         chosen.append(steps[-1])
     truth = None
-    if header.get("dim") == 2 and header.get("scene"):
-        from ..sim import paper_objects_2d
+    if header.get("dim") == 2:
+        from .runs import known_truth
 
-        scene = paper_objects_2d().get(header["scene"])
-        truth = None if scene is None else scene.inner_boundary
+        shapes = known_truth(header)
+        truth = None if shapes is None else shapes["inner"][0]
     out.mkdir(parents=True, exist_ok=True)
     rows, snapshots = [], {}
     shots = set(np.unique(np.linspace(0, len(chosen) - 1, max(1, figures)).round().astype(int)).tolist())

@@ -126,7 +126,7 @@ def claim_folder(path: str | os.PathLike, command: str, force: bool = False, **i
         FileExistsError: the folder holds someone else's files (names what it holds and the option).
         NotADirectoryError: ``path`` is a file.
     """
-    from .. import __version__
+    from .._version import __version__
 
     p = Path(path)
     if p.exists() and not p.is_dir():

@@ -30,6 +30,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
+from .._validation import as_bounds
 from .datasets import Dataset, DatasetError
 
 __all__ = ["BagImportError", "BagTopics", "BagMessage", "import_bag", "decode_point_cloud2", "parse_transform", "write_bag",
@@ -441,8 +442,6 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         raise ValueError(f"import_bag: joint_names needs the 6 UR5 joints, got {len(names)}")
     T_fixed = parse_transform(camera_transform) if camera_transform is not None else None
     if crop is not None:
-        from ..sim.bounds import as_bounds
-
         crop = as_bounds(crop, 3)
     path = Path(bag)
     ur5 = UR5(tool_offset=tool_offset)

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from .datasets import Dataset, DatasetError, load_dataset, replay
+from .logs import step_values
 
 __all__ = ["RunHistory", "load_run", "known_truth", "estimate_surface"]
 
@@ -63,22 +64,30 @@ class RunHistory:
         ds, p = self.states[k], self.params.get(k, {})
         theta = float(self.meta.get("theta") or 0.1)
         noise = float(self.meta.get("noise") or 0.006)
+        kernel = self.kernel()
         has_outer = bool((ds.task == 1).any())
         if not has_outer or self.meta.get("mode") == "tactile":
             inner = ds.task == 0
-            model = GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise)
-            return model
+            return GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise, kernel=kernel)
         if "local_params" in p and self.meta.get("regions"):
             from ..models.local import LocalGPIOIS
 
-            model = LocalGPIOIS(ds.x, ds.y, ds.task, regions=int(self.meta["regions"]), theta=theta, noise=noise)
-            with torch.no_grad():
-                model.params.copy_(torch.as_tensor(p["local_params"]))
-            model._engine = None
-            return model
+            model = LocalGPIOIS(ds.x, ds.y, ds.task, regions=int(self.meta["regions"]), theta=theta, noise=noise,
+                                kernel=kernel)
+            return model.set_params(p["local_params"])
         if "kt" in p and np.isfinite(p["kt"]).all():
-            return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]))
-        return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise).fit()
+            return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
+                          kernel=kernel)
+        return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, kernel=kernel).fit()
+
+    def kernel(self):
+        """The run's kernel when it is not the default inverse multiquadric (its header names it), else None."""
+        desc = self.meta.get("kernel")
+        if isinstance(desc, dict) and desc.get("kernel") not in (None, "InverseMultiquadric"):
+            from ..kernels import from_description
+
+            return from_description(desc)
+        return None
 
     def series(self, key: str) -> np.ndarray:
         """`(K,)` a recorded per-step value (``similarity``, ``correlation``, ``hausdorff``) over :attr:`steps`."""
@@ -105,8 +114,8 @@ def load_run(path: str | os.PathLike) -> RunHistory:
             k = int(rec.meta["step"])
             states[k] = ds
             a = rec.arrays
-            p = {"similarity": float(rec.meta.get("s", math.nan)), "correlation": float(rec.meta.get("rho", math.nan)),
-                 "hausdorff": float(rec.meta.get("h", math.nan) if rec.meta.get("h") is not None else math.nan)}
+            v = step_values(rec.meta)
+            p = {"similarity": v["similarity"], "correlation": v["correlation"], "hausdorff": v["hausdorff"]}
             for key in ("kt", "local_params", "contact"):
                 if key in a:
                     p[key] = np.asarray(a[key], dtype=np.float64)
@@ -134,40 +143,26 @@ def load_run(path: str | os.PathLike) -> RunHistory:
 
 
 def known_truth(meta: dict) -> dict | None:
-    """The true shapes of a built-in world named by a header (``world`` and ``scene``), or None.
+    """The true shapes of a registered world's built-in object named by a header (``world`` and ``scene``), or None.
 
     Returns:
-        2-D: ``{"inner": [(m, 2)], "outer": [(m, 2)]}`` closed polylines [m]; 3-D: ``{"inner": Trimesh, "outer":
-        Trimesh | None}`` (MuJoCo covers settle at run time: their outer shape is what the camera saw). None when
-        the world is not built in (a real robot, a user's scene) or its optional dependency is missing.
+        ``World.truth()`` of that object: 2-D ``{"inner": [(m, 2)], "outer": [(m, 2)]}`` closed polylines [m]; 3-D
+        ``{"inner": Trimesh, "outer": Trimesh | None}`` (MuJoCo covers settle at run time: their outer shape is what
+        the camera saw). None when the run's world or object is not a built-in one (a real robot, a user's scene) or
+        its optional dependency is missing.
     """
+    from ..exploration.registry import world_entry
+
     world, name = meta.get("world"), meta.get("scene")
-    try:
-        if world == "Scene2D":
-            from ..sim import paper_objects_2d
-
-            scene = paper_objects_2d().get(name)
-            return None if scene is None else {"inner": [scene.inner_boundary], "outer": [scene.outer_boundary]}
-        if world == "Scene3D":
-            from ..sim import paper_objects_3d
-
-            scene = paper_objects_3d().get(name)
-            return None if scene is None else {"inner": scene.inner, "outer": scene.outer}
-        if world == "MujocoScene":
-            from ..sim.mujoco import objects as mo
-            from ..sim.mujoco.primitives import as_primitives, union_sdf
-            from ..sim.shapes3d import mesh_from_sdf
-
-            if name not in mo.OBJECTS:
-                return None
-            arm = name in ("E", "F")
-            prims = as_primitives(mo.arm_primitives() if arm else mo.torso_primitives())
-            box = np.asarray(mo.ARM_RANGE if arm else mo.TORSO_RANGE) + np.array([[-0.3], [0.3]]) + 0.005 * (
-                math.sqrt(2) - 1)   # offset grid: see MujocoScene.inner
-            return {"inner": mesh_from_sdf(lambda p: union_sdf(prims, p), box, 0.005), "outer": None}
-    except ImportError:
+    if not isinstance(world, str) or not isinstance(name, str):
         return None
-    return None
+    try:
+        entry = world_entry(world)
+        if name not in entry.object_names:
+            return None
+        return entry.build(name).truth()
+    except (ValueError, ImportError):
+        return None
 
 
 def estimate_surface(model, bounds: np.ndarray, resolution: float, task: int = 0):

@@ -211,6 +211,23 @@ class GPIOIS(ImplicitSurfaceGP):
         lo, hi, _ = (correlation_interval if kind == "correlation" else ratio_interval)(evaluate, kt, level)
         return float(lo), float(hi)
 
+    def correlation_plausible(self, value: float = 1.0, level: float = 0.95) -> bool:
+        """Whether the profile-likelihood interval of the correlation at ``level`` contains ``value``
+        (:meth:`similarity_interval`), decided without computing the whole interval: one profile at ``value``.
+
+        With one task only the correlation is unidentified and every value is plausible (True).
+        """
+        from ..inference.interval import plausible_correlation
+
+        level = as_float(level, "level", lo=0.5, hi=0.9999)
+        value = as_float(value, "value", lo=-1.0, hi=1.0)
+        if not self.identified:
+            return True
+        engine = self._inference()
+        x0 = self.train_inputs[0]
+        return plausible_correlation(lambda kt: engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device)),
+                                     self.task_covariance, value, level)
+
     def _engine_class(self):
         if self.inference == "dense":
             return DenseExactInference

@@ -49,10 +49,11 @@ class GPIS(ImplicitSurfaceGP):
     def _train_task(self) -> Tensor:
         return torch.zeros(self.train_inputs[0].shape[0], dtype=torch.long, device=self.train_inputs[0].device)
 
-    def fit(self) -> "GPIS":
+    def fit(self, multi_start: bool | None = None) -> "GPIS":
         """Nothing is learned in GPIS (theta, sigma^2 and m are fixed, eq. 1-5); refreshes the exact factors.
 
-        Present so that GPIS and GPIOIS follow the same protocol during exploration.
+        Present so that GPIS and GPIOIS follow the same protocol during exploration (``multi_start`` is accepted for
+        that and has nothing to start).
 
         Returns:
             self

@@ -288,6 +288,21 @@ class LocalGPIOIS(ImplicitSurfaceGP):
         self.fit_result = FitResult(self.task_covariance, f, pg, it, ok)
         return self
 
+    def set_params(self, params) -> "LocalGPIOIS":
+        """Set ``(a', c, beta_1..beta_R)`` (e.g. the values a log recorded), as :meth:`fit` would have left them.
+
+        Raises:
+            ValueError: not ``R + 2`` finite numbers, or a non-positive ``a'`` or ``c``; the model is unchanged.
+        """
+        p = torch.as_tensor(params, dtype=torch.float64).reshape(-1)
+        if p.shape != self.params.shape or not bool(torch.isfinite(p).all()) or not bool((p[:2] > 0).all()):
+            raise ValueError(f"params: expected {self.params.numel()} finite numbers (a' > 0, c > 0, then one beta per "
+                             f"region), got {p.tolist()}")
+        with torch.no_grad():
+            self.params.copy_(p.to(self.params))
+        self._engine = None
+        return self
+
     def predict(self, x, task: int | str = INNER) -> tuple[Tensor, Tensor]:
         """Posterior mean and variance of F_task (inner: eq. 12-13 with the local covariance); differentiable in x."""
         return self._predict(x, task_id(task))

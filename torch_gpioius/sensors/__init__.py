@@ -1,5 +1,6 @@
 """Sensors behind one interface each: force sensors (the OptoForce USB DAQ over pyserial, a simulated fingertip
-sensor) and point-cloud sources (a simulated depth camera, recorded PLY/PCD/XYZ/NPZ files).
+sensor) and point-cloud sources (a simulated depth camera; recorded PLY/PCD/XYZ/NPZ files are read by
+:class:`torch_gpioius.io.FilePointCloud`).
 
 ``import torch_gpioius.sensors`` works without pyserial; constructing :class:`OptoForceDAQ` on a real port
 then raises an ImportError naming the ``sensors`` extra.
@@ -7,12 +8,24 @@ then raises an ImportError naming the ``sensors`` extra.
 
 from .base import (ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorError, SensorStale, SensorTimeout,
                    decode_status)
-from .pointcloud import (FilePointCloud, PinholeCamera, PointCloud, PointCloudSource, SimulatedDepthCamera,
-                         look_at)
+from .pointcloud import PinholeCamera, PointCloud, PointCloudSource, SimulatedDepthCamera, look_at
 from .optoforce import FrameParser, OptoForceDAQ, encode_config, encode_frame
-from .simulated import FAULTS, PenaltyContact, SimulatedForceSensor, SphereSDF
+from .simulated import FAULTS, ForceFieldContact, SimulatedForceSensor, SphereSDF
 
 __all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm", "SensorStale",
            "decode_status", "OptoForceDAQ", "FrameParser", "encode_config", "encode_frame", "SimulatedForceSensor",
-           "PenaltyContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource", "FilePointCloud",
+           "ForceFieldContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource",
            "PinholeCamera", "SimulatedDepthCamera", "look_at"]
+
+
+def __getattr__(name):
+    if name == "FilePointCloud":
+        from . import pointcloud
+
+        return pointcloud.__getattr__(name)
+    if name == "PenaltyContact":          # "penalty" names only the planner's range cost C(x) now
+        import warnings
+
+        warnings.warn("torch_gpioius.sensors.PenaltyContact is ForceFieldContact now", DeprecationWarning, stacklevel=2)
+        return ForceFieldContact
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

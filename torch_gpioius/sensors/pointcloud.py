@@ -15,10 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from ..io.importers import load_point_cloud
 from ..voxels import voxel_average
 
-__all__ = ["PointCloud", "PointCloudSource", "FilePointCloud", "PinholeCamera", "SimulatedDepthCamera", "look_at"]
+__all__ = ["PointCloud", "PointCloudSource", "PinholeCamera", "SimulatedDepthCamera", "look_at"]
 
 
 @dataclass
@@ -89,31 +88,6 @@ class PointCloudSource(abc.ABC):
     @abc.abstractmethod
     def capture(self) -> PointCloud:
         """One point cloud [m], base frame."""
-
-
-class FilePointCloud(PointCloudSource):
-    """A recorded point cloud (PLY, PCD, XYZ or NPZ with ``points``), e.g. a saved Kinect frame.
-
-    Args:
-        path: the file (format from the extension; see :func:`torch_gpioius.importers.load_point_cloud`).
-        units: the file's units ("m", "cm", "mm").
-        T_base_camera: `(4, 4)` pose of the frame the file is written in, in the base frame (identity: the file
-            is already in the base frame).
-        origin: `(3,)` optical centre in the *file's* frame [file units converted to m]; None if unknown.
-    """
-
-    def __init__(self, path: str | os.PathLike, *, units: str = "m", T_base_camera=None, origin=None) -> None:
-        self.path, self.units = path, units
-        self.T_base_camera = np.eye(4) if T_base_camera is None else np.asarray(T_base_camera, dtype=np.float64)
-        if self.T_base_camera.shape != (4, 4) or not np.isfinite(self.T_base_camera).all():
-            raise ValueError("T_base_camera: expected a finite (4, 4) homogeneous transform")
-        self.origin = None if origin is None else np.asarray(origin, dtype=np.float64)
-
-    def capture(self) -> PointCloud:
-        pts = load_point_cloud(self.path, units=self.units)
-        R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
-        origin = None if self.origin is None else R @ self.origin + t
-        return PointCloud(pts @ R.T + t, origin)
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -268,3 +242,16 @@ class SimulatedDepthCamera(PointCloudSource):
             p_cam = p_cam[self._rng.uniform(size=len(p_cam)) >= self.dropout]
         R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
         return PointCloud(p_cam @ R.T + t, t.copy())
+
+
+def __getattr__(name):
+    # FilePointCloud reads files, which is io's business; its 0.2 home forwards to it with a warning
+    if name == "FilePointCloud":
+        import warnings
+
+        from ..io.importers import FilePointCloud
+
+        warnings.warn("torch_gpioius.sensors.FilePointCloud is torch_gpioius.io.FilePointCloud now", DeprecationWarning,
+                      stacklevel=2)
+        return FilePointCloud
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

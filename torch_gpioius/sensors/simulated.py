@@ -1,6 +1,6 @@
 """A simulated fingertip force sensor for the simulated worlds.
 
-Contact is a penalty model: pressing ``delta`` metres into the inner (rigid-ish) object pushes back with
+Contact is a force field (a spring law, the penalty method of contact mechanics): pressing ``delta`` metres into the inner (rigid-ish) object pushes back with
 ``k_inner · delta`` along its outward normal; the soft cover adds ``k_cover · depth`` along the cover's
 outward normal, small enough that the cover alone stays below the 1 N contact threshold over centimetres.
 """
@@ -14,7 +14,7 @@ import torch
 
 from .base import ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorTimeout
 
-__all__ = ["SignedDistance", "SphereSDF", "PenaltyContact", "SimulatedForceSensor", "FAULTS"]
+__all__ = ["SignedDistance", "SphereSDF", "ForceFieldContact", "SimulatedForceSensor", "FAULTS"]
 
 #: Fault names :class:`SimulatedForceSensor` can inject at chosen reads.
 FAULTS = ("stale", "timeout", "overload", "spike", "checksum", "disconnect")
@@ -39,7 +39,7 @@ class SphereSDF:
         return r - self.radius, v / r[..., None]
 
 
-class PenaltyContact:
+class ForceFieldContact:
     """Force on a point fingertip from an inner object under a soft cover.
 
     Args:

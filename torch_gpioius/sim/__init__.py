@@ -1,9 +1,10 @@
-"""Simulated worlds behind the exploration loop's interfaces: the 2-D polygon world (Sec. V), the 3-D penalty
-world (Sec. VI with a kinematic UR5, a penalty contact model and a ray-cast depth camera), and the MuJoCo world
-(a UR5 with a fingertip force sensor on real contact physics, cloth and foam covers; optional extra ``mujoco``)."""
+"""Simulated worlds behind the exploration loop's interfaces, each registered by name
+(:mod:`torch_gpioius.exploration.registry`): ``planar``, the 2-D polygon world (Sec. V); ``forcefield``, Sec. VI in
+3-D with a kinematic UR5, a static force-field cover and a ray-cast depth camera; and ``mujoco``, a UR5 with a
+fingertip force sensor on MuJoCo's contact physics with cloth and foam covers (the optional extra ``mujoco``)."""
 
-from .bounds import as_bounds
-from .penalty import ROBOT_STUDY_DEFAULTS, Scene3D, estimate_metrics_3d, paper_objects_3d, simulated_ur5, sphere_scene
+from .._validation import as_bounds
+from .forcefield import ROBOT_STUDY_DEFAULTS, Scene3D, estimate_metrics_3d, paper_objects_3d, simulated_ur5, sphere_scene
 from .plane import (PlanarCamera, PlanarContact, PlanarForceSensor, PlanarGate, PlanarRobot, PlanarView, Scene2D,
                     paper_objects_2d, rectangle)
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union

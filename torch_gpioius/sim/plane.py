@@ -20,11 +20,12 @@ from shapely.geometry import LineString, Point, Polygon
 from ..contact import ContactResult
 from ..exploration.observations import ObservationPolicy, free_space_along
 from ..exploration.stopping import OnceAround
+from ..exploration.registry import register_world
 from ..exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
 from ..metrics import hausdorff_distance
 from ..sensors.base import ForceReading, ForceSensor
 from ..sensors.pointcloud import PointCloud, PointCloudSource
-from .bounds import as_bounds
+from .._validation import as_bounds
 
 __all__ = ["Scene2D", "paper_objects_2d", "rectangle", "PlanarRobot", "PlanarGate", "PlanarForceSensor",
            "PlanarCamera", "PlanarView", "PlanarContact"]
@@ -453,6 +454,10 @@ class Scene2D(World):
         n = max(3, int(math.ceil(ring.length / spacing)))
         return np.array([ring.interpolate(i * ring.length / n).coords[0] for i in range(n)])
 
+    def truth(self) -> dict:
+        """The true inner and outer boundaries as closed polylines `(m, 2)` [m]."""
+        return {"inner": [self.inner_boundary], "outer": [self.outer_boundary]}
+
     def __repr__(self) -> str:
         return (f"Scene2D({self.name!r}, inner area={self.inner.area * 1e4:.0f} cm^2, "
                 f"outer area={self.outer.area * 1e4:.0f} cm^2, d_H={self.inner_outer_hausdorff() * 100:.1f} cm)")
@@ -493,3 +498,7 @@ def paper_objects_2d() -> dict[str, Scene2D]:
         "C": Scene2D(c_inner, c_outer, start=(0.15 + 0.269 + 0.10, 0.01), direction=(-1, 0), name="C"),
         "D": Scene2D(d_inner, d_outer, start=(-0.50, 0.01), direction=(1, 0), name="D"),
     }
+
+
+register_world("planar", Scene2D, objects=lambda names, smoke: paper_objects_2d(), object_names=("A", "B", "C", "D"),
+               description="the paper's 2-D study (Sec. V): polygons and a point fingertip (objects A-D)")

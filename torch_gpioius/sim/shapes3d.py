@@ -17,6 +17,8 @@ import torch
 import trimesh
 from skimage import measure
 
+from .._validation import as_bounds
+
 __all__ = ["capsule", "rounded_box", "smooth_union", "offset", "mesh_from_sdf", "MeshSDF", "SDF"]
 
 #: A numpy signed-distance function: `(m, 3)` points [m] -> `(m,)` distances [m], negative inside.
@@ -92,8 +94,6 @@ def mesh_from_sdf(sdf: SDF, bounds, resolution: float = 0.005) -> trimesh.Trimes
     Raises:
         ValueError: the shape is empty or touches the bounds (the mesh would be open).
     """
-    from .bounds import as_bounds
-
     b = as_bounds(bounds, 3)
     axes = [np.arange(lo, hi + resolution / 2, resolution) for lo, hi in b.T]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exploration import Trace, explore
+from ..exploration import Trace
+from ..session import explore
 from ..sim import paper_objects_2d
 from .figures import Snapshot, figure_2d_object, figure_similarity
 

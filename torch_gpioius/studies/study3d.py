@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..exploration import Trace, explore
+from ..exploration import Trace
+from ..session import explore
 from .figures import figure_3d_object, figure_similarity
 from .study2d import write_records
 
@@ -48,7 +49,7 @@ def summarize_3d(traces: dict[str, dict[str, Trace]], hausdorff_io: dict[str, fl
             row[f"steps_{tag}"] = tr.n_steps - 1
             row[f"terminated_{tag}"] = tr.terminated
             row[f"median_plan_ms_{tag}"] = 1e3 * float(np.median(tr.step_time[1:])) if tr.n_steps > 1 else float("nan")
-            row[f"robot_time_s_{tag}"] = float(tr.sim_time[-1] - tr.sim_time[0]) if len(tr.sim_time) else float("nan")
+            row[f"robot_time_s_{tag}"] = float(tr.robot_time[-1] - tr.robot_time[0]) if len(tr.robot_time) else float("nan")
         if "visual-tactile" in pair:
             s = pair["visual-tactile"].similarity[1:]
             row["S_mean"] = float(np.nanmean(s)) if len(s) else float("nan")
@@ -135,8 +136,8 @@ def _write_meshes(traces: dict, scenes: dict, out: Path, resolution: float) -> N
 
 
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
-                 metrics_every: int = 5, modes=MODES, progress: bool = True, mesh_resolution: float = 0.006,
-                 smoke: bool = False, world: str = "penalty", **explore_kwargs) -> dict:
+                 metrics_every: int = 5, modes=MODES, progress: bool = True, smoke: bool = False,
+                 world: str = "forcefield", **explore_kwargs) -> dict:
     """Run the simulated robot study on objects E-H and write figures, records, logs and the summary.
 
     Writes into ``out``: ``fig9_<object>.png``, ``fig10_similarity.png``, ``records.csv`` / ``records.json``
@@ -150,27 +151,21 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         metrics_every: compute the surface metrics every k steps (and at the last one).
         modes: which modes to run.
         progress: progress bars.
-        mesh_resolution: marching-cubes spacing of the object meshes [m].
-        smoke: a CI run: figures and records as usual, but the claims are not judged.
-        world: "penalty" (``tg.sim.paper_objects_3d``) or "mujoco" (``tg.sim.mujoco_objects_3d``: cloth and foam
-            covers on MuJoCo's contact physics; needs the ``mujoco`` extra).
+        smoke: a CI run on coarser objects: figures and records as usual, but the claims are not judged.
+        world: a registered world with the objects E-H: "forcefield" (``tg.sim.paper_objects_3d``) or "mujoco"
+            (``tg.sim.mujoco_objects_3d``: cloth and foam covers on MuJoCo's contact physics; the ``mujoco`` extra).
         **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, ...).
     """
     from .._progress import progress as reporter
 
-    unknown = [o for o in objects if o not in OBJECTS]
+    from ..exploration.registry import world_entry
+
+    entry = world_entry(world)
+    unknown = [o for o in objects if o not in OBJECTS or o not in entry.object_names]
     if unknown:   # before building the meshes (seconds)
-        raise ValueError(f"objects: unknown {unknown}; choose among {list(OBJECTS)}")
-    if world == "penalty":
-        from ..sim import paper_objects_3d
-
-        scenes = paper_objects_3d(mesh_resolution)
-    elif world == "mujoco":
-        from ..sim.mujoco import mujoco_objects_3d
-
-        scenes = mujoco_objects_3d(objects, smoke=smoke)
-    else:
-        raise ValueError(f"world: must be 'penalty' or 'mujoco', got {world!r}")
+        raise ValueError(f"objects: unknown {unknown} in the {entry.name} world; choose among "
+                         f"{[o for o in OBJECTS if o in entry.object_names]}")
+    scenes = {o: entry.build(o, smoke) for o in objects}
     out = Path(out)
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

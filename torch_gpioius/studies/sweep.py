@@ -7,8 +7,8 @@
   file and renamed, so a killed run leaves nothing half-written and a re-run skips finished runs);
 * ``DIR/logs/<object>_<mode>_<seed>.gpioius``: its crash-safe exploration log.
 
-Then it aggregates: ``DIR/runs.csv`` (one row per run: ``object, mode, seed, final_hausdorff_m``, ...),
-``DIR/summary.json`` (``{object: {mode: {"final_hausdorff_m": {"median", "lo", "hi", ...}, "n", ...}}}`` plus the
+Then it aggregates: ``DIR/runs.csv`` (one row per run: ``object, mode, seed, final_hausdorff``, ...),
+``DIR/summary.json`` (``{object: {mode: {"final_hausdorff": {"median", "lo", "hi", ...}, "n", ...}}}`` plus the
 paired differences and the claims), ``DIR/summary.md`` and the figures.
 
 A seed perturbs the world (:meth:`torch_gpioius.exploration.world.World.perturbed`): the start within a 2 cm disc
@@ -29,7 +29,6 @@ import math
 import os
 import time
 from dataclasses import dataclass
-from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -39,17 +38,30 @@ from .stats import median_interval, paired_difference
 __all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
            "FRACTIONS", "MAX_SEEDS"]
 
-#: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants (issue 17).
+#: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants.
 MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps")
-WORLDS = ("2d", "3d", "mujoco")
 #: Fractions of the reference travel at which the Hausdorff distance is reported.
 FRACTIONS = (0.10, 0.25, 0.50, 1.00)
-DEFAULT_OBJECTS = {"2d": ("A", "B", "C", "D"), "3d": ("E", "F", "G", "H"), "mujoco": ("E", "F", "G", "H")}
+#: Metrics every k steps in worlds with a travel budget (the robot study's 150 steps; every step in 2-D).
+BUDGET_METRICS_EVERY = 5
+
+
+def __getattr__(name):
+    # the world names and their objects come from the registry (a world registered later is a sweep world too)
+    if name == "WORLDS":
+        from ..exploration.registry import world_names
+
+        return tuple(w for w in world_names() if w != "robot")
+    if name == "DEFAULT_OBJECTS":
+        from ..exploration.registry import world_entry, world_names
+
+        return {w: world_entry(w).object_names for w in world_names() if w != "robot"}
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 @dataclass(frozen=True)
 class RunSpec:
-    """One run of a sweep."""
+    """One run of a sweep (``world`` is a registered world's name)."""
 
     world: str
     object: str
@@ -66,42 +78,21 @@ class RunSpec:
         return f"{self.object}_{self.mode}_{self.seed}"
 
 
-@lru_cache(maxsize=4)
-def _objects(world: str, smoke: bool) -> dict:
-    if world == "2d":
-        from ..sim import paper_objects_2d
-
-        return paper_objects_2d()
-    if world == "3d":
-        from ..sim import paper_objects_3d
-
-        return paper_objects_3d(0.01 if smoke else 0.006)
-    raise ValueError(world)
-
-
 def make_world(world: str, name: str, seed: int, smoke: bool = False):
     """The world of one run: the named object, perturbed by ``seed`` (seed 0: the unperturbed object)."""
-    if world not in WORLDS:
-        raise ValueError(f"world: must be one of {WORLDS}, got {world!r}")
-    if world == "mujoco":
-        from ..sim.mujoco import mujoco_objects_3d
+    from ..exploration.registry import make_world as registry_make_world
 
-        base = _mujoco_object(name, smoke)
-        return base.perturbed(seed)
-    scenes = _objects(world, smoke)
-    if name not in scenes:
-        raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {sorted(scenes)}")
-    return scenes[name].perturbed(seed)
+    return registry_make_world(world, name, seed, smoke)
 
 
-@lru_cache(maxsize=8)
-def _mujoco_object(name: str, smoke: bool):
-    from ..sim.mujoco import mujoco_objects_3d
+def _world_budget(world) -> float | None:
+    """The travel budget [m] of a world's own stop rules (the robot study's 1.5 m), or None (e.g. once around)."""
+    from ..exploration.stopping import TravelBudget
 
-    return mujoco_objects_3d([name], smoke=smoke)[name]
+    return next((r.max_travel for r in world.defaults.stop if isinstance(r, TravelBudget)), None)
 
 
-def _explore_kwargs(spec: RunSpec) -> dict:
+def _explore_kwargs(spec: RunSpec, world) -> dict:
     mode, evidence = spec.mode, None
     if mode.endswith("+taps"):
         mode, evidence = mode[: -len("+taps")], "taps"
@@ -110,13 +101,14 @@ def _explore_kwargs(spec: RunSpec) -> dict:
         kw["mode"], kw["regions"] = "visual-tactile", 4
     else:
         kw["mode"] = mode
-    if spec.world != "2d":
-        kw["metrics_every"] = 5
-        kw["max_travel"] = spec.max_travel if spec.max_travel is not None else (0.06 if spec.smoke else 1.5)
+    budget = _world_budget(world)
+    if budget is not None:
+        kw["metrics_every"] = BUDGET_METRICS_EVERY
+        kw["max_travel"] = spec.max_travel if spec.max_travel is not None else (0.06 if spec.smoke else budget)
     if spec.max_steps is not None:
         kw["max_steps"] = spec.max_steps
     elif spec.smoke:
-        kw["max_steps"] = 12 if spec.world == "2d" else 40
+        kw["max_steps"] = 12 if budget is None else 40
     if kw["mode"] == "visual-tactile":
         kw["interval_every"] = 1000 if spec.smoke else 10
     return kw
@@ -140,6 +132,33 @@ def _number(v, *, allow_nan: bool = True) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool) and (allow_nan or math.isfinite(v))
 
 
+def _worlds() -> tuple:
+    from ..exploration.registry import world_names
+
+    return tuple(w for w in world_names() if w != "robot")
+
+
+def _current_names(run: dict) -> dict:
+    """A run file in the current names (files of earlier releases: ``travel_m``, ``wall_s``, ``median_step_ms``,
+    world ``2d`` / ``3d``, no ``budget``)."""
+    from ..exploration.registry import canonical_world_name
+
+    if not isinstance(run.get("world"), str):
+        return run
+    old_world = run["world"]
+    run = {**run, "world": canonical_world_name(old_world)}
+    if "travel_m" in run and "travel" not in run:
+        run["travel"] = run.pop("travel_m")
+    if "wall_s" in run and "wall_time" not in run:
+        run["wall_time"] = run.pop("wall_s")
+    if "median_step_ms" in run and "median_step_time" not in run:
+        v = run.pop("median_step_ms")
+        run["median_step_time"] = v / 1e3 if _number(v) else v
+    if "budget" not in run:
+        run["budget"] = None if old_world == "2d" else 1.5
+    return run
+
+
 def read_run_file(path: str | Path) -> dict:
     """Read and validate one run's result file (what :func:`run_one` writes).
 
@@ -160,23 +179,27 @@ def read_run_file(path: str | Path) -> dict:
     def bad(field: str, why: str):
         return RunFileError(f"{path}: field {field!r} {why}")
 
+    run = _current_names(run)
+
     for k in ("world", "object", "mode", "terminated"):
         if not isinstance(run.get(k), str):
             raise bad(k, f"must be a string, got {run.get(k)!r}")
-    if run["world"] not in WORLDS:
-        raise bad("world", f"must be one of {WORLDS}, got {run['world']!r}")
+    if run["world"] not in _worlds():
+        raise bad("world", f"must be one of {_worlds()}, got {run['world']!r}")
     if run["mode"] not in MODES:
         raise bad("mode", f"must be one of {MODES}, got {run['mode']!r}")
     for k in ("seed", "steps", "taps"):
         v = run.get(k)
         if not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
             raise bad(k, f"must be a non-negative integer, got {v!r}")
-    for k in ("travel_m", "wall_s"):
+    for k in ("travel", "wall_time"):
         v = run.get(k)
         if not (_number(v, allow_nan=False) and v >= 0):
             raise bad(k, f"must be a non-negative number, got {v!r}")
-    if not _number(run.get("median_step_ms")):
-        raise bad("median_step_ms", f"must be a number or NaN, got {run.get('median_step_ms')!r}")
+    if not _number(run.get("median_step_time")):
+        raise bad("median_step_time", f"must be a number or NaN, got {run.get('median_step_time')!r}")
+    if run.get("budget") is not None and not (_number(run["budget"], allow_nan=False) and run["budget"] > 0):
+        raise bad("budget", f"must be a positive travel [m] or null, got {run['budget']!r}")
     series = run.get("series")
     if not isinstance(series, dict):
         raise bad("series", "is missing or not an object")
@@ -199,7 +222,7 @@ def read_run_file(path: str | Path) -> dict:
 
 def run_one(spec: RunSpec) -> dict:
     """Run one (object, mode, seed) and write its result file; returns the result (also when already on disk)."""
-    from ..exploration import explore
+    from ..session import explore
     from ..threads import torch_threads
 
     out = Path(spec.out)
@@ -216,11 +239,12 @@ def run_one(spec: RunSpec) -> dict:
     t0 = time.perf_counter()
     with torch_threads(spec.threads):
         world = make_world(spec.world, spec.object, spec.seed, spec.smoke)
-        trace = explore(world, log=out / "logs" / f"{spec.key}.gpioius", **_explore_kwargs(spec))
+        kw = _explore_kwargs(spec, world)
+        trace = explore(world, log=out / "logs" / f"{spec.key}.gpioius", **kw)
     record = {"world": spec.world, "object": spec.object, "mode": spec.mode, "seed": spec.seed,
-              "terminated": trace.terminated, "steps": trace.n_steps - 1, "travel_m": float(trace.travel[-1]),
-              "wall_s": time.perf_counter() - t0,
-              "median_step_ms": 1e3 * float(np.median(trace.step_time[1:])) if trace.n_steps > 1 else math.nan,
+              "terminated": trace.terminated, "steps": trace.n_steps - 1, "travel": float(trace.travel[-1]),
+              "budget": kw.get("max_travel"), "wall_time": time.perf_counter() - t0,
+              "median_step_time": float(np.median(trace.step_time[1:])) if trace.n_steps > 1 else math.nan,
               "taps": int(trace.taps[-1]) if len(trace.taps) else 0,
               "series": {"travel": trace.travel.tolist(), "hausdorff": trace.hausdorff.tolist(),
                          "hausdorff_touched": trace.hausdorff_touched.tolist(),
@@ -284,29 +308,30 @@ def _at_travel(series: dict, key: str, distance: float) -> float:
 
 
 def _reference_travel(run: dict, runs_by_key: dict) -> float:
-    """3-D: the travel budget; 2-D: the tactile run of the same object and seed (the paper's table), else own."""
-    if run["world"] != "2d":
-        return float(run.get("budget_m") or max(run["travel_m"], 1e-9))
+    """The travel budget of a budgeted run (the robot study); else the tactile run of the same object and seed (the
+    paper's 2-D table), or the run's own travel."""
+    if run.get("budget"):
+        return float(run["budget"])
     tactile = runs_by_key.get((run["object"], "tactile", run["seed"]))
-    return float((tactile or run)["travel_m"])
+    return float((tactile or run)["travel"])
 
 
 def _row(run: dict, runs_by_key: dict) -> dict:
     s = run["series"]
     ref = _reference_travel(run, runs_by_key)
     row = {"world": run["world"], "object": run["object"], "mode": run["mode"], "seed": run["seed"],
-           "final_hausdorff_m": _last_finite(s["hausdorff"]),
-           "final_hausdorff_touched_m": _last_finite(s["hausdorff_touched"]),
+           "final_hausdorff": _last_finite(s["hausdorff"]),
+           "final_hausdorff_touched": _last_finite(s["hausdorff_touched"]),
            "final_uncertainty": _last_finite(s["uncertainty"]),
            "final_correlation": _last_finite(s["correlation"]),
            "final_correlation_lo": _last_finite(s["correlation_lo"]),
            "final_correlation_hi": _last_finite(s["correlation_hi"]),
            "final_similarity": _last_finite(s["similarity"]),
-           "travel_m": run["travel_m"], "steps": run["steps"], "terminated": run["terminated"], "taps": run["taps"],
-           "wall_s": run["wall_s"], "median_step_ms": run["median_step_ms"], "reference_travel_m": ref}
+           "travel": run["travel"], "steps": run["steps"], "terminated": run["terminated"], "taps": run["taps"],
+           "wall_time": run["wall_time"], "median_step_time": run["median_step_time"], "reference_travel": ref}
     for f in FRACTIONS:
         p = int(round(100 * f))
-        row[f"hausdorff_{p}_m"] = _at_travel(s, "hausdorff", f * ref)
+        row[f"hausdorff_{p}"] = _at_travel(s, "hausdorff", f * ref)
         row[f"uncertainty_{p}"] = _at_travel(s, "uncertainty", f * ref)
     return row
 
@@ -324,9 +349,6 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
     if not runs:
         raise ValueError(f"{out}: no finished runs to aggregate")
     by_key = {(r["object"], r["mode"], r["seed"]): r for r in runs}
-    for r in runs:
-        if r["world"] != "2d":
-            r["budget_m"] = max_travel if max_travel else (0.06 if smoke else 1.5)
     rows = sorted((_row(r, by_key) for r in runs), key=lambda x: (x["object"], x["mode"], x["seed"]))
     fields = list(rows[0])
     with open(out / "runs.csv", "w", newline="") as fh:
@@ -334,7 +356,7 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
         w.writeheader()
         w.writerows(rows)
     summary = _summarize(rows)
-    claims = None if smoke else _claims(rows[0]["world"], summary)
+    claims = None if smoke else _claims(summary)
     (out / "summary.json").write_text(json.dumps({**summary, "claims": claims}, indent=1, allow_nan=True))
     (out / "summary.md").write_text(_markdown(rows[0]["world"], summary, claims, len(rows)))
     from .sweep_figures import figure_paired, figure_similarity_bands, figure_transition_bands
@@ -346,8 +368,8 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
     return {"rows": rows, "summary": summary, "claims": claims}
 
 
-METRICS = ["final_hausdorff_m", "final_hausdorff_touched_m", "final_uncertainty", "final_correlation",
-           "final_similarity"] + [f"hausdorff_{int(round(100 * f))}_m" for f in FRACTIONS]
+METRICS = ["final_hausdorff", "final_hausdorff_touched", "final_uncertainty", "final_correlation",
+           "final_similarity"] + [f"hausdorff_{int(round(100 * f))}" for f in FRACTIONS]
 
 
 def _summarize(rows: list[dict]) -> dict:
@@ -364,7 +386,7 @@ def _summarize(rows: list[dict]) -> dict:
             entry = {m: median_interval([r[m] for r in rs]) for m in METRICS}
             entry["n"] = len(rs)
             entry["taps"] = median_interval([r["taps"] for r in rs])
-            entry["travel_m"] = median_interval([r["travel_m"] for r in rs])
+            entry["travel"] = median_interval([r["travel"] for r in rs])
             out["objects"][obj][mode] = entry
         tactile = {r["seed"]: r for r in rows if r["object"] == obj and r["mode"] == "tactile"}
         for mode in modes:
@@ -376,7 +398,7 @@ def _summarize(rows: list[dict]) -> dict:
                 continue
             out["paired"].setdefault(obj, {})[mode] = {
                 m: paired_difference([other[s][m] for s in seeds], [tactile[s][m] for s in seeds])
-                for m in ("final_hausdorff_m", "hausdorff_10_m", "hausdorff_25_m", "hausdorff_50_m")}
+                for m in ("final_hausdorff", "hausdorff_10", "hausdorff_25", "hausdorff_50")}
     return out
 
 
@@ -388,8 +410,8 @@ def _cm(v: float) -> str:
 def _no_harm(summary: dict, obj: str, mode: str = "visual-tactile") -> tuple[bool | None, str]:
     """"No harm": the upper end of the 95 % interval of the median paired difference VT - T of the final Hausdorff
     distance is at most max(10 % of the median tactile value, 0.5 cm)."""
-    pair = summary["paired"].get(obj, {}).get(mode, {}).get("final_hausdorff_m")
-    t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff_m")
+    pair = summary["paired"].get(obj, {}).get(mode, {}).get("final_hausdorff")
+    t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff")
     if pair is None or t is None or not math.isfinite(pair["hi"]):
         return None, "no paired runs"
     allowed = max(0.1 * t["median"], 0.005)
@@ -412,7 +434,8 @@ def _early_benefit(summary: dict, obj: str, key: str, mode: str = "visual-tactil
                          f"[{_cm(pair['lo'])}, {_cm(pair['hi'])}] cm, p = {pair['p_wilcoxon']:.3g}")
 
 
-def _claims(world: str, summary: dict) -> list[dict]:
+def _claims(summary: dict) -> list[dict]:
+    """The paper's claims about the objects present (A-D: Sec. V; E-H: Sec. VI), each judged by a stated rule."""
     objs = summary["objects"]
     claims = []
 
@@ -421,53 +444,53 @@ def _claims(world: str, summary: dict) -> list[dict]:
 
     rule_early = ("95 % interval of the median paired VT - T below 0 and median VT <= half median T")
     rule_harm = ("upper end of the 95 % interval of the median paired VT - T (final) <= max(10 % of median T, 0.5 cm)")
-    if world == "2d":
-        if "A" in objs:
-            add("A: visual-tactile close to the inner shape from the beginning (25 % of travel)", rule_early,
-                _early_benefit(summary, "A", "hausdorff_25_m"))
-        if "B" in objs:
-            add("B: VT better early (10 % of travel)", rule_early, _early_benefit(summary, "B", "hausdorff_10_m"))
-            add("B: about equal at the end", rule_harm + ", both ways",
-                _equal(summary, "B"))
-        if "D" in objs:
-            add("D: both reach about the same final Hausdorff", rule_harm + ", both ways", _equal(summary, "D"))
-        if "A" in objs and "D" in objs:
-            a = objs["A"].get("visual-tactile", {}).get("final_correlation")
-            d = objs["D"].get("visual-tactile", {}).get("final_correlation")
-            if a and d:
-                add("Final similarity A clearly above D (task correlation)", "95 % intervals of the medians disjoint, A "
-                    "above", (bool(a["lo"] > d["hi"]), f"A {a['median']:.2f} [{a['lo']:.2f}, {a['hi']:.2f}] vs D "
-                              f"{d['median']:.2f} [{d['lo']:.2f}, {d['hi']:.2f}]"))
-    else:
-        for obj in ("E", "G"):
-            if obj in objs:
-                add(f"{obj} (tight): visual-tactile accurate from the beginning (10 % of travel)", rule_early,
-                    _early_benefit(summary, obj, "hausdorff_10_m"))
-        if "F" in objs and "visual-tactile" in objs["F"]:
-            vt = objs["F"]["visual-tactile"]
-            add("F (loose, arm recognisable): estimate first affected by the outer shape, then shrinks to the inner",
-                "median VT Hausdorff at the end below its value at 10 % (intervals disjoint)",
-                (bool(vt["final_hausdorff_m"]["hi"] < vt["hausdorff_10_m"]["lo"]),
-                 f"VT {_cm(vt['hausdorff_10_m']['median'])} cm at 10 % -> {_cm(vt['final_hausdorff_m']['median'])} "
-                 "cm at the end"))
-        if "H" in objs:
-            add("H (loose garment): no harm from vision", rule_harm, _no_harm(summary, "H"))
-        corr = {o: objs[o]["visual-tactile"]["final_correlation"] for o in objs if "visual-tactile" in objs[o]}
-        if "H" in corr and len(corr) > 1:
-            others = [c["lo"] for o, c in corr.items() if o != "H"]
-            add("Fig. 10: H has the lowest similarity (task correlation)",
-                "H's median the lowest and the upper end of its 95 % interval below every other lower end",
-                (bool(corr["H"]["hi"] < min(others)), ", ".join(f"{o} {c['median']:.2f} [{c['lo']:.2f}, {c['hi']:.2f}]"
-                                                                for o, c in sorted(corr.items()))))
+    # Sec. V, objects A-D
+    if "A" in objs:
+        add("A: visual-tactile close to the inner shape from the beginning (25 % of travel)", rule_early,
+            _early_benefit(summary, "A", "hausdorff_25"))
+    if "B" in objs:
+        add("B: VT better early (10 % of travel)", rule_early, _early_benefit(summary, "B", "hausdorff_10"))
+        add("B: about equal at the end", rule_harm + ", both ways",
+            _equal(summary, "B"))
+    if "D" in objs:
+        add("D: both reach about the same final Hausdorff", rule_harm + ", both ways", _equal(summary, "D"))
+    if "A" in objs and "D" in objs:
+        a = objs["A"].get("visual-tactile", {}).get("final_correlation")
+        d = objs["D"].get("visual-tactile", {}).get("final_correlation")
+        if a and d:
+            add("Final similarity A clearly above D (task correlation)", "95 % intervals of the medians disjoint, A "
+                "above", (bool(a["lo"] > d["hi"]), f"A {a['median']:.2f} [{a['lo']:.2f}, {a['hi']:.2f}] vs D "
+                          f"{d['median']:.2f} [{d['lo']:.2f}, {d['hi']:.2f}]"))
+    # Sec. VI, objects E-H
+    for obj in ("E", "G"):
+        if obj in objs:
+            add(f"{obj} (tight): visual-tactile accurate from the beginning (10 % of travel)", rule_early,
+                _early_benefit(summary, obj, "hausdorff_10"))
+    if "F" in objs and "visual-tactile" in objs["F"]:
+        vt = objs["F"]["visual-tactile"]
+        add("F (loose, arm recognisable): estimate first affected by the outer shape, then shrinks to the inner",
+            "median VT Hausdorff at the end below its value at 10 % (intervals disjoint)",
+            (bool(vt["final_hausdorff"]["hi"] < vt["hausdorff_10"]["lo"]),
+             f"VT {_cm(vt['hausdorff_10']['median'])} cm at 10 % -> {_cm(vt['final_hausdorff']['median'])} "
+             "cm at the end"))
+    if "H" in objs:
+        add("H (loose garment): no harm from vision", rule_harm, _no_harm(summary, "H"))
+    corr = {o: objs[o]["visual-tactile"]["final_correlation"] for o in objs if "visual-tactile" in objs[o]}
+    if "H" in corr and len(corr) > 1 and set(corr) <= set("EFGH"):
+        others = [c["lo"] for o, c in corr.items() if o != "H"]
+        add("Fig. 10: H has the lowest similarity (task correlation)",
+            "H's median the lowest and the upper end of its 95 % interval below every other lower end",
+            (bool(corr["H"]["hi"] < min(others)), ", ".join(f"{o} {c['median']:.2f} [{c['lo']:.2f}, {c['hi']:.2f}]"
+                                                            for o, c in sorted(corr.items()))))
     for obj in sorted(objs):
-        if world == "2d" or obj != "H":
+        if obj != "H":                         # H has its own "no harm" claim above
             add(f"{obj}: no harm from vision", rule_harm, _no_harm(summary, obj))
     return claims
 
 
 def _equal(summary: dict, obj: str) -> tuple[bool | None, str]:
-    pair = summary["paired"].get(obj, {}).get("visual-tactile", {}).get("final_hausdorff_m")
-    t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff_m")
+    pair = summary["paired"].get(obj, {}).get("visual-tactile", {}).get("final_hausdorff")
+    t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff")
     if pair is None or t is None:
         return None, "no paired runs"
     allowed = max(0.1 * t["median"], 0.005)
@@ -491,17 +514,17 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
 
     for obj, modes in sorted(summary["objects"].items()):
         for mode, e in sorted(modes.items()):
-            cov = e["final_hausdorff_m"]["coverage"]
-            lines.append(f"| {obj} | {mode} | {e['n']} ({100 * cov:.0f} %) | {cell(e['hausdorff_10_m'])} | "
-                         f"{cell(e['hausdorff_25_m'])} | "
-                         f"{cell(e['hausdorff_50_m'])} | {cell(e['final_hausdorff_m'])} | "
-                         f"{cell(e['final_hausdorff_touched_m'])} | {cell(e['final_uncertainty'], 1, '.3f')} | "
+            cov = e["final_hausdorff"]["coverage"]
+            lines.append(f"| {obj} | {mode} | {e['n']} ({100 * cov:.0f} %) | {cell(e['hausdorff_10'])} | "
+                         f"{cell(e['hausdorff_25'])} | "
+                         f"{cell(e['hausdorff_50'])} | {cell(e['final_hausdorff'])} | "
+                         f"{cell(e['final_hausdorff_touched'])} | {cell(e['final_uncertainty'], 1, '.3f')} | "
                          f"{cell(e['final_correlation'], 1, '.2f')} | {cell(e['final_similarity'], 1, '.2f')} |")
     lines += ["", "Paired differences (same seed): mode - tactile, final Hausdorff [cm], with the Wilcoxon signed-rank "
               "p-value.", "", "| object | mode | n | median [95 % interval] | p |", "|---|---|---|---|---|"]
     for obj, modes in sorted(summary["paired"].items()):
         for mode, d in sorted(modes.items()):
-            p = d["final_hausdorff_m"]
+            p = d["final_hausdorff"]
             lines.append(f"| {obj} | {mode} | {p['n']} | {cell(p)} | {p['p_wilcoxon']:.3g} |")
     if claims is None:
         lines += ["", "Smoke sweep: the paper's claims are not judged on it."]
@@ -526,7 +549,7 @@ def _ray_available() -> bool:
 MAX_SEEDS = 10_000
 
 
-def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile"), seeds: int = 10,
+def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tactile"), seeds: int = 10,
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False) -> dict:
@@ -537,7 +560,8 @@ def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile
     again). While a sweep runs it holds a lock on the folder, so a second sweep into it is refused at once.
 
     Args:
-        world: "2d", "3d" (penalty) or "mujoco".
+        world: a registered world: "planar" (2-D), "forcefield" or "mujoco" (3-D), or one registered later (older
+            names, "2d", "3d" and "penalty", are accepted with a warning).
         objects: names (default: the world's paper objects); repeated names count once.
         modes: among :data:`MODES`; repeated modes count once.
         seeds: seeds 0 .. seeds-1 per object and mode (at most :data:`MAX_SEEDS`).
@@ -561,11 +585,14 @@ def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile
         RuntimeError: another sweep is writing to ``out``.
     """
     from .._progress import progress as reporter
+    from ..exploration.registry import canonical_world_name, world_entry
     from ..io.outputs import FolderLock, claim_folder
 
-    if world not in WORLDS:
-        raise ValueError(f"world: must be one of {WORLDS}, got {world!r}")
-    objects = tuple(dict.fromkeys(objects or DEFAULT_OBJECTS[world]))
+    world = canonical_world_name(world, warn=True)
+    if world not in _worlds():
+        raise ValueError(f"world: must be one of {_worlds()}, got {world!r}")
+    entry = world_entry(world)
+    objects = tuple(dict.fromkeys(objects or entry.object_names))
     modes = tuple(dict.fromkeys(modes))
     bad = [m for m in modes if m not in MODES]
     if bad:
@@ -575,8 +602,8 @@ def run_sweep(world: str = "2d", objects=None, modes=("visual-tactile", "tactile
     if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
         raise ValueError(f"seeds: must be an integer in [1, {MAX_SEEDS}], got {seeds!r}")
     for name in objects:        # fail before starting anything
-        if name not in DEFAULT_OBJECTS[world]:
-            raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {DEFAULT_OBJECTS[world]}")
+        if name not in entry.object_names:
+            raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {entry.object_names}")
     out = claim_folder(out, "study", force, world=world)
     with FolderLock(out, "gpioius study"):
         (out / "runs").mkdir(parents=True, exist_ok=True)

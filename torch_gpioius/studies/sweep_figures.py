@@ -126,7 +126,7 @@ def figure_similarity_bands(runs: list[dict], path: Path):
     return fig
 
 
-def figure_paired(rows: list[dict], path: Path, key: str = "final_hausdorff_m"):
+def figure_paired(rows: list[dict], path: Path, key: str = "final_hausdorff"):
     """Final Hausdorff distance per seed, tactile-only and every other mode side by side, a line per seed; each
     panel has its own labelled log axis.
 

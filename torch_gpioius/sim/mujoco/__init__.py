@@ -7,6 +7,12 @@ from .objects import OBJECTS, arm_primitives, mujoco_objects_3d, torso_primitive
 from .primitives import Primitive, as_primitives, capsule_between, rounded_box_primitives, union_sdf
 from .scene import MUJOCO_DEFAULTS, MujocoScene
 from .ur5 import ur5_mjcf
+from ...exploration.registry import register_world
+
+register_world("mujoco", MujocoScene, objects=lambda names, smoke: mujoco_objects_3d(names, smoke=smoke),
+               object_names=tuple(OBJECTS),
+               description="Sec. VI on MuJoCo: a simulated UR5, cloth and foam covers the fingertip pushes aside "
+                           "(objects E-H)")
 
 __all__ = ["MujocoScene", "MUJOCO_DEFAULTS", "mujoco_objects_3d", "arm_primitives", "torso_primitives", "OBJECTS",
            "COVER_KINDS", "CoverMesh", "cap_base", "make_cover", "shrink_wrap", "tube_base", "MujocoDepthCamera",

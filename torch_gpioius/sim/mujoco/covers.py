@@ -7,7 +7,7 @@ distance). Regular base meshes give well-shaped elements (marching cubes gives s
 unstable); bridging concave regions is what cloth does anyway. The base mesh's boundary (sleeve ends, the back edge
 of a shirt front) is pinned, as a garment is held where it is sewn to the rest of itself.
 
-* ``tight``: a cloth shell ``gap`` off the body (default 8 mm, the penalty world's sleeve and shirt).
+* ``tight``: a cloth shell ``gap`` off the body (default 8 mm, the force-field world's sleeve and shirt).
 * ``loose``: a cloth shell built ``slack`` off the body that settles under gravity before exploring.
 * ``foam``: a soft 3-D shell of ``thickness``, ``gap`` off the body (prisms between two shrink-wrapped layers, each
   split into three tetrahedra).

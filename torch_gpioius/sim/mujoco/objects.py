@@ -1,6 +1,6 @@
 """Objects E-H of the robot experiment rebuilt in MuJoCo with the dimensions of ``paper_objects_3d()``.
 
-The inner objects are unions of primitives (MuJoCo collides meshes as convex hulls); the penalty world's smooth
+The inner objects are unions of primitives (MuJoCo collides meshes as convex hulls); the force-field world's smooth
 blends at the elbow and shoulders become plain unions (a sphere fills the elbow). The covers are cloth:
 
 * E, arm in a tight sleeve: a cloth tube 8 mm off the arm, pinned at the shoulder and the wrist;

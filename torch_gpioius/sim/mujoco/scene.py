@@ -17,7 +17,7 @@ import torch
 from ...exploration.observations import ObservationPolicy
 from ...exploration.stopping import TravelBudget
 from ...exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
-from ..bounds import as_bounds
+from ..._validation import as_bounds
 from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
 from .primitives import Primitive, as_primitives, union_sdf, union_surface_samples
 
@@ -41,7 +41,7 @@ def _limited(value, name: str) -> float:
     lo, hi, unit = SCENE_LIMITS[name]
     return as_float(value, name, lo=lo, hi=hi, unit=unit)
 
-#: The robot study's settings in the MuJoCo world (as the penalty world's; the camera at half Kinect resolution).
+#: The robot study's settings in the MuJoCo world (as the force-field world's; the camera at half Kinect resolution).
 MUJOCO_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_steps=400, stop=(TravelBudget(1.5),),
                                       policy=ObservationPolicy(voxel=0.05, crop_margin=0.15), metrics_every=1,
                                       approach_travel=0.5)
@@ -325,7 +325,7 @@ class MujocoScene(World):
         return hausdorff_distance(self.inner_samples_in_range(spacing), verts[self.in_range(verts)])
 
     def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
-        from ..penalty import estimate_metrics_3d
+        from ..forcefield import estimate_metrics_3d
 
         return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
 
@@ -376,6 +376,11 @@ class MujocoScene(World):
         t0 = time.perf_counter()
         physics.step(n)
         return n * self.timestep / (time.perf_counter() - t0)
+
+    def truth(self) -> dict:
+        """The true inner surface (:attr:`inner`) [m]; the cover settles at run time, so its outer shape is what the
+        camera saw (None here)."""
+        return {"inner": self.inner, "outer": None}
 
     def __repr__(self) -> str:
         return (f"MujocoScene({self.name!r}, {len(self.primitives)} primitives, {self.cover.kind} cover with "

@@ -80,7 +80,7 @@ def ur5_mjcf(*, tool_offset=(0.0, 0.0, 0.05), tip_radius: float = 0.004, tip_mas
         tool_offset: `(3,)` fingertip centre in the flange frame [m] (as ``kinematics.UR5(tool_offset=...)``).
         tip_radius: radius of the fingertip sphere [m].
         tip_mass: mass of the fingertip body [kg] (what the sensor carries; tared away in free space).
-        tip_stiffness: stiffness of the fingertip's mount along each tool axis [N/m] (1 N per mm, as the penalty
+        tip_stiffness: stiffness of the fingertip's mount along each tool axis [N/m] (1 N per mm, as the force-field
             world's inner object: the 1-5 N contact band is 4 mm wide, several controller steps).
         tip_damping: damping of the mount [N s/m].
         kp: position gain of each joint servo [N m / rad]; kv: its damping [N m s / rad].

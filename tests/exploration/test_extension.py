@@ -1,0 +1,236 @@
+"""Extending the library from outside: every part below is defined in this file, through public contracts only,
+and run with ``explore``: a toy world (a ball under a soft cover, a gantry robot, a camera), a toy force sensor, a
+Matérn-3/2 kernel used through GPIOIS, a custom evidence policy and a custom recorder."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import torch_gpioius as tg
+from tests.kernels.contract import KernelContract
+from torch_gpioius.contact import ContactConfig, ContactController
+from torch_gpioius.exploration import (Evidence, ExplorationDefaults, Hardware, Measurement, ObservationPolicy,
+                                       Recorder, TravelBudget, World, register_world, world_entry)
+from torch_gpioius.kernels import ExactKernel
+from torch_gpioius.sensors import ForceReading, ForceSensor, PointCloud, PointCloudSource
+
+CENTRE, RADIUS, COVER = np.array([0.5, 0.0, 0.2]), 0.06, 0.08
+
+
+# ------------------------------------------------------------------------------------------------ a kernel
+class Matern32(ExactKernel):
+    """k(r) = (1 + sqrt(3) r / l) exp(-sqrt(3) r / l): once differentiable, unlike the default kernel."""
+
+    kind = "TestMatern32"
+
+    def __init__(self, lengthscale=0.1, **kw):
+        super().__init__(**kw)
+        self.ell = float(lengthscale)
+
+    def value(self, x1, x2):
+        s = math.sqrt(3) * torch.cdist(x1, x2, compute_mode="donot_use_mm_for_euclid_dist") / self.ell
+        return (1 + s) * torch.exp(-s)
+
+    def gradient(self, x1, x2, value=None):
+        s = math.sqrt(3) * torch.cdist(x1, x2, compute_mode="donot_use_mm_for_euclid_dist") / self.ell
+        coef = -3.0 / self.ell ** 2 * torch.exp(-s)                  # kappa'(r) / r
+        return ((x1.unsqueeze(1) - x2.unsqueeze(0)) * coef.unsqueeze(-1)).permute(2, 0, 1)
+
+    def prior_variance(self, scale=1.0):
+        return scale * 1.0
+
+    def second_derivative_at_zero(self):
+        return -3.0 / self.ell ** 2
+
+    def describe(self):
+        return {"kernel": self.kind, "lengthscale": self.ell}
+
+
+tg.kernels.register_kernel(Matern32)
+
+
+class TestMatern32Contract(KernelContract):
+    def make(self):
+        return Matern32(0.12)
+
+
+# ------------------------------------------------------------------------------------------------ a world
+class Gantry:
+    """A Cartesian robot that moves its fingertip exactly where it is told (inside a box), with a clock."""
+
+    def __init__(self, start, lo, hi):
+        self.p = np.asarray(start, dtype=float)
+        self.lo, self.hi, self.time = np.asarray(lo), np.asarray(hi), 0.0
+
+    def move_cartesian(self, dx, speed=0.05):
+        dx = np.asarray(torch.as_tensor(dx).detach(), dtype=float)
+        target = self.p + dx
+        if (target < self.lo).any() or (target > self.hi).any():
+            raise RuntimeError(f"move to {target} leaves the workspace")
+        self.p = target
+        self.time += max(np.linalg.norm(dx) / speed, 1e-3)
+
+    def read_pose(self):
+        T = torch.eye(4, dtype=torch.float64)
+        T[:3, 3] = torch.as_tensor(self.p)
+        return T
+
+    def tool_position(self):
+        return torch.as_tensor(self.p)
+
+    def stop(self):
+        pass
+
+
+class BallSensor(ForceSensor):
+    """The force on the fingertip: 800 N/m into the ball, a 5 N/m field through the cover, zero outside."""
+
+    def __init__(self, robot):
+        self.robot, self.counter = robot, 0
+
+    def read(self):
+        p = self.robot.p - CENTRE
+        r = float(np.linalg.norm(p))
+        n = p / max(r, 1e-12)
+        f = n * (800.0 * max(RADIUS - r, 0.0) + 5.0 * max(COVER - r, 0.0))
+        self.counter += 1
+        return ForceReading(torch.as_tensor(f), 0, self.counter, self.robot.time)
+
+    def tare(self):
+        pass
+
+
+class CoverCamera(PointCloudSource):
+    """A camera 1 m up that sees the front of the cover."""
+
+    def capture(self):
+        rng = np.random.default_rng(0)
+        d = rng.standard_normal((600, 3))
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        d = d[d[:, 2] > -0.2]
+        return PointCloud(CENTRE + COVER * d, origin=CENTRE + [0.0, 0.0, 1.0])
+
+
+class BallWorld(World):
+    """A ball of 6 cm under an 8 cm soft cover, touched from above."""
+
+    dim = 3
+
+    def __init__(self, name="ball"):
+        self.name = name
+        self.start = CENTRE + [0.004, 0.003, 0.15]
+        self.direction = np.array([0.0, 0.0, -1.0])
+        self.range = np.stack([CENTRE - 0.12, CENTRE + 0.12])
+
+    @property
+    def defaults(self):
+        return ExplorationDefaults(theta=0.1, noise=0.006, step=0.01, max_steps=40, stop=(TravelBudget(0.15),),
+                                   policy=ObservationPolicy(voxel=0.02), approach_travel=0.3)
+
+    def hardware(self):
+        robot = Gantry(self.start, self.range[0] - 0.1, self.range[1] + 0.1)
+        sensor = BallSensor(robot)
+        controller = ContactController(robot, sensor, ContactConfig(speed=0.05, approach_step=0.002))
+        return Hardware(robot, sensor, CoverCamera(), controller)
+
+    def measure(self, model, contacts, resolution=None):
+        mesh = tg.surfaces.zero_level_mesh(model, np.stack([CENTRE - 0.15, CENTRE + 0.15]), 0.02)
+        if mesh is None:
+            return Measurement()
+        off = np.abs(np.linalg.norm(mesh.vertices - CENTRE, axis=1) - RADIUS)
+        return Measurement(hausdorff=float(off.max()), surface=mesh)     # the estimate's side of eq. 24
+
+
+register_world("toyball", BallWorld, objects=lambda names, smoke: {n: BallWorld(n) for n in names},
+               object_names=("ball",), description="a ball under a soft cover (a test's world)")
+
+
+# ------------------------------------------------------------------------------------------------ evidence, recorder
+class Poke:
+    """Every 3 steps: lift 3 cm along the measured normal, then come back down."""
+
+    name = "poke"
+
+    def due(self, state):
+        return state.steps - state.last_evidence >= 3
+
+    def gather(self, state, toucher):
+        lift = toucher.lift(state.normal, step=0.005, until_force_below=0.1, extra=0.03, max_distance=0.1)
+        back = toucher.approach(-state.normal, max_travel=lift.travel + 0.05)
+        return Evidence([lift, back], back.contact.numpy() if back.in_contact else None,
+                        back.force_normal if back.in_contact else None)
+
+    def describe(self):
+        return {"name": self.name}
+
+
+class Diary(Recorder):
+    """Writes down the hooks it sees and the records they carry."""
+
+    def __init__(self):
+        self.calls, self.hausdorff = [], []
+
+    def start(self, run, state):
+        self.calls.append(("start", len(state.records)))
+
+    def step(self, run, state, record):
+        assert record is state.records[-1]
+        self.calls.append(("step", record.step))
+        self.hausdorff.append(record.hausdorff)
+
+    def end(self, run, state):
+        self.calls.append(("end", state.terminated))
+
+
+# ------------------------------------------------------------------------------------------------ the tests
+def test_a_world_sensor_kernel_policy_and_recorder_of_ones_own_run_through_explore(tmp_path):
+    diary = Diary()
+    trace = tg.explore(BallWorld(), kernel=Matern32(0.1), evidence=Poke(), recorders=[diary], metrics_every=2,
+                       log=tmp_path / "ball.gpioius")
+    assert trace.terminated == "travel" and trace.travel[-1] >= 0.15
+    # the recorder saw start, every step in order, and the end
+    steps = [c[1] for c in diary.calls if c[0] == "step"]
+    assert diary.calls[0] == ("start", 1) and diary.calls[-1] == ("end", "travel")
+    assert steps == list(range(1, trace.n_steps))
+    # it ran after the built-in metrics: every second step and the last carry a Hausdorff distance
+    assert all(np.isfinite(h) for s, h in zip(steps, diary.hausdorff) if s % 2 == 0)
+    # the policy poked, and the fingertip came back to the ball each time: contacts on its surface (the tip is a
+    # point pressed to 1-5 N at 800 N/m: 1.3-6.3 mm deep)
+    assert trace.taps[-1] >= 2
+    depth = RADIUS - np.linalg.norm(trace.contacts - CENTRE, axis=1)
+    assert (depth > 0.0).all() and (depth < 0.0075).all()
+    # the model is GPIOIS with the kernel of this file, and its structured engine is exact for it
+    model = trace.model
+    assert isinstance(model, tg.GPIOIS) and isinstance(model.kernel, Matern32)
+    assert type(model._inference()).__name__ == "StructuredExactInference"
+    x, t = model.train_inputs[0], model.train_task
+    dense = tg.GPIOIS(x, model.train_targets, t, kernel=Matern32(0.1), noise=0.006, inference="dense",
+                      task_covariance=model.task_covariance)
+    q = torch.as_tensor(CENTRE + np.array([[0.0, 0.0, 0.07], [0.05, 0.0, 0.03]]))
+    for task in (0, 1):
+        torch.testing.assert_close(model.predict(q, task)[0], dense.predict(q, task)[0], rtol=1e-10, atol=1e-11)
+    # the log names the kernel; the run history rebuilds the model with it
+    history = tg.load_run(tmp_path / "ball.gpioius")
+    assert history.meta["kernel"] == {"kernel": "TestMatern32", "lengthscale": 0.1}
+    assert history.meta["world"] == "toyball" and history.meta["evidence"] == "poke"
+    assert isinstance(history.model_at(history.steps[-1]).kernel, Matern32)
+
+
+def test_the_registered_world_is_made_by_name():
+    world = world_entry("toyball").build("ball")
+    assert isinstance(world, BallWorld) and world.kind == "toyball"
+    with pytest.raises(ValueError, match="unknown 'nope' in the toyball world"):
+        world_entry("toyball").build("nope")
+    with pytest.raises(ValueError, match="already BallWorld"):
+        register_world("toyball", Gantry)
+
+
+def test_a_policy_or_touch_without_the_contract_is_named():
+    with pytest.raises(ValueError, match="evidence: a policy needs due"):
+        tg.explore(BallWorld(), evidence=object())
+    with pytest.raises(ValueError, match="touch: expected a name or an object with observations"):
+        tg.explore(BallWorld(), touch=object())
+    with pytest.raises(TypeError, match="kernel: expected a torch_gpioius.kernels.ExactKernel"):
+        tg.explore(BallWorld(), kernel="matern")

@@ -1,0 +1,186 @@
+"""The settings of one exploration, validated once, with the world's defaults merged in (:class:`ExploreConfig`),
+and what recorders see of a run (:class:`Run`)."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import as_float
+from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
+from ..models.gpiois import GPIOIS, INNER, OUTER
+from ..models.gpis import GPIS
+from ..models.local import LocalGPIOIS
+from .evidence import evidence_policy
+from .observations import ObservationPolicy, Observations
+from .stopping import StopRule, TravelBudget
+from .touch import touch_model
+
+__all__ = ["ExploreConfig", "Run", "MODES"]
+
+MODES = ("visual-tactile", "tactile")
+
+
+def _check_int(value, name: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
+        raise ValueError(f"{name}: must be an integer in [{lo}, {hi}], got {value!r}")
+    return int(value)
+
+
+@dataclass(frozen=True)
+class ExploreConfig:
+    """One exploration's settings (see :func:`torch_gpioius.explore` for each): build it with :meth:`from_world`.
+
+    Attributes:
+        mode: "visual-tactile" (GPIOIS on vision + touch) or "tactile" (GPIS on touch only).
+        evidence: the evidence policy (e.g. :class:`~torch_gpioius.exploration.evidence.TapPolicy`) or None.
+        touch: the touch model (:class:`~torch_gpioius.exploration.touch.PointTouch` by default).
+        step: alpha, the planned step [m].
+        theta: theta_x of the default inverse multiquadric kernel [m] (None when ``kernel`` is given).
+        kernel: a kernel in place of the inverse multiquadric, or None.
+        noise: sigma^2.
+        max_steps: cap on planning steps (evidence actions count as steps).
+        stop: the stop rules.
+        policy: the observation policy.
+        penalty: C(x) of eq. (19) / (25).
+        metrics_every: ground-truth metrics every k steps (and at the last).
+        metrics_resolution: grid of the metrics [m] (None: the world's).
+        interval_every: the correlation's profile interval every k steps (None: never).
+        regions: a similarity per region (``LocalGPIOIS`` with this many regions) or None.
+        approach_travel: the approach gives up after this distance [m].
+    """
+
+    mode: str
+    evidence: object
+    touch: object
+    step: float
+    theta: float | None
+    kernel: ExactKernel | None
+    noise: float
+    max_steps: int
+    stop: tuple
+    policy: ObservationPolicy
+    penalty: object
+    metrics_every: int
+    metrics_resolution: float | None
+    interval_every: int | None
+    regions: int | None
+    approach_travel: float
+
+    @classmethod
+    def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
+                   kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
+                   metrics_every=None, metrics_resolution=None, interval_every=None, regions=None) -> "ExploreConfig":
+        """Validate the overrides and merge them with ``world.defaults`` (see :func:`torch_gpioius.explore`).
+
+        Raises:
+            ValueError: an invalid setting (names it).
+        """
+        if mode not in MODES:
+            raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
+        evidence = evidence_policy(evidence)
+        if evidence is not None and mode != "visual-tactile":
+            raise ValueError("evidence: evidence-seeking is about the similarity; it needs mode='visual-tactile'")
+        if regions is not None:
+            regions = _check_int(regions, "regions", 1, 64)
+            if mode != "visual-tactile":
+                raise ValueError("regions: a similarity per region needs mode='visual-tactile'")
+        d = world.defaults
+        step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
+        if kernel is not None and theta is not None:
+            raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's parameter)")
+        if kernel is not None:
+            as_kernel(kernel, None)                    # an ExactKernel, or a TypeError naming what it is
+            theta = None
+        else:
+            theta = as_float(d.theta if theta is None else theta, "theta", positive=True, unit="m")
+        noise = as_float(d.noise if noise is None else noise, "noise", positive=True)
+        max_steps = _check_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
+        metrics_every = _check_int(d.metrics_every if metrics_every is None else metrics_every, "metrics_every", 1,
+                                   1_000_000)
+        if interval_every is not None:
+            interval_every = _check_int(interval_every, "interval_every", 1, 1_000_000)
+        if metrics_resolution is not None:
+            metrics_resolution = as_float(metrics_resolution, "metrics_resolution", lo=1e-3, hi=0.5, unit="m")
+        rules = tuple(d.stop if stop is None else stop)
+        if not all(isinstance(r, StopRule) for r in rules):
+            raise ValueError("stop: every rule must be a torch_gpioius.exploration.StopRule")
+        if max_travel is not None:
+            rules = tuple(r for r in rules if not isinstance(r, TravelBudget)) + (TravelBudget(max_travel),)
+        policy = policy or d.policy
+        if not isinstance(policy, ObservationPolicy):
+            raise ValueError(f"policy: expected an ObservationPolicy, got {type(policy).__name__}")
+        penalty = penalty if penalty is not None else world.penalty()
+        return cls(mode, evidence, touch_model(touch), step, theta, kernel, noise, max_steps, rules, policy, penalty,
+                   metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel))
+
+    # ------------------------------------------------------------------ what the loop asks of the settings
+    @property
+    def uses_vision(self) -> bool:
+        """Whether the camera's capture enters the model (visual-tactile)."""
+        return self.mode == "visual-tactile"
+
+    @property
+    def budget(self) -> float | None:
+        """The travel budget [m] of the stop rules (for progress in centimetres), or None."""
+        return next((r.max_travel for r in self.stop if isinstance(r, TravelBudget)), None)
+
+    def make_model(self, inner: Observations, outer: Observations | None):
+        """The model of this mode on the first observations: GPIOIS (or LocalGPIOIS with ``regions``) on inner and
+        outer ones, GPIS on the inner ones alone."""
+        if not self.uses_vision:
+            return self.model_for(inner.x, inner.y, inner.task)
+        return self.model_for(np.concatenate([inner.x, outer.x]), np.concatenate([inner.y, outer.y]),
+                              np.r_[np.full(len(inner), INNER), np.full(len(outer), OUTER)])
+
+    def model_for(self, x: np.ndarray, y: np.ndarray, task: np.ndarray):
+        """The model of this mode on observations in the given order (GPIS keeps the inner ones)."""
+        # the default kernel is built from theta as given (a kernel passed through its constraint and back can
+        # differ in the last bit); another kernel is copied (a GPyTorch module belongs to one model)
+        theta, kernel = self.theta, None if self.kernel is None else copy.deepcopy(self.kernel)
+        if not self.uses_vision:
+            inner = np.asarray(task) == INNER
+            return GPIS(np.asarray(x)[inner], np.asarray(y)[inner], theta=theta, noise=self.noise, kernel=kernel)
+        if self.regions is not None:
+            return LocalGPIOIS(x, y, task, regions=self.regions, theta=theta, noise=self.noise, kernel=kernel)
+        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel)
+
+    def describe(self) -> dict:
+        """JSON-able settings for a log's header (resume compares them)."""
+        kernel = ({"kernel": InverseMultiquadricKernel.kind, "theta": self.theta} if self.kernel is None
+                  else self.kernel.describe())
+        evidence = None if self.evidence is None else getattr(self.evidence, "name", type(self.evidence).__name__)
+        out = {"mode": self.mode, "evidence": evidence, "touch": getattr(self.touch, "name", type(self.touch).__name__),
+               "step_length": self.step, "theta": self.theta, "kernel": kernel, "noise": float(self.noise), "max_steps": self.max_steps,
+               "stop": [r.describe() for r in self.stop], "metrics_every": self.metrics_every,
+               "metrics_resolution": self.metrics_resolution, "interval_every": self.interval_every,
+               "regions": self.regions, "policy": dataclasses.asdict(self.policy),
+               "penalty": type(self.penalty).__name__}
+        if self.evidence is not None and callable(getattr(self.evidence, "describe", None)):
+            out["evidence_policy"] = self.evidence.describe()
+        return out
+
+
+@dataclass
+class Run:
+    """What the loop and its recorders share about one run: the world, its hardware and the settings.
+
+    Attributes:
+        world: the :class:`~torch_gpioius.exploration.world.World`.
+        hardware: its :class:`~torch_gpioius.exploration.world.Hardware` for this run.
+        config: the :class:`ExploreConfig`.
+        resumed: whether the run continues from a log.
+    """
+
+    world: object
+    hardware: object
+    config: ExploreConfig
+    resumed: bool = False
+
+    @property
+    def dim(self) -> int:
+        return int(self.world.dim)
+

@@ -1,0 +1,89 @@
+"""The exploration's built-in observers: the ground-truth metrics, the correlation's profile interval, progress.
+
+They run in that order before any recorder a caller adds (a log, a user's own), so what they measure is in the
+record before it is written. Each is a :class:`~torch_gpioius.exploration.protocols.Recorder`.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._progress import progress as progress_reporter
+from .protocols import Recorder
+
+__all__ = ["MetricsRecorder", "IntervalRecorder", "ProgressRecorder"]
+
+
+class MetricsRecorder(Recorder):
+    """Ground-truth metrics (eq. 23-24) where the world knows the truth, every ``config.metrics_every`` steps, at a
+    step a stop rule ended, and at the end if the last record has none. Sets ``state.centre`` and
+    ``state.surface`` from each measurement (a stop rule may read the centre)."""
+
+    def _measure(self, run, state, record) -> None:
+        m = run.world.measure(state.model, state.contacts_array(), run.config.metrics_resolution)
+        state.centre, state.surface = m.centre, m.surface
+        record.hausdorff, record.hausdorff_touched, record.uncertainty = (float(m.hausdorff),
+                                                                          float(m.hausdorff_touched),
+                                                                          float(m.uncertainty))
+
+    def start(self, run, state) -> None:
+        if not run.resumed:
+            self._measure(run, state, state.records[0])
+
+    def step(self, run, state, record) -> None:
+        if record.step % run.config.metrics_every == 0 or record.final:
+            self._measure(run, state, record)
+
+    def end(self, run, state) -> None:
+        last = state.records[-1]
+        if len(state.records) > 1 and math.isnan(last.hausdorff):     # the final estimate is always measured
+            self._measure(run, state, last)
+
+
+class IntervalRecorder(Recorder):
+    """The task correlation's 95 % profile-likelihood interval every ``config.interval_every`` steps, at a step a
+    stop rule ended, and at the end (visual-tactile models with one K_t; never when ``interval_every`` is None)."""
+
+    @staticmethod
+    def _applies(run, state) -> bool:
+        m = state.model
+        return (run.config.interval_every is not None and hasattr(m, "similarity_interval")
+                and not hasattr(m, "region_correlations"))
+
+    def start(self, run, state) -> None:
+        if not run.resumed:
+            self.step(run, state, state.records[0])
+
+    def step(self, run, state, record) -> None:
+        if self._applies(run, state) and (record.step % run.config.interval_every == 0 or record.final):
+            record.correlation_interval = tuple(float(v) for v in state.model.similarity_interval(kind="correlation"))
+
+    def end(self, run, state) -> None:
+        last = state.records[-1]
+        if self._applies(run, state) and state.records and math.isnan(last.correlation_interval[0]):
+            last.correlation_interval = tuple(float(v) for v in state.model.similarity_interval(kind="correlation"))
+
+
+class ProgressRecorder(Recorder):
+    """A progress bar on a terminal (plain lines otherwise): centimetres of the travel budget, or steps."""
+
+    def __init__(self, enabled: bool = False) -> None:
+        self.enabled = enabled
+        self._bar = None
+
+    def _done(self, run, state) -> int:
+        budget = run.config.budget
+        return min(round(state.travel * 100), round(budget * 100)) if budget else state.steps
+
+    def start(self, run, state) -> None:
+        budget = run.config.budget
+        self._bar = progress_reporter(round(budget * 100) if budget else run.config.max_steps,
+                                      f"{run.world.name or 'world'} {run.config.mode}{' [cm]' if budget else ''}",
+                                      self.enabled)
+        self._bar.update(self._done(run, state))
+
+    def step(self, run, state, record) -> None:
+        self._bar.update(self._done(run, state) - self._bar.n)
+
+    def end(self, run, state) -> None:
+        self._bar.close()

@@ -1,0 +1,118 @@
+"""The public state of one exploration and its per-step record, in the one vocabulary that state, traces, logs,
+``runs.csv`` and the viewer share (docs/data-format.md, "Record fields")."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from .observations import Observations
+
+__all__ = ["ExplorationState", "StepRecord", "RECORD_FIELDS"]
+
+#: The per-step values and their units: the names every layer uses (state, Trace, logs, runs.csv, viewer).
+RECORD_FIELDS = {
+    "step": "step number (0: the state right after the first contact)",
+    "travel": "fingertip travel since the first contact [m]",
+    "hausdorff": "Hausdorff distance of the whole estimate {mu_in = 0} to the true inner surface [m] (eq. 24)",
+    "hausdorff_touched": "the same for the pieces of the estimate the fingertip touched [m]",
+    "uncertainty": "uncertainty measure, eq. (23), relative to the prior variance",
+    "similarity": "the paper's similarity K_t[0,1] / K_t[0,0] (a ratio of amplitudes)",
+    "correlation": "task correlation K_t[0,1] / sqrt(K_t[0,0] K_t[1,1])",
+    "correlation_interval": "its 95 % profile-likelihood interval (lo, hi)",
+    "task_covariance": "the learned K_t, (2, 2)",
+    "region_correlation": "task correlation of each region of a local model, (R,)",
+    "step_time": "wall time of planning, ingesting and re-learning [s] (motion excluded)",
+    "robot_time": "the robot's clock [s]",
+    "taps": "evidence-gathering actions so far (taps)",
+    "retracted": "free-space samples retracted so far",
+}
+
+
+@dataclass
+class StepRecord:
+    """What one step of an exploration produced (record 0: the state after the approach's first contact).
+
+    The loop fills the motion, the observations and the model's values; recorders add what they measure (the
+    ground-truth metrics, the correlation's interval) before the log writes it. Field meanings and units:
+    :data:`RECORD_FIELDS`.
+
+    Attributes (beyond :data:`RECORD_FIELDS`):
+        final: whether a stop rule that needs no estimate ended the run at this step (recorders measure then).
+        observations: the inner observations this step's touch added (before any evidence).
+        removed: `(k,)` indices (into the training set before the step) of free space retracted for them.
+        touch: the contact controller's result of the step (path, forces) or of the approach (record 0).
+        evidence: ``(observations, removed)`` of each evidence action taken after the touch.
+    """
+
+    step: int
+    travel: float
+    hausdorff: float = math.nan
+    hausdorff_touched: float = math.nan
+    uncertainty: float = math.nan
+    similarity: float = math.nan
+    correlation: float = math.nan
+    correlation_interval: tuple = (math.nan, math.nan)
+    task_covariance: np.ndarray = field(default_factory=lambda: np.full((2, 2), np.nan))
+    region_correlation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    step_time: float = math.nan
+    robot_time: float = math.nan
+    taps: int = 0
+    retracted: int = 0
+    final: bool = False
+    observations: Observations | None = None
+    removed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    touch: object = None
+    evidence: list = field(default_factory=list)
+
+
+@dataclass
+class ExplorationState:
+    """Everything an exploration carries from step to step (and a resume restores from a log).
+
+    Attributes:
+        model: the current model (``GPIOIS``, ``GPIS`` or ``LocalGPIOIS``).
+        contacts: the contacts so far, each `(d,)` [m]; the last is where the fingertip rests.
+        path: every position the fingertip occupied, each `(d,)` [m].
+        travel: fingertip travel since the first contact [m].
+        retracted: free-space samples retracted so far.
+        previous: the last planned direction `(d,)` (the planner keeps its sense), or None.
+        normal: the measured contact normal at the current contact `(d,)` (from the force), or None.
+        steps: planning steps taken.
+        taps: evidence actions taken; last_evidence: the step of the last one.
+        terminated: why the run ended (None while it runs).
+        centre: centroid of the estimated inner region, from the last measurement (2-D stop rule).
+        surface: the last measured estimate (2-D polylines or a 3-D mesh), or None.
+        records: one :class:`StepRecord` per step, record 0 first.
+    """
+
+    model: object
+    contacts: list = field(default_factory=list)
+    path: list = field(default_factory=list)
+    travel: float = 0.0
+    retracted: int = 0
+    previous: torch.Tensor | None = None
+    normal: torch.Tensor | None = None
+    steps: int = 0
+    taps: int = 0
+    last_evidence: int = 0
+    terminated: str | None = None
+    centre: np.ndarray | None = None
+    surface: object = None
+    records: list = field(default_factory=list)
+
+    @property
+    def contact(self) -> np.ndarray:
+        """`(d,)` the current contact [m]."""
+        return self.contacts[-1]
+
+    @property
+    def dim(self) -> int:
+        return len(self.contacts[-1])
+
+    def contacts_array(self) -> np.ndarray:
+        """`(k, d)` the contacts so far [m]."""
+        return np.asarray(self.contacts)

@@ -1,0 +1,195 @@
+"""Exploration logs: the crash-safe log as a recorder of the exploration, and resuming a run from it.
+
+The log is a ``.gpioius`` file (:mod:`torch_gpioius.io.datasets`) with a ``header`` (the world and the settings),
+one ``step`` record per completed step, one ``tap`` record per evidence action after the step it followed, and an
+``end`` record. Each record is durable (flushed and fsynced) before the next step begins, so a killed process loses
+at most the step it was in. Field names are those of
+:data:`torch_gpioius.exploration.state.RECORD_FIELDS`; logs written before they were (``h``, ``s``, ``rho``, ``ci``,
+``sim_time``, ...) are read through :func:`step_values`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import warnings
+
+import numpy as np
+import torch
+
+from ..exploration.protocols import Recorder
+from ..exploration.state import ExplorationState, StepRecord
+from .datasets import DatasetError, LogWriter, TornLogWarning, read_records, replay, step_number
+
+__all__ = ["LogRecorder", "restore_run", "step_values", "OLD_FIELD_NAMES"]
+
+#: Step-record fields of logs written before the one vocabulary, and their names now.
+OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertainty", "s": "similarity",
+                   "rho": "correlation", "ci": "correlation_interval", "time": "step_time", "sim_time": "robot_time"}
+_VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "similarity", "correlation", "step_time",
+           "robot_time")
+
+
+def step_values(meta: dict) -> dict:
+    """A step record's values by their current names (old names mapped; NaN where absent or null)."""
+    m = {OLD_FIELD_NAMES.get(k, k): v for k, v in meta.items()}
+    out = {k: (math.nan if m.get(k) is None else float(m[k])) for k in _VALUES}
+    ci = m.get("correlation_interval") or [math.nan, math.nan]
+    out["correlation_interval"] = tuple(math.nan if v is None else float(v) for v in ci)
+    out["taps"] = int(m.get("taps", 0) or 0)
+    out["retracted"] = int(m.get("retracted", 0) or 0)
+    return out
+
+
+def _num(v) -> float | None:
+    return None if v is None else float(v)
+
+
+class LogRecorder(Recorder):
+    """Writes the crash-safe exploration log at ``path`` (see the module docstring); appends to it on resume.
+
+    Args:
+        path: the log file (a new run replaces it; a resumed run appends after its last complete step).
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = path
+        self.writer: LogWriter | None = None
+
+    def start(self, run, state) -> None:
+        if run.resumed:
+            if state.terminated is None:
+                self.writer = LogWriter(self.path, resume=True)
+            return
+        header = {"frame": "base" if run.dim == 3 else "scene", "source": "torch_gpioius.explore",
+                  **run.world.describe(), **run.config.describe()}
+        self.writer = LogWriter(self.path, header)
+        self._write(run, state, state.records[0])
+
+    def step(self, run, state, record) -> None:
+        self._write(run, state, record)
+
+    def end(self, run, state) -> None:
+        if self.writer is not None:
+            self.writer.append("end", {"terminated": state.terminated, "steps": len(state.records) - 1}, {})
+            self.writer.close()
+            self.writer = None
+
+    def _write(self, run, state, record: StepRecord) -> None:
+        if self.writer is None:
+            return
+        dim = run.dim
+        world = {f"world_{k}": np.asarray(v) for k, v in run.world.snapshot(run.hardware).items()}
+        obs = record.observations
+        touch = record.touch
+        meta = {"step": record.step, "travel": record.travel, "retracted": record.retracted, "taps": record.taps,
+                "hausdorff": record.hausdorff, "hausdorff_touched": record.hausdorff_touched,
+                "uncertainty": record.uncertainty, "similarity": record.similarity, "correlation": record.correlation,
+                "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
+                "robot_time": record.robot_time}
+        path = touch.path.numpy() if touch is not None else np.zeros((0, dim))
+        arrays = {"x": obs.x, "y": obs.y, "task": obs.task, "removed": np.asarray(record.removed, dtype=np.int64),
+                  "contact": state.contact, "kt": np.asarray(record.task_covariance, dtype=np.float64),
+                  "previous": np.full(dim, np.nan) if state.previous is None else state.previous.numpy(),
+                  "normal": np.full(dim, np.nan) if state.normal is None else state.normal.numpy(),
+                  "path": path, "positions": path,
+                  "forces": touch.forces.numpy() if touch is not None else np.zeros((0, 3)),
+                  "timestamps": np.full(len(path), record.robot_time)}
+        if obs.normal is not None:
+            arrays["normals"] = obs.normal
+        if hasattr(state.model, "region_correlations"):
+            arrays["local_params"] = state.model.params.numpy()
+        self.writer.append("step", meta, {**arrays, **world})
+        for ev_obs, removed in record.evidence:
+            self.writer.append("tap", {"step": record.step, "taps": state.taps, "travel": state.travel},
+                               {"x": ev_obs.x, "y": ev_obs.y, "task": ev_obs.task,
+                                "removed": np.asarray(removed, dtype=np.int64), "contact": state.contact,
+                                "normal": state.normal.numpy(), **world})
+
+
+def _same(have, want) -> bool:
+    if isinstance(want, float) and isinstance(have, (int, float)) and not isinstance(have, bool):
+        return math.isclose(have, want, rel_tol=1e-12, abs_tol=0.0)
+    if isinstance(want, dict) and isinstance(have, dict):
+        return set(want) == set(have) and all(_same(have[k], want[k]) for k in want)
+    if isinstance(want, (list, tuple)) and isinstance(have, (list, tuple)):
+        return len(want) == len(have) and all(_same(a, b) for a, b in zip(have, want))
+    return have == want
+
+
+def restore_run(path: str | os.PathLike, world, hardware, config) -> ExplorationState:
+    """The state of a run after the last complete step of its log (written by ``torch_gpioius.explore(log=...)``).
+
+    The log's header must name the same world (its geometry fingerprint, not just its name) and the same settings;
+    the hardware is put back into the state logged with the last step (the robot's joints and clock, the sensor's
+    noise generator, the physics), so the resumed run continues exactly where the killed one stopped.
+
+    Args:
+        path: the log.
+        world: the world of the run; hardware: a fresh ``world.hardware()``; config: the run's
+            :class:`~torch_gpioius.exploration.config.ExploreConfig`.
+
+    Raises:
+        ValueError: the log was written by a different run (names the setting).
+        DatasetError: the log is unreadable or holds no complete step.
+    """
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", TornLogWarning)
+        records = list(read_records(path))
+        states = [ds for rec, ds in replay(path) if rec.kind in ("step", "tap")]
+    if not records or records[0].kind != "header":
+        raise DatasetError(f"{path}: no header record; not an exploration log")
+    header = records[0].meta
+    want = {**world.describe(), **config.describe()}
+    for key, value in want.items():
+        have = header.get(key)
+        if not _same(have, value):
+            what = "world geometry" if key == "scene_fingerprint" else key
+            raise ValueError(f"{path}: cannot resume: the log was written with {key}={have!r}, this call asks "
+                             f"{key}={value!r} (different {what})")
+    steps = [r for r in records[1:] if r.kind == "step"]
+    if not steps:
+        raise DatasetError(f"{path}: the log has no complete step to resume from")
+    end = [r for r in records[1:] if r.kind == "end"]
+    taps = [r for r in records[1:] if r.kind == "tap"]
+    state = ExplorationState(model=None)
+    for i, r in enumerate(steps):
+        where = f"{path}: step record {i}"
+        if step_number(r.meta, where) != i:
+            raise DatasetError(f"{where}: steps out of order (found step {r.meta['step']})")
+        state.contacts.append(np.asarray(r.arrays["contact"], dtype=np.float64))
+        state.path.extend(list(np.asarray(r.arrays["path"], dtype=np.float64)))
+        v = step_values(r.meta)
+        rec = StepRecord(step=i, travel=v["travel"], hausdorff=v["hausdorff"],
+                         hausdorff_touched=v["hausdorff_touched"], uncertainty=v["uncertainty"],
+                         similarity=v["similarity"], correlation=v["correlation"],
+                         correlation_interval=v["correlation_interval"],
+                         task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64), step_time=v["step_time"],
+                         robot_time=v["robot_time"], taps=v["taps"], retracted=v["retracted"])
+        state.records.append(rec)
+    last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
+    model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
+    if "local_params" in last.arrays and hasattr(model, "region_correlations"):
+        model.set_params(last.arrays["local_params"])
+        for rec in state.records:
+            rec.region_correlation = np.full(model.regions, np.nan)
+    elif hasattr(model, "task_covariance"):
+        model.task_covariance = torch.as_tensor(last.arrays["kt"])
+    state.model = model
+    v = step_values(last.meta)
+    state.travel, state.retracted, state.taps = v["travel"], v["retracted"], v["taps"]
+    state.steps = step_number(last.meta, f"{path}: last step")
+    for name in ("previous", "normal"):
+        a = np.asarray(last.arrays.get(name, np.full(world.dim, np.nan)), dtype=np.float64)
+        setattr(state, name, None if np.isnan(a).any() else torch.as_tensor(a))
+    state.terminated = end[-1].meta["terminated"] if end else None
+    after = taps[-1] if taps and taps[-1].meta.get("step") == state.steps else last
+    if after is not last:                        # the last step ended with a tap: its travel, contact and state
+        state.travel = float(after.meta["travel"])
+        state.taps = int(after.meta["taps"])
+        state.contacts[-1] = np.asarray(after.arrays["contact"], dtype=np.float64)
+        state.normal = torch.as_tensor(np.asarray(after.arrays["normal"], dtype=np.float64))
+    state.last_evidence = max((int(t.meta["step"]) for t in taps), default=0)
+    world.restore(hardware, {k[len("world_"):]: v for k, v in after.arrays.items() if k.startswith("world_")})
+    return state
+

@@ -1,0 +1,96 @@
+"""``torch_gpioius.explore``: the exploration loop with its crash-safe log and resume plugged in from above.
+
+The loop (:mod:`torch_gpioius.exploration.loop`) knows nothing of files; this module adds the log recorder and the
+restore of :mod:`torch_gpioius.io.logs`, which sit above it.
+"""
+
+from __future__ import annotations
+
+import os
+
+from .exploration.config import ExploreConfig
+from .exploration.loop import run
+from .exploration.trace import Trace
+from .exploration.world import World
+from .io.logs import LogRecorder, restore_run
+
+__all__ = ["explore"]
+
+
+def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=None, step: float | None = None,
+            theta: float | None = None, kernel=None, noise: float | None = None, max_steps: int | None = None,
+            max_travel: float | None = None, stop=None, policy=None, penalty=None,
+            metrics_every: int | None = None, metrics_resolution: float | None = None,
+            interval_every: int | None = None, regions: int | None = None, recorders=(), progress: bool = False,
+            log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None) -> Trace:
+    """Explore ``world`` and record per-step metrics: the same loop for every world.
+
+    Protocol (both modes alike): visual-tactile mode captures one point cloud before exploring (outer surface
+    points, y = 0, and the free space in front of them, y = 1; ``policy``). The fingertip approaches along
+    ``world.direction`` to the first contact; the approach's free space is inner free space. Then each step plans
+    d* (eq. 19, L = V_in + C) at the contact, the world's contact controller executes it, the touch model turns the
+    result into observations (a point touch: the contact, y = 0, and the free space crossed, y = 1, thinned, kept
+    ``policy.free_space_margin`` from every contact, with earlier samples retracted when a new contact lands
+    closer), an evidence policy may gather more, and K_t is re-learned (warm-started). The run stops on the
+    world's stop rules (2-D: once around the shape; robot study: 1.5 m of travel), after ``max_steps``, when contact
+    is lost, or when the robot refuses a command.
+
+    Every world-specific setting is the world's (``world.defaults``: theta, sigma^2, alpha, stop rules, observation
+    policy; its hardware, camera and range penalty); the arguments below override them for one run.
+
+    Args:
+        world: a :class:`~torch_gpioius.exploration.world.World` (``tg.sim.Scene2D``, ``tg.sim.Scene3D``,
+            ``tg.sim.MujocoScene``, ``tg.RobotWorld``, or a user's).
+        mode: "visual-tactile" (GPIOIS on vision + touch) or "tactile" (GPIS on touch only).
+        evidence: None (the paper's exploration), "taps" (evidence-seeking taps, visual-tactile only; see
+            :mod:`torch_gpioius.exploration.evidence`), or an evidence policy object.
+        touch: "point" (a fingertip force sensor, the paper's) or a touch model object
+            (:mod:`torch_gpioius.exploration.touch`).
+        step: alpha, the planned step [m], in (0, 0.1].
+        theta: IMQ kernel parameter [m]; kernel: another :class:`~torch_gpioius.kernels.ExactKernel` instead (give
+            one of the two); noise: sigma^2.
+        max_steps: cap on planning steps.
+        max_travel: fingertip travel budget since the first contact [m] (adds or replaces a ``TravelBudget``).
+        stop: stop rules replacing the world's.
+        policy: the observation policy.
+        penalty: C(x) replacing the world's.
+        metrics_every: ground-truth metrics every k steps (and always at the last).
+        metrics_resolution: grid of the metrics [m] (default: the world's).
+        interval_every: compute the profile-likelihood interval of the task correlation every k steps
+            (visual-tactile; default: never, it costs a few fits).
+        regions: visual-tactile with a similarity per region of the outer shape (:class:`torch_gpioius.LocalGPIOIS`
+            with this many regions) instead of one (GPIOIS).
+        recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the
+            metrics and the interval, before the log).
+        progress: report progress (a bar on a terminal, plain lines otherwise).
+        log: write a crash-safe exploration log here (docs/data-format.md): one record per completed step, durable
+            (fsync) before the next step begins.
+        resume_from: continue the run logged in this file from its last complete step (same world, parameters
+            and hardware state; appends to the log). The resumed run ends where an uninterrupted one would.
+
+    Returns:
+        :class:`~torch_gpioius.exploration.trace.Trace`.
+
+    Raises:
+        TypeError: ``world`` is not a World.
+        ValueError: an invalid argument (names it), or a log that does not match this run on resume.
+    """
+    if not isinstance(world, World):
+        raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
+                        f"{type(world).__name__}")
+    config = ExploreConfig.from_world(world, mode, evidence=evidence, touch=touch, step=step, theta=theta,
+                                      kernel=kernel, noise=noise, max_steps=max_steps, max_travel=max_travel,
+                                      stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
+                                      metrics_resolution=metrics_resolution, interval_every=interval_every,
+                                      regions=regions)
+    if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
+        raise ValueError("resume_from appends to its own log; pass log=None or the same path")
+    observers = list(recorders)
+    state = hardware = None
+    if resume_from is not None:
+        hardware = world.hardware()
+        state = restore_run(resume_from, world, hardware, config)
+        observers.append(LogRecorder(resume_from))
+    elif log is not None:
+        observers.append(LogRecorder(log))
+    return run(world, config, recorders=observers, progress=progress, state=state, hardware=hardware)

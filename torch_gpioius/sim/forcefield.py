@@ -1,0 +1,374 @@
+"""The force-field world (``forcefield``) of the paper's robot experiment (Sec. VI) in 3-D: a rigid inner mesh under a
+soft outer mesh whose force on the fingertip is a static field, a depth camera that sees the outer one, and an
+exploration range for the fingertip (eq. 25).
+
+The hardware is a kinematic UR5 (``kinematics.SimulatedUR5``) behind its safety gate, a simulated fingertip force
+sensor over a force-field contact model (the inner object 1000 N/m, the cover a static force field of a few N/m that
+the fingertip passes through), a simulated depth camera, and the :class:`torch_gpioius.contact.ContactController`.
+The cover does not move: for cloth that the fingertip pushes aside, see the MuJoCo world.
+
+Frames: everything is in the UR5 base frame [m] (z up); the objects stand in front of the robot.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import trimesh
+
+import torch
+
+from ..exploration.observations import ObservationPolicy
+from ..exploration.stopping import TravelBudget
+from ..exploration.registry import register_world
+from ..exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
+from ..metrics import hausdorff_distance
+from ..planning import RangePenalty
+from ..sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
+from ..sensors.simulated import ForceFieldContact
+from ..surfaces import surface_samples
+from .._validation import as_bounds
+from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
+
+__all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d",
+           "ROBOT_STUDY_DEFAULTS"]
+
+#: The robot study's settings (Sec. VI-A): theta 0.15, sigma^2 0.08, alpha 1 cm, 1.5 m of travel, the range
+#: penalty of eq. (25), the camera averaged in 5 cm voxels and cropped to 15 cm around the range.
+ROBOT_STUDY_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_steps=400,
+                                           stop=(TravelBudget(1.5),),
+                                           policy=ObservationPolicy(voxel=0.05, crop_margin=0.15),
+                                           metrics_every=1, approach_travel=2.0)
+
+
+def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
+                  q_home=(0.0, -1.2, 1.5, -1.9, -1.57, 0.0), margin: float = 0.1):
+    """A kinematic UR5 placed by IK with its fingertip at ``start`` pointing along ``direction``, behind a gate
+    whose workspace box is the exploration range [``lower``, ``upper``] and the start, grown by ``margin`` [m]."""
+    from kinematics import UR5, SafetyGate, SimulatedUR5, tool_rotation
+
+    ur5 = UR5(tool_offset=(0.0, 0.0, tool_length))
+    T = torch.eye(4, dtype=torch.float64)
+    T[:3, :3] = tool_rotation(direction)
+    T[:3, 3] = torch.as_tensor(start, dtype=torch.float64)
+    q0 = ur5.inverse_kinematics(T, q_init=torch.as_tensor(q_home, dtype=torch.float64))
+    lo = np.minimum(lower, start) - margin
+    hi = np.maximum(upper, start) + margin
+    return SimulatedUR5(ur5, q0, SafetyGate(ur5, lo.tolist(), hi.tolist()))
+
+
+def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float = 0.003, contacts=None) -> Measurement:
+    """Uncertainty (eq. 23) and Hausdorff distance (eq. 24) of the estimated inner surface, in the range.
+
+    The estimate {mu_in = 0} is meshed by marching cubes on a grid over the exploration range grown by 5 cm,
+    then both it and the true inner mesh are restricted to the exploration range (the robot can neither
+    touch nor be judged on what lies outside it, e.g. under the arm). The Hausdorff distance is computed
+    between dense surface samples (``spacing``) with k-d trees, so it is within about ``spacing`` of the
+    exact surface-to-surface value. With ``contacts``, also the distance of the touched pieces only
+    (:func:`torch_gpioius.surfaces.touched_pieces`).
+
+    Returns:
+        :class:`Measurement` (``surface``: the estimated mesh in the range, or None); NaN metrics when the estimate
+        has no surface in the range.
+    """
+    from ..metrics import uncertainty_measure
+    from ..surfaces import clip_mesh, evaluate_grid, touched_pieces, zero_level_mesh
+
+    truth = scene.inner_samples_in_range(spacing)
+    field = evaluate_grid(model, scene.bounds(0.05), resolution, 0)
+    mesh = clip_mesh(zero_level_mesh(model, None, field=field), scene.range[0], scene.range[1])
+    if mesh is None:
+        return Measurement()
+    est = surface_samples(mesh, spacing)
+    est = est[scene.in_range(est)]
+    h = hausdorff_distance(est, truth) if len(est) else float("nan")
+    ht = float("nan")
+    if contacts is not None and len(contacts):
+        touched = touched_pieces(mesh, contacts)
+        if touched is not None:
+            t = surface_samples(touched, spacing)
+            t = t[scene.in_range(t)]
+            ht = hausdorff_distance(t, truth) if len(t) else float("nan")
+    return Measurement(h, ht, uncertainty_measure(model, mesh, 0), None, mesh)
+
+
+def _mesh(m, name: str) -> trimesh.Trimesh:
+    if not isinstance(m, trimesh.Trimesh) or len(m.faces) == 0:
+        raise ValueError(f"{name}: expected a non-empty trimesh.Trimesh [m]")
+    if not np.isfinite(m.vertices).all():
+        raise ValueError(f"{name}: vertices contain NaN or inf")
+    if not m.is_watertight:
+        raise ValueError(f"{name}: the mesh must be closed (watertight)")
+    return m
+
+
+class Scene3D(World):
+    """A covered object in 3-D, seen by a depth camera and touched by the UR5's fingertip (the force-field world,
+    registered as ``forcefield``).
+
+    Args:
+        inner: closed mesh of the rigid inner object [m], base frame.
+        outer: closed mesh of the cover's outer surface [m] (must contain the inner one).
+        start: `(3,)` fingertip start position [m], outside the outer mesh.
+        direction: `(3,)` approach direction (normalised here); the tool points along it.
+        bounds: `(2, 3)` exploration range `[min corner; max corner]` [m] (trimesh's ``mesh.bounds`` layout): the
+            range penalty C (eq. 25) keeps the planner inside it, and the metrics are evaluated inside it.
+        name: label for figures and records.
+        camera: point-cloud source seeing the outer mesh (default: :meth:`default_camera`).
+        cover_stiffness: stiffness of the cover in the simulated force model [N/m].
+        sensor_noise: force-sensor noise per axis [N] (the OptoForce OMD-20 is specified to about 0.01-0.03 N).
+        seed: seed of the sensor and camera noise.
+        defaults: overrides of :data:`ROBOT_STUDY_DEFAULTS`.
+
+    Raises:
+        ValueError: open or invalid meshes, an outer mesh not containing the inner one, a start inside the outer
+            mesh, an approach ray missing the inner mesh, or invalid bounds.
+    """
+
+    def __init__(self, inner: trimesh.Trimesh, outer: trimesh.Trimesh, start, direction, bounds, name: str = "",
+                 camera=None, cover_stiffness: float = 5.0, sensor_noise: float = 0.02, seed: int = 0,
+                 defaults: ExplorationDefaults | None = None) -> None:
+        self.inner, self.outer = _mesh(inner, "inner"), _mesh(outer, "outer")
+        self.inner_sdf, self.outer_sdf = MeshSDF(self.inner), MeshSDF(self.outer)
+        # containment on at most 2000 inner vertices (trimesh's ray-based contains needs GBs for large meshes)
+        probe = self.inner.vertices[::max(1, len(self.inner.vertices) // 2000)]
+        if not bool((self.outer_sdf(probe)[0] <= 1e-9).all()):
+            raise ValueError("outer: must contain the inner mesh (a cover around the object)")
+        self.start = np.asarray(start, dtype=np.float64).reshape(-1)
+        d = np.asarray(direction, dtype=np.float64).reshape(-1)
+        if self.start.shape != (3,) or not np.isfinite(self.start).all():
+            raise ValueError(f"start: expected a finite (3,) position [m], got {start!r}")
+        if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) == 0:
+            raise ValueError("direction: must be a finite non-zero 3-vector")
+        self.direction = d / np.linalg.norm(d)
+        self.range = as_bounds(bounds, 3)
+        if float(self.outer_sdf(self.start[None])[0][0]) <= 0:
+            raise ValueError("start: must lie outside the outer mesh")
+        if not cover_stiffness >= 0:
+            raise ValueError("cover_stiffness must be >= 0 [N/m]")
+        self.name = name
+        self._inner_samples: dict[float, np.ndarray] = {}
+        self.cover_stiffness = float(cover_stiffness)
+        if isinstance(sensor_noise, bool) or not (isinstance(sensor_noise, (int, float)) and
+                                                  math.isfinite(sensor_noise) and 0 <= sensor_noise <= 1.0):
+            raise ValueError(f"sensor_noise: must be in [0, 1] N, got {sensor_noise!r}")
+        self.sensor_noise, self.seed = float(sensor_noise), int(seed)
+        self._camera = camera
+        self._defaults = defaults or ROBOT_STUDY_DEFAULTS
+        self.first_contact()  # raises if the approach misses
+
+    dim = 3
+
+    # ------------------------------------------------------------------ the World interface
+    @property
+    def defaults(self) -> ExplorationDefaults:
+        return self._defaults
+
+    @property
+    def camera(self):
+        """The point-cloud source (default: :meth:`default_camera`)."""
+        if self._camera is None:
+            self._camera = self.default_camera()
+        return self._camera
+
+    def hardware(self) -> Hardware:
+        from ..contact import ContactController
+        from ..sensors.simulated import SimulatedForceSensor
+
+        robot = simulated_ur5(self.start, self.direction, self.range[0], self.range[1])
+        sensor = SimulatedForceSensor(self.contact_model(), robot.read_pose, clock=lambda: robot.time,
+                                      noise_std=self.sensor_noise, seed=self.seed)
+        return Hardware(robot, sensor, self.camera, ContactController(robot, sensor))
+
+    def penalty(self) -> RangePenalty:
+        return self.range_penalty()
+
+    def crop_box(self) -> np.ndarray:
+        return self.range
+
+    def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
+        return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
+
+    def fingerprint(self) -> str:
+        return geometry_hash(self.inner.vertices, self.inner.faces, self.outer.vertices, self.outer.faces,
+                             self.start, self.direction, self.range,
+                             [self.cover_stiffness, self.sensor_noise, self.seed])
+
+    def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
+        return {"joints": hw.robot.read_joints().numpy(), "clock": np.array([hw.robot.time]),
+                **{f"sensor_{k}": v for k, v in hw.sensor.get_state().items()}}
+
+    def restore(self, hw: Hardware, state: dict[str, np.ndarray]) -> None:
+        hw.robot.set_state(torch.as_tensor(state["joints"]), float(np.asarray(state["clock"]).reshape(-1)[0]))
+        hw.sensor.set_state({k[len("sensor_"):]: v for k, v in state.items() if k.startswith("sensor_")})
+
+    def perturbed(self, seed: int) -> "Scene3D":
+        """The same objects with a seeded perturbation (seed 0: unchanged): the start moved uniformly within a
+        2 cm disc across the approach, the approach direction turned by up to 10 deg (uniform on the cap), and the
+        force-sensor and camera noise drawn from ``seed``. A perturbed approach must still hit the object."""
+        if seed == 0:
+            return self
+        rng = np.random.default_rng([seed, 3])
+        d = self.direction
+        u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+        u /= np.linalg.norm(u)
+        v = np.cross(d, u)
+        for _ in range(100):
+            r, phi = 0.02 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+            start = self.start + r * (math.cos(phi) * u + math.sin(phi) * v)
+            cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
+            sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
+            direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
+            camera = None
+            if self._camera is None or isinstance(self._camera, SimulatedDepthCamera):
+                base = self.camera
+                camera = SimulatedDepthCamera(base.mesh, base.intrinsics, base.T_base_camera, noise_a=base.noise_a,
+                                              noise_b=base.noise_b, dropout=base.dropout, seed=seed,
+                                              engine=base.engine)
+            try:
+                return Scene3D(self.inner, self.outer, start, direction, self.range, name=self.name,
+                               camera=camera if camera is not None else self._camera,
+                               cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=seed,
+                               defaults=self._defaults)
+            except ValueError:
+                continue
+        raise ValueError(f"seed {seed}: no perturbed approach hits the object")
+
+    # ------------------------------------------------------------------ geometry
+    def first_contact(self) -> np.ndarray:
+        """`(3,)` first point of the inner mesh hit from ``start`` along ``direction`` [m]."""
+        hits, _, _ = self.inner.ray.intersects_location(self.start[None], self.direction[None], multiple_hits=True)
+        if len(hits) == 0:
+            raise ValueError("direction: the approach ray from start misses the inner mesh")
+        return hits[np.argmin(np.linalg.norm(hits - self.start, axis=1))]
+
+    def bounds(self, margin: float = 0.05) -> np.ndarray:
+        """`(2, 3)` grid box [min; max] for surfaces and metrics: the exploration range grown by ``margin`` [m]."""
+        return self.range + np.array([[-margin], [margin]])
+
+    def in_range(self, points: np.ndarray) -> np.ndarray:
+        """`(n,)` bool: points `(n, 3)` inside the exploration range."""
+        p = np.asarray(points, dtype=np.float64)
+        return ((p >= self.range[0]) & (p <= self.range[1])).all(axis=1)
+
+    def inner_samples_in_range(self, spacing: float = 0.003) -> np.ndarray:
+        """`(n, 3)` samples of the true inner surface inside the exploration range, about one per ``spacing``^2
+        (the reference of the Hausdorff metric; computed once per spacing)."""
+        if spacing not in self._inner_samples:
+            pts = surface_samples(self.inner, spacing)
+            self._inner_samples[spacing] = pts[self.in_range(pts)]
+        return self._inner_samples[spacing]
+
+    def range_penalty(self, beta: float = 100.0) -> RangePenalty:
+        """The paper's C(x) (eq. 25, beta = 100) for this scene's exploration range."""
+        return RangePenalty(self.range[0], self.range[1], beta=beta)
+
+    def inner_outer_hausdorff(self, spacing: float = 0.003) -> float:
+        """Hausdorff distance between the inner and outer surfaces [m] (the whole meshes).
+
+        Both surfaces are sampled every ``spacing`` (vertices plus area-uniform samples) and compared with k-d
+        trees: within about ``spacing`` of the exact value, seconds instead of minutes for 10^5 faces.
+        """
+        return hausdorff_distance(surface_samples(self.inner, spacing), surface_samples(self.outer, spacing))
+
+    def contact_model(self, k_inner: float = 1000.0) -> ForceFieldContact:
+        """Force on a point fingertip: the rigid inner mesh and the soft cover (``cover_stiffness``)."""
+        return ForceFieldContact(self.inner_sdf, self.outer_sdf, k_inner=k_inner,
+                              k_cover=self.cover_stiffness)
+
+    def default_camera(self, scale: float = 0.5) -> SimulatedDepthCamera:
+        """A Kinect v2 (half resolution; depth noise 1.5 mm + 1.5 mm/m^2 * z^2) looking at the centre of the
+        exploration range from 1.1 m, from behind the approach (so that it sees what the robot will touch),
+        30 cm to the side and 30 cm up."""
+        target = self.range.mean(axis=0)
+        back = -self.direction
+        side = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
+        eye = target + back + 0.3 * side / np.linalg.norm(side) + np.array([0.0, 0.0, 0.3])
+        eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
+        return SimulatedDepthCamera(self.outer, PinholeCamera.kinect_v2(scale), look_at(eye, target),
+                                    noise_a=0.0015, noise_b=0.0015, seed=self.seed)
+
+    def truth(self) -> dict:
+        """The true inner and outer meshes [m]."""
+        return {"inner": self.inner, "outer": self.outer}
+
+    def __repr__(self) -> str:
+        return (f"Scene3D({self.name!r}, inner volume={self.inner.volume * 1e6:.0f} cm^3, "
+                f"outer volume={self.outer.volume * 1e6:.0f} cm^3)")
+
+
+def sphere_scene(radius: float = 0.08, cover: float = 0.01, center=(0.5, 0.0, 0.25), name: str = "sphere",
+                 subdivisions: int = 4) -> Scene3D:
+    """A sphere under a uniform cover, approached from above; the exploration range is its upper half.
+
+    Args:
+        radius: inner radius [m]. cover: cover thickness [m]. center: `(3,)` [m], base frame.
+    """
+    c = np.asarray(center, dtype=np.float64)
+    inner = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    outer = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius + cover)
+    inner.apply_translation(c)
+    outer.apply_translation(c)
+    reach = radius + cover + 0.05
+    bounds = np.stack([c - reach, c + reach])
+    bounds[0, 2] = c[2] - 0.3 * radius
+    return Scene3D(inner, outer, start=c + [0.01, 0.005, reach + 0.05], direction=(0, 0, -1), bounds=bounds,
+                   name=name)
+
+
+def paper_objects_3d(resolution: float = 0.006) -> dict[str, Scene3D]:
+    """Objects E-H of the robot experiment (Sec. VI, Fig. 6), built from capsules and rounded boxes [m].
+
+    * E, arm in a tight sleeve: an upper arm (r = 5 cm) and a forearm (r = 4 cm) capsule blended at the elbow,
+      lying along y at 25 cm height, bent 18 deg at the elbow; the sleeve is the arm grown by 8 mm.
+    * F, arm in a loose sleeve: the same arm; the sleeve is a 9 cm tube along the upper arm and forearm axes,
+      sagging 2.5 cm, blended with the arm grown by 1 cm. The arm's shape stays recognisable.
+    * G, torso in a tight shirt: a chest (rounded box 18 x 30 x 36 cm), shoulders (capsule, r = 6 cm) and a neck
+      (capsule, r = 4.5 cm) blended; the shirt is the torso grown by 8 mm.
+    * H, torso in a loose garment: the same torso under a poncho, a rounded box 34 x 52 x 48 cm with 8 cm edge
+      radius, blended with the torso grown by 1 cm (neck and shoulders shape the top, the rest hangs).
+
+    The arm is approached from above, the torso from the front (the side facing the robot base). The
+    exploration range is the upper half of the arm and the front and top of the torso, as in Fig. 6. The
+    inner-outer Hausdorff distances are in docs/results-3d.md (``Scene3D.inner_outer_hausdorff``).
+
+    Args:
+        resolution: marching-cubes grid spacing of the meshes [m].
+    """
+    elbow = np.array([0.5, 0.02, 0.25])
+    hand = elbow + 0.19 * np.array([-math.sin(math.radians(18)), math.cos(math.radians(18)), 0.0])
+    shoulder = np.array([0.5, -0.21, 0.25])
+    arm = smooth_union(capsule(shoulder, elbow, 0.05), capsule(elbow, hand, 0.04), k=0.03)
+    sag = np.array([0.0, 0.0, -0.025])
+    sleeve = smooth_union(offset(arm, 0.01), capsule(shoulder + sag, elbow + sag, 0.09),
+                          capsule(elbow + sag, hand + 0.6 * sag, 0.075), k=0.04)
+    arm_box = [[0.25, -0.40, 0.05], [0.75, 0.40, 0.45]]
+    arm_mesh = mesh_from_sdf(arm, arm_box, resolution)
+    arm_range = [[0.36, -0.24, 0.24], [0.66, 0.24, 0.42]]
+    arm_start, down = (0.51, -0.06, 0.45), (0.0, 0.0, -1.0)
+
+    torso = smooth_union(rounded_box((0.62, 0.0, 0.24), (0.09, 0.15, 0.18), 0.06),
+                         capsule((0.62, -0.14, 0.40), (0.62, 0.14, 0.40), 0.06),
+                         capsule((0.62, 0.0, 0.42), (0.62, 0.0, 0.53), 0.045), k=0.05)
+    poncho = smooth_union(offset(torso, 0.01), rounded_box((0.62, 0.0, 0.25), (0.17, 0.26, 0.24), 0.08), k=0.03)
+    torso_box = [[0.32, -0.4, -0.1], [0.92, 0.4, 0.62]]
+    torso_mesh = mesh_from_sdf(torso, torso_box, resolution)
+    torso_range = [[0.34, -0.24, 0.10], [0.62, 0.24, 0.56]]
+    torso_start, forward = (0.34, 0.03, 0.27), (1.0, 0.0, 0.0)
+
+    return {
+        "E": Scene3D(arm_mesh, mesh_from_sdf(offset(arm, 0.008), arm_box, resolution), arm_start, down,
+                     arm_range, name="E"),
+        "F": Scene3D(arm_mesh, mesh_from_sdf(sleeve, arm_box, resolution), arm_start, down, arm_range, name="F",
+                     cover_stiffness=3.0),
+        "G": Scene3D(torso_mesh, mesh_from_sdf(offset(torso, 0.008), torso_box, resolution), torso_start, forward,
+                     torso_range, name="G"),
+        "H": Scene3D(torso_mesh, mesh_from_sdf(poncho, torso_box, resolution), torso_start, forward,
+                     torso_range, name="H", cover_stiffness=3.0),
+    }
+
+
+register_world("forcefield", Scene3D, objects=lambda names, smoke: paper_objects_3d(0.01 if smoke else 0.006),
+               object_names=("E", "F", "G", "H"),
+               description="Sec. VI in 3-D: a kinematic UR5, a force-field cover that does not move (objects E-H)")
