@@ -16,7 +16,7 @@ $(STAMP): setup.cfg pyproject.toml
 	# The pinned CPU torch first (local wheel on our machines); setup.cfg keeps a range it satisfies.
 	$(PY) -m pip install --quiet torch==2.13.0
 	# every optional world and tool, so that the suite exercises them all (MuJoCo, Ray, rosbags, viser, Foxglove, docs)
-	$(PY) -m pip install --quiet -e ".[test,raycast,mujoco,ray,rosbag,viewer,foxglove,docs]"
+	$(PY) -m pip install --quiet -e ".[test,raycast,mujoco,shapes,ray,rosbag,viewer,foxglove,docs]"
 	touch $(STAMP)
 
 demo: $(STAMP)

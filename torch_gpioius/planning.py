@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import torch
@@ -87,8 +89,14 @@ def _tangent_fallback(normal: Tensor, previous: Tensor | None) -> tuple[Tensor, 
     return eye[0], "axis-0"
 
 
+#: Angle between the estimate's normal and the measured contact normal beyond which the planner trusts the measurement
+#: (:func:`plan_direction`).
+MAX_NORMAL_DISAGREEMENT = math.radians(60.0)
+
+
 def plan_direction(model, x, step: float = 0.01, penalty=None, task: int = 0,
-                   previous: Tensor | None = None) -> PlannedStep:
+                   previous: Tensor | None = None, measured_normal: Tensor | None = None,
+                   max_disagreement: float = MAX_NORMAL_DISAGREEMENT) -> PlannedStep:
     r"""Next sliding direction at the current contact, eq. (19):
 
     .. math:: d^* = \alpha\, P_\mu(x) \nabla L(x) / \|P_\mu(x) \nabla L(x)\|,\quad L = V + C
@@ -102,6 +110,10 @@ def plan_direction(model, x, step: float = 0.01, penalty=None, task: int = 0,
       +90 deg (counter-clockwise around the shape), in 3-D along the first base axis with a tangential component.
     * undefined normal (``|grad mu| <= tol.normal_eps``): no tangency constraint can be formed, so ``P = I`` and
       the step follows ``grad L`` itself (or the rules above if that vanishes too).
+    * the estimate's normal disagrees with the **measured** contact normal (the force direction) by more than
+      ``max_disagreement``, or is undefined while a measurement exists: the step is projected onto the measured
+      tangent plane instead (``fallback = "measured-normal"``), so it never points into the object where the
+      estimate has it wrong (a fingertip under an object, its estimated normal 100 deg off, was pushed into it).
 
     Args:
         model: ``GPIOIS`` or ``GPIS`` (task 0 is used for both mean and variance).
@@ -110,6 +122,8 @@ def plan_direction(model, x, step: float = 0.01, penalty=None, task: int = 0,
         penalty: callable C(x) `(m, d)` -> `(m,)` (default: ``ZeroPenalty``).
         task: task whose posterior drives the plan (0, inner).
         previous: `(d,)` previous direction, for the degenerate-case rule.
+        measured_normal: `(d,)` outward contact normal measured at ``x`` (the force direction), or None.
+        max_disagreement: angle [rad] between the two normals beyond which the measured one rules.
 
     Returns:
         ``PlannedStep``.
@@ -123,7 +137,16 @@ def plan_direction(model, x, step: float = 0.01, penalty=None, task: int = 0,
         grad_c, = torch.autograd.grad(penalty(xg).sum(), xg)
     grad_l = (geo.grad_var + grad_c)[0]
     normal = geo.normal[0]
-    projected = geo.projector[0] @ grad_l
+    projector = geo.projector[0]
+    guard = ""
+    if measured_normal is not None:
+        nm = torch.as_tensor(measured_normal, dtype=x0.dtype, device=x0.device).reshape(-1)
+        if bool(torch.isfinite(nm).all()) and float(nm.norm()) > 0.5:
+            nm = nm / nm.norm()
+            if not bool(geo.normal_defined[0]) or float(normal @ nm) < math.cos(max_disagreement):
+                normal, guard = nm, "measured-normal"
+                projector = torch.eye(len(nm), dtype=nm.dtype, device=nm.device) - torch.outer(nm, nm)
+    projected = projector @ grad_l
     pnorm = float(projected.norm())
     fallback = ""
     if pnorm > 1e-12 * (1.0 + float(grad_l.norm())):
@@ -131,6 +154,8 @@ def plan_direction(model, x, step: float = 0.01, penalty=None, task: int = 0,
     else:
         prev = None if previous is None else torch.as_tensor(previous, dtype=x0.dtype, device=x0.device)
         unit, fallback = _tangent_fallback(normal, prev)
-    if not bool(geo.normal_defined[0]):
+    if guard:
+        fallback = guard if not fallback else f"{guard}, {fallback}"
+    elif not bool(geo.normal_defined[0]):
         fallback = fallback or "undefined-normal"
     return PlannedStep(step * unit, normal, grad_l, pnorm, fallback)

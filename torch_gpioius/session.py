@@ -21,7 +21,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             theta: float | None = None, kernel=None, noise: float | None = None, max_steps: int | None = None,
             max_travel: float | None = None, stop=None, policy=None, penalty=None,
             metrics_every: int | None = None, metrics_resolution: float | None = None,
-            interval_every: int | None = None, regions: int | None = None, recorders=(), progress: bool = False,
+            interval_every: int | None = None, regions: int | None = None, stall="default", recorders=(),
+            progress: bool = False,
             log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None) -> Trace:
     """Explore ``world`` and record per-step metrics: the same loop for every world.
 
@@ -60,6 +61,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             (visual-tactile; default: never, it costs a few fits).
         regions: visual-tactile with a similarity per region of the outer shape (:class:`torch_gpioius.LocalGPIOIS`
             with this many regions) instead of one (GPIOIS).
+        stall: the no-progress rule and its recovery (default :class:`~torch_gpioius.exploration.recovery.NoProgress`:
+            no step in 8 took the fingertip 1 cm from where it is: lift along the measured normal and re-approach;
+            after 3 such recoveries the run ends as "stalled"); None switches it off.
         recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the
             metrics and the interval, before the log).
         progress: report progress (a bar on a terminal, plain lines otherwise).
@@ -82,7 +86,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
                                       kernel=kernel, noise=noise, max_steps=max_steps, max_travel=max_travel,
                                       stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
                                       metrics_resolution=metrics_resolution, interval_every=interval_every,
-                                      regions=regions)
+                                      regions=regions, stall=stall)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     observers = list(recorders)

@@ -17,7 +17,9 @@ def c_from_the_left():
 
 
 def test_a_tap_over_the_loose_side_removes_the_extension(c_from_the_left):
-    plain = tg.explore(c_from_the_left, max_steps=140)
+    # the plain run stalls in the corner where body and cover part (step 111 on); the no-progress rule's recovery,
+    # an approach from the free side, finds the cover's gap by itself, so it is off here to isolate the taps
+    plain = tg.explore(c_from_the_left, max_steps=140, stall=None)
     tapped = tg.explore(c_from_the_left, evidence="taps", max_steps=140, interval_every=1000)
     assert plain.taps[-1] == 0 and plain.correlation[-1] > 0.999
     assert tapped.taps[-1] >= 1

@@ -158,8 +158,8 @@ def test_a_run_cut_after_a_step_resumes_to_the_same_end(scene, tmp_path):
     clock are in every step record, so a run cut after step 3 resumes where it stopped. The resumed model is
     rebuilt from the logged observations and K_t (rounding-level differences, ~1e-14, from the incrementally
     updated engine of the uninterrupted run); the arm's rest detection is a threshold, so such a difference can
-    change one settling by a time step a few steps later: the contacts agree exactly for two steps after the cut
-    and within 1 mm to the end (measured: 9e-6 m)."""
+    change a settling by one time step from the first resumed step on: the logged contacts come back exactly and
+    the rest agree within 1 mm (measured: 2e-4 m at the 8 ms step, one step of the settling arm; 5e-7 m at 4 ms)."""
     from torch_gpioius.io.datasets import read_records
 
     kw = dict(mode="visual-tactile", max_travel=0.06, metrics_every=100, progress=False)
@@ -173,8 +173,8 @@ def test_a_run_cut_after_a_step_resumes_to_the_same_end(scene, tmp_path):
     assert resumed.terminated == reference.terminated
     n = min(len(resumed.contacts), len(reference.contacts))
     assert abs(len(resumed.contacts) - len(reference.contacts)) <= 1     # the travel budget may end a step apart
-    np.testing.assert_allclose(resumed.contacts[:6], reference.contacts[:6], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(resumed.task_covariance[:5], reference.task_covariance[:5], rtol=1e-10, atol=0)
+    np.testing.assert_allclose(resumed.contacts[:4], reference.contacts[:4], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(resumed.task_covariance[:4], reference.task_covariance[:4], rtol=1e-10, atol=0)
     np.testing.assert_allclose(resumed.contacts[:n], reference.contacts[:n], rtol=0, atol=1e-3)
 
 

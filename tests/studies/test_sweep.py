@@ -27,7 +27,8 @@ def test_order_statistic_interval_of_the_median():
     assert m["coverage"] == pytest.approx(1 - 2 * (1 + 10) / 1024)
     small = median_interval([3.0, 1.0, 2.0])     # no 95 % interval exists: the range, with its coverage
     assert (small["lo"], small["hi"]) == (1.0, 3.0) and small["coverage"] == pytest.approx(0.75)
-    assert np.isnan(median_interval([np.nan])["median"])
+    assert np.isnan(median_interval([np.nan], failed="drop")["median"])      # nothing entered
+    assert median_interval([np.nan])["median"] == np.inf                    # a failure is the worst value
     a, b = np.array([1.0, 2.0, 3.0, 4.0, 5.0, 6.5]), np.array([1.5, 2.1, 3.9, 4.2, 6.0, 6.0])
     d = paired_difference(a, b)
     assert d["p_wilcoxon"] == pytest.approx(wilcoxon(a - b).pvalue)

@@ -15,6 +15,7 @@ from .observations import (Observations, ObservationPolicy, free_space_along, re
                            vision_observations)
 from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
+from .recovery import NoProgress
 from .registry import WorldEntry, make_world, register_world, world_entry, world_names
 from .state import RECORD_FIELDS, ExplorationState, StepRecord
 from .stopping import OnceAround, StopRule, TravelBudget, gone_around, largest_uncovered_gap
@@ -28,7 +29,7 @@ EVIDENCE = (None, *EVIDENCE_POLICIES)
 __all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations",
            "ObservationPolicy", "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel",
            "EvidencePolicy", "Recorder", "MetricsRecorder", "IntervalRecorder", "ProgressRecorder", "Evidence",
-           "TapPolicy", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch", "TOUCH_MODELS", "touch_model",
+           "TapPolicy", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch", "TOUCH_MODELS", "touch_model",
            "StopRule", "OnceAround", "TravelBudget", "gone_around", "largest_uncovered_gap", "World", "Hardware",
            "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash", "register_world", "world_entry",
            "world_names", "make_world", "WorldEntry", "free_space_along", "retract_free_space", "thin_points",

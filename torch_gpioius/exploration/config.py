@@ -16,6 +16,7 @@ from ..models.gpis import GPIS
 from ..models.local import LocalGPIOIS
 from .evidence import evidence_policy
 from .observations import ObservationPolicy, Observations
+from .recovery import NoProgress
 from .stopping import StopRule, TravelBudget
 from .touch import touch_model
 
@@ -51,6 +52,8 @@ class ExploreConfig:
         interval_every: the correlation's profile interval every k steps (None: never).
         regions: a similarity per region (``LocalGPIOIS`` with this many regions) or None.
         approach_travel: the approach gives up after this distance [m].
+        stall: the no-progress rule and its recovery (:class:`~torch_gpioius.exploration.recovery.NoProgress`), or
+            None to switch it off.
     """
 
     mode: str
@@ -69,11 +72,13 @@ class ExploreConfig:
     interval_every: int | None
     regions: int | None
     approach_travel: float
+    stall: NoProgress | None = NoProgress()
 
     @classmethod
     def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
                    kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
-                   metrics_every=None, metrics_resolution=None, interval_every=None, regions=None) -> "ExploreConfig":
+                   metrics_every=None, metrics_resolution=None, interval_every=None, regions=None,
+                   stall="default") -> "ExploreConfig":
         """Validate the overrides and merge them with ``world.defaults`` (see :func:`torch_gpioius.explore`).
 
         Raises:
@@ -114,8 +119,12 @@ class ExploreConfig:
         if not isinstance(policy, ObservationPolicy):
             raise ValueError(f"policy: expected an ObservationPolicy, got {type(policy).__name__}")
         penalty = penalty if penalty is not None else world.penalty()
+        if isinstance(stall, str) and stall == "default":
+            stall = NoProgress()
+        if stall is not None and not isinstance(stall, NoProgress):
+            raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
         return cls(mode, evidence, touch_model(touch), step, theta, kernel, noise, max_steps, rules, policy, penalty,
-                   metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel))
+                   metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall)
 
     # ------------------------------------------------------------------ what the loop asks of the settings
     @property
@@ -158,7 +167,8 @@ class ExploreConfig:
                "stop": [r.describe() for r in self.stop], "metrics_every": self.metrics_every,
                "metrics_resolution": self.metrics_resolution, "interval_every": self.interval_every,
                "regions": self.regions, "policy": dataclasses.asdict(self.policy),
-               "penalty": type(self.penalty).__name__}
+               "penalty": type(self.penalty).__name__,
+               "stall": None if self.stall is None else self.stall.describe()}
         if self.evidence is not None and callable(getattr(self.evidence, "describe", None)):
             out["evidence_policy"] = self.evidence.describe()
         return out

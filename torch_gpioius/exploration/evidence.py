@@ -44,12 +44,15 @@ class Evidence:
         contact: `(d,)` where the fingertip rests on the body afterwards [m], or None if it did not come back to it.
         normal: the measured contact normal there `(d,)`, or None.
         min_move: a contact that moved less than this from the previous one [m] is not a new observation.
+        kind: "tap" (an evidence policy's action, counted in ``state.taps``) or "recovery" (a stall's recovery,
+            counted in ``state.recoveries``).
     """
 
     touches: list = field(default_factory=list)
     contact: np.ndarray | None = None
     normal: torch.Tensor | None = None
     min_move: float = 0.005
+    kind: str = "tap"
 
 
 @dataclass(frozen=True)

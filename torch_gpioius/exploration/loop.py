@@ -29,7 +29,7 @@ from .state import ExplorationState, StepRecord
 from .trace import Trace
 from .world import World
 
-__all__ = ["explore", "run", "begin"]
+__all__ = ["explore", "run", "begin", "step", "ingest", "ingest_evidence", "unstall", "recover"]
 
 
 def explore(world: World, mode: str = "visual-tactile", *, recorders=(), progress: bool = False,
@@ -70,11 +70,11 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
 def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     """One step of the pipeline; returns why the run stops here, or None to go on."""
     cfg, hw = ctx.config, ctx.hardware
-    if state.steps + state.taps >= cfg.max_steps:              # an evidence action counts as a step of the budget
+    if state.steps + state.taps + state.recoveries >= cfg.max_steps:    # evidence and recoveries count as steps
         return "max_steps"
     t0 = time.perf_counter()
     plan = plan_direction(state.model, torch.as_tensor(state.contact), step=cfg.step, penalty=cfg.penalty,
-                          previous=state.previous)
+                          previous=state.previous, measured_normal=state.normal)
     state.previous = plan.direction
     t_plan = time.perf_counter() - t0
     try:
@@ -94,9 +94,10 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
         evidence = cfg.evidence.gather(state, hw.controller)
         if evidence is not None:
             record.evidence.append(ingest_evidence(state, cfg, evidence))
+    stalled = unstall(ctx, state, record)
     state.model.fit(multi_start=False)
-    _describe(record, state, hw, step_time=t_plan + time.perf_counter() - t1)
-    stop = _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
+    _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1)
+    stop = stalled or _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
     record.final = stop is not None
     state.records.append(record)
     for r in observers:
@@ -129,7 +130,7 @@ def begin(ctx: Run) -> ExplorationState:
     state.model.fit()
     record = StepRecord(step=0, travel=0.0, touch=first, final=cfg.max_steps == 0,
                         observations=Observations.concat([inner, outer], source="start"))
-    _describe(record, state, hw, step_time=time.perf_counter() - t0)
+    _describe(record, state, ctx, step_time=time.perf_counter() - t0)
     state.records.append(record)
     return state
 
@@ -143,11 +144,14 @@ def ingest(state: ExplorationState, cfg: ExploreConfig, touch: ContactResult) ->
     return obs, removed
 
 
-def ingest_evidence(state: ExplorationState, cfg: ExploreConfig, evidence) -> tuple[Observations, np.ndarray]:
-    """An evidence policy's touches into the state and the model: travel and path, the free space they crossed
-    (y = 1), and the contact where the fingertip came back to rest (y = 0, when it moved ``evidence.min_move``).
-    Returns the batch and the retracted indices."""
-    state.taps += 1
+def ingest_evidence(state: ExplorationState, cfg: ExploreConfig, evidence) -> tuple[Observations, np.ndarray, str]:
+    """An evidence policy's touches (or a stall's recovery) into the state and the model: travel and path, the free
+    space they crossed (y = 1), and the contact where the fingertip came back to rest (y = 0, when it moved
+    ``evidence.min_move``). Returns the batch, the retracted indices and the evidence's kind."""
+    if evidence.kind == "recovery":
+        state.recoveries += 1
+    else:
+        state.taps += 1
     state.travel += float(sum(t.travel for t in evidence.touches))     # one sum, then added (as the tap did)
     for t in evidence.touches:
         state.path.extend(t.path.numpy())
@@ -168,10 +172,28 @@ def ingest_evidence(state: ExplorationState, cfg: ExploreConfig, evidence) -> tu
             xs.append(Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=state.steps,
                                    source="evidence"))
     if not xs:
-        return Observations.empty(state.dim, state.steps, "evidence"), removed
+        return Observations.empty(state.dim, state.steps, "evidence"), removed, evidence.kind
     obs = Observations.concat(xs)
     _add(state.model, obs)
-    return obs, removed
+    return obs, removed, evidence.kind
+
+
+def unstall(ctx: Run, state: ExplorationState, record: StepRecord) -> str | None:
+    """The no-progress rule (:mod:`~torch_gpioius.exploration.recovery`): recover when the run is stalled, plan afresh
+    afterwards; "stalled" once ``max_recoveries`` recoveries in a row left it stalled."""
+    rule = ctx.config.stall
+    verdict = None if rule is None else rule.stalled(state)
+    if not verdict:
+        if verdict is False:
+            state.failed_recoveries = 0
+        return None
+    if state.failed_recoveries >= rule.max_recoveries:
+        return "stalled"
+    state.failed_recoveries, state.last_recovery, state.previous = state.failed_recoveries + 1, state.steps, None
+    evidence = rule.recover(state, ctx.hardware.controller)
+    if evidence is not None:
+        record.evidence.append(ingest_evidence(state, ctx.config, evidence))
+    return None
 
 
 def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig, contact: np.ndarray) -> np.ndarray:
@@ -194,11 +216,16 @@ def _moved(state: ExplorationState, touch: ContactResult) -> None:
     state.path.extend(touch.path.numpy())
 
 
-def _describe(record: StepRecord, state: ExplorationState, hw, step_time: float) -> None:
-    """The record's motion and model values (what recorders do not measure)."""
+def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: float) -> None:
+    """The record's motion, its contact's ground truth where the world knows it, and the model's values."""
     m = state.model
     record.travel, record.taps, record.retracted, record.step_time = state.travel, state.taps, state.retracted, step_time
-    record.robot_time = float(getattr(hw.robot, "time", math.nan))
+    record.recoveries = state.recoveries
+    record.robot_time = float(getattr(ctx.hardware.robot, "time", math.nan))
+    truth = ctx.world.contact_truth(ctx.hardware, state.contact)
+    if truth is not None:
+        record.contact_distance = float(truth.distance)
+        record.contact_on_body = math.nan if truth.on_body is None else float(bool(truth.on_body))
     record.similarity = float(getattr(m, "similarity", math.nan))
     record.correlation = float(getattr(m, "correlation", math.nan))
     if hasattr(m, "task_covariance"):

@@ -28,6 +28,9 @@ RECORD_FIELDS = {
     "step_time": "wall time of planning, ingesting and re-learning [s] (motion excluded)",
     "robot_time": "the robot's clock [s]",
     "taps": "evidence-gathering actions so far (taps)",
+    "recoveries": "recoveries from a stall so far",
+    "contact_distance": "distance of the step's contact from the true inner surface [m] (negative inside)",
+    "contact_on_body": "1 if the fingertip touched the body itself at the contact, 0 if only the cover (NaN unknown)",
     "retracted": "free-space samples retracted so far",
 }
 
@@ -45,7 +48,7 @@ class StepRecord:
         observations: the inner observations this step's touch added (before any evidence).
         removed: `(k,)` indices (into the training set before the step) of free space retracted for them.
         touch: the contact controller's result of the step (path, forces) or of the approach (record 0).
-        evidence: ``(observations, removed)`` of each evidence action taken after the touch.
+        evidence: ``(observations, removed, kind)`` of each evidence action or recovery taken after the touch.
     """
 
     step: int
@@ -61,7 +64,10 @@ class StepRecord:
     step_time: float = math.nan
     robot_time: float = math.nan
     taps: int = 0
+    recoveries: int = 0
     retracted: int = 0
+    contact_distance: float = math.nan
+    contact_on_body: float = math.nan
     final: bool = False
     observations: Observations | None = None
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -83,6 +89,8 @@ class ExplorationState:
         normal: the measured contact normal at the current contact `(d,)` (from the force), or None.
         steps: planning steps taken.
         taps: evidence actions taken; last_evidence: the step of the last one.
+        recoveries: recoveries from a stall; last_recovery: the step of the last one; failed_recoveries: those in a
+            row after which the run still made no progress.
         terminated: why the run ended (None while it runs).
         centre: centroid of the estimated inner region, from the last measurement (2-D stop rule).
         surface: the last measured estimate (2-D polylines or a 3-D mesh), or None.
@@ -99,6 +107,9 @@ class ExplorationState:
     steps: int = 0
     taps: int = 0
     last_evidence: int = 0
+    recoveries: int = 0
+    last_recovery: int = 0
+    failed_recoveries: int = 0
     terminated: str | None = None
     centre: np.ndarray | None = None
     surface: object = None

@@ -41,6 +41,9 @@ class Trace:
         evidence: the evidence policy's name ("taps") or None.
         region_correlation: `(n, R)` task correlation of each region (``regions=R``; `(n, 0)` otherwise).
         touch: the touch model's name ("point", "patch").
+        contact_distance: `(n,)` distance of each step's contact from the true inner surface [m] (NaN unknown).
+        contact_on_body: `(n,)` 1 where the fingertip touched the body itself, 0 where only the cover (NaN unknown).
+        recoveries: `(n,)` cumulative number of recoveries from a stall.
     """
 
     mode: str
@@ -66,6 +69,9 @@ class Trace:
     evidence: str | None = None
     region_correlation: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     touch: str = "point"
+    contact_distance: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    contact_on_body: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    recoveries: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":
@@ -91,11 +97,21 @@ class Trace:
                    evidence=None if config.evidence is None else getattr(config.evidence, "name", "custom"),
                    region_correlation=(np.stack([np.pad(r, (0, width - len(r)), constant_values=np.nan)
                                                  for r in regions]) if width else np.zeros((len(recs), 0))),
-                   touch=getattr(config.touch, "name", "custom"))
+                   touch=getattr(config.touch, "name", "custom"), contact_distance=col("contact_distance"),
+                   contact_on_body=col("contact_on_body"),
+                   recoveries=np.array([r.recoveries for r in recs], dtype=np.int64))
 
     @property
     def n_steps(self) -> int:
         return len(self.travel)
+
+    def contacts_on_body(self, within: float = 0.01) -> dict:
+        """How many of the run's contacts were on the body: ``{"on_body": fraction touched on the body itself (NaN
+        where the world cannot tell), "within": fraction within ``within`` [m] of the true surface}``."""
+        d, b = np.asarray(self.contact_distance), np.asarray(self.contact_on_body)
+        ok_d, ok_b = np.isfinite(d), np.isfinite(b)
+        return {"on_body": float(b[ok_b].mean()) if ok_b.any() else float("nan"),
+                "within": float((np.abs(d[ok_d]) <= within).mean()) if ok_d.any() else float("nan")}
 
     @property
     def sim_time(self) -> np.ndarray:
@@ -122,6 +138,9 @@ class Trace:
                 row["evidence"] = self.evidence
                 row["taps"] = int(self.taps[i]) if len(self.taps) else 0
             row.update({f"contact_{a}": float(v) for a, v in zip("xyz", self.contacts[i])})
+            if len(self.contact_distance):
+                row["contact_distance"] = float(self.contact_distance[i])
+                row["contact_on_body"] = float(self.contact_on_body[i])
             row["step_time"] = float(self.step_time[i])
             if len(self.robot_time):
                 row["robot_time"] = float(self.robot_time[i])

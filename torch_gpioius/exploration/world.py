@@ -31,7 +31,8 @@ from .protocols import Toucher
 from .registry import register_world
 from .stopping import StopRule, TravelBudget
 
-__all__ = ["World", "Hardware", "Toucher", "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash"]
+__all__ = ["World", "Hardware", "Toucher", "ExplorationDefaults", "Measurement", "ContactTruth", "RobotWorld",
+           "geometry_hash"]
 
 
 @dataclass
@@ -97,6 +98,20 @@ class Measurement:
     surface: Any = None
 
 
+@dataclass
+class ContactTruth:
+    """Where a contact lies relative to the true body, in a world that knows it.
+
+    Attributes:
+        distance: signed distance of the contact point from the true inner surface [m] (negative inside).
+        on_body: whether the fingertip touched the body itself at that moment (False: it pressed only on the cover,
+            e.g. cloth carrying the force); None where the world cannot tell.
+    """
+
+    distance: float = math.nan
+    on_body: bool | None = None
+
+
 def geometry_hash(*arrays) -> str:
     """SHA-256 (first 16 hex digits) of numeric arrays: a world's geometry fingerprint for logs and resume."""
     h = hashlib.sha256()
@@ -145,6 +160,18 @@ class World(abc.ABC):
     def measure(self, model, contacts: np.ndarray, resolution: float | None = None) -> Measurement:
         """Ground-truth metrics of ``model``'s inner estimate; a world without a known truth returns NaNs."""
         return Measurement()
+
+    def true_distance(self, points: np.ndarray) -> np.ndarray | None:
+        """`(n,)` signed distance of `(n, d)` points from the true inner surface [m] (negative inside); None where the
+        world does not know the truth."""
+        return None
+
+    def contact_truth(self, hw: Hardware, contact: np.ndarray) -> ContactTruth | None:
+        """Where ``contact`` `(d,)` [m], just reached with ``hw``, lies relative to the true body; None where the
+        world does not know (a real robot). The default knows the distance (:meth:`true_distance`) but not whether
+        the body itself was touched."""
+        d = self.true_distance(np.asarray(contact, dtype=np.float64)[None])
+        return None if d is None else ContactTruth(float(d[0]), None)
 
     def fingerprint(self) -> str:
         """A digest of everything that defines this world's geometry (resume refuses a log from another)."""
@@ -232,6 +259,12 @@ class RobotWorld(World):
         if self.reference is not None:
             return self.reference.measure(model, contacts, resolution)
         return Measurement()
+
+    def contact_truth(self, hw, contact):
+        """The contact's distance from the reference world's true body (whether the real fingertip touched it the
+        robot cannot tell)."""
+        d = None if self.reference is None else self.reference.true_distance(np.asarray(contact)[None])
+        return None if d is None else ContactTruth(float(d[0]), None)
 
     def fingerprint(self) -> str:
         return geometry_hash(self.direction, self.range)

@@ -499,10 +499,10 @@ def replay(path: str | os.PathLike) -> Iterator[tuple[Record, Dataset]]:
     cur = [np.zeros((0, dim)), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)]
     for rec in records:
         where = f"{path}: {rec.kind} record ending at byte {rec.end}"
-        if rec.kind in ("observations", "step", "tap"):
-            step_no = step_number(rec.meta, where) if rec.kind in ("step", "tap") else 0
+        if rec.kind in ("observations", "step", "tap", "recovery"):
+            step_no = step_number(rec.meta, where) if rec.kind != "observations" else 0
             a = rec.arrays
-            if rec.kind in ("step", "tap"):
+            if rec.kind != "observations":
                 removed = np.asarray(a.get("removed", np.zeros(0, np.int64)))
                 if removed.size:
                     if removed.dtype.kind not in "iu" or removed.min() < 0 or removed.max() >= len(cur[0]):

@@ -27,7 +27,7 @@ __all__ = ["LogRecorder", "restore_run", "step_values", "OLD_FIELD_NAMES"]
 OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertainty", "s": "similarity",
                    "rho": "correlation", "ci": "correlation_interval", "time": "step_time", "sim_time": "robot_time"}
 _VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "similarity", "correlation", "step_time",
-           "robot_time")
+           "robot_time", "contact_distance", "contact_on_body")
 
 
 def step_values(meta: dict) -> dict:
@@ -37,6 +37,7 @@ def step_values(meta: dict) -> dict:
     ci = m.get("correlation_interval") or [math.nan, math.nan]
     out["correlation_interval"] = tuple(math.nan if v is None else float(v) for v in ci)
     out["taps"] = int(m.get("taps", 0) or 0)
+    out["recoveries"] = int(m.get("recoveries", 0) or 0)
     out["retracted"] = int(m.get("retracted", 0) or 0)
     return out
 
@@ -83,10 +84,12 @@ class LogRecorder(Recorder):
         obs = record.observations
         touch = record.touch
         meta = {"step": record.step, "travel": record.travel, "retracted": record.retracted, "taps": record.taps,
+                "recoveries": record.recoveries,
                 "hausdorff": record.hausdorff, "hausdorff_touched": record.hausdorff_touched,
                 "uncertainty": record.uncertainty, "similarity": record.similarity, "correlation": record.correlation,
                 "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
-                "robot_time": record.robot_time}
+                "robot_time": record.robot_time, "contact_distance": record.contact_distance,
+                "contact_on_body": record.contact_on_body}
         path = touch.path.numpy() if touch is not None else np.zeros((0, dim))
         arrays = {"x": obs.x, "y": obs.y, "task": obs.task, "removed": np.asarray(record.removed, dtype=np.int64),
                   "contact": state.contact, "kt": np.asarray(record.task_covariance, dtype=np.float64),
@@ -100,8 +103,9 @@ class LogRecorder(Recorder):
         if hasattr(state.model, "region_correlations"):
             arrays["local_params"] = state.model.params.numpy()
         self.writer.append("step", meta, {**arrays, **world})
-        for ev_obs, removed in record.evidence:
-            self.writer.append("tap", {"step": record.step, "taps": state.taps, "travel": state.travel},
+        for ev_obs, removed, kind in record.evidence:
+            self.writer.append(kind, {"step": record.step, "taps": state.taps, "recoveries": state.recoveries,
+                                      "travel": state.travel},
                                {"x": ev_obs.x, "y": ev_obs.y, "task": ev_obs.task,
                                 "removed": np.asarray(removed, dtype=np.int64), "contact": state.contact,
                                 "normal": state.normal.numpy(), **world})
@@ -136,7 +140,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", TornLogWarning)
         records = list(read_records(path))
-        states = [ds for rec, ds in replay(path) if rec.kind in ("step", "tap")]
+        states = [ds for rec, ds in replay(path) if rec.kind in ("step", "tap", "recovery")]
     if not records or records[0].kind != "header":
         raise DatasetError(f"{path}: no header record; not an exploration log")
     header = records[0].meta
@@ -151,7 +155,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     if not steps:
         raise DatasetError(f"{path}: the log has no complete step to resume from")
     end = [r for r in records[1:] if r.kind == "end"]
-    taps = [r for r in records[1:] if r.kind == "tap"]
+    taps = [r for r in records[1:] if r.kind in ("tap", "recovery")]
     state = ExplorationState(model=None)
     for i, r in enumerate(steps):
         where = f"{path}: step record {i}"
@@ -165,7 +169,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
                          similarity=v["similarity"], correlation=v["correlation"],
                          correlation_interval=v["correlation_interval"],
                          task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64), step_time=v["step_time"],
-                         robot_time=v["robot_time"], taps=v["taps"], retracted=v["retracted"])
+                         robot_time=v["robot_time"], taps=v["taps"], recoveries=v["recoveries"], retracted=v["retracted"],
+                         contact_distance=v["contact_distance"], contact_on_body=v["contact_on_body"])
         state.records.append(rec)
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
@@ -177,7 +182,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         model.task_covariance = torch.as_tensor(last.arrays["kt"])
     state.model = model
     v = step_values(last.meta)
-    state.travel, state.retracted, state.taps = v["travel"], v["retracted"], v["taps"]
+    state.travel, state.retracted, state.taps, state.recoveries = v["travel"], v["retracted"], v["taps"], v["recoveries"]
     state.steps = step_number(last.meta, f"{path}: last step")
     for name in ("previous", "normal"):
         a = np.asarray(last.arrays.get(name, np.full(world.dim, np.nan)), dtype=np.float64)
@@ -187,9 +192,11 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     if after is not last:                        # the last step ended with a tap: its travel, contact and state
         state.travel = float(after.meta["travel"])
         state.taps = int(after.meta["taps"])
+        state.recoveries = int(after.meta.get("recoveries", state.recoveries))
         state.contacts[-1] = np.asarray(after.arrays["contact"], dtype=np.float64)
         state.normal = torch.as_tensor(np.asarray(after.arrays["normal"], dtype=np.float64))
-    state.last_evidence = max((int(t.meta["step"]) for t in taps), default=0)
+    state.last_evidence = max((int(t.meta["step"]) for t in taps if t.kind == "tap"), default=0)
+    state.last_recovery = max((int(t.meta["step"]) for t in taps if t.kind == "recovery"), default=0)
     world.restore(hardware, {k[len("world_"):]: v for k, v in after.arrays.items() if k.startswith("world_")})
     return state
 

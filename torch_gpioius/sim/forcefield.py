@@ -22,7 +22,7 @@ import torch
 from ..exploration.observations import ObservationPolicy
 from ..exploration.stopping import TravelBudget
 from ..exploration.registry import register_world
-from ..exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
+from ..exploration.world import ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash
 from ..metrics import hausdorff_distance
 from ..planning import RangePenalty
 from ..sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
@@ -32,7 +32,7 @@ from .._validation import as_bounds
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
 __all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d",
-           "ROBOT_STUDY_DEFAULTS"]
+           "ROBOT_STUDY_DEFAULTS", "cover_around", "approach_from_above", "place"]
 
 #: The robot study's settings (Sec. VI-A): theta 0.15, sigma^2 0.08, alpha 1 cm, 1.5 m of travel, the range
 #: penalty of eq. (25), the camera averaged in 5 cm voxels and cropped to 15 cm around the range.
@@ -159,6 +159,60 @@ class Scene3D(World):
         self.first_contact()  # raises if the approach misses
 
     dim = 3
+
+    @classmethod
+    def from_mesh(cls, inner, cover: str = "tight", *, start=None, direction=None, bounds=None, pose=None,
+                  at=None, scale: float = 1.0, repair: bool = True, gap: float | None = None, bridge: float = 0.03,
+                  resolution: float | None = None, name: str = "", seed: int = 0,
+                  cover_stiffness: float | None = None, sensor_noise: float = 0.02,
+                  defaults: ExplorationDefaults | None = None) -> "Scene3D":
+        """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
+
+        The mesh is loaded, checked and repaired if need be (:func:`torch_gpioius.sim.meshes.load_mesh`, which warns
+        with the repair's size); the cover is built from the mesh's exact signed distance
+        (:func:`cover_around`). Without ``start``, ``direction`` and ``bounds`` the robot comes from above
+        (:func:`approach_from_above`).
+
+        Args:
+            inner: a ``trimesh.Trimesh`` or a path (STL, OBJ, PLY, GLB, OFF) [m after ``scale``].
+            cover: "tight" (the body grown by ``gap``) or "loose" (grown, and bridged over concavities narrower than
+                2 ``bridge``, as a draped cloth).
+            start: `(3,)` fingertip start [m] (default: :func:`approach_from_above`).
+            direction: `(3,)` approach direction (default: down).
+            bounds: `(2, 3)` exploration range `[min corner; max corner]` [m] (default: :func:`approach_from_above`).
+            pose: where the object stands (`(4, 4)` or ``{"position", "quat" | "rpy_deg"}``), after ``scale``.
+            at: `(3,)` where the bottom centre of the (posed) object's bounding box goes [m], or None.
+            scale: factor to metres (0.001 for millimetres).
+            repair: repair an open mesh (False refuses it).
+            gap: the cover's distance from the body [m] (default 8 mm tight, 1 cm loose).
+            bridge: the loose cover's bridging radius [m].
+            resolution: the cover's grid spacing [m] (default: 1/80 of the largest extent, 2-6 mm).
+            name: label.
+            seed: seed of the sensor and camera noise.
+            sensor_noise: force-sensor noise per axis [N].
+            defaults: overrides of :data:`ROBOT_STUDY_DEFAULTS`.
+            cover_stiffness: [N/m] (default 5 tight, 3 loose, as objects E-H).
+
+        Raises:
+            ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
+                approach that misses the body (each names the problem).
+        """
+        from .meshes import load_mesh
+
+        if cover not in ("tight", "loose"):
+            raise ValueError(f"cover: the force-field world has 'tight' and 'loose' covers, got {cover!r}")
+        mesh = place(load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner"), at)
+        gap = (0.008 if cover == "tight" else 0.01) if gap is None else gap
+        outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution)
+        if start is None or direction is None or bounds is None:
+            s, d, b = approach_from_above(mesh, outer)
+            start, direction = (s, d) if start is None and direction is None else (start, direction)
+            if start is None or direction is None:
+                raise ValueError("start, direction: give both or neither")
+            bounds = b if bounds is None else bounds
+        stiffness = (5.0 if cover == "tight" else 3.0) if cover_stiffness is None else cover_stiffness
+        return cls(mesh, outer, start, direction, bounds, name=name, cover_stiffness=stiffness,
+                   sensor_noise=sensor_noise, seed=seed, defaults=defaults)
 
     # ------------------------------------------------------------------ the World interface
     @property
@@ -289,6 +343,17 @@ class Scene3D(World):
         return SimulatedDepthCamera(self.outer, PinholeCamera.kinect_v2(scale), look_at(eye, target),
                                     noise_a=0.0015, noise_b=0.0015, seed=self.seed)
 
+    def true_distance(self, points: np.ndarray) -> np.ndarray:
+        """`(n,)` exact signed distance of `(n, 3)` points from the inner mesh [m] (negative inside)."""
+        return self.inner_sdf(np.asarray(points, dtype=np.float64).reshape(-1, 3))[0].numpy()
+
+    def contact_truth(self, hw, contact):
+        """The contact's distance from the inner mesh, and whether the fingertip presses into the body itself (the
+        body's stiff field acts only inside it; the cover's weak field acts everywhere inside the cover)."""
+        tip = hw.robot.tool_position().detach().numpy()
+        return ContactTruth(float(self.true_distance(np.asarray(contact)[None])[0]),
+                            bool(self.true_distance(tip[None])[0] < 0.0))
+
     def truth(self) -> dict:
         """The true inner and outer meshes [m]."""
         return {"inner": self.inner, "outer": self.outer}
@@ -296,6 +361,112 @@ class Scene3D(World):
     def __repr__(self) -> str:
         return (f"Scene3D({self.name!r}, inner volume={self.inner.volume * 1e6:.0f} cm^3, "
                 f"outer volume={self.outer.volume * 1e6:.0f} cm^3)")
+
+
+def place(mesh: trimesh.Trimesh, at=None) -> trimesh.Trimesh:
+    """``mesh`` moved so that the bottom centre of its bounding box is at ``at`` `(3,)` [m] (None: unchanged)."""
+    if at is None:
+        return mesh
+    a = np.asarray(at, dtype=np.float64).reshape(-1)
+    if a.shape != (3,) or not np.isfinite(a).all():
+        raise ValueError(f"at: expected a finite (3,) position [m], got {at!r}")
+    lo, hi = mesh.bounds
+    out = mesh.copy()
+    out.apply_translation(a - np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]))
+    return out
+
+
+def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.008, bridge: float = 0.03,
+                 resolution: float | None = None) -> trimesh.Trimesh:
+    """The outer surface of a cover over a closed mesh, for the force-field world.
+
+    * "tight": the level set ``{d = gap}`` of the body's exact signed distance ``d`` (a cover of uniform thickness).
+    * "loose": the morphological closing of the tight cover by a ball of radius ``bridge``: it spans concavities
+      narrower than ``2 bridge`` (between a bunny's ears, under a mug's handle) as a draped cloth does, and keeps
+      to the body elsewhere. The dilation is exact (``{d <= gap + bridge}``); the erosion uses the Euclidean distance
+      transform of that set on the grid, so the surface is within about one grid spacing of the exact closing.
+
+    Both are meshed by marching cubes on a grid of ``resolution`` (error about that spacing); the result contains
+    the tight cover (it is united with ``{d <= gap}`` on the grid).
+
+    Args:
+        mesh: closed inner mesh [m].
+        kind: "tight" or "loose".
+        gap: the cover's distance from the body [m] (> 0).
+        bridge: the loose cover's bridging radius [m] (> 0).
+        resolution: grid spacing [m] (default: 1/80 of the largest extent, clipped to 2-6 mm).
+
+    Returns:
+        A closed ``trimesh.Trimesh`` [m].
+
+    Raises:
+        ValueError: an unknown kind, or a non-positive gap, bridge or resolution.
+    """
+    from scipy import ndimage
+    from skimage import measure
+
+    from .meshes import MeshDistance
+
+    if kind not in ("tight", "loose"):
+        raise ValueError(f"kind: must be 'tight' or 'loose', got {kind!r}")
+    for label, v in (("gap", gap), ("bridge", bridge)):
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 0.2):
+            raise ValueError(f"{label}: must be in (0, 0.2] m, got {v!r}")
+    h = float(np.clip(float(mesh.extents.max()) / 80, 0.002, 0.006)) if resolution is None else float(resolution)
+    if not (math.isfinite(h) and 0 < h <= 0.05):
+        raise ValueError(f"resolution: must be in (0, 0.05] m, got {resolution!r}")
+    reach = gap + (2 * bridge if kind == "loose" else 0.0) + 3 * h
+    lo, hi = mesh.bounds[0] - reach, mesh.bounds[1] + reach
+    axes = [np.arange(a, b + h / 2, h) for a, b in zip(lo, hi)]
+    shape = tuple(len(a) for a in axes)
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    d = MeshDistance(mesh)(grid).reshape(shape)
+    field = d - gap
+    if kind == "loose":
+        grown = d <= gap + bridge
+        inside = ndimage.distance_transform_edt(grown, sampling=h)
+        outside = ndimage.distance_transform_edt(~grown, sampling=h)
+        closing = np.where(grown, bridge - inside, bridge + outside)      # > 0 outside the closed set
+        field = np.minimum(field, closing)
+    verts, faces, _, _ = measure.marching_cubes(field, level=0.0, spacing=(h,) * 3, gradient_direction="descent")
+    out = trimesh.Trimesh(verts + lo, faces, process=True)
+    out.update_faces(out.nondegenerate_faces())
+    out.remove_unreferenced_vertices()
+    trimesh.repair.fix_normals(out)
+    if not out.is_watertight:  # pragma: no cover - marching cubes inside a padded grid is closed
+        raise ValueError("cover_around: the cover mesh is not closed")
+    return out
+
+
+def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearance: float = 0.08,
+                        margin: float = 0.03) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A default approach and range for an object on a table: straight down onto the body point nearest the centre
+    of its top view (rays cast on a grid, so a mug's opening or a torus' hole is never aimed at), starting
+    ``clearance`` above the cover; the range is the cover's bounding box grown by ``margin`` [m], from a quarter of
+    the body's height up (the part a camera and a fingertip reach on a table).
+
+    Returns:
+        ``(start (3,), direction (3,), bounds (2, 3))`` [m].
+
+    Raises:
+        ValueError: no downward ray hits the body.
+    """
+    lo, hi = inner.bounds
+    centre = (lo + hi) / 2
+    u = np.linspace(-0.4, 0.4, 9)
+    xy = np.stack(np.meshgrid(u, u, indexing="ij"), -1).reshape(-1, 2) * (hi - lo)[:2] + centre[:2]
+    xy = xy[np.argsort(np.linalg.norm(xy - centre[:2], axis=1), kind="stable")]
+    top = outer.bounds[1, 2] + clearance
+    down = np.array([0.0, 0.0, -1.0])
+    origins = np.c_[xy, np.full(len(xy), top)]
+    hit = inner.ray.intersects_any(origins, np.broadcast_to(down, origins.shape))
+    if not hit.any():
+        raise ValueError("no downward ray hits the body: give start and direction")
+    start = origins[int(np.argmax(hit))]
+    b_lo, b_hi = outer.bounds[0] - margin, outer.bounds[1] + margin
+    b_lo[2] = lo[2] + 0.25 * (hi[2] - lo[2])
+    b_hi[2] = max(b_hi[2], start[2] - 0.01)
+    return start, down, np.stack([b_lo, b_hi])
 
 
 def sphere_scene(radius: float = 0.08, cover: float = 0.01, center=(0.5, 0.0, 0.25), name: str = "sphere",

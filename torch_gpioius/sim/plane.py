@@ -21,7 +21,7 @@ from ..contact import ContactResult
 from ..exploration.observations import ObservationPolicy, free_space_along
 from ..exploration.stopping import OnceAround
 from ..exploration.registry import register_world
-from ..exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
+from ..exploration.world import ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash
 from ..metrics import hausdorff_distance
 from ..sensors.base import ForceReading, ForceSensor
 from ..sensors.pointcloud import PointCloud, PointCloudSource
@@ -453,6 +453,19 @@ class Scene2D(World):
         ring = poly.exterior
         n = max(3, int(math.ceil(ring.length / spacing)))
         return np.array([ring.interpolate(i * ring.length / n).coords[0] for i in range(n)])
+
+    def true_distance(self, points: np.ndarray) -> np.ndarray:
+        """`(n,)` signed distance of `(n, 2)` points from the inner polygon's boundary [m] (negative inside)."""
+        from shapely.geometry import Point
+
+        pts = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+        d = np.array([self.inner.exterior.distance(Point(p)) for p in pts])
+        inside = np.array([self.inner.contains(Point(p)) for p in pts], dtype=bool)
+        return np.where(inside, -d, d)
+
+    def contact_truth(self, hw, contact):
+        """The 2-D toucher settles on the inner shape itself (there is no cover to press on)."""
+        return ContactTruth(float(self.true_distance(np.asarray(contact)[None])[0]), True)
 
     def truth(self) -> dict:
         """The true inner and outer boundaries as closed polylines `(m, 2)` [m]."""

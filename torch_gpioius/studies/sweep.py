@@ -42,6 +42,8 @@ __all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "read_run_file", "Run
 MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps")
 #: Fractions of the reference travel at which the Hausdorff distance is reported.
 FRACTIONS = (0.10, 0.25, 0.50, 1.00)
+#: A contact counts as "within" when it lies this close to the true body [m] (``contacts_within`` of a run).
+CONTACT_WITHIN = 0.01
 #: Metrics every k steps in worlds with a travel budget (the robot study's 150 steps; every step in 2-D).
 BUDGET_METRICS_EVERY = 5
 
@@ -200,6 +202,13 @@ def read_run_file(path: str | Path) -> dict:
         raise bad("median_step_time", f"must be a number or NaN, got {run.get('median_step_time')!r}")
     if run.get("budget") is not None and not (_number(run["budget"], allow_nan=False) and run["budget"] > 0):
         raise bad("budget", f"must be a positive travel [m] or null, got {run['budget']!r}")
+    v = run.setdefault("recoveries", 0)                 # files of 0.3.0 and earlier have none of these three
+    if not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+        raise bad("recoveries", f"must be a non-negative integer, got {v!r}")
+    for k in ("contacts_on_body", "contacts_within"):
+        v = run.setdefault(k, math.nan)
+        if not (_number(v) and (math.isnan(v) or 0.0 <= v <= 1.0)):
+            raise bad(k, f"must be a fraction in [0, 1] or NaN, got {v!r}")
     series = run.get("series")
     if not isinstance(series, dict):
         raise bad("series", "is missing or not an object")
@@ -246,6 +255,8 @@ def run_one(spec: RunSpec) -> dict:
               "budget": kw.get("max_travel"), "wall_time": time.perf_counter() - t0,
               "median_step_time": float(np.median(trace.step_time[1:])) if trace.n_steps > 1 else math.nan,
               "taps": int(trace.taps[-1]) if len(trace.taps) else 0,
+              "recoveries": int(trace.recoveries[-1]) if len(trace.recoveries) else 0,
+              **{f"contacts_{k}": v for k, v in trace.contacts_on_body(CONTACT_WITHIN).items()},
               "series": {"travel": trace.travel.tolist(), "hausdorff": trace.hausdorff.tolist(),
                          "hausdorff_touched": trace.hausdorff_touched.tolist(),
                          "uncertainty": trace.uncertainty.tolist(), "similarity": trace.similarity.tolist(),
@@ -316,10 +327,51 @@ def _reference_travel(run: dict, runs_by_key: dict) -> float:
     return float((tactile or run)["travel"])
 
 
+def failure(run: dict) -> str:
+    """Why a run failed, or "" if it did not: "stalled" (the no-progress rule gave up), "robot stop: <why>" (the
+    safety layer or the contact controller stopped the robot before the run's own end), "lost contact", "step cap"
+    (the step budget ran out before the travel budget) or "no estimate" (no estimated surface inside the range at
+    the end). A failed run stays in every statistic (see :mod:`torch_gpioius.studies.stats`)."""
+    t = run["terminated"]
+    if t == "stalled":
+        return "stalled"
+    if t.startswith("refused"):
+        return "robot stop: " + _short_reason(t[len("refused"):].lstrip(": "))
+    if t == "lost-contact":
+        return "lost contact"
+    if t == "max_steps" and run.get("budget") and run["travel"] < 0.999 * run["budget"]:
+        return "step cap"
+    if not math.isfinite(_last_finite(run["series"]["hausdorff"])):
+        return "no estimate"
+    return ""
+
+
+def _short_reason(why: str) -> str:
+    """A robot stop's message in a few words for a table cell."""
+    low = why.lower()
+    for key, label in (("overload", "overload"), ("inverse kinematics", "IK refused"), ("ik ", "IK refused"),
+                       ("joint speed", "joint speed"), ("joint limit", "joint limit"), ("workspace", "workspace"),
+                       ("force", "force limit"), ("timeout", "sensor timeout"), ("stale", "sensor stale")):
+        if key in low:
+            return label
+    return why[:40] or "refused"
+
+
+def failures_text(reasons) -> str:
+    """``"0"`` or ``"2: 1 stalled, 1 no estimate"`` from the runs' :func:`failure` reasons."""
+    from collections import Counter
+
+    counts = Counter(r for r in reasons if r)
+    if not counts:
+        return "0"
+    return f"{sum(counts.values())}: " + ", ".join(f"{n} {why}" for why, n in sorted(counts.items()))
+
+
 def _row(run: dict, runs_by_key: dict) -> dict:
     s = run["series"]
     ref = _reference_travel(run, runs_by_key)
     row = {"world": run["world"], "object": run["object"], "mode": run["mode"], "seed": run["seed"],
+           "failed": failure(run),
            "final_hausdorff": _last_finite(s["hausdorff"]),
            "final_hausdorff_touched": _last_finite(s["hausdorff_touched"]),
            "final_uncertainty": _last_finite(s["uncertainty"]),
@@ -328,6 +380,8 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "final_correlation_hi": _last_finite(s["correlation_hi"]),
            "final_similarity": _last_finite(s["similarity"]),
            "travel": run["travel"], "steps": run["steps"], "terminated": run["terminated"], "taps": run["taps"],
+           "recoveries": run["recoveries"], "contacts_on_body": run["contacts_on_body"],
+           "contacts_within": run["contacts_within"],
            "wall_time": run["wall_time"], "median_step_time": run["median_step_time"], "reference_travel": ref}
     for f in FRACTIONS:
         p = int(round(100 * f))
@@ -370,6 +424,13 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
 
 METRICS = ["final_hausdorff", "final_hausdorff_touched", "final_uncertainty", "final_correlation",
            "final_similarity"] + [f"hausdorff_{int(round(100 * f))}" for f in FRACTIONS]
+#: Metrics where NaN means "the mode has no such value" (a tactile run has no correlation), not a failure; every
+#: other metric is a distance or a variance, where NaN is "no estimate" and counts as the worst value.
+NOT_APPLICABLE_METRICS = ("final_correlation", "final_similarity", "contacts_on_body", "contacts_within")
+
+
+def _policy(metric: str) -> str:
+    return "drop" if metric in NOT_APPLICABLE_METRICS else "worst"
 
 
 def _summarize(rows: list[dict]) -> dict:
@@ -383,10 +444,12 @@ def _summarize(rows: list[dict]) -> dict:
             rs = [r for r in rows if r["object"] == obj and r["mode"] == mode]
             if not rs:
                 continue
-            entry = {m: median_interval([r[m] for r in rs]) for m in METRICS}
+            entry = {m: median_interval([r[m] for r in rs], failed=_policy(m)) for m in METRICS}
             entry["n"] = len(rs)
-            entry["taps"] = median_interval([r["taps"] for r in rs])
-            entry["travel"] = median_interval([r["travel"] for r in rs])
+            entry["failed"] = sum(bool(r["failed"]) for r in rs)
+            entry["failures"] = failures_text(r["failed"] for r in rs)
+            for m in ("taps", "travel", "recoveries", "contacts_on_body", "contacts_within"):
+                entry[m] = median_interval([r[m] for r in rs], failed="drop")
             out["objects"][obj][mode] = entry
         tactile = {r["seed"]: r for r in rows if r["object"] == obj and r["mode"] == "tactile"}
         for mode in modes:
@@ -397,14 +460,19 @@ def _summarize(rows: list[dict]) -> dict:
             if not seeds:
                 continue
             out["paired"].setdefault(obj, {})[mode] = {
-                m: paired_difference([other[s][m] for s in seeds], [tactile[s][m] for s in seeds])
+                m: paired_difference([other[s][m] for s in seeds], [tactile[s][m] for s in seeds], failed="worst")
                 for m in ("final_hausdorff", "hausdorff_10", "hausdorff_25", "hausdorff_50")}
     return out
 
 
 # ---------------------------------------------------------------------------------------------- claims
 def _cm(v: float) -> str:
-    return "n/a" if not math.isfinite(v) else f"{100 * v:.1f}"
+    return "n/a" if math.isnan(v) else ("inf" if math.isinf(v) else f"{100 * v:.1f}")
+
+
+def _allowed(t: dict) -> float:
+    """The "no harm" margin: 10 % of the median tactile value, at least 0.5 cm (0.5 cm where tactile failed)."""
+    return max(0.1 * t["median"], 0.005) if math.isfinite(t["median"]) else 0.005
 
 
 def _no_harm(summary: dict, obj: str, mode: str = "visual-tactile") -> tuple[bool | None, str]:
@@ -412,9 +480,9 @@ def _no_harm(summary: dict, obj: str, mode: str = "visual-tactile") -> tuple[boo
     distance is at most max(10 % of the median tactile value, 0.5 cm)."""
     pair = summary["paired"].get(obj, {}).get(mode, {}).get("final_hausdorff")
     t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff")
-    if pair is None or t is None or not math.isfinite(pair["hi"]):
+    if pair is None or t is None or pair["n"] == 0:
         return None, "no paired runs"
-    allowed = max(0.1 * t["median"], 0.005)
+    allowed = _allowed(t)
     return bool(pair["hi"] <= allowed), (f"median VT - T {_cm(pair['median'])} cm, 95 % interval [{_cm(pair['lo'])}, "
                                          f"{_cm(pair['hi'])}] cm (allowed {_cm(allowed)} cm), Wilcoxon p = "
                                          f"{pair['p_wilcoxon']:.3g}, n = {pair['n']}")
@@ -491,9 +559,9 @@ def _claims(summary: dict) -> list[dict]:
 def _equal(summary: dict, obj: str) -> tuple[bool | None, str]:
     pair = summary["paired"].get(obj, {}).get("visual-tactile", {}).get("final_hausdorff")
     t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff")
-    if pair is None or t is None:
+    if pair is None or t is None or pair["n"] == 0:
         return None, "no paired runs"
-    allowed = max(0.1 * t["median"], 0.005)
+    allowed = _allowed(t)
     return bool(-allowed <= pair["lo"] and pair["hi"] <= allowed), (
         f"paired VT - T {_cm(pair['median'])} [{_cm(pair['lo'])}, {_cm(pair['hi'])}] cm (allowed +-{_cm(allowed)} cm)")
 
@@ -502,10 +570,13 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
     lines = [f"{n_runs} runs ({world} world). Medians over seeds with distribution-free 95 % intervals "
              "(order statistics; the coverage is stated where fewer seeds make it lower). H: Hausdorff distance of the "
              "whole estimated zero set to the true inner surface, at 10 / 25 / 50 % of the reference travel and at "
-             "the end; H touched: the touched estimate only; rho: task correlation; S: the paper's ratio.", "",
-             "| object | mode | n (interval coverage) | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | H final [cm] | "
-             "H touched final [cm] | U final | rho final | S final (paper) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "the end; H touched: the touched estimate only; rho: task correlation; S: the paper's ratio. Failed "
+             "runs (stalled, stopped by the robot, no estimate) stay in every statistic; a run with no estimate "
+             "counts as inf, worse than any distance. On body: the median fraction of a run's contacts where the "
+             "fingertip touched the body itself (not only the cover); '-' where the world cannot tell.", "",
+             "| object | mode | n (interval coverage) | failed (why) | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | "
+             "H final [cm] | H touched final [cm] | U final | rho final | S final (paper) | on body |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(d: dict, scale: float = 100.0, fmt: str = ".1f") -> str:
         if d["n"] == 0:
@@ -515,17 +586,23 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
     for obj, modes in sorted(summary["objects"].items()):
         for mode, e in sorted(modes.items()):
             cov = e["final_hausdorff"]["coverage"]
-            lines.append(f"| {obj} | {mode} | {e['n']} ({100 * cov:.0f} %) | {cell(e['hausdorff_10'])} | "
+            on_body = e.get("contacts_on_body", {"n": 0})
+            lines.append(f"| {obj} | {mode} | {e['n']} ({100 * cov:.0f} %) | {e['failures']} | "
+                         f"{cell(e['hausdorff_10'])} | "
                          f"{cell(e['hausdorff_25'])} | "
                          f"{cell(e['hausdorff_50'])} | {cell(e['final_hausdorff'])} | "
                          f"{cell(e['final_hausdorff_touched'])} | {cell(e['final_uncertainty'], 1, '.3f')} | "
-                         f"{cell(e['final_correlation'], 1, '.2f')} | {cell(e['final_similarity'], 1, '.2f')} |")
+                         f"{cell(e['final_correlation'], 1, '.2f')} | {cell(e['final_similarity'], 1, '.2f')} | "
+                         f"{cell(on_body, 1, '.2f')} |")
     lines += ["", "Paired differences (same seed): mode - tactile, final Hausdorff [cm], with the Wilcoxon signed-rank "
-              "p-value.", "", "| object | mode | n | median [95 % interval] | p |", "|---|---|---|---|---|"]
+              "p-value; a pair where one side has no estimate is a loss for it (inf).", "",
+              "| object | mode | n | pairs with a failure | median [95 % interval] | wins / losses | p |",
+              "|---|---|---|---|---|---|---|"]
     for obj, modes in sorted(summary["paired"].items()):
         for mode, d in sorted(modes.items()):
             p = d["final_hausdorff"]
-            lines.append(f"| {obj} | {mode} | {p['n']} | {cell(p)} | {p['p_wilcoxon']:.3g} |")
+            lines.append(f"| {obj} | {mode} | {p['n']} | {p['failed']} | {cell(p)} | {p['wins']} / {p['losses']} | "
+                         f"{p['p_wilcoxon']:.3g} |")
     if claims is None:
         lines += ["", "Smoke sweep: the paper's claims are not judged on it."]
     else:

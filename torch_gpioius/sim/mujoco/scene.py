@@ -1,10 +1,11 @@
-"""The MuJoCo world: a UR5 with a compliant fingertip force sensor, a rigid inner object made of primitives, and a
-cloth or foam cover that the fingertip pushes aside, on MuJoCo's contact physics.
+"""The MuJoCo world: a UR5 with a compliant fingertip force sensor, a rigid inner object (primitives or any closed
+mesh), and a cloth or foam cover that the fingertip pushes aside, on MuJoCo's contact physics.
 
 Everything the loop uses goes through the interfaces of :mod:`torch_gpioius.exploration.world`: the robot
 (:class:`MujocoUR5`, behind the same ``SafetyGate`` as every backend), the force sensor (:class:`MujocoForceSensor`),
 the camera (:class:`MujocoDepthCamera`, seeing the settled cover) and the unchanged
-:class:`torch_gpioius.contact.ContactController`. Metrics use the exact signed distance of the primitives.
+:class:`torch_gpioius.contact.ContactController`. Metrics use the exact signed distance of the body
+(:mod:`~torch_gpioius.sim.mujoco.bodies`: the primitives' union, or the mesh itself).
 """
 
 from __future__ import annotations
@@ -16,10 +17,11 @@ import torch
 
 from ...exploration.observations import ObservationPolicy
 from ...exploration.stopping import TravelBudget
-from ...exploration.world import ExplorationDefaults, Hardware, Measurement, World, geometry_hash
+from ...exploration.world import ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash
 from ..._validation import as_bounds
 from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
-from .primitives import Primitive, as_primitives, union_sdf, union_surface_samples
+from .bodies import MeshBody, PrimitiveBody, as_body
+from .primitives import Primitive, as_primitives
 
 __all__ = ["MujocoScene", "MUJOCO_DEFAULTS", "SCENE_LIMITS", "MAX_PRIMITIVES", "MAX_COVER_VERTICES"]
 
@@ -29,7 +31,7 @@ __all__ = ["MujocoScene", "MUJOCO_DEFAULTS", "SCENE_LIMITS", "MAX_PRIMITIVES", "
 SCENE_LIMITS = {"sensor_noise": (0.0, 1.0, "N"), "timestep": (1e-4, 0.01, "s"), "settle_time": (0.0, 10.0, "s"),
                 "camera_scale": (0.05, 1.0, ""), "tool_length": (0.01, 0.3, "m"), "tip_radius": (0.001, 0.02, "m"),
                 "spacing": (0.005, 0.1, "m"), "half_angle": (1.0, 180.0, "deg")}
-#: Most primitives in one inner object (500 blew up at the first step).
+#: Most primitives or convex parts in one inner object (500 primitives blew up at the first step).
 MAX_PRIMITIVES = 64
 #: Most cover vertices (a 1 mm spacing asked MuJoCo for more memory than its arena has).
 MAX_COVER_VERTICES = 20_000
@@ -57,12 +59,14 @@ def _require_mujoco():
 class MujocoScene(World):
     """A covered object on MuJoCo's physics, explored by a simulated UR5 with a fingertip force sensor.
 
-    Build it with :meth:`from_primitives`. On construction the model is compiled, the arm placed at the start (its
+    Build it with :meth:`from_primitives` or :meth:`from_mesh`. On construction the model is compiled, the arm placed at the start (its
     fingertip at ``start``, pointing along ``direction``), and the cover settled under gravity; every
     :meth:`hardware` call starts from that settled state.
 
     Args:
-        primitives: the inner object (:func:`torch_gpioius.sim.mujoco.primitives.as_primitives`).
+        inner: the inner object: a :class:`~torch_gpioius.sim.mujoco.bodies.PrimitiveBody` or
+            :class:`~torch_gpioius.sim.mujoco.bodies.MeshBody`, or primitives
+            (:func:`torch_gpioius.sim.mujoco.primitives.as_primitives`).
         cover: the :class:`~torch_gpioius.sim.mujoco.covers.CoverMesh`.
         start: `(3,)` fingertip start [m], outside the cover.
         direction: `(3,)` approach direction.
@@ -83,13 +87,14 @@ class MujocoScene(World):
 
     dim = 3
 
-    def __init__(self, primitives: list[Primitive], cover: CoverMesh, start, direction, bounds, *, name: str = "",
-                 seed: int = 0, sensor_noise: float = 0.02, timestep: float = 0.004, settle_time: float = 1.0,
+    def __init__(self, inner, cover: CoverMesh, start, direction, bounds, *, name: str = "",
+                 seed: int = 0, sensor_noise: float = 0.02, timestep: float = 0.008, settle_time: float = 1.0,
                  camera_scale: float = 0.5, defaults: ExplorationDefaults | None = None,
                  tool_length: float = 0.05, tip_radius: float = 0.004) -> None:
         _require_mujoco()
-        if len(primitives) > MAX_PRIMITIVES:
-            raise ValueError(f"inner: {len(primitives)} primitives; at most {MAX_PRIMITIVES} are supported")
+        self.body = as_body(inner)
+        if len(self.body) > MAX_PRIMITIVES:
+            raise ValueError(f"inner: {len(self.body)} primitives or parts; at most {MAX_PRIMITIVES} are supported")
         if len(cover.vertices) > MAX_COVER_VERTICES:
             raise ValueError(f"cover: {len(cover.vertices)} vertices; at most {MAX_COVER_VERTICES} (a coarser spacing)")
         if not isinstance(name, str):
@@ -98,7 +103,9 @@ class MujocoScene(World):
             _limited(v, k) for v, k in ((sensor_noise, "sensor_noise"), (timestep, "timestep"),
                                         (settle_time, "settle_time"), (camera_scale, "camera_scale"),
                                         (tool_length, "tool_length"), (tip_radius, "tip_radius")))
-        self.primitives, self.cover = list(primitives), cover
+        self.cover = cover
+        #: the primitives of a primitive body ([] for a mesh body)
+        self.primitives = list(getattr(self.body, "primitives", []))
         self.start = np.asarray(start, dtype=np.float64).reshape(-1)
         d = np.asarray(direction, dtype=np.float64).reshape(-1)
         if self.start.shape != (3,) or not np.isfinite(self.start).all():
@@ -113,11 +120,11 @@ class MujocoScene(World):
         self._defaults = defaults or MUJOCO_DEFAULTS
         self._samples: dict[float, np.ndarray] = {}
         # the cover must start outside the body (its elements' radius included)
-        depth = union_sdf(self.primitives, cover.vertices) - cover.radius
+        depth = self.body.sdf(cover.vertices) - cover.radius
         if depth.min() < -1e-9:
             raise ValueError(f"cover: intersects the body at rest ({-depth.min() * 1e3:.1f} mm deep at vertex "
                              f"{int(depth.argmin())}); give it more gap or slack")
-        if union_sdf(self.primitives, self.start[None])[0] <= 0:
+        if self.body.sdf(self.start[None])[0] <= 0:
             raise ValueError("start: lies inside the inner object")
         self._build()
 
@@ -150,6 +157,57 @@ class MujocoScene(World):
         prims = as_primitives(inner)
         if len(prims) > MAX_PRIMITIVES:
             raise ValueError(f"inner: {len(prims)} primitives; at most {MAX_PRIMITIVES} are supported")
+        return cls._around(PrimitiveBody(prims), cover, start, direction, bounds, name=name, seed=seed, base=base,
+                           spacing=spacing, axis=axis, centre=centre, facing=facing, half_angle=half_angle,
+                           **cover_options)
+
+    @classmethod
+    def from_mesh(cls, inner, cover: str = "loose", *, start, direction, bounds, pose=None, scale: float = 1.0,
+                  repair: bool = True, collision: str = "convex", threshold: float = 0.05, max_parts: int = 32,
+                  name: str = "", seed: int = 0, base: str = "cap", spacing: float = 0.025, axis=None, centre=None,
+                  facing=None, half_angle: float = 100.0, **cover_options) -> "MujocoScene":
+        """A MuJoCo scene around any closed mesh: a user's scan or CAD model as the hidden body.
+
+        The mesh is loaded, checked and, if it is open or non-manifold, repaired with a warning that states how far
+        the repair moved the surface (:func:`torch_gpioius.sim.meshes.load_mesh`); it collides as CoACD convex parts
+        (:class:`~torch_gpioius.sim.mujoco.bodies.MeshBody`) and every metric uses the exact distance to the mesh.
+
+        Args:
+            inner: a ``trimesh.Trimesh`` or a path (STL, OBJ, PLY, GLB) [m after ``scale``].
+            cover: "tight", "loose" or "foam" (as :meth:`from_primitives`).
+            start: `(3,)` fingertip start [m], outside the cover; direction: `(3,)` approach direction.
+            bounds: `(2, 3)` exploration range `[min corner; max corner]` [m].
+            pose: where the object stands (`(4, 4)` or ``{"position", "quat" | "rpy_deg"}``), after ``scale``.
+            scale: factor to metres (0.001 for millimetres).
+            repair: repair an open mesh (False refuses it).
+            collision: "convex" (CoACD parts) or "hull" (MuJoCo's hull of the whole mesh; convex objects only).
+            threshold: CoACD's concavity threshold (smaller: more parts, closer to the mesh).
+            max_parts: the most convex parts.
+            name: label; seed: the scene's seed.
+            base: "cap" (a garment facing ``facing``, default against the approach) or "tube" (around ``axis``).
+            spacing: the cover's vertex spacing [m] (as :meth:`from_primitives`).
+            axis: the tube's axis polyline (as :meth:`from_primitives`).
+            centre: the cap's centre (as :meth:`from_primitives`).
+            facing: the cap's direction (as :meth:`from_primitives`).
+            half_angle: the cap's half angle [deg] (as :meth:`from_primitives`).
+            **cover_options: the cover's and scene's options (as :meth:`from_primitives`).
+
+        Raises:
+            ValueError: an unreadable, empty or irreparable mesh (the message names the defect), and everything
+                :meth:`from_primitives` refuses.
+        """
+        from ..meshes import load_mesh
+
+        _require_mujoco()
+        mesh = load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner")
+        body = MeshBody(mesh, collision, threshold=threshold, max_parts=max_parts)
+        return cls._around(body, cover, start, direction, bounds, name=name, seed=seed, base=base, spacing=spacing,
+                           axis=axis, centre=centre, facing=facing, half_angle=half_angle, **cover_options)
+
+    @classmethod
+    def _around(cls, body, cover: str, start, direction, bounds, *, name: str, seed: int, base: str, spacing,
+                axis, centre, facing, half_angle, **cover_options) -> "MujocoScene":
+        """A scene with a cover of ``cover`` built around ``body``."""
         spacing, half_angle = _limited(spacing, "spacing"), _limited(half_angle, "half_angle")
         if cover not in COVER_KINDS:
             raise ValueError(f"cover: must be one of {COVER_KINDS}, got {cover!r}")
@@ -164,32 +222,34 @@ class MujocoScene(World):
                 raise ValueError("base='tube' needs axis, a (k, 3) polyline along the limb")
             mesh_base = tube_base(axis, spacing)
         elif base == "cap":
-            c = np.mean([p.pos for p in prims], axis=0) if centre is None else np.asarray(centre, dtype=np.float64)
+            c = body.centre if centre is None else np.asarray(centre, dtype=np.float64)
             f = -np.asarray(direction, dtype=np.float64) if facing is None else np.asarray(facing, dtype=np.float64)
             # the typical distance of the surface from the centre, along a few directions of the cap
             probe = cap_base(c, f, half_angle, 1.0, 1.0)
-            radius = float(np.median(np.linalg.norm(shrink_wrap(prims, *probe[:2], 0.0) - c, axis=1)))
+            radius = float(np.median(np.linalg.norm(shrink_wrap(body, *probe[:2], 0.0) - c, axis=1)))
             mesh_base = cap_base(c, f, half_angle, spacing, radius)
         else:
             raise ValueError(f"base: must be 'auto', 'tube' or 'cap', got {base!r}")
         if len(mesh_base[0]) * (2 if cover == "foam" else 1) > MAX_COVER_VERTICES:
             raise ValueError(f"spacing: {spacing:g} m gives a cover of {len(mesh_base[0])} vertices; at most "
                              f"{MAX_COVER_VERTICES} are supported (use a coarser spacing)")
-        mesh = make_cover(prims, cover, mesh_base, **cover_options)
-        return cls(prims, mesh, start, direction, bounds, name=name, seed=seed, **scene_kw)
+        mesh = make_cover(body, cover, mesh_base, **cover_options)
+        return cls(body, mesh, start, direction, bounds, name=name, seed=seed, **scene_kw)
 
     def _xml(self) -> str:
         from .covers import cover_flexcomp
         from .ur5 import ur5_mjcf
 
         body, actuators, sensors = ur5_mjcf(tool_offset=(0.0, 0.0, self.tool_length), tip_radius=self.tip_radius)
-        geoms = "\n".join(p.mjcf(f"inner_{i}") for i, p in enumerate(self.primitives))
+        geoms = self.body.geoms()
+        assets = self.body.assets()
         from xml.sax.saxutils import quoteattr
 
         return f"""<mujoco model={quoteattr(self.name or 'covered object')}>
 <compiler angle="radian" autolimits="true"/>
-<option timestep="{self.timestep}" solver="CG" tolerance="1e-6" integrator="discrete"><flag energy="enable"/></option>
+<option timestep="{self.timestep}" solver="CG" cone="elliptic" tolerance="1e-6" integrator="discrete"><flag energy="enable"/></option>
 <size memory="64M"/>
+{f"<asset>{assets}</asset>" if assets else ""}
 <worldbody>
 {geoms}
 {cover_flexcomp(self.cover)}
@@ -219,7 +279,7 @@ class MujocoScene(World):
         physics.step(max(1, int(round(self.settle_time / self.timestep))))      # the cover settles
         self.settled = physics.get_state()
         verts = self.cover_vertices(physics)
-        depth = union_sdf(self.primitives, verts) - 0.5 * self.cover.radius
+        depth = self.body.sdf(verts) - 0.5 * self.cover.radius
         if depth.min() < -0.005:
             raise ValueError(f"cover: settles {-depth.min() * 1e3:.1f} mm into the body; it is too heavy or too soft "
                              "for its contact")
@@ -232,6 +292,7 @@ class MujocoScene(World):
         if np.linalg.norm(verts - self.start, axis=1).min() < self.tip_radius + self.cover.radius + 0.005:
             raise ValueError("start: touches the cover; start at least 5 mm outside it")
         self._physics0 = physics
+        self._tip_geom = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, "fingertip")
 
     def _robot(self, physics):
         from kinematics import SafetyGate
@@ -298,23 +359,25 @@ class MujocoScene(World):
         return ((p >= self.range[0]) & (p <= self.range[1])).all(axis=1)
 
     def inner_samples_in_range(self, spacing: float = 0.003) -> np.ndarray:
-        """`(n, 3)` samples of the true inner surface (the primitives' union) inside the exploration range."""
+        """`(n, 3)` samples of the true inner surface (the body's) inside the exploration range."""
         if spacing not in self._samples:
-            pts = union_surface_samples(self.primitives, spacing)
+            pts = self.body.surface_samples(spacing)
             self._samples[spacing] = pts[self.in_range(pts)]
         return self._samples[spacing]
 
     @property
     def inner(self):
-        """The inner surface as a ``trimesh.Trimesh`` (marching cubes of the exact union SDF at 5 mm; for figures and
-        exports; the metrics use the exact SDF)."""
+        """The inner surface as a ``trimesh.Trimesh``: a mesh body's mesh, or marching cubes of the primitives' exact
+        union SDF at 5 mm (for figures and exports; the metrics use the exact SDF)."""
+        if isinstance(self.body, MeshBody):
+            return self.body.mesh
         if getattr(self, "_inner_mesh", None) is None:
             from ..shapes3d import mesh_from_sdf
 
             # the grid is offset by an irrational fraction of a cell: box faces lying exactly on grid planes make
             # marching cubes emit degenerate triangles that leave the mesh open
             box = self.range + np.array([[-0.3], [0.3]]) + 0.005 * (math.sqrt(2) - 1)
-            self._inner_mesh = mesh_from_sdf(lambda p: union_sdf(self.primitives, p), box, 0.005)
+            self._inner_mesh = mesh_from_sdf(self.body.sdf, box, 0.005)
         return self._inner_mesh
 
     def inner_outer_hausdorff(self, spacing: float = 0.003) -> float:
@@ -330,9 +393,7 @@ class MujocoScene(World):
         return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
 
     def fingerprint(self) -> str:
-        prim = np.array([list(p.size) + [0.0] * (3 - len(p.size)) + list(p.pos) + list(p.quat)
-                         for p in self.primitives])
-        return geometry_hash(prim, self.cover.vertices, self.cover.elements, self.start, self.direction, self.range,
+        return geometry_hash(*self.body.fingerprint(), self.cover.vertices, self.cover.elements, self.start, self.direction, self.range,
                              [self.seed, self.sensor_noise, self.timestep, self.settle_time])
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
@@ -359,7 +420,7 @@ class MujocoScene(World):
         cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
         sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
         direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
-        return MujocoScene(self.primitives, self.cover, start, direction, self.range, name=self.name, seed=seed,
+        return MujocoScene(self.body, self.cover, start, direction, self.range, name=self.name, seed=seed,
                            sensor_noise=self.sensor_noise, timestep=self.timestep, settle_time=self.settle_time,
                            camera_scale=self.camera_scale, defaults=self._defaults, tool_length=self.tool_length,
                            tip_radius=self.tip_radius)
@@ -377,11 +438,24 @@ class MujocoScene(World):
         physics.step(n)
         return n * self.timestep / (time.perf_counter() - t0)
 
+    def true_distance(self, points: np.ndarray) -> np.ndarray:
+        """`(n,)` exact signed distance of `(n, 3)` points from the inner object [m] (negative inside)."""
+        return self.body.sdf(np.asarray(points, dtype=np.float64).reshape(-1, 3))
+
+    def contact_truth(self, hw, contact):
+        """The contact's distance from the body, and whether the fingertip presses on the body at this moment: its
+        surface lies within one pinched cover layer (two element radii) plus 1 mm of the body. False: the cover
+        alone carries the force (a cloth stretched like a trampoline, a fold, a bunch of fabric)."""
+        tip = hw.robot.physics.data.geom_xpos[self._tip_geom].copy()
+        gap = float(self.true_distance(tip[None])[0]) - self.tip_radius
+        on = gap <= 2 * self.cover.radius + 0.001
+        return ContactTruth(float(self.true_distance(np.asarray(contact)[None])[0]), bool(on))
+
     def truth(self) -> dict:
         """The true inner surface (:attr:`inner`) [m]; the cover settles at run time, so its outer shape is what the
         camera saw (None here)."""
         return {"inner": self.inner, "outer": None}
 
     def __repr__(self) -> str:
-        return (f"MujocoScene({self.name!r}, {len(self.primitives)} primitives, {self.cover.kind} cover with "
+        return (f"MujocoScene({self.name!r}, {self.body.describe()}, {self.cover.kind} cover with "
                 f"{len(self.cover.vertices)} vertices)")
