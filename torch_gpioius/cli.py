@@ -35,11 +35,14 @@ def _simulate3d(args: argparse.Namespace) -> int:
     from .studies.study3d import run_study_3d
 
     claim_folder(args.out, "simulate3d", args.force, world=args.world)
-    objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
+    scenes = [] if args.scene is None else args.scene.split(",")
+    if args.object is None:
+        objects = [] if scenes else ["E", "F", "G", "H"]
+    else:
+        objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
     travel = 0.06 if args.smoke else args.max_travel
     result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
-                          progress=not args.quiet,
-                          smoke=args.smoke, world=args.world)
+                          progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
@@ -49,7 +52,8 @@ def _study(args: argparse.Namespace) -> int:
     from .studies.sweep import run_sweep
 
     objects = None if args.objects is None else args.objects.split(",")
-    result = run_sweep(world=args.world, objects=objects, modes=args.modes.split(","),
+    scenes = [] if args.scenes is None else args.scenes.split(",")
+    result = run_sweep(world=args.world, objects=objects, scenes=scenes, modes=args.modes.split(","),
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force)
@@ -249,7 +253,11 @@ def build_parser() -> argparse.ArgumentParser:
                                     "capture of a simulated depth camera; visual-tactile GPIOIS vs tactile-only "
                                     "GPIS until 1.5 m of travel. Writes Fig. 9/10-like figures, records, logs and "
                                     "a summary table with the Sec. VI-B claims as measured.")
-    s3.add_argument("--object", default="all", choices=["all", "E", "F", "G", "H"], help="object(s) to explore")
+    s3.add_argument("--object", default=None, choices=["all", "E", "F", "G", "H"],
+                    help="object(s) to explore (default: all, or none when --scene is given)")
+    s3.add_argument("--scene", default=None,
+                    help="comma-separated scene files (TOML: your own mesh, cover, approach; "
+                         "docs/tutorials/your-object.md)")
     s3.add_argument("--world", default="forcefield", type=_world_name, choices=["forcefield", "mujoco"],
                     help="forcefield: a static force-field cover; mujoco: cloth and foam on MuJoCo's contact physics")
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
@@ -269,6 +277,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="which world (planar: 2-D objects A-D; forcefield, mujoco: 3-D objects E-H)")
     sw.add_argument("--objects", default=None,
                     help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D)")
+    sw.add_argument("--scenes", default=None,
+                    help="comma-separated scene files (TOML; docs/tutorials/your-object.md) run as objects; with "
+                         "--scenes and no --objects only the scenes run (3-D worlds)")
     sw.add_argument("--modes", default="visual-tactile,tactile",
                     help="comma-separated: visual-tactile, tactile, visual-tactile+taps, local, local+taps")
     sw.add_argument("--seeds", type=_positive_int, default=10,

@@ -177,3 +177,64 @@ def test_damaged_and_foreign_run_files_are_named_and_damaged_runs_done_again(tmp
                           progress=False)
     assert again["skipped"] == 1 and (out / "runs" / "A_tactile_1.json.invalid").exists()
     assert read_run_file(out / "runs" / "A_tactile_1.json")["seed"] == 1
+
+
+SCENE = """
+name = "{name}"
+[object]
+mesh = "ball.stl"
+at = [0.5, 0.0, 0.15]
+[cover]
+kind = "tight"
+gap = 0.008
+{extra}"""
+
+
+def _scene(tmp_path, name="ball", extra=""):
+    import trimesh
+
+    trimesh.creation.icosphere(3, 0.06).export(tmp_path / "ball.stl")
+    path = tmp_path / f"{name}.toml"
+    path.write_text(SCENE.format(name=name, extra=extra))
+    return path
+
+
+def test_scene_files_run_as_objects_and_a_run_that_never_touches_is_a_counted_failure(tmp_path):
+    """A scene file is an object of the study under its own name. A run whose approach misses the body (here the
+    approach aims past the ball's side) fails before any estimate; it is recorded as a failure with its reason,
+    counts as the worst result, and the study goes on."""
+    ball = _scene(tmp_path)
+    out = run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "s",
+                    smoke=True, backend="local", progress=False)
+    rows = list(csv.DictReader(open(tmp_path / "s" / "runs.csv")))
+    assert [r["object"] for r in rows] == ["ball"] and rows[0]["failed"] == ""
+    assert float(rows[0]["contacts_on_body"]) == 1.0
+    assert out["summary"]["objects"]["ball"]["visual-tactile"]["n"] == 1
+    # a run that cannot start: the range lets the approach pass the ball and leave the workspace
+    from torch_gpioius.studies.sweep import RunSpec, failure, read_run_file, run_one
+
+    spec = RunSpec("forcefield", "ball", "tactile", 0, str(tmp_path / "s"), True, None, None, 1, str(ball))
+    import torch_gpioius.studies.sweep as sweep
+
+    real = sweep.make_world
+
+    def missing(*args, **kw):
+        world = real(*args, **kw)
+        world.start = world.start + np.array([0.08, 0.0, 0.0])      # 2 cm past the ball's side
+        return world
+
+    sweep.make_world = missing
+    try:
+        record = run_one(spec)
+    finally:
+        sweep.make_world = real
+    assert record["terminated"].startswith("refused: approach")
+    assert failure(read_run_file(tmp_path / "s" / "runs" / f"{spec.key}.json")).startswith("approach")
+    with pytest.raises(ValueError, match="also the names of objects"):
+        run_sweep("forcefield", objects=["E"], scenes=[_scene(tmp_path, "E")], out=tmp_path / "t")
+    with pytest.raises(ValueError, match="does not build scene files"):
+        run_sweep("planar", scenes=[ball], out=tmp_path / "u")
+    with pytest.raises(ValueError, match="two scene files"):
+        other = tmp_path / "copy.toml"
+        other.write_text(ball.read_text())
+        run_sweep("forcefield", scenes=[ball, other], out=tmp_path / "v")

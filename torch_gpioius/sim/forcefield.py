@@ -290,12 +290,28 @@ class Scene3D(World):
         raise ValueError(f"seed {seed}: no perturbed approach hits the object")
 
     # ------------------------------------------------------------------ geometry
+    #: An approach must pass at least this deep [m] into the inner mesh: one that only grazes an edge meets less
+    #: than the contact threshold's force (1 N at 1000 N/m is 1 mm) and passes through the body.
+    MIN_APPROACH_DEPTH = 0.003
+
     def first_contact(self) -> np.ndarray:
-        """`(3,)` first point of the inner mesh hit from ``start`` along ``direction`` [m]."""
+        """`(3,)` first point of the inner mesh hit from ``start`` along ``direction`` [m].
+
+        Raises:
+            ValueError: the approach ray misses the inner mesh, or only grazes it (its first passage through the body
+                is never :attr:`MIN_APPROACH_DEPTH` deep).
+        """
         hits, _, _ = self.inner.ray.intersects_location(self.start[None], self.direction[None], multiple_hits=True)
         if len(hits) == 0:
             raise ValueError("direction: the approach ray from start misses the inner mesh")
-        return hits[np.argmin(np.linalg.norm(hits - self.start, axis=1))]
+        t = np.sort(np.linalg.norm(hits - self.start, axis=1))
+        if len(t) >= 2:
+            chord = self.start + np.linspace(t[0], t[1], 41)[:, None] * self.direction
+            depth = -float(self.true_distance(chord).min())
+            if depth < self.MIN_APPROACH_DEPTH:
+                raise ValueError(f"direction: the approach ray only grazes the inner mesh ({depth * 1e3:.1f} mm deep "
+                                 f"at most; at least {self.MIN_APPROACH_DEPTH * 1e3:.0f} mm is needed to feel it)")
+        return self.start + t[0] * self.direction
 
     def bounds(self, margin: float = 0.05) -> np.ndarray:
         """`(2, 3)` grid box [min; max] for surfaces and metrics: the exploration range grown by ``margin`` [m]."""

@@ -13,10 +13,11 @@ undefined on such a mesh. :func:`load_mesh` handles it in three stages:
    non-manifold meshes and is ~1 inside and ~0 outside wherever the input nearly encloses a volume, so the remesh
    is closed by construction; its error is about the grid spacing.
 
-Every repair is reported as a :class:`MeshRepairWarning` naming the defects found and the repair's Hausdorff
-distance from the input; a repair that moves the surface by more than ``max_repair_distance``, or an input that
-encloses no volume at all (an open sheet), is refused with a ``ValueError`` that names the defect. A broken mesh is
-never explored silently.
+Every repair is reported as a :class:`MeshRepairWarning` naming the defects found, how far the input's surface lies
+from the repaired one, and how far the new surface reaches from the input (a filled hole's patch reaches about the
+hole's radius: it is invented geometry, so it is stated, and its plausibility is the user's call); a repair that
+moves the input's surface by more than ``max_repair_distance``, or an input that encloses no volume at all (an open
+sheet), is refused with a ``ValueError`` that names the defect. A broken mesh is never explored silently.
 
 Distances use :class:`MeshDistance`: exact point-to-triangle distance from libigl's AABB tree, signed by the
 angle-weighted pseudo-normal at the closest point (exact for closed meshes; Baerentzen & Aanaes 2005). libigl is
@@ -128,18 +129,23 @@ def _sample(mesh: trimesh.Trimesh, n: int = 20000) -> np.ndarray:
     return np.concatenate([np.asarray(mesh.vertices), pts])
 
 
-def _distance_between(a: trimesh.Trimesh, b: trimesh.Trimesh, outer_only: bool = False) -> float:
-    """Symmetric Hausdorff distance [m] of two surfaces, from dense samples of each to the other's triangles.
-    ``outer_only``: of ``b``, only the samples outside its other pieces count (a union's internal faces are gone by
-    design)."""
-    da = MeshDistance(b, signed=False)(_sample(a))
+def _distance_between(a: trimesh.Trimesh, b: trimesh.Trimesh, outer_only: bool = False,
+                      exclude=None) -> tuple[float, float]:
+    """How far a repair ``a`` is from its input ``b`` [m]: ``(moved, patched)``, the largest distance of the input's
+    surface from the repair (how far existing surface moved) and of the repair's surface from the input (how far new
+    patches reach from what was there: about a hole's radius for a filled hole), from dense samples to the other's
+    triangles. ``outer_only``: of ``b``, only the samples outside its other pieces count (a union's internal faces
+    are gone by design); ``exclude``: a distance to pieces the repair dropped, whose samples of ``b`` do not count."""
+    patched = MeshDistance(b, signed=False)(_sample(a))
     if outer_only:
         pb, face = trimesh.sample.sample_surface(b, 20000, seed=0)
         pb = pb[_outside_other_pieces(b, pb, np.asarray(b.face_normals)[face])]
     else:
         pb = _sample(b)
-    db = MeshDistance(a, signed=False)(pb)
-    return float(max(np.abs(da).max(), np.abs(db).max()))
+    if exclude is not None:
+        pb = pb[np.abs(exclude(pb)) > 1e-9]
+    moved = MeshDistance(a, signed=False)(pb)
+    return float(np.abs(moved).max()), float(np.abs(patched).max())
 
 
 def _fill_holes(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -190,7 +196,7 @@ def _outside_other_pieces(mesh: trimesh.Trimesh, points: np.ndarray, normals: np
 
 
 def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
-                remesh: bool = False) -> tuple[trimesh.Trimesh, str, float]:
+                remesh: bool = False) -> tuple[trimesh.Trimesh, str, float, float]:
     """Close a mesh (see the module docstring): hole filling where every edge is manifold, else a watertight remesh
     of its generalized winding number.
 
@@ -200,7 +206,8 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
         remesh: remesh even where hole filling would do (overlapping closed pieces are united so).
 
     Returns:
-        ``(closed mesh, method, hausdorff distance from the input [m])``.
+        ``(closed mesh, method, moved, patched)``: how far the input's surface lies from the repair, and how far the
+        repair's new surface reaches from the input [m] (about the radius of the largest filled hole).
 
     Raises:
         ValueError: the input encloses no volume (an open sheet: the winding number never reaches 1/2).
@@ -210,15 +217,30 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
 
     if report.nonmanifold_edges == 0 and not remesh:
         m = _fill_holes(mesh)
+        # pieces that enclose no volume once filled (a stray sheet or triangle of a scan) are dropped and reported
+        parts = m.split(only_watertight=False) if report.components > 1 else [m]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            flat = [abs(p.volume) <= 1e-6 * float(np.prod(np.maximum(p.extents, 1e-9))) for p in parts]
+        kept = [p for p, f in zip(parts, flat) if not f]
+        if any(flat) and kept:
+            m = trimesh.util.concatenate(kept)
         with np.errstate(invalid="ignore", divide="ignore"):        # a flat result has zero volume
-            ok = inspect_mesh(m).closed and m.volume > 1e-12
+            ok = bool(kept) and inspect_mesh(m).closed and m.volume > 1e-12
         if ok:
-            return m, "hole filling", _distance_between(m, mesh)
+            what = "hole filling"
+            if any(flat):
+                dropped = [p for p, f in zip(parts, flat) if f]
+                what += f" (dropped {len(dropped)} flat piece(s) that enclose no volume)"
+                keep = MeshDistance(trimesh.util.concatenate(dropped), signed=False)
+                return (m, what, *_distance_between(m, mesh, exclude=keep))
+            return (m, what, *_distance_between(m, mesh))
     from skimage import measure
 
     lo, hi = mesh.bounds
     h = float(resolution) if resolution is not None else 0.01 * float((hi - lo).max())
-    lo, hi = lo - 3 * h, hi + 3 * h
+    # a grid offset by an irrational fraction of a cell: a face lying on grid nodes (a box on a grid of its own
+    # spacing) would give marching cubes zero-area triangles and an open result
+    lo, hi = lo - (3 + 1 / math.pi) * h, hi + 3 * h
     axes = [np.arange(a, b + h / 2, h) for a, b in zip(lo, hi)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     w = igl.fast_winding_number(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64),
@@ -235,7 +257,7 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
     if not inspect_mesh(m).closed:     # pragma: no cover - marching cubes inside a padded grid is closed
         raise ValueError("the watertight remesh is not closed")
     what = "union by winding-number remesh" if remesh else "winding-number remesh"
-    return m, f"{what} at {h * 1e3:.1f} mm", _distance_between(m, mesh, outer_only=remesh)
+    return (m, f"{what} at {h * 1e3:.1f} mm", *_distance_between(m, mesh, outer_only=remesh))
 
 
 def as_pose(pose) -> np.ndarray | None:
@@ -291,8 +313,8 @@ def load_mesh(source, *, scale: float = 1.0, pose=None, repair: bool = True, res
         repair: close holes and non-manifold parts (see the module docstring); False refuses a mesh that is not
             closed.
         resolution: grid spacing of a watertight remesh [m] (default 1 % of the largest extent).
-        max_repair_distance: refuse a repair that moves the surface further than this [m] (default: 2 % of the
-            bounding-box diagonal, at least 2 mm).
+        max_repair_distance: refuse a repair that moves the input's surface further than this [m] (default: 2 % of
+            the bounding-box diagonal, at least 2 mm). New surface over a hole is not limited (it is reported).
         name: what error messages call the mesh.
 
     Returns:
@@ -350,15 +372,17 @@ def load_mesh(source, *, scale: float = 1.0, pose=None, repair: bool = True, res
         limit = (max(0.02 * float(np.linalg.norm(mesh.extents)), 0.002) if max_repair_distance is None
                  else float(max_repair_distance))
         try:
-            fixed, method, moved = repair_mesh(mesh, resolution, remesh=bool(overlaps))
+            fixed, method, moved, patched = repair_mesh(mesh, resolution, remesh=bool(overlaps))
         except ValueError as exc:
             raise ValueError(f"{label}: {exc}") from None
         if moved > limit:
             raise ValueError(f"{label}: not closed ({report.defects()}); the repair ({method}) moves the surface by "
                              f"{moved * 1e3:.1f} mm, more than the {limit * 1e3:.1f} mm allowed "
                              "(max_repair_distance); close the mesh in a mesh editor")
-        warnings.warn(f"{label}: repaired {report.defects()} by {method}; the repaired surface lies within "
-                      f"{moved * 1e3:.2f} mm of the input (Hausdorff distance)", MeshRepairWarning, stacklevel=2)
+        warnings.warn(f"{label}: repaired {report.defects()} by {method}; the input's surface lies within "
+                      f"{moved * 1e3:.2f} mm of the repaired one, and the new surface reaches up to "
+                      f"{patched * 1e3:.1f} mm from the input (check that the holes were small or flat)",
+                      MeshRepairWarning, stacklevel=2)
         mesh = fixed
     elif mesh.volume < 0:
         mesh.invert()                                # wound inside out: normals inward

@@ -137,7 +137,7 @@ def _write_meshes(traces: dict, scenes: dict, out: Path, resolution: float) -> N
 
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
                  metrics_every: int = 5, modes=MODES, progress: bool = True, smoke: bool = False,
-                 world: str = "forcefield", **explore_kwargs) -> dict:
+                 world: str = "forcefield", scenes=(), **explore_kwargs) -> dict:
     """Run the simulated robot study on objects E-H and write figures, records, logs and the summary.
 
     Writes into ``out``: ``fig9_<object>.png``, ``fig10_similarity.png``, ``records.csv`` / ``records.json``
@@ -154,6 +154,8 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         smoke: a CI run on coarser objects: figures and records as usual, but the claims are not judged.
         world: a registered world with the objects E-H: "forcefield" (``tg.sim.paper_objects_3d``) or "mujoco"
             (``tg.sim.mujoco_objects_3d``: cloth and foam covers on MuJoCo's contact physics; the ``mujoco`` extra).
+        scenes: scene files (:mod:`torch_gpioius.sim.scenefile`) explored as further objects, named by their
+            ``name`` (the claims are judged on E-H only).
         **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, ...).
     """
     from .._progress import progress as reporter
@@ -165,7 +167,15 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     if unknown:   # before building the meshes (seconds)
         raise ValueError(f"objects: unknown {unknown} in the {entry.name} world; choose among "
                          f"{[o for o in OBJECTS if o in entry.object_names]}")
+    from ..sim.scenefile import load_scene, read_scene
+
+    files = [Path(p) for p in ([scenes] if isinstance(scenes, (str, Path)) else scenes)]
+    names = [read_scene(p).name for p in files]                     # fails on a bad file before anything runs
+    if len(set(names) | set(objects)) < len(names) + len(objects):
+        raise ValueError(f"scenes: the names {names} repeat each other or the objects {list(objects)}")
     scenes = {o: entry.build(o, smoke) for o in objects}
+    scenes.update({n: load_scene(p, world=entry.name, smoke=smoke) for n, p in zip(names, files)})
+    objects = list(scenes)
     out = Path(out)
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

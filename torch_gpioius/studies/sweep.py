@@ -74,14 +74,20 @@ class RunSpec:
     max_travel: float | None = None
     max_steps: int | None = None
     threads: int = 1
+    scene: str | None = None        # a scene file (torch_gpioius.sim.scenefile) instead of a built-in object
 
     @property
     def key(self) -> str:
         return f"{self.object}_{self.mode}_{self.seed}"
 
 
-def make_world(world: str, name: str, seed: int, smoke: bool = False):
-    """The world of one run: the named object, perturbed by ``seed`` (seed 0: the unperturbed object)."""
+def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None):
+    """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
+    unperturbed object)."""
+    if scene is not None:
+        from ..sim.scenefile import load_scene
+
+        return load_scene(scene, world=world, seed=seed, smoke=smoke)
     from ..exploration.registry import make_world as registry_make_world
 
     return registry_make_world(world, name, seed, smoke)
@@ -247,23 +253,18 @@ def run_one(spec: RunSpec) -> dict:
     marker.write_text(str(os.getpid()))
     t0 = time.perf_counter()
     with torch_threads(spec.threads):
-        world = make_world(spec.world, spec.object, spec.seed, spec.smoke)
+        world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene)
         kw = _explore_kwargs(spec, world)
-        trace = explore(world, log=out / "logs" / f"{spec.key}.gpioius", **kw)
-    record = {"world": spec.world, "object": spec.object, "mode": spec.mode, "seed": spec.seed,
-              "terminated": trace.terminated, "steps": trace.n_steps - 1, "travel": float(trace.travel[-1]),
-              "budget": kw.get("max_travel"), "wall_time": time.perf_counter() - t0,
-              "median_step_time": float(np.median(trace.step_time[1:])) if trace.n_steps > 1 else math.nan,
-              "taps": int(trace.taps[-1]) if len(trace.taps) else 0,
-              "recoveries": int(trace.recoveries[-1]) if len(trace.recoveries) else 0,
-              **{f"contacts_{k}": v for k, v in trace.contacts_on_body(CONTACT_WITHIN).items()},
-              "series": {"travel": trace.travel.tolist(), "hausdorff": trace.hausdorff.tolist(),
-                         "hausdorff_touched": trace.hausdorff_touched.tolist(),
-                         "uncertainty": trace.uncertainty.tolist(), "similarity": trace.similarity.tolist(),
-                         "correlation": trace.correlation.tolist(),
-                         "correlation_lo": trace.correlation_interval[:, 0].tolist(),
-                         "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
-    if getattr(trace.model, "regions", None) and len(trace.region_correlation):
+        try:
+            trace = explore(world, log=out / "logs" / f"{spec.key}.gpioius", **kw)
+        except RuntimeError as exc:
+            # the approach found no contact or the robot refused it (a perturbed approach past a thin part of the
+            # object): the run failed before any estimate; it is recorded as such, and the sweep goes on
+            trace = None
+            record = _no_start_record(spec, kw, exc, time.perf_counter() - t0)
+    if trace is not None:
+        record = _record(spec, kw, trace, time.perf_counter() - t0)
+    if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
 
@@ -276,6 +277,33 @@ def run_one(spec: RunSpec) -> dict:
     except OSError:
         pass
     return record
+
+
+def _no_start_record(spec: RunSpec, kw: dict, exc: Exception, wall_time: float) -> dict:
+    """The result of a run that failed before its first contact: terminated "refused: <why>", no estimate."""
+    nan = [math.nan]
+    return {"world": spec.world, "object": spec.object, "mode": spec.mode, "seed": spec.seed,
+            "terminated": f"refused: approach: {exc}", "steps": 0, "travel": 0.0, "budget": kw.get("max_travel"),
+            "wall_time": wall_time, "median_step_time": math.nan, "taps": 0, "recoveries": 0,
+            "contacts_on_body": math.nan, "contacts_within": math.nan,
+            "series": {"travel": [0.0], **{k: nan for k in _SERIES if k != "travel"}}}
+
+
+def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
+    """A finished run's result."""
+    return {"world": spec.world, "object": spec.object, "mode": spec.mode, "seed": spec.seed,
+            "terminated": trace.terminated, "steps": trace.n_steps - 1, "travel": float(trace.travel[-1]),
+            "budget": kw.get("max_travel"), "wall_time": wall_time,
+            "median_step_time": float(np.median(trace.step_time[1:])) if trace.n_steps > 1 else math.nan,
+            "taps": int(trace.taps[-1]) if len(trace.taps) else 0,
+            "recoveries": int(trace.recoveries[-1]) if len(trace.recoveries) else 0,
+            **{f"contacts_{k}": v for k, v in trace.contacts_on_body(CONTACT_WITHIN).items()},
+            "series": {"travel": trace.travel.tolist(), "hausdorff": trace.hausdorff.tolist(),
+                         "hausdorff_touched": trace.hausdorff_touched.tolist(),
+                         "uncertainty": trace.uncertainty.tolist(), "similarity": trace.similarity.tolist(),
+                         "correlation": trace.correlation.tolist(),
+                         "correlation_lo": trace.correlation_interval[:, 0].tolist(),
+                         "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
 
 
 def _set_aside(path: Path) -> Path:
@@ -328,13 +356,16 @@ def _reference_travel(run: dict, runs_by_key: dict) -> float:
 
 
 def failure(run: dict) -> str:
-    """Why a run failed, or "" if it did not: "stalled" (the no-progress rule gave up), "robot stop: <why>" (the
+    """Why a run failed, or "" if it did not: "stalled" (the no-progress rule gave up), "approach: <why>" (no first
+    contact: the approach missed the body or the robot refused it), "robot stop: <why>" (the
     safety layer or the contact controller stopped the robot before the run's own end), "lost contact", "step cap"
     (the step budget ran out before the travel budget) or "no estimate" (no estimated surface inside the range at
     the end). A failed run stays in every statistic (see :mod:`torch_gpioius.studies.stats`)."""
     t = run["terminated"]
     if t == "stalled":
         return "stalled"
+    if t.startswith("refused: approach"):
+        return "approach: " + _short_reason(t[len("refused: approach"):].lstrip(": "))
     if t.startswith("refused"):
         return "robot stop: " + _short_reason(t[len("refused"):].lstrip(": "))
     if t == "lost-contact":
@@ -629,7 +660,8 @@ MAX_SEEDS = 10_000
 def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tactile"), seeds: int = 10,
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
-              progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False) -> dict:
+              progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
+              scenes=()) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -652,6 +684,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         threads: torch threads per run.
         backend: "auto" (Ray when installed), "ray" or "local" (sequential, in-process).
         force: write into a non-empty folder that is not this world's study folder.
+        scenes: scene files (:mod:`torch_gpioius.sim.scenefile`) to run as objects too, named by their ``name``;
+            with scenes and no ``objects``, only the scenes run. Only the 3-D worlds build scene files.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -669,7 +703,11 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
     if world not in _worlds():
         raise ValueError(f"world: must be one of {_worlds()}, got {world!r}")
     entry = world_entry(world)
-    objects = tuple(dict.fromkeys(objects or entry.object_names))
+    scene_files = _scene_files(scenes, world)
+    objects = tuple(dict.fromkeys(objects or ([] if scene_files else entry.object_names)))
+    clash = sorted(set(objects) & set(scene_files))
+    if clash:
+        raise ValueError(f"scenes: {clash} are also the names of objects; rename the scene (its name key)")
     modes = tuple(dict.fromkeys(modes))
     bad = [m for m in modes if m not in MODES]
     if bad:
@@ -687,8 +725,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         running = out / "running"
         for stale in running.glob("*.pid") if running.exists() else []:   # we hold the lock: nobody else runs
             stale.unlink(missing_ok=True)
-        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads)
-                 for o in objects for m in modes for s in range(seeds)]
+        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o))
+                 for o in (*objects, *scene_files) for m in modes for s in range(seeds)]
         todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
         use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
         t0 = time.perf_counter()
@@ -711,6 +749,23 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         result = aggregate(out, None, smoke, world=world, max_travel=max_travel)
     result.update(runs=len(specs), skipped=len(specs) - len(todo), seconds=seconds, backend=used)
     return result
+
+
+def _scene_files(scenes, world: str) -> dict[str, str]:
+    """``{name: absolute path}`` of scene files, checked before anything runs (duplicate names refused)."""
+    from ..sim.scenefile import SCENE_WORLDS, read_scene
+
+    if isinstance(scenes, (str, Path)):
+        scenes = [scenes]
+    out: dict[str, str] = {}
+    for path in scenes or ():
+        if world not in SCENE_WORLDS:
+            raise ValueError(f"scenes: the {world} world does not build scene files; use one of {SCENE_WORLDS}")
+        spec = read_scene(path)
+        if spec.name in out:
+            raise ValueError(f"scenes: two scene files are named {spec.name!r} ({out[spec.name]}, {path})")
+        out[spec.name] = str(Path(path).resolve())
+    return out
 
 
 class _DropMessage:

@@ -164,8 +164,8 @@ class MujocoScene(World):
     @classmethod
     def from_mesh(cls, inner, cover: str = "loose", *, start, direction, bounds, pose=None, scale: float = 1.0,
                   repair: bool = True, collision: str = "convex", threshold: float = 0.05, max_parts: int = 32,
-                  name: str = "", seed: int = 0, base: str = "cap", spacing: float = 0.025, axis=None, centre=None,
-                  facing=None, half_angle: float = 100.0, **cover_options) -> "MujocoScene":
+                  name: str = "", seed: int = 0, base: str = "cap", spacing: float | None = None, axis=None,
+                  centre=None, facing=None, half_angle: float = 100.0, **cover_options) -> "MujocoScene":
         """A MuJoCo scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
         The mesh is loaded, checked and, if it is open or non-manifold, repaired with a warning that states how far
@@ -185,7 +185,7 @@ class MujocoScene(World):
             max_parts: the most convex parts.
             name: label; seed: the scene's seed.
             base: "cap" (a garment facing ``facing``, default against the approach) or "tube" (around ``axis``).
-            spacing: the cover's vertex spacing [m] (as :meth:`from_primitives`).
+            spacing: the cover's vertex spacing [m] (default: 1/12 of the object's largest extent, 1.2-2.5 cm).
             axis: the tube's axis polyline (as :meth:`from_primitives`).
             centre: the cap's centre (as :meth:`from_primitives`).
             facing: the cap's direction (as :meth:`from_primitives`).
@@ -201,6 +201,8 @@ class MujocoScene(World):
         _require_mujoco()
         mesh = load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner")
         body = MeshBody(mesh, collision, threshold=threshold, max_parts=max_parts)
+        if spacing is None:
+            spacing = float(np.clip(float(mesh.extents.max()) / 12, 0.012, 0.025))
         return cls._around(body, cover, start, direction, bounds, name=name, seed=seed, base=base, spacing=spacing,
                            axis=axis, centre=centre, facing=facing, half_angle=half_angle, **cover_options)
 

@@ -1,0 +1,128 @@
+"""Your own object: covers built around any mesh against their definition (offset, closing), the default approach,
+scene files and every way they can be wrong, and a short exploration of a scanned bottle."""
+
+import warnings
+
+import numpy as np
+import pytest
+import trimesh
+
+import torch_gpioius as tg
+from torch_gpioius.sim.forcefield import Scene3D, approach_from_above, cover_around, place
+from torch_gpioius.sim.meshes import MeshDistance, MeshRepairWarning
+from torch_gpioius.sim.scenefile import load_scene, read_scene
+
+PROFILE = np.array([[0, 0], [30, 0], [30, 100], [26, 115], [12, 135], [12, 160], [0, 160]], dtype=float)
+
+
+def bottle() -> trimesh.Trimesh:
+    m = trimesh.creation.revolve(PROFILE, sections=48)
+    m.apply_scale(0.001)
+    return place(m, (0.5, 0.0, 0.1))
+
+
+def test_a_tight_cover_is_the_offset_surface():
+    body = bottle()
+    outer = cover_around(body, "tight", gap=0.008, resolution=0.003)
+    d = MeshDistance(body)(outer.vertices)
+    # marching cubes of the exact distance: vertices on the level set to within the grid's interpolation error
+    assert np.abs(d - 0.008).max() < 0.003 * 0.5
+    assert outer.is_watertight and outer.volume > body.volume
+
+
+def test_a_loose_cover_bridges_a_gap_narrower_than_twice_its_radius():
+    a, b = trimesh.creation.icosphere(3, 0.04), trimesh.creation.icosphere(3, 0.04)
+    a.apply_translation((0.5, -0.05, 0.2))
+    b.apply_translation((0.5, 0.05, 0.2))
+    body = trimesh.util.concatenate([a, b])                       # 2 cm apart at the closest
+    tight = cover_around(body, "tight", gap=0.005, resolution=0.003)
+    loose = cover_around(body, "loose", gap=0.005, bridge=0.03, resolution=0.003)
+    mid = np.array([[0.5, 0.0, 0.2 + 0.02]])                      # between the spheres, above their centres
+    assert MeshDistance(tight)(mid)[0] > 0 and MeshDistance(loose)(mid)[0] < 0
+    # the closing contains the tight cover, and away from the gap keeps to it (within the grid error)
+    assert (MeshDistance(loose)(tight.vertices) <= 0.003).all()
+    far = np.array([[0.5, -0.05 - 0.045 - 0.001, 0.2]])             # outside the far side of a sphere
+    assert MeshDistance(loose)(far)[0] > 0
+    with pytest.raises(ValueError, match="kind"):
+        cover_around(body, "foam")
+    with pytest.raises(ValueError, match="gap"):
+        cover_around(body, "tight", gap=-0.01)
+
+
+def test_the_default_approach_hits_the_body_from_above():
+    mug = trimesh.creation.annulus(0.03, 0.04, 0.1)                # a ring from above: its centre is a hole
+    mug = place(mug, (0.5, 0.0, 0.1))
+    start, direction, bounds = approach_from_above(mug, mug)
+    np.testing.assert_allclose(direction, [0, 0, -1])
+    assert mug.ray.intersects_any(start[None], direction[None])[0]
+    assert (bounds[0] < mug.bounds[1]).all() and bounds[1, 2] >= start[2] - 0.01
+
+
+def _write(tmp_path, text: str, name: str = "scene.toml"):
+    (tmp_path / "bottle.stl").write_bytes(trimesh.creation.revolve(PROFILE, sections=48).export(file_type="stl"))
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+GOOD = """
+name = "bottle"
+[object]
+mesh = "bottle.stl"
+scale = 0.001
+at = [0.5, 0.0, 0.1]
+[cover]
+kind = "tight"
+gap = 0.008
+"""
+
+
+def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_body(tmp_path):
+    path = _write(tmp_path, GOOD)
+    world = load_scene(path)
+    assert isinstance(world, Scene3D) and world.name == "bottle"
+    np.testing.assert_allclose(world.inner.bounds[0], [0.47, -0.03, 0.1], atol=1e-9)
+    trace = tg.explore(world, max_travel=0.05, metrics_every=100)
+    assert trace.terminated == "travel"
+    on = trace.contacts_on_body()
+    assert on["on_body"] == 1.0 and on["within"] == 1.0
+    assert np.abs(world.true_distance(trace.contacts)).max() < 0.01
+    other = load_scene(path, seed=3)
+    assert np.abs(other.start - world.start).max() > 1e-4
+
+
+@pytest.mark.parametrize("text, match", [
+    ("this is = = not toml", "not a valid TOML"),
+    (GOOD + "colour = 'red'\n", "unknown key"),
+    (GOOD.replace("[cover]\nkind = \"tight\"", "[cover]\nkind = \"silk\""), "kind"),
+    (GOOD.replace("gap = 0.008", "gap = 0.008\ngapp = 0.01"), "unknown key"),
+    (GOOD.replace('mesh = "bottle.stl"', 'mesh = "missing.stl"'), "no such file"),
+    (GOOD.replace("at = [0.5, 0.0, 0.1]", "at = [0.5, 0.0]"), "object.at"),
+    (GOOD + "[range]\nmin = [0.6, 0, 0]\nmax = [0.4, 1, 1]\n", "min must be below max"),
+    (GOOD + "[approach]\nstart = [0.5, 0, 0.4]\n", "both start and direction"),
+    (GOOD.replace('name = "bottle"', 'name = "a b"'), "name"),
+    (GOOD.replace("scale = 0.001", "scale = 1.0"), "millimetres"),
+    (GOOD.replace("gap = 0.008", "slack = 0.03"), "do not apply in the forcefield world"),
+    (GOOD + "[approach]\nstart = [0.5, 0, 0.4]\ndirection = [0, 0, 1]\n", "misses"),
+    (GOOD + "[forcefield]\nspacing = 0.02\n", "allowed"),
+])
+def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
+    path = _write(tmp_path, text)
+    with pytest.raises(ValueError, match=match) as err:
+        load_scene(path)
+    assert "scene.toml" in str(err.value)
+
+
+def test_a_scene_file_names_its_repairs(tmp_path):
+    scan = trimesh.creation.revolve(PROFILE, sections=48)
+    z = scan.triangles_center[:, 2]
+    trimesh.Trimesh(scan.vertices, scan.faces[z > 1e-6]).export(tmp_path / "scan.stl")
+    path = tmp_path / "scan.toml"
+    path.write_text(GOOD.replace("bottle.stl", "scan.stl"))
+    with pytest.warns(MeshRepairWarning, match="1 hole"):
+        read_scene(path) and load_scene(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MeshRepairWarning)
+        path.write_text(GOOD.replace("bottle.stl", "scan.stl").replace("scale = 0.001", "scale = 0.001\nrepair = false"))
+        with pytest.raises(ValueError, match="not closed"):
+            load_scene(path)

@@ -1,0 +1,228 @@
+"""Scene files: a user's object, its cover, the approach and the exploration range in one TOML file, buildable in
+either 3-D world (``forcefield`` or ``mujoco``), for ``gpioius simulate3d --scene`` and ``gpioius study --scenes``.
+
+A scene file, every length in metres in the UR5's base frame (z up)::
+
+    name = "bottle"                   # default: the file's stem
+    world = "forcefield"              # the world simulate3d uses (a study's --world overrides it)
+
+    [object]
+    mesh = "bottle.stl"               # relative to this file; "pybullet:duck.obj" is a mesh of pybullet's data
+    scale = 0.001                     # to metres (this file is in millimetres)
+    pose = { rpy_deg = [90, 0, 0] }   # or { quat = [w, x, y, z] }, and position = [x, y, z]
+    at = [0.5, 0.0, 0.1]              # where the bottom centre of its bounding box goes
+    repair = true                     # close holes (with a warning stating the change) or refuse
+
+    [cover]
+    kind = "tight"                    # "tight", "loose" (and "foam" in MuJoCo)
+    gap = 0.008                       # tight: the cover's distance from the body
+
+    [approach]                        # optional: by default straight down onto the middle of the top
+    start = [0.5, 0.0, 0.4]
+    direction = [0, 0, -1]
+
+    [range]                           # optional: by default the cover's box from a quarter of the height up
+    min = [0.4, -0.1, 0.12]
+    max = [0.6, 0.1, 0.35]
+
+    [forcefield]                      # optional settings of one world (see Scene3D.from_mesh / MujocoScene.from_mesh)
+    cover_stiffness = 5.0
+    [mujoco]
+    spacing = 0.025
+
+The cover options a world does not use are refused by that world (a misspelt key is an error, never ignored).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover - Python 3.10
+    import tomli as tomllib
+
+__all__ = ["SceneSpec", "read_scene", "load_scene", "resolve_mesh", "SCENE_WORLDS"]
+
+#: The worlds a scene file can be built in.
+SCENE_WORLDS = ("forcefield", "mujoco")
+_TOP = {"name", "world", "object", "cover", "approach", "range", "forcefield", "mujoco"}
+_OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
+_COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
+          "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
+_WORLD = {"forcefield": {"cover_stiffness", "sensor_noise"},
+          "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
+                     "sensor_noise", "timestep", "settle_time", "camera_scale"}}
+
+
+@dataclass
+class SceneSpec:
+    """A parsed scene file (see the module docstring)."""
+
+    path: Path
+    name: str
+    world: str
+    object: dict
+    cover: dict
+    approach: dict | None = None
+    range: np.ndarray | None = None
+    settings: dict = field(default_factory=dict)      # world name -> that world's settings
+
+
+def resolve_mesh(ref: str, base: Path) -> Path:
+    """The file a scene's ``object.mesh`` names: a path relative to the scene file, or ``pybullet:<name>`` for a mesh
+    that ships inside the ``pybullet`` wheel (bunny, duck, teddy, mug; ``pip install torch_gpioius[shapes]``).
+
+    Raises:
+        ValueError: pybullet is not installed, or the file does not exist.
+    """
+    if ref.startswith("pybullet:"):
+        try:
+            import pybullet_data
+        except ImportError:
+            raise ValueError(f"object.mesh: {ref!r} needs pybullet's data: pip install torch_gpioius[shapes]") from None
+        path = Path(pybullet_data.getDataPath()) / ref[len("pybullet:"):]
+    else:
+        path = Path(ref)
+        path = path if path.is_absolute() else base / path
+    if not path.is_file():
+        raise ValueError(f"object.mesh: no such file {str(path)!r}")
+    return path
+
+
+def _vector(v, label: str, path: Path) -> np.ndarray:
+    a = np.asarray(v, dtype=np.float64) if isinstance(v, list) and all(
+        isinstance(e, (int, float)) and not isinstance(e, bool) for e in v) else None
+    if a is None or a.shape != (3,) or not np.isfinite(a).all():
+        raise ValueError(f"{path}: {label}: expected 3 finite numbers, got {v!r}")
+    return a
+
+
+def read_scene(path) -> SceneSpec:
+    """Parse and check a scene file (the mesh is not loaded yet).
+
+    Raises:
+        ValueError: an unreadable file, TOML errors, unknown keys or sections, missing ``[object]`` or ``[cover]``,
+            values of the wrong type (each names the file and the key).
+    """
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read the scene file ({exc.strerror or exc})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: not a valid TOML scene file ({exc})") from None
+
+    def bad(key: str, why: str) -> ValueError:
+        return ValueError(f"{path}: {key}: {why}")
+
+    unknown = set(data) - _TOP
+    if unknown:
+        raise bad(", ".join(sorted(unknown)), f"unknown key(s); a scene file has {sorted(_TOP)}")
+    name = data.get("name", path.stem)
+    if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_." for c in name):
+        raise bad("name", f"must be letters, digits, '-', '_' or '.', got {name!r}")
+    world = data.get("world", "forcefield")
+    if world not in SCENE_WORLDS:
+        raise bad("world", f"must be one of {SCENE_WORLDS}, got {world!r}")
+    obj, cover = data.get("object"), data.get("cover")
+    if not isinstance(obj, dict) or "mesh" not in obj:
+        raise bad("[object]", "missing, or without mesh = \"<file>\"")
+    if set(obj) - _OBJECT:
+        raise bad("object", f"unknown key(s) {sorted(set(obj) - _OBJECT)}; allowed {sorted(_OBJECT)}")
+    if not isinstance(obj["mesh"], str):
+        raise bad("object.mesh", f"must be a file name, got {obj['mesh']!r}")
+    if not isinstance(cover, dict) or cover.get("kind") not in ("tight", "loose", "foam"):
+        raise bad("[cover]", "missing, or its kind is not \"tight\", \"loose\" or \"foam\"")
+    every_cover = set().union(*_COVER.values())
+    if set(cover) - every_cover:
+        raise bad("cover", f"unknown key(s) {sorted(set(cover) - every_cover)}; allowed {sorted(every_cover)}")
+    if "at" in obj:
+        obj = dict(obj, at=_vector(obj["at"], "object.at", path))
+    approach = data.get("approach")
+    if approach is not None:
+        if not isinstance(approach, dict) or set(approach) != {"start", "direction"}:
+            raise bad("[approach]", "must give both start and direction (and nothing else)")
+        approach = {"start": _vector(approach["start"], "approach.start", path),
+                    "direction": _vector(approach["direction"], "approach.direction", path)}
+    bounds = data.get("range")
+    if bounds is not None:
+        if not isinstance(bounds, dict) or set(bounds) != {"min", "max"}:
+            raise bad("[range]", "must give min and max (and nothing else)")
+        bounds = np.stack([_vector(bounds["min"], "range.min", path), _vector(bounds["max"], "range.max", path)])
+        if not (bounds[0] < bounds[1]).all():
+            raise bad("range", "min must be below max on every axis")
+    settings = {}
+    for w in SCENE_WORLDS:
+        s = data.get(w, {})
+        if not isinstance(s, dict) or set(s) - _WORLD[w]:
+            raise bad(f"[{w}]", f"unknown key(s) {sorted(set(s) - _WORLD[w]) if isinstance(s, dict) else s!r}; "
+                                f"allowed {sorted(_WORLD[w])}")
+        settings[w] = dict(s)
+    return SceneSpec(path, name, world, dict(obj), dict(cover), approach, bounds, settings)
+
+
+def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = False):
+    """Build the world a scene file describes.
+
+    Args:
+        path: the TOML file.
+        world: "forcefield" or "mujoco" (default: the file's ``world``).
+        seed: the seeded perturbation of the approach and the noise (0: as written; ``World.perturbed``).
+        smoke: a coarse MuJoCo cover (4 cm spacing) for quick checks; the force-field world ignores it.
+
+    Returns:
+        A :class:`~torch_gpioius.sim.forcefield.Scene3D` or :class:`~torch_gpioius.sim.mujoco.MujocoScene`.
+
+    Raises:
+        ValueError: everything :func:`read_scene`, :func:`torch_gpioius.sim.meshes.load_mesh` and the world's
+            constructor refuse, each prefixed with the file's name.
+    """
+    from .forcefield import approach_from_above, place
+    from .meshes import load_mesh
+
+    spec = read_scene(path)
+    world = spec.world if world is None else world
+    if world not in SCENE_WORLDS:
+        raise ValueError(f"world: a scene file builds {SCENE_WORLDS}, got {world!r}")
+    try:
+        o = spec.object
+        mesh = load_mesh(resolve_mesh(o["mesh"], spec.path.parent), scale=o.get("scale", 1.0), pose=o.get("pose"),
+                         repair=o.get("repair", True), resolution=o.get("resolution"), name=spec.name)
+        mesh = place(mesh, o.get("at"))
+        cover = dict(spec.cover)
+        kind = cover.pop("kind")
+        unused = set(cover) - _COVER[world]
+        if unused:
+            raise ValueError(f"cover: {sorted(unused)} do not apply in the {world} world (it takes "
+                             f"{sorted(_COVER[world] - {'kind'})})")
+        where = {}
+        if spec.approach is not None:
+            where.update(start=spec.approach["start"], direction=spec.approach["direction"])
+        if spec.range is not None:
+            where["bounds"] = spec.range
+        if world == "forcefield":
+            from .forcefield import Scene3D
+
+            scene = Scene3D.from_mesh(mesh, kind, name=spec.name, **where, **cover, **spec.settings["forcefield"])
+        else:
+            from .mujoco import MujocoScene
+
+            if "start" not in where or "bounds" not in where:
+                s, d, b = approach_from_above(mesh, mesh, clearance=0.12)     # above a cover of up to 4 cm
+                where.setdefault("start", s)
+                where.setdefault("direction", d)
+                where.setdefault("bounds", b + np.array([[-0.03], [0.03]]) * np.array([1, 1, 0]))
+            settings = dict(spec.settings["mujoco"])
+            if smoke:
+                settings["spacing"] = max(settings.get("spacing", 0.025), 0.04)
+            scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{spec.path}: {exc}") from None
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
+    return scene.perturbed(seed)
