@@ -83,3 +83,27 @@ def test_range_penalty_steers_back_into_the_box():
     boxed = plan_direction(model, x + torch.tensor([0.0, -0.1], dtype=torch.float64) * 0, step=0.01,
                            penalty=RangePenalty([-1.0, 0.05], [1.0, 1.0]))
     assert float(free.direction[1]) < 0 < float(boxed.direction[1])
+
+
+def test_a_measured_normal_far_from_the_estimate_rules_the_tangent_plane():
+    """Where the estimate's normal is 100 degrees off the measured contact normal (a fingertip under an object the
+    model has wrong), the step is projected onto the measured tangent plane: it never points into the object,
+    whatever the variance gradient and the range penalty ask. Within 60 degrees the estimate's plane is kept."""
+    model = _half_circle_model()
+    x = torch.tensor([0.2, 0.0], dtype=torch.float64)
+    plain = plan_direction(model, x, step=0.01)
+    n_est = plain.normal / plain.normal.norm()
+    turn = math.radians(100.0)
+    rot = torch.tensor([[math.cos(turn), -math.sin(turn)], [math.sin(turn), math.cos(turn)]], dtype=torch.float64)
+    measured = rot @ n_est
+    # a penalty whose gradient points straight into the object along the measured normal
+    push = lambda p: 10.0 * (p @ measured)                                       # noqa: E731
+    plan = plan_direction(model, x, step=0.01, penalty=push, measured_normal=measured)
+    assert plan.fallback.startswith("measured-normal")
+    assert abs(float(plan.direction @ measured)) < 1e-15                          # in the measured tangent plane
+    assert float(plan.direction.norm()) == pytest.approx(0.01, rel=1e-12)
+    near = rot.new_tensor([[math.cos(0.5), -math.sin(0.5)], [math.sin(0.5), math.cos(0.5)]]) @ n_est   # 29 deg
+    kept = plan_direction(model, x, step=0.01, measured_normal=near)
+    assert kept.fallback == "" and torch.equal(kept.direction, plain.direction)
+    for bad in (torch.tensor([float("nan"), 0.0], dtype=torch.float64), torch.zeros(2, dtype=torch.float64)):
+        assert torch.equal(plan_direction(model, x, step=0.01, measured_normal=bad).direction, plain.direction)

@@ -81,6 +81,9 @@ def test_viewer_serves_both_dims_without_a_browser(log_2d, dataset_3d, tmp_path)
             assert "/estimate" in viewer._handles and "/touch/contacts" in viewer._handles
             if run == log_2d:
                 assert "/truth/inner" in viewer._handles        # the built-in scene A is known
+                viewer.show(steps[-1])                          # and where each contact lies from its body
+                n = len(steps)                                  # the approach's contact and one per step
+                assert f"contacts within 1 cm of the body: {n} of {n}" in viewer.info.content
             else:
                 # a dataset records no similarity; the viewer fills in the fitted one for the steps it visited
                 assert np.isfinite(viewer.run.params[steps[-1]]["similarity"])

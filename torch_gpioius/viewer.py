@@ -421,8 +421,25 @@ class RunViewer:
                 f"step **{k}** of {run.steps[-1]}: {int(((ds.task == 0) & (ds.y == 0)).sum())} contacts, "
                 f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points  \n"
                 f"similarity {fmt(p.get('similarity'))}, correlation {fmt(p.get('correlation'))}, "
-                f"Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}")
+                f"Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}" + self._on_body(run, k))
         self.shown_step = k
+
+    @staticmethod
+    def _on_body(run, k: int) -> str:
+        """"contacts on the body" up to step ``k``, where the log knows the truth (simulated worlds), else ""."""
+        on, near = [], []
+        for step in run.steps:
+            if step > k:
+                break
+            q = run.params.get(step, {})
+            if math.isfinite(q.get("contact_on_body", math.nan)):
+                on.append(q["contact_on_body"])
+            if math.isfinite(q.get("contact_distance", math.nan)):
+                near.append(abs(q["contact_distance"]) <= 0.01)
+        if not near:
+            return ""
+        text = f"  \ncontacts within 1 cm of the body: {sum(near)} of {len(near)}"
+        return text + (f", on the body itself: {int(sum(on))} of {len(on)}" if on else "")
 
     def _handle(self, name: str):
         return self._handles.get(name)

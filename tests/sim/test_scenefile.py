@@ -126,3 +126,21 @@ def test_a_scene_file_names_its_repairs(tmp_path):
         path.write_text(GOOD.replace("bottle.stl", "scan.stl").replace("scale = 0.001", "scale = 0.001\nrepair = false"))
         with pytest.raises(ValueError, match="not closed"):
             load_scene(path)
+
+
+def test_one_file_builds_both_worlds_with_each_worlds_own_cover_options(tmp_path):
+    pytest.importorskip("mujoco")
+    from torch_gpioius.sim.mujoco import MujocoScene
+
+    text = GOOD.replace('kind = "tight"\ngap = 0.008', 'kind = "loose"\ngap = 0.01') + \
+        "[forcefield]\nbridge = 0.02\ncover_stiffness = 4.0\n[mujoco]\nslack = 0.03\nspacing = 0.03\n"
+    path = _write(tmp_path, text)
+    ff = load_scene(path)
+    assert isinstance(ff, Scene3D) and ff.cover_stiffness == 4.0
+    mj = load_scene(path, world="mujoco")
+    assert isinstance(mj, MujocoScene) and mj.cover.kind == "loose"
+    # the cloth was built `slack` off the bottle (before it settled): its vertices 3 cm from the body
+    assert np.median(mj.body.sdf(mj.cover.vertices)) == pytest.approx(0.03, abs=0.005)
+    with pytest.raises(ValueError, match=r"own section, \[forcefield\]"):
+        load_scene(_write(tmp_path, text.replace("gap = 0.01", "gap = 0.01\nbridge = 0.02"), "b.toml"),
+                   world="mujoco")

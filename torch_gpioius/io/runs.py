@@ -115,7 +115,9 @@ def load_run(path: str | os.PathLike) -> RunHistory:
             states[k] = ds
             a = rec.arrays
             v = step_values(rec.meta)
-            p = {"similarity": v["similarity"], "correlation": v["correlation"], "hausdorff": v["hausdorff"]}
+            p = {"similarity": v["similarity"], "correlation": v["correlation"], "hausdorff": v["hausdorff"],
+                 "contact_distance": v.get("contact_distance", math.nan),
+                 "contact_on_body": v.get("contact_on_body", math.nan)}
             for key in ("kt", "local_params", "contact"):
                 if key in a:
                     p[key] = np.asarray(a[key], dtype=np.float64)

@@ -25,12 +25,16 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     min = [0.4, -0.1, 0.12]
     max = [0.6, 0.1, 0.35]
 
-    [forcefield]                      # optional settings of one world (see Scene3D.from_mesh / MujocoScene.from_mesh)
-    cover_stiffness = 5.0
-    [mujoco]
-    spacing = 0.025
+    [forcefield]                      # optional: settings and cover options of one world
+    cover_stiffness = 5.0             # (Scene3D.from_mesh, cover_around)
+    bridge = 0.03                     # a loose cover's bridging radius
+    [mujoco]                          # (MujocoScene.from_mesh, make_cover)
+    spacing = 0.02
+    slack = 0.03                      # a loose cloth's distance from the body before it settles
 
-The cover options a world does not use are refused by that world (a misspelt key is an error, never ignored).
+``[cover]`` holds what both worlds read (``kind``, ``gap``); an option only one world knows goes in that world's
+section, so one file builds both. Every key is checked: a misspelt one, or a ``[cover]`` option the chosen world
+does not use, is an error that names the file and the key, never ignored.
 """
 
 from __future__ import annotations
@@ -54,9 +58,12 @@ _TOP = {"name", "world", "object", "cover", "approach", "range", "forcefield", "
 _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
 _COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
           "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
-_WORLD = {"forcefield": {"cover_stiffness", "sensor_noise"},
-          "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
-                     "sensor_noise", "timestep", "settle_time", "camera_scale"}}
+_SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise"},
+             "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
+                        "sensor_noise", "timestep", "settle_time", "camera_scale"}}
+#: What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in the
+#: force-field world, its ``slack`` in MuJoCo), so that one file serves both worlds.
+_WORLD = {w: _SETTINGS[w] | (_COVER[w] - {"kind"}) for w in _SETTINGS}
 
 
 @dataclass
@@ -199,7 +206,11 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
         unused = set(cover) - _COVER[world]
         if unused:
             raise ValueError(f"cover: {sorted(unused)} do not apply in the {world} world (it takes "
-                             f"{sorted(_COVER[world] - {'kind'})})")
+                             f"{sorted(_COVER[world] - {'kind'})}); options of one world go in its own section, "
+                             f"[{'mujoco' if world == 'forcefield' else 'forcefield'}]")
+        own = spec.settings[world]
+        cover.update({k: v for k, v in own.items() if k in _COVER[world]})
+        settings = {k: v for k, v in own.items() if k not in _COVER[world]}
         where = {}
         if spec.approach is not None:
             where.update(start=spec.approach["start"], direction=spec.approach["direction"])
@@ -208,7 +219,7 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
         if world == "forcefield":
             from .forcefield import Scene3D
 
-            scene = Scene3D.from_mesh(mesh, kind, name=spec.name, **where, **cover, **spec.settings["forcefield"])
+            scene = Scene3D.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
         else:
             from .mujoco import MujocoScene
 
@@ -217,7 +228,6 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
                 where.setdefault("start", s)
                 where.setdefault("direction", d)
                 where.setdefault("bounds", b + np.array([[-0.03], [0.03]]) * np.array([1, 1, 0]))
-            settings = dict(spec.settings["mujoco"])
             if smoke:
                 settings["spacing"] = max(settings.get("spacing", 0.025), 0.04)
             scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
