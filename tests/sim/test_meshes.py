@@ -159,3 +159,17 @@ def test_signed_distance_matches_brute_force():
     assert np.abs(d[~off]).max() < 1e-12
     with pytest.raises(ValueError, match="not closed"):
         MeshDistance(with_holes(bottle_mm()))
+
+
+def test_a_repaired_mesh_needs_no_second_repair():
+    """load_mesh's output is a fixed point: loading it again finds nothing to repair (a scene loads the mesh, and a
+    world's from_mesh checks it again)."""
+    a, b = trimesh.creation.box((0.1, 0.1, 0.1)), trimesh.creation.box((0.1, 0.1, 0.1))
+    b.apply_translation((0.05, 0.03, 0.02))
+    for source in (trimesh.util.concatenate([a, b]), finned(with_holes(bottle_mm()))):
+        with pytest.warns(MeshRepairWarning):
+            once = load_mesh(source, scale=1.0 if source.extents.max() < 1 else 0.001, resolution=0.002)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", MeshRepairWarning)
+            again = load_mesh(once)
+        assert len(again.faces) == len(once.faces)

@@ -268,7 +268,9 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
                          MAX_REMESH_FACES)[:2]
         small = trimesh.Trimesh(U, G, process=True)
         trimesh.repair.fix_normals(small)
-        if inspect_mesh(small).closed and small.volume > 0:
+        # kept only if it is as clean as the remesh: closed, and no piece pushed into another (load_mesh of the
+        # result must find nothing to repair)
+        if inspect_mesh(small).closed and small.volume > 0 and overlapping_components(small) == 0:
             m, what = small, what + f" (decimated to {len(small.faces)} faces)"
     return (m, f"{what} at {h * 1e3:.1f} mm", *_distance_between(m, mesh, outer_only=remesh))
 

@@ -1,0 +1,92 @@
+"""The paper's three general claims judged on any study's objects (docs/results-real.md uses it).
+
+Reads ``runs.csv`` of a ``gpioius study`` folder with visual-tactile and tactile-only runs on the same seeds, and
+prints a markdown table per object. Failed runs stay in: a run with no estimate is +inf (worse than any distance),
+a failed pair is a loss for the failed side (``torch_gpioius.studies.stats``). The rules, fixed before looking:
+
+* **early benefit**: the 95 % interval of the median paired difference VT - T of H at 10 % of the tactile run's
+  travel lies below 0;
+* **no harm**: the upper end of the interval of the median paired difference of final H is at most
+  max(10 % of the tactile-only median, 0.5 cm);
+* **similarity ordering**: for an object under a tight and a loose cover (names ``<shape>-tight`` and
+  ``<shape>-loose``), the tight cover's median final correlation is above the loose one's with disjoint 95 %
+  intervals (the outer shape predicts the inner one better when it hugs it).
+
+    python scripts/claims_table.py outputs/real_ff
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from collections import defaultdict
+from pathlib import Path
+
+from torch_gpioius.studies.stats import median_interval, paired_difference
+
+
+def _f(v: str) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return math.nan
+
+
+def _cm(d: dict) -> str:
+    def one(v: float) -> str:
+        return "inf" if math.isinf(v) else f"{100 * v:.1f}"
+
+    return f"{one(d['median'])} [{one(d['lo'])}, {one(d['hi'])}]"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("study", type=Path)
+    args = parser.parse_args()
+    rows = list(csv.DictReader(open(args.study / "runs.csv")))
+    by = defaultdict(dict)
+    for r in rows:
+        by[(r["object"], r["mode"])][int(r["seed"])] = r
+    objects = sorted({r["object"] for r in rows})
+    print("| object | H 10 % VT - T [cm] | early benefit | final H VT - T [cm] (allowed) | no harm | wins / losses "
+          "| failed VT / T (why) | on body VT / T |")
+    print("|---|---|---|---|---|---|---|---|")
+    corr = {}
+    for o in objects:
+        vt, t = by[(o, "visual-tactile")], by[(o, "tactile")]
+        seeds = sorted(set(vt) & set(t))
+        if not seeds:
+            continue
+
+        def col(runs, key, worst=True):
+            vals = [_f(runs[s][key]) for s in seeds]
+            # a failed run's missing estimate is +inf; a finite value of a failed run is its estimate at the stop
+            return [math.inf if worst and not math.isfinite(v) else v for v in vals]
+
+        early = paired_difference(col(vt, "hausdorff_10"), col(t, "hausdorff_10"))
+        final = paired_difference(col(vt, "final_hausdorff"), col(t, "final_hausdorff"))
+        t_med = median_interval(col(t, "final_hausdorff"))["median"]
+        allowed = max(0.1 * t_med, 0.005) if math.isfinite(t_med) else math.inf
+        fails = [sum(1 for s in seeds if runs[s]["failed"]) for runs in (vt, t)]
+        why = sorted({runs[s]["failed"] for runs in (vt, t) for s in seeds if runs[s]["failed"]})
+        onb = [median_interval([_f(runs[s]["contacts_on_body"]) for s in seeds], failed="drop")["median"]
+               for runs in (vt, t)]
+        corr[o] = median_interval([_f(vt[s]["final_correlation"]) for s in seeds], failed="drop")
+        print(f"| {o} | {_cm(early)} | {'yes' if early['hi'] < 0 else '**no**'} | {_cm(final)} "
+              f"(+{100 * allowed:.1f}) | {'yes' if final['hi'] <= allowed else '**no**'} | "
+              f"{final['wins']} / {final['losses']} | {fails[0]} / {fails[1]}{' (' + ', '.join(why) + ')' if why else ''} "
+              f"| {onb[0]:.2f} / {onb[1]:.2f} |")
+    print()
+    print("| shape | final correlation tight | final correlation loose | tight above loose (disjoint intervals) |")
+    print("|---|---|---|---|")
+    for o in objects:
+        if o.endswith("-tight") and o in corr and o.replace("-tight", "-loose") in corr:
+            a, b = corr[o], corr[o.replace("-tight", "-loose")]
+            holds = a["lo"] > b["hi"]
+            print(f"| {o[:-6]} | {a['median']:.2f} [{a['lo']:.2f}, {a['hi']:.2f}] | {b['median']:.2f} "
+                  f"[{b['lo']:.2f}, {b['hi']:.2f}] | {'yes' if holds else '**no**'} |")
+
+
+if __name__ == "__main__":
+    main()
