@@ -161,10 +161,24 @@ class MeshBody:
         self.distance = MeshDistance(mesh)               # refuses an open mesh
         self.parts = convex_parts(mesh, threshold, max_parts) if collision == "convex" else [mesh.convex_hull]
         self.threshold, self.max_parts = float(threshold), int(max_parts)
+        self._part_distances = None
 
     def sdf(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` exact signed distance [m] to the mesh itself (not its parts) of `(n, 3)` points."""
         return self.distance(points)
+
+    def collision_sdf(self, points: np.ndarray) -> np.ndarray:
+        """`(n,)` signed distance [m] to what MuJoCo collides with: the union of the convex parts and the mesh (the
+        parts can reach past the mesh, e.g. across a mug's handle; a cover must start outside both)."""
+        from ..meshes import MeshDistance
+
+        if self._part_distances is None:
+            self._part_distances = [MeshDistance(p) for p in self.parts]
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        out = self.distance(p)
+        for d in self._part_distances:
+            out = np.minimum(out, d(p))
+        return out
 
     def surface_samples(self, spacing: float) -> np.ndarray:
         from ...surfaces import surface_samples

@@ -13,6 +13,7 @@ import numpy as np
 import torch
 
 from kinematics import RobotBackend, SafetyGate, UR5
+from kinematics.backends import RobotError
 from kinematics.dh import UR5_JOINT_NAMES
 
 from ...sensors.base import ForceReading, ForceSensor
@@ -77,7 +78,10 @@ class MujocoPhysics:
     def _check(self, bad_before: int) -> None:
         d = self.data
         # MuJoCo resets the state when it meets NaN or huge values and only counts a warning: a reset mid-run would
-        # teleport the arm and the cloth, so any new such warning is an error here
+        # teleport the arm and the cloth, so any new such warning is an error here. (The scenes switch the reset
+        # off, so the NaN stays and is caught below: a reset also re-zeroes the counters, and after a first reset a
+        # second one left the count where it was, unseen; a tight cloth in a mug's handle was reset at every step
+        # and the arm never moved.)
         if self._bad_warnings() > bad_before or not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
             raise MujocoInstability(f"MuJoCo simulation blew up at t = {d.time:.3f} s (NaN, inf or huge values in the "
                                     "state); reduce the timestep or stiffen the cover's damping")
@@ -174,11 +178,19 @@ class MujocoUR5(RobotBackend):
         duration = float(np.abs(target - start).max()) / float(speed)
         n = max(1, int(math.ceil(duration / dt)))
         d = self.physics.data
+        before = self._read_q()
         for k in range(1, n + 1):
             d.ctrl[self._act] = start + (target - start) * (k / n)
             self.physics.step(1)
         self._target = target
         self._rest(dt)
+        asked = float(np.abs(target - before).max())
+        if asked > 1e-4 and float(np.abs(self._read_q() - before).max()) < 0.01 * asked:
+            # the servos did not move the arm at all (seen once: a scene whose joints stayed frozen while their
+            # targets moved); a silent no-op would look like a fingertip resting in free space
+            self.stop()
+            raise RobotError(f"the arm did not follow a {asked:.4f} rad joint move (its joints stayed where they "
+                             "were); the simulation is stuck")
 
     def _rest(self, dt: float) -> None:
         """Run the physics until the arm is at rest (see ``settle``)."""

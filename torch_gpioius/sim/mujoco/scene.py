@@ -120,7 +120,7 @@ class MujocoScene(World):
         self._defaults = defaults or MUJOCO_DEFAULTS
         self._samples: dict[float, np.ndarray] = {}
         # the cover must start outside the body (its elements' radius included)
-        depth = self.body.sdf(cover.vertices) - cover.radius
+        depth = getattr(self.body, "collision_sdf", self.body.sdf)(cover.vertices) - cover.radius
         if depth.min() < -1e-9:
             raise ValueError(f"cover: intersects the body at rest ({-depth.min() * 1e3:.1f} mm deep at vertex "
                              f"{int(depth.argmin())}); give it more gap or slack")
@@ -249,7 +249,7 @@ class MujocoScene(World):
 
         return f"""<mujoco model={quoteattr(self.name or 'covered object')}>
 <compiler angle="radian" autolimits="true"/>
-<option timestep="{self.timestep}" solver="CG" cone="elliptic" tolerance="1e-6" integrator="discrete"><flag energy="enable"/></option>
+<option timestep="{self.timestep}" solver="CG" cone="elliptic" tolerance="1e-6" integrator="discrete"><flag energy="enable" autoreset="disable"/></option>
 <size memory="64M"/>
 {f"<asset>{assets}</asset>" if assets else ""}
 <worldbody>
@@ -417,15 +417,39 @@ class MujocoScene(World):
         u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
         u /= np.linalg.norm(u)
         v = np.cross(d, u)
-        r, phi = 0.02 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
-        start = self.start + r * (math.cos(phi) * u + math.sin(phi) * v)
-        cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
-        sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
-        direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
+        for _ in range(100):        # redraw an approach that misses or only grazes the body (as the force-field world)
+            r, phi = 0.02 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+            start = self.start + r * (math.cos(phi) * u + math.sin(phi) * v)
+            cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
+            sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
+            direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
+            if self.approach_depth(start, direction) >= self.MIN_APPROACH_DEPTH:
+                break
+        else:
+            raise ValueError(f"seed {seed}: no perturbed approach passes {self.MIN_APPROACH_DEPTH * 1e3:.0f} mm into "
+                             "the body")
         return MujocoScene(self.body, self.cover, start, direction, self.range, name=self.name, seed=seed,
                            sensor_noise=self.sensor_noise, timestep=self.timestep, settle_time=self.settle_time,
                            camera_scale=self.camera_scale, defaults=self._defaults, tool_length=self.tool_length,
                            tip_radius=self.tip_radius)
+
+    #: A perturbed approach must pass at least this deep [m] into the body (its centre line): one that only grazes an
+    #: edge slides off it, or past it out of the workspace.
+    MIN_APPROACH_DEPTH = 0.003
+
+    def approach_depth(self, start, direction, reach: float = 1.0) -> float:
+        """How deep [m] the line from ``start`` `(3,)` along ``direction`` `(3,)` passes into the body on its first
+        passage (0 if it misses within ``reach`` [m]), from the body's exact distance every millimetre."""
+        d = np.asarray(direction, dtype=np.float64)
+        t = np.arange(0.0, reach, 0.001)
+        sdf = self.body.sdf(np.asarray(start, dtype=np.float64) + t[:, None] * d / np.linalg.norm(d))
+        inside = np.flatnonzero(sdf < 0)
+        if len(inside) == 0:
+            return 0.0
+        first = inside[0]
+        out = np.flatnonzero(sdf[first:] >= 0)
+        end = first + (out[0] if len(out) else len(sdf) - first)
+        return float(-sdf[first:end].min())
 
     def real_time_factor(self, seconds: float = 1.0) -> float:
         """Simulated seconds per wall-clock second of the settled scene with the arm holding still."""
