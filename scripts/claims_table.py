@@ -64,12 +64,15 @@ def main() -> None:
             # a failed run's missing estimate is +inf; a finite value of a failed run is its estimate at the stop
             return [math.inf if worst and not math.isfinite(v) else v for v in vals]
 
+        fails = [sum(1 for s in seeds if runs[s]["failed"]) for runs in (vt, t)]
+        why = sorted({runs[s]["failed"] for runs in (vt, t) for s in seeds if runs[s]["failed"]})
+        if all(not math.isfinite(v) for v in col(vt, "final_hausdorff") + col(t, "final_hausdorff")):
+            print(f"| {o} | - | n/a | - | n/a | - | {fails[0]} / {fails[1]} ({', '.join(why)}) | - |")
+            continue
         early = paired_difference(col(vt, "hausdorff_10"), col(t, "hausdorff_10"))
         final = paired_difference(col(vt, "final_hausdorff"), col(t, "final_hausdorff"))
         t_med = median_interval(col(t, "final_hausdorff"))["median"]
         allowed = max(0.1 * t_med, 0.005) if math.isfinite(t_med) else math.inf
-        fails = [sum(1 for s in seeds if runs[s]["failed"]) for runs in (vt, t)]
-        why = sorted({runs[s]["failed"] for runs in (vt, t) for s in seeds if runs[s]["failed"]})
         onb = [median_interval([_f(runs[s]["contacts_on_body"]) for s in seeds], failed="drop")["median"]
                for runs in (vt, t)]
         corr[o] = median_interval([_f(vt[s]["final_correlation"]) for s in seeds], failed="drop")

@@ -116,3 +116,24 @@ def test_svg_curves_are_millimetres_upright(short_pair, tmp_path):
     width = float(re.search(r'width="([\d.]+)mm"', text).group(1))
     box = [float(v) for v in re.search(r'viewBox="([^"]+)"', text).group(1).split()]
     assert width == pytest.approx(box[2], rel=1e-3) and 50 < width < 1000      # a ~0.2 m shape: ~200 mm wide
+
+
+def test_a_log_panel_with_no_estimate_says_so_instead_of_failing(tmp_path):
+    """Every run of an object can fail before any estimate (its series are NaN): the study's figures must still be
+    written (a log axis over no positive data raised and lost the whole aggregation once)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from torch_gpioius.studies.figures import log_axis
+
+    fig, ax = plt.subplots()
+    ax.plot([0.0, 1.0], [float("nan"), float("nan")])
+    log_axis(ax)
+    assert ax.get_yscale() == "linear" and any("no estimate" in t.get_text() for t in ax.texts)
+    fig.savefig(tmp_path / "empty.png")
+    fig, ax = plt.subplots()
+    ax.plot([0.0, 1.0], [0.5, 2.0])
+    log_axis(ax)
+    assert ax.get_yscale() == "log"

@@ -39,6 +39,12 @@ def log_axis(ax, axis: str = "y") -> None:
     to read a value off a range narrower than a decade."""
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
+    hi = ax.dataLim.y1 if axis == "y" else ax.dataLim.x1
+    if not (np.isfinite(hi) and hi > 0):
+        # nothing positive to draw (every run of an object failed before any estimate): a log axis cannot be
+        # formed, and the panel says why it is empty
+        ax.text(0.5, 0.5, "no estimate in any run", transform=ax.transAxes, ha="center", va="center", fontsize=8)
+        return
     a = ax.yaxis if axis == "y" else ax.xaxis
     (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
     a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))

@@ -380,7 +380,7 @@ def failure(run: dict) -> str:
 def _short_reason(why: str) -> str:
     """A robot stop's message in a few words for a table cell."""
     low = why.lower()
-    for key, label in (("overload", "overload"), ("inverse kinematics", "IK refused"), ("ik ", "IK refused"),
+    for key, label in (("did not follow", "arm stuck"), ("found no contact", "no contact"), ("overload", "overload"), ("inverse kinematics", "IK refused"), ("ik ", "IK refused"),
                        ("joint speed", "joint speed"), ("joint limit", "joint limit"), ("workspace", "workspace"),
                        ("force", "force limit"), ("timeout", "sensor timeout"), ("stale", "sensor stale")):
         if key in low:
