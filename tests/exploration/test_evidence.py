@@ -5,21 +5,12 @@ import numpy as np
 import pytest
 
 import torch_gpioius as tg
-from torch_gpioius.sim import Scene2D, rectangle
 
 
-@pytest.fixture(scope="module")
-def c_from_the_left():
-    """Object C approached from the side where the cover coincides with the body: the approach records no free
-    space inside the cover, so without taps the similarity stays 1 and the estimate keeps the 27 cm extension."""
-    return Scene2D(rectangle(-0.15, 0.15, -0.10, 0.10), rectangle(-0.15, 0.419, -0.10, 0.10), start=(-0.30, 0.01),
-                   direction=(1, 0), name="C-left")
-
-
-def test_a_tap_over_the_loose_side_removes_the_extension(c_from_the_left):
+def test_a_tap_over_the_loose_side_removes_the_extension(c_from_the_left, c_left_without_recovery):
     # the plain run stalls in the corner where body and cover part (step 111 on); the no-progress rule's recovery,
     # an approach from the free side, finds the cover's gap by itself, so it is off here to isolate the taps
-    plain = tg.explore(c_from_the_left, max_steps=140, stall=None)
+    plain = c_left_without_recovery
     tapped = tg.explore(c_from_the_left, evidence="taps", max_steps=140, interval_every=1000)
     assert plain.taps[-1] == 0 and plain.correlation[-1] > 0.999
     assert tapped.taps[-1] >= 1

@@ -8,7 +8,6 @@ import pytest
 
 import torch_gpioius as tg
 from torch_gpioius.exploration.recovery import NoProgress
-from torch_gpioius.sim import Scene2D, rectangle
 
 
 def _state(contacts, steps=None, last_recovery=0):
@@ -39,12 +38,6 @@ def test_bad_settings_are_refused(kw):
         NoProgress(**kw)
 
 
-@pytest.fixture(scope="module")
-def c_from_the_left():
-    return Scene2D(rectangle(-0.15, 0.15, -0.10, 0.10), rectangle(-0.15, 0.419, -0.10, 0.10), start=(-0.30, 0.01),
-                   direction=(1, 0), name="C-left")
-
-
 def _longest_stay(contacts, radius=0.01):
     """The most consecutive steps the contact stayed within ``radius`` of where such a stay ended."""
     c = np.asarray(contacts)
@@ -57,8 +50,8 @@ def _longest_stay(contacts, radius=0.01):
     return best
 
 
-def test_a_stalled_run_recovers_and_its_recovery_is_paid_for(c_from_the_left):
-    stuck = tg.explore(c_from_the_left, max_steps=140, stall=None)
+def test_a_stalled_run_recovers_and_its_recovery_is_paid_for(c_from_the_left, c_left_without_recovery):
+    stuck = c_left_without_recovery
     assert _longest_stay(stuck.contacts) >= 25                  # the corner holds it from step 111 to the end
     rule = NoProgress()
     freed = tg.explore(c_from_the_left, max_steps=140, stall=rule)

@@ -142,7 +142,8 @@ class MeshBody:
     Args:
         mesh: closed ``trimesh.Trimesh`` [m], base frame.
         collision: "convex" (CoACD parts) or "hull" (see :data:`COLLISION_MODES`).
-        threshold, max_parts: CoACD's settings (:func:`convex_parts`).
+        threshold: CoACD's concavity threshold (:func:`convex_parts`).
+        max_parts: CoACD's most parts.
         name: label.
 
     Raises:
