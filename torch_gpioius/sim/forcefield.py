@@ -457,7 +457,8 @@ def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.0
 def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearance: float = 0.08,
                         margin: float = 0.03) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A default approach and range for an object on a table: straight down onto the body point nearest the centre
-    of its top view (rays cast on a grid, so a mug's opening or a torus' hole is never aimed at), starting
+    of its top view (rays cast on a grid, so a ring's hole, where a ray meets nothing, is never aimed at; a cup's
+    opening is: its ray meets the inside bottom, so give a cup a side approach), starting
     ``clearance`` above the cover; the range is the cover's bounding box grown by ``margin`` [m], from a quarter of
     the body's height up (the part a camera and a fingertip reach on a table).
 
