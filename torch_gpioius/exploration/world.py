@@ -32,7 +32,7 @@ from .registry import register_world
 from .stopping import StopRule, TravelBudget
 
 __all__ = ["World", "Hardware", "Toucher", "ExplorationDefaults", "Measurement", "ContactTruth", "RobotWorld",
-           "geometry_hash"]
+           "geometry_hash", "perturbed_approaches"]
 
 
 @dataclass
@@ -110,6 +110,24 @@ class ContactTruth:
 
     distance: float = math.nan
     on_body: bool | None = None
+
+
+def perturbed_approaches(start, direction, rng, radius: float = 0.02, max_angle: float = 10.0,
+                         tries: int = 100):
+    """Seeded candidate approaches for ``World.perturbed`` in 3-D: ``(start (3,), direction (3,))`` pairs, the start
+    moved uniformly within a disc of ``radius`` [m] across the approach, the direction turned by up to ``max_angle``
+    [deg] (uniform on the cap), ``tries`` of them from ``rng`` (``numpy.random.Generator``). A world takes the first
+    one it accepts (one that reaches its body), so a seed always gives the same approach."""
+    start, d = np.asarray(start, dtype=np.float64), np.asarray(direction, dtype=np.float64)
+    u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
+    u /= np.linalg.norm(u)
+    v = np.cross(d, u)
+    for _ in range(tries):
+        r, phi = radius * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
+        s = start + r * (math.cos(phi) * u + math.sin(phi) * v)
+        cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(max_angle)))
+        sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
+        yield s, cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
 
 
 def geometry_hash(*arrays) -> str:

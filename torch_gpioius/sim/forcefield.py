@@ -22,7 +22,8 @@ import torch
 from ..exploration.observations import ObservationPolicy
 from ..exploration.stopping import TravelBudget
 from ..exploration.registry import register_world
-from ..exploration.world import ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash
+from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash,
+                                 perturbed_approaches)
 from ..metrics import hausdorff_distance
 from ..planning import RangePenalty
 from ..sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
@@ -263,17 +264,7 @@ class Scene3D(World):
         force-sensor and camera noise drawn from ``seed``. A perturbed approach must still hit the object."""
         if seed == 0:
             return self
-        rng = np.random.default_rng([seed, 3])
-        d = self.direction
-        u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
-        u /= np.linalg.norm(u)
-        v = np.cross(d, u)
-        for _ in range(100):
-            r, phi = 0.02 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
-            start = self.start + r * (math.cos(phi) * u + math.sin(phi) * v)
-            cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
-            sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
-            direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
+        for start, direction in perturbed_approaches(self.start, self.direction, np.random.default_rng([seed, 3])):
             camera = None
             if self._camera is None or isinstance(self._camera, SimulatedDepthCamera):
                 base = self.camera

@@ -51,6 +51,9 @@ class PrimitiveBody:
         """`(n,)` signed distance [m] of `(n, 3)` points (negative inside)."""
         return union_sdf(self.primitives, points)
 
+    #: What MuJoCo collides with is the primitives themselves.
+    collision_sdf = sdf
+
     def surface_samples(self, spacing: float) -> np.ndarray:
         """`(n, 3)` samples of the surface [m], about one per ``spacing``^2."""
         return union_surface_samples(self.primitives, spacing)

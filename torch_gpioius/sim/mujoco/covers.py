@@ -148,13 +148,10 @@ def cap_base(centre, facing, half_angle_deg: float, spacing: float, radius_hint:
 
 
 def _sdf_of(body):
-    """The signed distance function the cloth meets: of a body's collision geometry (``collision_sdf``, a mesh body's
-    convex parts, which can span a concavity such as a mug's handle), else of the body (``sdf(points)``), or of a
-    list of primitives."""
+    """The signed distance function the cloth meets: of a body's collision geometry (``collision_sdf``; a mesh body's
+    convex parts can span a concavity such as a mug's handle), or of a list of primitives."""
     if hasattr(body, "collision_sdf"):
         return body.collision_sdf
-    if hasattr(body, "sdf"):
-        return body.sdf
     return lambda p: union_sdf(body, p)
 
 

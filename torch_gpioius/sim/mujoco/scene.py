@@ -17,7 +17,8 @@ import torch
 
 from ...exploration.observations import ObservationPolicy
 from ...exploration.stopping import TravelBudget
-from ...exploration.world import ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash
+from ...exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash,
+                                  perturbed_approaches)
 from ..._validation import as_bounds
 from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
 from .bodies import MeshBody, PrimitiveBody, as_body
@@ -120,7 +121,7 @@ class MujocoScene(World):
         self._defaults = defaults or MUJOCO_DEFAULTS
         self._samples: dict[float, np.ndarray] = {}
         # the cover must start outside the body (its elements' radius included)
-        depth = getattr(self.body, "collision_sdf", self.body.sdf)(cover.vertices) - cover.radius
+        depth = self.body.collision_sdf(cover.vertices) - cover.radius
         if depth.min() < -1e-9:
             raise ValueError(f"cover: intersects the body at rest ({-depth.min() * 1e3:.1f} mm deep at vertex "
                              f"{int(depth.argmin())}); give it more gap or slack")
@@ -412,17 +413,8 @@ class MujocoScene(World):
         ``seed``."""
         if seed == 0:
             return self
-        rng = np.random.default_rng([seed, 5])
-        d = self.direction
-        u = np.cross(d, [0.0, 0.0, 1.0] if abs(d[2]) < 0.9 else [1.0, 0.0, 0.0])
-        u /= np.linalg.norm(u)
-        v = np.cross(d, u)
-        for _ in range(100):        # redraw an approach that misses or only grazes the body (as the force-field world)
-            r, phi = 0.02 * math.sqrt(rng.uniform()), rng.uniform(0, 2 * math.pi)
-            start = self.start + r * (math.cos(phi) * u + math.sin(phi) * v)
-            cos_t = 1 - rng.uniform() * (1 - math.cos(math.radians(10.0)))
-            sin_t, psi = math.sqrt(max(0.0, 1 - cos_t * cos_t)), rng.uniform(0, 2 * math.pi)
-            direction = cos_t * d + sin_t * (math.cos(psi) * u + math.sin(psi) * v)
+        # redraw an approach that misses or only grazes the body (as the force-field world)
+        for start, direction in perturbed_approaches(self.start, self.direction, np.random.default_rng([seed, 5])):
             if self.approach_depth(start, direction) >= self.MIN_APPROACH_DEPTH:
                 break
         else:
