@@ -24,6 +24,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from torch_gpioius.studies.stats import median_interval, paired_difference
+from torch_gpioius.studies.sweep import no_harm_margin
 
 
 def _f(v: str) -> float:
@@ -71,8 +72,7 @@ def main() -> None:
             continue
         early = paired_difference(col(vt, "hausdorff_10"), col(t, "hausdorff_10"))
         final = paired_difference(col(vt, "final_hausdorff"), col(t, "final_hausdorff"))
-        t_med = median_interval(col(t, "final_hausdorff"))["median"]
-        allowed = max(0.1 * t_med, 0.005) if math.isfinite(t_med) else math.inf
+        allowed = no_harm_margin(median_interval(col(t, "final_hausdorff")))      # the sweep's own rule
         onb = [median_interval([_f(runs[s]["contacts_on_body"]) for s in seeds], failed="drop")["median"]
                for runs in (vt, t)]
         corr[o] = median_interval([_f(vt[s]["final_correlation"]) for s in seeds], failed="drop")

@@ -299,11 +299,11 @@ def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
             "recoveries": int(trace.recoveries[-1]) if len(trace.recoveries) else 0,
             **{f"contacts_{k}": v for k, v in trace.contacts_on_body(CONTACT_WITHIN).items()},
             "series": {"travel": trace.travel.tolist(), "hausdorff": trace.hausdorff.tolist(),
-                         "hausdorff_touched": trace.hausdorff_touched.tolist(),
-                         "uncertainty": trace.uncertainty.tolist(), "similarity": trace.similarity.tolist(),
-                         "correlation": trace.correlation.tolist(),
-                         "correlation_lo": trace.correlation_interval[:, 0].tolist(),
-                         "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
+                       "hausdorff_touched": trace.hausdorff_touched.tolist(),
+                       "uncertainty": trace.uncertainty.tolist(), "similarity": trace.similarity.tolist(),
+                       "correlation": trace.correlation.tolist(),
+                       "correlation_lo": trace.correlation_interval[:, 0].tolist(),
+                       "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
 
 
 def _set_aside(path: Path) -> Path:
@@ -380,9 +380,10 @@ def failure(run: dict) -> str:
 def _short_reason(why: str) -> str:
     """A robot stop's message in a few words for a table cell."""
     low = why.lower()
-    for key, label in (("did not follow", "arm stuck"), ("found no contact", "no contact"), ("overload", "overload"), ("inverse kinematics", "IK refused"), ("ik ", "IK refused"),
-                       ("joint speed", "joint speed"), ("joint limit", "joint limit"), ("workspace", "workspace"),
-                       ("force", "force limit"), ("timeout", "sensor timeout"), ("stale", "sensor stale")):
+    for key, label in (("did not follow", "arm stuck"), ("found no contact", "no contact"), ("overload", "overload"),
+                       ("inverse kinematics", "IK refused"), ("ik ", "IK refused"), ("joint speed", "joint speed"),
+                       ("joint limit", "joint limit"), ("workspace", "workspace"), ("force", "force limit"),
+                       ("timeout", "sensor timeout"), ("stale", "sensor stale")):
         if key in low:
             return label
     return why[:40] or "refused"
@@ -501,8 +502,9 @@ def _cm(v: float) -> str:
     return "n/a" if math.isnan(v) else ("inf" if math.isinf(v) else f"{100 * v:.1f}")
 
 
-def _allowed(t: dict) -> float:
-    """The "no harm" margin: 10 % of the median tactile value, at least 0.5 cm (0.5 cm where tactile failed)."""
+def no_harm_margin(t: dict) -> float:
+    """The "no harm" margin [m] of a tactile-only :func:`~torch_gpioius.studies.stats.median_interval` ``t``: 10 % of
+    its median, at least 0.5 cm (0.5 cm where tactile-only failed)."""
     return max(0.1 * t["median"], 0.005) if math.isfinite(t["median"]) else 0.005
 
 
@@ -513,7 +515,7 @@ def _no_harm(summary: dict, obj: str, mode: str = "visual-tactile") -> tuple[boo
     t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff")
     if pair is None or t is None or pair["n"] == 0:
         return None, "no paired runs"
-    allowed = _allowed(t)
+    allowed = no_harm_margin(t)
     return bool(pair["hi"] <= allowed), (f"median VT - T {_cm(pair['median'])} cm, 95 % interval [{_cm(pair['lo'])}, "
                                          f"{_cm(pair['hi'])}] cm (allowed {_cm(allowed)} cm), Wilcoxon p = "
                                          f"{pair['p_wilcoxon']:.3g}, n = {pair['n']}")
@@ -592,7 +594,7 @@ def _equal(summary: dict, obj: str) -> tuple[bool | None, str]:
     t = summary["objects"][obj].get("tactile", {}).get("final_hausdorff")
     if pair is None or t is None or pair["n"] == 0:
         return None, "no paired runs"
-    allowed = _allowed(t)
+    allowed = no_harm_margin(t)
     return bool(-allowed <= pair["lo"] and pair["hi"] <= allowed), (
         f"paired VT - T {_cm(pair['median'])} [{_cm(pair['lo'])}, {_cm(pair['hi'])}] cm (allowed +-{_cm(allowed)} cm)")
 

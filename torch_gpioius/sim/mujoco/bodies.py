@@ -106,7 +106,8 @@ def convex_parts(mesh: trimesh.Trimesh, threshold: float = 0.05, max_parts: int 
         raise ImportError("a mesh body in the MuJoCo world needs 'coacd': pip install torch_gpioius[mujoco]") from exc
     key = hashlib.sha256(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes()
                          + np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes()
-                         + json.dumps([threshold, max_parts, seed, 1000, 60, getattr(coacd, "__version__", "")]).encode()
+                         + json.dumps([threshold, max_parts, seed, 1000, 60,
+                                       getattr(coacd, "__version__", "")]).encode()
                          ).hexdigest()[:24]
     path = _cache_dir() / f"{key}.npz"
     if cache and path.exists():

@@ -60,8 +60,8 @@ def _require_mujoco():
 class MujocoScene(World):
     """A covered object on MuJoCo's physics, explored by a simulated UR5 with a fingertip force sensor.
 
-    Build it with :meth:`from_primitives` or :meth:`from_mesh`. On construction the model is compiled, the arm placed at the start (its
-    fingertip at ``start``, pointing along ``direction``), and the cover settled under gravity; every
+    Build it with :meth:`from_primitives` or :meth:`from_mesh`. On construction the model is compiled, the arm placed
+    at the start (its fingertip at ``start``, pointing along ``direction``), and the cover settled under gravity; every
     :meth:`hardware` call starts from that settled state.
 
     Args:
