@@ -26,7 +26,7 @@ from torch import Tensor
 from ..tolerances import tol
 
 __all__ = ["FitResult", "chol_params_to_task_covariance", "task_covariance_to_chol_params", "maximize_mll",
-           "newton_maximize"]
+           "newton_maximize", "predicted_gain"]
 
 
 @dataclass
@@ -40,6 +40,10 @@ class FitResult:
         grad_norm: infinity norm of the projected gradient in the Cholesky parameters at the end.
         iterations: Newton iterations taken.
         converged: whether the tolerance was met before ``tol.fit_max_iter``.
+        hessian: `(3, 3)` Hessian of the MLL in the Cholesky parameters at the last evaluated point (None where
+            the fit evaluated none); ``GPIOIS.fit(min_gain=...)`` predicts later gains with it.
+        relearned: False when ``GPIOIS.fit(min_gain=...)`` held K_t instead of re-learning it.
+        predicted_gain: the Newton decrement [nats] that decided a held fit (NaN for a full fit).
     """
 
     task_covariance: Tensor
@@ -47,6 +51,9 @@ class FitResult:
     grad_norm: float
     iterations: int
     converged: bool
+    hessian: np.ndarray | None = None
+    relearned: bool = True
+    predicted_gain: float = math.nan
 
 
 def chol_params_to_task_covariance(phi) -> Tensor:
@@ -166,16 +173,20 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
     lower = np.array([lo, -math.inf, lo])
     upper = np.array([hi, math.inf, hi])
 
+    last = {}
+
     def value(phi):
         f, g, h = _evaluate_trial(evaluate, phi)
         if g is None:
             return f, None, None
         grad, hess = _chain(phi, g, h)
+        last["hess"] = hess
         return f, grad, hess
 
     phi0 = task_covariance_to_chol_params(kt0)
     f0, g0, h0 = evaluate(chol_params_to_task_covariance(phi0))      # the start must evaluate (errors propagate)
     first = [(f0, *_chain(phi0, g0, h0))]
+    last["hess"] = first[0][2]
 
     def value_first(phi):
         if first:
@@ -183,4 +194,26 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         return value(phi)
 
     phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper)
-    return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged)
+    return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged, hessian=last["hess"])
+
+
+def predicted_gain(grad: np.ndarray, hess: np.ndarray, free: np.ndarray) -> float:
+    """Newton decrement ``g^T (-H)^-1 g / 2`` of a maximisation on the free coordinates.
+
+    Args:
+        grad: `(k,)` gradient.
+        hess: `(k, k)` Hessian (of a maximum: negative definite on the free coordinates).
+        free: `(k,)` bool, the coordinates not held at a bound.
+
+    Returns:
+        The gain [units of the function] one Newton step predicts; inf where -H is not positive definite.
+    """
+    idx = np.flatnonzero(free)
+    if not len(idx):
+        return 0.0
+    try:
+        chol = np.linalg.cholesky(-np.asarray(hess, dtype=np.float64)[np.ix_(idx, idx)])
+    except np.linalg.LinAlgError:
+        return math.inf
+    z = np.linalg.solve(chol, np.asarray(grad, dtype=np.float64)[idx])
+    return 0.5 * float(z @ z)

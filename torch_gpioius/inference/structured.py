@@ -357,31 +357,51 @@ class StructuredExactInference:
     def append(self, x: Tensor, y: Tensor, task: Tensor) -> None:
         """Append inner observations in O(k N_o^2 + k N_i sum_j n_j); outer ones rebuild the engine."""
         x, y, task = x.detach(), y.detach(), task.detach()
-        if bool((task == 1).any()):
-            xs = torch.cat([self.xi, self.xo, x])
-            ys = torch.cat([self.yi, self.yo, y])
-            ts = torch.cat([torch.zeros(len(self.xi), dtype=torch.long, device=x.device),
-                            torch.ones(len(self.xo), dtype=torch.long, device=x.device), task])
-            self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean)
+        if self._rebuild_with_outer(x, y, task):
             return
-        self.kii = bordered(self.kii, self.kernel.value(x, self.xi), self.kernel.value(x, x))
+        p_new = self._ingest(x, y)
+        if self._series is not None:
+            self._series.append(p_new)
+        self._invalidate()
+
+    def _rebuild_with_outer(self, x: Tensor, y: Tensor, task: Tensor) -> bool:
+        """Outer points change the eigendecomposition: rebuild the engine on all data (returns whether it did)."""
+        if not bool((task == 1).any()):
+            return False
+        xs = torch.cat([self.xi, self.xo, x])
+        ys = torch.cat([self.yi, self.yo, y])
+        ts = torch.cat([torch.zeros(len(self.xi), dtype=torch.long, device=x.device),
+                        torch.ones(len(self.xo), dtype=torch.long, device=x.device), task])
+        self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean)
+        return True
+
+    #: Above this many surface contacts in one append, the planner's rotated x-derivative rows are not computed at
+    #: ingest (a patch brings dozens; the planner queries one point and rotates it itself).
+    ROTATED_CONTACTS_MAX = 8
+
+    def _ingest(self, x: Tensor, y: Tensor) -> Tensor:
+        """Grow K_ii, P and the data by inner points `(k, d)`; returns the new rows of P, `(k, N_o)`."""
+        self._grow_kii(self.kernel.value(x, self.xi), self.kernel.value(x, x))
         # The rows of P and, from the same pass over U, the rotated kernel x-derivatives at the new surface
         # contacts (y = 0): the planner plans from the contact just added, and U (N_o^2 doubles) is the largest
         # thing read per step. Free-space points get no derivative rows.
         dim, n_o = x.shape[1], len(self.xo)
         contacts = x[y == 0]
+        if len(contacts) > self.ROTATED_CONTACTS_MAX:
+            contacts = contacts[:0]
         rows = torch.cat([self.kernel.value(x, self.xo),
                           _kernel_rows(contacts, self.xo, self.kernel)[1:].reshape(-1, n_o)])
         rotated = rows @ self.u
         p_new = rotated[:len(x)]
-        self._rotated = (contacts, torch.cat([rotated[:len(x)][y == 0].unsqueeze(0),
+        self._rotated = (contacts, torch.cat([rotated[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
                                               rotated[len(x):].view(dim, len(contacts), n_o)]))
         self._p.append(p_new)
         self.xi = torch.cat([self.xi, x])
         self.yi = torch.cat([self.yi, y])
-        if self._series is not None:
-            self._series.append(p_new)
-        self._invalidate()
+        return p_new
+
+    def _grow_kii(self, k_new_old: Tensor, k_new_new: Tensor) -> None:
+        self.kii = bordered(self.kii, k_new_old, k_new_new)
 
     def remove(self, drop: Tensor, task: Tensor) -> bool:
         """Drop inner observations in place, keeping the eigendecomposition of K_oo.
@@ -414,6 +434,8 @@ class StructuredExactInference:
         """T(c) = P D P^T `(N_i, N_i)`, with T'(c) and T''(c) if ``derivatives`` (else None); rebuilds the window
         if needed."""
         c = max(c, 1e-300)
+        if self._series is not None and self._series.size < self.n_inner:   # rows deferred by a subclass
+            self._series.append(self.p[self._series.size:])
         if self._series is None or not self._series.covers(c, beta * beta):
             # size the truncation for the largest b^2 a PSD K_t allows at this a, c (b^2 <= a c)
             self._series = _ChebyshevStore(self.lam, self.p, self.noise, c, max(beta * beta, a * c))
@@ -445,11 +467,17 @@ class StructuredExactInference:
             chol, self.jitter = robust_cholesky(smat, "inner Schur complement")
             v = (self.yi - self.mean) - beta * pd[:, 0]
             alpha_i = torch.cholesky_solve(v.unsqueeze(-1), chol).squeeze(-1)
-            cache.update(t0=t[0], t1=t[1], t2=t[2], pd=pd, chol=chol, v=v, alpha_i=alpha_i)
+            cache.update(t0=t[0], t1=t[1], t2=t[2], pd=pd, chol=chol, v=v, alpha_i=alpha_i,
+                         logdet_s=2 * chol.diagonal().log().sum())
         else:
             cache.update(alpha_i=torch.zeros(0, **self._kind), alpha_rot=d_all * self.rt)
         self._cache, self._key = cache, key
         return cache
+
+    @staticmethod
+    def _solve_lower(f: dict, rhs: Tensor) -> Tensor:
+        """``L^-1 rhs`` for the Schur factor ``L`` of a factorisation, `(N_i, m)` right-hand sides."""
+        return torch.linalg.solve_triangular(f["chol"], rhs, upper=False)
 
     def _alpha_rot(self, f: dict) -> Tensor:
         """Outer weights in the rotated basis, ``U^T alpha_o`` (computed on the first query of a factor)."""
@@ -474,7 +502,7 @@ class StructuredExactInference:
             k_i = self.kernel.value(xq, self.xi)
             mean = mean + b0 * (k_i @ f["alpha_i"])
             z = b0 * k_i - beta * b1 * ((w * f["d"]) @ self.p.T)   # (m, N_i)
-            y = torch.linalg.solve_triangular(f["chol"], z.T, upper=False)
+            y = self._solve_lower(f, z.T)
             quad = quad + (y * y).sum(0)
         var = self.kernel.prior_variance(b[task, task]) - quad
         return mean, var.clamp_min(0.0)
@@ -523,7 +551,7 @@ class StructuredExactInference:
             mean = mean + b0 * (k_all[0] @ f["alpha_i"])
             g_mean = g_mean + b0 * (k_all[1:] @ f["alpha_i"])
             z_all = b0 * k_all - beta * b1 * ((w_all * d) @ self.p.T)        # (1 + d, m, N_i)
-            y = torch.linalg.solve_triangular(f["chol"], z_all.reshape(-1, self.n_inner).T, upper=False)
+            y = self._solve_lower(f, z_all.reshape(-1, self.n_inner).T)
             y = y.T.reshape(1 + dim, m, -1)
             quad = quad + (y[0] * y[0]).sum(-1)
             g_quad = g_quad + 2 * (y[1:] * y[0]).sum(-1)
@@ -539,7 +567,7 @@ class StructuredExactInference:
         logdet = torch.log(c * self.lam + self.noise).sum()
         quad = (self.rt * self.rt * d).sum()
         if self.n_inner:
-            logdet = logdet + 2 * f["chol"].diagonal().log().sum()
+            logdet = logdet + f["logdet_s"]
             quad = quad + f["v"] @ f["alpha_i"]
         return -0.5 * logdet - 0.5 * quad - 0.5 * self.n * math.log(2 * math.pi)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import warnings
 
+import numpy as np
 import torch
 from gpytorch.distributions import MultivariateNormal
 from gpytorch.kernels import IndexKernel
@@ -13,7 +14,8 @@ from torch import Tensor
 from .base import ImplicitSurfaceGP
 from .._validation import as_float, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
-from ..inference.optim import FitResult, maximize_mll
+from ..inference.batched import BatchedExactInference
+from ..inference.optim import FitResult, _chain, maximize_mll, predicted_gain, task_covariance_to_chol_params
 from ..inference.structured import StructuredExactInference
 from ..tolerances import tol
 
@@ -55,7 +57,9 @@ class GPIOIS(ImplicitSurfaceGP):
         inference: exact engine behind ``predict`` / ``fit`` / ``log_marginal_likelihood``: "dense" (one
             Cholesky of the full Gram matrix, the reference), "structured" (``StructuredExactInference``: fixed
             outer set, inner Schur complement; agrees with dense to ~1e-10, 100x faster at N_o = 2000), or
-            "auto" (structured when there are outer points and sigma^2 >= 1e-8, else dense).
+            "auto" (structured when there are outer points and sigma^2 >= 1e-8, else dense), or "batched"
+            (``BatchedExactInference``: the structured engine with rank-k bordering of the factorisation at a
+            held K_t, for tactile patches of tens of points per step; use it with ``fit(min_gain=...)``).
         kernel: any :class:`~torch_gpioius.kernels.ExactKernel` (e.g. ``tg.kernels.Matern52(0.1)``) in place of the
             inverse multiquadric; both engines stay exact for it.
 
@@ -76,8 +80,8 @@ class GPIOIS(ImplicitSurfaceGP):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")
-        if inference not in ("auto", "dense", "structured"):
-            raise ValueError(f"inference: must be 'auto', 'dense' or 'structured', got {inference!r}")
+        if inference not in ("auto", "dense", "structured", "batched"):
+            raise ValueError(f"inference: must be 'auto', 'dense', 'structured' or 'batched', got {inference!r}")
         super().__init__((x, t.unsqueeze(-1)), y, theta, noise, learn_theta, kernel)
         self.inference = inference
         self.task_covar_module = IndexKernel(num_tasks=2, rank=2).double()
@@ -86,6 +90,7 @@ class GPIOIS(ImplicitSurfaceGP):
         self.task_covariance = torch.eye(2, dtype=torch.float64) if task_covariance is None else task_covariance
         #: Outcome of the last ``fit()`` (None before the first).
         self.fit_result: FitResult | None = None
+        self._held_fits = 0
 
     # ------------------------------------------------------------------ GPyTorch idiom
     def forward(self, x: Tensor, task: Tensor) -> MultivariateNormal:
@@ -232,10 +237,10 @@ class GPIOIS(ImplicitSurfaceGP):
         if self.inference == "dense":
             return DenseExactInference
         has_outer = bool((self._train_task() == OUTER).any())
-        if self.inference == "structured":
+        if self.inference in ("structured", "batched"):
             if not has_outer:
-                raise ValueError("inference='structured' needs outer (task 1) observations")
-            return StructuredExactInference
+                raise ValueError(f"inference={self.inference!r} needs outer (task 1) observations")
+            return StructuredExactInference if self.inference == "structured" else BatchedExactInference
         return StructuredExactInference if has_outer and self.noise >= 1e-8 else DenseExactInference
 
     def _task_matrix(self) -> Tensor:
@@ -251,24 +256,43 @@ class GPIOIS(ImplicitSurfaceGP):
         return self._train_task()
 
     # ------------------------------------------------------------------ learning and prediction
-    def fit(self, multi_start: bool | None = None) -> "GPIOIS":
+    def fit(self, multi_start: bool | None = None, min_gain: float | None = None,
+            max_hold: int = 20) -> "GPIOIS":
         """Learn K_t (and only K_t) by maximising the exact log marginal likelihood, eq. (15)-(16).
 
         A projected, damped Newton method on the Cholesky parameters of K_t with the exact gradient and Hessian
         (``DenseExactInference.mll_derivatives``) runs to the tolerances of ``tol`` (see ``optim.maximize_mll``).
         Deterministic for the same data.
 
+        With ``min_gain`` (the rule for batches of inner points, docs/performance.md): first the exact gradient g
+        at the current K_t (O(N_i^2) with ``inference="batched"``); K_t is kept when the Newton decrement with
+        the Hessian H of the last re-learning, ``g^T (-H)^-1 g / 2`` on the coordinates not held at a bound,
+        predicts a gain below ``min_gain`` nats, and fewer than ``max_hold`` fits in a row have kept it.
+        Otherwise K_t is re-learned as without ``min_gain``. Inference at a kept K_t stays exact.
+
         Args:
             multi_start: also start from fixed, data-independent K_t values (identity; 0.1 x a correlation of 0.9)
                 and keep the best. Default: on the first fit only; later fits warm-start from the current K_t
                 (exploration adds a few points per step).
+            min_gain: re-learn only when the predicted gain exceeds this [nats] (None: always re-learn). For
+                scale: a 95 % profile interval spans 1.92 nats below the optimum.
+            max_hold: re-learn after this many kept fits in a row, whatever the prediction.
 
         Returns:
-            self, with ``fit_result`` describing the optimisation.
+            self, with ``fit_result`` describing the optimisation (``relearned``, ``predicted_gain``).
+
+        Raises:
+            ValueError: ``min_gain`` negative or NaN, ``max_hold`` below 1.
         """
+        if min_gain is not None and not min_gain >= 0:        # NaN fails this too
+            raise ValueError(f"min_gain: must be a number of nats >= 0 (inf: hold for max_hold fits), got {min_gain!r}")
+        if max_hold < 1:
+            raise ValueError(f"max_hold: must be >= 1, got {max_hold!r}")
         engine = self._inference()
         if multi_start is None:
             multi_start = self.fit_result is None
+        if min_gain is not None and not multi_start and self._hold_task_covariance(engine, min_gain, max_hold):
+            return self
         starts = [self.task_covariance]
         if multi_start:
             starts += [torch.eye(2, dtype=torch.float64), 0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]],
@@ -294,6 +318,30 @@ class GPIOIS(ImplicitSurfaceGP):
         self.task_covariance = best.task_covariance
         self.fit_result = best
         return self
+
+    def _hold_task_covariance(self, engine, min_gain: float, max_hold: int) -> bool:
+        """Keep K_t if the exact gradient predicts a re-learning gain below ``min_gain`` (see ``fit``)."""
+        last = self.fit_result
+        if last is None or last.hessian is None or (not last.relearned and self._held_fits >= max_hold):
+            return False
+        x0 = self.train_inputs[0]
+        kt = self._task_matrix()
+        if hasattr(engine, "mll_gradient"):
+            mll, g = engine.mll_gradient(kt)
+        else:
+            mll, g, _ = engine.mll_derivatives(kt)
+        phi = task_covariance_to_chol_params(self.task_covariance)
+        grad, _ = _chain(phi, g, torch.zeros(3, 3, dtype=x0.dtype, device=x0.device))
+        lo, hi = tol.log_chol_bounds
+        lower, upper = np.array([lo, -math.inf, lo]), np.array([hi, math.inf, hi])
+        free = ~(((phi <= lower) & (grad < 0)) | ((phi >= upper) & (grad > 0)))
+        gain = predicted_gain(grad, last.hessian, free)
+        if gain > min_gain:
+            return False
+        self._held_fits = self._held_fits + 1 if not last.relearned else 1
+        self.fit_result = FitResult(self.task_covariance, mll, float(np.abs(np.where(free, grad, 0.0)).max()), 0,
+                                    last.converged, hessian=last.hessian, relearned=False, predicted_gain=gain)
+        return True
 
     def predict(self, x, task: int | str = INNER) -> tuple[Tensor, Tensor]:
         """Latent posterior mean and variance of F_task, eq. (12)-(13). Differentiable with respect to ``x``.

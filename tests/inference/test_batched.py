@@ -1,0 +1,212 @@
+"""The batched engine (rank-k bordering at a held K_t) held equal to a dense solve, and the re-learning rule."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+import torch_gpioius as tg
+from torch_gpioius.inference import BatchedExactInference, DenseExactInference
+from torch_gpioius.inference.batched import SOLVE_BLOCK, _solve_lower_blocked
+from torch_gpioius.inference.optim import predicted_gain
+from torch_gpioius.planning import plan_direction
+
+THETA, NOISE = 0.15, 0.08
+KT = torch.tensor([[0.9, 0.7], [0.7, 1.1]], dtype=torch.float64)
+
+
+def _ellipsoid(rng, n, radii):
+    v = rng.normal(size=(n, 3))
+    return torch.tensor(v / np.linalg.norm(v, axis=1, keepdims=True) * np.asarray(radii))
+
+
+def _start(rng, n_outer=300, n_inner=30):
+    xo = torch.cat([_ellipsoid(rng, n_outer // 2, (0.25, 0.18, 0.3)), _ellipsoid(rng, n_outer // 2, (0.3, 0.23, 0.35))])
+    yo = torch.cat([torch.zeros(n_outer // 2), torch.ones(n_outer // 2)]).double()
+    xi = _ellipsoid(rng, n_inner, (0.2, 0.14, 0.25))
+    x = torch.cat([xi, xo])
+    y = torch.cat([torch.zeros(n_inner, dtype=torch.float64), yo])
+    t = torch.cat([torch.zeros(n_inner, dtype=torch.long), torch.ones(n_outer, dtype=torch.long)])
+    return x, y, t
+
+
+def _patch(rng, k):
+    """k inner points near one surface point: a contact, surface points, free space (y = 1) in front."""
+    c = _ellipsoid(rng, 1, (0.2, 0.14, 0.25))
+    pts = c + 0.01 * torch.tensor(rng.normal(size=(k, 3)))
+    y = torch.tensor((rng.random(k) < 0.25).astype(np.float64))
+    pts = torch.where(y.bool().unsqueeze(1), pts * 1.08, pts)
+    return pts, y
+
+
+def _dense(engine):
+    x = torch.cat([engine.xi, engine.xo])
+    y = torch.cat([engine.yi, engine.yo])
+    t = torch.cat([torch.zeros(engine.n_inner, dtype=torch.long), torch.ones(len(engine.xo), dtype=torch.long)])
+    return DenseExactInference(x, y, t, THETA, NOISE)
+
+
+def _assert_exact(engine, rng, kt=KT):
+    """Posterior (mean; variance over the prior variance), MLL and gradient within 1e-9 of a dense solve."""
+    dense = _dense(engine)
+    q = _ellipsoid(rng, 50, (0.2, 0.14, 0.25)) * torch.tensor(rng.uniform(0.9, 1.1, (50, 1)))
+    for task in (0, 1):
+        m1, v1 = engine.predict(q, task, kt)
+        m2, v2 = dense.predict(q, task, kt)
+        assert float((m1 - m2).abs().max()) < 1e-9
+        assert float((v1 - v2).abs().max()) < 1e-9 * float(kt[task, task])
+    mll1, g1 = engine.mll_gradient(kt)
+    mll2, g2, _ = dense.mll_derivatives(kt)
+    assert abs(mll1 - mll2) < 1e-9 * abs(mll2)
+    # each gradient entry is a sum of terms of size ~N: hold it to 1e-9 of that scale
+    assert float((g1 - g2).abs().max()) < 1e-9 * engine.n
+
+
+def test_hundreds_of_batched_appends_stay_exact():
+    rng = np.random.default_rng(0)
+    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine.factor(KT)                                   # builds the held factorisation
+    for step in range(240):
+        x, y = _patch(rng, int(rng.integers(1, 9)))
+        engine.append(x, y, torch.zeros(len(y), dtype=torch.long))
+        if step in (0, 120):
+            _assert_exact(engine, rng)
+    assert engine.bordered_batches == 240              # never refactorised
+    assert engine._held["chol"].buf.shape[0] > 30 + 64   # the buffers grew past their first capacity
+    _assert_exact(engine, rng)
+    # the bordered inverse did not drift from the inverse of a fresh factorisation
+    fresh = BatchedExactInference(torch.cat([engine.xi, engine.xo]), torch.cat([engine.yi, engine.yo]),
+                                  torch.cat([torch.zeros(engine.n_inner, dtype=torch.long),
+                                             torch.ones(len(engine.xo), dtype=torch.long)]), theta=THETA,
+                                  noise=NOISE)
+    fresh.factor(KT)
+    w1, w2 = engine._held["w"].view, fresh._held["w"].view
+    assert float((w1 - w2).abs().max() / w2.abs().max()) < 1e-9
+
+
+def test_a_new_task_covariance_or_outer_points_or_removal_rebuild_and_stay_exact():
+    rng = np.random.default_rng(1)
+    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine.factor(KT)
+    for _ in range(5):
+        x, y = _patch(rng, 6)
+        engine.append(x, y, torch.zeros(6, dtype=torch.long))
+    other = torch.tensor([[0.3, 0.1], [0.1, 0.5]], dtype=torch.float64)
+    _assert_exact(engine, rng, other)                   # a held state at another K_t is built afresh
+    assert engine.bordered_batches == 0
+    xo = _ellipsoid(rng, 4, (0.3, 0.23, 0.35))
+    engine.append(xo, torch.ones(4, dtype=torch.float64), torch.ones(4, dtype=torch.long))
+    assert engine._held is None and len(engine.xo) == 304
+    _assert_exact(engine, rng)
+    engine.append(*_patch(rng, 5), torch.zeros(5, dtype=torch.long))
+    drop = torch.zeros(engine.n, dtype=torch.bool)
+    task = torch.cat([torch.zeros(engine.n_inner, dtype=torch.long), torch.ones(len(engine.xo), dtype=torch.long)])
+    drop[[0, 3, engine.n_inner - 1]] = True
+    assert engine.remove(drop, task)
+    assert engine._held is None
+    _assert_exact(engine, rng)
+
+
+def test_blocked_triangular_solves_equal_lapack():
+    n = 2 * SOLVE_BLOCK + 37
+    rng = np.random.default_rng(2)
+    a = torch.tensor(rng.normal(size=(n, n)))
+    low = torch.linalg.cholesky(a @ a.T / n + torch.eye(n, dtype=torch.float64))
+    buf = torch.zeros(n + 50, n + 50, dtype=torch.float64)
+    buf[:n, :n] = low
+    rhs = torch.tensor(rng.normal(size=(n, 3)))
+    for transpose in (False, True):
+        ref = torch.linalg.solve_triangular(low.T if transpose else low, rhs, upper=transpose)
+        got = _solve_lower_blocked(buf, n, rhs, transpose=transpose)
+        assert float((got - ref).abs().max() / ref.abs().max()) < 1e-12
+
+
+def test_predicted_gain_is_the_newton_decrement_of_a_quadratic():
+    a = np.array([[2.0, 0.3, 0.0], [0.3, 1.0, 0.1], [0.0, 0.1, 0.5]])
+    g = np.array([0.4, -0.2, 0.1])          # f(x) = g.x - x.A x / 2 gains g.A^-1 g / 2 at its maximum
+    assert predicted_gain(g, -a, np.ones(3, bool)) == pytest.approx(0.5 * g @ np.linalg.solve(a, g), rel=1e-14)
+    free = np.array([True, False, True])
+    sub = np.ix_(free, free)
+    assert predicted_gain(g, -a, free) == pytest.approx(0.5 * g[free] @ np.linalg.solve(a[sub], g[free]), rel=1e-14)
+    assert predicted_gain(g, a, np.ones(3, bool)) == math.inf     # not a maximum: re-learn
+    assert predicted_gain(g, -a, np.zeros(3, bool)) == 0.0
+
+
+def _model(rng, inference="batched"):
+    x, y, t = _start(rng, 300, 40)
+    return tg.GPIOIS(x, y, t, theta=THETA, noise=NOISE, inference=inference).fit()
+
+
+def test_fit_holds_task_covariance_while_the_gradient_predicts_little_and_relearns_otherwise():
+    rng = np.random.default_rng(3)
+    model = _model(rng)
+    assert model.fit_result.relearned and model.fit_result.hessian is not None
+    kt = model.task_covariance.clone()
+    kinds = []
+    for _ in range(4):
+        x, y = _patch(rng, 16)
+        model.add_observations(x, y, 0)
+        model.fit(min_gain=math.inf, max_hold=3)
+        kinds.append(model.fit_result.relearned)
+        plan_direction(model, x[0], step=0.01)
+    assert kinds == [False, False, False, True]         # held three times, then re-learned (max_hold)
+    x, y = _patch(rng, 16)
+    model.add_observations(x, y, 0)
+    kt_held = model.task_covariance.clone()
+    model.fit(min_gain=math.inf)
+    held = model.fit_result
+    assert not held.relearned and torch.equal(model.task_covariance, kt_held) and held.predicted_gain > 0
+    # the held fit's MLL and gradient are those of a dense solve at the held K_t
+    dense = _dense(model._inference())
+    mll_d, g_d, _ = dense.mll_derivatives(model._task_matrix())
+    assert held.mll == pytest.approx(mll_d, rel=1e-12)
+    # min_gain = 0 re-learns every time; the result equals a full fit from the same start
+    twin = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+                     task_covariance=kt_held, inference="structured").fit(multi_start=False)
+    model.fit(min_gain=0.0)
+    assert model.fit_result.relearned
+    assert float((model.task_covariance - twin.task_covariance).abs().max()) < 1e-9
+    assert not torch.equal(kt, model.task_covariance)
+
+
+def test_held_gain_prediction_tracks_the_real_gain():
+    """The Newton decrement with an old Hessian is a prediction: it must be of the size of the real gain."""
+    rng = np.random.default_rng(4)
+    model = _model(rng)
+    ratios = []
+    for _ in range(6):
+        x, y = _patch(rng, 24)
+        model.add_observations(x, y, 0)
+        model.fit(min_gain=math.inf, max_hold=100)
+        predicted = model.fit_result.predicted_gain
+        held_mll = model.fit_result.mll
+        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+                         task_covariance=model.task_covariance, inference="structured").fit(multi_start=False)
+        ratios.append(predicted / (best.fit_result.mll - held_mll))
+    assert all(0.5 < r < 2.0 for r in ratios), ratios
+
+
+@pytest.mark.parametrize("kwargs", [{"min_gain": -1.0}, {"min_gain": math.nan}, {"min_gain": 0.1, "max_hold": 0}])
+def test_bad_relearning_settings_are_refused_and_leave_the_model_alone(kwargs):
+    rng = np.random.default_rng(5)
+    model = _model(rng)
+    before = (model.task_covariance.clone(), model.fit_result)
+    with pytest.raises(ValueError, match="min_gain|max_hold"):
+        model.fit(**kwargs)
+    assert torch.equal(model.task_covariance, before[0]) and model.fit_result is before[1]
+
+
+def test_the_structured_engine_takes_the_same_rule_through_its_full_derivatives():
+    rng = np.random.default_rng(6)
+    model = _model(rng, "structured")
+    x, y = _patch(rng, 8)
+    model.add_observations(x, y, 0)
+    model.fit(min_gain=math.inf)
+    assert not model.fit_result.relearned and math.isfinite(model.fit_result.predicted_gain)
+
+
+def test_batched_inference_needs_outer_points():
+    x = torch.rand(5, 3, dtype=torch.float64)
+    with pytest.raises(ValueError, match="batched"):
+        tg.GPIOIS(x, torch.zeros(5), torch.zeros(5, dtype=torch.long), inference="batched").fit()
