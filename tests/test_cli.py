@@ -102,3 +102,36 @@ def test_study_defaults_to_the_worlds_own_objects(monkeypatch, tmp_path):
     assert main(["study", "--world", "mujoco", "--smoke", "--out", str(tmp_path / "s")]) == 2
     assert seen["objects"] is None and seen["world"] == "mujoco"
     assert sweep.DEFAULT_OBJECTS["mujoco"] == ("E", "F", "G", "H")
+
+
+def test_voxel_reaches_the_study_and_the_3d_simulation_and_bad_values_are_refused(monkeypatch, tmp_path, capsys):
+    import torch_gpioius.studies.study3d as study3d
+    import torch_gpioius.studies.sweep as sweep
+
+    seen = {}
+
+    def fake(*args, **kw):
+        seen.update(kw)
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(sweep, "run_sweep", fake)
+    monkeypatch.setattr(study3d, "run_study_3d", fake)
+    assert main(["study", "--world", "forcefield", "--voxel", "0.01", "--out", str(tmp_path / "s")]) == 2
+    assert seen["voxel"] == 0.01
+    assert main(["simulate3d", "--voxel", "0", "--out", str(tmp_path / "t")]) == 2
+    assert seen["voxel"] == 0.0
+    for bad in ("abc", "-0.01", "nan", "3"):
+        with pytest.raises(SystemExit):
+            main(["study", "--voxel", bad, "--out", str(tmp_path / "u")])
+        assert "voxel" in capsys.readouterr().err
+    assert not (tmp_path / "u").exists()
+
+
+def test_policy_with_voxel():
+    from torch_gpioius.exploration.observations import ObservationPolicy
+
+    policy = ObservationPolicy(voxel=0.05, crop_margin=0.15)
+    assert policy.with_voxel(0.01) == ObservationPolicy(voxel=0.01, crop_margin=0.15)
+    assert policy.with_voxel(0).voxel is None                     # every camera point
+    with pytest.raises(ValueError, match="voxel"):
+        policy.with_voxel(-1.0)

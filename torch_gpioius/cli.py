@@ -34,7 +34,7 @@ def _simulate3d(args: argparse.Namespace) -> int:
     from .io.outputs import claim_folder
     from .studies.study3d import run_study_3d
 
-    claim_folder(args.out, "simulate3d", args.force, world=args.world)
+    claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel)
     scenes = [] if args.scene is None else args.scene.split(",")
     if args.object is None:
         objects = [] if scenes else ["E", "F", "G", "H"]
@@ -42,7 +42,8 @@ def _simulate3d(args: argparse.Namespace) -> int:
         objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
     travel = 0.06 if args.smoke else args.max_travel
     result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
-                          progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes)
+                          progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes,
+                          voxel=args.voxel)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
@@ -56,7 +57,7 @@ def _study(args: argparse.Namespace) -> int:
     result = run_sweep(world=args.world, objects=objects, scenes=scenes, modes=args.modes.split(","),
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
-                       progress=not args.quiet, threads=args.threads, force=args.force)
+                       progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -192,6 +193,23 @@ def _world_name(text: str) -> str:
     return name
 
 
+VOXEL_HELP = ("edge of the camera's voxels [m] (default: the world's, 0.05 as in the paper; 0 keeps every camera "
+              "point; docs/results-resolution.md)")
+
+
+def _voxel(text: str) -> float:
+    from .exploration.observations import check_voxel
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"voxel: not a number of metres: {text!r}") from None
+    try:
+        return check_voxel(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _study_worlds() -> list[str]:
     from .exploration.registry import world_names
 
@@ -263,6 +281,7 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
     s3.add_argument("--max-travel", type=float, default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
+    s3.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP)
     s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
     s3.add_argument("--quiet", action="store_true", help="no progress output")
     _force(s3, "--out holds files that `gpioius simulate3d` (of this world) did not write")
@@ -289,6 +308,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--address", default=None, help="join an existing Ray cluster (e.g. ray://host:10001 or auto)")
     sw.add_argument("--max-travel", type=float, default=None, help="travel budget per run [m] (3-D worlds)")
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
+    sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

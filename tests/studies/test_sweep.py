@@ -1,6 +1,7 @@
 """Studies over seeds: the statistics against closed forms, a sequential sweep that skips finished runs and
 reproduces itself, seeds that perturb the world, and a real local Ray sweep that survives a killed worker."""
 
+import math
 import csv
 import json
 import os
@@ -238,3 +239,27 @@ def test_scene_files_run_as_objects_and_a_run_that_never_touches_is_a_counted_fa
         other = tmp_path / "copy.toml"
         other.write_text(ball.read_text())
         run_sweep("forcefield", scenes=[ball, other], out=tmp_path / "v")
+
+
+def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_path):
+    """--voxel reaches the camera: finer voxels keep more outer points; each run records its voxel and outer
+    count; a folder holds one setting; bad values and the 2-D world are refused before anything runs."""
+    ball = _scene(tmp_path)
+    counts = {}
+    for voxel, name in ((None, "default"), (0.01, "fine")):
+        run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / name, smoke=True,
+                  backend="local", progress=False, voxel=voxel)
+        rows = list(csv.DictReader(open(tmp_path / name / "runs.csv")))
+        assert rows[0]["failed"] == ""
+        counts[name] = (float(rows[0]["voxel"]), int(rows[0]["n_outer"]))
+    assert counts["default"][0] == 0.05 and counts["fine"][0] == 0.01
+    assert counts["fine"][1] > 4 * counts["default"][1] > 0
+    with pytest.raises(FileExistsError, match=r"voxel=0.01.* this one is voxel=None"):
+        run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "fine",
+                  smoke=True, backend="local", progress=False)
+    for bad in (-0.01, math.nan, 2.0, True):
+        with pytest.raises(ValueError, match="voxel"):
+            run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", voxel=bad)
+    with pytest.raises(ValueError, match="voxel-averaged"):
+        run_sweep("planar", seeds=1, out=tmp_path / "planar", voxel=0.01)
+    assert not (tmp_path / "bad").exists() and not (tmp_path / "planar").exists()

@@ -13,7 +13,7 @@ decide whether the similarity means anything (docs/method-notes.md). The same ru
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -21,7 +21,7 @@ import torch
 from ..models.gpiois import INNER, OUTER
 from ..voxels import voxel_average
 
-__all__ = ["Observations", "ObservationPolicy", "thin_points", "thin_indices", "free_space_along",
+__all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices", "free_space_along",
            "retract_free_space", "vision_observations", "INNER", "OUTER"]
 
 @dataclass
@@ -142,6 +142,27 @@ class ObservationPolicy:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= 1.0):
                 raise ValueError(f"ObservationPolicy.{name}: must be in (0, 1] m, got {v!r}")
+
+
+    def with_voxel(self, voxel: float) -> "ObservationPolicy":
+        """This policy with the camera's points averaged in voxels of edge ``voxel`` [m]; 0 keeps every point.
+
+        Raises:
+            ValueError: ``voxel`` negative, above 1 m or not a finite number.
+        """
+        return replace(self, voxel=check_voxel(voxel) or None)
+
+
+#: Largest voxel edge accepted [m]: coarser than a metre averages a whole object into a point.
+MAX_VOXEL = 1.0
+
+
+def check_voxel(voxel) -> float:
+    """``voxel`` [m] as a float in [0, ``MAX_VOXEL``] (0: no averaging); raises ValueError naming the value."""
+    if isinstance(voxel, bool) or not isinstance(voxel, (int, float)) or not (
+            math.isfinite(voxel) and 0 <= voxel <= MAX_VOXEL):
+        raise ValueError(f"voxel: must be an edge in [0, {MAX_VOXEL:g}] m (0 keeps every camera point), got {voxel!r}")
+    return float(voxel)
 
 
 def thin_indices(points: np.ndarray, spacing: float, avoid: np.ndarray, margin: float) -> np.ndarray:

@@ -137,7 +137,7 @@ def _write_meshes(traces: dict, scenes: dict, out: Path, resolution: float) -> N
 
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
                  metrics_every: int = 5, modes=MODES, progress: bool = True, smoke: bool = False,
-                 world: str = "forcefield", scenes=(), **explore_kwargs) -> dict:
+                 world: str = "forcefield", scenes=(), voxel: float | None = None, **explore_kwargs) -> dict:
     """Run the simulated robot study on objects E-H and write figures, records, logs and the summary.
 
     Writes into ``out``: ``fig9_<object>.png``, ``fig10_similarity.png``, ``records.csv`` / ``records.json``
@@ -156,6 +156,7 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
             (``tg.sim.mujoco_objects_3d``: cloth and foam covers on MuJoCo's contact physics; the ``mujoco`` extra).
         scenes: scene files (:mod:`torch_gpioius.sim.scenefile`) explored as further objects, named by their
             ``name`` (the claims are judged on E-H only).
+        voxel: edge of the camera's voxels [m] (0: every camera point; None: each scene's own, 0.05 as the paper).
         **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, ...).
     """
     from .._progress import progress as reporter
@@ -163,6 +164,12 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     from ..exploration.registry import world_entry
 
     entry = world_entry(world)
+    if voxel is not None:
+        from ..exploration.observations import check_voxel
+
+        voxel = check_voxel(voxel)
+        if "policy" in explore_kwargs:
+            raise ValueError("voxel: give either voxel or policy (whose voxel it would replace), not both")
     unknown = [o for o in objects if o not in OBJECTS or o not in entry.object_names]
     if unknown:   # before building the meshes (seconds)
         raise ValueError(f"objects: unknown {unknown} in the {entry.name} world; choose among "
@@ -186,9 +193,12 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     explore_kwargs.setdefault("interval_every", 1000 if smoke else 10)
     for name, mode in jobs:
         bar.set_postfix_str(f"object {name}, {mode}")
+        kw = dict(explore_kwargs)
+        if voxel is not None:
+            kw["policy"] = scenes[name].defaults.policy.with_voxel(voxel)
         traces.setdefault(name, {})[mode] = explore(
             scenes[name], mode=mode, max_travel=max_travel, metrics_every=metrics_every, progress=progress,
-            log=out / "logs" / f"{name}_{mode}.gpioius", **explore_kwargs)
+            log=out / "logs" / f"{name}_{mode}.gpioius", **kw)
         bar.update(1)
     bar.close()
     hio = {name: scenes[name].inner_outer_hausdorff() for name in objects}

@@ -75,6 +75,7 @@ class RunSpec:
     max_steps: int | None = None
     threads: int = 1
     scene: str | None = None        # a scene file (torch_gpioius.sim.scenefile) instead of a built-in object
+    voxel: float | None = None      # camera voxel edge [m] (0: every point); None: the world's own (0.05)
 
     @property
     def key(self) -> str:
@@ -119,6 +120,8 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["max_steps"] = 12 if budget is None else 40
     if kw["mode"] == "visual-tactile":
         kw["interval_every"] = 1000 if spec.smoke else 10
+    if spec.voxel is not None:
+        kw["policy"] = world.defaults.policy.with_voxel(spec.voxel)
     return kw
 
 
@@ -264,6 +267,8 @@ def run_one(spec: RunSpec) -> dict:
             record = _no_start_record(spec, kw, exc, time.perf_counter() - t0)
     if trace is not None:
         record = _record(spec, kw, trace, time.perf_counter() - t0)
+        record["n_outer"] = _n_outer(trace.model)
+    record["voxel"] = kw.get("policy", world.defaults.policy).voxel or 0.0
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
@@ -304,6 +309,15 @@ def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
                        "correlation": trace.correlation.tolist(),
                        "correlation_lo": trace.correlation_interval[:, 0].tolist(),
                        "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
+
+
+def _n_outer(model) -> int:
+    """Outer (camera) points in a run's final model: 0 for tactile-only GPIS, summed over a local model's regions."""
+    task = getattr(model, "train_task", None)
+    if task is not None:
+        return int((task == 1).sum())
+    regions = getattr(model, "regions", None) or ()
+    return sum(_n_outer(r) for r in regions)
 
 
 def _set_aside(path: Path) -> Path:
@@ -414,7 +428,8 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "travel": run["travel"], "steps": run["steps"], "terminated": run["terminated"], "taps": run["taps"],
            "recoveries": run["recoveries"], "contacts_on_body": run["contacts_on_body"],
            "contacts_within": run["contacts_within"],
-           "wall_time": run["wall_time"], "median_step_time": run["median_step_time"], "reference_travel": ref}
+           "wall_time": run["wall_time"], "median_step_time": run["median_step_time"], "reference_travel": ref,
+           "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan)}
     for f in FRACTIONS:
         p = int(round(100 * f))
         row[f"hausdorff_{p}"] = _at_travel(s, "hausdorff", f * ref)
@@ -663,7 +678,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
-              scenes=()) -> dict:
+              scenes=(), voxel: float | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -688,6 +703,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         force: write into a non-empty folder that is not this world's study folder.
         scenes: scene files (:mod:`torch_gpioius.sim.scenefile`) to run as objects too, named by their ``name``;
             with scenes and no ``objects``, only the scenes run. Only the 3-D worlds build scene files.
+        voxel: edge of the camera's voxels [m] (0: every camera point; None: each world's own, 0.05 as the
+            paper). A study folder holds one setting: compare settings across folders (docs/results-resolution.md).
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -721,13 +738,20 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
     for name in objects:        # fail before starting anything
         if name not in entry.object_names:
             raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {entry.object_names}")
-    out = claim_folder(out, "study", force, world=world)
+    if voxel is not None:
+        from ..exploration.observations import check_voxel
+
+        voxel = check_voxel(voxel)
+        if getattr(entry.cls, "dim", 3) != 3:
+            raise ValueError(f"voxel: the {world} world's camera view is sampled at its spacing, not voxel-averaged; "
+                             "--voxel applies to the 3-D worlds")
+    out = claim_folder(out, "study", force, world=world, voxel=voxel)
     with FolderLock(out, "gpioius study"):
         (out / "runs").mkdir(parents=True, exist_ok=True)
         running = out / "running"
         for stale in running.glob("*.pid") if running.exists() else []:   # we hold the lock: nobody else runs
             stale.unlink(missing_ok=True)
-        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o))
+        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o), voxel)
                  for o in (*objects, *scene_files) for m in modes for s in range(seeds)]
         todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
         use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
