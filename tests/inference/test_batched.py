@@ -8,7 +8,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.inference import BatchedExactInference, DenseExactInference
-from torch_gpioius.inference.batched import SOLVE_BLOCK, _solve_lower_blocked
+from torch_gpioius.inference.batched import SOLVE_BLOCK, _LowerFactor
 from torch_gpioius.inference.optim import predicted_gain
 from torch_gpioius.planning import plan_direction
 
@@ -73,7 +73,7 @@ def test_hundreds_of_batched_appends_stay_exact():
         if step in (0, 120):
             _assert_exact(engine, rng)
     assert engine.bordered_batches == 240              # never refactorised
-    assert engine._held["chol"].buf.shape[0] > 30 + 64   # the buffers grew past their first capacity
+    assert engine._held["chol"].sq.buf.shape[0] > 30 + 64   # the buffers grew past their first capacity
     _assert_exact(engine, rng)
     # the bordered inverse did not drift from the inverse of a fresh factorisation
     fresh = BatchedExactInference(torch.cat([engine.xi, engine.xo]), torch.cat([engine.yi, engine.yo]),
@@ -113,12 +113,14 @@ def test_blocked_triangular_solves_equal_lapack():
     rng = np.random.default_rng(2)
     a = torch.tensor(rng.normal(size=(n, n)))
     low = torch.linalg.cholesky(a @ a.T / n + torch.eye(n, dtype=torch.float64))
-    buf = torch.zeros(n + 50, n + 50, dtype=torch.float64)
-    buf[:n, :n] = low
+    factor = _LowerFactor(low[:n - 40, :n - 40], n + 50)
+    factor.solve(torch.ones(n - 40, 1, dtype=torch.float64))      # caches the diagonal blocks, one of them partial
+    factor.border(low[n - 40:, :n - 40], low[n - 40:, n - 40:])  # grows the partial block: its cache must go
+    assert torch.equal(factor.sq.view, low)
     rhs = torch.tensor(rng.normal(size=(n, 3)))
     for transpose in (False, True):
         ref = torch.linalg.solve_triangular(low.T if transpose else low, rhs, upper=transpose)
-        got = _solve_lower_blocked(buf, n, rhs, transpose=transpose)
+        got = factor.solve(rhs, transpose=transpose)
         assert float((got - ref).abs().max() / ref.abs().max()) < 1e-12
 
 

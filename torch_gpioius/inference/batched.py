@@ -77,23 +77,53 @@ class _Square:
         self.n = need
 
 
-def _solve_lower_blocked(lbuf: Tensor, n: int, rhs: Tensor, transpose: bool = False) -> Tensor:
-    """``L^-1 rhs`` (or ``L^-T rhs``) for the lower-triangular ``L = lbuf[:n, :n]``, `(n, m)` right-hand sides."""
-    x = rhs.clone()
-    starts = list(range(0, n, SOLVE_BLOCK))
-    if not transpose:
-        for i0 in starts:
-            i1 = min(n, i0 + SOLVE_BLOCK)
-            if i0:
-                x[i0:i1] -= lbuf[i0:i1, :i0] @ x[:i0]
-            x[i0:i1] = torch.linalg.solve_triangular(lbuf[i0:i1, i0:i1].contiguous(), x[i0:i1], upper=False)
-    else:
-        for i0 in reversed(starts):
-            i1 = min(n, i0 + SOLVE_BLOCK)
-            if i1 < n:
-                x[i0:i1] -= lbuf[i1:n, i0:i1].T @ x[i1:n]
-            x[i0:i1] = torch.linalg.solve_triangular(lbuf[i0:i1, i0:i1].T.contiguous(), x[i0:i1], upper=True)
-    return x
+class _LowerFactor:
+    """A lower-triangular Cholesky factor grown by bordering, with blocked triangular solves.
+
+    LAPACK's wrapper would copy a strided `(n, n)` view of the buffer whole at every solve; the blocks' GEMMs read
+    it in place, and the contiguous diagonal blocks are kept (a border changes only the last one).
+    """
+
+    def __init__(self, chol: Tensor, cap: int):
+        self.sq = _Square(chol, cap)
+        self._diag: dict[int, Tensor] = {}
+
+    @property
+    def n(self) -> int:
+        return self.sq.n
+
+    def border(self, x_t: Tensor, lz: Tensor) -> None:
+        """Append rows ``[X^T, L_z]``: `(k, n)` and the `(k, k)` lower factor of the new block."""
+        n, k = self.n, lz.shape[0]
+        self.sq.grow(k)
+        self.sq.buf[n:n + k, :n] = x_t
+        self.sq.buf[n:n + k, n:n + k] = lz
+        self._diag = {i0: b for i0, b in self._diag.items() if i0 + b.shape[0] < n}   # full blocks stay valid
+
+    def _block(self, i0: int, i1: int) -> Tensor:
+        blk = self._diag.get(i0)
+        if blk is None or blk.shape[0] != i1 - i0:
+            blk = self._diag[i0] = self.sq.buf[i0:i1, i0:i1].contiguous()
+        return blk
+
+    def solve(self, rhs: Tensor, transpose: bool = False) -> Tensor:
+        """``L^-1 rhs`` (or ``L^-T rhs``), `(n, m)` right-hand sides."""
+        n, lbuf = self.n, self.sq.buf
+        x = rhs.clone()
+        starts = list(range(0, n, SOLVE_BLOCK))
+        if not transpose:
+            for i0 in starts:
+                i1 = min(n, i0 + SOLVE_BLOCK)
+                if i0:
+                    x[i0:i1] -= lbuf[i0:i1, :i0] @ x[:i0]
+                x[i0:i1] = torch.linalg.solve_triangular(self._block(i0, i1), x[i0:i1], upper=False)
+        else:
+            for i0 in reversed(starts):
+                i1 = min(n, i0 + SOLVE_BLOCK)
+                if i1 < n:
+                    x[i0:i1] -= lbuf[i1:n, i0:i1].T @ x[i1:n]
+                x[i0:i1] = torch.linalg.solve_triangular(self._block(i0, i1).T, x[i0:i1], upper=True)
+        return x
 
 
 class BatchedExactInference(StructuredExactInference):
@@ -181,7 +211,7 @@ class BatchedExactInference(StructuredExactInference):
             "key": tuple(b.detach().flatten().tolist()), "n": n, "a": a, "beta": beta, "c": c,
             "jitter": self.jitter, "d": d, "d1": -lam * d * d,
             "vecs": torch.stack([d * self.rt, lam * d * d * self.rt, lam * lam * d ** 3 * self.rt], dim=1),
-            "chol": _Square(f["chol"], cap), "w": _Square(torch.cholesky_inverse(f["chol"]), cap),
+            "chol": _LowerFactor(f["chol"], cap), "w": _Square(torch.cholesky_inverse(f["chol"]), cap),
             "t0": _Square(f["t0"], cap), "t1": _Square(f["t1"], cap),
             "pd": _Rows(f["pd"]), "v": _Rows(f["v"]), "logdet_s": f["logdet_s"], "cache": cache,
         }
@@ -191,9 +221,9 @@ class BatchedExactInference(StructuredExactInference):
     def _refresh(self) -> None:
         """Posterior weights of the held factorisation (two blocked triangular solves)."""
         h = self._held
-        n, lbuf = h["n"], h["chol"].buf
+        n, chol = h["n"], h["chol"]
         v = h["v"].data
-        alpha_i = _solve_lower_blocked(lbuf, n, _solve_lower_blocked(lbuf, n, v.unsqueeze(1)), transpose=True)
+        alpha_i = chol.solve(chol.solve(v.unsqueeze(1)), transpose=True)
         h["cache"].update(alpha_i=alpha_i.squeeze(1), v=v, pd=h["pd"].data, logdet_s=h["logdet_s"],
                           alpha_rot=None, n=n)
 
@@ -203,24 +233,23 @@ class BatchedExactInference(StructuredExactInference):
         n, k = h["n"], p_new.shape[0]
         a, beta, s = h["a"], h["beta"], self.noise + h["jitter"]
         p_all = self.p                                              # (n + k, N_o), new rows last
-        t0_rows = (p_new * h["d"]) @ p_all.T                        # (k, n + k): T rows, summed directly
-        t1_rows = (p_new * h["d1"]) @ p_all.T
+        # (k, n + k) rows of T and T', summed directly (one GEMM)
+        t0_rows, t1_rows = (torch.cat([p_new * h["d"], p_new * h["d1"]]) @ p_all.T).split(k)
         k_rows = self.kii[n:]                                       # K_ii is already grown
         s_rows = a * k_rows - beta * beta * t0_rows
         s_rows[:, n:].diagonal().add_(s)
         bt, cmat = s_rows[:, :n], s_rows[:, n:]
         cmat = 0.5 * (cmat + cmat.T)
         lsq, wsq = h["chol"], h["w"]
-        x = _solve_lower_blocked(lsq.buf, n, bt.T)                  # (n, k) = L^-1 B
+        x = lsq.solve(bt.T)                                         # (n, k) = L^-1 B
         lz, _ = robust_cholesky(cmat - x.T @ x, "bordered Schur complement")
-        g = _solve_lower_blocked(lsq.buf, n, x, transpose=True)     # W B
+        g = lsq.solve(x, transpose=True)                            # W B
         yt = torch.linalg.solve_triangular(lz, g.T, upper=False)    # (k, n) = L_z^-1 G^T = Y^T
         w_no = -torch.linalg.solve_triangular(lz.T, yt, upper=True)  # (k, n) = -Z^-1 G^T
         wsq.view.addmm_(yt.T, yt)
-        for sq in (lsq, wsq, h["t0"], h["t1"]):
+        lsq.border(x.T, lz)
+        for sq in (wsq, h["t0"], h["t1"]):
             sq.grow(k)
-        lsq.buf[n:n + k, :n] = x.T
-        lsq.buf[n:n + k, n:n + k] = lz
         wsq.buf[n:n + k, :n] = w_no
         wsq.buf[:n, n:n + k] = w_no.T
         wsq.buf[n:n + k, n:n + k] = torch.cholesky_inverse(lz)
@@ -237,8 +266,7 @@ class BatchedExactInference(StructuredExactInference):
 
     def _solve_lower(self, f: dict, rhs: Tensor) -> Tensor:
         if "lower_solve" in f:
-            h = self._held
-            return _solve_lower_blocked(h["chol"].buf, h["n"], rhs)
+            return self._held["chol"].solve(rhs)
         return super()._solve_lower(f, rhs)
 
     # ------------------------------------------------------------------ marginal likelihood

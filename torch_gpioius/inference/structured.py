@@ -375,8 +375,8 @@ class StructuredExactInference:
         self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean)
         return True
 
-    #: Above this many surface contacts in one append, the planner's rotated x-derivative rows are not computed at
-    #: ingest (a patch brings dozens; the planner queries one point and rotates it itself).
+    #: Above this many surface contacts in one append (a tactile patch brings dozens), the planner's rotated
+    #: x-derivative rows are computed at ingest for the first contact only (the one a patch step plans from).
     ROTATED_CONTACTS_MAX = 8
 
     def _ingest(self, x: Tensor, y: Tensor) -> Tensor:
@@ -388,7 +388,7 @@ class StructuredExactInference:
         dim, n_o = x.shape[1], len(self.xo)
         contacts = x[y == 0]
         if len(contacts) > self.ROTATED_CONTACTS_MAX:
-            contacts = contacts[:0]
+            contacts = contacts[:1]
         rows = torch.cat([self.kernel.value(x, self.xo),
                           _kernel_rows(contacts, self.xo, self.kernel)[1:].reshape(-1, n_o)])
         rotated = rows @ self.u
