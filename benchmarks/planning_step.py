@@ -40,7 +40,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
-from torch_gpioius.inference.optim import _chain, chol_params_to_task_covariance, task_covariance_to_chol_params
+from torch_gpioius.inference.optim import chain_to_cholesky, chol_params_to_task_covariance, task_covariance_to_chol_params
 from torch_gpioius.planning import plan_direction
 
 THETA, NOISE, STEP = 0.15, 0.08, 0.01
@@ -151,7 +151,7 @@ def run(n_outer: int, n_inner: int, steps: int, naive: bool):
         mll_d, g_d, h_d = dense.mll_derivatives(kt_f)
         mu_d, v_d = dense.predict(contact[None], 0, kt_f)
         phi = task_covariance_to_chol_params(kt_f)
-        grad, hess = _chain(phi, g_d, h_d)
+        grad, hess = chain_to_cholesky(phi, g_d, h_d)
         kt_opt = chol_params_to_task_covariance(phi + np.linalg.solve(-hess, grad))
         cos = float(f["dir"] @ d_n) / STEP**2
         diffs.append({

@@ -13,6 +13,7 @@ from .evidence import EVIDENCE_POLICIES, Evidence, TapPolicy, evidence_policy
 from .loop import begin, explore, run
 from .observations import (Observations, ObservationPolicy, free_space_along, retract_free_space, thin_points,
                            vision_observations)
+from .patches import PatchSettings, patch_observations
 from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .recovery import NoProgress
@@ -33,4 +34,4 @@ __all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run
            "StopRule", "OnceAround", "TravelBudget", "gone_around", "largest_uncovered_gap", "World", "Hardware",
            "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash", "register_world", "world_entry",
            "world_names", "make_world", "WorldEntry", "free_space_along", "retract_free_space", "thin_points",
-           "vision_observations"]
+           "vision_observations", "PatchSettings", "patch_observations"]

@@ -40,7 +40,7 @@ import torch
 from torch import Tensor
 
 from .dense import robust_cholesky
-from .structured import StructuredExactInference, _Rows
+from .structured import StructuredExactInference, GrowingRows
 
 __all__ = ["BatchedExactInference"]
 
@@ -213,7 +213,7 @@ class BatchedExactInference(StructuredExactInference):
             "vecs": torch.stack([d * self.rt, lam * d * d * self.rt, lam * lam * d ** 3 * self.rt], dim=1),
             "chol": _LowerFactor(f["chol"], cap), "w": _Square(torch.cholesky_inverse(f["chol"]), cap),
             "t0": _Square(f["t0"], cap), "t1": _Square(f["t1"], cap),
-            "pd": _Rows(f["pd"]), "v": _Rows(f["v"]), "logdet_s": f["logdet_s"], "cache": cache,
+            "pd": GrowingRows(f["pd"]), "v": GrowingRows(f["v"]), "logdet_s": f["logdet_s"], "cache": cache,
         }
         self.bordered_batches = 0
         self._refresh()

@@ -26,7 +26,7 @@ from torch import Tensor
 from ..tolerances import tol
 
 __all__ = ["FitResult", "chol_params_to_task_covariance", "task_covariance_to_chol_params", "maximize_mll",
-           "newton_maximize", "predicted_gain"]
+           "newton_maximize", "predicted_gain", "chain_to_cholesky"]
 
 
 @dataclass
@@ -74,7 +74,7 @@ def task_covariance_to_chol_params(kt: Tensor) -> np.ndarray:
     return np.array([min(max(math.log(l00), lo), hi), v, min(max(0.5 * math.log(l11sq), lo), hi)])
 
 
-def _chain(phi: np.ndarray, g: Tensor, h: Tensor) -> tuple[np.ndarray, np.ndarray]:
+def chain_to_cholesky(phi: np.ndarray, g: Tensor, h: Tensor) -> tuple[np.ndarray, np.ndarray]:
     """Gradient and Hessian in phi from those in p = (a, b, c) by the chain rule (3x3 NumPy arithmetic: these
     small steps run once per Newton iteration, where torch's per-operation dispatch would dominate)."""
     u, v, w = phi.tolist()
@@ -179,13 +179,13 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         f, g, h = _evaluate_trial(evaluate, phi)
         if g is None:
             return f, None, None
-        grad, hess = _chain(phi, g, h)
+        grad, hess = chain_to_cholesky(phi, g, h)
         last["hess"] = hess
         return f, grad, hess
 
     phi0 = task_covariance_to_chol_params(kt0)
     f0, g0, h0 = evaluate(chol_params_to_task_covariance(phi0))      # the start must evaluate (errors propagate)
-    first = [(f0, *_chain(phi0, g0, h0))]
+    first = [(f0, *chain_to_cholesky(phi0, g0, h0))]
     last["hess"] = first[0][2]
 
     def value_first(phi):

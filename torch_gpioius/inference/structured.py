@@ -145,7 +145,7 @@ def _kernel_rows(xq: Tensor, x_train: Tensor, kernel) -> Tensor:
     return torch.cat([k.unsqueeze(0), kernel.gradient(xq, x_train, k)])
 
 
-class _Rows:
+class GrowingRows:
     """Rows appended in place into a buffer with spare capacity (``torch.cat`` would copy everything per append)."""
 
     def __init__(self, rows: Tensor):
@@ -203,7 +203,7 @@ class _ChebyshevStore:
         self.capacity = 0
         self.block = torch.zeros(len(self.n_j), 0, **kind)
         self._reserve(self.size * (self.size + 1) // 2)
-        self._pp = _Rows(p[:, self.perm[:self.n_j[0]]])                              # P, modes permuted
+        self._pp = GrowingRows(p[:, self.perm[:self.n_j[0]]])                              # P, modes permuted
         self.pp = self._pp.data
         if self.size:
             r, c = _tril(self.size, p.device)
@@ -329,7 +329,7 @@ class StructuredExactInference:
         self.lam = lam.clamp_min(0.0)  # K_oo is PSD; clamp rounding below zero
         self.rt = self.u.T @ (self.yo - self.mean)
         self.kii = self.kernel.value(self.xi, self.xi)
-        self._p = _Rows(self.kernel.value(self.xi, self.xo) @ self.u if len(self.xi)
+        self._p = GrowingRows(self.kernel.value(self.xi, self.xo) @ self.u if len(self.xi)
                         else torch.zeros(0, len(self.xo), **kind))
         self._series = None  # _ChebyshevStore of the current window of K_t[1,1]
         self._rotated = None  # (contacts, (1 + d, k, N_o) rotated kernel rows and x-derivatives) of the last append
@@ -418,7 +418,7 @@ class StructuredExactInference:
         keep = ~drop[task == 0]            # inner points keep their data order here (init and append)
         self.xi, self.yi = self.xi[keep], self.yi[keep]
         self.kii = self.kii[keep][:, keep]
-        self._p = _Rows(self.p[keep])
+        self._p = GrowingRows(self.p[keep])
         self._series = None                # rebuilt for the remaining rows at the next factorisation
         self._rotated = None
         self._invalidate()
