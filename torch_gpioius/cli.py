@@ -34,7 +34,8 @@ def _simulate3d(args: argparse.Namespace) -> int:
     from .io.outputs import claim_folder
     from .studies.study3d import run_study_3d
 
-    claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel)
+    claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
+                 touch=None if args.touch == "point" else args.touch)   # folders of older versions: point
     scenes = [] if args.scene is None else args.scene.split(",")
     if args.object is None:
         objects = [] if scenes else ["E", "F", "G", "H"]
@@ -43,7 +44,7 @@ def _simulate3d(args: argparse.Namespace) -> int:
     travel = 0.06 if args.smoke else args.max_travel
     result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
                           progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes,
-                          voxel=args.voxel)
+                          voxel=args.voxel, touch=args.touch)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
@@ -282,6 +283,9 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("--max-travel", type=float, default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
     s3.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP)
+    s3.add_argument("--touch", default="point", choices=["point", "patch"],
+                    help="point: the fingertip's contact (the paper); patch: a DIGIT-like gel pad's depth map at each "
+                         "contact (forcefield world)")
     s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
     s3.add_argument("--quiet", action="store_true", help="no progress output")
     _force(s3, "--out holds files that `gpioius simulate3d` (of this world) did not write")

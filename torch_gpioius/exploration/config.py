@@ -155,7 +155,8 @@ class ExploreConfig:
             return GPIS(np.asarray(x)[inner], np.asarray(y)[inner], theta=theta, noise=self.noise, kernel=kernel)
         if self.regions is not None:
             return LocalGPIOIS(x, y, task, regions=self.regions, theta=theta, noise=self.noise, kernel=kernel)
-        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel)
+        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel,
+                      inference=getattr(self.touch, "inference", "auto"))
 
     def describe(self) -> dict:
         """JSON-able settings for a log's header (resume compares them)."""

@@ -13,6 +13,7 @@ crash-safe log of :mod:`torch_gpioius.io.logs`).
 
 from __future__ import annotations
 
+import inspect
 import math
 import time
 
@@ -95,7 +96,7 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
         if evidence is not None:
             record.evidence.append(ingest_evidence(state, cfg, evidence))
     stalled = unstall(ctx, state, record)
-    state.model.fit(multi_start=False)
+    _fit(state.model, cfg)
     _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1)
     stop = stalled or _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
     record.final = stop is not None
@@ -109,6 +110,8 @@ def begin(ctx: Run) -> ExplorationState:
     """Vision (when the mode uses it), the approach to the first contact, the first model and its fit: the state
     with record 0."""
     cfg, hw, world = ctx.config, ctx.hardware, ctx.world
+    if callable(getattr(cfg.touch, "bind", None)):
+        cfg.touch.bind(hw)
     outer = None
     if cfg.uses_vision:
         crop = world.crop_box()
@@ -198,10 +201,19 @@ def unstall(ctx: Run, state: ExplorationState, record: StepRecord) -> str | None
 
 def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig, contact: np.ndarray) -> np.ndarray:
     """Retract free space the new contact shows to be too close, then add the batch; the retracted indices."""
-    removed = retract_free_space(state.model, contact, cfg.policy.free_space_margin)
+    margin = getattr(cfg.touch, "retraction_margin", None) or cfg.policy.free_space_margin
+    removed = retract_free_space(state.model, contact, margin)
     state.retracted += len(removed)
     _add(state.model, obs)
     return removed
+
+
+def _fit(model, cfg: ExploreConfig) -> None:
+    """Re-learn warm-started; a touch model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model whose
+    ``fit`` takes them (GPIOIS; GPIS learns nothing)."""
+    options = cfg.touch.fit_options() if callable(getattr(cfg.touch, "fit_options", None)) else {}
+    accepted = inspect.signature(model.fit).parameters
+    model.fit(multi_start=False, **{k: v for k, v in options.items() if k in accepted})
 
 
 def _add(model, obs: Observations) -> None:

@@ -3,13 +3,15 @@ tactile patches are the same contract with many points)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
+from typing import Any
 
 import numpy as np
 
 from .observations import Observations, ObservationPolicy, thin_points
+from .patches import PatchSettings, patch_observations
 
-__all__ = ["PointTouch", "TOUCH_MODELS", "touch_model"]
+__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "touch_model"]
 
 
 @dataclass(frozen=True)
@@ -32,8 +34,67 @@ class PointTouch:
         return {"touch": self.name}
 
 
+@dataclass
+class PatchTouch:
+    """A tactile pad at the fingertip (DIGIT, GelSight): each touch's patch, read at the contact
+    (:func:`~torch_gpioius.exploration.patches.patch_observations`: surface points with normals, free space on the
+    untouched gel), and the free space the fingertip crossed, as :class:`PointTouch` records it (kept the free-space
+    margin from the contacts and from the patch's surface points).
+
+    The model takes tens of points per step, so a visual-tactile run uses the batched engine
+    (``GPIOIS(inference="batched")``) and re-learns K_t by the ``min_gain`` rule (``GPIOIS.fit``).
+
+    Attributes:
+        settings: the patch's thinning.
+        min_gain: K_t is re-learned when the exact gradient predicts more than this [nats].
+        sensor: the pad (a :class:`~torch_gpioius.sensors.tactile.TactileSensor`); bound from the world's
+            ``Hardware.tactile`` when the run starts if None.
+    """
+
+    settings: PatchSettings = field(default_factory=PatchSettings)
+    min_gain: float = 0.1
+    sensor: Any = None
+    name: str = "patch"
+    inference: str = "batched"
+
+    def bind(self, hardware) -> None:
+        """Take the world's pad (``hardware.tactile``) unless a sensor was given.
+
+        Raises:
+            ValueError: the world has no tactile pad.
+        """
+        if self.sensor is None:
+            pad = getattr(hardware, "tactile", None)
+            if pad is None:
+                raise ValueError("touch='patch': this world's hardware has no tactile pad (Hardware.tactile); give "
+                                 "PatchTouch(sensor=...) or use touch='point'")
+            self.sensor = pad
+
+    def fit_options(self) -> dict:
+        return {"min_gain": self.min_gain}
+
+    @property
+    def retraction_margin(self) -> float:
+        """Free space closer than this to a new contact is retracted [m]: the patch's own margin (its free points
+        sit beside its surface points by design), not the point touch's 2 cm."""
+        return self.settings.free_margin
+
+    def observations(self, result, contacts: np.ndarray, policy: ObservationPolicy, step: int) -> Observations:
+        """The batch of one touch that ended in contact at ``contacts[-1]``: the pad's patch, then free space."""
+        if self.sensor is None:
+            raise ValueError("PatchTouch: no tactile pad bound (bind(hardware) or PatchTouch(sensor=...))")
+        patch = patch_observations(self.sensor.read(), self.settings, step)
+        avoid = np.concatenate([np.asarray(contacts, dtype=np.float64).reshape(-1, patch.dim), patch.x[patch.y == 0]])
+        free = thin_points(result.free_space.numpy(), policy.free_space_spacing, avoid, policy.free_space_margin)
+        path = Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step, source="touch")
+        return Observations.concat([patch, path], source="patch")
+
+    def describe(self) -> dict:
+        return {"touch": self.name, "patch": asdict(self.settings), "min_gain": self.min_gain}
+
+
 #: Touch models by name (``explore(..., touch="point")``).
-TOUCH_MODELS: dict[str, type] = {"point": PointTouch}
+TOUCH_MODELS: dict[str, type] = {"point": PointTouch, "patch": PatchTouch}
 
 
 def touch_model(touch) -> object:

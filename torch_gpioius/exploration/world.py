@@ -46,12 +46,15 @@ class Hardware:
         camera: a :class:`torch_gpioius.sensors.PointCloudSource`.
         controller: ``approach(direction, max_travel)`` and ``slide(step, normal)`` returning
             :class:`torch_gpioius.contact.ContactResult`.
+        tactile: a tactile pad at the fingertip (:class:`torch_gpioius.sensors.tactile.TactileSensor`) or None;
+            ``touch="patch"`` reads it at each contact.
     """
 
     robot: Any
     sensor: Any
     camera: Any
     controller: Toucher
+    tactile: Any = None
 
 
 @dataclass(frozen=True)

@@ -138,6 +138,10 @@ class BatchedExactInference(StructuredExactInference):
         As :class:`~torch_gpioius.inference.StructuredExactInference`.
     """
 
+    #: Patches grow the data fast (tens of points per step): the store's truncation leaves room for 256x growth of
+    #: ``b^2 |p_k|^2`` before a rebuild (one or two more Chebyshev orders per mode than the structured engine's 16x).
+    STORE_HEADROOM = 256.0
+
     def __init__(self, *args, **kwargs):
         self._held: dict | None = None
         super().__init__(*args, **kwargs)
@@ -191,8 +195,11 @@ class BatchedExactInference(StructuredExactInference):
         key = tuple(b.detach().flatten().tolist())
         held = self._held
         if not derivatives and self.n_inner:
-            if held is None or held["key"] != key or held["n"] != self.n_inner:
-                self._hold(b)
+            if held is not None and held["key"] == key and held["n"] == self.n_inner:
+                return held["cache"]
+            if self._key == key:                 # a full factorisation at this K_t (a Newton trial's MLL)
+                return self._cache
+            self._hold(b)
             return self._held["cache"]
         return super().factor(b, derivatives)
 

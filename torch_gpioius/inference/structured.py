@@ -176,20 +176,21 @@ class _ChebyshevStore:
         p: `(N_i, N_o)` rotated inner-outer kernel rows.
         noise: s.
         c0: centre of the window.
-        beta2: b^2 the truncation is sized for (grown by ``HEADROOM``).
+        beta2: b^2 the truncation is sized for (grown by ``headroom``).
+        headroom: factor of growth (of b^2 and of the data's |p_k|^2) the truncation allows before a rebuild.
     """
 
     HEADROOM = 16.0
     GROUPS = 4
 
-    def __init__(self, lam: Tensor, p: Tensor, noise: float, c0: float, beta2: float):
+    def __init__(self, lam: Tensor, p: Tensor, noise: float, c0: float, beta2: float, headroom: float = HEADROOM):
         kind = dict(dtype=p.dtype, device=p.device)
         self.kind, self.noise = kind, noise
         self.u0, self.h = math.log(c0), math.log(WINDOW)
         coef = _chebyshev_coefficients(lam, noise, self.u0, self.h).to(**kind)
         err = _unit_error_bounds(lam, noise, self.u0, self.h)
         w = (p * p).sum(0).to(err)                                                   # |p_k|^2
-        target = tol.structured_series * noise / (self.HEADROOM * max(beta2, 1e-300))
+        target = tol.structured_series * noise / (headroom * max(beta2, 1e-300))
         orders = self._allocate(err * w.unsqueeze(1), target)
         self.unit_err = err.gather(1, orders.unsqueeze(1)).squeeze(1).to(**kind)     # bound per unit |p_k|^2
         self.w = w.to(**kind)
@@ -375,6 +376,9 @@ class StructuredExactInference:
         self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean)
         return True
 
+    #: Growth of the data (and of b^2) the Chebyshev store's truncation allows before it is rebuilt.
+    STORE_HEADROOM = 16.0
+
     #: Above this many surface contacts in one append (a tactile patch brings dozens), the planner's rotated
     #: x-derivative rows are computed at ingest for the first contact only (the one a patch step plans from).
     ROTATED_CONTACTS_MAX = 8
@@ -438,7 +442,8 @@ class StructuredExactInference:
             self._series.append(self.p[self._series.size:])
         if self._series is None or not self._series.covers(c, beta * beta):
             # size the truncation for the largest b^2 a PSD K_t allows at this a, c (b^2 <= a c)
-            self._series = _ChebyshevStore(self.lam, self.p, self.noise, c, max(beta * beta, a * c))
+            self._series = _ChebyshevStore(self.lam, self.p, self.noise, c, max(beta * beta, a * c),
+                                           self.STORE_HEADROOM)
         return self._series.t_matrices(c, derivatives)
 
     # ------------------------------------------------------------------ factorisation

@@ -232,9 +232,22 @@ class Scene3D(World):
         from ..sensors.simulated import SimulatedForceSensor
 
         robot = simulated_ur5(self.start, self.direction, self.range[0], self.range[1])
-        sensor = SimulatedForceSensor(self.contact_model(), robot.read_pose, clock=lambda: robot.time,
+        field = self.contact_model()
+        sensor = SimulatedForceSensor(field, robot.read_pose, clock=lambda: robot.time,
                                       noise_std=self.sensor_noise, seed=self.seed)
-        return Hardware(robot, sensor, self.camera, ContactController(robot, sensor))
+        return Hardware(robot, sensor, self.camera, ContactController(robot, sensor), self.tactile_pad(robot, field))
+
+    def tactile_pad(self, robot, field=None):
+        """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
+        contact force of the field, sees the body through 0.5 mm of pinched cloth."""
+        from .meshes import MeshDistance
+        from .tactile import SimulatedGelPad
+
+        if getattr(self, "_body_distance", None) is None:
+            self._body_distance = MeshDistance(self.inner)
+        field = field or self.contact_model()
+        return SimulatedGelPad(self._body_distance, lambda: robot.tool_position().detach().numpy(),
+                               lambda: field(robot.tool_position().detach()).numpy(), clock=lambda: robot.time)
 
     def penalty(self) -> RangePenalty:
         return self.range_penalty()

@@ -1,0 +1,41 @@
+"""touch="patch": a simulated gel pad explores a 3-D object; its points are on the body (plus the cloth)."""
+
+import numpy as np
+import pytest
+
+import torch_gpioius as tg
+from torch_gpioius.exploration.registry import make_world
+from torch_gpioius.exploration.touch import PatchTouch
+from torch_gpioius.io.datasets import replay
+
+
+@pytest.mark.parametrize("mode", ["visual-tactile", "tactile"])
+def test_a_simulated_pad_explores_the_arm_and_its_patches_lie_on_the_body(mode, tmp_path):
+    world = make_world("forcefield", "E", 0, smoke=True)
+    log = tmp_path / "run.gpioius"
+    trace = tg.explore(world, mode, touch="patch", max_travel=0.03, metrics_every=100, log=log)
+    assert trace.n_steps >= 3 and not trace.terminated.startswith("refused")
+    m = trace.model
+    task = m.train_task if mode == "visual-tactile" else np.zeros(m.train_targets.numel(), np.int64)
+    inner = np.asarray(task) == 0
+    x, y = m.train_inputs[0].numpy()[inner], m.train_targets.numpy()[inner]
+    surf = x[y == 0]
+    assert len(surf) > 20 * trace.n_steps                       # tens of surface points per touch
+    # on the body to within the pinched cloth (0.5 mm) and the pad's 0.5 mm pixels
+    dist = world.true_distance(surf)
+    assert np.abs(dist).max() < 2e-3, np.abs(dist).max()
+    assert (world.true_distance(x[y == 1]) > 0).all()           # free space is outside the body
+    if mode == "visual-tactile":
+        assert type(trace.model._inference()).__name__ == "BatchedExactInference"
+    # the log holds every patch: replaying it gives the model's data
+    last = None
+    for _, dataset in replay(log):
+        last = dataset
+    assert last is not None and len(last.y) == trace.model.train_targets.numel()
+
+
+def test_a_world_without_a_pad_says_so():
+    world = make_world("planar", "A", 0)
+    with pytest.raises(ValueError, match="no tactile pad"):
+        tg.explore(world, "tactile", touch="patch", max_steps=2)
+    assert PatchTouch().describe()["touch"] == "patch"
