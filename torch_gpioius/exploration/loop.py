@@ -57,6 +57,8 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
         the :class:`~torch_gpioius.exploration.trace.Trace` of the run.
     """
     ctx = Run(world, hardware or world.hardware(), config, resumed=state is not None)
+    if callable(getattr(config.touch, "bind", None)):        # a patch touch reads the world's pad
+        config.touch.bind(ctx.hardware)
     observers = [MetricsRecorder(), IntervalRecorder(), *recorders, ProgressRecorder(progress)]
     state = state if state is not None else begin(ctx)
     for r in observers:
@@ -110,8 +112,6 @@ def begin(ctx: Run) -> ExplorationState:
     """Vision (when the mode uses it), the approach to the first contact, the first model and its fit: the state
     with record 0."""
     cfg, hw, world = ctx.config, ctx.hardware, ctx.world
-    if callable(getattr(cfg.touch, "bind", None)):
-        cfg.touch.bind(hw)
     outer = None
     if cfg.uses_vision:
         crop = world.crop_box()

@@ -68,7 +68,7 @@ class PatchTouch:
             if pad is None:
                 raise ValueError("touch='patch': this world's hardware has no tactile pad (Hardware.tactile); give "
                                  "PatchTouch(sensor=...) or use touch='point'")
-            self.sensor = pad
+            self._pad = pad                  # each run binds its own hardware's pad
 
     def fit_options(self) -> dict:
         return {"min_gain": self.min_gain}
@@ -81,9 +81,10 @@ class PatchTouch:
 
     def observations(self, result, contacts: np.ndarray, policy: ObservationPolicy, step: int) -> Observations:
         """The batch of one touch that ended in contact at ``contacts[-1]``: the pad's patch, then free space."""
-        if self.sensor is None:
+        pad = self.sensor if self.sensor is not None else getattr(self, "_pad", None)
+        if pad is None:
             raise ValueError("PatchTouch: no tactile pad bound (bind(hardware) or PatchTouch(sensor=...))")
-        patch = patch_observations(self.sensor.read(), self.settings, step)
+        patch = patch_observations(pad.read(), self.settings, step)
         avoid = np.concatenate([np.asarray(contacts, dtype=np.float64).reshape(-1, patch.dim), patch.x[patch.y == 0]])
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, avoid, policy.free_space_margin)
         path = Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step, source="touch")

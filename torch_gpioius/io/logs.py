@@ -90,6 +90,10 @@ class LogRecorder(Recorder):
                 "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
                 "contact_on_body": record.contact_on_body}
+        fit_state = getattr(state.model, "fit_state", None)
+        fit_hessian = np.full((3, 3), np.nan)
+        if callable(fit_state):                     # the min_gain rule's memory (patch runs), so resume decides alike
+            fit_hessian, meta["fit_relearned"], meta["held_fits"] = fit_state()
         path = touch.path.numpy() if touch is not None else np.zeros((0, dim))
         arrays = {"x": obs.x, "y": obs.y, "task": obs.task, "removed": np.asarray(record.removed, dtype=np.int64),
                   "contact": state.contact, "kt": np.asarray(record.task_covariance, dtype=np.float64),
@@ -97,7 +101,7 @@ class LogRecorder(Recorder):
                   "normal": np.full(dim, np.nan) if state.normal is None else state.normal.numpy(),
                   "path": path, "positions": path,
                   "forces": touch.forces.numpy() if touch is not None else np.zeros((0, 3)),
-                  "timestamps": np.full(len(path), record.robot_time)}
+                  "timestamps": np.full(len(path), record.robot_time), "fit_hessian": fit_hessian}
         if obs.normal is not None:
             arrays["normals"] = obs.normal
         if hasattr(state.model, "region_correlations"):
@@ -180,6 +184,9 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
             rec.region_correlation = np.full(model.regions, np.nan)
     elif hasattr(model, "task_covariance"):
         model.task_covariance = torch.as_tensor(last.arrays["kt"])
+        if "fit_hessian" in last.arrays and callable(getattr(model, "restore_fit_state", None)):
+            model.restore_fit_state(last.arrays["fit_hessian"], last.meta.get("fit_relearned", True),
+                                    last.meta.get("held_fits", 0))
     state.model = model
     v = step_values(last.meta)
     state.travel, state.retracted, state.taps, state.recoveries = v["travel"], v["retracted"], v["taps"], v["recoveries"]

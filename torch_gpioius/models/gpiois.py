@@ -319,6 +319,22 @@ class GPIOIS(ImplicitSurfaceGP):
         self.fit_result = best
         return self
 
+    def fit_state(self) -> tuple[np.ndarray, bool, int]:
+        """What ``fit(min_gain=...)`` decides from, for logs and resume: the last re-learning's `(3, 3)` Hessian
+        (NaN if none), whether the last fit re-learned, and the held fits in a row."""
+        last = self.fit_result
+        hess = np.full((3, 3), np.nan) if last is None or last.hessian is None else np.asarray(last.hessian)
+        return hess, bool(last is None or last.relearned), int(self._held_fits)
+
+    def restore_fit_state(self, hessian, relearned: bool, held_fits: int) -> None:
+        """Restore :meth:`fit_state` on a model rebuilt from a log (its K_t already set)."""
+        hess = np.asarray(hessian, dtype=np.float64)
+        if hess.shape != (3, 3) or not np.isfinite(hess).all():
+            return
+        self.fit_result = FitResult(self.task_covariance, math.nan, math.nan, 0, True, hessian=hess,
+                                    relearned=bool(relearned))
+        self._held_fits = int(held_fits)
+
     def _hold_task_covariance(self, engine, min_gain: float, max_hold: int) -> bool:
         """Keep K_t if the exact gradient predicts a re-learning gain below ``min_gain`` (see ``fit``)."""
         last = self.fit_result
