@@ -58,7 +58,8 @@ def _study(args: argparse.Namespace) -> int:
     result = run_sweep(world=args.world, objects=objects, scenes=scenes, modes=args.modes.split(","),
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
-                       progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel)
+                       progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
+                       touch=args.touch)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -313,6 +314,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--max-travel", type=float, default=None, help="travel budget per run [m] (3-D worlds)")
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
     sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
+    sw.add_argument("--touch", default="point", choices=["point", "patch"],
+                    help="point: the fingertip's contact; patch: a gel pad's depth map (forcefield); one per --out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

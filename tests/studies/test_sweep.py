@@ -263,3 +263,17 @@ def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_p
     with pytest.raises(ValueError, match="voxel-averaged"):
         run_sweep("planar", seeds=1, out=tmp_path / "planar", voxel=0.01)
     assert not (tmp_path / "bad").exists() and not (tmp_path / "planar").exists()
+
+
+def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
+    ball = _scene(tmp_path)
+    run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,
+              backend="local", progress=False, touch="patch")
+    rows = list(csv.DictReader(open(tmp_path / "p" / "runs.csv")))
+    assert rows[0]["failed"] == "" and json.loads((tmp_path / "p" / "runs" / "ball_visual-tactile_0.json")
+                                                   .read_text())["touch"] == "patch"
+    with pytest.raises(FileExistsError, match=r"touch='patch'.* this one is touch=None"):
+        run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,
+                  backend="local", progress=False)
+    with pytest.raises(ValueError, match="touch"):
+        run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "q", touch="finger")

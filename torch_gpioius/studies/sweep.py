@@ -76,6 +76,7 @@ class RunSpec:
     threads: int = 1
     scene: str | None = None        # a scene file (torch_gpioius.sim.scenefile) instead of a built-in object
     voxel: float | None = None      # camera voxel edge [m] (0: every point); None: the world's own (0.05)
+    touch: str = "point"            # "point" (the fingertip's contact) or "patch" (a gel pad's depth map)
 
     @property
     def key(self) -> str:
@@ -122,6 +123,8 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["interval_every"] = 1000 if spec.smoke else 10
     if spec.voxel is not None:
         kw["policy"] = world.defaults.policy.with_voxel(spec.voxel)
+    if spec.touch != "point":
+        kw["touch"] = spec.touch
     return kw
 
 
@@ -269,6 +272,7 @@ def run_one(spec: RunSpec) -> dict:
         record = _record(spec, kw, trace, time.perf_counter() - t0)
         record["n_outer"] = _n_outer(trace.model)
     record["voxel"] = kw.get("policy", world.defaults.policy).voxel or 0.0
+    record["touch"] = spec.touch
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
@@ -678,7 +682,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
-              scenes=(), voxel: float | None = None) -> dict:
+              scenes=(), voxel: float | None = None, touch: str = "point") -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -705,6 +709,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             with scenes and no ``objects``, only the scenes run. Only the 3-D worlds build scene files.
         voxel: edge of the camera's voxels [m] (0: every camera point; None: each world's own, 0.05 as the
             paper). A study folder holds one setting: compare settings across folders (docs/results-resolution.md).
+        touch: "point" (the paper's fingertip contact) or "patch" (a gel pad's depth map at each contact; the
+            force-field world has a pad); a study folder holds one.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -745,13 +751,16 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         if getattr(entry.cls, "dim", 3) != 3:
             raise ValueError(f"voxel: the {world} world's camera view is sampled at its spacing, not voxel-averaged; "
                              "--voxel applies to the 3-D worlds")
-    out = claim_folder(out, "study", force, world=world, voxel=voxel)
+    if touch not in ("point", "patch"):
+        raise ValueError(f"touch: must be 'point' or 'patch', got {touch!r}")
+    out = claim_folder(out, "study", force, world=world, voxel=voxel,
+                       touch=None if touch == "point" else touch)     # folders of older versions hold point runs
     with FolderLock(out, "gpioius study"):
         (out / "runs").mkdir(parents=True, exist_ok=True)
         running = out / "running"
         for stale in running.glob("*.pid") if running.exists() else []:   # we hold the lock: nobody else runs
             stale.unlink(missing_ok=True)
-        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o), voxel)
+        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o), voxel, touch)
                  for o in (*objects, *scene_files) for m in modes for s in range(seeds)]
         todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
         use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
