@@ -133,9 +133,7 @@ class BatchedExactInference(StructuredExactInference):
     eigendecomposition of K_oo and Chebyshev store it inherits for re-learning K_t), plus
     :meth:`mll_gradient`. The first factorisation at a K_t also inverts S (O(N_i^3)); later inner batches
     border it in O(N_i^2 k). The Chebyshev store is only needed to re-learn K_t, so new rows reach it then.
-
-    Args:
-        As :class:`~torch_gpioius.inference.StructuredExactInference`.
+    It takes the arguments of :class:`~torch_gpioius.inference.StructuredExactInference`.
     """
 
     #: Patches grow the data fast (tens of points per step): the store's truncation leaves room for 256x growth of
