@@ -105,13 +105,13 @@ def naive_step(x, y, t, kt_init, contact):
     return (model.task_covariance, -float(loss) * n, float(mean.detach()), float(var.detach()), direction.detach())
 
 
-def run(n_outer: int, n_inner: int, steps: int, naive: bool):
+def run(n_outer: int, n_inner: int, steps: int, naive: bool, device: str = "cpu"):
     xo, yo, xi_all, yi_all = make_data(n_outer, n_inner + 5 * (steps + 1))
     t_o = torch.ones(n_outer, dtype=torch.long)
     t0 = time.perf_counter()
     model = tg.GPIOIS(torch.cat([xi_all[:n_inner], xo]), torch.cat([yi_all[:n_inner], yo]),
                       torch.cat([torch.zeros(n_inner, dtype=torch.long), t_o]), theta=THETA, noise=NOISE,
-                      inference="structured")
+                      inference="structured", device=device)
     model._inference()
     t_eig = time.perf_counter() - t0
     model.fit()
@@ -121,7 +121,7 @@ def run(n_outer: int, n_inner: int, steps: int, naive: bool):
     fast_times, fast = [], []
     for s in range(steps):
         lo = n_inner + 5 * s
-        new_x, new_y = xi_all[lo:lo + 5], yi_all[lo:lo + 5]
+        new_x, new_y = xi_all[lo:lo + 5].to(device), yi_all[lo:lo + 5].to(device)
         t1 = time.perf_counter()
         model.add_observations(new_x, new_y, 0)
         model.fit()
@@ -129,8 +129,8 @@ def run(n_outer: int, n_inner: int, steps: int, naive: bool):
         fast_times.append(time.perf_counter() - t1)
         if naive:
             mu_f, v_f = model.predict(new_x[0][None])
-            fast.append({"kt": model.task_covariance, "mll": float(model.log_marginal_likelihood()),
-                         "mu": float(mu_f), "v": float(v_f), "dir": plan.direction})
+            fast.append({"kt": model.task_covariance.cpu(), "mll": float(model.log_marginal_likelihood()),
+                         "mu": float(mu_f), "v": float(v_f), "dir": plan.direction.cpu()})
     # (b) on the same steps, then the dense exact engine at (a)'s K_t
     naive_times, diffs = [], []
     kt_prev = kt_first
@@ -180,7 +180,11 @@ def main():
     parser.add_argument("--steps", type=int, default=7, help="planning steps timed per configuration")
     parser.add_argument("--naive-max-outer", type=int, default=2000,
                         help="skip the naive side above this N_outer (it takes minutes per step there)")
+    parser.add_argument("--device", default="cpu", help="where the fast side runs (cuda: on a GPU, float64)")
     args = parser.parse_args()
+    if args.device != "cpu":
+        print(f"# fast side on {args.device}: "
+              f"{torch.cuda.get_device_name(args.device) if args.device.startswith('cuda') else args.device}")
     print(f"# {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, torch {torch.__version__} "
           f"({torch.get_num_threads()} threads), gpytorch {gpytorch.__version__}, float64")
     print("| N_outer | N_inner | setup: eigh + first fit [s] | fast step [ms] | naive step [ms] | ratio | "
@@ -189,7 +193,7 @@ def main():
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n_outer in args.outer:
         for n_inner in args.inner:
-            r = run(n_outer, n_inner, args.steps, naive=n_outer <= args.naive_max_outer)
+            r = run(n_outer, n_inner, args.steps, naive=n_outer <= args.naive_max_outer, device=args.device)
             if r["diff"]:
                 d = r["diff"]
                 diff = f"{d['K_t']:.1e} / {d['MLL']:.1e} / {d['mu']:.1e} / {d['V']:.1e}"

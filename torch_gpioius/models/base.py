@@ -120,6 +120,21 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             n = self._engine.n
             self._engine_key = self._key(n)
 
+    def to_device(self, device) -> "ImplicitSurfaceGP":
+        """Move the data and the model to ``device`` (None: stay); the engine is rebuilt there, in float64.
+
+        Raises:
+            ValueError: an unknown device name, or one this torch build cannot use (names it).
+        """
+        if device is None:
+            return self
+        try:
+            dev = torch.device(device)
+            torch.zeros(1, dtype=torch.float64, device=dev)
+        except (RuntimeError, AssertionError, TypeError) as exc:
+            raise ValueError(f"device: cannot use {device!r} here ({exc})") from None
+        return self.to(dev)
+
     def _apply(self, fn, *args, **kwargs):
         # .to(dtype) / .float() / .half() would run the GP arithmetic in that dtype: refuse before anything moves.
         # The probe is what fn makes of a float64 tensor (device moves keep float64 and pass).

@@ -62,6 +62,8 @@ class GPIOIS(ImplicitSurfaceGP):
             held K_t, for tactile patches of tens of points per step; use it with ``fit(min_gain=...)``).
         kernel: any :class:`~torch_gpioius.kernels.ExactKernel` (e.g. ``tg.kernels.Matern52(0.1)``) in place of the
             inverse multiquadric; both engines stay exact for it.
+        device: where the data and the exact arithmetic live ("cpu", "cuda", a ``torch.device``; default: where
+            ``train_x`` is). Always float64; K_t's 3 x 3 Newton algebra runs on the host.
 
     Raises:
         ValueError: NaN/inf coordinates, empty data, mismatched lengths, labels or task ids outside {0, 1}.
@@ -76,7 +78,7 @@ class GPIOIS(ImplicitSurfaceGP):
 
     def __init__(self, train_x, train_y, train_task, theta: float = 0.1, noise: float = 0.006,
                  task_covariance: Tensor | None = None, learn_theta: bool = False, inference: str = "auto",
-                 kernel=None):
+                 kernel=None, device=None):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")
@@ -91,6 +93,7 @@ class GPIOIS(ImplicitSurfaceGP):
         #: Outcome of the last ``fit()`` (None before the first).
         self.fit_result: FitResult | None = None
         self._held_fits = 0
+        self.to_device(device)
 
     # ------------------------------------------------------------------ GPyTorch idiom
     def forward(self, x: Tensor, task: Tensor) -> MultivariateNormal:

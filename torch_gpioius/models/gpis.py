@@ -26,6 +26,8 @@ class GPIS(ImplicitSurfaceGP):
         noise: noise variance sigma^2.
         learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
         kernel: any :class:`~torch_gpioius.kernels.ExactKernel` in place of the inverse multiquadric.
+        device: where the data and the exact arithmetic live ("cpu", "cuda", a ``torch.device``; default: where
+            ``train_x`` is). Always float64.
 
     Raises:
         ValueError: NaN/inf coordinates, empty data, wrong shapes, labels outside {0, 1}.
@@ -34,10 +36,11 @@ class GPIS(ImplicitSurfaceGP):
     num_tasks = 1
 
     def __init__(self, train_x, train_y, theta: float = 0.1, noise: float = 0.006, learn_theta: bool = False,
-                 kernel=None):
+                 kernel=None, device=None):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         super().__init__((x,), y, theta, noise, learn_theta, kernel)
+        self.to_device(device)
 
     def forward(self, x: Tensor) -> MultivariateNormal:
         """GPyTorch prior of F at `(n, d)` points."""
