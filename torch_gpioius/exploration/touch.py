@@ -56,6 +56,7 @@ class PatchTouch:
     sensor: Any = None
     name: str = "patch"
     inference: str = "batched"
+    _pad: Any = field(default=None, init=False, repr=False, compare=False)   # the run's hardware pad (bind)
 
     def bind(self, hardware) -> None:
         """Take the world's pad (``hardware.tactile``) unless a sensor was given.
@@ -81,7 +82,7 @@ class PatchTouch:
 
     def observations(self, result, contacts: np.ndarray, policy: ObservationPolicy, step: int) -> Observations:
         """The batch of one touch that ended in contact at ``contacts[-1]``: the pad's patch, then free space."""
-        pad = self.sensor if self.sensor is not None else getattr(self, "_pad", None)
+        pad = self.sensor if self.sensor is not None else self._pad
         if pad is None:
             raise ValueError("PatchTouch: no tactile pad bound (bind(hardware) or PatchTouch(sensor=...))")
         patch = patch_observations(pad.read(), self.settings, step)

@@ -215,7 +215,7 @@ class BatchedExactInference(StructuredExactInference):
         self._held = {
             "key": tuple(b.detach().flatten().tolist()), "n": n, "a": a, "beta": beta, "c": c,
             "jitter": self.jitter, "d": d, "d1": -lam * d * d,
-            "vecs": torch.stack([d * self.rt, lam * d * d * self.rt, lam * lam * d ** 3 * self.rt], dim=1),
+            "vecs": self._weight_vectors(d, derivatives=True),
             "chol": _LowerFactor(f["chol"], cap), "w": _Square(torch.cholesky_inverse(f["chol"]), cap),
             "t0": _Square(f["t0"], cap), "t1": _Square(f["t1"], cap),
             "pd": GrowingRows(f["pd"]), "v": GrowingRows(f["v"]), "logdet_s": f["logdet_s"], "cache": cache,
@@ -293,12 +293,10 @@ class BatchedExactInference(StructuredExactInference):
         h = self._held
         beta = h["beta"]
         u, pd = f["alpha_i"], f["pd"]
+        # K_ii and the held buffers share one capacity (set in _hold, grown by the same k each batch), so each trace
+        # is one dot product over the used rows
         wr = h["w"].rows()
-        kii_sq = self.__dict__["_kii"]
-        if kii_sq.buf.shape[1] != h["w"].buf.shape[1]:             # the buffers grew apart: trace on views
-            tr = torch.stack([(h["w"].view * m).sum() for m in (self.kii, h["t0"].view, h["t1"].view)])
-        else:
-            tr = torch.stack([wr @ kii_sq.rows(), wr @ h["t0"].rows(), wr @ h["t1"].rows()])
+        tr = torch.stack([wr @ self.__dict__["_kii"].rows(), wr @ h["t0"].rows(), wr @ h["t1"].rows()])
         scale = torch.tensor([1.0, -2 * beta, -beta * beta], **self._kind)
         au = torch.stack([self.kii @ u, h["t0"].view @ u, h["t1"].view @ u])
         su = scale.unsqueeze(1) * au

@@ -26,7 +26,8 @@ from torch import Tensor
 from ..tolerances import tol
 
 __all__ = ["FitResult", "chol_params_to_task_covariance", "task_covariance_to_chol_params", "maximize_mll",
-           "newton_maximize", "predicted_gain", "chain_to_cholesky"]
+           "newton_maximize", "predicted_gain", "chain_to_cholesky", "cholesky_bounds",
+           "free_coordinates"]
 
 
 @dataclass
@@ -125,9 +126,7 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     it = 0
     pg_norm = math.inf
     for it in range(1, tol.fit_max_iter + 1):
-        at_lower = (phi <= lower) & (grad < 0)
-        at_upper = (phi >= upper) & (grad > 0)
-        free = ~(at_lower | at_upper)
+        free = free_coordinates(phi, grad, lower, upper)
         pg = np.where(free, grad, 0.0)
         pg_norm = float(np.abs(pg).max())
         if pg_norm <= tol.fit_gtol:
@@ -169,10 +168,7 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         The ``FitResult``. Convergence: projected gradient infinity-norm <= ``tol.fit_gtol``, or a Newton
         decrement below ``tol.fit_ftol * max(1, |mll|)``.
     """
-    lo, hi = tol.log_chol_bounds
-    lower = np.array([lo, -math.inf, lo])
-    upper = np.array([hi, math.inf, hi])
-
+    lower, upper = cholesky_bounds()
     last = {}
 
     def value(phi):
@@ -195,6 +191,18 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
 
     phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper)
     return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged, hessian=last["hess"])
+
+
+def cholesky_bounds() -> tuple[np.ndarray, np.ndarray]:
+    """`(3,)` lower and upper bounds of the Cholesky parameters (u, v, w): ``tol.log_chol_bounds`` on the log
+    diagonals, none on the off-diagonal."""
+    lo, hi = tol.log_chol_bounds
+    return np.array([lo, -math.inf, lo]), np.array([hi, math.inf, hi])
+
+
+def free_coordinates(phi: np.ndarray, grad: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """`(k,)` bool: the coordinates a projected ascent may move (not at a bound with the gradient pointing past it)."""
+    return ~(((phi <= lower) & (grad < 0)) | ((phi >= upper) & (grad > 0)))
 
 
 def predicted_gain(grad: np.ndarray, hess: np.ndarray, free: np.ndarray) -> float:

@@ -377,7 +377,7 @@ class StructuredExactInference:
         return True
 
     #: Growth of the data (and of b^2) the Chebyshev store's truncation allows before it is rebuilt.
-    STORE_HEADROOM = 16.0
+    STORE_HEADROOM = _ChebyshevStore.HEADROOM
 
     #: Above this many surface contacts in one append (a tactile patch brings dozens), the planner's rotated
     #: x-derivative rows are computed at ingest for the first contact only (the one a patch step plans from).
@@ -463,10 +463,7 @@ class StructuredExactInference:
         cache = {"a": a, "beta": beta, "c": c, "d": d_all, "alpha_rot": None}
         if self.n_inner:
             t = self._t_matrices(c, beta, a, derivatives)
-            vecs = [d_all * self.rt]
-            if derivatives:
-                vecs += [self.lam * d_all * d_all * self.rt, self.lam * self.lam * d_all ** 3 * self.rt]
-            pd = self.p @ torch.stack(vecs, dim=1)                  # P D rt (and its c-derivative companions)
+            pd = self.p @ self._weight_vectors(d_all, derivatives)  # P D rt (and its c-derivative companions)
             smat = a * self.kii - beta * beta * t[0]
             smat.diagonal().add_(s)      # exactly symmetric: K_ii and the unpacked T are (Cholesky reads one half)
             chol, self.jitter = robust_cholesky(smat, "inner Schur complement")
@@ -483,6 +480,14 @@ class StructuredExactInference:
     def _solve_lower(f: dict, rhs: Tensor) -> Tensor:
         """``L^-1 rhs`` for the Schur factor ``L`` of a factorisation, `(N_i, m)` right-hand sides."""
         return torch.linalg.solve_triangular(f["chol"], rhs, upper=False)
+
+    def _weight_vectors(self, d: Tensor, derivatives: bool) -> Tensor:
+        """`(N_o, 1 or 3)`: ``D rt`` and, with ``derivatives``, ``lam D^2 rt`` and ``lam^2 D^3 rt`` (the rotated outer
+        residual weighted for ``P D rt`` and its c-derivatives; ``d = 1 / (c lam + s)``)."""
+        vecs = [d * self.rt]
+        if derivatives:
+            vecs += [self.lam * d * d * self.rt, self.lam * self.lam * d ** 3 * self.rt]
+        return torch.stack(vecs, dim=1)
 
     def _alpha_rot(self, f: dict) -> Tensor:
         """Outer weights in the rotated basis, ``U^T alpha_o`` (computed on the first query of a factor)."""

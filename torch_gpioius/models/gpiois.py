@@ -15,7 +15,8 @@ from .base import ImplicitSurfaceGP
 from .._validation import as_float, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
-from ..inference.optim import FitResult, chain_to_cholesky, maximize_mll, predicted_gain, task_covariance_to_chol_params
+from ..inference.optim import (FitResult, chain_to_cholesky, cholesky_bounds, free_coordinates, maximize_mll,
+                               predicted_gain, task_covariance_to_chol_params)
 from ..inference.structured import StructuredExactInference
 from ..tolerances import tol
 
@@ -351,9 +352,7 @@ class GPIOIS(ImplicitSurfaceGP):
             mll, g, _ = engine.mll_derivatives(kt)
         phi = task_covariance_to_chol_params(self.task_covariance)
         grad, _ = chain_to_cholesky(phi, g, torch.zeros(3, 3, dtype=x0.dtype, device=x0.device))
-        lo, hi = tol.log_chol_bounds
-        lower, upper = np.array([lo, -math.inf, lo]), np.array([hi, math.inf, hi])
-        free = ~(((phi <= lower) & (grad < 0)) | ((phi >= upper) & (grad > 0)))
+        free = free_coordinates(phi, grad, *cholesky_bounds())
         gain = predicted_gain(grad, last.hessian, free)
         if gain > min_gain:
             return False

@@ -316,12 +316,9 @@ def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
 
 
 def _n_outer(model) -> int:
-    """Outer (camera) points in a run's final model: 0 for tactile-only GPIS, summed over a local model's regions."""
+    """Outer (camera) points in a run's final model (GPIOIS, LocalGPIOIS); 0 for tactile-only GPIS."""
     task = getattr(model, "train_task", None)
-    if task is not None:
-        return int((task == 1).sum())
-    regions = getattr(model, "regions", None) or ()
-    return sum(_n_outer(r) for r in regions)
+    return 0 if task is None else int((task == 1).sum())
 
 
 def _set_aside(path: Path) -> Path:
