@@ -68,6 +68,18 @@ def test_a_pressed_sphere_gives_points_on_it_normals_of_it_and_free_space_outsid
     assert np.linalg.norm(surf[0] - (centre - radius * (pose if pose is not None else np.eye(4))[:3, 2])) < 2e-4
 
 
+def test_a_patch_does_not_depend_on_rounding_of_its_depths():
+    """A sphere pressed square on the pad has rings of pixels of equal depth; a 1e-16 m perturbation (another CPU,
+    a resumed run) must not change which of them the thinning keeps."""
+    reading, _ = _sphere_reading()
+    rng = np.random.default_rng(0)
+    nudged = TactileReading(reading.depth * (1 + 1e-15 * rng.standard_normal(reading.depth.shape)), reading.pose,
+                            reading.calibration)
+    a, b = patch_observations(reading), patch_observations(nudged)
+    assert a.x.shape == b.x.shape and np.array_equal(a.y, b.y)
+    assert np.abs(a.x - b.x).max() < 1e-15
+
+
 def test_a_patch_feeds_the_model_and_its_estimate_passes_through_the_sphere():
     reading, centre = _sphere_reading(0.03, press=1.5e-3, shape=(200, 200))
     obs = patch_observations(reading, PatchSettings(spacing=0.002, free_spacing=0.003, free_margin=0.003))

@@ -25,7 +25,10 @@ import numpy as np
 
 from .observations import Observations, thin_indices
 
-__all__ = ["PatchSettings", "patch_observations"]
+__all__ = ["PatchSettings", "patch_observations", "DEPTH_RESOLUTION"]
+
+DEPTH_RESOLUTION = 1e-9
+"""Depths closer than this [m] count as equal when ordering a patch's points (far below any gel's noise)."""
 
 
 @dataclass(frozen=True)
@@ -104,7 +107,11 @@ def patch_observations(reading, settings: PatchSettings | None = None, step: int
     stride = max(1, int(settings.spacing / (2 * pitch)))
     grid[::stride, ::stride] = True
     cand = contact & grid
-    order = np.argsort(-np.where(cand, depth, -np.inf), axis=None, kind="stable")[:int(cand.sum())]
+    # Deepest first, with depths compared to DEPTH_RESOLUTION and ties in pixel order: a symmetric contact (a
+    # sphere, a flat face) has many pixels of equal depth up to rounding, and ordering them by 1e-16 m would let
+    # the greedy thinning keep different points for the same contact on two CPUs or after a resume.
+    key = np.where(cand, np.rint(depth / DEPTH_RESOLUTION), -np.inf)
+    order = np.argsort(-key, axis=None, kind="stable")[:int(cand.sum())]
     surf = pts.reshape(-1, 3)[order]
     surf_n = normals.reshape(-1, 3)[order]
     keep = thin_indices(surf, settings.spacing, np.zeros((0, 3)), 0.0)
