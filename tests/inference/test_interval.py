@@ -88,3 +88,57 @@ def test_ratio_interval_contains_the_estimate_and_matches_a_grid(two_shape_data)
     q = chi2_quantile(0.95)
     assert 2 * (l_hat - brute_ratio(lo)) == pytest.approx(q, abs=0.05)
     assert 2 * (l_hat - brute_ratio(hi)) == pytest.approx(q, abs=0.05)
+
+
+def test_the_profiles_slope_and_curvature_match_finite_differences(two_shape_data):
+    """The search for the endpoints steps with the profile's slope (envelope theorem) and starts from its curvature
+    (a Schur complement of the MLL's Hessian): both against central differences of the profile itself."""
+    from torch_gpioius.inference.interval import _profile_slope
+
+    m = tg.GPIOIS(*two_shape_data, inference="dense").fit()
+    engine = m._inference()
+    kt = m.task_covariance
+    start = np.array([0.5 * math.log(float(kt[0, 0])), 0.5 * math.log(float(kt[1, 1]))])
+    for rho in (0.3, 0.6, 0.85):
+        f, x, slope, curv = _profile_slope(engine.mll_derivatives, rho, start)
+        h = 1e-4
+        fp, fm = (_profile_slope(engine.mll_derivatives, rho + d, x)[0] for d in (h, -h))
+        # the profile is maximised to a relative gradient of 1e-8: its values carry ~1e-10 of error, so the
+        # differences' rounding is ~1e-6 (slope) and ~1e-2 (curvature), beside a truncation of h^2 f''' ~ 1e-7
+        assert slope == pytest.approx((fp - fm) / (2 * h), rel=1e-4, abs=1e-4)
+        assert curv == pytest.approx((fp - 2 * f + fm) / h ** 2, rel=2e-2, abs=5e-2)
+
+
+def test_the_endpoint_search_agrees_with_bisection_on_the_same_profile(two_shape_data):
+    """The Newton search on the signed root and a plain bisection of the same profile find the same crossings,
+    each to its bracket of 1e-3, and the search needs fewer MLL evaluations."""
+    from torch_gpioius.inference import interval as iv
+
+    m = tg.GPIOIS(*two_shape_data, inference="dense").fit()
+    engine = m._inference()
+    calls = [0]
+
+    def evaluate(kt):
+        calls[0] += 1
+        return engine.mll_derivatives(kt)
+
+    lo, hi, rho_hat = iv.correlation_interval(evaluate, m.task_covariance)
+    n_search = calls[0]
+    calls[0] = 0
+    kt = m.task_covariance
+    x = np.array([0.5 * math.log(float(kt[0, 0])), 0.5 * math.log(float(kt[1, 1]))])
+    f_hat, x_hat = iv.profile_correlation(evaluate, rho_hat, x)
+    q = chi2_quantile(0.95)
+    ends = []
+    for edge in (-1.0, 1.0):
+        inside, outside, xi = rho_hat, edge, x_hat
+        while abs(outside - inside) > 1e-3:
+            mid = 0.5 * (inside + outside)
+            f_mid, x_mid = iv.profile_correlation(evaluate, mid, xi)
+            if 2 * (f_hat - f_mid) <= q:
+                inside, xi = mid, x_mid
+            else:
+                outside = mid
+        ends.append(0.5 * (inside + outside))
+    assert abs(lo - ends[0]) <= 1e-3 and abs(hi - ends[1]) <= 1e-3
+    assert n_search < calls[0]

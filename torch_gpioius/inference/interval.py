@@ -44,9 +44,15 @@ def _kt(a: float, b: float, c: float) -> torch.Tensor:
 
 
 def _newton2(evaluate: Evaluate, params: np.ndarray, to_p: Callable, max_iter: int = 60,
-             lo: float = -12.0, hi: float = 12.0) -> tuple[float, np.ndarray]:
+             lo: float = -12.0, hi: float = 12.0) -> tuple[float, np.ndarray, tuple | None]:
     """Maximise the MLL over two log-parameters with damped Newton steps; ``to_p(x) -> (p, J, second)`` maps them to
-    ``p = (a, b, c)`` with Jacobian ``J (3, 2)`` and ``second[i]``, the Hessian of ``p_i`` (2, 2)."""
+    ``p = (a, b, c)`` with Jacobian ``J (3, 2)`` and ``second[i]``, the Hessian of ``p_i`` (2, 2).
+
+    Returns:
+        The maximum, the `(2,)` parameters there, and ``(g, H, hess)`` there: the MLL's `(3,)` gradient and
+        `(3, 3)` Hessian in ``p`` and its `(2, 2)` Hessian in the parameters (None if the start could not be
+        evaluated).
+    """
     x = np.clip(np.asarray(params, dtype=np.float64), lo, hi)
 
     def value(x):
@@ -54,15 +60,15 @@ def _newton2(evaluate: Evaluate, params: np.ndarray, to_p: Callable, max_iter: i
         try:
             f, g, h = evaluate(_kt(*p))
         except (torch.linalg.LinAlgError, ArithmeticError):
-            return -math.inf, None, None
+            return -math.inf, None, None, None
         g64, h64 = g.detach().cpu().double().numpy(), h.detach().cpu().double().numpy()
         grad = jac.T @ g64
         hess = jac.T @ h64 @ jac + sum(g64[i] * sec[i] for i in range(3))
-        return f, grad, hess
+        return f, grad, (g64, h64), hess
 
-    f, grad, hess = value(x)
+    f, grad, gp, hess = value(x)
     if grad is None:
-        return -math.inf, x
+        return -math.inf, x, None
     shift = 0.0
     for _ in range(max_iter):
         free = ~(((x <= lo) & (grad < 0)) | ((x >= hi) & (grad > 0)))
@@ -76,18 +82,18 @@ def _newton2(evaluate: Evaluate, params: np.ndarray, to_p: Callable, max_iter: i
                 continue
             step = np.linalg.solve(neg, np.where(free, grad, 0.0))
             cand = np.clip(x + step, lo, hi)
-            f_new, g_new, h_new = value(cand)
+            f_new, g_new, gp_new, h_new = value(cand)
             if f_new >= f - 1e-12 * max(1.0, abs(f)):
                 break
             shift = max(10.0 * shift, 1e-6 * max(1.0, abs(f)))
             if shift > 1e12 * max(1.0, abs(f)):
-                return f, x
+                return f, x, (*gp, hess)
         gain = f_new - f
-        x, f, grad, hess = cand, f_new, g_new, h_new
+        x, f, grad, gp, hess = cand, f_new, g_new, gp_new, h_new
         shift /= 10.0
         if gain <= 1e-10 * max(1.0, abs(f)):
             break
-    return f, x
+    return f, x, (*gp, hess)
 
 
 def _correlation_map(rho: float):
@@ -104,25 +110,99 @@ def _correlation_map(rho: float):
 
 def profile_correlation(evaluate: Evaluate, rho: float, start: np.ndarray) -> tuple[float, np.ndarray]:
     """``l_p(rho)``: the MLL maximised over ``(log sqrt(a), log sqrt(c))`` with the correlation fixed at ``rho``."""
-    return _newton2(evaluate, start, _correlation_map(float(np.clip(rho, -1.0, 1.0))))
+    f, x, _, _ = _profile_slope(evaluate, rho, start)
+    return f, x
 
 
-def _search(profile: Callable[[float, np.ndarray], tuple[float, np.ndarray]], centre: float, edge: float,
-            l_hat: float, q_inside: float, q_edge: float | None, start: np.ndarray, tol: float) -> float:
-    """The endpoint between ``centre`` (inside) and ``edge``: ``edge`` itself when it is not ruled out (with the
-    boundary quantile ``q_edge``), else the crossing of ``2 (l_hat - l_p) = q_inside`` by bisection."""
-    f_edge, x_edge = profile(edge, start)
+def _profile_slope(evaluate: Evaluate, rho: float, start: np.ndarray) -> tuple[float, np.ndarray, float, float]:
+    """``l_p(rho)``, its maximiser ``(u, w)``, and its slope and curvature in rho (NaN where the profile could not be
+    evaluated).
+
+    With ``b = rho e^(u + w)``: the slope is ``dl/db e^(u + w)`` (the envelope theorem: ``(u, w)`` sit at their
+    maximum), the curvature the Schur complement ``H_rr - H_rv H_vv^-1 H_vr`` of the MLL's Hessian in
+    ``(rho, u, w)``."""
+    rho = float(np.clip(rho, -1.0, 1.0))
+    f, x, derivs = _newton2(evaluate, start, _correlation_map(rho))
+    if derivs is None:
+        return f, x, math.nan, math.nan
+    g, h, h_uw = derivs
+    e = math.exp(x[0] + x[1])
+    a, b, c = math.exp(2 * x[0]), rho * e, math.exp(2 * x[1])
+    jr = np.array([0.0, e, 0.0])                             # dp / drho
+    juw = np.array([[2 * a, 0.0], [b, b], [0.0, 2 * c]])     # dp / d(u, w)
+    cross = juw.T @ h @ jr + g[1] * e                        # d2 l / drho d(u, w): d2 b / drho du = e, likewise w
+    try:
+        curvature = float(jr @ h @ jr - cross @ np.linalg.solve(h_uw, cross))
+    except np.linalg.LinAlgError:
+        curvature = math.nan
+    return f, x, float(g[1]) * e, curvature
+
+
+def _search(profile: Callable, centre: tuple[float, float, float, float, np.ndarray], edge: float,
+            l_hat: float, q_inside: float, q_edge: float | None, tol: float) -> float:
+    """The endpoint between the ``centre`` (inside; ``(rho, l_p, slope, curvature, maximiser)``) and ``edge``:
+    ``edge`` itself when it is not ruled out (with the boundary quantile ``q_edge``), else the crossing of
+    ``2 (l_hat - l_p(rho)) = q_inside``, returned as the middle of a bracket no wider than ``tol``.
+
+    The crossing is sought on the signed root ``g(rho) = sqrt(2 (l_hat - l_p(rho))) - sqrt(q_inside)``, nearly linear
+    where the profile is nearly quadratic: first where the centre's quadratic model (its slope and curvature) puts
+    it, then by Newton steps with the profile's slope (``g' = -l_p' / sqrt(2 (l_hat - l_p))``) from the point nearest
+    the crossing, each aimed ``tol / 4`` past its target so that the crossing ends up bracketed from both sides.
+    A step that leaves the bracket or fails to halve ``|g|`` is followed by a bisection. Every profile is warm-started
+    from the nearest profiled rho. About 4 profiles per endpoint instead of bisection's 11 (``tol`` 1e-3 over
+    [-1, 1]); each profile is a few exact MLL evaluations, O(N_i^3) at thousands of inner points."""
+    rho_c, _, slope_c, curv_c, x_c = centre
+    seen = [(rho_c, x_c)]
+
+    def run(r: float) -> tuple[float, float, float, np.ndarray]:
+        x0 = min(seen, key=lambda p: abs(p[0] - r))[1]
+        f, x, slope, _ = profile(r, x0)
+        if math.isfinite(f):
+            seen.append((r, x))
+        d = 2.0 * max(l_hat - f, 0.0) if math.isfinite(f) else math.inf
+        rt = math.sqrt(d)
+        dg = -slope / rt if 0 < rt < math.inf else math.nan
+        return f, rt - root_q, dg, x
+
+    root_q = math.sqrt(q_inside)
+    toward = math.copysign(1.0, edge - rho_c)
+    f_edge, g_edge, dg_edge, _ = run(edge)
     if q_edge is not None and 2 * (l_hat - f_edge) <= q_edge:
         return edge
-    lo, hi, x = centre, edge, start
-    while abs(hi - lo) > tol:
-        mid = 0.5 * (lo + hi)
-        f_mid, x_mid = profile(mid, x)
-        if 2 * (l_hat - f_mid) <= q_inside:
-            lo, x = mid, x_mid
+    inside, outside = rho_c, edge                   # g(inside) <= 0 < g(outside)
+    best = (edge, g_edge, dg_edge)
+    # the quadratic model's crossing: s d + k d^2 / 2 = -q / 2 along ``toward``
+    s, k = toward * slope_c, curv_c
+    guess = math.nan
+    if math.isfinite(s) and math.isfinite(k):
+        if k < 0:
+            d = (-s - math.sqrt(s * s - k * q_inside)) / k if s * s - k * q_inside >= 0 else math.nan
         else:
-            hi = mid
-    return 0.5 * (lo + hi)
+            d = -0.5 * q_inside / s if s < 0 else math.nan
+        guess = rho_c + toward * d
+    bisect_next = False
+    for i in range(200):
+        if abs(outside - inside) <= tol:
+            break
+        lo_, hi_ = min(inside, outside), max(inside, outside)
+        r, g, dg = best
+        if i == 0:
+            cand = guess
+        else:
+            cand = r - g / dg if math.isfinite(g) and math.isfinite(dg) and dg != 0.0 else math.nan
+            if math.isfinite(cand):
+                cand += math.copysign(0.25 * tol, cand - r)
+        if bisect_next or not lo_ < cand < hi_:
+            cand = 0.5 * (inside + outside)
+        _, g_c, dg_c, _ = run(cand)
+        if g_c <= 0:
+            inside = cand
+        else:
+            outside = cand
+        bisect_next = not bisect_next and i > 0 and not abs(g_c) <= 0.5 * abs(g)
+        if math.isfinite(g_c) and not abs(g_c) > abs(best[1]):
+            best = (cand, g_c, dg_c)
+    return 0.5 * (inside + outside)
 
 
 def correlation_interval(evaluate: Evaluate, kt_hat: torch.Tensor, level: float = 0.95,
@@ -141,16 +221,21 @@ def correlation_interval(evaluate: Evaluate, kt_hat: torch.Tensor, level: float 
     a, b, c = float(kt_hat[0, 0]), float(kt_hat[0, 1]), float(kt_hat[1, 1])
     rho_hat = float(np.clip(b / math.sqrt(a * c), -1.0, 1.0))
     start = np.array([0.5 * math.log(a), 0.5 * math.log(c)])
-    f_hat, _ = profile_correlation(evaluate, rho_hat, start)
+
+    def profile(r, x):
+        return _profile_slope(evaluate, r, x)
+
+    f_hat, x_hat, slope, curv = profile(rho_hat, start)
     # the maximum over the closed set: the optimiser's bound keeps rho just inside +-1
     for edge in (-1.0, 1.0):
         if abs(edge - rho_hat) < 1e-3:
-            f_edge, _ = profile_correlation(evaluate, edge, start)
+            f_edge, x_edge, s_edge, c_edge = profile(edge, start)
             if f_edge > f_hat:
-                f_hat, rho_hat = f_edge, edge
+                f_hat, rho_hat, x_hat, slope, curv = f_edge, edge, x_edge, s_edge, c_edge
     q_in, q_edge = chi2_quantile(level), chi2_quantile(level, boundary=True)
-    lo = _search(lambda r, x: profile_correlation(evaluate, r, x), rho_hat, -1.0, f_hat, q_in, q_edge, start, tol)
-    hi = _search(lambda r, x: profile_correlation(evaluate, r, x), rho_hat, 1.0, f_hat, q_in, q_edge, start, tol)
+    centre = (rho_hat, f_hat, slope, curv, x_hat)
+    lo = _search(profile, centre, -1.0, f_hat, q_in, q_edge, tol)
+    hi = _search(profile, centre, 1.0, f_hat, q_in, q_edge, tol)
     return min(lo, rho_hat), max(hi, rho_hat), rho_hat
 
 
@@ -176,7 +261,8 @@ def ratio_interval(evaluate: Evaluate, kt_hat: torch.Tensor, level: float = 0.95
     start = np.array([0.5 * math.log(a), 0.5 * math.log(max(c - b * b / a, 1e-24))])
 
     def profile(s, x):
-        return _newton2(evaluate, x, _ratio_map(s))
+        f, x_s, _ = _newton2(evaluate, x, _ratio_map(s))
+        return f, x_s
 
     f_hat, _ = profile(s_hat, start)
     q = chi2_quantile(level)
