@@ -313,3 +313,22 @@ def test_a_mesh_body_collides_as_convex_parts_and_its_metrics_use_the_mesh(tmp_p
     assert trace.terminated == "travel" and trace.contacts_on_body()["within"] == 1.0
     with pytest.raises(ValueError, match="collision"):
         MeshBody(bottle, "sdf")
+
+
+def test_a_gel_pad_explores_under_the_simulated_cloth(scene, tmp_path):
+    """touch="patch" in the MuJoCo world: the pad sees the body through the cloth where the cloth is pressed onto it
+    (body + the 1 mm fabric) and the cloth alone where the cloth carries the force, and never free space inside the
+    body. A loose cap over a box: most readings are pinched ones."""
+    trace = tg.explore(scene, "visual-tactile", touch="patch", max_travel=0.04, metrics_every=100,
+                       log=tmp_path / "run.gpioius")
+    assert trace.n_steps >= 3 and not trace.terminated.startswith("refused")
+    m = trace.model
+    task, x, y = np.asarray(m.train_task), m.train_inputs[0].numpy(), m.train_targets.numpy()
+    surf, free = x[(task == 0) & (y == 0)], x[(task == 0) & (y == 1)]
+    assert len(surf) > 20 * trace.n_steps
+    d = scene.true_distance(surf)
+    pinched = np.abs(d - scene.cover.thickness) < 1e-6        # body + fabric, to the exact SDF's rounding
+    assert pinched.mean() > 0.5, np.percentile(d, [10, 50, 90])
+    assert (d > -1e-9).all()                                  # never inside the body
+    assert (scene.true_distance(free) > 0).all()
+    assert type(m._inference()).__name__ == "BatchedExactInference"

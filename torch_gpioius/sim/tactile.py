@@ -14,6 +14,18 @@ to the pad plane) is found by sphere tracing on the body's exact signed distance
 * **how deep**: the pad is placed so that its deepest pixel is pressed by ``|F| / gel_stiffness`` (clamped to
   [2 x contact depth, 80 % of the gel]): the gel takes the contact force, the fingertip's position and the force
   stay what the force sensor and the safety gate see.
+
+**With a simulated cover** (the MuJoCo world: ``cover`` gives the first crossing of the cloth along each ray, from
+the cloth's current state), the cloth is where the simulation put it instead of everywhere:
+
+* where the body, at the pixel where it comes nearest the pad, is bare or lies within ``pinch`` behind the cover's
+  face (the simulated cloth's pinched layer, as the world's own contact check counts it), the pad presses the cloth onto the body: a pixel reads the body plus the cloth where the cloth
+  is between pad and body along its ray, and the bare body where the cloth has slid away (a flat pad flattens the
+  fabric it presses; the simulated fingertip is a small sphere, so the cloth's shape around it is not what a pad
+  would leave);
+* otherwise the cover alone carries the force (a cloth stretched like a trampoline, a fold, foam thicker than the
+  gel): the pad reads the cover's surface, which is what a gel would report; the exploration then learns the cover
+  as the inner surface there, as a real pad would make it.
 """
 
 from __future__ import annotations
@@ -54,11 +66,17 @@ class SimulatedGelPad:
         cloth_thickness: thickness of the cover's fabric pinched under the pad [m] (0: no cover).
         gel_stiffness: force per metre of the deepest indentation [N/m].
         clock: ``() -> float`` the world's time [s].
+        cover: ``(origins (n, 3), axis (3,), far) -> (n,)`` distance along ``axis`` from each origin to the cover's
+            outer face [m] (inf where the ray meets no cover within ``far``), or None: the cloth is everywhere
+            between pad and body (the force-field world, whose cover is a field, not a sheet).
+        pinch: with ``cover``: how far in front of the body the cover's face may lie and still be pressed onto it
+            [m] (default ``cloth_thickness`` + 1 mm; a simulated cloth's pinched layer is its collision thickness).
     """
 
     def __init__(self, body_distance: Callable, position: Callable, force: Callable,
                  calibration: TactileCalibration = SIM_PAD_CALIBRATION, shape: tuple[int, int] = (40, 40),
-                 cloth_thickness: float = 5e-4, gel_stiffness: float = 2000.0, clock: Callable = lambda: 0.0):
+                 cloth_thickness: float = 5e-4, gel_stiffness: float = 2000.0, clock: Callable = lambda: 0.0,
+                 cover: Callable | None = None, pinch: float | None = None):
         if not 0 <= cloth_thickness < calibration.gel_thickness:
             raise ValueError(f"cloth_thickness: must be in [0, gel thickness {calibration.gel_thickness:g}) m, got "
                              f"{cloth_thickness!r}")
@@ -67,15 +85,24 @@ class SimulatedGelPad:
         self.body_distance, self.position, self.force = body_distance, position, force
         self.calibration, self.shape = calibration, tuple(int(v) for v in shape)
         self.cloth_thickness, self.gel_stiffness, self.clock = float(cloth_thickness), float(gel_stiffness), clock
+        self.cover = cover
+        self.pinch = self.cloth_thickness + 1e-3 if pinch is None else float(pinch)
+        if not self.pinch >= 0:
+            raise ValueError(f"pinch: must be >= 0 m, got {pinch!r}")
+
+    def _origins(self, pose: np.ndarray, reach: float) -> np.ndarray:
+        """`(H W, 3)` ray origins: the pixels ``reach`` behind the pad plane, base frame."""
+        h, w = self.shape
+        pitch = self.calibration.pitch
+        jj, ii = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+        plane = np.stack([(jj - (w - 1) / 2) * pitch, (ii - (h - 1) / 2) * pitch, np.full_like(jj, -reach)], -1)
+        return plane.reshape(-1, 3) @ pose[:3, :3].T + pose[:3, 3]
 
     def _crossings(self, pose: np.ndarray, reach: float, far: float) -> np.ndarray:
         """`(H, W)` signed position ``s`` along the pad's axis where each pixel's ray enters the body (inf where it
         does not before ``far``); rays start ``reach`` behind the pad plane."""
         h, w = self.shape
-        pitch = self.calibration.pitch
-        jj, ii = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-        plane = np.stack([(jj - (w - 1) / 2) * pitch, (ii - (h - 1) / 2) * pitch, np.zeros_like(jj)], -1)
-        origin = plane.reshape(-1, 3) @ pose[:3, :3].T + pose[:3, 3]
+        origin = self._origins(pose, 0.0)
         axis = pose[:3, 2]
         s = np.full(len(origin), -reach)
         done = np.zeros(len(origin), bool)
@@ -108,15 +135,23 @@ class SimulatedGelPad:
             raise RuntimeError(f"tactile pad: read out of contact (|F| = {mag:.2f} N)")
         axis = -f / mag                                      # into the object
         reach = cal.gel_thickness
-        s = self._crossings(pad_pose(c, axis), 4 * reach, 4 * reach)
+        pose0 = pad_pose(c, axis)
+        s = self._crossings(pose0, 4 * reach, 4 * reach)
         press = float(np.clip(mag / self.gel_stiffness, 2 * cal.contact_depth, 0.8 * reach))
-        deepest = float(np.min(s))
+        if self.cover is None:
+            surface = s - t                                  # the body plus the cloth, everywhere
+        else:
+            rays = np.asarray(self.cover(self._origins(pose0, 4 * reach), axis, 8 * reach), dtype=np.float64)
+            cloth = rays.reshape(s.shape) - 4 * reach        # the cover's face, on the same axis as s
+            at = np.unravel_index(np.argmin(s), s.shape)     # where the body comes nearest the pad
+            on_body = bool(np.isfinite(s[at])) and (cloth[at] > s[at] or s[at] - cloth[at] <= self.pinch)
+            surface = np.where(cloth <= s, s - t, s) if on_body else cloth
+        deepest = float(np.min(surface))
         if not np.isfinite(deepest):
-            raise RuntimeError("tactile pad: no part of the body lies under the pad at the contact")
-        # move the pad along its axis so that the deepest pixel (body plus cloth) is pressed by ``press``
-        shift = deepest - t + press
+            raise RuntimeError("tactile pad: nothing lies under the pad at the contact")
+        # move the pad along its axis so that the deepest pixel is pressed by ``press``
+        shift = deepest + press
         pose = pad_pose(c + shift * axis, axis)
-        s = s - shift
-        depth = np.where(s < t, t - s, np.nan)
+        depth = np.where(surface < shift, shift - surface, np.nan)
         depth = np.minimum(depth, reach)                     # the gel bottoms out
         return TactileReading(depth, pose, cal, float(self.clock()))

@@ -263,6 +263,11 @@ class MujocoForceSensor(ForceSensor):
         self._last_status = status
         return ForceReading(torch.as_tensor(f), status, self._counter, self.physics.time)
 
+    def true_force(self) -> np.ndarray:
+        """`(3,)` the tared force without noise [N], tool frame (for simulated instruments that respond to the load
+        itself, such as the gel pad; reading it draws no noise and leaves the sensor's state alone)."""
+        return self._raw() - self._offset
+
     def tare(self) -> None:
         """Zero at the current load (the fingertip free of contact)."""
         self._offset = self._raw().copy()

@@ -343,7 +343,39 @@ class MujocoScene(World):
         camera = MujocoDepthCamera(physics, PinholeCamera.kinect_v2(self.camera_scale), look_at(eye, target),
                                    noise_a=0.0015, noise_b=0.0015, seed=self.seed)
         config = ContactConfig(speed=0.08, approach_step=0.003, tip_radius=self.tip_radius, tip_stiffness=1000.0)
-        return Hardware(robot, sensor, camera, ContactController(robot, sensor, config))
+        return Hardware(robot, sensor, camera, ContactController(robot, sensor, config),
+                        self.tactile_pad(physics, robot, sensor))
+
+    def tactile_pad(self, physics, robot, sensor):
+        """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
+        fingertip's noiseless contact force and sees the body through the cloth where the simulated cloth lies
+        between pad and body (rays against the cover's current faces), or the cover alone where the cover carries
+        the force. Pinched cloth reads as its fabric thickness (1 mm); the simulated cloth counts as pinched within
+        its collision layer (two element radii) + 1 mm of the body, as :meth:`contact_truth` counts it; foam,
+        thicker than the gel, is read as foam."""
+        import mujoco
+
+        from ..tactile import SimulatedGelPad
+
+        vid = np.zeros(1, np.int32)
+        lift = self.cover.radius                 # mj_rayFlex meets the faces' mid-surface; the cloth's face is this in front
+
+        def cover_rays(origins: np.ndarray, axis: np.ndarray, far: float) -> np.ndarray:
+            out = np.full(len(origins), np.inf)
+            direction = np.ascontiguousarray(axis, dtype=np.float64)
+            for f in range(physics.model.nflex):
+                for i, o in enumerate(origins):
+                    d = mujoco.mj_rayFlex(physics.model, physics.data, 0, False, False, True, False, f,
+                                          np.ascontiguousarray(o), direction, vid, None)
+                    if 0 <= d <= far:
+                        out[i] = min(out[i], d - lift)
+            return out
+
+        tip = self._tip_geom
+        return SimulatedGelPad(self.body.sdf, lambda: np.array(physics.data.geom_xpos[tip]),
+                               lambda: robot.read_pose()[:3, :3].detach().numpy() @ sensor.true_force(),
+                               cloth_thickness=self.cover.thickness if self.cover.dim == 2 else 0.0,
+                               clock=lambda: physics.time, cover=cover_rays, pinch=2 * self.cover.radius + 1e-3)
 
     def penalty(self):
         from ...planning import RangePenalty
