@@ -286,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP)
     s3.add_argument("--touch", default="point", choices=["point", "patch"],
                     help="point: the fingertip's contact (the paper); patch: a DIGIT-like gel pad's depth map at each "
-                         "contact (forcefield world)")
+                         "contact (both 3-D worlds)")
     s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
     s3.add_argument("--quiet", action="store_true", help="no progress output")
     _force(s3, "--out holds files that `gpioius simulate3d` (of this world) did not write")
@@ -315,7 +315,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
     sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
     sw.add_argument("--touch", default="point", choices=["point", "patch"],
-                    help="point: the fingertip's contact; patch: a gel pad's depth map (forcefield); one per --out folder")
+                    help="point: the fingertip's contact; patch: a gel pad's depth map (3-D worlds); one per --out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")
