@@ -38,6 +38,7 @@ import numpy as np
 __all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "COLOUR_KEY"]
 
 _GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (150, 150, 150), (150, 200, 255), (20, 20, 20), (0, 190, 210), (255, 140, 0)
+_PAD, _PAD_OLD = (200, 30, 120), (230, 170, 200)      # the gel pad's outline: this step's, earlier ones
 _GREEN = (30, 160, 60)
 
 
@@ -74,7 +75,7 @@ def _lift(x: np.ndarray) -> np.ndarray:
 #: What each colour in the scene is (the GUI shows it as a key).
 COLOUR_KEY = (("camera: seen outer surface", _GREY), ("camera: free space in front of it", _LIGHT_BLUE),
               ("touch: contacts", _BLACK), ("touch: free space", _CYAN), ("fingertip path", _ORANGE),
-              ("true inner shape", _GREEN))
+              ("gel pad at this step (earlier ones paler; patch runs)", _PAD), ("true inner shape", _GREEN))
 
 _LOOPBACK = ("localhost", "127.0.0.1", "::1")
 
@@ -387,6 +388,17 @@ class RunViewer:
                 pts = _lift(ds.x[mask]) if mask.any() else np.zeros((1, 3))
                 self._handles[name] = scene.add_point_cloud(name, pts, colour, point_size=size * (1.6 if "contacts" in name else 1.0),
                                       point_shape="circle", visible=bool(on[layer] and mask.any()))
+            pads = run.pad_footprints(k) if run.dim == 3 else np.zeros((0, 4, 3))
+            if len(pads) or self._handle("/touch/pads") is not None:
+                # each pad's outline: its four edges, the current one brighter than the earlier ones
+                edges = np.stack([pads, np.roll(pads, -1, axis=1)], axis=2).reshape(-1, 2, 3)
+                if not len(edges):
+                    edges = np.zeros((1, 2, 3))
+                colours = np.tile(np.array(_PAD_OLD, dtype=np.uint8), (len(edges), 2, 1))
+                colours[-4:] = _PAD
+                self._handles["/touch/pads"] = scene.add_line_segments(
+                    "/touch/pads", edges, colours, thickness=2.0, thickness_units="screen",
+                    visible=bool(on["touches"] and len(pads)))
             upto = (run.trajectory[run.trajectory_step <= k] if run.trajectory is not None and k > 0
                     else np.zeros((0, run.dim)))
             shown = len(upto) > 1

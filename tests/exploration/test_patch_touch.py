@@ -6,7 +6,8 @@ import pytest
 import torch_gpioius as tg
 from torch_gpioius.exploration.registry import make_world
 from torch_gpioius.exploration.touch import PatchTouch
-from torch_gpioius.io.datasets import replay
+from torch_gpioius.io.datasets import read_records, replay
+from torch_gpioius.io.runs import load_run
 
 
 @pytest.mark.parametrize("mode", ["visual-tactile", "tactile"])
@@ -32,6 +33,36 @@ def test_a_simulated_pad_explores_the_arm_and_its_patches_lie_on_the_body(mode, 
     for _, dataset in replay(log):
         last = dataset
     assert last is not None and len(last.y) == trace.model.train_targets.numel()
+    # and every pad: a 2 x 2 cm square per step, its patch's surface points under it (within the gel's reach)
+    run = load_run(log)
+    pads = run.pad_footprints(run.steps[-1])
+    assert pads.shape == (len(run.steps), 4, 3)
+    sides = np.linalg.norm(pads - np.roll(pads, -1, axis=1), axis=-1)
+    assert np.allclose(sides, 0.02, atol=1e-12)
+    for r in read_records(log):
+        if r.kind == "step" and r.meta["step"] > 0:              # the step's batch: its patch, then free space
+            pose, x, y, task = (r.arrays[k] for k in ("pad_pose", "x", "y", "task"))
+            local = (x[(y == 0) & (task == 0)] - pose[:3, 3]) @ pose[:3, :3]
+            assert len(local) > 10
+            assert (np.abs(local[:, :2]) <= 0.01 + 1e-9).all() and (np.abs(local[:, 2]) <= 3e-3 + 1e-9).all()
+
+
+def test_the_viewer_draws_the_pads_of_a_patch_run(tmp_path):
+    from torch_gpioius.viewer import RunViewer
+
+    log = tmp_path / "run.gpioius"
+    tg.explore(make_world("forcefield", "E", 0, smoke=True), "tactile", touch="patch", max_travel=0.02,
+               metrics_every=100, log=log, progress=False)
+    viewer = RunViewer(log, port=0)
+    try:
+        steps = viewer.run.steps
+        viewer.show(steps[-1])
+        pads = viewer._handles["/touch/pads"]
+        assert pads.visible and len(pads.points) == 4 * len(steps)
+        viewer.show(steps[0])
+        assert len(viewer._handles["/touch/pads"].points) == 4
+    finally:
+        viewer.close()
 
 
 def test_a_world_without_a_pad_says_so():
@@ -47,7 +78,6 @@ def test_a_patch_run_cut_after_a_step_resumes(tmp_path):
     same although a freshly built factorisation differs from a bordered one by rounding (~1e-16 m on the next
     contact): the patch orders its pixels by depth to 1e-9 m (symmetric contacts have rings of equal depth).
     Bit-equality beyond the first resumed step is not promised: the sliding exploration amplifies rounding."""
-    from torch_gpioius.io.datasets import read_records
     from torch_gpioius.sim import sphere_scene
 
     scene = sphere_scene(subdivisions=3)

@@ -57,6 +57,7 @@ class PatchTouch:
     name: str = "patch"
     inference: str = "batched"
     _pad: Any = field(default=None, init=False, repr=False, compare=False)   # the run's hardware pad (bind)
+    last_reading: Any = field(default=None, init=False, repr=False, compare=False)   # for logs and the viewer
 
     def bind(self, hardware) -> None:
         """Take the world's pad (``hardware.tactile``) unless a sensor was given.
@@ -74,6 +75,16 @@ class PatchTouch:
     def fit_options(self) -> dict:
         return {"min_gain": self.min_gain}
 
+    def footprint(self) -> dict[str, np.ndarray]:
+        """The last reading's pad for logs: ``pad_pose`` `(4, 4)` pad-to-base and ``pad_size`` `(2,)` [m] (width
+        along the pad's x, height along its y); empty before the first reading."""
+        r = self.last_reading
+        if r is None:
+            return {}
+        h, w = r.depth.shape
+        return {"pad_pose": np.asarray(r.pose, dtype=np.float64),
+                "pad_size": np.array([w * r.calibration.pitch, h * r.calibration.pitch])}
+
     @property
     def retraction_margin(self) -> float:
         """Free space closer than this to a new contact is retracted [m]: the patch's own margin (its free points
@@ -85,7 +96,9 @@ class PatchTouch:
         pad = self.sensor if self.sensor is not None else self._pad
         if pad is None:
             raise ValueError("PatchTouch: no tactile pad bound (bind(hardware) or PatchTouch(sensor=...))")
-        patch = patch_observations(pad.read(), self.settings, step)
+        reading = pad.read()
+        patch = patch_observations(reading, self.settings, step)
+        self.last_reading = reading
         avoid = np.concatenate([np.asarray(contacts, dtype=np.float64).reshape(-1, patch.dim), patch.x[patch.y == 0]])
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, avoid, policy.free_space_margin)
         path = Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step, source="touch")

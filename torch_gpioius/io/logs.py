@@ -104,6 +104,9 @@ class LogRecorder(Recorder):
                   "timestamps": np.full(len(path), record.robot_time), "fit_hessian": fit_hessian}
         if obs.normal is not None:
             arrays["normals"] = obs.normal
+        footprint = getattr(run.config.touch, "footprint", None)
+        if callable(footprint):              # the pad of this step's patch (the viewer draws it)
+            arrays.update(footprint())
         if hasattr(state.model, "region_correlations"):
             arrays["local_params"] = state.model.params.numpy()
         self.writer.append("step", meta, {**arrays, **world})

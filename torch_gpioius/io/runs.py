@@ -31,6 +31,9 @@ class RunHistory:
             model), ``similarity`` / ``correlation`` / ``hausdorff`` as recorded (NaN when not).
         trajectory: `(m, d)` fingertip positions in time order [m]; ``trajectory_step`` `(m,)` the step each
             belongs to.
+
+    A step of a tactile-patch run also has ``pad_pose`` `(4, 4)` (pad to base) and ``pad_size`` `(2,)` [m] in its
+    ``params``: where the gel pad was when it was read.
     """
 
     path: Path
@@ -89,6 +92,21 @@ class RunHistory:
             return from_description(desc)
         return None
 
+    def pad_footprints(self, step: int) -> np.ndarray:
+        """`(p, 4, 3)` the corners of the gel pad at every patch up to ``step`` [m], base frame (in order around
+        the pad; none for point-touch runs)."""
+        corners = []
+        for k in self.steps:
+            if k > step:
+                break
+            p = self.params.get(k, {})
+            if "pad_pose" in p and "pad_size" in p:
+                w, h = 0.5 * np.asarray(p["pad_size"], dtype=np.float64)
+                local = np.array([[-w, -h, 0.0], [w, -h, 0.0], [w, h, 0.0], [-w, h, 0.0]])
+                pose = np.asarray(p["pad_pose"], dtype=np.float64)
+                corners.append(local @ pose[:3, :3].T + pose[:3, 3])
+        return np.asarray(corners, dtype=np.float64).reshape(-1, 4, 3)
+
     def series(self, key: str) -> np.ndarray:
         """`(K,)` a recorded per-step value (``similarity``, ``correlation``, ``hausdorff``) over :attr:`steps`."""
         return np.array([self.params.get(k, {}).get(key, math.nan) for k in self.steps], dtype=np.float64)
@@ -118,7 +136,7 @@ def load_run(path: str | os.PathLike) -> RunHistory:
             p = {"similarity": v["similarity"], "correlation": v["correlation"], "hausdorff": v["hausdorff"],
                  "contact_distance": v.get("contact_distance", math.nan),
                  "contact_on_body": v.get("contact_on_body", math.nan)}
-            for key in ("kt", "local_params", "contact"):
+            for key in ("kt", "local_params", "contact", "pad_pose", "pad_size"):
                 if key in a:
                     p[key] = np.asarray(a[key], dtype=np.float64)
             params[k] = p
