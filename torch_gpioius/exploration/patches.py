@@ -10,8 +10,9 @@ tactile.TactileReading` whose frames and sign conventions its module states:
   the contact's edge; NaN rows where a pixel has no contact neighbour along an axis);
 * **free space** (y = 1, task 0): the undeformed gel surface (z = 0) at pixels pressed less than ``contact_depth``
   or not at all: the object did not reach it (to within ``contact_depth``). A gel senses only what presses it, so
-  this is the only free space a pad can vouch for. Thinned to ``free_spacing`` and kept ``free_margin`` from every
-  surface point (two opposite labels closer than that would only fight in the GP).
+  this is the only free space a pad can vouch for. Thinned to ``free_spacing`` and kept ``free_margin`` (2 cm) from
+  every surface point (opposite labels closer than the kernel can bend between make the likelihood buy the jump
+  with a huge signal variance; on a 2 x 2 cm pad this keeps free space only where the contact is off to one side).
 
 All points are in the base frame (the reading's pose).
 """
@@ -38,7 +39,10 @@ class PatchSettings:
     Attributes:
         spacing: spacing of the kept surface points [m] (2 mm: ~100 points on a 2 x 2 cm pad).
         free_spacing: spacing of the kept free-space points [m].
-        free_margin: free-space points closer than this to a surface point of the patch are dropped [m].
+        free_margin: free-space points closer than this to a surface point of the patch are dropped [m]. 2 cm, as the
+            point touch's margin (docs/method-notes.md, sections 2 and 11): the gel vouches for free space right
+            beside the contact, but labels 0 and 1 a few mm apart make the likelihood buy the jump with a huge
+            K_t[0,0] (3 mm took K_t[0,0] to 1.7e6 and the correlation to 0.13 within 0.3 m on object E).
 
     Raises:
         ValueError: a value that is not a positive number of metres up to 0.1.
@@ -46,7 +50,7 @@ class PatchSettings:
 
     spacing: float = 0.002
     free_spacing: float = 0.004
-    free_margin: float = 0.003
+    free_margin: float = 0.02
 
     def __post_init__(self) -> None:
         for name in ("spacing", "free_spacing", "free_margin"):

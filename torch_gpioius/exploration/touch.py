@@ -87,8 +87,8 @@ class PatchTouch:
 
     @property
     def retraction_margin(self) -> float:
-        """Free space closer than this to a new contact is retracted [m]: the patch's own margin (its free points
-        sit beside its surface points by design), not the point touch's 2 cm."""
+        """Free space closer than this to a new contact is retracted [m]: the patch's free-space margin (2 cm by
+        default, the point touch's)."""
         return self.settings.free_margin
 
     def observations(self, result, contacts: np.ndarray, policy: ObservationPolicy, step: int) -> Observations:

@@ -103,7 +103,7 @@ def _evaluate_trial(evaluate, phi: np.ndarray):
     return f, g, h
 
 
-def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarray):
+def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarray, caps: Callable | None = None):
     """Maximise a smooth function of a few parameters within bounds by projected, Levenberg-damped Newton steps.
 
     Args:
@@ -112,9 +112,13 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         phi0: `(k,)` start (clamped to the bounds).
         lower: `(k,)` lower bounds (``-inf`` for none).
         upper: `(k,)` upper bounds (``+inf`` for none).
+        caps: ``phi -> (k,)`` the largest change of each parameter in one step (a trust region: a longer step is
+            shortened along its direction), or None.
 
     Returns:
         ``(phi, f, projected_gradient_norm, iterations, converged)``; convergence as in :func:`maximize_mll`.
+        Three accepted steps in a row that gain less than ``tol.fit_ftol`` (relative) end it unconverged: the
+        function's rounding, not the optimum, stops progress there.
     """
     phi = np.minimum(np.maximum(np.asarray(phi0, dtype=np.float64), lower), upper)
     f, grad, hess = value(phi)
@@ -125,6 +129,7 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     converged = False
     it = 0
     pg_norm = math.inf
+    stalls = 0
     for it in range(1, tol.fit_max_iter + 1):
         free = free_coordinates(phi, grad, lower, upper)
         pg = np.where(free, grad, 0.0)
@@ -139,9 +144,12 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         while True:
             step = np.zeros(k)
             step[idx] = np.linalg.solve(neg_h + shift * np.eye(len(idx)), grad[idx])
+            over = float(np.max(np.abs(step) / caps(phi))) if caps is not None else 0.0
+            if over > 1.0:
+                step /= over
             candidate = np.minimum(np.maximum(phi + step, lower), upper)
             decrement = float(grad @ (candidate - phi))
-            if shift == 0.0 and 0 <= decrement <= tol.fit_ftol * max(1.0, abs(f)):
+            if shift == 0.0 and over <= 1.0 and 0 <= decrement <= tol.fit_ftol * max(1.0, abs(f)):
                 # Newton-decrement stop: the pure Newton step predicts a gain below tolerance; near a
                 # non-degenerate maximum its error is quadratic in that gain, so take it without re-evaluating.
                 return candidate, f, pg_norm, it, True
@@ -152,7 +160,12 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
             if shift > 1e12 * max(1.0, abs(f)):
                 return phi, f, pg_norm, it, False
         damping = shift / 10.0 if shift > 0 else 0.0
+        # a stall: steps that gain nothing above the function's own rounding (an ill-conditioned K_t, where the
+        # evaluations differ by more than the tolerance asks) end the fit instead of running to fit_max_iter
+        stalls = stalls + 1 if f_new - f <= tol.fit_ftol * max(1.0, abs(f)) else 0
         phi, f, grad, hess = candidate, f_new, g_new, h_new
+        if stalls >= 3:
+            break
     return phi, f, pg_norm, it, converged
 
 
@@ -189,15 +202,25 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
             return first.pop()
         return value(phi)
 
-    phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper)
+    phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper, step_caps)
     return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged, hessian=last["hess"])
 
 
 def cholesky_bounds() -> tuple[np.ndarray, np.ndarray]:
     """`(3,)` lower and upper bounds of the Cholesky parameters (u, v, w): ``tol.log_chol_bounds`` on the log
-    diagonals, none on the off-diagonal."""
+    diagonals, ``e^hi`` on the off-diagonal's magnitude (so every entry of K_t stays below ``2 e^(2 hi)``; unbounded,
+    one Newton step once took K_t[1, 1] past ``tol.task_covariance_max``)."""
     lo, hi = tol.log_chol_bounds
-    return np.array([lo, -math.inf, lo]), np.array([hi, math.inf, hi])
+    return np.array([lo, -math.exp(hi), lo]), np.array([hi, math.exp(hi), hi])
+
+
+def step_caps(phi: np.ndarray) -> np.ndarray:
+    """`(3,)` the largest change of each Cholesky parameter (u, v, w) in one Newton step: ``tol.fit_max_step`` on
+    the log diagonals, and on ``v`` the change that scaling K_t by ``e^(2 fit_max_step)`` would make
+    (``v`` scales with ``sqrt`` of K_t)."""
+    r = tol.fit_max_step
+    u, v, w = (float(x) for x in phi)
+    return np.array([r, math.expm1(r) * max(abs(v), math.exp(w), math.exp(u) * 1e-3), r])
 
 
 def free_coordinates(phi: np.ndarray, grad: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
