@@ -10,7 +10,7 @@ mcap_reader = pytest.importorskip("mcap.reader")
 
 import torch_gpioius as tg  # noqa: E402
 from torch_gpioius.cli import main  # noqa: E402
-from torch_gpioius.io.foxglove import MCAP_TOPICS, export_mcap  # noqa: E402
+from torch_gpioius.io.foxglove import MCAP_TOPICS, PAD_TOPIC, export_mcap  # noqa: E402
 from torch_gpioius.io.runs import load_run  # noqa: E402
 
 
@@ -73,3 +73,22 @@ def test_cli_and_refusals(log_2d, tmp_path, capsys):
         assert main(argv) == 2
         err = capsys.readouterr().err.strip()
         assert expected in err and "\n" not in err
+
+
+def test_a_patch_run_exports_its_pads(tmp_path):
+    from torch_gpioius.exploration.registry import make_world
+
+    log = tmp_path / "patch.gpioius"
+    tg.explore(make_world("forcefield", "E", 0, smoke=True), "tactile", touch="patch", max_travel=0.02,
+               metrics_every=100, log=log, progress=False)
+    out = tmp_path / "patch.mcap"
+    export_mcap(log, out)
+    run = load_run(log)
+    with open(out, "rb") as f:
+        reader = mcap_reader.make_reader(f)
+        topics = {c.topic for c in reader.get_summary().channels.values()}
+        assert topics == set(MCAP_TOPICS) | {PAD_TOPIC}
+        last = [(s, m) for s, c, m in reader.iter_messages(topics=[PAD_TOPIC])][-1]
+    update = _decoder(last[0]).FromString(last[1].data)
+    loop = np.array([[p.x, p.y, p.z] for p in update.entities[0].lines[0].points])
+    np.testing.assert_allclose(loop, run.pad_footprints(run.steps[-1])[-1], atol=1e-12)

@@ -8,7 +8,9 @@ Topics, all in the run's frame (``base``, or ``scene`` in 2-D, lifted to z = 0):
 * ``/gpioius/path`` (``foxglove.SceneUpdate`` with a line strip): the fingertip's path so far;
 * ``/gpioius/estimate`` (``foxglove.SceneUpdate``): the inner estimate, a triangle list in 3-D or a line list in 2-D,
   coloured by its posterior variance (white certain, purple prior);
-* ``/gpioius/metrics`` (JSON): step, similarity, correlation, Hausdorff distance, for Foxglove's plot panel.
+* ``/gpioius/metrics`` (JSON): step, similarity, correlation, Hausdorff distance, for Foxglove's plot panel;
+* ``/gpioius/pad`` (``foxglove.SceneUpdate`` with a line loop; tactile-patch runs only, :data:`PAD_TOPIC`): the
+  outline of the gel pad read at the step.
 
 Message times are the run's step numbers in seconds from the start of the file (a step's wall time is not what a
 viewer scrubs by).
@@ -23,10 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["export_mcap", "MCAP_TOPICS"]
+__all__ = ["export_mcap", "MCAP_TOPICS", "PAD_TOPIC"]
 
 MCAP_TOPICS = ("/gpioius/cloud", "/gpioius/contacts", "/gpioius/free_space", "/gpioius/path", "/gpioius/estimate",
                "/gpioius/metrics")
+#: The pad's outline per step, written for runs whose log records the gel pad (``touch="patch"``).
+PAD_TOPIC = "/gpioius/pad"
 
 
 def _lift(x: np.ndarray) -> np.ndarray:
@@ -122,6 +126,8 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
         path_ch = ch.SceneUpdateChannel("/gpioius/path", context=ctx)
         estimate = ch.SceneUpdateChannel("/gpioius/estimate", context=ctx)
         metrics = foxglove.Channel("/gpioius/metrics", context=ctx)
+        has_pads = any("pad_pose" in history.params.get(k, {}) for k in steps)
+        pad_ch = ch.SceneUpdateChannel(PAD_TOPIC, context=ctx) if has_pads else None
         first = history.states[steps[0]]
         cloud.log(cloud_msg(first.x[first.task == 1], 0), log_time=0)
         n_messages += 1
@@ -140,6 +146,13 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
                     path_ch.log(fm.SceneUpdate(entities=[fm.SceneEntity(timestamp=fm.Timestamp(k, 0), frame_id=frame,
                                                                           id="path", lines=[line])]), log_time=t_ns)
                     n_messages += 1
+            if pad_ch is not None and "pad_pose" in history.params.get(k, {}):
+                corners = history.pad_footprints(k)[-1]
+                loop = fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineLoop, thickness=2.0, scale_invariant=True,
+                                        points=pts(corners), color=fm.Color(r=0.78, g=0.12, b=0.47, a=1.0))
+                pad_ch.log(fm.SceneUpdate(entities=[fm.SceneEntity(timestamp=fm.Timestamp(k, 0), frame_id=frame,
+                                                                     id="pad", lines=[loop])]), log_time=t_ns)
+                n_messages += 1
             if ((ds.task == 0) & (ds.y == 0)).any():
                 model = history.model_at(k)
                 surface, var = estimate_surface(model, data_bounds(ds.x), res, 0)
