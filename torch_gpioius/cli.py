@@ -140,12 +140,22 @@ def _import_bag(args: argparse.Namespace) -> int:
         window = (0.0 if args.start is None else args.start, 1e12 if args.end is None else args.end)
     tool = numbers(args.tool_offset, 3, "--tool-offset")
     crop = numbers(args.crop, 6, "--crop")
-    topics = BagTopics(cloud=args.cloud, wrench=args.wrench, joints=args.joints, tf=tuple(args.tf))
+    topics = BagTopics(cloud=args.cloud, wrench=args.wrench, joints=args.joints, tf=tuple(args.tf),
+                       tactile=args.tactile_topic)
+    calibration = None
+    if args.tactile_topic is not None:
+        from .sensors.tactile import DIGIT_CALIBRATION, TactileCalibration
+
+        calibration = TactileCalibration(
+            pitch=DIGIT_CALIBRATION.pitch if args.tactile_pitch is None else args.tactile_pitch,
+            gel_thickness=DIGIT_CALIBRATION.gel_thickness if args.tactile_gel is None else args.tactile_gel,
+            contact_depth=(DIGIT_CALIBRATION.contact_depth if args.tactile_contact_depth is None
+                           else args.tactile_contact_depth))
     ds = import_bag(args.bag, topics=topics, base_frame=args.base_frame, camera_transform=args.camera_transform,
                     tool_offset=tool, tip_radius=args.tip_radius, contact_force=args.contact_force,
                     contact_spacing=args.contact_spacing, max_gap=args.max_gap,
                     policy=ObservationPolicy(voxel=args.voxel), crop=None if crop is None else [crop[:3], crop[3:]],
-                    time_window=window)
+                    time_window=window, tactile_calibration=calibration, tactile_transform=args.tactile_transform)
     path = save_dataset(ds, out, overwrite=args.force)
     c = ds.meta["counts"]
     frames = ", ".join(ds.meta["camera_frames"]) or "none"
@@ -154,6 +164,10 @@ def _import_bag(args: argparse.Namespace) -> int:
     print(f"inner: {c['contacts']} contacts (|F| >= {args.contact_force:g} N), {c['free_space']} free-space points; "
           f"outer: {c['outer_surface']} surface + {c['outer_free_space']} free-space points "
           f"({args.voxel * 100:g} cm voxels)")
+    if args.tactile_topic is not None:
+        print(f"pad {args.tactile_topic}: {c['pad_frames']} frames, {c['pad_frames_used']} at contacts -> "
+              f"{c['patch_surface']} surface + {c['patch_free_space']} free-space points "
+              f"({c['pad_frames_out_of_contact']} out of contact, {c['pad_frames_untouched']} with no pixel pressed)")
     print(f"wrote {path}; next: gpioius fit {path} --out outputs/fit")
     return 0
 
@@ -370,6 +384,15 @@ def build_parser() -> argparse.ArgumentParser:
                      help="import from this many seconds after the first wrench sample (default: the beginning)")
     bag.add_argument("--end", type=float, default=None,
                      help="import up to this many seconds after the first wrench sample (default: the end)")
+    bag.add_argument("--tactile-topic", default=None,
+                     help="sensor_msgs/Image depth topic of a gel pad at the fingertip (DIGIT, GelSight): its frames "
+                          "at contacts become patches")
+    bag.add_argument("--tactile-pitch", type=float, default=None, help="the pad's pixel pitch [m] (default: DIGIT's)")
+    bag.add_argument("--tactile-gel", type=float, default=None, help="the gel's thickness [m] (default: DIGIT's)")
+    bag.add_argument("--tactile-contact-depth", type=float, default=None,
+                     help="indentation [m] at which a pixel is a contact (default: DIGIT's)")
+    bag.add_argument("--tactile-transform", default=None,
+                     help="T_tool_pad: the pad frame in the fingertip frame, 'x y z qx qy qz qw' (default: identity)")
     _force(bag, "--out exists")
     bag.set_defaults(func=_import_bag)
     ex = sub.add_parser("export", parents=[common], formatter_class=fmt,

@@ -329,3 +329,121 @@ def test_clouds_are_streamed_into_the_voxels_and_a_time_window_selects(tmp_path)
         import_bag(tmp_path / "b1", tool_offset=truth["tool_offset"], time_window=(5.0, 6.0))
     with pytest.raises(ValueError, match="time_window"):
         import_bag(tmp_path / "b1", time_window=(2.0, 1.0))
+
+
+# ----------------------------------------------------------------------------------------------- a gel pad topic
+def _pad_frames(recording, every=1, bad=None):
+    """The recording plus depth frames (32FC1) of a gel pad fixed to the fingertip, rendered from the true sphere at
+    the joint states' stamps: every ``every``-th joint sample while pressing, and two out of contact. The pad faces
+    the sphere at the first press (its gel 1 mm inside it there) and keeps that mount; frames pressed beyond the
+    gel's reach are not recorded (a gel bottoms out). Returns ``(messages, T_tool_pad, calibration)``."""
+    import torch
+    from kinematics.ur5 import UR5
+    from rosbags.typesys import Stores, get_typestore
+
+    from torch_gpioius.io.rosbag import BagMessage
+    from torch_gpioius.sensors.tactile import TactileCalibration
+    from torch_gpioius.sim.tactile import pad_pose
+
+    msgs, truth = recording
+    ts = get_typestore(Stores.ROS2_HUMBLE).types
+    cal = TactileCalibration(pitch=5e-4, gel_thickness=3e-3, contact_depth=1e-4)
+    c, r = np.asarray(truth["center"]), truth["radius"]
+    ur5 = UR5(tool_offset=truth["tool_offset"])
+    wrench = sorted((m.t_ns, np.linalg.norm([m.msg.wrench.force.x, m.msg.wrench.force.y, m.msg.wrench.force.z]))
+                    for m in msgs if m.topic == "/wrench")
+    t_w, f_w = np.array([w[0] for w in wrench]), np.array([w[1] for w in wrench])
+    joints = [m for m in msgs if m.topic == "/joint_states"]
+    pressing = [m for m in joints if f_w[np.argmin(np.abs(t_w - m.t_ns))] >= 1.0]
+    loose = [m for m in joints if f_w[np.argmin(np.abs(t_w - m.t_ns))] < 0.5]
+    T = {m.t_ns: ur5.forward_kinematics(torch.as_tensor(np.asarray(m.msg.position))).detach().numpy()
+         for m in pressing + loose[::50]}
+    first = T[pressing[0].t_ns]
+    n0 = (first[:3, 3] - c) / np.linalg.norm(first[:3, 3] - c)
+    pad0 = pad_pose(c + (r - 1e-3) * n0, -n0)                  # z into the sphere, the gel 1 mm inside it
+    T_tool_pad = np.linalg.inv(first) @ pad0
+    h = w = 40
+    jj, ii = np.meshgrid(np.arange(w) - (w - 1) / 2, np.arange(h) - (h - 1) / 2)
+    plane = np.stack([jj * cal.pitch, ii * cal.pitch, np.zeros_like(jj, dtype=float)], -1).reshape(-1, 3)
+    out = []
+    for m in pressing[::every] + loose[::50][:2]:
+        pose = T[m.t_ns] @ T_tool_pad
+        o = plane @ pose[:3, :3].T + pose[:3, 3]
+        axis = pose[:3, 2]
+        b = (o - c) @ axis
+        disc = b * b - (((o - c) ** 2).sum(1) - r * r)
+        s = np.where(disc >= 0, -b - np.sqrt(np.maximum(disc, 0.0)), np.inf)   # the sphere's front, pad z
+        depth = np.where(s < 0, -s, np.nan).reshape(h, w)
+        if np.nanmax(depth, initial=0.0) > cal.gel_thickness:
+            continue
+        data = depth.astype(np.float32)
+        img = ts["sensor_msgs/msg/Image"](header=m.msg.header, height=h, width=w, encoding="32FC1", is_bigendian=0,
+                                          step=4 * w, data=data.view(np.uint8).reshape(-1))
+        if bad is not None:
+            img = bad(img)
+        out.append(BagMessage("/digit/depth", "sensor_msgs/msg/Image", m.t_ns, img))
+    return msgs + out, T_tool_pad, cal
+
+
+def test_a_pad_topic_imports_patches_on_the_known_object(recording, tmp_path):
+    from torch_gpioius.exploration.patches import PatchSettings
+
+    msgs, T_tool_pad, cal = _pad_frames(recording)
+    truth = recording[1]
+    bag = write_bag(tmp_path / "pad", msgs, storage="mcap")
+    ds = _import(bag, truth, topics=BagTopics(tactile="/digit/depth"), tactile_calibration=cal,
+                 tactile_transform=T_tool_pad, patch=PatchSettings(spacing=0.002))
+    counts = ds.meta["counts"]
+    assert counts["pad_frames_used"] >= 3 and counts["pad_frames_out_of_contact"] == 2
+    assert counts["pad_frames"] == counts["pad_frames_used"] + counts["pad_frames_out_of_contact"] + \
+        counts["pad_frames_untouched"]
+    assert counts["patch_surface"] > 10 * counts["pad_frames_used"] // 2
+    inner = ds.task == 0
+    surf = ds.x[inner & (ds.y == 0)]
+    c, r = truth["center"], truth["radius"]
+    # the patches lie on the sphere: joints at their own stamps (no interpolation), float32 depths of <= 3 mm
+    # (~4e-10 m); the fingertip contacts beside them as before (2e-4 m, interpolation)
+    on = np.abs(np.linalg.norm(surf - c, axis=1) - r)
+    assert (on < 2e-4).all() and (np.sort(on)[:counts["patch_surface"]] < 1e-8).all()
+    # thinned across frames to the patch spacing, and every inner free point the margins away from them
+    d = np.linalg.norm(surf[:, None] - surf[None], axis=-1) + np.eye(len(surf))
+    patch_pts = surf[on < 1e-8]
+    dp = np.linalg.norm(patch_pts[:, None] - patch_pts[None], axis=-1) + np.eye(len(patch_pts))
+    assert dp.min() >= 0.002 * (1 - 1e-9) and d.min() > 0
+    free = ds.x[inner & (ds.y == 1)]
+    assert np.linalg.norm(free[:, None] - patch_pts[None], axis=-1).min() >= 0.02 - 1e-12
+    assert ds.meta["bag_topics"]["tactile"] == "/digit/depth" and ds.meta["tactile"]["calibration"]["pitch"] == 5e-4
+
+
+@pytest.mark.parametrize("bad, match", [
+    (lambda img: dataclasses.replace(img, encoding="rgb8"), "not a depth encoding"),
+    (lambda img: dataclasses.replace(img, data=(np.full((img.height, img.width), 5e-3, np.float32)
+                                                .view(np.uint8).reshape(-1))), "reach"),
+    (lambda img: dataclasses.replace(img, data=img.data[:-4]), "do not hold"),
+])
+def test_bad_pad_frames_are_refused_naming_the_topic(recording, tmp_path, bad, match):
+    msgs, T_tool_pad, cal = _pad_frames(recording, every=40, bad=bad)
+    bag = write_bag(tmp_path / "bad", msgs, storage="mcap")
+    with pytest.raises(BagImportError, match=f"/digit/depth: the frame at t = .*{match}"):
+        _import(bag, recording[1], topics=BagTopics(tactile="/digit/depth"), tactile_calibration=cal,
+                tactile_transform=T_tool_pad)
+    with pytest.raises(ValueError, match="tactile_calibration"):
+        _import(bag, recording[1], topics=BagTopics(tactile="/digit/depth"))
+
+
+def test_cli_imports_a_pad_topic(recording, tmp_path, capsys):
+    from scipy.spatial.transform import Rotation
+
+    msgs, T_tool_pad, cal = _pad_frames(recording)
+    bag = write_bag(tmp_path / "pad", msgs, storage="mcap")
+    qx, qy, qz, qw = Rotation.from_matrix(T_tool_pad[:3, :3]).as_quat()
+    pose = " ".join(f"{v:.17g}" for v in (*T_tool_pad[:3, 3], qx, qy, qz, qw))
+    out = tmp_path / "pad.gpioius"
+    truth = recording[1]
+    assert main(["import-bag", str(bag), "--out", str(out), "--tool-offset", " ".join(map(str, truth["tool_offset"])),
+                 "--tip-radius", str(truth["tip_radius"]), "--tactile-topic", "/digit/depth", "--tactile-pitch",
+                 str(cal.pitch), "--tactile-gel", str(cal.gel_thickness), "--tactile-contact-depth",
+                 str(cal.contact_depth), "--tactile-transform", pose]) == 0
+    text = capsys.readouterr().out
+    ds = load_dataset(out)
+    assert f"{ds.meta['counts']['patch_surface']} surface" in text and ds.meta["counts"]["pad_frames_used"] >= 3

@@ -21,6 +21,7 @@ Every problem with a bag raises :class:`BagImportError` with one line naming the
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from dataclasses import dataclass
@@ -43,6 +44,7 @@ _TYPES = {
     "wrench": "geometry_msgs/msg/WrenchStamped",
     "joints": "sensor_msgs/msg/JointState",
     "tf": "tf2_msgs/msg/TFMessage",
+    "tactile": "sensor_msgs/msg/Image",
 }
 
 
@@ -59,12 +61,16 @@ class BagTopics:
         wrench: ``geometry_msgs/WrenchStamped`` of the fingertip force sensor.
         joints: ``sensor_msgs/JointState`` of the UR5 (names as in the UR driver, e.g. ``shoulder_pan_joint``).
         tf: ``tf2_msgs/TFMessage`` topics to take the camera's pose from; missing ones are skipped.
+        tactile: ``sensor_msgs/Image`` depth maps of a gel pad at the fingertip (DIGIT, GelSight; 32FC1 / 64FC1 in
+            metres or 16UC1 / mono16 in mm, as :func:`torch_gpioius.sensors.tactile.depth_from_image_message`), or
+            None: no pad.
     """
 
     cloud: str = "/camera/depth/points"
     wrench: str = "/wrench"
     joints: str = "/joint_states"
     tf: tuple[str, ...] = ("/tf_static", "/tf")
+    tactile: str | None = None
 
 
 # ----------------------------------------------------------------------------------------------- point clouds
@@ -383,7 +389,8 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
                contact_force: float = 1.0, contact_spacing: float = 0.005, max_gap: float = 0.1,
                joint_names: Sequence[str] | None = None, policy=None, crop=None,
                theta: float | None = None, noise: float | None = None, time_window=None,
-               max_joint_speed: float = UR5_MAX_JOINT_SPEED) -> Dataset:
+               max_joint_speed: float = UR5_MAX_JOINT_SPEED, tactile_calibration=None, tactile_transform=None,
+               patch=None) -> Dataset:
     """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
 
     Args:
@@ -408,6 +415,19 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             inside it are imported (joint states and tf are read whole, for interpolation and lookups).
         max_joint_speed: the robot's fastest joint speed [rad/s] (UR5: pi); joint states that would need a joint
             faster than that (by more than 25 %) are refused as corrupt.
+        tactile_calibration: the pad's :class:`~torch_gpioius.sensors.tactile.TactileCalibration`; required with
+            ``topics.tactile``.
+        tactile_transform: ``T_tool_pad``, the pad frame in the fingertip's frame (the frame the forward kinematics
+            gives at ``tool_offset``), in the same forms as ``camera_transform``; default identity (the gel centred
+            on the fingertip centre, facing along the tool's z axis).
+        patch: :class:`~torch_gpioius.exploration.patches.PatchSettings` (thinning and free-space margin).
+
+    With ``topics.tactile``, every pad frame stamped at a contact (the nearest wrench sample within ``max_gap``
+    has ``|F| >= contact_force``) becomes a patch (:func:`~torch_gpioius.exploration.patches.patch_observations`)
+    at the pad's pose from the joint states interpolated at its stamp; frames out of contact, or in contact but
+    with no pixel pressed to the contact depth, are counted and skipped. Surface points of later frames are thinned
+    against the earlier ones to the patch spacing, and the fingertip's free space is kept the policy's margin from
+    them too.
 
     Clouds are read one at a time and averaged into the voxels as they come (:class:`torch_gpioius.voxels.
     VoxelAccumulator`), so memory holds one cloud and the occupied voxels, not the recording.
@@ -421,7 +441,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         BagImportError: one line naming the topic and the cause (missing topic, wrong type, empty, a time gap,
             a backwards clock, an empty or all-NaN cloud, no x/y/z fields or repeated/overlapping ones, implausible
             coordinates, a joint named twice or moving faster than the robot can, a NaN or non-rotation tf, an
-            unknown camera frame).
+            unknown camera frame, a pad frame that is not a depth image or presses beyond the gel's reach).
         ValueError: bad arguments.
     """
     from kinematics.dh import UR5_JOINT_NAMES
@@ -441,6 +461,17 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
     if len(names) != 6:
         raise ValueError(f"import_bag: joint_names needs the 6 UR5 joints, got {len(names)}")
     T_fixed = parse_transform(camera_transform) if camera_transform is not None else None
+    if topics.tactile is not None:
+        from ..exploration.patches import PatchSettings
+        from ..sensors.tactile import TactileCalibration
+
+        if not isinstance(tactile_calibration, TactileCalibration):
+            raise ValueError("import_bag: topics.tactile needs tactile_calibration (a TactileCalibration: pixel "
+                             f"pitch, gel thickness, contact depth), got {tactile_calibration!r}")
+        T_pad = np.eye(4) if tactile_transform is None else parse_transform(tactile_transform)
+        patch = patch or PatchSettings()
+        if not isinstance(patch, PatchSettings):
+            raise ValueError(f"import_bag: patch must be a PatchSettings, got {type(patch).__name__}")
     if crop is not None:
         crop = as_bounds(crop, 3)
     path = Path(bag)
@@ -522,6 +553,17 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         keep_f = free_idx[thin_indices(tips[free_idx], policy.free_space_spacing, contacts, policy.free_space_margin)]
         free, free_steps = tips[keep_f], step_of[keep_f]
 
+        # ---- inner: the gel pad's frames at contacts, as patches
+        pads = {"surface": [], "free": [], "surface_steps": [], "free_steps": []}
+        n_pad = n_pad_used = n_pad_off = n_pad_empty = 0
+        if topics.tactile is not None:
+            n_pad, n_pad_used, n_pad_off, n_pad_empty = _import_pads(
+                reader, path, topics, t_w, touching, step_of, t_j, q_j, max_gap, ur5, T_pad, tactile_calibration,
+                patch, time_window and (t_first + w0, t_first + w1), pads)
+            if pads["surface"]:
+                far = _far_from(free, np.concatenate(pads["surface"]), policy.free_space_margin)
+                free, free_steps = free[far], free_steps[far]
+
         # ---- outer: one cloud at a time into the base frame, the exploration's vision rule, then the voxels
         base = base_frame.lstrip("/")
         cloud_frames = set()
@@ -582,11 +624,15 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
     else:
         seen = np.concatenate(seen_all)
         free_o = np.concatenate(free_all) if free_all else np.empty((0, 3))
-    x = np.concatenate([contacts, free, seen, free_o])
-    y = np.concatenate([np.zeros(len(contacts)), np.ones(len(free)), np.zeros(len(seen)), np.ones(len(free_o))])
-    task = np.concatenate([np.zeros(len(contacts) + len(free)), np.ones(len(seen) + len(free_o))]).astype(np.int64)
-    step = np.concatenate([np.arange(1, len(contacts) + 1), np.asarray(free_steps, dtype=np.int64),
-                           np.zeros(len(seen) + len(free_o), np.int64)]).astype(np.int64)
+    p_surf = np.concatenate(pads["surface"]) if pads["surface"] else np.empty((0, 3))
+    p_free = np.concatenate(pads["free"]) if pads["free"] else np.empty((0, 3))
+    x = np.concatenate([contacts, p_surf, free, p_free, seen, free_o])
+    y = np.concatenate([np.zeros(len(contacts) + len(p_surf)), np.ones(len(free) + len(p_free)), np.zeros(len(seen)),
+                        np.ones(len(free_o))])
+    n_inner = len(contacts) + len(p_surf) + len(free) + len(p_free)
+    task = np.concatenate([np.zeros(n_inner), np.ones(len(seen) + len(free_o))]).astype(np.int64)
+    step = np.concatenate([np.arange(1, len(contacts) + 1), *pads["surface_steps"], np.asarray(free_steps),
+                           *pads["free_steps"], np.zeros(len(seen) + len(free_o))]).astype(np.int64)
     meta = {"source": f"rosbag:{path.name}", "frame": base, "bag_topics": {"cloud": topics.cloud,
             "wrench": topics.wrench, "joints": topics.joints}, "camera_frames": sorted(cloud_frames),
             "contact_force": contact_force, "contact_spacing": contact_spacing, "tip_radius": tip_radius,
@@ -595,6 +641,13 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             "counts": {"wrench": len(wrenches), "joint_states": len(joint_msgs), "clouds": n_clouds,
                        "cloud_points": int(n_raw), "contacts": int(len(contacts)), "free_space": int(len(free)),
                        "outer_surface": int(len(seen)), "outer_free_space": int(len(free_o))}}
+    if topics.tactile is not None:
+        meta["bag_topics"]["tactile"] = topics.tactile
+        meta["tactile"] = {"calibration": dataclasses.asdict(tactile_calibration), "T_tool_pad": T_pad.tolist(),
+                           "patch": dataclasses.asdict(patch)}
+        meta["counts"].update({"pad_frames": n_pad, "pad_frames_used": n_pad_used,
+                               "pad_frames_out_of_contact": n_pad_off, "pad_frames_untouched": n_pad_empty,
+                               "patch_surface": int(len(p_surf)), "patch_free_space": int(len(p_free))})
     if theta is not None:
         meta["theta"] = theta
     if noise is not None:
@@ -602,6 +655,68 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
     trace = {"positions": tips, "forces": forces, "timestamps": t_w - t_w[0]}
     return Dataset(x, y, task, step, meta=meta, trace=trace)
 
+
+def _import_pads(reader, path: Path, topics: BagTopics, t_w: np.ndarray, touching: np.ndarray, step_of: np.ndarray,
+                 t_j: np.ndarray, q_j: np.ndarray, max_gap: float, ur5, T_pad: np.ndarray, calibration, settings,
+                 window, out: dict) -> tuple[int, int, int, int]:
+    """The pad frames of ``topics.tactile`` as patches into ``out`` (see :func:`import_bag`); returns the frames
+    read, used, out of contact and untouched."""
+    from ..exploration.observations import thin_indices
+    from ..exploration.patches import patch_observations
+    from ..sensors.tactile import TactileReading, depth_from_image_message
+
+    n = used = off = empty = 0
+    kept = np.empty((0, 3))
+    for t, msg in _iter_messages(reader, path, topics.tactile, "tactile"):
+        if window and not window[0] <= t <= window[1]:
+            continue
+        n += 1
+        k = int(np.clip(np.searchsorted(t_w, t), 1, len(t_w) - 1))
+        k = k if abs(t_w[k] - t) < abs(t_w[k - 1] - t) else k - 1
+        if abs(t_w[k] - t) > max_gap or not touching[k]:
+            off += 1
+            continue
+        where = f"{path}: topic {topics.tactile}: the frame at t = {t:.6f} s"
+        try:
+            depth = depth_from_image_message(msg)
+        except ValueError as exc:
+            raise BagImportError(f"{where}: {exc}") from None
+        q = _interpolate(path, topics.joints, t_j, q_j, np.array([t]), max_gap)
+        with torch.no_grad():
+            T_tool = ur5.forward_kinematics(torch.as_tensor(q)).numpy()[0]
+        try:
+            reading = TactileReading(depth, T_tool @ T_pad, calibration, float(t))
+        except ValueError as exc:
+            raise BagImportError(f"{where}: {exc}") from None
+        if not reading.contact_mask.any():
+            empty += 1
+            continue
+        obs = patch_observations(reading, settings, int(step_of[k]))
+        surf, free = obs.x[obs.y == 0], obs.x[obs.y == 1]
+        surf = surf[thin_indices(surf, settings.spacing, kept, settings.spacing)] if len(kept) else surf
+        kept = np.concatenate([kept, surf])
+        used += 1
+        out["surface"].append(surf)
+        out["surface_steps"].append(np.full(len(surf), int(step_of[k])))
+        out["free"].append(free)
+        out["free_steps"].append(np.full(len(free), int(step_of[k])))
+    if out["free"]:                  # the free space of every patch kept its margin from every patch's surface
+        allf = np.concatenate(out["free"])
+        steps = np.concatenate(out["free_steps"])
+        far = _far_from(allf, kept, settings.free_margin)
+        out["free"], out["free_steps"] = [allf[far]], [steps[far]]
+    return n, used, off, empty
+
+
+def _far_from(points: np.ndarray, avoid: np.ndarray, margin: float) -> np.ndarray:
+    """`(n,)` bool: points at least ``margin`` from every point of ``avoid`` (a k-d tree: a recording's patches hold
+    thousands of points, too many for a dense distance matrix against its free space)."""
+    from scipy.spatial import cKDTree
+
+    if not len(points) or not len(avoid):
+        return np.ones(len(points), bool)
+    d, _ = cKDTree(avoid).query(points, k=1)
+    return d >= margin
 
 # ----------------------------------------------------------------------------------------------- writing
 @dataclass
