@@ -3,7 +3,8 @@ patch`` on the same objects, modes and seeds).
 
 Per object and mode: H at 10 % of the reference travel and at the end for each touch (medians with 95 %
 intervals), the paired difference patch - point on the same seed, the final correlation with the median of the
-runs' own 95 % profile intervals, the inner points at the end and the median step time.
+runs' own 95 % profile intervals, how many runs' intervals reach below 0.9 (the data tell the tasks apart there)
+and the median step time.
 
     python scripts/touch_table.py outputs/touch_point_ff outputs/touch_patch_ff
 """
@@ -38,8 +39,9 @@ def main() -> None:
     args = parser.parse_args()
     point, patch = _runs(args.point), _runs(args.patch)
     print("| object | mode | H 10 % point / patch [cm] | patch - point at 10 % [cm] | H final point / patch [cm] | "
-          "patch - point final [cm] | rho final point / patch [runs' intervals] | step point / patch [ms] |")
-    print("|---|---|---|---|---|---|---|---|")
+          "patch - point final [cm] | rho final point / patch [runs' intervals] | "
+          "runs with interval lower end < 0.9: point / patch | step point / patch [ms] |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for key in sorted(set(point) & set(patch)):
         a, b = point[key], patch[key]
         seeds = sorted(set(a) & set(b))
@@ -53,8 +55,11 @@ def main() -> None:
         hf = [median_interval(col(rs, "final_hausdorff")) for rs in (a, b)]
         d10 = paired_difference(col(b, "hausdorff_10"), col(a, "hausdorff_10"))
         dfin = paired_difference(col(b, "final_hausdorff"), col(a, "final_hausdorff"))
-        rho = []
+        rho, wide = [], []
         for rs in (a, b):
+            los = [_f(rs[s]["final_correlation_lo"]) for s in seeds]
+            wide.append(f"{sum(v < 0.9 for v in los if math.isfinite(v))} of {sum(math.isfinite(v) for v in los)}"
+                        if any(math.isfinite(v) for v in los) else "-")
             vals = [_f(rs[s]["final_correlation"]) for s in seeds]
             if not any(math.isfinite(v) for v in vals):
                 rho.append("-")
@@ -64,7 +69,7 @@ def main() -> None:
             rho.append(f"{statistics.median(vals):.2f} [{lo:.2f}, {hi:.2f}]")
         step = [1e3 * statistics.median(_f(rs[s]["median_step_time"]) for s in seeds) for rs in (a, b)]
         print(f"| {key[0]} | {key[1]} | {_cm(h10[0])} / {_cm(h10[1])} | {_cm(d10)} | {_cm(hf[0])} / {_cm(hf[1])} | "
-              f"{_cm(dfin)} | {rho[0]} / {rho[1]} | {step[0]:.0f} / {step[1]:.0f} |")
+              f"{_cm(dfin)} | {rho[0]} / {rho[1]} | {wide[0]} / {wide[1]} | {step[0]:.0f} / {step[1]:.0f} |")
 
 
 if __name__ == "__main__":
