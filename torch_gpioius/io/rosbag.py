@@ -559,7 +559,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         if topics.tactile is not None:
             n_pad, n_pad_used, n_pad_off, n_pad_empty = _import_pads(
                 reader, path, topics, t_w, touching, step_of, t_j, q_j, max_gap, ur5, T_pad, tactile_calibration,
-                patch, time_window and (t_first + w0, t_first + w1), pads)
+                patch, None if time_window is None else (t_first + w0, t_first + w1), pads)
             if pads["surface"]:
                 far = _far_from(free, np.concatenate(pads["surface"]), policy.free_space_margin)
                 free, free_steps = free[far], free_steps[far]
