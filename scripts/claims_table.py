@@ -41,6 +41,21 @@ def _cm(d: dict) -> str:
     return f"{one(d['median'])} [{one(d['lo'])}, {one(d['hi'])}]"
 
 
+def _column(runs: dict, seeds: list, key: str) -> list[float]:
+    """A metric over the seeds; a failed run's missing estimate is +inf (a finite value of a failed run is its
+    estimate at the stop)."""
+    return [v if math.isfinite(v) else math.inf for v in (_f(runs[s][key]) for s in seeds)]
+
+
+def _hausdorff(x: dict, y: dict, seeds: list) -> dict:
+    """H at 10 % of the travel and at the end for runs ``x`` and ``y`` on the same seeds: ``h10`` and ``hf``, the
+    medians with intervals of each (x first), and ``d10`` / ``dfin``, the paired differences x - y."""
+    return {"h10": [median_interval(_column(r, seeds, "hausdorff_10")) for r in (x, y)],
+            "hf": [median_interval(_column(r, seeds, "final_hausdorff")) for r in (x, y)],
+            "d10": paired_difference(_column(x, seeds, "hausdorff_10"), _column(y, seeds, "hausdorff_10")),
+            "dfin": paired_difference(_column(x, seeds, "final_hausdorff"), _column(y, seeds, "final_hausdorff"))}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("study", type=Path)
@@ -60,10 +75,8 @@ def main() -> None:
         if not seeds:
             continue
 
-        def col(runs, key, worst=True):
-            vals = [_f(runs[s][key]) for s in seeds]
-            # a failed run's missing estimate is +inf; a finite value of a failed run is its estimate at the stop
-            return [math.inf if worst and not math.isfinite(v) else v for v in vals]
+        def col(runs, key):
+            return _column(runs, seeds, key)
 
         fails = [sum(1 for s in seeds if runs[s]["failed"]) for runs in (vt, t)]
         why = sorted({runs[s]["failed"] for runs in (vt, t) for s in seeds if runs[s]["failed"]})

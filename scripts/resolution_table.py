@@ -17,16 +17,15 @@ from __future__ import annotations
 
 import argparse
 import csv
-import math
 import statistics
 import sys
 from collections import defaultdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from claims_table import _cm, _f  # noqa: E402  (scripts/ is not a package)
+from claims_table import _cm, _f, _hausdorff  # noqa: E402  (scripts/ is not a package)
 
-from torch_gpioius.studies.stats import median_interval, paired_difference  # noqa: E402
+from torch_gpioius.studies.stats import median_interval  # noqa: E402
 from torch_gpioius.studies.sweep import no_harm_margin  # noqa: E402
 
 #: Tight and loose covers of the same body (docs/results-3d.md).
@@ -61,13 +60,8 @@ def main() -> None:
         if not seeds:
             continue
 
-        def col(rs, key):
-            return [v if math.isfinite(v) else math.inf for v in (_f(rs[s][key]) for s in seeds)]
-
-        h10 = [median_interval(col(rs, "hausdorff_10")) for rs in (runs, tact)]
-        hf = [median_interval(col(rs, "final_hausdorff")) for rs in (runs, tact)]
-        early = paired_difference(col(runs, "hausdorff_10"), col(tact, "hausdorff_10"))
-        final = paired_difference(col(runs, "final_hausdorff"), col(tact, "final_hausdorff"))
+        h = _hausdorff(runs, tact, seeds)
+        h10, hf, early, final = h["h10"], h["hf"], h["d10"], h["dfin"]
         allowed = no_harm_margin(hf[1])
         rho = median_interval([_f(runs[s]["final_correlation"]) for s in seeds], failed="drop")
         corr[(obj, voxel)] = rho

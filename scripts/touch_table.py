@@ -20,9 +20,7 @@ from collections import defaultdict
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from claims_table import _cm, _f  # noqa: E402  (scripts/ is not a package)
-
-from torch_gpioius.studies.stats import median_interval, paired_difference  # noqa: E402
+from claims_table import _cm, _f, _hausdorff  # noqa: E402  (scripts/ is not a package)
 
 
 def _runs(folder: Path) -> dict:
@@ -47,14 +45,8 @@ def main() -> None:
         seeds = sorted(set(a) & set(b))
         if not seeds:
             continue
-
-        def col(rs, name):
-            return [v if math.isfinite(v) else math.inf for v in (_f(rs[s][name]) for s in seeds)]
-
-        h10 = [median_interval(col(rs, "hausdorff_10")) for rs in (a, b)]
-        hf = [median_interval(col(rs, "final_hausdorff")) for rs in (a, b)]
-        d10 = paired_difference(col(b, "hausdorff_10"), col(a, "hausdorff_10"))
-        dfin = paired_difference(col(b, "final_hausdorff"), col(a, "final_hausdorff"))
+        h = _hausdorff(b, a, seeds)                          # patch first: the differences are patch - point
+        h10, hf, d10, dfin = h["h10"][::-1], h["hf"][::-1], h["d10"], h["dfin"]
         rho, wide = [], []
         for rs in (a, b):
             los = [_f(rs[s]["final_correlation_lo"]) for s in seeds]
