@@ -138,9 +138,10 @@ def _profile_slope(evaluate: Evaluate, rho: float, start: np.ndarray) -> tuple[f
     return f, x, float(g[1]) * e, curvature
 
 
-def _search(profile: Callable, centre: tuple[float, float, float, float, np.ndarray], edge: float,
-            l_hat: float, q_inside: float, q_edge: float | None, tol: float) -> float:
-    """The endpoint between the ``centre`` (inside; ``(rho, l_p, slope, curvature, maximiser)``) and ``edge``:
+def _search(evaluate: Evaluate, centre: tuple[float, float, float, float, np.ndarray], edge: float,
+            q_inside: float, q_edge: float | None, tol: float) -> float:
+    """The endpoint between the ``centre`` (the maximum ``l_hat`` of the profile, inside; ``(rho, l_hat, slope,
+    curvature, maximiser)`` as :func:`_profile_slope` gives them there) and ``edge``:
     ``edge`` itself when it is not ruled out (with the boundary quantile ``q_edge``), else the crossing of
     ``2 (l_hat - l_p(rho)) = q_inside``, returned as the middle of a bracket no wider than ``tol``.
 
@@ -151,12 +152,12 @@ def _search(profile: Callable, centre: tuple[float, float, float, float, np.ndar
     A step that leaves the bracket or fails to halve ``|g|`` is followed by a bisection. Every profile is warm-started
     from the nearest profiled rho. About 4 profiles per endpoint instead of bisection's 11 (``tol`` 1e-3 over
     [-1, 1]); each profile is a few exact MLL evaluations, O(N_i^3) at thousands of inner points."""
-    rho_c, _, slope_c, curv_c, x_c = centre
+    rho_c, l_hat, slope_c, curv_c, x_c = centre
     seen = [(rho_c, x_c)]
 
     def run(r: float) -> tuple[float, float, float, np.ndarray]:
         x0 = min(seen, key=lambda p: abs(p[0] - r))[1]
-        f, x, slope, _ = profile(r, x0)
+        f, x, slope, _ = _profile_slope(evaluate, r, x0)
         if math.isfinite(f):
             seen.append((r, x))
         d = 2.0 * max(l_hat - f, 0.0) if math.isfinite(f) else math.inf
@@ -221,21 +222,17 @@ def correlation_interval(evaluate: Evaluate, kt_hat: torch.Tensor, level: float 
     a, b, c = float(kt_hat[0, 0]), float(kt_hat[0, 1]), float(kt_hat[1, 1])
     rho_hat = float(np.clip(b / math.sqrt(a * c), -1.0, 1.0))
     start = np.array([0.5 * math.log(a), 0.5 * math.log(c)])
-
-    def profile(r, x):
-        return _profile_slope(evaluate, r, x)
-
-    f_hat, x_hat, slope, curv = profile(rho_hat, start)
+    f_hat, x_hat, slope, curv = _profile_slope(evaluate, rho_hat, start)
     # the maximum over the closed set: the optimiser's bound keeps rho just inside +-1
     for edge in (-1.0, 1.0):
         if abs(edge - rho_hat) < 1e-3:
-            f_edge, x_edge, s_edge, c_edge = profile(edge, start)
+            f_edge, x_edge, s_edge, c_edge = _profile_slope(evaluate, edge, start)
             if f_edge > f_hat:
                 f_hat, rho_hat, x_hat, slope, curv = f_edge, edge, x_edge, s_edge, c_edge
     q_in, q_edge = chi2_quantile(level), chi2_quantile(level, boundary=True)
     centre = (rho_hat, f_hat, slope, curv, x_hat)
-    lo = _search(profile, centre, -1.0, f_hat, q_in, q_edge, tol)
-    hi = _search(profile, centre, 1.0, f_hat, q_in, q_edge, tol)
+    lo = _search(evaluate, centre, -1.0, q_in, q_edge, tol)
+    hi = _search(evaluate, centre, 1.0, q_in, q_edge, tol)
     return min(lo, rho_hat), max(hi, rho_hat), rho_hat
 
 
