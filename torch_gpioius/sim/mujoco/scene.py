@@ -353,23 +353,13 @@ class MujocoScene(World):
         the force. Pinched cloth reads as its fabric thickness (1 mm); the simulated cloth counts as pinched within
         its collision layer (two element radii) + 1 mm of the body, as :meth:`contact_truth` counts it; foam,
         thicker than the gel, is read as foam."""
-        import mujoco
-
         from ..tactile import SimulatedGelPad
 
-        vid = np.zeros(1, np.int32)
         lift = self.cover.radius                 # mj_rayFlex meets the faces' mid-surface; the cloth's face is this in front
 
         def cover_rays(origins: np.ndarray, axis: np.ndarray, far: float) -> np.ndarray:
-            out = np.full(len(origins), np.inf)
-            direction = np.ascontiguousarray(axis, dtype=np.float64)
-            for f in range(physics.model.nflex):
-                for i, o in enumerate(origins):
-                    d = mujoco.mj_rayFlex(physics.model, physics.data, 0, False, False, True, False, f,
-                                          np.ascontiguousarray(o), direction, vid, None)
-                    if 0 <= d <= far:
-                        out[i] = min(out[i], d - lift)
-            return out
+            hits = (self._flex_ray(physics, o, axis) for o in origins)
+            return np.array([d - lift if d is not None and d <= far else np.inf for d in hits])
 
         tip = self._tip_geom
         return SimulatedGelPad(self.body.sdf, lambda: np.array(physics.data.geom_xpos[tip]),
