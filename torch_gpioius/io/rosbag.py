@@ -661,7 +661,6 @@ def _import_pads(reader, path: Path, topics: BagTopics, t_w: np.ndarray, touchin
                  window, out: dict) -> tuple[int, int, int, int]:
     """The pad frames of ``topics.tactile`` as patches into ``out`` (see :func:`import_bag`); returns the frames
     read, used, out of contact and untouched."""
-    from ..exploration.observations import thin_indices
     from ..exploration.patches import patch_observations
     from ..sensors.tactile import TactileReading, depth_from_image_message
 
@@ -693,7 +692,7 @@ def _import_pads(reader, path: Path, topics: BagTopics, t_w: np.ndarray, touchin
             continue
         obs = patch_observations(reading, settings, int(step_of[k]))
         surf, free = obs.x[obs.y == 0], obs.x[obs.y == 1]
-        surf = surf[thin_indices(surf, settings.spacing, kept, settings.spacing)] if len(kept) else surf
+        surf = surf[_far_from(surf, kept, settings.spacing)]   # already thinned within the patch; now across frames
         kept = np.concatenate([kept, surf])
         used += 1
         out["surface"].append(surf)
