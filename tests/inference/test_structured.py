@@ -302,3 +302,134 @@ def test_removing_inner_points_keeps_the_eigendecomposition():
     outer_first = int(torch.nonzero(m.train_task == 1)[0])
     m.remove_observations([outer_first])                   # an outer point: the engine is rebuilt
     assert m._inference() is not engine and m._inference().n == len(y) - 5
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The truncated outer basis (outer_tol): an approximation beside the exact engine (issue 26).
+def _dense_with_kernel(eng, x, y, t, kt):
+    """Dense reference with ``K' = U diag(lam) U^T`` in place of K_oo, differentiable in K_t (autograd)."""
+    inner, outer = t == 0, t == 1
+    order = torch.cat([torch.nonzero(inner).flatten(), torch.nonzero(outer).flatten()])
+    xs, ys = x[order], y[order]
+    n_i = int(inner.sum())
+    k = eng.kernel.value(xs, xs)
+    kp = (eng.u * eng.lam) @ eng.u.T
+    a, b, c = kt[0, 0], kt[0, 1], kt[1, 1]
+    g = torch.cat([torch.cat([a * k[:n_i, :n_i], b * k[:n_i, n_i:]], 1), torch.cat([b * k[n_i:, :n_i], c * kp], 1)])
+    g = g + eng.noise * torch.eye(len(ys), dtype=torch.float64)
+    chol = torch.linalg.cholesky(g)
+    r = ys - eng.mean
+    alpha = torch.cholesky_solve(r.unsqueeze(-1), chol).squeeze(-1)
+    mll = -0.5 * (2 * chol.diagonal().log().sum() + r @ alpha) - 0.5 * len(ys) * math.log(2 * math.pi)
+
+    def predict(xq, task):
+        scale = torch.cat([kt[task, 0].expand(n_i), kt[task, 1].expand(len(ys) - n_i)])
+        kq = eng.kernel.value(xq, xs) * scale
+        v = torch.linalg.solve_triangular(chol, kq.T, upper=False)
+        return eng.mean + kq @ alpha, kt[task, task] * eng.kernel.prior_variance(1.0) - (v * v).sum(0)
+
+    return mll, alpha, predict
+
+
+def test_truncated_engine_is_exact_for_its_kernel():
+    """With K' in place of K_oo the engine's arithmetic is exact: MLL, its gradient and Hessian, mean, variance and
+    their x-gradients equal a dense solve with K' (and autograd through it)."""
+    x, y, t = _surface_data(n_outer=1200, n_inner=100, seed=4)
+    eng = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=1e-1)
+    assert eng.truncated and eng.rank < 1000 and 0 < eng.dropped_trace <= 1e-1 * 0.08
+    xq = x[:25] + 0.01
+    for kt in ([[0.3, 0.25], [0.25, 0.4]], [[1.0, -0.5], [-0.5, 0.3]]):
+        p = torch.tensor([kt[0][0], kt[0][1], kt[1][1]], dtype=torch.float64, requires_grad=True)
+        b = torch.stack([torch.stack([p[0], p[1]]), torch.stack([p[1], p[2]])])
+        mll_ref, _, predict = _dense_with_kernel(eng, x, y, t, b)
+        g_ref = torch.autograd.grad(mll_ref, p, create_graph=True)[0]
+        h_ref = torch.stack([torch.autograd.grad(g_ref[j], p, retain_graph=True)[0] for j in range(3)])
+        fs, gs, hs = eng.mll_derivatives(b.detach())
+        # the MLL is a small difference of terms of size ~N (here ~20 from ~1e3): rounding scales with N
+        assert abs(fs - float(mll_ref)) <= 1e-10 * len(y)
+        assert _rel(gs, g_ref.detach()) < 1e-8 and _rel(hs, h_ref.detach()) < 1e-8
+        for task in (0, 1):
+            mr, vr = predict(xq, task)
+            ms, vs = eng.predict(xq, task, b.detach())
+            # 1e-8: the complement's terms (k . g / s, |k|^2 / s) are differences of numbers ~1e3 times the result
+            assert _rel(ms, mr.detach()) < 1e-8 and float(((vs - vr.detach()).abs() / vr.detach()).max()) < 1e-7
+            m2, v2, gm, gv = eng.predict_with_gradients(xq, task, b.detach())
+            xg = xq.clone().requires_grad_(True)
+            ma, va = eng.predict(xg, task, b.detach())
+            gma, = torch.autograd.grad(ma.sum(), xg, retain_graph=True)
+            gva, = torch.autograd.grad(va.sum(), xg)
+            assert _rel(m2, ms) < 1e-8 and _rel(v2, vs) < 1e-8
+            assert _rel(gm, gma) < 1e-9 and _rel(gv, gva) < 1e-7
+
+
+def test_truncated_engine_is_within_its_bound_of_the_exact_one():
+    """|MLL' - MLL| <= (delta + c tr(E) |alpha'|^2 (1 + delta)) / 2 with delta = c tr(E) / s (the Gram matrices
+    differ by c E >= 0 in the outer block); a tighter tolerance moves everything towards the exact engine."""
+    x, y, t = _surface_data(n_outer=1200, n_inner=100, seed=5)
+    exact = StructuredExactInference(x, y, t, theta=0.15, noise=0.08)
+    b = torch.tensor([[0.3, 0.25], [0.25, 0.4]], dtype=torch.float64)
+    xq = x[:25] + 0.01
+    errors = []
+    for outer_tol in (10.0, 1e-1, 1e-3):
+        eng = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=outer_tol)
+        delta = eng.truncation(0.4)
+        assert delta == pytest.approx(0.4 * eng.dropped_trace / 0.08, rel=1e-12) and delta <= 0.4 * outer_tol
+        _, alpha, _ = _dense_with_kernel(eng, x, y, t, b)
+        bound = 0.5 * (delta + 0.4 * eng.dropped_trace * float(alpha @ alpha) * (1 + delta))
+        err = abs(float(eng.mll(b)) - float(exact.mll(b)))
+        assert eng.truncated and err <= bound + 1e-10 * abs(float(exact.mll(b)))      # + rounding
+        errors.append((err, _rel(eng.predict(xq, 0, b)[0], exact.predict(xq, 0, b)[0])))
+    assert errors[0][0] > errors[1][0] > errors[2][0] and errors[0][1] > errors[2][1] and errors[2][1] < 1e-6
+
+
+def test_truncated_engine_grows_and_shrinks_like_a_fresh_one():
+    """Appends (with the planner's cached rows) and removals keep the basis and equal a fresh truncated engine;
+    outer points rebuild it with the same tolerance."""
+    x, y, t = _surface_data(n_outer=1200, n_inner=80, seed=6)
+    inner = torch.nonzero(t == 0).flatten()
+    first = torch.ones(len(y), dtype=torch.bool)
+    first[inner[40:]] = False
+    eng = StructuredExactInference(x[first], y[first], t[first], theta=0.15, noise=0.08, outer_tol=1e-2)
+    u = eng.u
+    b = torch.tensor([[0.3, 0.2], [0.2, 0.5]], dtype=torch.float64)
+    eng.mll_derivatives(b)
+    for k in range(40, 80, 5):
+        eng.append(x[inner[k:k + 5]], y[inner[k:k + 5]], torch.zeros(5, dtype=torch.long))
+    assert eng.u is u
+    fresh = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=1e-2)
+    torch.testing.assert_close(fresh.lam, eng.lam, rtol=0, atol=0)       # the same outer points, the same basis
+    f1, g1, h1 = eng.mll_derivatives(b)
+    f2, g2, h2 = fresh.mll_derivatives(b)
+    assert abs(f1 - f2) <= 1e-10 * abs(f2) and _rel(g1, g2) < 1e-9 and _rel(h1, h2) < 1e-9
+    contact = x[inner[75]].unsqueeze(0)                                   # served from the cached rotated rows
+    for a_, b_ in zip(eng.predict_with_gradients(contact, 0, b), fresh.predict_with_gradients(contact, 0, b)):
+        torch.testing.assert_close(a_, b_, rtol=1e-9, atol=1e-12)
+    drop = torch.zeros(eng.n, dtype=torch.bool)
+    drop[[3, 50, 70]] = True                                              # inner rows (inner first in data order)
+    tasks = torch.cat([torch.zeros(eng.n_inner, dtype=torch.long), torch.ones(1200, dtype=torch.long)])
+    assert eng.remove(drop, tasks)
+    keep = torch.ones(len(y), dtype=torch.bool)
+    keep[inner[[3, 50, 70]]] = False
+    fresh = StructuredExactInference(x[keep], y[keep], t[keep], theta=0.15, noise=0.08, outer_tol=1e-2)
+    xq = x[:10] + 0.01
+    torch.testing.assert_close(eng.predict(xq, 0, b)[1], fresh.predict(xq, 0, b)[1], rtol=1e-9, atol=1e-12)
+    assert abs(float(eng.mll(b) - fresh.mll(b))) <= 1e-10 * abs(float(fresh.mll(b)))
+    eng.append(torch.tensor([[0.4, 0.0, 0.0]], dtype=torch.float64), torch.ones(1, dtype=torch.float64),
+               torch.ones(1, dtype=torch.long))
+    assert eng.outer_tol == 1e-2 and eng.truncated and len(eng.xo) == 1201
+
+
+def test_model_outer_tol_fits_near_the_exact_model_and_reports_its_bound():
+    x, y, t = _surface_data(n_outer=1200, n_inner=100, seed=8)
+    exact = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08).fit()
+    approx = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, outer_tol=1e-2).fit()
+    assert exact.truncation == 0.0 and approx._inference().truncated
+    assert 0 < approx.truncation <= 1e-2 * float(approx.task_covariance[1, 1])
+    assert _rel(approx.task_covariance, exact.task_covariance) < 1e-4
+    for bad in (0.0, -1e-3, float("nan"), "1e-3", True):
+        with pytest.raises(ValueError, match="outer_tol"):
+            tg.GPIOIS(x, y, t, outer_tol=bad)
+    with pytest.raises(ValueError, match="outer_tol"):
+        tg.GPIOIS(x, y, t, inference="dense", outer_tol=1e-3)
+    with pytest.raises(ValueError, match="outer_tol"):
+        tg.GPIOIS(x[t == 0], y[t == 0], t[t == 0], outer_tol=1e-3).fit()

@@ -48,6 +48,7 @@ import torch
 from torch import Tensor
 
 from .dense import bordered, engine_kernel, robust_cholesky
+from .lowrank import truncated_basis
 from ..tolerances import tol
 
 __all__ = ["StructuredExactInference"]
@@ -315,9 +316,12 @@ class StructuredExactInference:
     """
 
     def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel=None, noise: float = 0.006, mean: float = 1.0, *,
-                 theta: float | None = None):
+                 theta: float | None = None, outer_tol: float | None = None):
         self.kernel = engine_kernel(kernel, theta)
         self.noise, self.mean = float(noise), float(mean)
+        if outer_tol is not None and (not math.isfinite(outer_tol) or outer_tol <= 0):
+            raise ValueError(f"outer_tol: must be a finite number > 0 (or None: exact), got {outer_tol}")
+        self.outer_tol = outer_tol
         x, y, task = x.detach(), y.detach(), task.detach()
         inner, outer = task == 0, task == 1
         if not bool(outer.any()):
@@ -326,12 +330,28 @@ class StructuredExactInference:
         self.xi, self.yi = x[inner], y[inner]
         kind = dict(dtype=x.dtype, device=x.device)
         self._kind = kind
-        lam, self.u = torch.linalg.eigh(self.kernel.value(self.xo, self.xo))
-        self.lam = lam.clamp_min(0.0)  # K_oo is PSD; clamp rounding below zero
+        if outer_tol is None:
+            lam, self.u = torch.linalg.eigh(self.kernel.value(self.xo, self.xo))
+            self.lam = lam.clamp_min(0.0)  # K_oo is PSD; clamp rounding below zero
+            self.dropped_trace = 0.0
+        else:
+            basis = truncated_basis(self.kernel, self.xo, outer_tol * self.noise)
+            self.lam, self.u, self.dropped_trace = basis.lam, basis.u, basis.dropped_trace
         self.rt = self.u.T @ (self.yo - self.mean)
         self.kii = self.kernel.value(self.xi, self.xi)
-        self._p = GrowingRows(self.kernel.value(self.xi, self.xo) @ self.u if len(self.xi)
-                        else torch.zeros(0, len(self.xo), **kind))
+        k_io = self.kernel.value(self.xi, self.xo) if len(self.xi) else torch.zeros(0, len(self.xo), **kind)
+        self._p = GrowingRows(k_io @ self.u)
+        # The truncated basis spans part of R^N_o: with K' = U diag(lam) U^T in place of K_oo,
+        # (c K' + s I)^-1 = U D U^T + (I - U U^T) / s. The second term is c-independent; it enters T(c) as
+        # C0 = (K_io K_oi - P P^T) / s, the weights as e = (K_io r_o - P rt) / s, the outer quadratic form as
+        # (|r_o|^2 - |rt|^2) / s and queries through their raw kernel rows (forms that never need U^T U = I).
+        self._raw = None
+        if self.truncated:
+            ro = self.yo - self.mean
+            self._raw = {"kio": GrowingRows(k_io), "ro": ro,
+                         "c0": (k_io @ k_io.T - self.p @ self.p.T) / self.noise,
+                         "e": (k_io @ ro - self.p @ self.rt) / self.noise,
+                         "quad_o": float(ro @ ro - self.rt @ self.rt) / self.noise}
         self._series = None  # _ChebyshevStore of the current window of K_t[1,1]
         self._rotated = None  # (contacts, (1 + d, k, N_o) rotated kernel rows and x-derivatives) of the last append
         self._invalidate()
@@ -345,6 +365,21 @@ class StructuredExactInference:
     @property
     def n(self) -> int:
         return len(self.xi) + len(self.xo)
+
+    @property
+    def truncated(self) -> bool:
+        """Whether the outer block uses a truncated basis (``outer_tol``) that drops part of ``K_oo``."""
+        return self.outer_tol is not None and self.lam.shape[0] < len(self.xo)
+
+    @property
+    def rank(self) -> int:
+        """Number of outer modes kept (N_o when exact)."""
+        return int(self.lam.shape[0])
+
+    def truncation(self, c: float) -> float:
+        """``c tr(E) / s``: bound on the truncated basis' perturbation of the Gram matrix ``G >= s I``, relative
+        to s (0 when exact). ``E = K_oo - U diag(lam) U^T`` is positive semi-definite and ``||c E|| <= c tr(E)``."""
+        return abs(c) * self.dropped_trace / self.noise
 
     @property
     def n_inner(self) -> int:
@@ -373,7 +408,7 @@ class StructuredExactInference:
         ys = torch.cat([self.yi, self.yo, y])
         ts = torch.cat([torch.zeros(len(self.xi), dtype=torch.long, device=x.device),
                         torch.ones(len(self.xo), dtype=torch.long, device=x.device), task])
-        self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean)
+        self.__init__(xs, ys, ts, self.kernel, self.noise, self.mean, outer_tol=self.outer_tol)
         return True
 
     #: Growth of the data (and of b^2) the Chebyshev store's truncation allows before it is rebuilt.
@@ -397,8 +432,17 @@ class StructuredExactInference:
                           _kernel_rows(contacts, self.xo, self.kernel)[1:].reshape(-1, n_o)])
         rotated = rows @ self.u
         p_new = rotated[:len(x)]
+        contact_rows = torch.cat([rows[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
+                                  rows[len(x):].view(dim, len(contacts), n_o)])
         self._rotated = (contacts, torch.cat([rotated[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
-                                              rotated[len(x):].view(dim, len(contacts), n_o)]))
+                                              rotated[len(x):].view(dim, len(contacts), self.rank)]), contact_rows)
+        if self._raw is not None:
+            raw, s, k_new = self._raw, self.noise, rows[:len(x)]
+            k_io = raw["kio"].append(k_new)
+            p_all = torch.cat([self.p, p_new])
+            c0_rows = (k_new @ k_io.T - p_new @ p_all.T) / s                     # (k, N_i + k)
+            raw["c0"] = bordered(raw["c0"], c0_rows[:, :-len(x)], c0_rows[:, -len(x):])
+            raw["e"] = torch.cat([raw["e"], (k_new @ raw["ro"] - p_new @ self.rt) / s])
         self._p.append(p_new)
         self.xi = torch.cat([self.xi, x])
         self.yi = torch.cat([self.yi, y])
@@ -423,6 +467,10 @@ class StructuredExactInference:
         self.xi, self.yi = self.xi[keep], self.yi[keep]
         self.kii = self.kii[keep][:, keep]
         self._p = GrowingRows(self.p[keep])
+        if self._raw is not None:
+            raw = self._raw
+            raw["kio"] = GrowingRows(raw["kio"].data[keep])
+            raw["c0"], raw["e"] = raw["c0"][keep][:, keep], raw["e"][keep]
         self._series = None                # rebuilt for the remaining rows at the next factorisation
         self._rotated = None
         self._invalidate()
@@ -464,6 +512,9 @@ class StructuredExactInference:
         if self.n_inner:
             t = self._t_matrices(c, beta, a, derivatives)
             pd = self.p @ self._weight_vectors(d_all, derivatives)  # P D rt (and its c-derivative companions)
+            if self._raw is not None:                               # the truncated basis' complement
+                t = (t[0] + self._raw["c0"],) + tuple(t[1:])
+                pd[:, 0] += self._raw["e"]
             smat = a * self.kii - beta * beta * t[0]
             smat.diagonal().add_(s)      # exactly symmetric: K_ii and the unpacked T are (Cholesky reads one half)
             chol, self.jitter = robust_cholesky(smat, "inner Schur complement")
@@ -472,7 +523,8 @@ class StructuredExactInference:
             cache.update(t0=t[0], t1=t[1], t2=t[2], pd=pd, chol=chol, v=v, alpha_i=alpha_i,
                          logdet_s=2 * chol.diagonal().log().sum())
         else:
-            cache.update(alpha_i=torch.zeros(0, **self._kind), alpha_rot=d_all * self.rt)
+            cache.update(alpha_i=torch.zeros(0, **self._kind),
+                         alpha_rot=(d_all if self._raw is None else d_all - 1.0 / s) * self.rt)
         self._cache, self._key = cache, key
         return cache
 
@@ -490,10 +542,20 @@ class StructuredExactInference:
         return torch.stack(vecs, dim=1)
 
     def _alpha_rot(self, f: dict) -> Tensor:
-        """Outer weights in the rotated basis, ``U^T alpha_o`` (computed on the first query of a factor)."""
+        """Outer weights in the rotated basis, ``U^T alpha_o`` (computed on the first query of a factor).
+
+        With a truncated basis these are ``(D - 1/s) h`` and :meth:`_alpha_raw` holds ``g / s``
+        (``h = rt - b P^T alpha_i``, ``g = r_o - b K_oi alpha_i``): ``k_o . alpha_o = w . alpha_rot + k_o . g / s``."""
         if f["alpha_rot"] is None:
-            f["alpha_rot"] = f["d"] * (self.rt - f["beta"] * (self.p.T @ f["alpha_i"]))
+            h = self.rt - f["beta"] * (self.p.T @ f["alpha_i"])
+            f["alpha_rot"] = f["d"] * h if self._raw is None else (f["d"] - 1.0 / self.noise) * h
         return f["alpha_rot"]
+
+    def _alpha_raw(self, f: dict) -> Tensor:
+        """`(N_o,)` ``g / s`` of a truncated basis (see :meth:`_alpha_rot`)."""
+        if f.get("alpha_raw") is None:
+            f["alpha_raw"] = (self._raw["ro"] - f["beta"] * (self._raw["kio"].data.T @ f["alpha_i"])) / self.noise
+        return f["alpha_raw"]
 
     # ------------------------------------------------------------------ posterior
     def predict(self, xq: Tensor, task: int, b: Tensor, chunk: int = 4096) -> tuple[Tensor, Tensor]:
@@ -508,10 +570,15 @@ class StructuredExactInference:
         w = k_o @ self.u                                  # (m, N_o) rotated outer kernel vectors
         mean = self.mean + b1 * (w @ self._alpha_rot(f))
         quad = b1 * b1 * (w * w * f["d"]).sum(-1)
+        if self._raw is not None:                                   # the truncated basis' complement
+            mean = mean + b1 * (k_o @ self._alpha_raw(f))
+            quad = quad + b1 * b1 * ((k_o * k_o).sum(-1) - (w * w).sum(-1)) / self.noise
         if self.n_inner:
             k_i = self.kernel.value(xq, self.xi)
             mean = mean + b0 * (k_i @ f["alpha_i"])
             z = b0 * k_i - beta * b1 * ((w * f["d"]) @ self.p.T)   # (m, N_i)
+            if self._raw is not None:
+                z = z - beta * b1 * (k_o @ self._raw["kio"].data.T - w @ self.p.T) / self.noise
             y = self._solve_lower(f, z.T)
             quad = quad + (y * y).sum(0)
         var = self.kernel.prior_variance(b[task, task]) - quad
@@ -543,12 +610,14 @@ class StructuredExactInference:
 
         w_all = None
         if self._rotated is not None:                                        # queries at just-added points
-            x_new, rotated = self._rotated
+            x_new, rotated, raw_rows = self._rotated
             hit = (xq.unsqueeze(1) == x_new.unsqueeze(0)).all(-1)            # (m, k)
             if bool(hit.any(1).all()):
                 w_all = rotated[:, hit.to(torch.int8).argmax(1)]
+                k_rows = raw_rows[:, hit.to(torch.int8).argmax(1)]
         if w_all is None:
-            w_all = (_kernel_rows(xq, self.xo, self.kernel).reshape(-1, len(self.xo)) @ self.u).view(1 + dim, m, -1)
+            k_rows = _kernel_rows(xq, self.xo, self.kernel)                  # (1 + d, m, N_o)
+            w_all = (k_rows.reshape(-1, len(self.xo)) @ self.u).view(1 + dim, m, -1)
         w, dw = w_all[0], w_all[1:]
         d = f["d"]
         alpha_rot = self._alpha_rot(f)
@@ -556,11 +625,19 @@ class StructuredExactInference:
         g_mean = b1 * (dw @ alpha_rot)                                        # (d, m)
         quad = b1 * b1 * (w * w * d).sum(-1)
         g_quad = 2 * b1 * b1 * (dw * (w * d)).sum(-1)
+        if self._raw is not None:                                            # the truncated basis' complement
+            g_raw = k_rows @ self._alpha_raw(f)                              # (1 + d, m)
+            mean, g_mean = mean + b1 * g_raw[0], g_mean + b1 * g_raw[1:]
+            k0, s = k_rows[0], self.noise
+            quad = quad + b1 * b1 * ((k0 * k0).sum(-1) - (w * w).sum(-1)) / s
+            g_quad = g_quad + 2 * b1 * b1 * ((k_rows[1:] * k0).sum(-1) - (dw * w).sum(-1)) / s
         if self.n_inner:
             k_all = _kernel_rows(xq, self.xi, self.kernel)                   # (1 + d, m, N_i)
             mean = mean + b0 * (k_all[0] @ f["alpha_i"])
             g_mean = g_mean + b0 * (k_all[1:] @ f["alpha_i"])
             z_all = b0 * k_all - beta * b1 * ((w_all * d) @ self.p.T)        # (1 + d, m, N_i)
+            if self._raw is not None:
+                z_all = z_all - beta * b1 * (k_rows @ self._raw["kio"].data.T - w_all @ self.p.T) / self.noise
             y = self._solve_lower(f, z_all.reshape(-1, self.n_inner).T)
             y = y.T.reshape(1 + dim, m, -1)
             quad = quad + (y[0] * y[0]).sum(-1)
@@ -576,6 +653,9 @@ class StructuredExactInference:
         d, c = f["d"], f["c"]
         logdet = torch.log(c * self.lam + self.noise).sum()
         quad = (self.rt * self.rt * d).sum()
+        if self._raw is not None:              # the complement's modes: c * 0 + s each
+            logdet = logdet + (len(self.xo) - self.rank) * math.log(self.noise)
+            quad = quad + self._raw["quad_o"]
         if self.n_inner:
             logdet = logdet + f["logdet_s"]
             quad = quad + f["v"] @ f["alpha_i"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 
@@ -63,6 +64,12 @@ class GPIOIS(ImplicitSurfaceGP):
             held K_t, for tactile patches of tens of points per step; use it with ``fit(min_gain=...)``).
         kernel: any :class:`~torch_gpioius.kernels.ExactKernel` (e.g. ``tg.kernels.Matern52(0.1)``) in place of the
             inverse multiquadric; both engines stay exact for it.
+        outer_tol: None (default: exact) or an **approximation beside the exact engine** for large outer sets
+            (thousands of fine camera voxels): the structured engine then uses a truncated eigenbasis of K_oo from a
+            pivoted Cholesky that drops a positive semi-definite part E of trace at most ``outer_tol * sigma^2``
+            (``inference.lowrank``). The Gram matrix then differs from the exact one by at most
+            ``K_t[1,1] tr(E)`` in spectral norm, ``truncation`` of the model's value relative to ``sigma^2``
+            (docs/performance.md gives its measured effect). Only with ``inference`` "auto" or "structured".
         device: where the data and the exact arithmetic live ("cpu", "cuda", a ``torch.device``; default: where
             ``train_x`` is). Always float64; K_t's 3 x 3 Newton algebra runs on the host.
 
@@ -79,14 +86,23 @@ class GPIOIS(ImplicitSurfaceGP):
 
     def __init__(self, train_x, train_y, train_task, theta: float = 0.1, noise: float = 0.006,
                  task_covariance: Tensor | None = None, learn_theta: bool = False, inference: str = "auto",
-                 kernel=None, device=None):
+                 kernel=None, device=None, outer_tol: float | None = None):
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")
         if inference not in ("auto", "dense", "structured", "batched"):
             raise ValueError(f"inference: must be 'auto', 'dense', 'structured' or 'batched', got {inference!r}")
+        if outer_tol is not None:
+            if inference not in ("auto", "structured"):
+                raise ValueError(f"outer_tol: needs inference 'auto' or 'structured', got {inference!r}")
+            if isinstance(outer_tol, bool) or not isinstance(outer_tol, (int, float)) or not math.isfinite(outer_tol) \
+                    or outer_tol <= 0:
+                raise ValueError(f"outer_tol: must be a finite number > 0 (or None: exact), got {outer_tol!r}")
+            outer_tol = float(outer_tol)
         super().__init__((x, t.unsqueeze(-1)), y, theta, noise, learn_theta, kernel)
         self.inference = inference
+        #: Truncated outer basis: dropped trace at most ``outer_tol * sigma^2`` (None: exact).
+        self.outer_tol = outer_tol
         self.task_covar_module = IndexKernel(num_tasks=2, rank=2).double()
         self.task_covar_module.raw_var.data.fill_(_ZERO_VAR_RAW)
         self.task_covar_module.raw_var.requires_grad_(False)
@@ -241,11 +257,26 @@ class GPIOIS(ImplicitSurfaceGP):
         if self.inference == "dense":
             return DenseExactInference
         has_outer = bool((self._train_task() == OUTER).any())
+        if self.outer_tol is not None:
+            if not has_outer:
+                raise ValueError("outer_tol: needs outer (task 1) observations")
+            return functools.partial(StructuredExactInference, outer_tol=self.outer_tol)
         if self.inference in ("structured", "batched"):
             if not has_outer:
                 raise ValueError(f"inference={self.inference!r} needs outer (task 1) observations")
             return StructuredExactInference if self.inference == "structured" else BatchedExactInference
         return StructuredExactInference if has_outer and self.noise >= 1e-8 else DenseExactInference
+
+    def _key(self, n: int) -> tuple:
+        return super()._key(n) + (getattr(self, "outer_tol", None),)
+
+    @property
+    def truncation(self) -> float:
+        """Bound on the truncated outer basis' change of the Gram matrix, relative to sigma^2: ``K_t[1,1] tr(E) /
+        sigma^2`` (0.0 with the exact engines; see ``outer_tol``)."""
+        if self.outer_tol is None:
+            return 0.0
+        return float(self._inference().truncation(float(self.task_covariance[1, 1])))
 
     def _task_matrix(self) -> Tensor:
         x0 = self.train_inputs[0]
