@@ -59,7 +59,7 @@ def _study(args: argparse.Namespace) -> int:
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
-                       touch=args.touch)
+                       touch=args.touch, outer_tol=args.outer_tol)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -330,6 +330,10 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
     sw.add_argument("--touch", default="point", choices=["point", "patch"],
                     help="point: the fingertip's contact; patch: a gel pad's depth map (3-D worlds); one per --out folder")
+    sw.add_argument("--outer-tol", type=float, default=None,
+                    help="visual-tactile runs with a truncated outer basis dropping a PSD part of trace <= OUTER_TOL * "
+                         "sigma^2 (an approximation for thousands of camera points, e.g. 1e-3 with --voxel 0.01; "
+                         "docs/performance.md); default: exact; one setting per --out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

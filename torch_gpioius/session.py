@@ -21,8 +21,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             theta: float | None = None, kernel=None, noise: float | None = None, max_steps: int | None = None,
             max_travel: float | None = None, stop=None, policy=None, penalty=None,
             metrics_every: int | None = None, metrics_resolution: float | None = None,
-            interval_every: int | None = None, regions: int | None = None, stall="default", recorders=(),
-            progress: bool = False,
+            interval_every: int | None = None, regions: int | None = None, stall="default",
+            outer_tol: float | None = None, recorders=(), progress: bool = False,
             log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None) -> Trace:
     """Explore ``world`` and record per-step metrics: the same loop for every world.
 
@@ -64,6 +64,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         stall: the no-progress rule and its recovery (default :class:`~torch_gpioius.exploration.recovery.NoProgress`:
             no step in 8 took the fingertip 1 cm from where it is: lift along the measured normal and re-approach;
             after 3 such recoveries the run ends as "stalled"); None switches it off.
+        outer_tol: visual-tactile with ``GPIOIS(outer_tol=...)``: a truncated basis of the outer kernel matrix that
+            drops a positive semi-definite part of trace at most ``outer_tol * sigma^2``, for thousands of camera
+            points (fine voxels); each record's ``truncation`` says how far the Gram matrix moved (None: exact).
         recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the
             metrics and the interval, before the log).
         progress: report progress (a bar on a terminal, plain lines otherwise).
@@ -86,7 +89,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
                                       kernel=kernel, noise=noise, max_steps=max_steps, max_travel=max_travel,
                                       stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
                                       metrics_resolution=metrics_resolution, interval_every=interval_every,
-                                      regions=regions, stall=stall)
+                                      regions=regions, stall=stall, outer_tol=outer_tol)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     observers = list(recorders)

@@ -54,6 +54,8 @@ class ExploreConfig:
         approach_travel: the approach gives up after this distance [m].
         stall: the no-progress rule and its recovery (:class:`~torch_gpioius.exploration.recovery.NoProgress`), or
             None to switch it off.
+        outer_tol: the truncated outer basis of ``GPIOIS(outer_tol=...)`` (an approximation for thousands of
+            camera points), or None (exact).
     """
 
     mode: str
@@ -73,12 +75,13 @@ class ExploreConfig:
     regions: int | None
     approach_travel: float
     stall: NoProgress | None = NoProgress()
+    outer_tol: float | None = None
 
     @classmethod
     def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
                    kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
                    metrics_every=None, metrics_resolution=None, interval_every=None, regions=None,
-                   stall="default") -> "ExploreConfig":
+                   stall="default", outer_tol=None) -> "ExploreConfig":
         """Validate the overrides and merge them with ``world.defaults`` (see :func:`torch_gpioius.explore`).
 
         Raises:
@@ -93,6 +96,11 @@ class ExploreConfig:
             regions = _check_int(regions, "regions", 1, 64)
             if mode != "visual-tactile":
                 raise ValueError("regions: a similarity per region needs mode='visual-tactile'")
+        if outer_tol is not None:
+            outer_tol = as_float(outer_tol, "outer_tol", positive=True)
+            if mode != "visual-tactile" or regions is not None:
+                raise ValueError("outer_tol: the truncated outer basis is GPIOIS's; it needs mode='visual-tactile' "
+                                 "and no regions")
         d = world.defaults
         step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
         if kernel is not None and theta is not None:
@@ -124,7 +132,8 @@ class ExploreConfig:
         if stall is not None and not isinstance(stall, NoProgress):
             raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
         return cls(mode, evidence, touch_model(touch), step, theta, kernel, noise, max_steps, rules, policy, penalty,
-                   metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall)
+                   metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
+                   outer_tol)
 
     # ------------------------------------------------------------------ what the loop asks of the settings
     @property
@@ -155,8 +164,12 @@ class ExploreConfig:
             return GPIS(np.asarray(x)[inner], np.asarray(y)[inner], theta=theta, noise=self.noise, kernel=kernel)
         if self.regions is not None:
             return LocalGPIOIS(x, y, task, regions=self.regions, theta=theta, noise=self.noise, kernel=kernel)
-        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel,
-                      inference=getattr(self.touch, "inference", "auto"))
+        inference = getattr(self.touch, "inference", "auto")
+        if self.outer_tol is not None and inference != "auto":
+            raise ValueError(f"outer_tol: the {getattr(self.touch, 'name', 'touch')} touch uses the {inference} "
+                             "engine, which has no truncated outer basis")
+        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel, inference=inference,
+                      outer_tol=self.outer_tol)
 
     def describe(self) -> dict:
         """JSON-able settings for a log's header (resume compares them)."""
@@ -170,6 +183,8 @@ class ExploreConfig:
                "regions": self.regions, "policy": dataclasses.asdict(self.policy),
                "penalty": type(self.penalty).__name__,
                "stall": None if self.stall is None else self.stall.describe()}
+        if self.outer_tol is not None:            # only when set: logs written before it existed still resume
+            out["outer_tol"] = self.outer_tol
         if self.evidence is not None and callable(getattr(self.evidence, "describe", None)):
             out["evidence_policy"] = self.evidence.describe()
         return out

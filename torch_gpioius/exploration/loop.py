@@ -242,6 +242,7 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     record.correlation = float(getattr(m, "correlation", math.nan))
     if hasattr(m, "task_covariance"):
         record.task_covariance = m.task_covariance.numpy()
+    record.truncation = float(getattr(m, "truncation", 0.0))
     if hasattr(m, "region_correlations"):
         record.region_correlation = m.region_correlations().numpy()
 

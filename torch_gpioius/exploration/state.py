@@ -32,6 +32,7 @@ RECORD_FIELDS = {
     "contact_distance": "distance of the step's contact from the true inner surface [m] (negative inside)",
     "contact_on_body": "1 if the fingertip touched the body itself at the contact, 0 if only the cover (NaN unknown)",
     "retracted": "free-space samples retracted so far",
+    "truncation": "bound on the truncated outer basis' change of the Gram matrix, relative to sigma^2 (0: exact)",
 }
 
 
@@ -68,6 +69,7 @@ class StepRecord:
     retracted: int = 0
     contact_distance: float = math.nan
     contact_on_body: float = math.nan
+    truncation: float = 0.0
     final: bool = False
     observations: Observations | None = None
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))

@@ -44,6 +44,8 @@ class Trace:
         contact_distance: `(n,)` distance of each step's contact from the true inner surface [m] (NaN unknown).
         contact_on_body: `(n,)` 1 where the fingertip touched the body itself, 0 where only the cover (NaN unknown).
         recoveries: `(n,)` cumulative number of recoveries from a stall.
+        truncation: `(n,)` bound on the truncated outer basis' change of the Gram matrix relative to sigma^2
+            (``outer_tol``; 0 with the exact engines).
     """
 
     mode: str
@@ -72,6 +74,7 @@ class Trace:
     contact_distance: np.ndarray = field(default_factory=lambda: np.zeros(0))
     contact_on_body: np.ndarray = field(default_factory=lambda: np.zeros(0))
     recoveries: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    truncation: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":
@@ -99,7 +102,7 @@ class Trace:
                                                  for r in regions]) if width else np.zeros((len(recs), 0))),
                    touch=getattr(config.touch, "name", "custom"), contact_distance=col("contact_distance"),
                    contact_on_body=col("contact_on_body"),
-                   recoveries=np.array([r.recoveries for r in recs], dtype=np.int64))
+                   recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"))
 
     @property
     def n_steps(self) -> int:

@@ -34,8 +34,10 @@ from torch import Tensor
 
 __all__ = ["OuterBasis", "pivoted_cholesky", "truncated_basis"]
 
-#: Candidate pivots examined per block (one GEMM of ``(N_o, r) x (r, BLOCK)`` per block).
+#: Candidate pivots examined per block (one GEMM of ``(N_o, r) x (r, BLOCK)`` per block), at most; blocks start at
+#: MIN_BLOCK and grow with the rank (r / 4), so a loose tolerance is not overshot by a whole block.
 BLOCK = 128
+MIN_BLOCK = 16
 #: A candidate joins a block's pivots while its residual is at least this fraction of the largest residual left
 #: outside the block (the greedy order, kept to within a factor that costs no extra rank in practice).
 ACCEPT = 0.1
@@ -91,7 +93,7 @@ def pivoted_cholesky(kernel, x: Tensor, trace_tol: float, max_rank: int | None =
     pivots: list[Tensor] = []
     r = 0
     while r < max_rank and float(d.sum()) > trace_tol:
-        b = min(BLOCK, max_rank - r, n - r)
+        b = min(BLOCK, max(MIN_BLOCK, r // 4), max_rank - r, n - r)   # small first blocks: little overshoot
         cand = torch.topk(d + tie * (d > 0), b).indices
         cand = cand[d[cand] > 0]
         if not len(cand):

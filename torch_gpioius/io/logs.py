@@ -27,7 +27,7 @@ __all__ = ["LogRecorder", "restore_run", "step_values", "OLD_FIELD_NAMES"]
 OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertainty", "s": "similarity",
                    "rho": "correlation", "ci": "correlation_interval", "time": "step_time", "sim_time": "robot_time"}
 _VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "similarity", "correlation", "step_time",
-           "robot_time", "contact_distance", "contact_on_body")
+           "robot_time", "contact_distance", "contact_on_body", "truncation")
 
 
 def step_values(meta: dict) -> dict:
@@ -89,7 +89,7 @@ class LogRecorder(Recorder):
                 "uncertainty": record.uncertainty, "similarity": record.similarity, "correlation": record.correlation,
                 "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
-                "contact_on_body": record.contact_on_body}
+                "contact_on_body": record.contact_on_body, "truncation": record.truncation}
         fit_state = getattr(state.model, "fit_state", None)
         fit_hessian = np.full((3, 3), np.nan)
         if callable(fit_state):                     # the min_gain rule's memory (patch runs), so resume decides alike
@@ -177,7 +177,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
                          correlation_interval=v["correlation_interval"],
                          task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64), step_time=v["step_time"],
                          robot_time=v["robot_time"], taps=v["taps"], recoveries=v["recoveries"], retracted=v["retracted"],
-                         contact_distance=v["contact_distance"], contact_on_body=v["contact_on_body"])
+                         contact_distance=v["contact_distance"], contact_on_body=v["contact_on_body"],
+                         truncation=v["truncation"])
         state.records.append(rec)
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it

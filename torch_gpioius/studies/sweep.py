@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validation import as_float
 from .stats import median_interval, paired_difference
 
 __all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
@@ -77,6 +78,7 @@ class RunSpec:
     scene: str | None = None        # a scene file (torch_gpioius.sim.scenefile) instead of a built-in object
     voxel: float | None = None      # camera voxel edge [m] (0: every point); None: the world's own (0.05)
     touch: str = "point"            # "point" (the fingertip's contact) or "patch" (a gel pad's depth map)
+    outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
 
     @property
     def key(self) -> str:
@@ -125,6 +127,8 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["policy"] = world.defaults.policy.with_voxel(spec.voxel)
     if spec.touch != "point":
         kw["touch"] = spec.touch
+    if spec.outer_tol is not None and kw["mode"] == "visual-tactile" and "regions" not in kw:
+        kw["outer_tol"] = spec.outer_tol
     return kw
 
 
@@ -273,6 +277,9 @@ def run_one(spec: RunSpec) -> dict:
         record["n_outer"] = _n_outer(trace.model)
     record["voxel"] = kw.get("policy", world.defaults.policy).voxel or 0.0
     record["touch"] = spec.touch
+    if "outer_tol" in kw and trace is not None:      # the truncated outer basis: its setting and largest bound
+        record["outer_tol"] = kw["outer_tol"]
+        record["max_truncation"] = float(np.nanmax(trace.truncation)) if len(trace.truncation) else math.nan
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
@@ -430,7 +437,8 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "recoveries": run["recoveries"], "contacts_on_body": run["contacts_on_body"],
            "contacts_within": run["contacts_within"],
            "wall_time": run["wall_time"], "median_step_time": run["median_step_time"], "reference_travel": ref,
-           "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan)}
+           "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
+           "max_truncation": run.get("max_truncation", 0.0)}
     for f in FRACTIONS:
         p = int(round(100 * f))
         row[f"hausdorff_{p}"] = _at_travel(s, "hausdorff", f * ref)
@@ -679,7 +687,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
-              scenes=(), voxel: float | None = None, touch: str = "point") -> dict:
+              scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -708,6 +716,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             paper). A study folder holds one setting: compare settings across folders (docs/results-resolution.md).
         touch: "point" (the paper's fingertip contact) or "patch" (a gel pad's depth map at each contact; the
             force-field world has a pad); a study folder holds one.
+        outer_tol: the visual-tactile runs with a truncated outer basis (``GPIOIS(outer_tol=...)``, an approximation
+            for thousands of camera points; each record's ``truncation`` bounds its effect); None: exact. A study
+            folder holds one setting.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -750,14 +761,20 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
                              "--voxel applies to the 3-D worlds")
     if touch not in ("point", "patch"):
         raise ValueError(f"touch: must be 'point' or 'patch', got {touch!r}")
+    if outer_tol is not None:
+        outer_tol = as_float(outer_tol, "outer_tol", positive=True)
+        if touch == "patch":
+            raise ValueError("outer_tol: patch runs use the batched engine, which has no truncated outer basis")
+    identity = {} if outer_tol is None else {"outer_tol": outer_tol}   # folders of older versions: exact
     out = claim_folder(out, "study", force, world=world, voxel=voxel,
-                       touch=None if touch == "point" else touch)     # folders of older versions hold point runs
+                       touch=None if touch == "point" else touch, **identity)   # older folders hold point runs
     with FolderLock(out, "gpioius study"):
         (out / "runs").mkdir(parents=True, exist_ok=True)
         running = out / "running"
         for stale in running.glob("*.pid") if running.exists() else []:   # we hold the lock: nobody else runs
             stale.unlink(missing_ok=True)
-        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o), voxel, touch)
+        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o), voxel, touch,
+                         outer_tol)
                  for o in (*objects, *scene_files) for m in modes for s in range(seeds)]
         todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
         use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
