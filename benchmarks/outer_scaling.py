@@ -28,45 +28,20 @@ import resource
 import statistics
 import subprocess
 import sys
-import time
 
 import torch
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from planning_step import NOISE, STEP, THETA, make_data  # noqa: E402
-
-import torch_gpioius as tg  # noqa: E402
-from torch_gpioius.planning import plan_direction  # noqa: E402
+from planning_step import timed_steps  # noqa: E402
 
 
 def one(n_outer: int, n_inner: int, steps: int, outer_tol: float | None, device: str) -> dict:
     """One configuration in this process: setup, steps, per-step values; peak RSS at the end."""
     torch.set_num_threads(1)
-    xo, yo, xi_all, yi_all = make_data(n_outer, n_inner + 5 * (steps + 1))
-    t_o = torch.ones(n_outer, dtype=torch.long)
-    t0 = time.perf_counter()
-    model = tg.GPIOIS(torch.cat([xi_all[:n_inner], xo]), torch.cat([yi_all[:n_inner], yo]),
-                      torch.cat([torch.zeros(n_inner, dtype=torch.long), t_o]), theta=THETA, noise=NOISE,
-                      inference="structured", outer_tol=outer_tol, device=device)
-    engine = model._inference()
-    t_basis = time.perf_counter() - t0
-    model.fit()
-    t_setup = time.perf_counter() - t0
-    times, values = [], []
-    for s in range(steps):
-        lo = n_inner + 5 * s
-        new_x, new_y = xi_all[lo:lo + 5].to(device), yi_all[lo:lo + 5].to(device)
-        t1 = time.perf_counter()
-        model.add_observations(new_x, new_y, 0)
-        model.fit()
-        plan = plan_direction(model, new_x[0], step=STEP)
-        times.append(time.perf_counter() - t1)
-        mu, v = model.predict(new_x[0][None])
-        values.append({"kt": model.task_covariance.flatten().tolist(), "mll": float(model.log_marginal_likelihood()),
-                       "mu": float(mu), "v": float(v), "dir": plan.direction.cpu().tolist(),
-                       "bound": model.truncation})
-    return {"n_outer": n_outer, "n_inner": n_inner, "outer_tol": outer_tol, "rank": engine.rank,
-            "basis_s": t_basis, "setup_s": t_setup, "step_ms": 1e3 * statistics.median(times),
+    r = timed_steps(n_outer, n_inner, steps, True, device, outer_tol=outer_tol)
+    values = [{**v, "kt": v["kt"].flatten().tolist(), "dir": v["dir"].tolist()} for v in r["values"]]
+    return {"n_outer": n_outer, "n_inner": n_inner, "outer_tol": outer_tol, "rank": r["model"]._inference().rank,
+            "basis_s": r["engine_s"], "setup_s": r["setup_s"], "step_ms": 1e3 * statistics.median(r["times"]),
             "rss_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20, "values": values}
 
 

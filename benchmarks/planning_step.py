@@ -105,20 +105,22 @@ def naive_step(x, y, t, kt_init, contact):
     return (model.task_covariance, -float(loss) * n, float(mean.detach()), float(var.detach()), direction.detach())
 
 
-def run(n_outer: int, n_inner: int, steps: int, naive: bool, device: str = "cpu"):
-    xo, yo, xi_all, yi_all = make_data(n_outer, n_inner + 5 * (steps + 1))
-    t_o = torch.ones(n_outer, dtype=torch.long)
+def timed_steps(n_outer: int, n_inner: int, steps: int, record: bool, device: str = "cpu", **model_kwargs) -> dict:
+    """The structured engine alone: setup (engine, then the first fit) and ``steps`` planning steps, timed as in an
+    exploration loop. With ``record``, each step's K_t, MLL, mu and V at the contact, direction and
+    ``GPIOIS.truncation`` (taken outside the timed part). ``model_kwargs`` go to ``GPIOIS`` (e.g. ``outer_tol``)."""
+    data = make_data(n_outer, n_inner + 5 * (steps + 1))
+    xo, yo, xi_all, yi_all = data
     t0 = time.perf_counter()
     model = tg.GPIOIS(torch.cat([xi_all[:n_inner], xo]), torch.cat([yi_all[:n_inner], yo]),
-                      torch.cat([torch.zeros(n_inner, dtype=torch.long), t_o]), theta=THETA, noise=NOISE,
-                      inference="structured", device=device)
+                      torch.cat([torch.zeros(n_inner, dtype=torch.long), torch.ones(n_outer, dtype=torch.long)]),
+                      theta=THETA, noise=NOISE, inference="structured", device=device, **model_kwargs)
     model._inference()
-    t_eig = time.perf_counter() - t0
+    t_engine = time.perf_counter() - t0
     model.fit()
     t_setup = time.perf_counter() - t0
     kt_first = model.task_covariance
-    # (a) alone over all steps, as in an exploration loop; what (b) and the dense check need is recorded
-    fast_times, fast = [], []
+    times, values = [], []
     for s in range(steps):
         lo = n_inner + 5 * s
         new_x, new_y = xi_all[lo:lo + 5].to(device), yi_all[lo:lo + 5].to(device)
@@ -126,11 +128,22 @@ def run(n_outer: int, n_inner: int, steps: int, naive: bool, device: str = "cpu"
         model.add_observations(new_x, new_y, 0)
         model.fit()
         plan = plan_direction(model, new_x[0], step=STEP)
-        fast_times.append(time.perf_counter() - t1)
-        if naive:
-            mu_f, v_f = model.predict(new_x[0][None])
-            fast.append({"kt": model.task_covariance.cpu(), "mll": float(model.log_marginal_likelihood()),
-                         "mu": float(mu_f), "v": float(v_f), "dir": plan.direction.cpu()})
+        times.append(time.perf_counter() - t1)
+        if record:
+            mu, v = model.predict(new_x[0][None])
+            values.append({"kt": model.task_covariance.cpu(), "mll": float(model.log_marginal_likelihood()),
+                           "mu": float(mu), "v": float(v), "dir": plan.direction.cpu(), "bound": model.truncation})
+    return {"data": data, "model": model, "engine_s": t_engine, "setup_s": t_setup, "kt_first": kt_first,
+            "times": times, "values": values}
+
+
+def run(n_outer: int, n_inner: int, steps: int, naive: bool, device: str = "cpu"):
+    # (a) alone over all steps, as in an exploration loop; what (b) and the dense check need is recorded
+    a = timed_steps(n_outer, n_inner, steps, naive, device)
+    xo, yo, xi_all, yi_all = a["data"]
+    t_o = torch.ones(n_outer, dtype=torch.long)
+    model, t_eig, t_setup, kt_first, fast_times, fast = (a[k] for k in ("model", "engine_s", "setup_s", "kt_first",
+                                                                         "times", "values"))
     # (b) on the same steps, then the dense exact engine at (a)'s K_t
     naive_times, diffs = [], []
     kt_prev = kt_first

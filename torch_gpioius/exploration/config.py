@@ -96,11 +96,16 @@ class ExploreConfig:
             regions = _check_int(regions, "regions", 1, 64)
             if mode != "visual-tactile":
                 raise ValueError("regions: a similarity per region needs mode='visual-tactile'")
+        touch = touch_model(touch)
         if outer_tol is not None:
             outer_tol = as_float(outer_tol, "outer_tol", positive=True)
             if mode != "visual-tactile" or regions is not None:
                 raise ValueError("outer_tol: the truncated outer basis is GPIOIS's; it needs mode='visual-tactile' "
                                  "and no regions")
+            inference = getattr(touch, "inference", "auto")
+            if inference != "auto":
+                raise ValueError(f"outer_tol: the {getattr(touch, 'name', 'touch')} touch uses the {inference} "
+                                 "engine, which has no truncated outer basis")
         d = world.defaults
         step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
         if kernel is not None and theta is not None:
@@ -131,7 +136,7 @@ class ExploreConfig:
             stall = NoProgress()
         if stall is not None and not isinstance(stall, NoProgress):
             raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
-        return cls(mode, evidence, touch_model(touch), step, theta, kernel, noise, max_steps, rules, policy, penalty,
+        return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
                    metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
                    outer_tol)
 
@@ -164,12 +169,8 @@ class ExploreConfig:
             return GPIS(np.asarray(x)[inner], np.asarray(y)[inner], theta=theta, noise=self.noise, kernel=kernel)
         if self.regions is not None:
             return LocalGPIOIS(x, y, task, regions=self.regions, theta=theta, noise=self.noise, kernel=kernel)
-        inference = getattr(self.touch, "inference", "auto")
-        if self.outer_tol is not None and inference != "auto":
-            raise ValueError(f"outer_tol: the {getattr(self.touch, 'name', 'touch')} touch uses the {inference} "
-                             "engine, which has no truncated outer basis")
-        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel, inference=inference,
-                      outer_tol=self.outer_tol)
+        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel,
+                      inference=getattr(self.touch, "inference", "auto"), outer_tol=self.outer_tol)
 
     def describe(self) -> dict:
         """JSON-able settings for a log's header (resume compares them)."""

@@ -353,7 +353,9 @@ class StructuredExactInference:
                          "e": (k_io @ ro - self.p @ self.rt) / self.noise,
                          "quad_o": float(ro @ ro - self.rt @ self.rt) / self.noise}
         self._series = None  # _ChebyshevStore of the current window of K_t[1,1]
-        self._rotated = None  # (contacts, (1 + d, k, N_o) rotated kernel rows and x-derivatives) of the last append
+        # (contacts, (1 + d, k, r) rotated kernel rows and x-derivatives, their raw (1 + d, k, N_o) rows when
+        # truncated, else None) of the last append
+        self._rotated = None
         self._invalidate()
 
     # ------------------------------------------------------------------ data
@@ -432,18 +434,17 @@ class StructuredExactInference:
                           _kernel_rows(contacts, self.xo, self.kernel)[1:].reshape(-1, n_o)])
         rotated = rows @ self.u
         p_new = rotated[:len(x)]
-        contact_rows = torch.cat([rows[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
-                                  rows[len(x):].view(dim, len(contacts), n_o)])
+        contact_rows = None if self._raw is None else torch.cat([rows[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
+                                                                 rows[len(x):].view(dim, len(contacts), n_o)])
         self._rotated = (contacts, torch.cat([rotated[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
                                               rotated[len(x):].view(dim, len(contacts), self.rank)]), contact_rows)
+        p_all = self._p.append(p_new)
         if self._raw is not None:
             raw, s, k_new = self._raw, self.noise, rows[:len(x)]
             k_io = raw["kio"].append(k_new)
-            p_all = torch.cat([self.p, p_new])
             c0_rows = (k_new @ k_io.T - p_new @ p_all.T) / s                     # (k, N_i + k)
             raw["c0"] = bordered(raw["c0"], c0_rows[:, :-len(x)], c0_rows[:, -len(x):])
             raw["e"] = torch.cat([raw["e"], (k_new @ raw["ro"] - p_new @ self.rt) / s])
-        self._p.append(p_new)
         self.xi = torch.cat([self.xi, x])
         self.yi = torch.cat([self.yi, y])
         return p_new
@@ -523,8 +524,8 @@ class StructuredExactInference:
             cache.update(t0=t[0], t1=t[1], t2=t[2], pd=pd, chol=chol, v=v, alpha_i=alpha_i,
                          logdet_s=2 * chol.diagonal().log().sum())
         else:
-            cache.update(alpha_i=torch.zeros(0, **self._kind),
-                         alpha_rot=(d_all if self._raw is None else d_all - 1.0 / s) * self.rt)
+            cache.update(alpha_i=torch.zeros(0, **self._kind))
+            cache["alpha_rot"] = self._query_weights(cache) * self.rt
         self._cache, self._key = cache, key
         return cache
 
@@ -541,14 +542,18 @@ class StructuredExactInference:
             vecs += [self.lam * d * d * self.rt, self.lam * self.lam * d ** 3 * self.rt]
         return torch.stack(vecs, dim=1)
 
+    def _query_weights(self, f: dict) -> Tensor:
+        """`(r,)` weights of the rotated query rows: ``D``, or ``D - 1/s`` with a truncated basis, whose
+        ``(c K' + s I)^-1 = U (D - I/s) U^T + I/s`` adds the raw rows' ``I/s`` part separately."""
+        return f["d"] if self._raw is None else f["d"] - 1.0 / self.noise
+
     def _alpha_rot(self, f: dict) -> Tensor:
         """Outer weights in the rotated basis, ``U^T alpha_o`` (computed on the first query of a factor).
 
         With a truncated basis these are ``(D - 1/s) h`` and :meth:`_alpha_raw` holds ``g / s``
         (``h = rt - b P^T alpha_i``, ``g = r_o - b K_oi alpha_i``): ``k_o . alpha_o = w . alpha_rot + k_o . g / s``."""
         if f["alpha_rot"] is None:
-            h = self.rt - f["beta"] * (self.p.T @ f["alpha_i"])
-            f["alpha_rot"] = f["d"] * h if self._raw is None else (f["d"] - 1.0 / self.noise) * h
+            f["alpha_rot"] = self._query_weights(f) * (self.rt - f["beta"] * (self.p.T @ f["alpha_i"]))
         return f["alpha_rot"]
 
     def _alpha_raw(self, f: dict) -> Tensor:
@@ -568,17 +573,18 @@ class StructuredExactInference:
         b0, b1, beta = b[task, 0], b[task, 1], f["beta"]
         k_o = self.kernel.value(xq, self.xo)
         w = k_o @ self.u                                  # (m, N_o) rotated outer kernel vectors
+        dq = self._query_weights(f)
         mean = self.mean + b1 * (w @ self._alpha_rot(f))
-        quad = b1 * b1 * (w * w * f["d"]).sum(-1)
-        if self._raw is not None:                                   # the truncated basis' complement
+        quad = b1 * b1 * (w * w * dq).sum(-1)
+        if self._raw is not None:                                   # the truncated basis' I/s part
             mean = mean + b1 * (k_o @ self._alpha_raw(f))
-            quad = quad + b1 * b1 * ((k_o * k_o).sum(-1) - (w * w).sum(-1)) / self.noise
+            quad = quad + b1 * b1 * (k_o * k_o).sum(-1) / self.noise
         if self.n_inner:
             k_i = self.kernel.value(xq, self.xi)
             mean = mean + b0 * (k_i @ f["alpha_i"])
-            z = b0 * k_i - beta * b1 * ((w * f["d"]) @ self.p.T)   # (m, N_i)
+            z = b0 * k_i - beta * b1 * ((w * dq) @ self.p.T)       # (m, N_i)
             if self._raw is not None:
-                z = z - beta * b1 * (k_o @ self._raw["kio"].data.T - w @ self.p.T) / self.noise
+                z = z - beta * b1 * (k_o @ self._raw["kio"].data.T) / self.noise
             y = self._solve_lower(f, z.T)
             quad = quad + (y * y).sum(0)
         var = self.kernel.prior_variance(b[task, task]) - quad
@@ -613,31 +619,32 @@ class StructuredExactInference:
             x_new, rotated, raw_rows = self._rotated
             hit = (xq.unsqueeze(1) == x_new.unsqueeze(0)).all(-1)            # (m, k)
             if bool(hit.any(1).all()):
-                w_all = rotated[:, hit.to(torch.int8).argmax(1)]
-                k_rows = raw_rows[:, hit.to(torch.int8).argmax(1)]
+                at = hit.to(torch.int8).argmax(1)
+                w_all = rotated[:, at]
+                k_rows = None if raw_rows is None else raw_rows[:, at]
         if w_all is None:
             k_rows = _kernel_rows(xq, self.xo, self.kernel)                  # (1 + d, m, N_o)
             w_all = (k_rows.reshape(-1, len(self.xo)) @ self.u).view(1 + dim, m, -1)
         w, dw = w_all[0], w_all[1:]
-        d = f["d"]
+        d = self._query_weights(f)
         alpha_rot = self._alpha_rot(f)
         mean = self.mean + b1 * (w @ alpha_rot)
         g_mean = b1 * (dw @ alpha_rot)                                        # (d, m)
         quad = b1 * b1 * (w * w * d).sum(-1)
         g_quad = 2 * b1 * b1 * (dw * (w * d)).sum(-1)
-        if self._raw is not None:                                            # the truncated basis' complement
+        if self._raw is not None:                                            # the truncated basis' I/s part
             g_raw = k_rows @ self._alpha_raw(f)                              # (1 + d, m)
             mean, g_mean = mean + b1 * g_raw[0], g_mean + b1 * g_raw[1:]
             k0, s = k_rows[0], self.noise
-            quad = quad + b1 * b1 * ((k0 * k0).sum(-1) - (w * w).sum(-1)) / s
-            g_quad = g_quad + 2 * b1 * b1 * ((k_rows[1:] * k0).sum(-1) - (dw * w).sum(-1)) / s
+            quad = quad + b1 * b1 * (k0 * k0).sum(-1) / s
+            g_quad = g_quad + 2 * b1 * b1 * (k_rows[1:] * k0).sum(-1) / s
         if self.n_inner:
             k_all = _kernel_rows(xq, self.xi, self.kernel)                   # (1 + d, m, N_i)
             mean = mean + b0 * (k_all[0] @ f["alpha_i"])
             g_mean = g_mean + b0 * (k_all[1:] @ f["alpha_i"])
             z_all = b0 * k_all - beta * b1 * ((w_all * d) @ self.p.T)        # (1 + d, m, N_i)
             if self._raw is not None:
-                z_all = z_all - beta * b1 * (k_rows @ self._raw["kio"].data.T - w_all @ self.p.T) / self.noise
+                z_all = z_all - beta * b1 * (k_rows @ self._raw["kio"].data.T) / self.noise
             y = self._solve_lower(f, z_all.reshape(-1, self.n_inner).T)
             y = y.T.reshape(1 + dim, m, -1)
             quad = quad + (y[0] * y[0]).sum(-1)

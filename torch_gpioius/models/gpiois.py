@@ -95,10 +95,7 @@ class GPIOIS(ImplicitSurfaceGP):
         if outer_tol is not None:
             if inference not in ("auto", "structured"):
                 raise ValueError(f"outer_tol: needs inference 'auto' or 'structured', got {inference!r}")
-            if isinstance(outer_tol, bool) or not isinstance(outer_tol, (int, float)) or not math.isfinite(outer_tol) \
-                    or outer_tol <= 0:
-                raise ValueError(f"outer_tol: must be a finite number > 0 (or None: exact), got {outer_tol!r}")
-            outer_tol = float(outer_tol)
+            outer_tol = as_float(outer_tol, "outer_tol", positive=True)
         super().__init__((x, t.unsqueeze(-1)), y, theta, noise, learn_theta, kernel)
         self.inference = inference
         #: Truncated outer basis: dropped trace at most ``outer_tol * sigma^2`` (None: exact).
