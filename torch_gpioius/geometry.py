@@ -21,6 +21,15 @@ def predict_task(model, x: Tensor, task: int = 0) -> tuple[Tensor, Tensor]:
     return model.predict(x, task=task)
 
 
+def predict_mean_task(model, x: Tensor, task: int = 0) -> Tensor:
+    """``model.predict_mean`` for either model type (the mean of :func:`predict_task` without the variance)."""
+    if getattr(model, "num_tasks", 1) == 1:
+        if task != 0:
+            raise ValueError(f"task: a single-task model only has task 0, got {task}")
+        return model.predict_mean(x)
+    return model.predict_mean(x, task=task)
+
+
 @dataclass
 class SurfaceGeometry:
     """Posterior and first-order geometry of the estimated shape {mu = 0} at query points.

@@ -90,7 +90,7 @@ class TapPolicy:
         model = state.model
         x = torch.as_tensor(state.contact, dtype=model.train_inputs[0].dtype).reshape(1, -1)
         xg = x.clone().requires_grad_(True)
-        mu, _ = model.predict(xg, task=1)
+        mu = model.predict_mean(xg, task=1)
         grad, = torch.autograd.grad(mu.sum(), xg)
         mu_out, g = float(mu.detach()), float(grad.norm())
         gap = -mu_out / g if g > 0 and mu_out < 0 else 0.0
@@ -115,7 +115,7 @@ class TapPolicy:
         def inside_outer(p) -> bool:     # still inside the outer surface the camera saw
             with torch.no_grad():
                 q = torch.as_tensor(p, dtype=x0.dtype).reshape(1, -1)
-                return float(model.predict(q, task=1)[0][0]) < 0.0
+                return float(model.predict_mean(q, task=1)[0]) < 0.0
 
         try:
             lift = toucher.lift(normal, step=self.lift_step, until_force_below=self.vanish_force,

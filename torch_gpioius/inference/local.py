@@ -119,6 +119,22 @@ class LocalDenseInference:
         p = p.detach()
         if self._gi is None:
             self._gi = torch.cholesky_inverse(self._chol)
+        kq, lq, eq = self._query_rows(xq, task, p)
+        mean = self.mean + kq @ alpha
+        prior = self.kernel.prior_variance(p[1] * lq * lq + p[0] * eq * eq)
+        var = prior - ((kq @ self._gi) * kq).sum(-1)
+        return mean, var.clamp_min(0.0)
+
+    def predict_mean(self, xq: Tensor, task: int, p: Tensor, chunk: int = 8192) -> Tensor:
+        _, alpha = self.factor(p)
+        p = p.detach()
+        if not xq.requires_grad and xq.shape[0] > chunk:
+            return torch.cat([self.predict_mean(xq[i:i + chunk], task, p, chunk) for i in range(0, xq.shape[0], chunk)])
+        return self.mean + self._query_rows(xq, task, p)[0] @ alpha
+
+    def _query_rows(self, xq: Tensor, task: int, p: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+        """`(m, n)` covariances of F_task at the queries with the training values at parameters ``p``, and the
+        queries' `(m,)` outer and inner loadings."""
         lam, eta = loadings(self.task, self.wts, p)
         if task == 0:
             lq = region_weights(xq, self.centres, self.tau) @ p[2:]
@@ -126,11 +142,7 @@ class LocalDenseInference:
         else:
             lq = torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device)
             eq = torch.zeros_like(lq)
-        kq = self.kernel.value(xq, self.x) * (p[1] * lq.unsqueeze(1) * lam + p[0] * eq.unsqueeze(1) * eta)
-        mean = self.mean + kq @ alpha
-        prior = self.kernel.prior_variance(p[1] * lq * lq + p[0] * eq * eq)
-        var = prior - ((kq @ self._gi) * kq).sum(-1)
-        return mean, var.clamp_min(0.0)
+        return self.kernel.value(xq, self.x) * (p[1] * lq.unsqueeze(1) * lam + p[0] * eq.unsqueeze(1) * eta), lq, eq
 
     def mll(self, p: Tensor) -> Tensor:
         chol, alpha = self.factor(p)
@@ -267,6 +279,23 @@ class LocalStructuredInference(StructuredExactInference):
             quad = quad + (y * y).sum(0)
         var = prior - quad
         return mean, var.clamp_min(0.0)
+
+    def predict_mean(self, xq: Tensor, task: int, p: Tensor, chunk: int = 4096) -> Tensor:
+        """The mean of :meth:`predict` through the outer weights in the original basis (no GEMM with U per query)."""
+        f = self.factor(p)
+        p = p.detach()
+        if not xq.requires_grad and xq.shape[0] > chunk:
+            return torch.cat([self.predict_mean(xq[i:i + chunk], task, p, chunk) for i in range(0, xq.shape[0], chunk)])
+        a1, c = p[0], f["c"]
+        if task == 0:
+            lq, eq = region_weights(xq, self.centres, self.tau) @ p[2:], 1.0
+        else:
+            lq, eq = torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device), 0.0
+        mean = self.mean + c * lq * (self.kernel.value(xq, self.xo) @ self._alpha_outer(f))
+        if self.n_inner:
+            cross = c * lq.unsqueeze(1) * f["beta_i"] + a1 * eq
+            mean = mean + (cross * self.kernel.value(xq, self.xi)) @ f["alpha_i"]
+        return mean
 
     # ------------------------------------------------------------------ marginal likelihood
     def mll(self, p: Tensor) -> Tensor:

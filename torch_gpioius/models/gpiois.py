@@ -401,6 +401,22 @@ class GPIOIS(ImplicitSurfaceGP):
         """
         return self._predict(x, task_id(task))
 
+    def predict_mean(self, x, task: int | str = INNER) -> Tensor:
+        """Latent posterior mean of F_task, eq. (12), without the variance. Differentiable with respect to ``x``.
+
+        Equal to ``predict(x, task)[0]`` at a fraction of the cost when the camera keeps thousands of outer points:
+        the variance needs every query's kernel row rotated into the outer eigenbasis (``O(m N_o r)``), the mean
+        only its dot product with the weights (``O(m (N_i + N_o))``). Use it to mesh the estimate on a grid.
+
+        Args:
+            x: `(m, d)` query points [m], base frame.
+            task: 0 or "inner" for F_in (tactile), 1 or "outer" for F_out (visual).
+
+        Returns:
+            `(m,)` posterior mean (``< 0`` inside, ``0`` on the estimated surface).
+        """
+        return self._predict_mean(x, task_id(task))
+
     def add_observations(self, x, y, task) -> "GPIOIS":
         """Append observations; the posterior updates exactly, ``K_t`` is re-learned by ``fit()``.
 

@@ -307,6 +307,10 @@ class LocalGPIOIS(ImplicitSurfaceGP):
         """Posterior mean and variance of F_task (inner: eq. 12-13 with the local covariance); differentiable in x."""
         return self._predict(x, task_id(task))
 
+    def predict_mean(self, x, task: int | str = INNER) -> Tensor:
+        """Posterior mean of F_task alone (``predict(x, task)[0]`` without the variance's cost); differentiable in x."""
+        return self._predict_mean(x, task_id(task))
+
     def log_marginal_likelihood(self) -> Tensor:
         return self._inference().mll(self.params)
 

@@ -77,7 +77,7 @@ def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float =
     from ..surfaces import clip_mesh, evaluate_grid, touched_pieces, zero_level_mesh
 
     truth = scene.inner_samples_in_range(spacing)
-    field = evaluate_grid(model, scene.bounds(0.05), resolution, 0)
+    field = evaluate_grid(model, scene.bounds(0.05), resolution, 0, variance=False)
     mesh = clip_mesh(zero_level_mesh(model, None, field=field), scene.range[0], scene.range[1])
     if mesh is None:
         return Measurement()

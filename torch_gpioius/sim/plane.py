@@ -336,7 +336,7 @@ class Scene2D(World):
 
         res = 0.01 if resolution is None else resolution
         bounds = self.bounds(0.1)
-        field_ = evaluate_grid(model, bounds, res, 0)
+        field_ = evaluate_grid(model, bounds, res, 0, variance=False)
         curves = zero_level_curves(model, bounds, res, 0, field=field_)
         unc = uncertainty_measure(model, curves, 0) if curves else math.nan
         inside = field_.mean < 0
