@@ -127,6 +127,31 @@ def test_voxel_reaches_the_study_and_the_3d_simulation_and_bad_values_are_refuse
     assert not (tmp_path / "u").exists()
 
 
+def test_device_and_outer_tol_reach_the_study_and_the_3d_simulation(monkeypatch, tmp_path, capsys):
+    import torch_gpioius.studies.study3d as study3d
+    import torch_gpioius.studies.sweep as sweep
+
+    seen = {}
+
+    def fake(*args, **kw):
+        seen.update(kw)
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(sweep, "run_sweep", fake)
+    monkeypatch.setattr(study3d, "run_study_3d", fake)
+    assert main(["study", "--device", "cpu", "--outer-tol", "1e-3", "--out", str(tmp_path / "s")]) == 2
+    assert seen["device"] == "cpu" and seen["outer_tol"] == 1e-3
+    assert main(["simulate3d", "--device", "cpu", "--outer-tol", "1e-3", "--out", str(tmp_path / "t")]) == 2
+    assert seen["device"] == "cpu" and seen["outer_tol"] == 1e-3
+    with pytest.raises(SystemExit, match="outer-tol"):         # patch runs have no truncated basis
+        main(["simulate3d", "--touch", "patch", "--outer-tol", "1e-3", "--out", str(tmp_path / "u")])
+    for option, bad in (("--device", "gpu"), ("--outer-tol", "-1"), ("--outer-tol", "nan")):
+        with pytest.raises(SystemExit):
+            main(["simulate3d", option, bad, "--out", str(tmp_path / "v")])
+        assert option.strip("-").replace("-", "_") in capsys.readouterr().err.replace("-", "_")
+    assert not (tmp_path / "u").exists() and not (tmp_path / "v").exists()
+
+
 def test_policy_with_voxel():
     from torch_gpioius.exploration.observations import ObservationPolicy
 

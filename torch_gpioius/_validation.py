@@ -156,3 +156,19 @@ def as_bounds(bounds, dim: int, name: str = "bounds") -> np.ndarray:
         hint = " (an [[min, max] per axis] box? transpose it)" if dim == 2 else ""
         raise ValueError(f"{name}: the max corner must exceed the min corner on every axis, got {b.tolist()}{hint}")
     return b
+
+
+def as_device(device, name: str = "device") -> torch.device | None:
+    """Validate a device name or ``torch.device`` (None stays None) by placing a float64 scalar on it.
+
+    Raises:
+        ValueError: an unknown device name, or one this torch build or machine cannot use (names it).
+    """
+    if device is None:
+        return None
+    try:
+        dev = torch.device(device)
+        torch.zeros(1, dtype=torch.float64, device=dev)
+    except (RuntimeError, AssertionError, TypeError) as exc:
+        raise ValueError(f"{name}: cannot use {device!r} here ({exc})") from None
+    return dev

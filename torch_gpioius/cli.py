@@ -34,8 +34,12 @@ def _simulate3d(args: argparse.Namespace) -> int:
     from .io.outputs import claim_folder
     from .studies.study3d import run_study_3d
 
+    if args.outer_tol is not None and args.touch == "patch":
+        raise SystemExit("gpioius simulate3d: --outer-tol: patch runs use the batched engine, which has no truncated "
+                         "outer basis")
+    identity = {} if args.outer_tol is None else {"outer_tol": args.outer_tol}   # older folders: exact
     claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
-                 touch=None if args.touch == "point" else args.touch)   # folders of older versions: point
+                 touch=None if args.touch == "point" else args.touch, **identity)   # older folders: point
     scenes = [] if args.scene is None else args.scene.split(",")
     if args.object is None:
         objects = [] if scenes else ["E", "F", "G", "H"]
@@ -44,7 +48,7 @@ def _simulate3d(args: argparse.Namespace) -> int:
     travel = 0.06 if args.smoke else args.max_travel
     result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
                           progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes,
-                          voxel=args.voxel, touch=args.touch)
+                          voxel=args.voxel, touch=args.touch, outer_tol=args.outer_tol, device=args.device)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
@@ -59,7 +63,7 @@ def _study(args: argparse.Namespace) -> int:
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
-                       touch=args.touch, outer_tol=args.outer_tol)
+                       touch=args.touch, outer_tol=args.outer_tol, device=args.device)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -226,6 +230,31 @@ def _voxel(text: str) -> float:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
+DEVICE_HELP = ("where the GP arithmetic runs: cpu, or cuda for a GPU (float64 either way; the robot, the world and "
+               "the records stay on the CPU; docs/performance.md)")
+OUTER_TOL_HELP = ("visual-tactile runs with a truncated outer basis dropping a PSD part of trace <= OUTER_TOL * "
+                  "sigma^2 (an approximation for thousands of camera points, e.g. 1e-3 with --voxel 0.01; "
+                  "docs/performance.md); default: exact")
+
+
+def _device(text: str) -> str:
+    from ._validation import as_device
+
+    try:
+        return str(as_device(text))
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def _outer_tol(text: str) -> float:
+    from ._validation import as_float
+
+    try:
+        return as_float(float(text), "outer_tol", positive=True)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _study_worlds() -> list[str]:
     from .exploration.registry import world_names
 
@@ -301,6 +330,8 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("--touch", default="point", choices=["point", "patch"],
                     help="point: the fingertip's contact (the paper); patch: a DIGIT-like gel pad's depth map at each "
                          "contact (both 3-D worlds)")
+    s3.add_argument("--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP)
+    s3.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
     s3.add_argument("--quiet", action="store_true", help="no progress output")
     _force(s3, "--out holds files that `gpioius simulate3d` (of this world) did not write")
@@ -330,10 +361,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
     sw.add_argument("--touch", default="point", choices=["point", "patch"],
                     help="point: the fingertip's contact; patch: a gel pad's depth map (3-D worlds); one per --out folder")
-    sw.add_argument("--outer-tol", type=float, default=None,
-                    help="visual-tactile runs with a truncated outer basis dropping a PSD part of trace <= OUTER_TOL * "
-                         "sigma^2 (an approximation for thousands of camera points, e.g. 1e-3 with --voxel 0.01; "
-                         "docs/performance.md); default: exact; one setting per --out folder")
+    sw.add_argument("--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP + "; one setting per --out folder")
+    sw.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

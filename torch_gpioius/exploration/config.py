@@ -8,8 +8,9 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
+import torch
 
-from .._validation import as_float
+from .._validation import as_device, as_float
 from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
 from ..models.gpiois import GPIOIS, INNER, OUTER
 from ..models.gpis import GPIS
@@ -56,6 +57,7 @@ class ExploreConfig:
             None to switch it off.
         outer_tol: the truncated outer basis of ``GPIOIS(outer_tol=...)`` (an approximation for thousands of
             camera points), or None (exact).
+        device: where the model's data and exact arithmetic live (a ``torch.device``), or None (the CPU).
     """
 
     mode: str
@@ -76,12 +78,13 @@ class ExploreConfig:
     approach_travel: float
     stall: NoProgress | None = NoProgress()
     outer_tol: float | None = None
+    device: torch.device | None = None
 
     @classmethod
     def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
                    kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
                    metrics_every=None, metrics_resolution=None, interval_every=None, regions=None,
-                   stall="default", outer_tol=None) -> "ExploreConfig":
+                   stall="default", outer_tol=None, device=None) -> "ExploreConfig":
         """Validate the overrides and merge them with ``world.defaults`` (see :func:`torch_gpioius.explore`).
 
         Raises:
@@ -138,7 +141,7 @@ class ExploreConfig:
             raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
         return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
                    metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
-                   outer_tol)
+                   outer_tol, as_device(device))
 
     # ------------------------------------------------------------------ what the loop asks of the settings
     @property
@@ -166,11 +169,13 @@ class ExploreConfig:
         theta, kernel = self.theta, None if self.kernel is None else copy.deepcopy(self.kernel)
         if not self.uses_vision:
             inner = np.asarray(task) == INNER
-            return GPIS(np.asarray(x)[inner], np.asarray(y)[inner], theta=theta, noise=self.noise, kernel=kernel)
-        if self.regions is not None:
-            return LocalGPIOIS(x, y, task, regions=self.regions, theta=theta, noise=self.noise, kernel=kernel)
-        return GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel,
-                      inference=getattr(self.touch, "inference", "auto"), outer_tol=self.outer_tol)
+            model = GPIS(np.asarray(x)[inner], np.asarray(y)[inner], theta=theta, noise=self.noise, kernel=kernel)
+        elif self.regions is not None:
+            model = LocalGPIOIS(x, y, task, regions=self.regions, theta=theta, noise=self.noise, kernel=kernel)
+        else:
+            model = GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel,
+                           inference=getattr(self.touch, "inference", "auto"), outer_tol=self.outer_tol)
+        return model.to_device(self.device)
 
     def describe(self) -> dict:
         """JSON-able settings for a log's header (resume compares them)."""

@@ -78,10 +78,11 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     t0 = time.perf_counter()
     plan = plan_direction(state.model, torch.as_tensor(state.contact), step=cfg.step, penalty=cfg.penalty,
                           previous=state.previous, measured_normal=state.normal)
-    state.previous = plan.direction
+    direction = plan.direction.detach().cpu()               # the robot side is CPU, whatever the model's device
+    state.previous = direction
     t_plan = time.perf_counter() - t0
     try:
-        touch = hw.controller.slide(plan.direction, state.normal)
+        touch = hw.controller.slide(direction, state.normal)
     except RuntimeError as exc:                                 # ContactFault, SafetyViolation, RobotError
         return f"refused: {exc}"
     _moved(state, touch)
@@ -241,10 +242,10 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     record.similarity = float(getattr(m, "similarity", math.nan))
     record.correlation = float(getattr(m, "correlation", math.nan))
     if hasattr(m, "task_covariance"):
-        record.task_covariance = m.task_covariance.numpy()
+        record.task_covariance = m.task_covariance.detach().cpu().numpy()
     record.truncation = float(getattr(m, "truncation", 0.0))
     if hasattr(m, "region_correlations"):
-        record.region_correlation = m.region_correlations().numpy()
+        record.region_correlation = m.region_correlations().detach().cpu().numpy()
 
 
 def _first(reasons):

@@ -108,7 +108,7 @@ class LogRecorder(Recorder):
         if callable(footprint):              # the pad of this step's patch (the viewer draws it)
             arrays.update(footprint())
         if hasattr(state.model, "region_correlations"):
-            arrays["local_params"] = state.model.params.numpy()
+            arrays["local_params"] = state.model.params.detach().cpu().numpy()
         self.writer.append("step", meta, {**arrays, **world})
         for ev_obs, removed, kind in record.evidence:
             self.writer.append(kind, {"step": record.step, "taps": state.taps, "recoveries": state.recoveries,

@@ -9,7 +9,7 @@ from gpytorch.likelihoods import GaussianLikelihood
 from gpytorch.means import ConstantMean
 from torch import Tensor
 
-from .._validation import as_float, as_points, task_id
+from .._validation import as_device, as_float, as_points, task_id
 from ..inference.dense import DenseExactInference
 from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
 from ..settings import exact_arithmetic
@@ -126,14 +126,8 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         Raises:
             ValueError: an unknown device name, or one this torch build cannot use (names it).
         """
-        if device is None:
-            return self
-        try:
-            dev = torch.device(device)
-            torch.zeros(1, dtype=torch.float64, device=dev)
-        except (RuntimeError, AssertionError, TypeError) as exc:
-            raise ValueError(f"device: cannot use {device!r} here ({exc})") from None
-        return self.to(dev)
+        dev = as_device(device)
+        return self if dev is None else self.to(dev)
 
     def _apply(self, fn, *args, **kwargs):
         # .to(dtype) / .float() / .half() would run the GP arithmetic in that dtype: refuse before anything moves.

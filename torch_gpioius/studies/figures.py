@@ -267,7 +267,7 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
             x0 = tr.model.train_inputs[0]
             with torch.no_grad():
                 _, var = predict_task(tr.model, torch.as_tensor(np.array(mesh.triangles_center), dtype=x0.dtype), 0)
-            rel = var.numpy() / prior_variance(tr.model, 0)
+            rel = var.cpu().numpy() / prior_variance(tr.model, 0)
             ax.add_collection3d(Poly3DCollection(mesh.triangles, facecolors=cmap(norm(rel)), edgecolor="none",
                                                  alpha=0.8))
         ax.plot(*tr.path.T, "-", color="tab:orange", lw=1)

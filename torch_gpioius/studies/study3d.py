@@ -137,7 +137,8 @@ def _write_meshes(traces: dict, scenes: dict, out: Path, resolution: float) -> N
 
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
                  metrics_every: int = 5, modes=MODES, progress: bool = True, smoke: bool = False,
-                 world: str = "forcefield", scenes=(), voxel: float | None = None, **explore_kwargs) -> dict:
+                 world: str = "forcefield", scenes=(), voxel: float | None = None, outer_tol: float | None = None,
+                 **explore_kwargs) -> dict:
     """Run the simulated robot study on objects E-H and write figures, records, logs and the summary.
 
     Writes into ``out``: ``fig9_<object>.png``, ``fig10_similarity.png``, ``records.csv`` / ``records.json``
@@ -157,7 +158,9 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         scenes: scene files (:mod:`torch_gpioius.sim.scenefile`) explored as further objects, named by their
             ``name`` (the claims are judged on E-H only).
         voxel: edge of the camera's voxels [m] (0: every camera point; None: each scene's own, 0.05 as the paper).
-        **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, ...).
+        outer_tol: the visual-tactile runs with a truncated outer basis (``explore(outer_tol=...)``); the
+            tactile-only runs have no camera points. None: exact.
+        **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, device, ...).
     """
     from .._progress import progress as reporter
 
@@ -196,6 +199,8 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         kw = dict(explore_kwargs)
         if voxel is not None:
             kw["policy"] = scenes[name].defaults.policy.with_voxel(voxel)
+        if outer_tol is not None and mode == "visual-tactile":
+            kw["outer_tol"] = outer_tol
         traces.setdefault(name, {})[mode] = explore(
             scenes[name], mode=mode, max_travel=max_travel, metrics_every=metrics_every, progress=progress,
             log=out / "logs" / f"{name}_{mode}.gpioius", **kw)

@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import as_float
+from .._validation import as_device, as_float
 from .stats import median_interval, paired_difference
 
 __all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
@@ -79,6 +79,7 @@ class RunSpec:
     voxel: float | None = None      # camera voxel edge [m] (0: every point); None: the world's own (0.05)
     touch: str = "point"            # "point" (the fingertip's contact) or "patch" (a gel pad's depth map)
     outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
+    device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
 
     @property
     def key(self) -> str:
@@ -129,6 +130,8 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["touch"] = spec.touch
     if spec.outer_tol is not None and kw["mode"] == "visual-tactile" and "regions" not in kw:
         kw["outer_tol"] = spec.outer_tol
+    if spec.device is not None:
+        kw["device"] = spec.device
     return kw
 
 
@@ -277,6 +280,8 @@ def run_one(spec: RunSpec) -> dict:
         record["n_outer"] = _n_outer(trace.model)
     record["voxel"] = kw.get("policy", world.defaults.policy).voxel or 0.0
     record["touch"] = spec.touch
+    if spec.device is not None:
+        record["device"] = spec.device
     if "outer_tol" in kw and trace is not None:      # the truncated outer basis: its setting and largest bound
         record["outer_tol"] = kw["outer_tol"]
         record["max_truncation"] = float(np.nanmax(trace.truncation)) if len(trace.truncation) else math.nan
@@ -687,7 +692,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
-              scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None) -> dict:
+              scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
+              device: str | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -719,6 +725,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         outer_tol: the visual-tactile runs with a truncated outer basis (``GPIOIS(outer_tol=...)``, an approximation
             for thousands of camera points; each record's ``truncation`` bounds its effect); None: exact. A study
             folder holds one setting.
+        device: where each run's model computes ("cuda" for a GPU, float64; None: the CPU). Not part of the
+            folder's identity: runs on either device answer the same question (the trajectories differ by the
+            chaos of rounding, as on two CPUs); each run's record says where it ran.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -765,6 +774,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         outer_tol = as_float(outer_tol, "outer_tol", positive=True)
         if touch == "patch":
             raise ValueError("outer_tol: patch runs use the batched engine, which has no truncated outer basis")
+    if device is not None:
+        device = str(as_device(device))      # fails here, before any run, on a device this machine lacks
     identity = {} if outer_tol is None else {"outer_tol": outer_tol}   # folders of older versions: exact
     out = claim_folder(out, "study", force, world=world, voxel=voxel,
                        touch=None if touch == "point" else touch, **identity)   # older folders hold point runs
@@ -774,7 +785,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         for stale in running.glob("*.pid") if running.exists() else []:   # we hold the lock: nobody else runs
             stale.unlink(missing_ok=True)
         specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o), voxel, touch,
-                         outer_tol)
+                         outer_tol, device)
                  for o in (*objects, *scene_files) for m in modes for s in range(seeds)]
         todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
         use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
