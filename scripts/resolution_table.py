@@ -6,9 +6,10 @@ them, usually the 5 cm one) and paired with every voxel setting's visual-tactile
 Per object and voxel it prints the outer points, H at 10 % of the tactile run's travel and at the end (medians
 with 95 % intervals), the paired differences VT - T with the claims' rules of ``scripts/claims_table.py`` (early
 benefit: the interval at 10 % below 0; no harm: the final interval's upper end within the sweep's margin), the
-final correlation (median over seeds, and the median of the runs' own 95 % profile intervals) and the median
-step time. Then the similarity ordering per voxel: tight covers (E, G) above loose ones (F, H) with disjoint
-intervals of the median final correlation.
+final correlation (median over seeds, the median of the runs' own 95 % profile intervals, and how many runs'
+intervals reach below 0, i.e. do not exclude an unrelated cover) and the median step time. Then the similarity
+ordering per voxel: tight covers (E, G) above loose ones (F, H) with disjoint intervals of the median final
+correlation.
 
     python scripts/resolution_table.py outputs/res_5cm outputs/res_2cm outputs/res_1cm
 """
@@ -51,8 +52,9 @@ def main() -> None:
     vt, tactile = _read(args.studies)
     print("| object | voxel [cm] | N_outer | H 10 % VT / T [cm] | VT - T at 10 % [cm] | early benefit | "
           "H final VT / T [cm] | VT - T final [cm] (allowed) | no harm | rho final [interval] | "
-          "runs' own 95 % interval (median ends) | failed VT / T | step VT / T [ms] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "runs' own 95 % interval (median ends) | runs whose interval reaches below 0 | failed VT / T | "
+          "step VT / T [ms] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     corr = {}
     for (obj, voxel) in sorted(vt, key=lambda k: (k[0], -k[1])):
         runs, tact = vt[(obj, voxel)], tactile.get(obj, {})
@@ -68,12 +70,13 @@ def main() -> None:
         lo = statistics.median(_f(runs[s]["final_correlation_lo"]) for s in seeds)
         hi = statistics.median(_f(runs[s]["final_correlation_hi"]) for s in seeds)
         n_outer = statistics.median(_f(runs[s]["n_outer"]) for s in seeds)
+        flagged = sum(1 for s in seeds if _f(runs[s]["final_correlation_lo"]) < 0)   # "unrelated" not excluded
         fails = [sum(1 for s in seeds if rs[s]["failed"]) for rs in (runs, tact)]
         step = [1e3 * statistics.median(_f(rs[s]["median_step_time"]) for s in seeds) for rs in (runs, tact)]
         print(f"| {obj} | {100 * voxel:g} | {n_outer:.0f} | {_cm(h10[0])} / {_cm(h10[1])} | {_cm(early)} | "
               f"{'yes' if early['hi'] < 0 else '**no**'} | {_cm(hf[0])} / {_cm(hf[1])} | {_cm(final)} "
               f"(+{100 * allowed:.1f}) | {'yes' if final['hi'] <= allowed else '**no**'} | "
-              f"{rho['median']:.2f} [{rho['lo']:.2f}, {rho['hi']:.2f}] | [{lo:.2f}, {hi:.2f}] | "
+              f"{rho['median']:.2f} [{rho['lo']:.2f}, {rho['hi']:.2f}] | [{lo:.2f}, {hi:.2f}] | {flagged} of {len(seeds)} | "
               f"{fails[0]} / {fails[1]} | {step[0]:.0f} / {step[1]:.0f} |")
     print()
     print("| voxel [cm] | tight | loose | tight above loose (disjoint intervals) |")
