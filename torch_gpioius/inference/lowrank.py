@@ -156,4 +156,7 @@ def truncated_basis(kernel, x: Tensor, trace_tol: float, max_rank: int | None = 
     keep = lam > WEAKEST * float(lam.max())
     dropped = float(resid.sum()) + float(lam[~keep].clamp_min(0.0).sum())
     lam = lam[keep]
-    return OuterBasis(lam, (factor @ v[:, keep]) / lam.sqrt(), dropped, piv)
+    # U = L V lam^-1/2, stored column-major (as eigh returns the exact engine's U): each step multiplies a few
+    # kernel rows by U, and MKL's small-M double GEMM reads a column-major U faster (benchmarks/small_gemm.py)
+    u = ((v[:, keep] / lam.sqrt()).T @ factor.T).T
+    return OuterBasis(lam, u, dropped, piv)
