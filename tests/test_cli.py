@@ -104,18 +104,24 @@ def test_study_defaults_to_the_worlds_own_objects(monkeypatch, tmp_path):
     assert sweep.DEFAULT_OBJECTS["mujoco"] == ("E", "F", "G", "H")
 
 
-def test_voxel_reaches_the_study_and_the_3d_simulation_and_bad_values_are_refused(monkeypatch, tmp_path, capsys):
+@pytest.fixture
+def seen(monkeypatch) -> dict:
+    """The keyword arguments the study and the 3-D simulation would have been called with (neither runs)."""
     import torch_gpioius.studies.study3d as study3d
     import torch_gpioius.studies.sweep as sweep
 
-    seen = {}
+    calls = {}
 
     def fake(*args, **kw):
-        seen.update(kw)
+        calls.update(kw)
         raise ValueError("stop here")
 
     monkeypatch.setattr(sweep, "run_sweep", fake)
     monkeypatch.setattr(study3d, "run_study_3d", fake)
+    return calls
+
+
+def test_voxel_reaches_the_study_and_the_3d_simulation_and_bad_values_are_refused(seen, tmp_path, capsys):
     assert main(["study", "--world", "forcefield", "--voxel", "0.01", "--out", str(tmp_path / "s")]) == 2
     assert seen["voxel"] == 0.01
     assert main(["simulate3d", "--voxel", "0", "--touch", "patch", "--out", str(tmp_path / "t")]) == 2
@@ -127,18 +133,7 @@ def test_voxel_reaches_the_study_and_the_3d_simulation_and_bad_values_are_refuse
     assert not (tmp_path / "u").exists()
 
 
-def test_device_and_outer_tol_reach_the_study_and_the_3d_simulation(monkeypatch, tmp_path, capsys):
-    import torch_gpioius.studies.study3d as study3d
-    import torch_gpioius.studies.sweep as sweep
-
-    seen = {}
-
-    def fake(*args, **kw):
-        seen.update(kw)
-        raise ValueError("stop here")
-
-    monkeypatch.setattr(sweep, "run_sweep", fake)
-    monkeypatch.setattr(study3d, "run_study_3d", fake)
+def test_device_and_outer_tol_reach_the_study_and_the_3d_simulation(seen, tmp_path, capsys):
     assert main(["study", "--device", "cpu", "--outer-tol", "1e-3", "--out", str(tmp_path / "s")]) == 2
     assert seen["device"] == "cpu" and seen["outer_tol"] == 1e-3
     assert main(["simulate3d", "--device", "cpu", "--outer-tol", "1e-3", "--out", str(tmp_path / "t")]) == 2
