@@ -217,17 +217,25 @@ VOXEL_HELP = ("edge of the camera's voxels [m] (default: the world's, 0.05 as in
               "point; docs/results-resolution.md)")
 
 
+def _number(text: str, name: str, what: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name}: not {what}: {text!r}") from None
+
+
+def _argument(check, value):
+    """``check(value)`` as an argparse type: its ValueError becomes the option's error message."""
+    try:
+        return check(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def _voxel(text: str) -> float:
     from .exploration.observations import check_voxel
 
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"voxel: not a number of metres: {text!r}") from None
-    try:
-        return check_voxel(value)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    return _argument(check_voxel, _number(text, "voxel", "a number of metres"))
 
 
 DEVICE_HELP = ("where the GP arithmetic runs: cpu, or cuda for a GPU (float64 either way; the robot, the world and "
@@ -240,19 +248,13 @@ OUTER_TOL_HELP = ("visual-tactile runs with a truncated outer basis dropping a P
 def _device(text: str) -> str:
     from ._validation import as_device
 
-    try:
-        return str(as_device(text))
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    return str(_argument(as_device, text))
 
 
 def _outer_tol(text: str) -> float:
     from ._validation import as_float
 
-    try:
-        return as_float(float(text), "outer_tol", positive=True)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from None
+    return _argument(lambda v: as_float(v, "outer_tol", positive=True), _number(text, "outer_tol", "a number"))
 
 
 def _study_worlds() -> list[str]:

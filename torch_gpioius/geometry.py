@@ -12,22 +12,23 @@ from .tolerances import tol
 __all__ = ["SurfaceGeometry", "surface_geometry", "predict_task"]
 
 
-def predict_task(model, x: Tensor, task: int = 0) -> tuple[Tensor, Tensor]:
-    """``model.predict`` for either model type: GPIS ignores ``task`` (it has one), GPIOIS takes it."""
+def _per_task(model, method: str, x: Tensor, task: int):
+    """``model.<method>(x, task=task)``, or ``model.<method>(x)`` for a single-task model (task 0 only)."""
     if getattr(model, "num_tasks", 1) == 1:
         if task != 0:
             raise ValueError(f"task: a single-task model only has task 0, got {task}")
-        return model.predict(x)
-    return model.predict(x, task=task)
+        return getattr(model, method)(x)
+    return getattr(model, method)(x, task=task)
+
+
+def predict_task(model, x: Tensor, task: int = 0) -> tuple[Tensor, Tensor]:
+    """``model.predict`` for either model type: GPIS ignores ``task`` (it has one), GPIOIS takes it."""
+    return _per_task(model, "predict", x, task)
 
 
 def predict_mean_task(model, x: Tensor, task: int = 0) -> Tensor:
     """``model.predict_mean`` for either model type (the mean of :func:`predict_task` without the variance)."""
-    if getattr(model, "num_tasks", 1) == 1:
-        if task != 0:
-            raise ValueError(f"task: a single-task model only has task 0, got {task}")
-        return model.predict_mean(x)
-    return model.predict_mean(x, task=task)
+    return _per_task(model, "predict_mean", x, task)
 
 
 @dataclass

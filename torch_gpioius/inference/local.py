@@ -60,6 +60,14 @@ def loadings(task: Tensor, wts: Tensor, p: Tensor) -> tuple[Tensor, Tensor]:
     return lam, eta
 
 
+def query_loadings(xq: Tensor, task: int, p: Tensor, centres: Tensor, tau: float) -> tuple[Tensor, float]:
+    """`(m,)` loadings on F_out of F_task at `(m, d)` queries (the region weights' beta for the inner task, 1 for the
+    outer) and the query's loading on H (1 for the inner task, 0 for the outer)."""
+    if task == 0:
+        return region_weights(xq, centres, tau) @ p[2:], 1.0
+    return torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device), 0.0
+
+
 class LocalDenseInference:
     """The dense reference engine of the local model: one Cholesky of the full Gram matrix (see the module docs).
 
@@ -134,15 +142,10 @@ class LocalDenseInference:
 
     def _query_rows(self, xq: Tensor, task: int, p: Tensor) -> tuple[Tensor, Tensor, Tensor]:
         """`(m, n)` covariances of F_task at the queries with the training values at parameters ``p``, and the
-        queries' `(m,)` outer and inner loadings."""
+        queries' loadings (:func:`query_loadings`)."""
         lam, eta = loadings(self.task, self.wts, p)
-        if task == 0:
-            lq = region_weights(xq, self.centres, self.tau) @ p[2:]
-            eq = torch.ones_like(lq)
-        else:
-            lq = torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device)
-            eq = torch.zeros_like(lq)
-        return self.kernel.value(xq, self.x) * (p[1] * lq.unsqueeze(1) * lam + p[0] * eq.unsqueeze(1) * eta), lq, eq
+        lq, eq = query_loadings(xq, task, p, self.centres, self.tau)
+        return self.kernel.value(xq, self.x) * (p[1] * lq.unsqueeze(1) * lam + p[0] * eq * eta), lq, eq
 
     def mll(self, p: Tensor) -> Tensor:
         chol, alpha = self.factor(p)
@@ -258,12 +261,7 @@ class LocalStructuredInference(StructuredExactInference):
             parts = [self.predict(xq[i:i + chunk], task, p, chunk) for i in range(0, xq.shape[0], chunk)]
             return torch.cat([q[0] for q in parts]), torch.cat([q[1] for q in parts])
         a1, c = p[0], f["c"]
-        if task == 0:
-            lq = region_weights(xq, self.centres, self.tau) @ p[2:]
-            eq = 1.0
-        else:
-            lq = torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device)
-            eq = 0.0
+        lq, eq = query_loadings(xq, task, p, self.centres, self.tau)
         k_o = self.kernel.value(xq, self.xo)
         w = k_o @ self.u                                       # (m, N_o)
         mean = self.mean + c * lq * (w @ self._alpha_rot(f))
@@ -287,10 +285,7 @@ class LocalStructuredInference(StructuredExactInference):
         if not xq.requires_grad and xq.shape[0] > chunk:
             return torch.cat([self.predict_mean(xq[i:i + chunk], task, p, chunk) for i in range(0, xq.shape[0], chunk)])
         a1, c = p[0], f["c"]
-        if task == 0:
-            lq, eq = region_weights(xq, self.centres, self.tau) @ p[2:], 1.0
-        else:
-            lq, eq = torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device), 0.0
+        lq, eq = query_loadings(xq, task, p, self.centres, self.tau)
         mean = self.mean + c * lq * (self.kernel.value(xq, self.xo) @ self._alpha_outer(f))
         if self.n_inner:
             cross = c * lq.unsqueeze(1) * f["beta_i"] + a1 * eq

@@ -194,11 +194,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         return self._inference().predict(xq, task, self._task_matrix())
 
     def _predict_mean(self, x, task: int) -> Tensor:
-        xq = self._check_query(x)
-        engine = self._inference()
-        if hasattr(engine, "predict_mean"):
-            return engine.predict_mean(xq, task, self._task_matrix())
-        return engine.predict(xq, task, self._task_matrix())[0]
+        return self._inference().predict_mean(self._check_query(x), task, self._task_matrix())
 
     def _predict_with_gradients(self, x, task: int) -> tuple[Tensor, Tensor, Tensor, Tensor] | None:
         """Mean, variance and their x-gradients by the engine's closed form, or None if it has none (autograd)."""
