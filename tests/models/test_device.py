@@ -39,7 +39,8 @@ def test_cuda_agrees_with_cpu():
     cpu = tg.GPIOIS(x, y, task, theta=0.2, noise=0.01).fit()
     gpu = tg.GPIOIS(x, y, task, theta=0.2, noise=0.01, device="cuda").fit()
     assert gpu.train_inputs[0].is_cuda
-    assert float((gpu.task_covariance - cpu.task_covariance).abs().max()) < 1e-9
+    assert gpu.task_covariance.is_cuda   # K_t lives where the model lives
+    assert float((gpu.task_covariance.cpu() - cpu.task_covariance).abs().max()) < 1e-9
     m_c, v_c = cpu.predict(q)
     m_g, v_g = gpu.predict(q.cuda())
     assert float((m_g.cpu() - m_c).abs().max()) < 1e-9 and float((v_g.cpu() - v_c).abs().max()) < 1e-9
