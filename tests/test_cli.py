@@ -155,3 +155,58 @@ def test_policy_with_voxel():
     assert policy.with_voxel(0).voxel is None                     # every camera point
     with pytest.raises(ValueError, match="voxel"):
         policy.with_voxel(-1.0)
+
+
+@pytest.fixture
+def fake_2d_study(monkeypatch):
+    """run_study replaced by one that writes what the real one writes for its objects (in a second)."""
+    import torch_gpioius.studies.study2d as study2d
+
+    def fake(objects, out, **kw):
+        from pathlib import Path
+
+        out = Path(out)
+        for o in objects:
+            (out / f"fig4_{o}.png").write_bytes(b"png")
+        (out / "summary.md").write_text("objects " + ",".join(objects) + "\n")
+        return {"seconds": 0.0}
+
+    monkeypatch.setattr(study2d, "run_study", fake)
+
+
+def test_simulate_refuses_a_folder_of_another_objects_run(tmp_path, capsys, fake_2d_study):
+    """Issue 33, item 3: `--object B` into A's folder left A's figures beside B's table, and both exited 0."""
+    out = tmp_path / "sim"
+    assert main(["simulate", "--object", "A", "--out", str(out)]) == 0
+    assert main(["simulate", "--object", "A", "--out", str(out)]) == 0          # the same run again: allowed
+    before = sorted(p.name for p in out.iterdir())
+    assert main(["simulate", "--object", "B", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "holds the output of another run (objects='A')" in err and "objects='B'" in err
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert (out / "summary.md").read_text() == "objects A\n"
+    assert main(["simulate", "--object", "B", "--out", str(out), "--force"]) == 0   # asked for
+
+
+def test_simulate_folders_written_before_the_objects_were_recorded_are_reused(tmp_path, fake_2d_study):
+    import json
+
+    out = tmp_path / "old"
+    out.mkdir()
+    (out / ".gpioius-output.json").write_text(json.dumps({"command": "simulate", "version": "0.9"}))
+    (out / "summary.md").write_text("old\n")
+    assert main(["simulate", "--object", "all", "--out", str(out)]) == 0
+    assert json.loads((out / ".gpioius-output.json").read_text())["objects"] == "A,B,C,D"
+
+
+@pytest.mark.parametrize("command", ["simulate", "simulate3d"])
+def test_simulations_lock_their_folder(tmp_path, capsys, fake_2d_study, seen, command):
+    """Two simulations into one folder at once both exited 0, their files mixed."""
+    from torch_gpioius.io.outputs import FolderLock
+
+    out = tmp_path / "sim"
+    out.mkdir()
+    with FolderLock(out, f"gpioius {command}"):
+        assert main([command, "--out", str(out)]) == 2
+    assert f"another gpioius {command} (pid" in capsys.readouterr().err
+    assert not (out / "summary.md").exists() and not seen          # nothing ran

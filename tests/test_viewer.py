@@ -166,9 +166,49 @@ def test_origin_rule():
     assert not origin_allowed("null", "127.0.0.1:8080", "127.0.0.1")                     # sandboxed frames, files
     # DNS rebinding: the attacker's name resolves to 127.0.0.1, so Host and Origin agree, but Host is not ours
     assert not origin_allowed("http://rebind.evil.example:8080", "rebind.evil.example:8080", "127.0.0.1")
-    assert origin_allowed("http://lab-pc:8080", "lab-pc:8080", "0.0.0.0")              # bound to all: by name too
+    lab = frozenset({"lab-pc", "10.0.0.7"})
+    assert origin_allowed("http://lab-pc:8080", "lab-pc:8080", "0.0.0.0", machine=lab)  # bound to all: our names
+    assert origin_allowed("http://10.0.0.7:8080", "10.0.0.7:8080", "::", machine=lab)
+    # issue 33, item 4: bound to all interfaces, any Host used to pass, so DNS rebinding did too
+    assert not origin_allowed("http://evil.example:8080", "evil.example:8080", "0.0.0.0", machine=lab)
+    assert not origin_allowed("http://evil.example:8080", "evil.example:8080", "0.0.0.0")   # this machine's names
+    assert origin_allowed("http://viz.lab.org:8080", "viz.lab.org:8080", "0.0.0.0", ("viz.lab.org",), lab)
+    assert origin_allowed("http://viz.lab.org:8080", "viz.lab.org:8080", "10.0.0.5", ("viz.lab.org",))
     assert origin_allowed("http://10.0.0.5:8080", "10.0.0.5:8080", "10.0.0.5")
     assert not origin_allowed("http://10.0.0.5:8080", None, "10.0.0.5")
+
+
+def test_a_public_bind_keeps_the_host_check_and_warns(log_2d, capsys):
+    """Issue 33, item 4: `--host 0.0.0.0` let a DNS-rebinding handshake (Host and Origin on evil.example) through
+    with 101 Switching Protocols; now it gets 403, and the bind is announced as public."""
+    from websockets.exceptions import InvalidStatus
+    from websockets.sync.client import connect
+
+    from torch_gpioius.viewer import check_hosts, public_bind_warning
+
+    assert public_bind_warning("127.0.0.1") is None and public_bind_warning("::1") is None
+    assert "every interface" in public_bind_warning("0.0.0.0") and "10.0.0.5" in public_bind_warning("10.0.0.5")
+    for bad in ("http://x.org", "x.org:8080", "", "a b"):
+        with pytest.raises(ValueError, match="allow_hosts"):
+            check_hosts([bad])
+    viewer = RunViewer(log_2d, host="0.0.0.0", port=_free_port(), allow_hosts=["viz.lab.example"])
+    try:
+        def handshake(name, **kw):
+            """A browser that reached this machine under ``name`` (the URI's host is the Host header)."""
+            sock = socket.create_connection(("127.0.0.1", viewer.port), timeout=10)
+            return connect(f"ws://{name}:{viewer.port}", sock=sock, origin=f"http://{name}:{viewer.port}",
+                           open_timeout=10, **kw)
+
+        for name in ("evil.example", "rebind.evil.example"):
+            with pytest.raises(InvalidStatus) as refused:
+                handshake(name).close()
+            assert refused.value.response.status_code == 403
+        protocol = ["viser-v" + __import__("viser").__version__]
+        for name in ("localhost", "viz.lab.example"):            # loopback, and the name the user allowed
+            with handshake(name, subprotocols=protocol) as ws:
+                assert ws.recv(timeout=10)
+    finally:
+        viewer.close()
 
 
 def test_cross_site_pages_cannot_open_the_websocket(log_2d):

@@ -18,37 +18,42 @@ __all__ = ["main"]
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from .io.outputs import claim_folder
+    from .io.outputs import FolderLock, claim_folder
     from .studies.study2d import run_study
 
-    claim_folder(args.out, "simulate", args.force)
     objects = ["A", "B", "C", "D"] if args.object == "all" else [args.object]
+    # the folder's summary, records and figures describe one set of objects: another set is another run
+    claim_folder(args.out, "simulate", args.force, objects=",".join(objects), added=("objects",))
     max_steps = 12 if args.smoke else args.max_steps
-    result = run_study(objects, out=args.out, max_steps=max_steps, progress=not args.quiet, smoke=args.smoke)
+    with FolderLock(args.out, "gpioius simulate"):
+        result = run_study(objects, out=args.out, max_steps=max_steps, progress=not args.quiet, smoke=args.smoke)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
 
 
 def _simulate3d(args: argparse.Namespace) -> int:
-    from .io.outputs import claim_folder
+    from .io.outputs import FolderLock, claim_folder
     from .studies.study3d import run_study_3d
 
     if args.outer_tol is not None and args.touch == "patch":
         raise SystemExit("gpioius simulate3d: --outer-tol: patch runs use the batched engine, which has no truncated "
                          "outer basis")
-    identity = {} if args.outer_tol is None else {"outer_tol": args.outer_tol}   # older folders: exact
-    claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
-                 touch=None if args.touch == "point" else args.touch, **identity)   # older folders: point
     scenes = [] if args.scene is None else args.scene.split(",")
     if args.object is None:
         objects = [] if scenes else ["E", "F", "G", "H"]
     else:
         objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
+    identity = {} if args.outer_tol is None else {"outer_tol": args.outer_tol}   # older folders: exact
+    claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
+                 touch=None if args.touch == "point" else args.touch,   # older folders: point
+                 objects=",".join([*objects, *(str(Path(s).resolve()) for s in scenes)]), added=("objects",),
+                 **identity)
     travel = 0.06 if args.smoke else args.max_travel
-    result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
-                          progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes,
-                          voxel=args.voxel, touch=args.touch, outer_tol=args.outer_tol, device=args.device)
+    with FolderLock(args.out, "gpioius simulate3d"):
+        result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
+                              progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes,
+                              voxel=args.voxel, touch=args.touch, outer_tol=args.outer_tol, device=args.device)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
@@ -199,7 +204,8 @@ def _export(args: argparse.Namespace) -> int:
 def _view(args: argparse.Namespace) -> int:
     from .viewer import serve
 
-    serve(args.run, port=args.port, open_browser=not args.no_browser, resolution=args.resolution, host=args.host)
+    serve(args.run, port=args.port, open_browser=not args.no_browser, resolution=args.resolution, host=args.host,
+          allow_hosts=args.allow_host)
     return 0
 
 
@@ -455,7 +461,11 @@ def build_parser() -> argparse.ArgumentParser:
     vw.add_argument("run", help="exploration log, dataset (.gpioius) or study folder (with logs/)")
     vw.add_argument("--port", type=int, default=8080, help="TCP port of the page (0: any free port)")
     vw.add_argument("--host", default="127.0.0.1",
-                    help="interface to serve on; 0.0.0.0 serves every interface (other machines can then connect)")
+                    help="interface to serve on; 0.0.0.0 serves every interface (other machines can then connect; "
+                         "a warning says so)")
+    vw.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                    help="a host name, besides this machine's own, under which browsers may open the page (a DNS "
+                         "alias, a reverse proxy); repeatable")
     vw.add_argument("--no-browser", action="store_true", help="do not open a browser")
     vw.add_argument("--resolution", type=float, default=None, help="grid spacing of the estimate [m]")
     vw.set_defaults(func=_view)

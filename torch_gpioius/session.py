@@ -23,7 +23,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             metrics_every: int | None = None, metrics_resolution: float | None = None,
             interval_every: int | None = None, regions: int | None = None, stall="default",
             outer_tol: float | None = None, device=None, recorders=(), progress: bool = False,
-            log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None) -> Trace:
+            log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None,
+            overwrite: bool = False) -> Trace:
     """Explore ``world`` and record per-step metrics: the same loop for every world.
 
     Protocol (both modes alike): visual-tactile mode captures one point cloud before exploring (outer surface
@@ -76,13 +77,17 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             (fsync) before the next step begins.
         resume_from: continue the run logged in this file from its last complete step (same world, parameters
             and hardware state; appends to the log). The resumed run ends where an uninterrupted one would.
+        overwrite: replace an existing file at ``log`` (default: refuse it, since ``resume_from`` relies on it).
 
     Returns:
         :class:`~torch_gpioius.exploration.trace.Trace`.
 
     Raises:
         TypeError: ``world`` is not a World.
-        ValueError: an invalid argument (names it), or a log that does not match this run on resume.
+        ValueError: an invalid argument (names it), a ``log`` that is a folder or lies in a folder that does not
+            exist, or a log that does not match this run on resume.
+        FileExistsError: ``log`` exists and ``overwrite`` is False (names the file and both ways on).
+        FileNotFoundError: ``resume_from`` does not exist.
     """
     if not isinstance(world, World):
         raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
@@ -94,6 +99,10 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
                                       regions=regions, stall=stall, outer_tol=outer_tol, device=device)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
+    if log is not None:
+        _check_log_path(log, "log", must_exist=False, overwrite=overwrite or resume_from is not None)
+    if resume_from is not None:
+        _check_log_path(resume_from, "resume_from", must_exist=True)
     observers = list(recorders)
     state = hardware = None
     if resume_from is not None:
@@ -103,3 +112,23 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     elif log is not None:
         observers.append(LogRecorder(log))
     return run(world, config, recorders=observers, progress=progress, state=state, hardware=hardware)
+
+
+def _check_log_path(path, name: str, *, must_exist: bool, overwrite: bool = False) -> None:
+    """Refuse a log path before the run starts, naming the argument (nothing is written or truncated here)."""
+    if not isinstance(path, (str, os.PathLike)) or not os.fspath(path):
+        raise ValueError(f"{name}: expected a file path, got {path!r}")
+    p = os.fspath(path)
+    if os.path.isdir(p):
+        raise ValueError(f"{name}: {p} is a folder; give a file in it, e.g. {os.path.join(p, 'run.gpioius')}")
+    if must_exist:
+        if not os.path.isfile(p):
+            raise FileNotFoundError(f"{name}: {p} does not exist (the log of the run to continue)")
+        return
+    folder = os.path.dirname(p) or "."
+    if not os.path.isdir(folder):
+        raise ValueError(f"{name}: the folder {folder} of {p} does not exist; create it first")
+    if os.path.lexists(p) and not overwrite:
+        raise FileExistsError(f"{name}: {p} exists ({os.path.getsize(p)} bytes, a run's log that resume_from relies "
+                              f"on); pass resume_from={p!r} to continue it, overwrite=True to replace it, or another "
+                              "log path")

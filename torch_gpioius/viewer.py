@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "COLOUR_KEY"]
+__all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "check_hosts", "machine_names",
+           "public_bind_warning", "COLOUR_KEY"]
 
 _GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (150, 150, 150), (150, 200, 255), (20, 20, 20), (0, 190, 210), (255, 140, 0)
 _PAD, _PAD_OLD = (200, 30, 120), (230, 170, 200)      # the gel pad's outline: this step's, earlier ones
@@ -91,15 +92,42 @@ def check_port(port) -> int:
     return port
 
 
-def origin_allowed(origin: str | None, host_header: str | None, bound_host: str) -> bool:
+def machine_names() -> frozenset[str]:
+    """The names and addresses by which other machines reach this one (host name, FQDN, and their addresses),
+    lower-case; what a viewer bound to all interfaces accepts as ``Host`` besides loopback and the user's names."""
+    import socket
+
+    names = {socket.gethostname(), socket.getfqdn()}
+    for name in list(names):
+        try:
+            names.update(info[4][0] for info in socket.getaddrinfo(name, None))
+        except OSError:                  # a host name that does not resolve: the name itself still counts
+            pass
+    return frozenset(n.lower() for n in names if n)
+
+
+def _all_interfaces(bound_host: str) -> bool:
+    return bound_host in ("0.0.0.0", "::", "")
+
+
+def origin_allowed(origin: str | None, host_header: str | None, bound_host: str,
+                   allowed_hosts: tuple[str, ...] | frozenset[str] = (), machine: frozenset[str] | None = None) -> bool:
     """Whether a WebSocket handshake may proceed (RFC 6455, section 10.2).
 
     * No ``Origin`` header: not a browser page (browsers always send one): allowed.
-    * The ``Host`` the client asked for must name this machine: a loopback name, or the interface the viewer was
-      bound to (any name when bound to all interfaces, ``0.0.0.0`` / ``::``, which the user asked for). A page
-      that re-points its own domain name at 127.0.0.1 (DNS rebinding) is refused here.
+    * The ``Host`` the client asked for must name this machine: a loopback name, the interface the viewer was bound
+      to, this machine's own names and addresses when bound to all interfaces (``0.0.0.0`` / ``::``;
+      :func:`machine_names`), or a name in ``allowed_hosts`` (``gpioius view --allow-host``: a DNS alias, a reverse
+      proxy). Any other name is refused on every bind: a page that re-points its own domain name at this machine
+      (DNS rebinding) reaches it with its own name as ``Host``.
     * The ``Origin`` must be the viewer's own page: scheme http(s) and the same host and port as ``Host``. Any
       other site's page is refused (cross-site WebSocket hijacking).
+
+    Args:
+        origin, host_header: the handshake's headers (None where absent).
+        bound_host: the interface the viewer serves on.
+        allowed_hosts: further host names the user named.
+        machine: this machine's names (default: :func:`machine_names`, looked up when bound to all interfaces).
     """
     from urllib.parse import urlsplit
 
@@ -114,13 +142,40 @@ def origin_allowed(origin: str | None, host_header: str | None, bound_host: str)
         h_port = h.port or 80
     except ValueError:
         return False
-    allowed = set(_LOOPBACK)
-    if bound_host not in ("0.0.0.0", "::", ""):
+    allowed = set(_LOOPBACK) | {a.strip("[]").lower() for a in allowed_hosts}
+    if not _all_interfaces(bound_host):
         allowed.add(bound_host.strip("[]").lower())
-    elif h.hostname:
-        allowed.add(h.hostname)
+    else:
+        allowed |= machine_names() if machine is None else machine
     return (o.scheme in ("http", "https") and h.hostname in allowed and o.hostname == h.hostname
             and o_port == h_port)
+
+
+def check_hosts(hosts) -> tuple[str, ...]:
+    """Host names for ``allow_hosts``: non-empty names or addresses, without scheme, port or path.
+
+    Raises:
+        ValueError: naming the bad entry.
+    """
+    if isinstance(hosts, str):
+        hosts = (hosts,)
+    out = []
+    for h in hosts or ():
+        if not isinstance(h, str) or not h.strip() or any(c in h for c in "/@ ") or h.count(":") == 1:
+            raise ValueError(f"allow_hosts: {h!r} is not a host name or address (give it without scheme or port, "
+                             "e.g. lab-pc.example.org)")
+        out.append(h.strip().strip("[]").lower())
+    return tuple(out)
+
+
+def public_bind_warning(host: str) -> str | None:
+    """A warning for a bind that other machines can reach (None for loopback)."""
+    if host.strip("[]").lower() in _LOOPBACK:
+        return None
+    where = "every interface" if _all_interfaces(host) else host
+    return (f"gpioius view: warning: serving on {where}: anyone who can reach this machine on the network can open "
+            "the run and drive the page (there is no password); serve on 127.0.0.1 and use an SSH tunnel where you "
+            "can. Pages are accepted only under this machine's names and --allow-host names.")
 
 
 class _Proxy:
@@ -135,7 +190,7 @@ class _Proxy:
         return getattr(self._wrapped, name)
 
 
-def _install_origin_check(bound_host: str) -> None:
+def _install_origin_check(bound_host: str, allowed_hosts: tuple[str, ...] = ()) -> None:
     """Make the WebSocket server of viewers created from now on check the handshake with :func:`origin_allowed`.
 
     viser (1.1) has no option for it: its ``WebsockServer`` calls ``websockets.asyncio.server.serve`` through the
@@ -148,11 +203,15 @@ def _install_origin_check(bound_host: str) -> None:
 
     real = getattr(_infra.websockets, "_wrapped_websockets", _infra.websockets)
     real_serve = real.asyncio.server.serve
+    machine = machine_names() if _all_interfaces(bound_host) else frozenset()
 
     def serve(handler, host, port, *args, process_request=None, **kwargs):
         def check(connection, request):
-            if request.headers.get("Upgrade", "").lower() == "websocket" and not origin_allowed(
-                    request.headers.get("Origin"), request.headers.get("Host"), bound_host):
+            h = request.headers
+            if h.get("Upgrade", "").lower() == "websocket" and (
+                    len(h.get_all("Host")) != 1 or len(h.get_all("Origin")) > 1      # ambiguous: refused
+                    or not origin_allowed(h["Origin"] if "Origin" in h else None, h["Host"], bound_host,
+                                          allowed_hosts, machine)):
                 return connection.respond(http.HTTPStatus.FORBIDDEN, "gpioius view: cross-origin WebSocket refused\n")
             return process_request(connection, request) if process_request is not None else None
 
@@ -171,6 +230,8 @@ class RunViewer:
         host: interface to serve on.
         port: TCP port (viser moves to the next free one if taken; see :attr:`port`).
         resolution: grid spacing of the estimates [m] (default 5 mm in 2-D, 1.5 cm in 3-D).
+        allow_hosts: host names, besides this machine's own, under which a browser page may connect (a DNS
+            alias or a reverse proxy; see :func:`origin_allowed`).
 
     Attributes:
         server: the ``viser.ViserServer``.
@@ -180,7 +241,7 @@ class RunViewer:
     """
 
     def __init__(self, source: str | os.PathLike, *, host: str = "127.0.0.1", port: int = 8080,
-                 resolution: float | None = None, progress: bool = False) -> None:
+                 resolution: float | None = None, progress: bool = False, allow_hosts=()) -> None:
         try:
             import viser
         except ImportError as exc:  # pragma: no cover - extra missing
@@ -191,6 +252,7 @@ class RunViewer:
         check_port(port)
         if not isinstance(host, str) or not host:
             raise ValueError(f"host: expected an interface name or address, got {host!r}")
+        allow_hosts = check_hosts(allow_hosts)
         if resolution is not None:
             from ._validation import as_float
 
@@ -216,7 +278,7 @@ class RunViewer:
         self.resolution = resolution
         self.host = host
         self.run = self._runs[self.files[0]]
-        _install_origin_check(host)
+        _install_origin_check(host, allow_hosts)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
         self.port = self.server.get_port()
         self.server.scene.set_up_direction("+z")
@@ -514,14 +576,17 @@ def _browser_host(host: str) -> str:
 
 
 def serve(source: str | os.PathLike, *, port: int = 8080, open_browser: bool = True,
-          resolution: float | None = None, host: str = "127.0.0.1") -> None:
+          resolution: float | None = None, host: str = "127.0.0.1", allow_hosts=()) -> None:
     """Serve :class:`RunViewer` until interrupted (Ctrl-C); the address is printed once every run is loaded.
 
     Raises:
         ValueError: a bad port, host or resolution.
         DatasetError: no run of the source could be read.
     """
-    viewer = RunViewer(source, host=host, port=port, resolution=resolution, progress=True)
+    viewer = RunViewer(source, host=host, port=port, resolution=resolution, progress=True, allow_hosts=allow_hosts)
+    warning = public_bind_warning(host)
+    if warning:
+        print(warning, file=sys.stderr, flush=True)
     url = f"http://{_browser_host(host)}:{viewer.port}"
     for path, why in viewer.skipped.items():
         print(f"gpioius view: left out {path}: {why}", file=sys.stderr, flush=True)

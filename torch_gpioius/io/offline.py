@@ -12,7 +12,7 @@ import torch
 from tqdm.auto import tqdm
 
 from .checkpoints import save_checkpoint
-from .outputs import atomic_write
+from .outputs import FolderLock, StagedFiles, atomic_write
 from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
 from ..models.gpiois import GPIOIS, INNER
 from ..metrics import hausdorff_distance, uncertainty_measure
@@ -99,14 +99,17 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        info["checkpoint"] = str(save_checkpoint(model, out / "model.pt", extra={"dataset": str(path)}))
         from .export import grid_resolution
 
         res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
-        fig = out / "fit.png"
-        _plot_estimate(model, ds, fig, f"{Path(path).name}: estimated inner shape over its variance", res)
-        info["figure"] = str(fig)
-        atomic_write(out / "fit.json", json.dumps(info, indent=2))
+        # one fit's three files together: staged, then moved in when all are written (a failure, or a second fit
+        # into the same folder, never leaves a model.pt of one fit beside the fit.json of another)
+        with FolderLock(out, "gpioius fit"), StagedFiles(out) as staged:
+            save_checkpoint(model, staged.path / "model.pt", extra={"dataset": str(path)})
+            _plot_estimate(model, ds, staged.path / "fit.png",
+                           f"{Path(path).name}: estimated inner shape over its variance", res)
+            info["checkpoint"], info["figure"] = str(out / "model.pt"), str(out / "fit.png")
+            atomic_write(staged.path / "fit.json", json.dumps(info, indent=2))
     return info
 
 

@@ -14,6 +14,10 @@ and call, flushed, fsynced and renamed over the target: a crash leaves the old f
 never share a temporary file, and a symbolic link at the target is replaced, never followed (the rename replaces
 the link itself).
 
+**Staged files.** A command whose files describe one result together (``fit --out``: model.pt, fit.png and
+fit.json) writes them into a private staging folder inside the output folder and moves them in only when all are
+written (:class:`StagedFiles`): a failure leaves the earlier result whole, never a mix of two.
+
 **The lock.** :class:`FolderLock` holds an exclusive ``flock`` on a file in an output folder for as long as a
 writer works there; a second writer is refused at once with the holder's process id. The kernel releases the lock
 when its holder dies, so a killed run never leaves a stale lock behind.
@@ -26,7 +30,7 @@ import os
 import secrets
 from pathlib import Path
 
-__all__ = ["MARKER", "atomic_write", "check_new_file", "check_distinct", "claim_folder", "FolderLock"]
+__all__ = ["MARKER", "atomic_write", "check_new_file", "check_distinct", "claim_folder", "FolderLock", "StagedFiles"]
 
 #: The file by which a command marks an output folder as its own (JSON: command, version, and e.g. the world).
 MARKER = ".gpioius-output.json"
@@ -109,7 +113,8 @@ def check_distinct(**paths) -> None:
         seen[key] = name
 
 
-def claim_folder(path: str | os.PathLike, command: str, force: bool = False, **identity) -> Path:
+def claim_folder(path: str | os.PathLike, command: str, force: bool = False, *, added: tuple[str, ...] = (),
+                 **identity) -> Path:
     """Make ``path`` an output folder of ``command`` (see the module docstring) and record it there.
 
     Args:
@@ -118,6 +123,8 @@ def claim_folder(path: str | os.PathLike, command: str, force: bool = False, **i
         force: write into a non-empty folder that another command, or no command, wrote.
         **identity: JSON-able facts that must also match for a folder to be re-used (e.g. ``world="2d"`` for a
             study, whose runs and tables belong to one world).
+        added: identity keys that folders written by older versions do not record; such a folder is taken as
+            matching on them (and records them from now on).
 
     Returns:
         the folder.
@@ -142,7 +149,7 @@ def claim_folder(path: str | os.PathLike, command: str, force: bool = False, **i
                                   "--force to write into it (files of the same names are replaced) or choose "
                                   "another --out") from None
         want = {"command": command, **identity}
-        clash = {k: info.get(k) for k, v in want.items() if info.get(k) != v}
+        clash = {k: info.get(k) for k, v in want.items() if info.get(k) != v and not (k in added and k not in info)}
         if clash:
             held = ", ".join(f"{k}={v!r}" for k, v in clash.items())
             asked = ", ".join(f"{k}={want[k]!r}" for k in clash)
@@ -197,3 +204,46 @@ class FolderLock:
 
     def __exit__(self, *exc: object) -> None:
         self.release()
+
+
+class StagedFiles:
+    """Files that belong together, written into a private staging folder and moved into ``folder`` at the end.
+
+    Use as a context manager: write into :attr:`path`; on a clean exit every file there replaces the one of its
+    name in ``folder`` (each by an atomic rename, all after the last one was written); on an exception nothing in
+    ``folder`` changes and the staging folder is removed.
+
+    Args:
+        folder: the output folder (must exist).
+
+    Attributes:
+        path: the staging folder (``folder/.staging.<pid>.<random>``), same file system as ``folder``.
+        moved: the final paths, after a clean exit.
+    """
+
+    def __init__(self, folder: str | os.PathLike) -> None:
+        self.folder = Path(folder)
+        self.path = self.folder / f".staging.{os.getpid()}.{secrets.token_hex(4)}"
+        self.moved: list[Path] = []
+
+    def __enter__(self) -> "StagedFiles":
+        self.path.mkdir()
+        return self
+
+    def __exit__(self, exc_type, *exc: object) -> None:
+        import shutil
+
+        try:
+            if exc_type is None:
+                staged = sorted(p for p in self.path.iterdir() if p.is_file())
+                for p in staged:
+                    with open(p, "rb") as f:
+                        os.fsync(f.fileno())
+                for p in staged:
+                    target = self.folder / p.name
+                    os.replace(p, target)
+                    self.moved.append(target)
+                if self.moved:
+                    _fsync_dir(self.moved[-1])
+        finally:
+            shutil.rmtree(self.path, ignore_errors=True)

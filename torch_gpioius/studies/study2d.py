@@ -222,7 +222,8 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
         bar.set_postfix_str(f"object {name}, {mode}")
         log = out / "logs" / f"{name}_{mode}.gpioius"   # crash-safe exploration log (docs/data-format.md)
         traces.setdefault(name, {})[mode] = explore(scenes[name], mode=mode, max_steps=max_steps,
-                                                    progress=progress, log=log, **explore_kwargs)
+                                                    progress=progress, log=log, overwrite=True,
+                                                    **explore_kwargs)
         bar.update(1)
     bar.close()
     for name in objects:

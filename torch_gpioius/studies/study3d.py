@@ -203,7 +203,7 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
             kw["outer_tol"] = outer_tol
         traces.setdefault(name, {})[mode] = explore(
             scenes[name], mode=mode, max_travel=max_travel, metrics_every=metrics_every, progress=progress,
-            log=out / "logs" / f"{name}_{mode}.gpioius", **kw)
+            log=out / "logs" / f"{name}_{mode}.gpioius", overwrite=True, **kw)
         bar.update(1)
     bar.close()
     hio = {name: scenes[name].inner_outer_hausdorff() for name in objects}

@@ -269,7 +269,8 @@ def run_one(spec: RunSpec) -> dict:
         world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene)
         kw = _explore_kwargs(spec, world)
         try:
-            trace = explore(world, log=out / "logs" / f"{spec.key}.gpioius", **kw)
+            # the folder is ours: a run that crashed before is done again over its own log
+            trace = explore(world, log=out / "logs" / f"{spec.key}.gpioius", overwrite=True, **kw)
         except RuntimeError as exc:
             # the approach found no contact or the robot refused it (a perturbed approach past a thin part of the
             # object): the run failed before any estimate; it is recorded as such, and the sweep goes on

@@ -1,0 +1,56 @@
+"""torch_gpioius.explore's log argument: an existing log is never truncated, bad paths are named before the run."""
+
+import os
+
+import pytest
+
+import torch_gpioius as tg
+from torch_gpioius.sim import paper_objects_2d
+
+
+def _a():
+    return paper_objects_2d()["A"]
+
+
+def test_an_existing_log_is_refused_and_left_as_it_was(tmp_path):
+    log = tmp_path / "run.gpioius"
+    tg.explore(_a(), mode="tactile", max_steps=3, log=log)
+    before = log.read_bytes()
+    with pytest.raises(FileExistsError, match=r"log: .*run\.gpioius exists.*resume_from.*overwrite=True"):
+        tg.explore(_a(), mode="tactile", max_steps=1, log=log)
+    assert log.read_bytes() == before                         # not truncated, not appended to
+    done = tg.explore(_a(), mode="tactile", max_steps=3, resume_from=log)   # resume still reads it
+    assert done.n_steps == 4
+
+
+def test_overwrite_replaces_the_log(tmp_path):
+    log = tmp_path / "run.gpioius"
+    tg.explore(_a(), mode="tactile", max_steps=3, log=log)
+    size = log.stat().st_size
+    tg.explore(_a(), mode="tactile", max_steps=1, log=log, overwrite=True)
+    assert log.stat().st_size < size
+
+
+def test_a_link_at_the_log_path_counts_as_existing(tmp_path):
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("keep")
+    log = tmp_path / "run.gpioius"
+    os.symlink(target, log)
+    with pytest.raises(FileExistsError, match="log:"):
+        tg.explore(_a(), mode="tactile", max_steps=1, log=log)
+    assert target.read_text() == "keep"
+
+
+@pytest.mark.parametrize("kind", ["missing folder", "a folder"])
+def test_a_bad_log_path_is_named_before_anything_runs(tmp_path, kind):
+    path = tmp_path / "missing_dir" / "x.gpioius" if kind == "missing folder" else tmp_path
+    with pytest.raises(ValueError, match="log: .*(does not exist|is a folder)"):
+        tg.explore(_a(), mode="tactile", max_steps=1, log=path)
+    assert not (tmp_path / "missing_dir").exists()
+
+
+def test_a_missing_resume_log_is_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="resume_from: .*nothere.gpioius does not exist"):
+        tg.explore(_a(), mode="tactile", resume_from=tmp_path / "nothere.gpioius")
+    with pytest.raises(ValueError, match="resume_from: .*is a folder"):
+        tg.explore(_a(), mode="tactile", resume_from=tmp_path)
