@@ -210,3 +210,39 @@ def test_simulations_lock_their_folder(tmp_path, capsys, fake_2d_study, seen, co
         assert main([command, "--out", str(out)]) == 2
     assert f"another gpioius {command} (pid" in capsys.readouterr().err
     assert not (out / "summary.md").exists() and not seen          # nothing ran
+
+
+def test_lengths_in_the_wrong_units_are_refused(tmp_path, capsys, seen):
+    """Issue 33, item 6: `--max-travel 150` ran for 86 s until the step cap."""
+    from torch_gpioius.exploration.stopping import TravelBudget
+
+    for command in ("simulate3d", "study"):
+        with pytest.raises(SystemExit):
+            main([command, "--world", "forcefield", "--max-travel", "150", "--out", str(tmp_path / "x")] if command ==
+                 "study" else [command, "--max-travel", "150", "--out", str(tmp_path / "x")])
+        assert "--max-travel: 150 m is above 20 m; lengths are in metres" in capsys.readouterr().err
+    assert not seen
+    with pytest.raises(ValueError, match="max_travel: 150 m is above 20 m"):
+        TravelBudget(150.0)
+
+
+def test_fit_on_a_dataset_in_millimetres_is_refused_by_its_units(tmp_path, capsys):
+    """`gpioius fit` printed correlation 1.0 on data in mm; with --out it blamed the grid resolution."""
+    from torch_gpioius.io.datasets import Dataset, save_dataset
+
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-150, 150, size=(40, 2))
+    bad = tmp_path / "mm.gpioius"
+    # written as the old writer did (no check), so that the reader's check is the one tested
+    import torch_gpioius.io.datasets as datasets
+
+    real = datasets.check_metres
+    datasets.check_metres = lambda *a, **k: None
+    try:
+        save_dataset(Dataset(x, (np.arange(40) % 2).astype(float), (np.arange(40) % 3 == 0).astype(np.int64),
+                             np.zeros(40, np.int64)), bad)
+    finally:
+        datasets.check_metres = real
+    assert main(["fit", str(bad), "--out", str(tmp_path / "fit")]) == 2
+    err = capsys.readouterr().err
+    assert "mm.gpioius" in err and "probably in millimetres" in err and "resolution" not in err

@@ -265,3 +265,16 @@ def test_the_initial_view_holds_the_whole_object():
     for radius, fov in ((0.1, math.radians(75)), (0.5, math.radians(50))):
         d = frame_distance(radius, fov, fill=0.5)
         assert math.tan(math.asin(radius / d)) == pytest.approx(0.5 * math.tan(fov / 2), rel=1e-12)
+
+
+def test_a_step_without_an_estimate_is_named_in_the_panel(log_2d, monkeypatch):
+    """Issue 33, item 5: an empty picture for a step whose estimate has no surface said nothing."""
+    viewer = RunViewer(log_2d, port=_free_port())
+    try:
+        viewer.show(viewer.run.steps[-1])
+        assert "No estimate" not in viewer.info.content
+        monkeypatch.setattr(viewer, "_estimate", lambda k: ([], None, 1.0))      # no curve at this step
+        viewer.show(viewer.run.steps[0])
+        assert "**No estimate at this step:**" in viewer.info.content
+    finally:
+        viewer.close()

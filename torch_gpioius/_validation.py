@@ -8,7 +8,16 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["as_points", "as_labels", "as_tasks", "as_float", "as_bounds", "task_id", "TASK_NAMES"]
+__all__ = ["as_points", "as_labels", "as_tasks", "as_float", "as_bounds", "task_id", "TASK_NAMES", "check_metres",
+           "as_length", "MAX_SCENE_EXTENT", "MAX_COORDINATE", "MAX_LENGTH"]
+
+#: Largest extent of a scene's data [m]: a robot's tabletop workspace is ~2 m and an uncropped depth camera sees
+#: ~8 m; data larger than this are almost always in millimetres (an object of 15 cm is 150 "m" across then).
+MAX_SCENE_EXTENT = 10.0
+#: Largest coordinate accepted [m] (positions in a robot's base frame or a camera's).
+MAX_COORDINATE = 50.0
+#: Largest length a setting may take [m] (a travel budget, a step, a distance): larger is a units mistake.
+MAX_LENGTH = 20.0
 
 #: Task names accepted beside the ids: 0 is the inner (tactile) shape, 1 the outer (visual) one.
 TASK_NAMES = {"inner": 0, "outer": 1}
@@ -54,6 +63,41 @@ def as_float(value, name: str, *, lo: float | None = None, hi: float | None = No
         raise ValueError(f"{name}: {v:g}{unit} is below the supported minimum {lo:g}{unit}")
     if hi is not None and v > hi:
         raise ValueError(f"{name}: {v:g}{unit} is above the supported maximum {hi:g}{unit}")
+    return v
+
+
+def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) for a file in millimetres") -> None:
+    """Refuse `(n, d)` positions that cannot be metres: an extent above :data:`MAX_SCENE_EXTENT` or a coordinate
+    beyond :data:`MAX_COORDINATE` (a dataset in millimetres is 1000x too large, and every later step -- the kernel,
+    the grid, the correlation -- goes wrong without a word).
+
+    Raises:
+        ValueError: naming ``where``, the measured size and the likely units.
+    """
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim != 2 or not len(a):
+        return
+    extent = float((a.max(0) - a.min(0)).max())
+    reach = float(np.abs(a).max())
+    if extent > MAX_SCENE_EXTENT or reach > MAX_COORDINATE:
+        size = f"{extent:.4g} m across" if extent > MAX_SCENE_EXTENT else f"{reach:.4g} m from the origin"
+        likely = "millimetres" if extent > 100 * MAX_SCENE_EXTENT or reach > 100 * MAX_COORDINATE else \
+            "millimetres or centimetres"
+        raise ValueError(f"{where}: the points are {size}; positions must be in metres, and these are probably in "
+                         f"{likely} ({hint}; at most {MAX_SCENE_EXTENT:g} m across and {MAX_COORDINATE:g} m from the "
+                         "origin are accepted)")
+
+
+def as_length(value, name: str, *, hi: float = MAX_LENGTH, positive: bool = True) -> float:
+    """A length setting [m]: finite, positive, at most ``hi`` (a larger one is a units mistake, named as such).
+
+    Raises:
+        ValueError: naming ``name``.
+    """
+    v = as_float(value, name, positive=positive, unit="m")
+    if v > hi:
+        raise ValueError(f"{name}: {v:g} m is above {hi:g} m; lengths are in metres (was it given in millimetres or "
+                         "centimetres?)")
     return v
 
 

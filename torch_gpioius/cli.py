@@ -95,6 +95,9 @@ def _fit(args: argparse.Namespace) -> int:
     else:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")
+    if not info["estimate"]:
+        print("no estimate: the inner zero level {mu_in = 0} has no surface in the data's box, so there is no shape to "
+              "show or export (too few contacts, or units other than metres?)")
     if args.out:
         print(f"wrote {info['checkpoint']}, {info['figure']} and fit.json")
     return 0
@@ -263,6 +266,17 @@ def _outer_tol(text: str) -> float:
     return _argument(lambda v: as_float(v, "outer_tol", positive=True), _number(text, "outer_tol", "a number"))
 
 
+def _length(option: str):
+    """An argparse type for a length [m]: positive, at most 20 m (a larger one was meant in mm or cm)."""
+    from ._validation import as_length
+
+    def parse(text: str) -> float:
+        return _argument(lambda v: as_length(v, f"--{option}"), _number(text, option, "a number of metres"))
+
+    parse.__name__ = option          # argparse names the type in its messages
+    return parse
+
+
 def _study_worlds() -> list[str]:
     from .exploration.registry import world_names
 
@@ -332,7 +346,7 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("--world", default="forcefield", type=_world_name, choices=["forcefield", "mujoco"],
                     help="forcefield: a static force-field cover; mujoco: cloth and foam on MuJoCo's contact physics")
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
-    s3.add_argument("--max-travel", type=float, default=1.5, help="fingertip travel per run [m]")
+    s3.add_argument("--max-travel", type=_length("max-travel"), default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
     s3.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP)
     s3.add_argument("--touch", default="point", choices=["point", "patch"],
@@ -364,7 +378,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--out", default="outputs/study", help="output folder")
     sw.add_argument("--workers", type=_positive_int, default=None, help="parallel runs (default: the CPU count)")
     sw.add_argument("--address", default=None, help="join an existing Ray cluster (e.g. ray://host:10001 or auto)")
-    sw.add_argument("--max-travel", type=float, default=None, help="travel budget per run [m] (3-D worlds)")
+    sw.add_argument("--max-travel", type=_length("max-travel"), default=None,
+                    help="travel budget per run [m] (3-D worlds)")
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
     sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
     sw.add_argument("--touch", default="point", choices=["point", "patch"],

@@ -495,8 +495,16 @@ class RunViewer:
                 f"step **{k}** of {run.steps[-1]}: {int(((ds.task == 0) & (ds.y == 0)).sum())} contacts, "
                 f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points  \n"
                 f"similarity {fmt(p.get('similarity'))}, correlation {fmt(p.get('correlation'))}, "
-                f"Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}" + self._on_body(run, k))
+                f"Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}" + self._on_body(run, k)
+                + self._no_estimate(surface))
         self.shown_step = k
+
+    def _no_estimate(self, surface) -> str:
+        """A line saying that this step's estimate has no surface (an empty picture must not look like a bug)."""
+        if surface is None or (self.run.dim == 2 and not surface):
+            return ("  \n**No estimate at this step:** the inner zero level {mu_in = 0} has no surface in the view "
+                    "(nothing to draw)")
+        return ""
 
     @staticmethod
     def _on_body(run, k: int) -> str:

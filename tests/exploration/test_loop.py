@@ -148,3 +148,41 @@ def test_resume_compares_the_geometry_not_the_name(tmp_path):
                    mode="tactile", max_steps=2, resume_from=log2)
     same = tg.explore(a, mode="tactile", max_steps=2, resume_from=log)     # the same world resumes
     assert same.n_steps == 3
+
+
+class _LostEstimate(Scene2D):
+    """A world whose estimate vanishes from ``vanish`` on (its metrics find no closed curve): the situation of a
+    user's open box or a carton whose inner estimate left the range."""
+
+    vanish = 3
+
+    def measure(self, model, contacts, resolution=None):
+        from torch_gpioius.exploration.world import Measurement
+
+        if len(contacts) > self.vanish:
+            return Measurement(estimate=False)
+        return super().measure(model, contacts, resolution)
+
+
+def test_a_run_that_ends_without_an_estimate_says_so(tmp_path):
+    """Issue 33, item 5: a run whose final estimate had no surface said nothing (NaN in the table, an empty figure)."""
+    from torch_gpioius.exploration import NoEstimateWarning
+    from torch_gpioius.io.runs import load_run
+
+    scene = _LostEstimate(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
+    log = tmp_path / "run.gpioius"
+    with pytest.warns(NoEstimateWarning, match=r"ended at step 5 with no estimated inner surface .*no closed curve"):
+        trace = tg.explore(scene, mode="tactile", max_steps=5, log=log, metrics_every=2)
+    assert trace.has_estimate is False
+    assert trace.estimate[0] == 1.0 and trace.estimate[-1] == 0.0 and math.isnan(trace.estimate[1])   # not measured
+    assert math.isnan(trace.hausdorff[-1]) and trace.records()[-1]["estimate"] == 0.0
+    history = load_run(log)
+    assert history.params[5]["estimate"] == 0.0 and history.params[0]["estimate"] == 1.0     # the log keeps it
+    fine = tg.explore(paper_objects_2d_a(), mode="tactile", max_steps=2)
+    assert fine.has_estimate is True
+
+
+def paper_objects_2d_a():
+    from torch_gpioius.sim import paper_objects_2d
+
+    return paper_objects_2d()["A"]

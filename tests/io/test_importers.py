@@ -156,3 +156,50 @@ def test_dataset_from_files_validates_its_parameters(tmp_path):
     (tmp_path / "a.csv").write_text("x,y,label\n0.1,0.2,contact\n")
     with pytest.raises(DatasetError, match="theta"):
         dataset_from_files(tmp_path / "a.csv", theta=-1)
+
+
+# ------------------------------------------------------------------------------- issue 33: units, columns, steps
+def test_contacts_and_clouds_in_millimetres_are_refused_naming_the_units(tmp_path):
+    """Issue 33, item 6: contacts written in mm gave a dataset 500 "m" across, without a word."""
+    mm = tmp_path / "touch_mm.csv"
+    mm.write_text("x,y,z,label\n100,0,0,contact\n250,30,0,free\n-200,0,40,contact\n")
+    with pytest.raises(DatasetError, match=r"touch_mm.csv: the points are 450 m across.*millimetres.*units='mm'"):
+        load_contacts_csv(mm)
+    x, _, _ = load_contacts_csv(mm, units="mm")
+    assert np.allclose(x[0], [0.1, 0, 0])
+    np.savez(tmp_path / "cloud_mm.npz", points=PTS * 1000)             # the same scene, in mm
+    with pytest.raises(DatasetError, match="cloud_mm.npz: .*probably in millimetres"):
+        load_point_cloud(tmp_path / "cloud_mm.npz")
+    with pytest.raises(DatasetError, match="touch_mm.csv"):
+        dataset_from_files(mm, tmp_path / "cloud_mm.npz")
+    assert len(dataset_from_files(mm, tmp_path / "cloud_mm.npz", units="mm", voxel=None)) == 7
+
+
+def test_a_dataset_in_millimetres_is_refused_wherever_it_is_built(tmp_path):
+    from torch_gpioius.io.datasets import Dataset, load_dataset, save_dataset
+
+    x = np.array([[0.0, 0.0], [120.0, 0.0], [0.0, 80.0]])
+    with pytest.raises(DatasetError, match="field 'x': the points are 120 m across.*metres"):
+        Dataset(x, np.zeros(3), np.zeros(3, np.int64), np.zeros(3, np.int64))
+    with pytest.raises(DatasetError, match="60.1 m from the origin"):     # small, but far out: not metres either
+        Dataset(np.array([[60.0, 0.0], [60.1, 0.0]]), np.zeros(2), np.zeros(2, np.int64), np.zeros(2, np.int64))
+    ok = save_dataset(Dataset(x / 1000, np.zeros(3), np.zeros(3, np.int64), np.zeros(3, np.int64)), tmp_path / "m.gpioius")
+    assert len(load_dataset(ok)) == 3
+
+
+def test_a_csv_with_a_column_twice_is_refused(tmp_path):
+    """Issue 33, item 10: `x,y,label,X` or `label,label`: the last column won."""
+    for header, row in (("x,y,label,X", "0.1,0.2,contact,0.9"), ("x,y,label,label", "0.1,0.2,contact,free")):
+        (tmp_path / "d.csv").write_text(f"{header}\n{row}\n")
+        with pytest.raises(DatasetError, match=r"d.csv: the header names column\(s\) \['(x|label)'\] more than once"):
+            load_contacts_csv(tmp_path / "d.csv")
+
+
+def test_a_step_too_large_for_the_format_names_file_and_line(tmp_path):
+    """Issue 33, item 13: a bare OverflowError named neither the file nor the line."""
+    (tmp_path / "s.csv").write_text("x,y,label,step\n0.1,0.2,contact,1\n0.1,0.3,contact,99999999999999999999999\n")
+    with pytest.raises(DatasetError, match="s.csv:3: step 99999999999999999999999 is out of range"):
+        load_contacts_csv(tmp_path / "s.csv")
+    (tmp_path / "n.csv").write_text("x,y,label,step\n0.1,0.2,contact,-1\n")
+    with pytest.raises(DatasetError, match="n.csv:2: step -1 is out of range"):
+        load_contacts_csv(tmp_path / "n.csv")

@@ -71,3 +71,30 @@ def test_cli_smoke_runs_the_mujoco_study(tmp_path, capsys):
     travel = max(r["travel"] for r in records)
     assert 0.05 < travel < 0.2                                   # the smoke budget, not the study's 1.5 m
     assert "| E |" in capsys.readouterr().out
+
+
+def _trace(mode, hausdorff, estimate):
+    from torch_gpioius.exploration import Trace
+
+    n = len(hausdorff)
+    return Trace(mode=mode, scene_name="box", hausdorff=np.array(hausdorff, float), uncertainty=np.full(n, 0.1),
+                 similarity=np.full(n, 0.5), travel=np.linspace(0, 0.6, n), path=np.zeros((0, 3)),
+                 contacts=np.zeros((n, 3)), model=None, step_time=np.full(n, 0.01), terminated="travel",
+                 robot_time=np.arange(n, dtype=float), estimate=np.array(estimate, float))
+
+
+def test_the_summary_names_runs_without_an_estimate_and_counts_valid_samples():
+    """Issue 33, item 5: "8.3 / 8.3 / 8.3" was printed when 4 of 6 samples were NaN, and "nan" said nothing."""
+    from torch_gpioius.studies.study3d import _markdown, summarize_3d
+
+    nan = np.nan
+    vt = _trace("visual-tactile", [0.083, nan, nan, nan, nan, nan, 0.083], [1, 0, nan, 0, 0, 0, 1])
+    t = _trace("tactile", [0.09, nan, nan, 0.07, nan, nan, nan], [1, nan, nan, 1, nan, nan, 0])
+    rows = summarize_3d({"box": {"visual-tactile": vt, "tactile": t}}, {"box": 0.01})
+    r = rows[0]
+    assert np.isnan(r["H_vt_10"])               # the sample at 10 % had no surface: no later value stands in
+    assert (r["valid_vt"], r["measured_vt"]) == (2, 6) and (r["valid_t"], r["measured_t"]) == (2, 3)
+    assert r["estimate_vt"] is True and r["estimate_t"] is False
+    text = _markdown(rows, None)
+    assert "| none / " in text and "2 of 6 / 2 of 3" in text
+    assert "**No estimate at the end:** box tactile" in text and "Columns: H is the Hausdorff distance" in text

@@ -277,3 +277,40 @@ def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
                   backend="local", progress=False)
     with pytest.raises(ValueError, match="touch"):
         run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "q", touch="finger")
+
+
+def _run(hausdorff, estimate=None, terminated="travel"):
+    series = {"travel": [0.01 * i for i in range(len(hausdorff))], "hausdorff": hausdorff,
+              "hausdorff_touched": hausdorff, "uncertainty": [0.1] * len(hausdorff),
+              "similarity": [0.5] * len(hausdorff), "correlation": [0.9] * len(hausdorff),
+              "correlation_lo": [0.5] * len(hausdorff), "correlation_hi": [1.0] * len(hausdorff)}
+    if estimate is not None:
+        series["estimate"] = estimate
+    return {"world": "forcefield", "object": "X", "mode": "visual-tactile", "seed": 0, "terminated": terminated,
+            "steps": len(hausdorff) - 1, "travel": series["travel"][-1], "budget": None, "wall_time": 1.0,
+            "median_step_time": 0.01, "taps": 0, "recoveries": 0, "contacts_on_body": 1.0, "contacts_within": 1.0,
+            "series": series}
+
+
+def test_a_run_whose_final_estimate_vanished_is_failed_with_no_stale_value():
+    """Issue 33, item 5: runs.csv gave an earlier step's Hausdorff (0.0515) as final_hausdorff, `failed` empty."""
+    from torch_gpioius.studies.sweep import _row, failure
+
+    nan = math.nan
+    lost = _run([0.08, nan, 0.0515, nan], [1.0, nan, 1.0, 0.0])
+    row = _row(lost, {})
+    assert failure(lost) == "no estimate" and row["failed"] == "no estimate"
+    assert math.isnan(row["final_hausdorff"]) and math.isnan(row["final_uncertainty"])
+    kept = _run([0.08, nan, 0.0515, 0.04], [1.0, nan, 1.0, 1.0])
+    assert failure(kept) == "" and _row(kept, {})["final_hausdorff"] == 0.04
+    old = _run([0.08, nan, 0.0515, nan])              # a run file written before the estimate series: as read then
+    assert failure(old) == "" and _row(old, {})["final_hausdorff"] == 0.0515
+
+
+def test_run_files_with_a_bad_estimate_series_are_refused(tmp_path):
+    from torch_gpioius.studies.sweep import RunFileError, read_run_file
+
+    path = tmp_path / "r.json"
+    path.write_text(json.dumps(_run([0.08, 0.05], [1.0, 2.0])))
+    with pytest.raises(RunFileError, match="series.estimate"):
+        read_run_file(path)

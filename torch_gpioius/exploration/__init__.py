@@ -15,7 +15,7 @@ from .observations import (Observations, ObservationPolicy, free_space_along, re
                            vision_observations)
 from .patches import PatchSettings, patch_observations
 from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel
-from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
+from .recorders import IntervalRecorder, MetricsRecorder, NoEstimateWarning, ProgressRecorder
 from .recovery import NoProgress
 from .registry import WorldEntry, make_world, register_world, world_entry, world_names
 from .state import RECORD_FIELDS, ExplorationState, StepRecord
@@ -29,7 +29,7 @@ EVIDENCE = (None, *EVIDENCE_POLICIES)
 
 __all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations",
            "ObservationPolicy", "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel",
-           "EvidencePolicy", "Recorder", "MetricsRecorder", "IntervalRecorder", "ProgressRecorder", "Evidence",
+           "EvidencePolicy", "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder", "Evidence",
            "TapPolicy", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch", "TOUCH_MODELS", "touch_model",
            "StopRule", "OnceAround", "TravelBudget", "gone_around", "largest_uncovered_gap", "World", "Hardware",
            "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash", "register_world", "world_entry",

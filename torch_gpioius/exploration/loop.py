@@ -102,7 +102,8 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     _fit(state.model, cfg)
     _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1)
     stop = stalled or _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
-    record.final = stop is not None
+    # the step cap ends the run at the next step's start: this record is the last one, measured before it is logged
+    record.final = stop is not None or state.steps + state.taps + state.recoveries >= cfg.max_steps
     state.records.append(record)
     for r in observers:
         r.step(ctx, state, record)

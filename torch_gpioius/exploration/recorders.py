@@ -7,11 +7,18 @@ record before it is written. Each is a :class:`~torch_gpioius.exploration.protoc
 from __future__ import annotations
 
 import math
+import warnings
 
 from .._progress import progress as progress_reporter
 from .protocols import Recorder
 
-__all__ = ["MetricsRecorder", "IntervalRecorder", "ProgressRecorder"]
+__all__ = ["MetricsRecorder", "IntervalRecorder", "ProgressRecorder", "NoEstimateWarning"]
+
+
+class NoEstimateWarning(RuntimeWarning):
+    """A run ended with no estimated inner surface to judge: {mu_in = 0} has no closed curve (2-D) or no surface
+    inside the range (3-D). Its Hausdorff distance is NaN, its figures are empty, and a study counts it as failed
+    ("no estimate")."""
 
 
 class MetricsRecorder(Recorder):
@@ -25,6 +32,7 @@ class MetricsRecorder(Recorder):
         record.hausdorff, record.hausdorff_touched, record.uncertainty = (float(m.hausdorff),
                                                                           float(m.hausdorff_touched),
                                                                           float(m.uncertainty))
+        record.estimate = math.nan if m.estimate is None else float(m.estimate)
 
     def start(self, run, state) -> None:
         if not run.resumed:
@@ -36,8 +44,13 @@ class MetricsRecorder(Recorder):
 
     def end(self, run, state) -> None:
         last = state.records[-1]
-        if len(state.records) > 1 and math.isnan(last.hausdorff):     # the final estimate is always measured
-            self._measure(run, state, last)
+        if len(state.records) > 1 and math.isnan(last.estimate) and math.isnan(last.hausdorff):
+            self._measure(run, state, last)                           # the final estimate is always measured
+        if last.estimate == 0.0:
+            warnings.warn(f"explore: {run.world.name or type(run.world).__name__} ({run.config.mode}) ended at step "
+                          f"{last.step} with no estimated inner surface to judge (mu_in = 0 has "
+                          f"{'no closed curve' if run.dim == 2 else 'no surface inside the range'}): its Hausdorff "
+                          "distance is NaN and its figures are empty", NoEstimateWarning, stacklevel=2)
 
 
 class IntervalRecorder(Recorder):

@@ -20,6 +20,8 @@ RECORD_FIELDS = {
     "hausdorff": "Hausdorff distance of the whole estimate {mu_in = 0} to the true inner surface [m] (eq. 24)",
     "hausdorff_touched": "the same for the pieces of the estimate the fingertip touched [m]",
     "uncertainty": "uncertainty measure, eq. (23), relative to the prior variance",
+    "estimate": "1 where the estimate was measured and has a surface to judge (2-D: a closed curve; 3-D: surface in "
+                "the range), 0 where it was measured and has none (no estimate), NaN where not measured",
     "similarity": "the paper's similarity K_t[0,1] / K_t[0,0] (a ratio of amplitudes)",
     "correlation": "task correlation K_t[0,1] / sqrt(K_t[0,0] K_t[1,1])",
     "correlation_interval": "its 95 % profile-likelihood interval (lo, hi)",
@@ -57,6 +59,7 @@ class StepRecord:
     hausdorff: float = math.nan
     hausdorff_touched: float = math.nan
     uncertainty: float = math.nan
+    estimate: float = math.nan
     similarity: float = math.nan
     correlation: float = math.nan
     correlation_interval: tuple = (math.nan, math.nan)

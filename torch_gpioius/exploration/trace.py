@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 
@@ -44,6 +45,8 @@ class Trace:
         contact_distance: `(n,)` distance of each step's contact from the true inner surface [m] (NaN unknown).
         contact_on_body: `(n,)` 1 where the fingertip touched the body itself, 0 where only the cover (NaN unknown).
         recoveries: `(n,)` cumulative number of recoveries from a stall.
+        estimate: `(n,)` 1 where the estimate was measured and has a surface to judge, 0 where it has none (no
+            estimate), NaN where not measured.
         truncation: `(n,)` bound on the truncated outer basis' change of the Gram matrix relative to sigma^2
             (``outer_tol``; 0 with the exact engines).
     """
@@ -75,6 +78,7 @@ class Trace:
     contact_on_body: np.ndarray = field(default_factory=lambda: np.zeros(0))
     recoveries: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     truncation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    estimate: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":
@@ -102,11 +106,20 @@ class Trace:
                                                  for r in regions]) if width else np.zeros((len(recs), 0))),
                    touch=getattr(config.touch, "name", "custom"), contact_distance=col("contact_distance"),
                    contact_on_body=col("contact_on_body"),
-                   recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"))
+                   recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"),
+                   estimate=col("estimate"))
 
     @property
     def n_steps(self) -> int:
         return len(self.travel)
+
+    @property
+    def has_estimate(self) -> bool | None:
+        """Whether the final estimate has a surface to judge (False: the run ended with no estimate; None: the world
+        did not measure it, e.g. a real robot without a reference)."""
+        if not len(self.estimate) or math.isnan(self.estimate[-1]):
+            return None
+        return bool(self.estimate[-1])
 
     def contacts_on_body(self, within: float = 0.01) -> dict:
         """How many of the run's contacts were on the body: ``{"on_body": fraction touched on the body itself (NaN
@@ -131,6 +144,8 @@ class Trace:
                    "similarity": float(self.similarity[i])}
             if len(self.hausdorff_touched):
                 row["hausdorff_touched"] = float(self.hausdorff_touched[i])
+            if len(self.estimate):
+                row["estimate"] = float(self.estimate[i])
             if len(self.correlation):
                 row["correlation"] = float(self.correlation[i])
             if len(self.correlation_interval):

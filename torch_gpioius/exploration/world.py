@@ -92,6 +92,8 @@ class Measurement:
         uncertainty: eq. (23), relative to the prior variance.
         centre: centroid of the estimated inner region {mu_in < 0} (2-D; None otherwise or if empty).
         surface: the estimated surface (2-D: list of polylines; 3-D: a ``trimesh.Trimesh`` in the range, or None).
+        estimate: whether the estimate has a surface to judge (2-D: a closed curve; 3-D: surface inside the range);
+            None where the world did not look (no known truth).
     """
 
     hausdorff: float = math.nan
@@ -99,6 +101,7 @@ class Measurement:
     uncertainty: float = math.nan
     centre: np.ndarray | None = None
     surface: Any = None
+    estimate: bool | None = None
 
 
 @dataclass

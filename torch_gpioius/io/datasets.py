@@ -32,6 +32,8 @@ from typing import Any, Iterator
 
 import numpy as np
 
+from .._validation import check_metres
+
 __all__ = ["FORMAT_VERSION", "FILE_KINDS", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
            "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta", "step_number"]
 
@@ -241,6 +243,10 @@ def validate_observations(x: Any, y: Any, task: Any, step: Any, *, where: str, d
             raise DatasetError(f"{where}: field {name!r} must have shape ({n},), got {a.shape}")
     if not np.isfinite(x).all():
         raise DatasetError(f"{where}: field 'x' contains NaN or inf")
+    try:
+        check_metres(x, f"{where}: field 'x'", hint="convert the data to metres, or import it with units='mm'")
+    except ValueError as exc:
+        raise DatasetError(str(exc)) from None
     if not np.isin(y, (0.0, 1.0)).all():
         raise DatasetError(f"{where}: field 'y' must be 0 (surface) or 1 (free space)")
     if task.dtype.kind not in "iub" and not (task.dtype.kind == "f" and np.isfinite(task).all()

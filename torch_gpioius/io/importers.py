@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validation import check_metres
 from ..sensors.pointcloud import PointCloud, PointCloudSource
 from ..voxels import VOXEL_RANGE, voxel_average  # noqa: F401  (re-exported: the 0.2 home of voxel_average)
 from .datasets import Dataset, DatasetError
@@ -196,6 +197,10 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
     if len(pts) == 0:
         raise DatasetError(f"{path}: the point cloud holds no (finite) points")
     pts = pts * scale
+    try:
+        check_metres(pts, str(path), hint=f"give its units, e.g. units='mm' (the file was read as {units!r})")
+    except ValueError as exc:
+        raise DatasetError(str(exc)) from None
     if voxel is None:
         return pts
     try:
@@ -222,12 +227,17 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
     scale = _scale(units, path)
     try:
         with open(path, newline="") as f:
-            rows = list(csv.DictReader(f))
+            reader = csv.DictReader(f)
+            rows = list(reader)
+            header = [c.strip().lower() for c in reader.fieldnames or [] if c is not None]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
         raise DatasetError(f"{path}: cannot read CSV ({exc})") from exc
     if not rows:
         raise DatasetError(f"{path}: no rows (expected a header x,y[,z],label and at least one row)")
     cols = [c.strip().lower() for c in rows[0].keys() if c is not None]
+    dup = sorted({c for c in header if header.count(c) > 1})
+    if dup:                                # csv.DictReader keeps the last of two columns of one name
+        raise DatasetError(f"{path}: the header names column(s) {dup} more than once ({header}); each column once")
     dims = ["x", "y", "z"] if "z" in cols else ["x", "y"]
     if not {"x", "y", "label"} <= set(cols):
         raise DatasetError(f"{path}: header must contain x, y[, z] and label, got {cols}")
@@ -251,10 +261,17 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
             st = int(row["step"]) if row.get("step") else 0
         except ValueError:
             raise DatasetError(f"{path}:{i}: step {row.get('step')!r} is not an integer") from None
+        if not 0 <= st < 2**62:
+            raise DatasetError(f"{path}:{i}: step {row.get('step')} is out of range (a step number from 0 to 2^62)")
         xs.append(p)
         ys.append(_LABELS[label])
         steps.append(st)
-    return np.asarray(xs) * scale, np.asarray(ys), np.asarray(steps, dtype=np.int64)
+    xs = np.asarray(xs) * scale
+    try:
+        check_metres(xs, str(path), hint=f"give its units, e.g. units='mm' (the file was read as {units!r})")
+    except ValueError as exc:
+        raise DatasetError(str(exc)) from None
+    return xs, np.asarray(ys), np.asarray(steps, dtype=np.int64)
 
 
 def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud: str | os.PathLike | None = None, *,

@@ -26,7 +26,7 @@ __all__ = ["LogRecorder", "restore_run", "step_values", "OLD_FIELD_NAMES"]
 #: Step-record fields of logs written before the one vocabulary, and their names now.
 OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertainty", "s": "similarity",
                    "rho": "correlation", "ci": "correlation_interval", "time": "step_time", "sim_time": "robot_time"}
-_VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "similarity", "correlation", "step_time",
+_VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "estimate", "similarity", "correlation", "step_time",
            "robot_time", "contact_distance", "contact_on_body", "truncation")
 
 
@@ -86,7 +86,8 @@ class LogRecorder(Recorder):
         meta = {"step": record.step, "travel": record.travel, "retracted": record.retracted, "taps": record.taps,
                 "recoveries": record.recoveries,
                 "hausdorff": record.hausdorff, "hausdorff_touched": record.hausdorff_touched,
-                "uncertainty": record.uncertainty, "similarity": record.similarity, "correlation": record.correlation,
+                "uncertainty": record.uncertainty, "estimate": record.estimate, "similarity": record.similarity,
+                "correlation": record.correlation,
                 "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
                 "contact_on_body": record.contact_on_body, "truncation": record.truncation}
@@ -173,6 +174,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         v = step_values(r.meta)
         rec = StepRecord(step=i, travel=v["travel"], hausdorff=v["hausdorff"],
                          hausdorff_touched=v["hausdorff_touched"], uncertainty=v["uncertainty"],
+                         estimate=v["estimate"],
                          similarity=v["similarity"], correlation=v["correlation"],
                          correlation_interval=v["correlation_interval"],
                          task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64), step_time=v["step_time"],

@@ -38,6 +38,15 @@ def _markers(ax, ds: Dataset, dim: int) -> None:
             ax.scatter(*ds.x[m, :dim].T, label=label, **style)
 
 
+def has_surface(model, x: np.ndarray, resolution: float) -> bool:
+    """Whether the inner estimate {mu_in = 0} has any surface in the data's box (:func:`data_bounds` of `(n, d)`
+    points ``x``), on a grid of ``resolution`` [m]: a fit without one has no estimate to show or export."""
+    bounds = data_bounds(x, pad=max(0.05, 2 * resolution))
+    if x.shape[1] == 2:
+        return bool(zero_level_curves(model, bounds, resolution, INNER))
+    return zero_level_mesh(model, bounds, resolution, INNER) is not None
+
+
 def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float) -> None:
     import matplotlib
 
@@ -83,7 +92,8 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
 
     Returns:
         ``{"n", "task_covariance", "similarity", "correlation", "correlation_interval", "mll", "checkpoint",
-        "figure"}``; ``correlation_interval`` is the 95 % profile-likelihood interval of the correlation
+        "figure", "estimate"}``; ``estimate`` says whether the inner estimate has a surface in the data's box (on the
+        figure's grid); ``correlation_interval`` is the 95 % profile-likelihood interval of the correlation
         (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
     ds = load_dataset(path)
@@ -96,12 +106,13 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
     if isinstance(model, GPIOIS):
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
                     correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)))
+    from .export import grid_resolution
+
+    res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
+    info["estimate"] = has_surface(model, ds.x, res)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        from .export import grid_resolution
-
-        res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
         # one fit's three files together: staged, then moved in when all are written (a failure, or a second fit
         # into the same folder, never leaves a model.pt of one fit beside the fit.json of another)
         with FolderLock(out, "gpioius fit"), StagedFiles(out) as staged:

@@ -28,7 +28,8 @@ class RunHistory:
         steps: `(K,)` step numbers, increasing (0 = before exploring, when the file has it).
         states: the observations after each step (:class:`Dataset`), keyed by step.
         params: per step, what the run had learned: ``kt`` `(2, 2)` (visual-tactile), ``local_params`` (local
-            model), ``similarity`` / ``correlation`` / ``hausdorff`` as recorded (NaN when not).
+            model), ``similarity`` / ``correlation`` / ``hausdorff`` / ``estimate`` (1: a surface to judge, 0: none) as
+            recorded (NaN when not).
         trajectory: `(m, d)` fingertip positions in time order [m]; ``trajectory_step`` `(m,)` the step each
             belongs to.
 
@@ -134,6 +135,7 @@ def load_run(path: str | os.PathLike) -> RunHistory:
             a = rec.arrays
             v = step_values(rec.meta)
             p = {"similarity": v["similarity"], "correlation": v["correlation"], "hausdorff": v["hausdorff"],
+                 "estimate": v["estimate"],
                  "contact_distance": v.get("contact_distance", math.nan),
                  "contact_on_body": v.get("contact_on_body", math.nan)}
             for key in ("kt", "local_params", "contact", "pad_pose", "pad_size"):

@@ -80,10 +80,12 @@ def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float =
     field = evaluate_grid(model, scene.bounds(0.05), resolution, 0, variance=False)
     mesh = clip_mesh(zero_level_mesh(model, None, field=field), scene.range[0], scene.range[1])
     if mesh is None:
-        return Measurement()
+        return Measurement(estimate=False)
     est = surface_samples(mesh, spacing)
     est = est[scene.in_range(est)]
-    h = hausdorff_distance(est, truth) if len(est) else float("nan")
+    if not len(est):
+        return Measurement(estimate=False)
+    h = hausdorff_distance(est, truth)
     ht = float("nan")
     if contacts is not None and len(contacts):
         touched = touched_pieces(mesh, contacts)
@@ -91,7 +93,7 @@ def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float =
             t = surface_samples(touched, spacing)
             t = t[scene.in_range(t)]
             ht = hausdorff_distance(t, truth) if len(t) else float("nan")
-    return Measurement(h, ht, uncertainty_measure(model, mesh, 0), None, mesh)
+    return Measurement(h, ht, uncertainty_measure(model, mesh, 0), None, mesh, estimate=True)
 
 
 def _mesh(m, name: str) -> trimesh.Trimesh:

@@ -348,7 +348,7 @@ class Scene2D(World):
         h = hausdorff_distance(closed, [self.inner_boundary], spacing=2e-3) if closed else math.nan
         touched = closed_curves(touched_pieces(curves, contacts)) if len(contacts) else []
         ht = hausdorff_distance(touched, [self.inner_boundary], spacing=2e-3) if touched else math.nan
-        return Measurement(h, ht, unc, centre, curves)
+        return Measurement(h, ht, unc, centre, curves, estimate=bool(closed))
 
     def fingerprint(self) -> str:
         return geometry_hash(self.inner_boundary, self.outer_boundary, self.start, self.direction,

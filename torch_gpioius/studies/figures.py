@@ -281,7 +281,9 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
         ax.set_ylabel("y [m]", fontsize=7, labelpad=2)
         ax.set_zlabel("z [m]", fontsize=7, labelpad=0)
         ax.tick_params(labelsize=6, pad=0)
-        ax.set_title(f"{name}: {mode}\nfinal Hausdorff {100 * tr.hausdorff[-1]:.1f} cm", fontsize=9)
+        final = ("no estimate: no surface in the range" if tr.has_estimate is False or np.isnan(tr.hausdorff[-1])
+                 else f"final Hausdorff {100 * tr.hausdorff[-1]:.1f} cm")
+        ax.set_title(f"{name}: {mode}\n{final}", fontsize=9)
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 

@@ -22,10 +22,24 @@ OBJECTS = ("E", "F", "G", "H")
 FRACTIONS = (0.1, 0.5, 1.0)
 
 
+def _measured(trace: Trace) -> np.ndarray:
+    """`(n,)` whether each record's estimate was measured (with or without a surface to judge)."""
+    if len(trace.estimate) == trace.n_steps and not np.isnan(trace.estimate).all():
+        return ~np.isnan(trace.estimate)
+    return ~np.isnan(trace.hausdorff)                  # traces read from logs older than the estimate field
+
+
 def _at(trace: Trace, distance: float) -> int:
-    """Index of the first *measured* record (finite Hausdorff) at or after ``distance`` of travel."""
-    ok = np.flatnonzero(~np.isnan(trace.hausdorff) & (trace.travel >= distance - 1e-12))
+    """Index of the first *measured* record at or after ``distance`` of travel (its value is NaN when that
+    estimate had no surface: a later step's value never stands in for it)."""
+    ok = np.flatnonzero(_measured(trace) & (trace.travel >= distance - 1e-12))
     return int(ok[0]) if len(ok) else trace.n_steps - 1
+
+
+def estimate_counts(trace: Trace) -> tuple[int, int]:
+    """``(with an estimate, measured)``: how many of a run's metric samples had a surface to judge."""
+    measured = _measured(trace)
+    return int((measured & np.isfinite(trace.hausdorff)).sum()), int(measured.sum())
 
 
 def summarize_3d(traces: dict[str, dict[str, Trace]], hausdorff_io: dict[str, float]) -> list[dict]:
@@ -46,6 +60,8 @@ def summarize_3d(traces: dict[str, dict[str, Trace]], hausdorff_io: dict[str, fl
                 if tag == "vt":
                     row[f"S_{int(f * 100)}"] = float(tr.similarity[i])
             row[f"travel_{tag}_m"] = total
+            row[f"estimate_{tag}"] = tr.has_estimate
+            row[f"valid_{tag}"], row[f"measured_{tag}"] = estimate_counts(tr)
             row[f"steps_{tag}"] = tr.n_steps - 1
             row[f"terminated_{tag}"] = tr.terminated
             row[f"median_plan_ms_{tag}"] = 1e3 * float(np.median(tr.step_time[1:])) if tr.n_steps > 1 else float("nan")
@@ -98,21 +114,36 @@ def check_claims_3d(rows: list[dict]) -> list[dict]:
 
 def _markdown(rows: list[dict], claims: list[dict] | None) -> str:
     def h(v):
-        return "-" if v is None or np.isnan(v) else f"{100 * v:.1f}"
+        return "-" if v is None else ("none" if np.isnan(v) else f"{100 * v:.1f}")
 
-    lines = ["| object | d_H inner-outer [cm] | H VT 10 / 50 / 100 % [cm] | H tactile 10 / 50 / 100 % [cm] | "
-             "U VT / T final | similarity 10 / 100 % | steps VT / T | plan ms VT / T | robot time VT / T [s] |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    def valid(r, tag):
+        return f"{r[f'valid_{tag}']} of {r[f'measured_{tag}']}" if f"valid_{tag}" in r else "-"
+
+    lines = ["Columns: H is the Hausdorff distance (eq. 24) from the estimated inner surface to the true one at 10, 50 "
+             "and 100 % of the run's travel ('none': the estimate had no surface inside the range there); U the "
+             "uncertainty (eq. 23, relative to the prior variance); similarity the paper's K_t[0,1] / K_t[0,0]; "
+             "'with estimate' how many of the run's metric samples had a surface to judge; plan ms the median "
+             "planning step; robot time the simulated clock.", "",
+             "| object | d_H inner-outer [cm] | H VT 10 / 50 / 100 % [cm] | H tactile 10 / 50 / 100 % [cm] | "
+             "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps VT / T | plan ms VT / T | "
+             "robot time VT / T [s] |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         lines.append(
             f"| {r['object']} | {h(r['inner_outer_hausdorff_m'])} | "
             f"{h(r.get('H_vt_10'))} / {h(r.get('H_vt_50'))} / {h(r.get('H_vt_100'))} | "
             f"{h(r.get('H_t_10'))} / {h(r.get('H_t_50'))} / {h(r.get('H_t_100'))} | "
+            f"{valid(r, 'vt')} / {valid(r, 't')} | "
             f"{r.get('U_vt_100', float('nan')):.3f} / {r.get('U_t_100', float('nan')):.3f} | "
             f"{r.get('S_10', float('nan')):.2f} / {r.get('S_100', float('nan')):.2f} | "
             f"{r.get('steps_vt', '-')} / {r.get('steps_t', '-')} | "
             f"{r.get('median_plan_ms_vt', float('nan')):.0f} / {r.get('median_plan_ms_t', float('nan')):.0f} | "
             f"{r.get('robot_time_s_vt', float('nan')):.0f} / {r.get('robot_time_s_t', float('nan')):.0f} |")
+    lost = [f"{r['object']} {mode}" for r in rows for mode, tag in (("visual-tactile", "vt"), ("tactile", "t"))
+            if r.get(f"estimate_{tag}") is False]
+    if lost:
+        lines += ["", f"**No estimate at the end:** {', '.join(lost)}: the estimated inner surface {{mu_in = 0}} has no "
+                      "surface inside the range, so there is nothing to judge (H 'none', the figure's panel empty)."]
     if claims is None:
         lines += ["", "Smoke run (a few centimetres of travel): the paper's claims are not judged on it."]
         return "\n".join(lines) + "\n"

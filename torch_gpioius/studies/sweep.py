@@ -243,6 +243,11 @@ def read_run_file(path: str | Path) -> dict:
         if k.startswith("correlation") and (np.abs(a[np.isfinite(a)]) > 1 + 1e-9).any():
             raise bad(f"series.{k}", "holds a correlation outside [-1, 1]")
         lengths.add(len(v))
+    if "estimate" in series:           # runs since the series was recorded: 1 surface, 0 none, NaN not measured
+        v = series["estimate"]
+        if not isinstance(v, list) or not all(_number(e) and (math.isnan(e) or e in (0, 1)) for e in v):
+            raise bad("series.estimate", "must be a list of 0, 1 or NaN (1: the estimate has a surface to judge)")
+        lengths.add(len(v))
     if len(lengths) != 1 or 0 in lengths:
         raise bad("series", f"its lists must be non-empty and of one length, got lengths {sorted(lengths)}")
     return run
@@ -308,7 +313,7 @@ def _no_start_record(spec: RunSpec, kw: dict, exc: Exception, wall_time: float) 
             "terminated": f"refused: approach: {exc}", "steps": 0, "travel": 0.0, "budget": kw.get("max_travel"),
             "wall_time": wall_time, "median_step_time": math.nan, "taps": 0, "recoveries": 0,
             "contacts_on_body": math.nan, "contacts_within": math.nan,
-            "series": {"travel": [0.0], **{k: nan for k in _SERIES if k != "travel"}}}
+            "series": {"travel": [0.0], **{k: nan for k in _SERIES if k != "travel"}, "estimate": [0.0]}}
 
 
 def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
@@ -325,7 +330,8 @@ def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
                        "uncertainty": trace.uncertainty.tolist(), "similarity": trace.similarity.tolist(),
                        "correlation": trace.correlation.tolist(),
                        "correlation_lo": trace.correlation_interval[:, 0].tolist(),
-                       "correlation_hi": trace.correlation_interval[:, 1].tolist()}}
+                       "correlation_hi": trace.correlation_interval[:, 1].tolist(),
+                       "estimate": trace.estimate.tolist()}}
 
 
 def _n_outer(model) -> int:
@@ -400,9 +406,28 @@ def failure(run: dict) -> str:
         return "lost contact"
     if t == "max_steps" and run.get("budget") and run["travel"] < 0.999 * run["budget"]:
         return "step cap"
-    if not math.isfinite(_last_finite(run["series"]["hausdorff"])):
+    if not _has_final_estimate(run):
         return "no estimate"
     return ""
+
+
+def _has_final_estimate(run: dict) -> bool:
+    """Whether the run's final estimate has a surface to judge: its last record says so where it was recorded
+    (runs since the ``estimate`` series); older run files: some Hausdorff distance was measured."""
+    est = run["series"].get("estimate")
+    if est:
+        return not est[-1] == 0.0
+    return math.isfinite(_last_finite(run["series"]["hausdorff"]))
+
+
+def _final(run: dict, key: str) -> float:
+    """A metric of the final estimate: the last record's value (always measured; NaN when the run ended with no
+    estimate, never an earlier step's value). Older run files without the ``estimate`` series: the last measured
+    value, as they were read then."""
+    s = run["series"]
+    if s.get("estimate"):
+        return float(s[key][-1]) if _has_final_estimate(run) else math.nan
+    return _last_finite(s[key])
 
 
 def _short_reason(why: str) -> str:
@@ -432,9 +457,9 @@ def _row(run: dict, runs_by_key: dict) -> dict:
     ref = _reference_travel(run, runs_by_key)
     row = {"world": run["world"], "object": run["object"], "mode": run["mode"], "seed": run["seed"],
            "failed": failure(run),
-           "final_hausdorff": _last_finite(s["hausdorff"]),
-           "final_hausdorff_touched": _last_finite(s["hausdorff_touched"]),
-           "final_uncertainty": _last_finite(s["uncertainty"]),
+           "final_hausdorff": _final(run, "hausdorff"),
+           "final_hausdorff_touched": _final(run, "hausdorff_touched"),
+           "final_uncertainty": _final(run, "uncertainty"),
            "final_correlation": _last_finite(s["correlation"]),
            "final_correlation_lo": _last_finite(s["correlation_lo"]),
            "final_correlation_hi": _last_finite(s["correlation_hi"]),
