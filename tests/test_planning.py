@@ -107,3 +107,14 @@ def test_a_measured_normal_far_from_the_estimate_rules_the_tangent_plane():
     assert kept.fallback == "" and torch.equal(kept.direction, plain.direction)
     for bad in (torch.tensor([float("nan"), 0.0], dtype=torch.float64), torch.zeros(2, dtype=torch.float64)):
         assert torch.equal(plan_direction(model, x, step=0.01, measured_normal=bad).direction, plain.direction)
+
+
+@pytest.mark.parametrize("step", [float("nan"), 0.0, -0.01, float("inf"), "0.01", True, 5.0])
+def test_a_step_that_is_no_length_is_refused(step):
+    """Issue 33, item 10: step=nan returned a NaN direction and step=0 a zero one."""
+    import torch_gpioius as tg
+
+    x = torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1], [0.2, 0.0]], dtype=torch.float64)
+    model = tg.GPIS(x, torch.tensor([0.0, 0.0, 0.0, 0.0, 1.0], dtype=torch.float64), theta=0.1, noise=0.006)
+    with pytest.raises(ValueError, match="step: "):
+        plan_direction(model, x[0], step=step)

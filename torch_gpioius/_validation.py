@@ -212,7 +212,21 @@ def as_device(device, name: str = "device") -> torch.device | None:
         return None
     try:
         dev = torch.device(device)
-        torch.zeros(1, dtype=torch.float64, device=dev)
-    except (RuntimeError, AssertionError, TypeError) as exc:
-        raise ValueError(f"{name}: cannot use {device!r} here ({exc})") from None
+        if dev.type not in ("cpu", "cuda", "mps", "xpu"):     # meta, privateuse, ...: tensors without values
+            raise RuntimeError(f"device type {dev.type!r} holds no data to compute with")
+        torch.zeros(1, dtype=torch.float64, device=dev).item()
+    except (RuntimeError, AssertionError, TypeError, NotImplementedError) as exc:
+        raise ValueError(f"{name}: cannot use {device!r} here ({exc}); available: {', '.join(available_devices())}") \
+            from None
     return dev
+
+
+def available_devices() -> list[str]:
+    """The devices this torch build and machine can compute on ("cpu", "cuda:0", ...)."""
+    out = ["cpu"]
+    if torch.cuda.is_available():
+        out += [f"cuda:{i}" for i in range(torch.cuda.device_count())]
+    mps = getattr(torch.backends, "mps", None)
+    if mps is not None and mps.is_available():
+        out.append("mps")
+    return out

@@ -127,7 +127,13 @@ def plan_direction(model, x, step: float = 0.01, penalty=None, task: int = 0,
 
     Returns:
         ``PlannedStep``.
+
+    Raises:
+        ValueError: ``step`` is not a positive finite length of at most 1 m.
     """
+    from ._validation import as_length
+
+    step = as_length(step, "step", hi=1.0)          # NaN gave a NaN direction, 0 a zero one
     penalty = penalty if penalty is not None else ZeroPenalty()
     x0 = model.train_inputs[0]
     xq = torch.as_tensor(x, dtype=x0.dtype, device=x0.device).reshape(1, -1)

@@ -203,3 +203,42 @@ def test_a_step_too_large_for_the_format_names_file_and_line(tmp_path):
     (tmp_path / "n.csv").write_text("x,y,label,step\n0.1,0.2,contact,-1\n")
     with pytest.raises(DatasetError, match="n.csv:2: step -1 is out of range"):
         load_contacts_csv(tmp_path / "n.csv")
+
+
+@pytest.mark.parametrize("header", ["FIELDS x y z x\nSIZE 4 4 4 4\nTYPE F F F F\nCOUNT 1 1 1 1",
+                                    "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 0 1",
+                                    "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 -1 1"])
+@pytest.mark.parametrize("binary", [False, True])
+def test_pcd_headers_with_a_field_twice_or_no_count_are_refused_in_both_forms(tmp_path, header, binary):
+    """Issue 33, item 10: `FIELDS x y z x` used the last x, COUNT 0 and -1 were accepted (ascii only)."""
+    head = f"VERSION 0.7\n{header}\nWIDTH 1\nHEIGHT 1\nPOINTS 1\nDATA {'binary' if binary else 'ascii'}\n"
+    body = np.zeros(4, "<f4").tobytes() if binary else b"0.1 0.2 0.3 0.9\n"
+    (tmp_path / "c.pcd").write_bytes(head.encode() + body)
+    with pytest.raises(DatasetError, match=r"c.pcd: PCD (FIELDS names \['x'\] more than once|COUNT and SIZE must be)"):
+        load_point_cloud(tmp_path / "c.pcd")
+
+
+def test_load_dataset_refuses_a_step_that_is_no_step_number():
+    from torch_gpioius.io.datasets import load_dataset
+
+    for bad in (2.5, -1, True, "3"):
+        with pytest.raises(DatasetError, match="upto_step: must be a step number"):
+            load_dataset("data/example_2d.gpioius", upto_step=bad)
+    assert len(load_dataset("data/example_2d.gpioius", upto_step=2)) > 0
+
+
+@pytest.mark.parametrize("ext", ["obj", "stl", "xyz"])
+def test_a_garbage_file_is_named_as_not_a_mesh(tmp_path, ext):
+    """Issue 33, item 15: the cause read "No module named 'charset_normalizer'"."""
+    import charset_normalizer  # noqa: F401  (declared: trimesh decodes non-UTF-8 text files with it)
+
+    from torch_gpioius.sim.meshes import load_mesh
+
+    p = tmp_path / f"g.{ext}"
+    p.write_bytes(np.random.default_rng(0).bytes(400) + b"\xff\xfe garbage")
+    if ext == "xyz":
+        with pytest.raises(DatasetError, match=r"g.xyz: not a readable XYZ point cloud"):
+            load_point_cloud(p)
+    else:
+        with pytest.raises(ValueError, match=rf"g.{ext}\): not a (readable )?{ext.upper()} mesh"):
+            load_mesh(p)

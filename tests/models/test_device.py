@@ -44,3 +44,22 @@ def test_cuda_agrees_with_cpu():
     m_c, v_c = cpu.predict(q)
     m_g, v_g = gpu.predict(q.cuda())
     assert float((m_g.cpu() - m_c).abs().max()) < 1e-9 and float((v_g.cpu() - v_c).abs().max()) < 1e-9
+
+
+@pytest.mark.parametrize("bad", ["meta", "cuda:99" if torch.cuda.is_available() else "cuda"])
+def test_devices_that_cannot_compute_are_refused_with_the_available_ones(bad):
+    """Issue 33, item 14: `--device meta` failed with "Tensor.item() cannot be called on meta tensors"."""
+    from torch_gpioius._validation import as_device, available_devices
+
+    with pytest.raises(ValueError, match=r"device: cannot use .* here .*available: cpu"):
+        as_device(bad)
+    assert available_devices()[0] == "cpu" and all(as_device(d).type in ("cpu", "cuda", "mps")
+                                                   for d in available_devices())
+
+
+def test_the_cli_refuses_the_meta_device(capsys, tmp_path):
+    from torch_gpioius.cli import main
+
+    with pytest.raises(SystemExit):
+        main(["simulate3d", "--device", "meta", "--out", str(tmp_path / "x")])
+    assert "holds no data to compute with" in capsys.readouterr().err

@@ -105,6 +105,10 @@ def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_bo
     (GOOD.replace("gap = 0.008", "slack = 0.03"), "do not apply in the forcefield world"),
     (GOOD + "[approach]\nstart = [0.5, 0, 0.4]\ndirection = [0, 0, 1]\n", "misses"),
     (GOOD + "[forcefield]\nspacing = 0.02\n", "allowed"),
+    # issue 33, item 10: a string for a flag still repaired, and a zero or negative grid was accepted
+    (GOOD.replace("scale = 0.001", "scale = 0.001\nrepair = \"false\""), "repair: must be true or false"),
+    (GOOD.replace("scale = 0.001", "scale = 0.001\nresolution = 0"), "resolution: must be positive"),
+    (GOOD.replace("scale = 0.001", "scale = 0.001\nresolution = -1"), "resolution: must be positive"),
 ])
 def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
     path = _write(tmp_path, text)

@@ -545,6 +545,9 @@ def load_dataset(path: str | os.PathLike, *, upto_step: int | None = None) -> Da
         DatasetError: unreadable, corrupt, invalid or empty (names the file and the field).
     """
     path = Path(path)
+    if upto_step is not None and (isinstance(upto_step, bool) or not isinstance(upto_step, (int, np.integer))
+                                  or upto_step < 0):
+        raise DatasetError(f"upto_step: must be a step number (an integer >= 0), got {upto_step!r}")
     ds = None
     for rec, state in replay(path):
         if upto_step is not None and rec.kind == "step" and rec.meta["step"] > upto_step:

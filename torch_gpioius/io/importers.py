@@ -55,6 +55,11 @@ def _read_pcd(path: Path) -> np.ndarray:
         npoints = int(header["POINTS"][0])
     except (KeyError, ValueError, IndexError) as exc:
         raise DatasetError(f"{path}: PCD header lacks or garbles FIELDS/SIZE/TYPE/POINTS ({exc})") from exc
+    dup = sorted({f for f in fields if fields.count(f) > 1})
+    if dup:                                 # the last x would silently win
+        raise DatasetError(f"{path}: PCD FIELDS names {dup} more than once ({' '.join(fields)})")
+    if any(c < 1 for c in counts) or any(s < 1 for s in sizes):
+        raise DatasetError(f"{path}: PCD COUNT and SIZE must be positive integers, got COUNT {counts}, SIZE {sizes}")
     if npoints < 0 or not (len(fields) == len(sizes) == len(types) == len(counts)):
         raise DatasetError(f"{path}: PCD header is inconsistent (POINTS {npoints}, {len(fields)} fields, "
                            f"{len(sizes)} sizes, {len(types)} types, {len(counts)} counts)")
@@ -186,7 +191,8 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
     except DatasetError:
         raise
     except Exception as exc:
-        raise DatasetError(f"{path}: cannot read point cloud ({type(exc).__name__}: {exc})") from exc
+        raise DatasetError(f"{path}: not a readable {ext[1:].upper()} point cloud ({type(exc).__name__}: {exc})") \
+            from exc
     if pts.ndim != 2 or pts.shape[1] != 3:
         raise DatasetError(f"{path}: points must have shape (n, 3), got {pts.shape}")
     finite = np.isfinite(pts).all(axis=1)

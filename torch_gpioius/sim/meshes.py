@@ -353,11 +353,19 @@ def load_mesh(source, *, scale: float = 1.0, pose=None, repair: bool = True, res
         try:
             mesh = trimesh.load(path, force="mesh", process=False)
         except Exception as exc:                     # trimesh raises many types for a corrupt file
-            raise ValueError(f"{label}: cannot read the mesh ({type(exc).__name__}: {exc})") from None
-        if not isinstance(mesh, trimesh.Trimesh):
-            raise ValueError(f"{label}: the file holds no triangle mesh")
+            raise ValueError(f"{label}: not a readable {path.suffix.lower()[1:].upper()} mesh "
+                             f"({type(exc).__name__}: {exc})") from None
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            raise ValueError(f"{label}: not a {path.suffix.lower()[1:].upper()} mesh: no triangle could be read "
+                             "from it (a corrupt or empty file, or another format under this name)")
     if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise ValueError(f"{label}: the mesh has no faces")
+    if not isinstance(repair, bool):           # repair = "false" in a scene file used to repair
+        raise ValueError(f"repair: must be true or false, got {repair!r}")
+    if resolution is not None:
+        from .._validation import as_length
+
+        resolution = as_length(resolution, "resolution", hi=1.0)
     if not np.isfinite(np.asarray(mesh.vertices)).all():
         raise ValueError(f"{label}: vertices contain NaN or inf")
     if isinstance(scale, bool) or not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
