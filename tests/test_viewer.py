@@ -278,3 +278,25 @@ def test_a_step_without_an_estimate_is_named_in_the_panel(log_2d, monkeypatch):
         assert "**No estimate at this step:**" in viewer.info.content
     finally:
         viewer.close()
+
+
+def test_a_malformed_message_closes_its_connection_with_one_line(log_2d, capfd):
+    """Issue 33, item 16: a malformed WebSocket message printed a traceback in the viewer's terminal."""
+    from websockets.sync.client import connect
+
+    viewer = RunViewer(log_2d, port=_free_port())
+    protocol = ["viser-v" + __import__("viser").__version__]
+    try:
+        uri = f"ws://127.0.0.1:{viewer.port}"
+        with connect(uri, origin=f"http://127.0.0.1:{viewer.port}", subprotocols=protocol, open_timeout=10) as ws:
+            ws.recv(timeout=10)
+            ws.send(b"\x93\x01\x02garbage")                      # not a viser message
+            err = []
+            _wait(lambda: err.append(capfd.readouterr().err) or "cannot read" in "".join(err), timeout=20)
+        with connect(uri, origin=f"http://127.0.0.1:{viewer.port}", subprotocols=protocol, open_timeout=10) as ws:
+            assert ws.recv(timeout=10)                              # the server goes on serving
+    finally:
+        viewer.close()
+    err = "".join(err) + capfd.readouterr().err
+    assert "closed the connection from 127.0.0.1" in err and "DecodeError" in err
+    assert "Traceback" not in err and "connection handler failed" not in err

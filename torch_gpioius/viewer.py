@@ -215,11 +215,29 @@ def _install_origin_check(bound_host: str, allowed_hosts: tuple[str, ...] = ()) 
                 return connection.respond(http.HTTPStatus.FORBIDDEN, "gpioius view: cross-origin WebSocket refused\n")
             return process_request(connection, request) if process_request is not None else None
 
-        return real_serve(handler, host, port, *args, process_request=check, **kwargs)
+        async def guarded(connection):
+            # one client's unreadable message (a malformed frame, garbage MessagePack) ends that connection with one
+            # line here, not a traceback from websockets' logger; the server and other pages go on
+            try:
+                await handler(connection)
+            except Exception as exc:
+                print(f"gpioius view: closed the connection from {_peer(connection)}: it sent a message the viewer "
+                      f"cannot read ({type(exc).__name__}: {' '.join(str(exc).split())[:200]})", file=sys.stderr,
+                      flush=True)
+
+        return real_serve(guarded, host, port, *args, process_request=check, **kwargs)
 
     server_mod = _Proxy(real.asyncio.server, serve=serve)
     proxy = _Proxy(real, asyncio=_Proxy(real.asyncio, server=server_mod), _wrapped_websockets=real)
     _infra.websockets = proxy
+
+
+def _peer(connection) -> str:
+    try:
+        host, port = connection.remote_address[:2]
+        return f"{host}:{port}"
+    except Exception:                      # pragma: no cover - a transport without an address
+        return "a client"
 
 
 class RunViewer:
