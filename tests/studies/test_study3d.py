@@ -98,3 +98,20 @@ def test_the_summary_names_runs_without_an_estimate_and_counts_valid_samples():
     text = _markdown(rows, None)
     assert "| none / " in text and "2 of 6 / 2 of 3" in text
     assert "**No estimate at the end:** box tactile" in text and "Columns: H is the Hausdorff distance" in text
+
+
+def test_claims_are_not_judged_on_runs_that_barely_explored():
+    """Issue 33, item 9: `--max-travel 1e-9` marked the claims "yes" after one step, `--max-steps 0` marked them
+    "no"; below a stated minimum they are "not judged"."""
+    from torch_gpioius.studies import study2d, study3d
+
+    short = _trace("visual-tactile", [0.05, 0.04], [1, 1])                    # 2 records: 1 step, 0.6 m
+    why = study3d.explored_enough({"E": {"visual-tactile": short}})
+    assert why and "E visual-tactile (0.6 m, 1 steps)" in why
+    text = study3d._markdown(study3d.summarize_3d({"E": {"visual-tactile": short}}, {}), None, why)
+    assert "The paper's claims are not judged: runs below 0.3 m of travel or 10 steps" in text
+    long = _trace("visual-tactile", [0.05] * 30, [1] * 30)
+    assert study3d.explored_enough({"E": {"visual-tactile": long}}) is None
+    none = _trace("tactile", [0.05], [1])                                     # --max-steps 0: record 0 only
+    assert "A tactile (0)" in study2d.explored_enough({"A": {"tactile": none, "visual-tactile": long}})
+    assert study2d.explored_enough({"A": {"visual-tactile": long}}) is None
