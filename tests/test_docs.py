@@ -143,3 +143,39 @@ def test_the_own_data_tutorial_quotes_what_its_code_prints(tmp_path):
                           timeout=600)
     assert done.returncode == 0, done.stderr[-3000:]
     assert done.stdout.strip().splitlines() == quoted
+
+
+_CONSOLE = re.compile(r"^```console\n(.*?)^```", re.S | re.M)
+
+
+def _quoted_commands() -> list[tuple[str, str, list[str]]]:
+    """Every ``$ gpioius ...`` line in a ``console`` block of the README and docs, with the lines quoted after it."""
+    found = []
+    for md in [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]:
+        for body in _CONSOLE.findall(md.read_text()):
+            cmd, out = None, []
+            for line in body.splitlines() + ["$ "]:
+                if line.startswith("$ "):
+                    if cmd:
+                        found.append((str(md.relative_to(ROOT)), cmd, out))
+                    cmd, out = line[2:].strip(), []
+                else:
+                    out.append(line)
+    return found
+
+
+QUOTED = _quoted_commands()
+
+
+def test_the_docs_quote_commands_with_their_output():
+    assert any(c.startswith("gpioius fit data/example_2d.gpioius") for _, c, _ in QUOTED)
+
+
+@pytest.mark.parametrize("page, cmd, quoted", QUOTED, ids=[f"{p}: {c}" for p, c, _ in QUOTED])
+def test_quoted_output_is_what_the_command_prints(page, cmd, quoted, capsys, monkeypatch):
+    """Issue 33, item 11: docs/data-format.md printed K_t, similarity and MLL the command no longer printed."""
+    from torch_gpioius.cli import main
+
+    monkeypatch.chdir(ROOT)
+    assert main(shlex.split(cmd)[1:]) == 0
+    assert capsys.readouterr().out.rstrip("\n").splitlines() == quoted, f"{page} quotes other output for `{cmd}`"
