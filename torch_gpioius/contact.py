@@ -49,6 +49,9 @@ class ContactConfig:
         tip_stiffness: stiffness of the fingertip itself [N/m] (``inf``: rigid). With both, the recorded contact is
             the point of the sphere on the surface: ``tool - (tip_radius - |F| / tip_stiffness) n`` with ``n`` the
             measured force direction (the fingertip deflects back by ``|F| / tip_stiffness`` when pressed).
+        floor: height [m, base frame z] of a support plane (the table the object stands on), or None. No move takes
+            the fingertip's centre below ``floor + tip_radius``: the part of a move that would is dropped, so the
+            fingertip slides along the table instead of passing through it, whatever the planner asks.
     """
 
     contact_force: float = 1.0
@@ -67,6 +70,7 @@ class ContactConfig:
     near_force: float = 0.3
     tip_radius: float = 0.0
     tip_stiffness: float = math.inf
+    floor: float | None = None
 
     #: Upper ends of the accepted ranges (what the OptoForce OMD-20-SE-40N and a UR5 in contact work allow).
     BOUNDS = {"contact_force": 40.0, "retreat_force": 40.0, "max_force": 40.0, "max_force_jump": 40.0,
@@ -93,6 +97,10 @@ class ContactConfig:
             raise ValueError("ContactConfig: near_force must be below contact_force")
         if self.tangential_step > self.max_step:
             raise ValueError("ContactConfig: tangential_step must not exceed max_step")
+        if self.floor is not None and (isinstance(self.floor, bool) or not isinstance(self.floor, (int, float))
+                                       or not (math.isfinite(self.floor) and abs(self.floor) <= 5.0)):
+            raise ValueError(f"ContactConfig.floor: must be None or a height within 5 m of the base [m], got "
+                             f"{self.floor!r}")
 
 
 @dataclass
@@ -206,7 +214,21 @@ class ContactController:
         return R @ r.force
 
     # ---------------------------------------------------------------------------------- motion
+    def _above_floor(self, dx: torch.Tensor) -> torch.Tensor:
+        """``dx`` without the part that would take the fingertip below the support plane (``config.floor``)."""
+        cfg = self.config
+        if cfg.floor is None or len(dx) != 3:
+            return dx
+        z = float(self.robot.read_pose()[2, 3])
+        lowest = cfg.floor + cfg.tip_radius
+        if z + float(dx[2]) >= lowest:
+            return dx
+        dx = dx.clone()
+        dx[2] = lowest - z              # down to the plane (or back up onto it)
+        return dx
+
     def _move(self, dx: torch.Tensor, log: _Log, normal: torch.Tensor) -> torch.Tensor:
+        dx = self._above_floor(dx)
         self.robot.move_cartesian(dx, self.config.speed)
         f = self.read_force(normal)
         p = self.robot.read_pose()[:3, 3].clone()

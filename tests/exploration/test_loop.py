@@ -113,6 +113,17 @@ def test_lost_contact_falls_back_to_the_last_contact():
             assert len(out.path) == len(lost.path) + 4
         else:
             assert out is None
+        # issue 33, item 7: each re-approach is counted with its travel (they were invisible: recoveries stayed 0)
+        assert s.reapproaches == 2 and s.reapproach_travel == pytest.approx(s.travel)
+    # ... and none goes past the travel budget: with 12 cm left, 10 cm along the normal, then at most 2 cm
+    s = ExplorationState(model=model, contacts=[last])
+    ctl = Controller(False)
+    assert recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost, budget_left=0.12) is None
+    assert [round(r, 12) for _, r in ctl.calls] == [0.1, 0.02] and s.travel <= 0.12 + 1e-12
+    s = ExplorationState(model=model, contacts=[last])
+    ctl = Controller(True)
+    assert recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost, budget_left=0.0) is None
+    assert ctl.calls == [] and s.reapproaches == 0
 
 
 @pytest.mark.parametrize("kwargs, field", [

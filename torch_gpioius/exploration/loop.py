@@ -86,8 +86,12 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     except RuntimeError as exc:                                 # ContactFault, SafetyViolation, RobotError
         return f"refused: {exc}"
     _moved(state, touch)
-    if not touch.in_contact and (touch := recover(state, hw, touch)) is None:
-        return "lost-contact"
+    if not touch.in_contact:
+        left = None if cfg.budget is None else cfg.budget - state.travel
+        if left is not None and left <= 0:           # the budget is spent: no re-approach past it
+            return "travel"
+        if (touch := recover(state, hw, touch, left)) is None:
+            return "lost-contact"
     state.steps += 1
     state.normal = touch.force_normal
     t1 = time.perf_counter()
@@ -235,6 +239,7 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     m = state.model
     record.travel, record.taps, record.retracted, record.step_time = state.travel, state.taps, state.retracted, step_time
     record.recoveries = state.recoveries
+    record.reapproaches, record.reapproach_travel = state.reapproaches, state.reapproach_travel
     record.robot_time = float(getattr(ctx.hardware.robot, "time", math.nan))
     truth = ctx.world.contact_truth(ctx.hardware, state.contact)
     if truth is not None:
@@ -253,18 +258,28 @@ def _first(reasons):
     return next((r for r in reasons if r), None)
 
 
-def recover(state: ExplorationState, hw, lost: ContactResult) -> ContactResult | None:
+def recover(state: ExplorationState, hw, lost: ContactResult, budget_left: float | None = None
+            ) -> ContactResult | None:
     """Contact was lost during a step (the surface curved away, or a cover dragged the fingertip): a re-approach
     from where the fingertip is, along the estimated inward normal there, for at most 10 cm; if that finds nothing,
-    one towards the last contact, for its distance + 5 cm. Returns the merged result of the step and the
-    re-approaches, or None (the run then ends on "lost-contact")."""
+    one towards the last contact, for its distance + 5 cm. Neither goes past ``budget_left`` [m] of the travel
+    budget (a run ends at most one step past it). Each re-approach is counted in ``state.reapproaches`` and its
+    travel in ``state.reapproach_travel``. Returns the merged result of the step and the re-approaches, or None
+    (the run then ends on "lost-contact")."""
+    left = [math.inf if budget_left is None else budget_left]
 
     def approach(direction, reach: float):
+        reach = min(reach, left[0])
+        if not reach > 1e-6:
+            return None
         try:
             r = hw.controller.approach(direction, max_travel=reach)
         except RuntimeError:          # refused or faulted: no re-approach
             return None
         _moved(state, r)
+        state.reapproaches += 1
+        state.reapproach_travel += r.travel
+        left[0] -= r.travel
         return r
 
     res = lost

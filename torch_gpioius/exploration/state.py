@@ -31,6 +31,8 @@ RECORD_FIELDS = {
     "robot_time": "the robot's clock [s]",
     "taps": "evidence-gathering actions so far (taps)",
     "recoveries": "recoveries from a stall so far",
+    "reapproaches": "re-approaches after lost contact so far",
+    "reapproach_travel": "fingertip travel spent on those re-approaches so far [m] (part of travel)",
     "contact_distance": "distance of the step's contact from the true inner surface [m] (negative inside)",
     "contact_on_body": "1 if the fingertip touched the body itself at the contact, 0 if only the cover (NaN unknown)",
     "retracted": "free-space samples retracted so far",
@@ -69,6 +71,8 @@ class StepRecord:
     robot_time: float = math.nan
     taps: int = 0
     recoveries: int = 0
+    reapproaches: int = 0
+    reapproach_travel: float = 0.0
     retracted: int = 0
     contact_distance: float = math.nan
     contact_on_body: float = math.nan
@@ -96,6 +100,8 @@ class ExplorationState:
         taps: evidence actions taken; last_evidence: the step of the last one.
         recoveries: recoveries from a stall; last_recovery: the step of the last one; failed_recoveries: those in a
             row after which the run still made no progress.
+        reapproaches: re-approaches after lost contact (:func:`torch_gpioius.exploration.loop.recover`);
+            reapproach_travel: the travel they took [m] (counted in ``travel``).
         terminated: why the run ended (None while it runs).
         centre: centroid of the estimated inner region, from the last measurement (2-D stop rule).
         surface: the last measured estimate (2-D polylines or a 3-D mesh), or None.
@@ -115,6 +121,8 @@ class ExplorationState:
     recoveries: int = 0
     last_recovery: int = 0
     failed_recoveries: int = 0
+    reapproaches: int = 0
+    reapproach_travel: float = 0.0
     terminated: str | None = None
     centre: np.ndarray | None = None
     surface: object = None

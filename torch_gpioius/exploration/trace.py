@@ -45,6 +45,8 @@ class Trace:
         contact_distance: `(n,)` distance of each step's contact from the true inner surface [m] (NaN unknown).
         contact_on_body: `(n,)` 1 where the fingertip touched the body itself, 0 where only the cover (NaN unknown).
         recoveries: `(n,)` cumulative number of recoveries from a stall.
+        reapproaches: `(n,)` cumulative number of re-approaches after lost contact.
+        reapproach_travel: `(n,)` cumulative travel of those re-approaches [m] (part of ``travel``).
         estimate: `(n,)` 1 where the estimate was measured and has a surface to judge, 0 where it has none (no
             estimate), NaN where not measured.
         truncation: `(n,)` bound on the truncated outer basis' change of the Gram matrix relative to sigma^2
@@ -79,6 +81,8 @@ class Trace:
     recoveries: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     truncation: np.ndarray = field(default_factory=lambda: np.zeros(0))
     estimate: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    reapproaches: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    reapproach_travel: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":
@@ -107,7 +111,9 @@ class Trace:
                    touch=getattr(config.touch, "name", "custom"), contact_distance=col("contact_distance"),
                    contact_on_body=col("contact_on_body"),
                    recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"),
-                   estimate=col("estimate"))
+                   estimate=col("estimate"),
+                   reapproaches=np.array([r.reapproaches for r in recs], dtype=np.int64),
+                   reapproach_travel=col("reapproach_travel"))
 
     @property
     def n_steps(self) -> int:

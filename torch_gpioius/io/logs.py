@@ -38,6 +38,8 @@ def step_values(meta: dict) -> dict:
     out["correlation_interval"] = tuple(math.nan if v is None else float(v) for v in ci)
     out["taps"] = int(m.get("taps", 0) or 0)
     out["recoveries"] = int(m.get("recoveries", 0) or 0)
+    out["reapproaches"] = int(m.get("reapproaches", 0) or 0)
+    out["reapproach_travel"] = float(m.get("reapproach_travel", 0.0) or 0.0)
     out["retracted"] = int(m.get("retracted", 0) or 0)
     return out
 
@@ -84,7 +86,8 @@ class LogRecorder(Recorder):
         obs = record.observations
         touch = record.touch
         meta = {"step": record.step, "travel": record.travel, "retracted": record.retracted, "taps": record.taps,
-                "recoveries": record.recoveries,
+                "recoveries": record.recoveries, "reapproaches": record.reapproaches,
+                "reapproach_travel": record.reapproach_travel,
                 "hausdorff": record.hausdorff, "hausdorff_touched": record.hausdorff_touched,
                 "uncertainty": record.uncertainty, "estimate": record.estimate, "similarity": record.similarity,
                 "correlation": record.correlation,
@@ -113,6 +116,7 @@ class LogRecorder(Recorder):
         self.writer.append("step", meta, {**arrays, **world})
         for ev_obs, removed, kind in record.evidence:
             self.writer.append(kind, {"step": record.step, "taps": state.taps, "recoveries": state.recoveries,
+                                      "reapproaches": state.reapproaches, "reapproach_travel": state.reapproach_travel,
                                       "travel": state.travel},
                                {"x": ev_obs.x, "y": ev_obs.y, "task": ev_obs.task,
                                 "removed": np.asarray(removed, dtype=np.int64), "contact": state.contact,
@@ -179,6 +183,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
                          correlation_interval=v["correlation_interval"],
                          task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64), step_time=v["step_time"],
                          robot_time=v["robot_time"], taps=v["taps"], recoveries=v["recoveries"], retracted=v["retracted"],
+                         reapproaches=v["reapproaches"], reapproach_travel=v["reapproach_travel"],
                          contact_distance=v["contact_distance"], contact_on_body=v["contact_on_body"],
                          truncation=v["truncation"])
         state.records.append(rec)
@@ -196,6 +201,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     state.model = model
     v = step_values(last.meta)
     state.travel, state.retracted, state.taps, state.recoveries = v["travel"], v["retracted"], v["taps"], v["recoveries"]
+    state.reapproaches, state.reapproach_travel = v["reapproaches"], v["reapproach_travel"]
     state.steps = step_number(last.meta, f"{path}: last step")
     for name in ("previous", "normal"):
         a = np.asarray(last.arrays.get(name, np.full(world.dim, np.nan)), dtype=np.float64)
@@ -206,6 +212,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         state.travel = float(after.meta["travel"])
         state.taps = int(after.meta["taps"])
         state.recoveries = int(after.meta.get("recoveries", state.recoveries))
+        state.reapproaches = int(after.meta.get("reapproaches", state.reapproaches))
+        state.reapproach_travel = float(after.meta.get("reapproach_travel", state.reapproach_travel))
         state.contacts[-1] = np.asarray(after.arrays["contact"], dtype=np.float64)
         state.normal = torch.as_tensor(np.asarray(after.arrays["normal"], dtype=np.float64))
     state.last_evidence = max((int(t.meta["step"]) for t in taps if t.kind == "tap"), default=0)

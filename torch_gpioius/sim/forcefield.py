@@ -44,9 +44,11 @@ ROBOT_STUDY_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, ma
 
 
 def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
-                  q_home=(0.0, -1.2, 1.5, -1.9, -1.57, 0.0), margin: float = 0.1):
+                  q_home=(0.0, -1.2, 1.5, -1.9, -1.57, 0.0), margin: float = 0.1, floor: float | None = None):
     """A kinematic UR5 placed by IK with its fingertip at ``start`` pointing along ``direction``, behind a gate
-    whose workspace box is the exploration range [``lower``, ``upper``] and the start, grown by ``margin`` [m]."""
+    whose workspace box is the exploration range [``lower``, ``upper``] and the start, grown by ``margin`` [m];
+    with a support plane at height ``floor`` [m] the box ends 5 mm below it (the controller keeps the fingertip
+    above it, the gate refuses what would pass it)."""
     from kinematics import UR5, SafetyGate, SimulatedUR5, tool_rotation
 
     ur5 = UR5(tool_offset=(0.0, 0.0, tool_length))
@@ -56,6 +58,8 @@ def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
     q0 = ur5.inverse_kinematics(T, q_init=torch.as_tensor(q_home, dtype=torch.float64))
     lo = np.minimum(lower, start) - margin
     hi = np.maximum(upper, start) + margin
+    if floor is not None:
+        lo[2] = max(lo[2], floor - 0.005)
     return SimulatedUR5(ur5, q0, SafetyGate(ur5, lo.tolist(), hi.tolist()))
 
 
@@ -123,6 +127,10 @@ class Scene3D(World):
         sensor_noise: force-sensor noise per axis [N] (the OptoForce OMD-20 is specified to about 0.01-0.03 N).
         seed: seed of the sensor and camera noise.
         defaults: overrides of :data:`ROBOT_STUDY_DEFAULTS`.
+        support: the support plane the object stands on: "base" (default: a table at the inner mesh's lowest
+            point), a height z [m], or None (no table: the fingertip may pass under the object). Nothing passes
+            the plane: the contact controller keeps the fingertip above it and the robot's gate refuses what would
+            go more than 5 mm below.
 
     Raises:
         ValueError: open or invalid meshes, an outer mesh not containing the inner one, a start inside the outer
@@ -131,8 +139,19 @@ class Scene3D(World):
 
     def __init__(self, inner: trimesh.Trimesh, outer: trimesh.Trimesh, start, direction, bounds, name: str = "",
                  camera=None, cover_stiffness: float = 5.0, sensor_noise: float = 0.02, seed: int = 0,
-                 defaults: ExplorationDefaults | None = None) -> None:
+                 defaults: ExplorationDefaults | None = None, support: float | str | None = "base") -> None:
         self.inner, self.outer = _mesh(inner, "inner"), _mesh(outer, "outer")
+        base = float(self.inner.bounds[0, 2])
+        if support == "base":
+            self.support: float | None = base
+        elif support is None:
+            self.support = None
+        elif isinstance(support, bool) or not isinstance(support, (int, float)) or not math.isfinite(support) \
+                or support > base + 1e-9:
+            raise ValueError(f"support: must be 'base', None or a height [m] at or below the body's lowest point "
+                             f"({base:.4f} m), got {support!r}")
+        else:
+            self.support = float(support)
         self.inner_sdf, self.outer_sdf = MeshSDF(self.inner), MeshSDF(self.outer)
         # containment on at most 2000 inner vertices (trimesh's ray-based contains needs GBs for large meshes)
         probe = self.inner.vertices[::max(1, len(self.inner.vertices) // 2000)]
@@ -168,7 +187,7 @@ class Scene3D(World):
                   at=None, scale: float = 1.0, repair: bool = True, gap: float | None = None, bridge: float = 0.03,
                   resolution: float | None = None, name: str = "", seed: int = 0,
                   cover_stiffness: float | None = None, sensor_noise: float = 0.02,
-                  defaults: ExplorationDefaults | None = None) -> "Scene3D":
+                  defaults: ExplorationDefaults | None = None, support: float | str | None = "base") -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
         The mesh is loaded, checked and repaired if need be (:func:`torch_gpioius.sim.meshes.load_mesh`, which warns
@@ -195,6 +214,7 @@ class Scene3D(World):
             sensor_noise: force-sensor noise per axis [N].
             defaults: overrides of :data:`ROBOT_STUDY_DEFAULTS`.
             cover_stiffness: [N/m] (default 5 tight, 3 loose, as objects E-H).
+            support: the table under the object ("base": at its lowest point; a height [m]; None: none).
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
@@ -215,7 +235,7 @@ class Scene3D(World):
             bounds = b if bounds is None else bounds
         stiffness = (5.0 if cover == "tight" else 3.0) if cover_stiffness is None else cover_stiffness
         return cls(mesh, outer, start, direction, bounds, name=name, cover_stiffness=stiffness,
-                   sensor_noise=sensor_noise, seed=seed, defaults=defaults)
+                   sensor_noise=sensor_noise, seed=seed, defaults=defaults, support=support)
 
     # ------------------------------------------------------------------ the World interface
     @property
@@ -233,11 +253,14 @@ class Scene3D(World):
         from ..contact import ContactController
         from ..sensors.simulated import SimulatedForceSensor
 
-        robot = simulated_ur5(self.start, self.direction, self.range[0], self.range[1])
+        from ..contact import ContactConfig
+
+        robot = simulated_ur5(self.start, self.direction, self.range[0], self.range[1], floor=self.support)
         field = self.contact_model()
         sensor = SimulatedForceSensor(field, robot.read_pose, clock=lambda: robot.time,
                                       noise_std=self.sensor_noise, seed=self.seed)
-        return Hardware(robot, sensor, self.camera, ContactController(robot, sensor), self.tactile_pad(robot, field))
+        return Hardware(robot, sensor, self.camera, ContactController(robot, sensor, ContactConfig(floor=self.support)),
+                        self.tactile_pad(robot, field))
 
     def tactile_pad(self, robot, field=None):
         """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
@@ -263,7 +286,8 @@ class Scene3D(World):
     def fingerprint(self) -> str:
         return geometry_hash(self.inner.vertices, self.inner.faces, self.outer.vertices, self.outer.faces,
                              self.start, self.direction, self.range,
-                             [self.cover_stiffness, self.sensor_noise, self.seed])
+                             [self.cover_stiffness, self.sensor_noise, self.seed,
+                              math.nan if self.support is None else self.support])
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
         return {"joints": hw.robot.read_joints().numpy(), "clock": np.array([hw.robot.time]),
@@ -290,7 +314,7 @@ class Scene3D(World):
                 return Scene3D(self.inner, self.outer, start, direction, self.range, name=self.name,
                                camera=camera if camera is not None else self._camera,
                                cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=seed,
-                               defaults=self._defaults)
+                               defaults=self._defaults, support=self.support)
             except ValueError:
                 continue
         raise ValueError(f"seed {seed}: no perturbed approach hits the object")

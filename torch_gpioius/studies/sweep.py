@@ -224,6 +224,12 @@ def read_run_file(path: str | Path) -> dict:
     v = run.setdefault("recoveries", 0)                 # files of 0.3.0 and earlier have none of these three
     if not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
         raise bad("recoveries", f"must be a non-negative integer, got {v!r}")
+    v = run.setdefault("reapproaches", 0)               # files written before re-approaches were counted: 0
+    if not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
+        raise bad("reapproaches", f"must be a non-negative integer, got {v!r}")
+    v = run.setdefault("reapproach_travel", 0.0)
+    if not (_number(v, allow_nan=False) and v >= 0):
+        raise bad("reapproach_travel", f"must be a non-negative distance [m], got {v!r}")
     for k in ("contacts_on_body", "contacts_within"):
         v = run.setdefault(k, math.nan)
         if not (_number(v) and (math.isnan(v) or 0.0 <= v <= 1.0)):
@@ -324,6 +330,9 @@ def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
             "median_step_time": float(np.median(trace.step_time[1:])) if trace.n_steps > 1 else math.nan,
             "taps": int(trace.taps[-1]) if len(trace.taps) else 0,
             "recoveries": int(trace.recoveries[-1]) if len(trace.recoveries) else 0,
+            "reapproaches": int(trace.reapproaches[-1]) if len(trace.reapproaches) else 0,
+            "reapproach_travel": float(trace.reapproach_travel[-1]) if len(trace.reapproach_travel) else 0.0,
+            "has_estimate": trace.has_estimate,
             **{f"contacts_{k}": v for k, v in trace.contacts_on_body(CONTACT_WITHIN).items()},
             "series": {"travel": trace.travel.tolist(), "hausdorff": trace.hausdorff.tolist(),
                        "hausdorff_touched": trace.hausdorff_touched.tolist(),
@@ -465,7 +474,10 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "final_correlation_hi": _last_finite(s["correlation_hi"]),
            "final_similarity": _last_finite(s["similarity"]),
            "travel": run["travel"], "steps": run["steps"], "terminated": run["terminated"], "taps": run["taps"],
-           "recoveries": run["recoveries"], "contacts_on_body": run["contacts_on_body"],
+           "recoveries": run["recoveries"], "reapproaches": run["reapproaches"],
+           "reapproach_share": run["reapproach_travel"] / run["travel"] if run["travel"] > 0 else 0.0,
+           "has_estimate": _has_final_estimate(run),
+           "contacts_on_body": run["contacts_on_body"],
            "contacts_within": run["contacts_within"],
            "wall_time": run["wall_time"], "median_step_time": run["median_step_time"], "reference_travel": ref,
            "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
@@ -535,7 +547,8 @@ def _summarize(rows: list[dict]) -> dict:
             entry["n"] = len(rs)
             entry["failed"] = sum(bool(r["failed"]) for r in rs)
             entry["failures"] = failures_text(r["failed"] for r in rs)
-            for m in ("taps", "travel", "recoveries", "contacts_on_body", "contacts_within"):
+            for m in ("taps", "travel", "recoveries", "reapproaches", "reapproach_share", "contacts_on_body",
+                      "contacts_within"):
                 entry[m] = median_interval([r[m] for r in rs], failed="drop")
             out["objects"][obj][mode] = entry
         tactile = {r["seed"]: r for r in rows if r["object"] == obj and r["mode"] == "tactile"}
@@ -661,10 +674,12 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
              "the end; H touched: the touched estimate only; rho: task correlation; S: the paper's ratio. Failed "
              "runs (stalled, stopped by the robot, no estimate) stay in every statistic; a run with no estimate "
              "counts as inf, worse than any distance. On body: the median fraction of a run's contacts where the "
-             "fingertip touched the body itself (not only the cover); '-' where the world cannot tell.", "",
+             "fingertip touched the body itself (not only the cover); '-' where the world cannot tell. Travel: the "
+             "median travel [m]; re-approach: the median share of it spent re-approaching after lost contact.", "",
              "| object | mode | n (interval coverage) | failed (why) | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | "
-             "H final [cm] | H touched final [cm] | U final | rho final | S final (paper) | on body |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "H final [cm] | H touched final [cm] | U final | rho final | S final (paper) | on body | travel [m] | "
+             "re-approach |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(d: dict, scale: float = 100.0, fmt: str = ".1f") -> str:
         if d["n"] == 0:
@@ -681,7 +696,8 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
                          f"{cell(e['hausdorff_50'])} | {cell(e['final_hausdorff'])} | "
                          f"{cell(e['final_hausdorff_touched'])} | {cell(e['final_uncertainty'], 1, '.3f')} | "
                          f"{cell(e['final_correlation'], 1, '.2f')} | {cell(e['final_similarity'], 1, '.2f')} | "
-                         f"{cell(on_body, 1, '.2f')} |")
+                         f"{cell(on_body, 1, '.2f')} | {cell(e.get('travel', {'n': 0}), 1, '.2f')} | "
+                         f"{cell(e.get('reapproach_share', {'n': 0}), 100, '.0f')} % |")
     lines += ["", "Paired differences (same seed): mode - tactile, final Hausdorff [cm], with the Wilcoxon signed-rank "
               "p-value; a pair where one side has no estimate is a loss for it (inf).", "",
               "| object | mode | n | pairs with a failure | median [95 % interval] | wins / losses | p |",
