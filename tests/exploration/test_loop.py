@@ -197,3 +197,20 @@ def paper_objects_2d_a():
     from torch_gpioius.sim import paper_objects_2d
 
     return paper_objects_2d()["A"]
+
+
+def test_each_reported_fraction_is_measured_where_the_travel_reaches_it():
+    """Issue 33, item 8: metrics every 5 steps put "H at 10 %" at 0.182 m of a 0.6 m budget; the step that first
+    reaches 10, 25 and 50 % of the budget is measured now."""
+    from torch_gpioius.exploration.recorders import REPORT_FRACTIONS
+    from torch_gpioius.sim.forcefield import sphere_scene
+
+    budget = 0.08
+    trace = tg.explore(sphere_scene(), mode="tactile", max_travel=budget, metrics_every=1000)
+    measured = ~np.isnan(trace.estimate)
+    for f in REPORT_FRACTIONS:
+        first = int(np.flatnonzero(trace.travel >= f * budget)[0])
+        assert measured[first], f"the step reaching {f:.0%} was not measured"
+        assert trace.travel[first - 1] < f * budget
+    assert measured.sum() == len(REPORT_FRACTIONS) + 2          # record 0, the three fractions, the last
+    assert trace.travel[-1] <= budget + 0.03                     # at most one step (and its regulation) past it

@@ -314,3 +314,14 @@ def test_run_files_with_a_bad_estimate_series_are_refused(tmp_path):
     path.write_text(json.dumps(_run([0.08, 0.05], [1.0, 2.0])))
     with pytest.raises(RunFileError, match="series.estimate"):
         read_run_file(path)
+
+
+def test_a_fraction_whose_estimate_vanished_is_not_filled_by_a_later_one():
+    from torch_gpioius.studies.sweep import _at_travel
+
+    nan = math.nan
+    series = {"travel": [0.0, 0.05, 0.1, 0.2], "hausdorff": [0.09, nan, nan, 0.03], "estimate": [1.0, nan, 0.0, 1.0]}
+    assert math.isnan(_at_travel(series, "hausdorff", 0.06))    # the step reaching it had no estimate
+    assert _at_travel(series, "hausdorff", 0.15) == 0.03
+    old = {k: v for k, v in series.items() if k != "estimate"}
+    assert _at_travel(old, "hausdorff", 0.06) == 0.03            # older run files: as read then

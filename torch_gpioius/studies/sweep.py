@@ -380,9 +380,16 @@ def _last_finite(v) -> float:
 
 
 def _at_travel(series: dict, key: str, distance: float) -> float:
-    """The first measured value at or after ``distance`` of travel (the last one if the run ended before)."""
+    """The value of the first measured record at or after ``distance`` of travel (NaN where that estimate had no
+    surface: a later step's value never stands in for it); the final record's if the run ended before. Run files
+    without the ``estimate`` series: the first finite value, as they were read then."""
     t = np.asarray(series["travel"], dtype=float)
     v = np.asarray(series[key], dtype=float)
+    est = series.get("estimate")
+    if est:
+        measured = ~np.isnan(np.asarray(est, dtype=float))
+        ok = np.flatnonzero(measured & (t >= distance - 1e-12))
+        return float(v[ok[0]] if len(ok) else v[-1])
     ok = np.flatnonzero(np.isfinite(v) & (t >= distance - 1e-12))
     if len(ok):
         return float(v[ok[0]])
