@@ -98,6 +98,7 @@ def test_the_summary_names_runs_without_an_estimate_and_counts_valid_samples():
     text = _markdown(rows, None)
     assert "| none / " in text and "2 of 6 / 2 of 3" in text
     assert "**No estimate at the end:** box tactile" in text and "Columns: H is the Hausdorff distance" in text
+    assert "| 0.60 (0: 0.00 m) / 0.60 (0: 0.00 m) |" in text                # travel and its re-approaches
 
 
 def test_claims_are_not_judged_on_runs_that_barely_explored():

@@ -61,6 +61,8 @@ def summarize_3d(traces: dict[str, dict[str, Trace]], hausdorff_io: dict[str, fl
                     row[f"S_{int(f * 100)}"] = float(tr.similarity[i])
             row[f"travel_{tag}_m"] = total
             row[f"estimate_{tag}"] = tr.has_estimate
+            row[f"reapproaches_{tag}"] = int(tr.reapproaches[-1]) if len(tr.reapproaches) else 0
+            row[f"reapproach_m_{tag}"] = float(tr.reapproach_travel[-1]) if len(tr.reapproach_travel) else 0.0
             row[f"valid_{tag}"], row[f"measured_{tag}"] = estimate_counts(tr)
             row[f"steps_{tag}"] = tr.n_steps - 1
             row[f"terminated_{tag}"] = tr.terminated
@@ -137,12 +139,19 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
     lines = ["Columns: H is the Hausdorff distance (eq. 24) from the estimated inner surface to the true one at 10, 50 "
              "and 100 % of the run's travel ('none': the estimate had no surface inside the range there); U the "
              "uncertainty (eq. 23, relative to the prior variance); similarity the paper's K_t[0,1] / K_t[0,0]; "
-             "'with estimate' how many of the run's metric samples had a surface to judge; plan ms the median "
-             "planning step; robot time the simulated clock.", "",
+             "'with estimate' how many of the run's metric samples had a surface to judge; travel the fingertip's "
+             "travel and, in brackets, how many re-approaches after lost contact it held and how far they went; plan "
+             "ms the median planning step; robot time the simulated clock.", "",
              "| object | d_H inner-outer [cm] | H VT 10 / 50 / 100 % [cm] | H tactile 10 / 50 / 100 % [cm] | "
-             "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps VT / T | plan ms VT / T | "
-             "robot time VT / T [s] |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps VT / T | travel VT / T [m] "
+             "(re-approaches) | plan ms VT / T | robot time VT / T [s] |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+
+    def travel(r, tag):
+        if f"travel_{tag}_m" not in r:
+            return "-"
+        return (f"{r[f'travel_{tag}_m']:.2f} ({r.get(f'reapproaches_{tag}', 0)}: "
+                f"{r.get(f'reapproach_m_{tag}', 0.0):.2f} m)")
     for r in rows:
         lines.append(
             f"| {r['object']} | {h(r['inner_outer_hausdorff_m'])} | "
@@ -151,7 +160,7 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
             f"{valid(r, 'vt')} / {valid(r, 't')} | "
             f"{r.get('U_vt_100', float('nan')):.3f} / {r.get('U_t_100', float('nan')):.3f} | "
             f"{r.get('S_10', float('nan')):.2f} / {r.get('S_100', float('nan')):.2f} | "
-            f"{r.get('steps_vt', '-')} / {r.get('steps_t', '-')} | "
+            f"{r.get('steps_vt', '-')} / {r.get('steps_t', '-')} | {travel(r, 'vt')} / {travel(r, 't')} | "
             f"{r.get('median_plan_ms_vt', float('nan')):.0f} / {r.get('median_plan_ms_t', float('nan')):.0f} | "
             f"{r.get('robot_time_s_vt', float('nan')):.0f} / {r.get('robot_time_s_t', float('nan')):.0f} |")
     lost = [f"{r['object']} {mode}" for r in rows for mode, tag in (("visual-tactile", "vt"), ("tactile", "t"))
