@@ -246,3 +246,16 @@ def test_fit_on_a_dataset_in_millimetres_is_refused_by_its_units(tmp_path, capsy
     assert main(["fit", str(bad), "--out", str(tmp_path / "fit")]) == 2
     err = capsys.readouterr().err
     assert "mm.gpioius" in err and "probably in millimetres" in err and "resolution" not in err
+
+
+def test_a_mistyped_option_gets_its_commands_usage_and_the_nearest_option(capsys):
+    """Issue 35, item 8: `--max-travle` printed the top-level usage."""
+    with pytest.raises(SystemExit) as done:
+        main(["simulate3d", "--max-travle", "0.3"])
+    assert done.value.code == 2
+    err = capsys.readouterr().err
+    assert "usage: gpioius simulate3d" in err and "did you mean --max-travel?" in err
+    with pytest.raises(SystemExit):
+        main(["fit", str(EXAMPLE), "--zzz"])
+    err = capsys.readouterr().err
+    assert "usage: gpioius fit" in err and "unrecognized arguments: --zzz" in err and "did you mean" not in err

@@ -487,10 +487,32 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _parse(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
+    """``parser.parse_args``, except that an unknown option is reported by its command's parser (its usage, not the
+    top level's) with the nearest options it has (``--max-travle``: did you mean --max-travel?)."""
+    import difflib
+
+    args, extra = parser.parse_known_args(argv)
+    if not extra:
+        return args
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    sub = action.choices[args.command]
+    known = [o for a in sub._actions for o in a.option_strings]
+    hints = []
+    for token in extra:
+        name = token.split("=", 1)[0]
+        if name.startswith("-"):
+            close = difflib.get_close_matches(name, known, n=2, cutoff=0.6)
+            if close:
+                hints.append(f"{name}: did you mean {' or '.join(close)}?")
+    sub.error(f"unrecognized arguments: {' '.join(extra)}" + (f" ({'; '.join(hints)})" if hints else ""))
+    raise AssertionError("unreachable")  # pragma: no cover - error() exits
+
+
 def main(argv: list[str] | None = None) -> int:
     from .threads import torch_threads
 
-    args = build_parser().parse_args(argv)
+    args = _parse(build_parser(), argv)
     try:
         with torch_threads(getattr(args, "threads", 1)):
             return args.func(args)
