@@ -259,3 +259,42 @@ def test_a_mistyped_option_gets_its_commands_usage_and_the_nearest_option(capsys
         main(["fit", str(EXAMPLE), "--zzz"])
     err = capsys.readouterr().err
     assert "usage: gpioius fit" in err and "unrecognized arguments: --zzz" in err and "did you mean" not in err
+
+
+def test_warnings_reach_the_user_as_one_line(capsys, monkeypatch, tmp_path):
+    """Issue 35, item 10: warnings reached users raw, with a line of library source."""
+    import warnings as w
+
+    import torch_gpioius.io.offline as offline
+
+    def fit(*args, **kwargs):
+        w.warn("GPIOIS.fit: K_t's fit stopped at its cap", RuntimeWarning)
+        return {"n": 1, "n_inner": 1, "n_outer": 0, "theta": 0.1, "noise": 0.006, "mll": 1.0, "estimate": True}
+
+    monkeypatch.setattr(offline, "fit_dataset", fit)
+    assert main(["fit", str(EXAMPLE)]) == 0
+    err = capsys.readouterr().err
+    assert "gpioius: warning: GPIOIS.fit: K_t's fit stopped at its cap" in err
+    assert "RuntimeWarning" not in err and "w.warn(" not in err and ".py:" not in err
+
+
+def test_an_exploration_says_once_how_many_fits_stopped_short(monkeypatch):
+    import warnings as w
+
+    import torch_gpioius as tg
+    from torch_gpioius.models.gpiois import GPIOIS, FitNotConvergedWarning
+
+    real = GPIOIS.fit
+
+    def fit(self, *args, **kwargs):
+        out = real(self, *args, **kwargs)
+        w.warn("GPIOIS.fit: stopped short", FitNotConvergedWarning)
+        return out
+
+    monkeypatch.setattr(GPIOIS, "fit", fit)
+    with w.catch_warnings(record=True) as caught:
+        w.simplefilter("always")
+        tg.explore(tg.sim.paper_objects_2d()["A"], max_steps=4)
+    mine = [str(c.message) for c in caught if issubclass(c.category, FitNotConvergedWarning)]
+    assert mine[-1].startswith("explore: K_t's fit stopped at its iteration cap") and "at 4 of 4 steps" in mine[-1]
+    assert len(mine) <= 2          # the first fit (before exploring) may warn itself; the steps' are counted

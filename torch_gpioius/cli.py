@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 __all__ = ["main"]
@@ -487,6 +488,12 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _one_line_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings as one line a user can read (``gpioius: warning: ...``), without the library's source line."""
+    text = " ".join(str(message).split())
+    print(f"gpioius: warning: {text}", file=sys.stderr if file is None else file, flush=True)
+
+
 def _parse(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.Namespace:
     """``parser.parse_args``, except that an unknown option is reported by its command's parser (its usage, not the
     top level's) with the nearest options it has (``--max-travle``: did you mean --max-travel?)."""
@@ -514,7 +521,8 @@ def main(argv: list[str] | None = None) -> int:
 
     args = _parse(build_parser(), argv)
     try:
-        with torch_threads(getattr(args, "threads", 1)):
+        with torch_threads(getattr(args, "threads", 1)), warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning
             return args.func(args)
     except (ValueError, OSError, RuntimeError, ImportError) as exc:
         message = " ".join(str(exc).split())

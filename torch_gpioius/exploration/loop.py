@@ -16,6 +16,7 @@ from __future__ import annotations
 import inspect
 import math
 import time
+import warnings
 
 import numpy as np
 import torch
@@ -67,6 +68,12 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
         state.terminated = step(ctx, state, observers)
     for r in observers:
         r.end(ctx, state)
+    if state.unconverged_fits:
+        from ..models.gpiois import FitNotConvergedWarning
+
+        warnings.warn(f"explore: K_t's fit stopped at its iteration cap, short of the optimum, at "
+                      f"{state.unconverged_fits} of {state.steps} steps; each used the best K_t found (usually within "
+                      "rounding of the optimum on a flat likelihood)", FitNotConvergedWarning, stacklevel=3)
     return Trace.from_state(state, world, config)
 
 
@@ -103,7 +110,7 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
         if evidence is not None:
             record.evidence.append(ingest_evidence(state, cfg, evidence))
     stalled = unstall(ctx, state, record)
-    _fit(state.model, cfg)
+    _fit(state.model, cfg, state)
     _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1)
     stop = stalled or _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
     # the step cap ends the run at the next step's start: this record is the last one, measured before it is logged
@@ -214,12 +221,21 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig, conta
     return removed
 
 
-def _fit(model, cfg: ExploreConfig) -> None:
+def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
     """Re-learn warm-started; a touch model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model whose
     ``fit`` takes them (GPIOIS; GPIS learns nothing)."""
+    from ..models.gpiois import FitNotConvergedWarning
+
     options = cfg.touch.fit_options() if callable(getattr(cfg.touch, "fit_options", None)) else {}
     accepted = inspect.signature(model.fit).parameters
-    model.fit(multi_start=False, **{k: v for k, v in options.items() if k in accepted})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", FitNotConvergedWarning)
+        model.fit(multi_start=False, **{k: v for k, v in options.items() if k in accepted})
+    for w in caught:                     # counted, and said once at the end of the run; others passed on
+        if issubclass(w.category, FitNotConvergedWarning):
+            state.unconverged_fits += 1
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
 def _add(model, obs: Observations) -> None:

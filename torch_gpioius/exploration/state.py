@@ -123,6 +123,7 @@ class ExplorationState:
     failed_recoveries: int = 0
     reapproaches: int = 0
     reapproach_travel: float = 0.0
+    unconverged_fits: int = 0
     terminated: str | None = None
     centre: np.ndarray | None = None
     surface: object = None

@@ -28,6 +28,13 @@ INNER = 0
 #: Task id of the outer (visual) shape.
 OUTER = 1
 
+class FitNotConvergedWarning(RuntimeWarning):
+    """``fit()`` stopped at its iteration cap before the projected gradient met its tolerance. The model keeps the
+    best K_t found; on a flat likelihood (few contacts) that is within rounding of the optimum in the marginal
+    likelihood, and ``fit_result`` says how far the gradient was from zero. Nothing for a user to do unless K_t
+    itself is the result they report; an exploration counts these fits and says so once at the end."""
+
+
 class UnidentifiedSimilarityWarning(UserWarning):
     """The data observe only one task, so the similarity between the shapes cannot be learned from them."""
 
@@ -345,8 +352,9 @@ class GPIOIS(ImplicitSurfaceGP):
                           "K_t[0,1] is unidentified (reported as NaN); only the observed task's variance was learned",
                           UnidentifiedSimilarityWarning, stacklevel=2)
         if not best.converged:
-            warnings.warn(f"GPIOIS.fit: K_t optimisation stopped after {best.iterations} iterations with "
-                          f"projected gradient {best.grad_norm:.3g}", RuntimeWarning, stacklevel=2)
+            warnings.warn(f"GPIOIS.fit: K_t's fit stopped at its cap of {best.iterations} iterations, short of the "
+                          f"optimum (projected gradient {best.grad_norm:.3g}); the best K_t found is used "
+                          "(fit_result has the details)", FitNotConvergedWarning, stacklevel=2)
         self.task_covariance = best.task_covariance
         self.fit_result = best
         return self
