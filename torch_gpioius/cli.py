@@ -96,6 +96,8 @@ def _fit(args: argparse.Namespace) -> int:
     else:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")
+    if info.get("converged") is False:
+        print("  (K_t's fit stopped at its iteration cap, short of the optimum: this is the best K_t found)")
     if not info["estimate"]:
         print("no estimate: the inner zero level {mu_in = 0} has no surface in the data's box, so there is no shape to "
               "show or export (too few contacts, or units other than metres?)")
@@ -523,6 +525,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with torch_threads(getattr(args, "threads", 1)), warnings.catch_warnings():
             warnings.showwarning = _one_line_warning
+            from .models.gpiois import FitNotConvergedWarning
+
+            # a fit at its iteration cap uses the best K_t found: `fit` says so in its report, other commands keep
+            # quiet about it (nothing for a user to act on)
+            warnings.simplefilter("ignore", FitNotConvergedWarning)
             return args.func(args)
     except (ValueError, OSError, RuntimeError, ImportError) as exc:
         message = " ".join(str(exc).split())

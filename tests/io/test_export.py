@@ -68,7 +68,9 @@ def test_bad_requests_are_one_line_and_leave_nothing(log_2d, dataset_3d, tmp_pat
         (["export", str(log_2d)], "nothing to write"),
         (["export", str(log_2d), "--mesh", str(tmp_path / "x.stl")], "a 2-D estimate is a set of closed curves"),
         (["export", str(dataset_3d), "--mesh", str(tmp_path / "x.svg")], "a 3-D estimate is a mesh"),
-        (["export", str(log_2d), "--mesh", str(tmp_path / "x.svg"), "--step", "-3"], "precedes the run's first step"),
+        (["export", str(log_2d), "--mesh", str(tmp_path / "x.svg"), "--step", "-3"], "is outside the run's steps 0-"),
+        # issue 35, item 7: past the end it exported the last step silently; both ends are refused alike now
+        (["export", str(log_2d), "--mesh", str(tmp_path / "x.svg"), "--step", "40"], "is outside the run's steps 0-"),
         (["export", str(tmp_path / "missing.gpioius"), "--mesh", str(tmp_path / "x.svg")], "missing.gpioius"),
     ]
     for argv, expected in cases:

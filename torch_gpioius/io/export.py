@@ -151,9 +151,13 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
         if target is not None:
             check_new_file(target, force, "export")
     history = load_run(run)
+    if step is not None and (isinstance(step, bool) or not isinstance(step, (int, np.integer))):
+        raise ValueError(f"export: step must be a step number, got {step!r}")
+    if step is not None and not history.steps[0] <= int(step) <= history.steps[-1]:
+        # both ends alike: a step past the end (`--step 40` on a 10-step log) is refused as one before the start
+        raise ValueError(f"export: step {step} is outside the run's steps {history.steps[0]}-{history.steps[-1]} "
+                         f"({len(history.steps)} recorded); omit --step for the last")
     k = history.steps[-1] if step is None else history.nearest_step(int(step))
-    if step is not None and int(step) < history.steps[0]:
-        raise ValueError(f"export: step {step} precedes the run's first step {history.steps[0]}")
     model = history.model_at(k)
     ds = history.states[k]
     dim = history.dim

@@ -104,6 +104,7 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
             "theta": float(f"{model.theta:.15g}"), "noise": float(f"{model.noise:.15g}"),
             "mll": float(model.log_marginal_likelihood())}
     if isinstance(model, GPIOIS):
+        info["converged"] = bool(getattr(model.fit_result, "converged", True))
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
                     correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)))
     from .export import grid_resolution
