@@ -179,3 +179,16 @@ def test_quoted_output_is_what_the_command_prints(page, cmd, quoted, capsys, mon
     monkeypatch.chdir(ROOT)
     assert main(shlex.split(cmd)[1:]) == 0
     assert capsys.readouterr().out.rstrip("\n").splitlines() == quoted, f"{page} quotes other output for `{cmd}`"
+
+
+def test_the_readme_tables_writing_commands_each_name_their_own_folder():
+    """Issue 35, item 6: the table's commands could not run in order (two wrote the same default folder)."""
+    table = [line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith("| ")]
+    commands = [c for line in table for c in re.findall(r"`(gpioius (?:simulate3d|simulate|study) [^`]*)`", line)]
+    assert len(commands) >= 5
+    outs = []
+    for c in commands:
+        argv = shlex.split(c)
+        assert "--out" in argv, f"README: `{c}` writes the command's default folder; name one"
+        outs.append(argv[argv.index("--out") + 1])
+    assert len(set(outs)) == len(outs), f"README: two commands write one folder: {outs}"

@@ -272,7 +272,8 @@ def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "p" / "runs.csv")))
     assert rows[0]["failed"] == "" and json.loads((tmp_path / "p" / "runs" / "ball_visual-tactile_0.json")
                                                    .read_text())["touch"] == "patch"
-    with pytest.raises(FileExistsError, match=r"touch='patch'.* this one is touch=None"):
+    # issue 35, item 6: the point default read "touch=None"
+    with pytest.raises(FileExistsError, match=r"touch='patch'.* this one is touch='point'"):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,
                   backend="local", progress=False)
     with pytest.raises(ValueError, match="touch"):

@@ -151,13 +151,22 @@ def claim_folder(path: str | os.PathLike, command: str, force: bool = False, *, 
         want = {"command": command, **identity}
         clash = {k: info.get(k) for k, v in want.items() if info.get(k) != v and not (k in added and k not in info)}
         if clash:
-            held = ", ".join(f"{k}={v!r}" for k, v in clash.items())
-            asked = ", ".join(f"{k}={want[k]!r}" for k in clash)
+            # None stands for a setting's default in older markers (touch=None: point touches); name it so
+            held = ", ".join(f"{k}={_shown(k, v)!r}" for k, v in clash.items())
+            asked = ", ".join(f"{k}={_shown(k, want[k])!r}" for k in clash)
             raise FileExistsError(f"{p}: holds the output of another run ({held}); this one is {asked}; pass --force "
                                   "to write into it anyway or choose another --out")
     p.mkdir(parents=True, exist_ok=True)
     atomic_write(p / MARKER, json.dumps({"command": command, **identity, "version": __version__}))
     return p
+
+
+#: How a marker's None reads for the identity keys whose default is recorded as None.
+_DEFAULT_NAMES = {"touch": "point", "voxel": "the world's default", "outer_tol": "exact"}
+
+
+def _shown(key: str, value):
+    return _DEFAULT_NAMES.get(key, value) if value is None else value
 
 
 class FolderLock:
