@@ -130,3 +130,52 @@ def test_the_loop_is_short(name):
     tree = ast.parse((PACKAGE / "exploration" / "loop.py").read_text())
     fn = next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == name)
     assert fn.end_lineno - fn.lineno + 1 <= 80
+
+
+def _module_graph() -> dict[str, set[str]]:
+    """Module -> the package's modules it imports (module level and inside functions; a package's ``__init__`` and
+    the deprecated-name forwards in ``__getattr__`` left out), by dotted path under the package."""
+    graph: dict[str, set[str]] = {}
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE)
+        if rel.name == "__init__.py":
+            continue
+        me = ".".join(rel.with_suffix("").parts)
+        out = graph.setdefault(me, set())
+        tree = ast.parse(path.read_text())
+        shims = {n for f in ast.walk(tree) if isinstance(f, ast.FunctionDef) and f.name in SHIMS for n in ast.walk(f)}
+        pkg = list(rel.parts[:-1])
+        for node in ast.walk(tree):
+            if not (isinstance(node, ast.ImportFrom) and node.level > 0) or node in shims:
+                continue
+            base = pkg[:len(pkg) - (node.level - 1)] if node.level > 1 else pkg
+            target = base + (node.module.split(".") if node.module else [])
+            for name in [a.name for a in node.names]:
+                for parts in (target + [name], target):          # a submodule by name, else the module itself
+                    f = PACKAGE.joinpath(*parts)
+                    if f.with_suffix(".py").is_file() if parts else False:
+                        out.add(".".join(parts))
+                        break
+    return graph
+
+
+def test_no_two_modules_import_each_other():
+    """Issue 35, item 21: io/export.py and io/offline.py imported each other, and sensors/pointcloud.py reached up
+    into io/importers.py, which imports it; a circle between modules, even through function-level imports."""
+    graph = _module_graph()
+    assert "io.export" in graph["io.offline"] or "surfaces" in graph["io.offline"]
+    circles, state = [], {}
+
+    def visit(m, stack):
+        state[m] = 1
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == 1:
+                circles.append(" -> ".join(stack[stack.index(n):] + [n]))
+            elif n not in state:
+                visit(n, stack + [n])
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m, [m])
+    assert not circles, "modules that import each other:\n" + "\n".join(circles)

@@ -13,8 +13,26 @@ from ._validation import as_bounds
 from .geometry import predict_mean_task, predict_task
 from .polylines import distance_to_segments, segments
 
-__all__ = ["GridField", "evaluate_grid", "zero_level_curves", "zero_level_mesh", "closed_curves", "touched_pieces",
-           "surface_samples", "clip_mesh"]
+__all__ = ["data_bounds", "grid_resolution", "GridField", "evaluate_grid", "zero_level_curves", "zero_level_mesh",
+           "closed_curves", "touched_pieces", "surface_samples", "clip_mesh"]
+
+
+def data_bounds(x: np.ndarray, pad: float = 0.05) -> np.ndarray:
+    """`(2, d)` box [min corner; max corner] of `(n, d)` points, padded by ``pad`` [m]."""
+    return np.stack([x.min(0) - pad, x.max(0) + pad])
+
+
+def grid_resolution(resolution, dim: int, default_2d: float = 0.005, default_3d: float = 0.01) -> float:
+    """The grid spacing [m] of an estimate: ``resolution`` checked (1 mm to 50 cm), or the default when None.
+
+    Raises:
+        ValueError: zero, negative, NaN or out of range (0 used to mean the default silently).
+    """
+    from ._validation import as_float
+
+    if resolution is None:
+        return default_2d if dim == 2 else default_3d
+    return as_float(resolution, "resolution", lo=1e-3, hi=0.5, positive=True, unit="m")
 
 
 @dataclass

@@ -310,7 +310,7 @@ class RunViewer:
     def _estimate(self, k: int):
         key = (self.run.path, k)
         if key not in self._cache:
-            from .io.offline import data_bounds
+            from .surfaces import data_bounds
             from .io.runs import estimate_surface
             from .metrics import prior_variance
             from .models.gpiois import UnidentifiedSimilarityWarning

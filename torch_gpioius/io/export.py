@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import as_bounds
+from ..surfaces import data_bounds, grid_resolution  # noqa: F401  (grid_resolution: re-exported, its 0.3 home)
 from .datasets import DatasetError
 from .outputs import atomic_write, check_distinct, check_new_file
 
@@ -25,19 +26,6 @@ def _colours(variance: np.ndarray, prior: float) -> np.ndarray:
     from matplotlib import colormaps
 
     return (colormaps["Purples"](np.clip(variance / prior, 0.0, 1.0)) * 255).round().astype(np.uint8)
-
-
-def grid_resolution(resolution, dim: int, default_2d: float = 0.005, default_3d: float = 0.01) -> float:
-    """The grid spacing [m] of an estimate: ``resolution`` checked (1 mm to 50 cm), or the default when None.
-
-    Raises:
-        ValueError: zero, negative, NaN or out of range (0 used to mean the default silently).
-    """
-    from .._validation import as_float
-
-    if resolution is None:
-        return default_2d if dim == 2 else default_3d
-    return as_float(resolution, "resolution", lo=1e-3, hi=0.5, positive=True, unit="m")
 
 
 def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> Path:
@@ -141,7 +129,6 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
         FileExistsError: an output exists and ``force`` is False.
     """
     from ..metrics import prior_variance
-    from .offline import data_bounds
     from .runs import estimate_surface, load_run
 
     if mesh is None and outer is None:

@@ -61,7 +61,7 @@ def export_mcap(run: str | os.PathLike, path: str | os.PathLike, *, every: int |
         import foxglove  # noqa: F401
     except ImportError as exc:  # pragma: no cover - extra missing
         raise ImportError("MCAP export needs the 'foxglove' extra: pip install 'torch_gpioius[foxglove]'") from exc
-    from .export import grid_resolution
+    from ..surfaces import grid_resolution
     from .outputs import check_new_file
     from .runs import load_run
 
@@ -95,7 +95,7 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
     from matplotlib import colormaps
 
     from ..metrics import prior_variance
-    from .offline import data_bounds
+    from ..surfaces import data_bounds
     from .runs import estimate_surface
 
     steps = history.steps

@@ -16,14 +16,9 @@ from .outputs import FolderLock, StagedFiles, atomic_write
 from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
 from ..models.gpiois import GPIOIS, INNER
 from ..metrics import hausdorff_distance, uncertainty_measure
-from ..surfaces import closed_curves, evaluate_grid, zero_level_curves, zero_level_mesh
+from ..surfaces import closed_curves, data_bounds, evaluate_grid, grid_resolution, zero_level_curves, zero_level_mesh
 
 __all__ = ["fit_dataset", "replay_log", "data_bounds"]
-
-
-def data_bounds(x: np.ndarray, pad: float = 0.05) -> np.ndarray:
-    """`(2, d)` box [min corner; max corner] of `(n, d)` points, padded by ``pad`` [m]."""
-    return np.stack([x.min(0) - pad, x.max(0) + pad])
 
 
 def _markers(ax, ds: Dataset, dim: int) -> None:
@@ -107,8 +102,6 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
         info["converged"] = bool(getattr(model.fit_result, "converged", True))
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
                     correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)))
-    from .export import grid_resolution
-
     res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
     info["estimate"] = has_surface(model, ds.x, res)
     if out is not None:

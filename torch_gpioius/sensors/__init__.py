@@ -22,10 +22,9 @@ __all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "Senso
 
 
 def __getattr__(name):
-    if name == "FilePointCloud":
-        from . import pointcloud
-
-        return pointcloud.__getattr__(name)
+    if name == "FilePointCloud":          # forwarded to io until 0.3; reading files is io's business
+        raise AttributeError("torch_gpioius.sensors.FilePointCloud moved to torch_gpioius.io.FilePointCloud (the "
+                             "forward from sensors is gone: sensors no longer imports io)")
     if name == "PenaltyContact":          # "penalty" names only the planner's range cost C(x) now
         import warnings
 

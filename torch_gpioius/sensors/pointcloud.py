@@ -242,16 +242,3 @@ class SimulatedDepthCamera(PointCloudSource):
             p_cam = p_cam[self._rng.uniform(size=len(p_cam)) >= self.dropout]
         R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
         return PointCloud(p_cam @ R.T + t, t.copy())
-
-
-def __getattr__(name):
-    # FilePointCloud reads files, which is io's business; its 0.2 home forwards to it with a warning
-    if name == "FilePointCloud":
-        import warnings
-
-        from ..io.importers import FilePointCloud
-
-        warnings.warn("torch_gpioius.sensors.FilePointCloud is torch_gpioius.io.FilePointCloud now", DeprecationWarning,
-                      stacklevel=2)
-        return FilePointCloud
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
