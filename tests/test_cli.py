@@ -298,3 +298,34 @@ def test_an_exploration_says_once_how_many_fits_stopped_short(monkeypatch):
     mine = [str(c.message) for c in caught if issubclass(c.category, FitNotConvergedWarning)]
     assert mine[-1].startswith("explore: K_t's fit stopped at its iteration cap") and "at 4 of 4 steps" in mine[-1]
     assert len(mine) <= 2          # the first fit (before exploring) may warn itself; the steps' are counted
+
+
+def test_fit_reads_a_users_contacts_csv_and_cloud_with_units_and_camera_free_space(tmp_path, capsys):
+    """Issue 35, item 5: `gpioius fit touches.csv` gave "bad magic bytes" and --cloud was unknown."""
+    import json
+
+    import trimesh
+
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(40, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    c = np.array([500.0, 0.0, 250.0])                                   # millimetres
+    rows = ["x,y,z,label"] + [f"{p[0]:.2f},{p[1]:.2f},{p[2]:.2f},contact" for p in d[:30] * 80 + c] + \
+        [f"{p[0]:.2f},{p[1]:.2f},{p[2]:.2f},free" for p in d[30:] * 110 + c]
+    (tmp_path / "touch.csv").write_text("\n".join(rows) + "\n")
+    shell = trimesh.creation.icosphere(3, radius=90).vertices + c
+    trimesh.PointCloud(shell[shell[:, 0] < c[0] + 30]).export(tmp_path / "cloud.ply")
+    csv, cloud = str(tmp_path / "touch.csv"), str(tmp_path / "cloud.ply")
+    assert main(["fit", csv, "--cloud", cloud]) == 2                     # metres assumed: named as units
+    assert "--units mm" in capsys.readouterr().err
+    out = tmp_path / "fit"
+    assert main(["fit", csv, "--cloud", cloud, "--units", "mm", "--voxel", "0.02", "--out", str(out)]) == 0
+    plain = json.loads((out / "fit.json").read_text())
+    assert plain["n_inner"] == 40 and plain["n_outer"] > 100
+    assert main(["fit", csv, "--cloud", cloud, "--units", "mm", "--voxel", "0.02", "--camera-origin", "-500 0 600",
+                 "--out", str(out)]) == 0
+    with_free = json.loads((out / "fit.json").read_text())
+    assert with_free["n_outer"] > plain["n_outer"]                       # the camera's free space was added
+    assert "touch.csv: 4" in capsys.readouterr().out
+    assert main(["fit", str(EXAMPLE), "--cloud", cloud]) == 2            # a .gpioius file holds its own cloud
+    assert "go with a contacts CSV" in capsys.readouterr().err

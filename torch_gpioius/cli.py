@@ -83,7 +83,22 @@ def _fit(args: argparse.Namespace) -> int:
         from .io.outputs import claim_folder
 
         claim_folder(args.out, "fit", args.force)
-    info = fit_dataset(args.dataset, args.out, theta=args.theta, noise=args.noise)
+    source = args.dataset
+    own = Path(args.dataset).suffix.lower() == ".csv"
+    if not own and (args.cloud or args.camera_origin or args.units != "m"):
+        raise ValueError("fit: --cloud, --units and --camera-origin go with a contacts CSV (a .gpioius file holds "
+                         "its own cloud, in metres)")
+    if own:
+        from .io.importers import dataset_from_files
+
+        origin = None
+        if args.camera_origin is not None:
+            origin = [float(v) for v in args.camera_origin.replace(",", " ").split()] or None
+        ds = dataset_from_files(args.dataset, args.cloud, units=args.units, voxel=args.voxel or None,
+                                camera_origin=origin)
+        ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, args.cloud) if p)
+        source = ds
+    info = fit_dataset(source, args.out, theta=args.theta, noise=args.noise)
     print(f"{args.dataset}: {info['n']} observations ({info['n_inner']} inner, {info['n_outer']} outer), "
           f"theta = {info['theta']:g} m, sigma^2 = {info['noise']:g}")
     if "task_covariance" in info:
@@ -399,7 +414,16 @@ def build_parser() -> argparse.ArgumentParser:
                                      "dataset or exploration log (docs/data-format.md): prints K_t, the correlation, "
                                      "the paper's similarity and the marginal likelihood; with --out saves model.pt, "
                                      "fit.png and fit.json.")
-    fit.add_argument("dataset", help="dataset or exploration log file (.gpioius)")
+    fit.add_argument("dataset", help="dataset or exploration log file (.gpioius), or your contacts as a CSV "
+                                     "(x,y[,z],label[,step]; docs/tutorials/own-data.md)")
+    fit.add_argument("--cloud", default=None, help="with a contacts CSV: the camera's point cloud (PLY, PCD, XYZ, "
+                                                   "NPZ) in the same frame")
+    fit.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the CSV and the cloud")
+    fit.add_argument("--voxel", type=_voxel, default=0.05, help="voxel edge of the cloud [m] (0: every point)")
+    fit.add_argument("--camera-origin", default=None, metavar='"X Y Z"',
+                     help="the camera's optical centre in the files' frame and units: adds the free space in front "
+                          "of the seen surface (without it the model knows where the cover is, not which side is "
+                          "empty)")
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
     fit.add_argument("--theta", type=float, default=None, help="IMQ theta [m] (default: the file's, else 0.1)")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 (default: the file's, else 0.006)")

@@ -26,6 +26,10 @@ def _scale(units: str, path: Path) -> float:
     return _SCALE[units]
 
 
+def _units_hint(units: str) -> str:
+    return f"read as {units!r}; give the file's units: units='mm' in Python, --units mm on the command line"
+
+
 def _read_pcd(path: Path) -> np.ndarray:
     """x, y, z of an ASCII or binary (uncompressed) PCD file.
 
@@ -204,7 +208,7 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
         raise DatasetError(f"{path}: the point cloud holds no (finite) points")
     pts = pts * scale
     try:
-        check_metres(pts, str(path), hint=f"give its units, e.g. units='mm' (the file was read as {units!r})")
+        check_metres(pts, str(path), hint=_units_hint(units))
     except ValueError as exc:
         raise DatasetError(str(exc)) from None
     if voxel is None:
@@ -274,7 +278,7 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
         steps.append(st)
     xs = np.asarray(xs) * scale
     try:
-        check_metres(xs, str(path), hint=f"give its units, e.g. units='mm' (the file was read as {units!r})")
+        check_metres(xs, str(path), hint=_units_hint(units))
     except ValueError as exc:
         raise DatasetError(str(exc)) from None
     return xs, np.asarray(ys), np.asarray(steps, dtype=np.int64)
@@ -282,22 +286,68 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
 
 def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud: str | os.PathLike | None = None, *,
                        units: str = "m", voxel: float | None = 0.05, theta: float | None = None,
-                       noise: float | None = None, source: str = "import") -> Dataset:
-    """Combine a contact CSV (inner, task 0) and a point cloud (outer surface, task 1, step 0) into a Dataset."""
+                       noise: float | None = None, source: str = "import", camera_origin=None) -> Dataset:
+    """Combine a contact CSV (inner, task 0) and a point cloud (outer, task 1, step 0) into a Dataset.
+
+    Args:
+        contacts_csv: the contacts (:func:`load_contacts_csv`).
+        point_cloud: the camera's cloud, in the contacts' frame (:func:`load_point_cloud`), or None.
+        units: both files' units ("m", "cm", "mm").
+        voxel: voxel edge of the cloud [m] (None: every point).
+        theta, noise: hyperparameters recorded in the dataset (the model's defaults otherwise).
+        source: the dataset's ``source``.
+        camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None. With it the
+            dataset also holds the camera's free space (y = 1, task 1): points 2 cm in front of the seen surface
+            along each ray, half the information vision gives (the model otherwise only knows where the surface
+            is, not which side is empty).
+
+    Raises:
+        DatasetError: an unreadable file, units that cannot be metres, a 3-D cloud with 2-D contacts, or a bad
+            ``camera_origin`` (each names the file or argument).
+    """
     x_in, y_in, step_in = load_contacts_csv(contacts_csv, units=units)
     parts = [(x_in, y_in, np.zeros(len(x_in), np.int64), step_in)]
+    if camera_origin is not None and point_cloud is None:
+        raise DatasetError("camera_origin: gives the free space in front of a point cloud; pass point_cloud too")
     if point_cloud is not None:
-        pts = load_point_cloud(point_cloud, units=units, voxel=voxel)
+        if camera_origin is None:
+            pts, y_out = load_point_cloud(point_cloud, units=units, voxel=voxel), None
+        else:
+            pts, y_out = _seen_and_free(point_cloud, units, voxel, camera_origin)
         if pts.shape[1] != x_in.shape[1]:
             raise DatasetError(f"{point_cloud}: a 3-D point cloud needs a 3-D contact CSV (x, y, z)")
-        parts.append((pts, np.zeros(len(pts)), np.ones(len(pts), np.int64), np.zeros(len(pts), np.int64)))
+        y_out = np.zeros(len(pts)) if y_out is None else y_out
+        parts.append((pts, y_out, np.ones(len(pts), np.int64), np.zeros(len(pts), np.int64)))
     x, y, task, step = (np.concatenate(a) for a in zip(*parts))
     meta = {"source": source, "voxel_size": voxel if point_cloud is not None else None}
+    if camera_origin is not None:
+        meta["camera_origin"] = [float(v) * _SCALE[units] for v in np.asarray(camera_origin, dtype=float).ravel()]
     if theta is not None:
         meta["theta"] = theta
     if noise is not None:
         meta["noise"] = noise
     return Dataset(x, y, task, step, meta=meta)
+
+
+def _seen_and_free(point_cloud, units: str, voxel: float | None, camera_origin) -> tuple[np.ndarray, np.ndarray]:
+    """The cloud's surface points (y = 0) and the free space in front of them along the rays to ``camera_origin``
+    (y = 1), as vision gives them in an exploration (:func:`torch_gpioius.exploration.vision_observations`)."""
+    from ..exploration.observations import ObservationPolicy, vision_observations
+
+    try:
+        origin = np.asarray(camera_origin, dtype=np.float64).reshape(-1) * _scale(units, Path(point_cloud))
+    except (TypeError, ValueError):
+        raise DatasetError(f"camera_origin: expected 3 numbers, got {camera_origin!r}") from None
+    if origin.shape != (3,) or not np.isfinite(origin).all():
+        raise DatasetError(f"camera_origin: expected 3 finite numbers, got {camera_origin!r}")
+    pts = load_point_cloud(point_cloud, units=units)
+    try:
+        check_metres(np.vstack([pts, origin]), f"{point_cloud} with camera_origin",
+                     hint="the camera origin is in the cloud's frame and units")
+        policy = ObservationPolicy().with_voxel(0.0 if voxel is None else voxel)
+        return vision_observations(PointCloud(pts, origin), policy)
+    except ValueError as exc:
+        raise DatasetError(str(exc)) from None
 
 
 class FilePointCloud(PointCloudSource):

@@ -81,9 +81,16 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
     plt.close(fig)
 
 
-def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *, theta: float | None = None,
-                noise: float | None = None, resolution: float | None = None) -> dict:
+def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None = None, *,
+                theta: float | None = None, noise: float | None = None, resolution: float | None = None) -> dict:
     """Learn K_t on a dataset (or the final state of a log); save a checkpoint and a figure.
+
+    Args:
+        path: a ``.gpioius`` dataset or log, or a :class:`Dataset` (e.g. from
+            :func:`torch_gpioius.io.importers.dataset_from_files`).
+        out: folder for ``model.pt``, ``fit.png`` and ``fit.json`` (None: write nothing).
+        theta, noise: hyperparameters (default: the dataset's, else the model's).
+        resolution: grid spacing of the estimate [m].
 
     Returns:
         ``{"n", "task_covariance", "similarity", "correlation", "correlation_interval", "mll", "checkpoint",
@@ -91,7 +98,8 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
         figure's grid); ``correlation_interval`` is the 95 % profile-likelihood interval of the correlation
         (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
-    ds = load_dataset(path)
+    ds = path if isinstance(path, Dataset) else load_dataset(path)
+    path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
     model = ds.to_model(theta=theta, noise=noise).fit()
     # 15 significant digits: theta passes through GPyTorch's positive constraint (softplus and back), which
     # leaves rounding in the last digit (0.10000000000000002) that a reader should not see
@@ -112,7 +120,8 @@ def fit_dataset(path: str | os.PathLike, out: str | os.PathLike | None = None, *
         with FolderLock(out, "gpioius fit"), StagedFiles(out) as staged:
             save_checkpoint(model, staged.path / "model.pt", extra={"dataset": str(path)})
             _plot_estimate(model, ds, staged.path / "fit.png",
-                           f"{Path(path).name}: estimated inner shape over its variance", res)
+                           f"{' + '.join(Path(p).name for p in str(path).split(' + '))}: estimated inner shape "
+                           "over its variance", res)
             info["checkpoint"], info["figure"] = str(out / "model.pt"), str(out / "fit.png")
             atomic_write(staged.path / "fit.json", json.dumps(info, indent=2))
     return info
