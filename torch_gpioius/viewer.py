@@ -124,7 +124,8 @@ def origin_allowed(origin: str | None, host_header: str | None, bound_host: str,
       other site's page is refused (cross-site WebSocket hijacking).
 
     Args:
-        origin, host_header: the handshake's headers (None where absent).
+        origin: the handshake's ``Origin`` header (None where absent).
+        host_header: its ``Host`` header (None where absent).
         bound_host: the interface the viewer serves on.
         allowed_hosts: further host names the user named.
         machine: this machine's names (default: :func:`machine_names`, looked up when bound to all interfaces).

@@ -294,7 +294,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud: str | os.Pa
         point_cloud: the camera's cloud, in the contacts' frame (:func:`load_point_cloud`), or None.
         units: both files' units ("m", "cm", "mm").
         voxel: voxel edge of the cloud [m] (None: every point).
-        theta, noise: hyperparameters recorded in the dataset (the model's defaults otherwise).
+        theta: the IMQ kernel's theta [m] recorded in the dataset (the model's default otherwise).
+        noise: sigma^2 recorded in the dataset (the model's default otherwise).
         source: the dataset's ``source``.
         camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None. With it the
             dataset also holds the camera's free space (y = 1, task 1): points 2 cm in front of the seen surface

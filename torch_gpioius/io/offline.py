@@ -89,7 +89,8 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         path: a ``.gpioius`` dataset or log, or a :class:`Dataset` (e.g. from
             :func:`torch_gpioius.io.importers.dataset_from_files`).
         out: folder for ``model.pt``, ``fit.png`` and ``fit.json`` (None: write nothing).
-        theta, noise: hyperparameters (default: the dataset's, else the model's).
+        theta: the IMQ kernel's theta [m] (default: the dataset's, else the model's).
+        noise: sigma^2 (default: the dataset's, else the model's).
         resolution: grid spacing of the estimate [m].
 
     Returns:
