@@ -106,9 +106,10 @@ class ProgressRecorder(Recorder):
 
     def start(self, run, state) -> None:
         budget = run.config.budget
+        # "object H, visual-tactile: travel [cm]" (the old "H visual-tactile [cm]" read like a Hausdorff distance)
+        what = "travel [cm]" if budget else "steps"
         self._bar = progress_reporter(round(budget * 100) if budget else run.config.max_steps,
-                                      f"{run.world.name or 'world'} {run.config.mode}{' [cm]' if budget else ''}",
-                                      self.enabled)
+                                      f"object {run.world.name or 'world'}, {run.config.mode}: {what}", self.enabled)
         self._bar.update(self._done(run, state))
 
     def step(self, run, state, record) -> None:
