@@ -329,3 +329,17 @@ def test_fit_reads_a_users_contacts_csv_and_cloud_with_units_and_camera_free_spa
     assert "touch.csv: 4" in capsys.readouterr().out
     assert main(["fit", str(EXAMPLE), "--cloud", cloud]) == 2            # a .gpioius file holds its own cloud
     assert "go with a contacts CSV" in capsys.readouterr().err
+
+
+def test_fit_says_when_there_is_no_estimate(tmp_path, capsys):
+    """Issue 33, item 5: a fit whose inner zero level has no surface in the data's box said nothing."""
+    from torch_gpioius.io.datasets import Dataset, save_dataset
+
+    rng = np.random.default_rng(1)
+    x = rng.uniform(-0.1, 0.1, size=(30, 2))
+    free_only = save_dataset(Dataset(x, np.ones(30), np.zeros(30, np.int64), np.zeros(30, np.int64)),
+                             tmp_path / "free.gpioius")                # free space only: mu > 0 everywhere
+    assert main(["fit", str(free_only)]) == 0
+    assert "no estimate: the inner zero level {mu_in = 0} has no surface" in capsys.readouterr().out
+    assert main(["fit", str(EXAMPLE)]) == 0
+    assert "no estimate" not in capsys.readouterr().out
