@@ -79,7 +79,28 @@ def test_fraction_labels_never_overprint(tmp_path):
     renderer = fig.canvas.get_renderer()
     boxes = [t.get_window_extent(renderer) for t in labels]
     assert all(not a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    # issue 35, item 13: on fig4_D "10 %" and "25 %" did not overprint but touched ("10 %25 %"); keep a gap
+    gap = 0.4 * 7 * fig.dpi / 72
+    same_row = [(a, b) for i, a in enumerate(boxes) for b in boxes[i + 1:] if abs(a.y0 - b.y0) < 1]
+    assert all(b.x0 - a.x1 >= gap - 1e-6 or a.x0 - b.x1 >= gap - 1e-6 for a, b in same_row)
     plt.close(fig)
+
+
+def test_fig10_with_one_object_keeps_its_title_and_legend_inside(short_pair, tmp_path):
+    """Issue 35, item 12: with one object the title and the legend ran off both edges."""
+    from torch_gpioius.studies.figures import figure_similarity
+
+    _, pair, _ = short_pair
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = figure_similarity({"E": pair}, tmp_path / "fig10.png", "Similarity transitions (cf. Fig. 10)")
+    canvas = FigureCanvasAgg(fig)                      # the figure was closed after saving
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    width = fig.get_size_inches()[0] * fig.dpi
+    for artist in [fig._suptitle, *fig.legends]:
+        box = artist.get_window_extent(renderer)
+        assert box.x0 >= 0 and box.x1 <= width, artist
 
 
 def test_fig5_gives_each_object_its_own_panel_and_band(short_pair, tmp_path):

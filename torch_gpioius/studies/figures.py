@@ -72,7 +72,9 @@ def fraction_labels(ax, xs, texts, fontsize: float = 7) -> list:
             t = ax.annotate(text, (x, 1.0), xycoords=("data", "axes fraction"), xytext=(0, 2 + 9 * level),
                             textcoords="offset points", fontsize=fontsize, ha="center", va="bottom", color="0.35")
             box = t.get_window_extent(renderer)
-            if not any(box.overlaps(b) for b in placed):
+            gap = 0.4 * fontsize * fig.dpi / 72           # labels that merely touch read as one ("10 %25 %")
+            padded = box.expanded(1.0 + 2 * gap / max(box.width, 1e-9), 1.0)
+            if not any(padded.overlaps(b) for b in placed):
                 placed.append(box)
                 out.append(t)
                 break
@@ -338,10 +340,16 @@ def figure_similarity(traces: dict, path: Path, title: str = "Similarity transit
             ax.tick_params(labelsize=7)
     axes[0, 0].set_ylabel("task correlation\n$K_t[0,1]/\\sqrt{K_t[0,0]K_t[1,1]}$", fontsize=8)
     axes[1, 0].set_ylabel("paper's similarity $K_t[0,1]/K_t[0,0]$\n(a ratio: can exceed 1)", fontsize=8)
-    fig.suptitle(title + ": the correlation with its interval (top), the paper's ratio (bottom)", fontsize=10)
-    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    import textwrap
+
+    # one object leaves a narrow figure: the title wraps and the legend stacks, instead of running off both edges
+    width = fig.get_size_inches()[0]
+    fig.suptitle(textwrap.fill(title + ": the correlation with its interval (top), the paper's ratio (bottom)",
+                               int(width * 10.5)), fontsize=10)
+    ncol = 3 if cols > 1 else 1
+    fig.tight_layout(rect=(0, 0.06 if ncol == 3 else 0.11, 1, 1))
     h, lab = axes[0, 0].get_legend_handles_labels()
-    legend_below(fig, h + [plt.Line2D([], [], color="0.3")], lab + ["paper's ratio (dashed: 1)"], ncol=3)
+    legend_below(fig, h + [plt.Line2D([], [], color="0.3")], lab + ["paper's ratio (dashed: 1)"], ncol=ncol)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return fig
