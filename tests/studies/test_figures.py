@@ -55,6 +55,12 @@ def test_fig4_keeps_legends_off_the_data_and_shows_both_modes_early(short_pair, 
     titles = [ax.get_title() for ax in fig.axes]
     assert sum("at 10 % of the travel" in t for t in titles) == 2 and sum(": final" in t for t in titles) == 2
     assert not any("times" in t for t in _tick_texts(fig))          # no "2x10^0" minor tick labels
+    # issue 35, item 14: the true shape is outlined (its fill vanished into the variance map) and every marker kind
+    # has a legend entry, the fraction markers included
+    legend_texts = [t.get_text() for lg in fig.legends for t in lg.get_texts()]
+    assert "true inner shape" in legend_texts and any(t.startswith("H at 10 / 25 / 50 %") for t in legend_texts)
+    outlines = [p for ax in fig.axes for p in ax.patches if p.get_label() == "true inner shape"]
+    assert outlines and all(p.get_linewidth() >= 1.5 and p.get_edgecolor()[3] == 1.0 for p in outlines)
     # a "touched pieces" curve is drawn only where it differs from the whole estimate's (it hid under it)
     for ax in fig.axes:
         for line in ax.lines:

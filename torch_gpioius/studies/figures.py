@@ -119,6 +119,8 @@ def _transitions(ax_u, ax_h, pair: dict, reference: str = "tactile") -> None:
             if len(ok):
                 i = ok[0]
                 ax_h.plot(tr.travel[i], 100 * tr.hausdorff[i], "o", color=st["color"], ms=5, mfc="white", zorder=4)
+    # the markers' legend entry in neutral grey (each mode draws them in its own colour)
+    ax_h.plot([], [], "o", color="0.35", ms=5, mfc="white", label="H at 10 / 25 / 50 % of the travel (the maps' moments)")
     for f in FRACTION_MARKS:
         for ax in (ax_u, ax_h):
             ax.axvline(f * total, color="0.75", lw=0.6, zorder=0)
@@ -157,7 +159,10 @@ def _map(ax, scene, model, path: np.ndarray, b: np.ndarray, resolution: float, t
     f = evaluate_grid(model, b, resolution, 0)
     rel_var = f.var / prior_variance(model, 0)   # fraction of the prior variance: comparable across modes
     im = ax.imshow(rel_var.T, origin="lower", extent=extent, cmap="Purples", vmin=0, vmax=1)
-    ax.fill(*scene.inner_boundary.T, color="tab:green", alpha=0.35, lw=0, label="true inner shape")
+    # a filled shape with a solid outline: the fill alone disappeared into the variance map's purple
+    ax.fill(*scene.inner_boundary.T, facecolor="tab:green", alpha=0.35, lw=0)
+    ax.fill(*scene.inner_boundary.T, facecolor="none", edgecolor="darkgreen", lw=1.6, zorder=3,
+            label="true inner shape")
     ax.plot(*scene.outer_boundary.T, "k-.", lw=1.2, label="outer shape (seen)")
     if len(path):
         ax.plot(*np.asarray(path).T, "-", color="0.35", lw=0.7, label="fingertip path")
