@@ -164,3 +164,19 @@ def test_a_log_panel_with_no_estimate_says_so_instead_of_failing(tmp_path):
     ax.plot([0.0, 1.0], [0.5, 2.0])
     log_axis(ax)
     assert ax.get_yscale() == "log"
+
+
+def test_fig5_legend_matches_what_is_drawn(short_pair, tmp_path):
+    """Issue 35, item 15: the legend's line styles did not match the per-object colours (and showed the dashed
+    reference as a solid line)."""
+    from torch_gpioius.studies.figures import figure_similarity
+
+    _, pair, _ = short_pair
+    fig = figure_similarity({"A": pair, "D": pair}, tmp_path / "fig5.png")
+    handles = fig.legends[0].legend_handles
+    labels = [t.get_text() for t in fig.legends[0].get_texts()]
+    dashed = [h for h, lab in zip(handles, labels) if "reference" in lab]
+    assert dashed and dashed[0].get_linestyle() == "--"
+    drawn = {ln.get_color() for ax in fig.axes for ln in ax.lines if ln.get_label() in ("correlation", "paper's ratio")}
+    assert len(drawn) == 2                                   # one colour per object ...
+    assert not any(getattr(h, "get_color", lambda: None)() in drawn for h in handles)   # ... none claimed by the key

@@ -353,8 +353,14 @@ def figure_similarity(traces: dict, path: Path, title: str = "Similarity transit
                                int(width * 10.5)), fontsize=10)
     ncol = 3 if cols > 1 else 1
     fig.tight_layout(rect=(0, 0.06 if ncol == 3 else 0.11, 1, 1))
-    h, lab = axes[0, 0].get_legend_handles_labels()
-    legend_below(fig, h + [plt.Line2D([], [], color="0.3")], lab + ["paper's ratio (dashed: 1)"], ncol=ncol)
+    from matplotlib.patches import Patch
+
+    # neutral handles: each object has its own colour, and the dashed line is the reference 1 (the legend showed
+    # the first object's colour for every curve and a solid line for the dashed one)
+    handles = [Patch(facecolor="0.5", alpha=0.3, label="95 % profile-likelihood interval (object's colour)"),
+               plt.Line2D([], [], color="0.3", label="correlation (top) / paper's ratio (bottom), object's colour"),
+               plt.Line2D([], [], color="0.6", lw=0.6, ls="--", label="ratio 1 (reference)")]
+    legend_below(fig, handles, [h.get_label() for h in handles], ncol=ncol)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return fig
