@@ -54,3 +54,35 @@ def test_staged_files_move_in_only_on_success(tmp_path):
             raise KeyError("stop")
     assert (tmp_path / "a.txt").read_text() == "new a"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "b.txt"]
+
+
+def test_the_3d_fit_figure_draws_a_certain_estimate_visibly_and_keeps_the_z_label_clear(tmp_path, monkeypatch):
+    """Issue 35, item 16: the 3-D fit.png drew the estimate white on white; the z label ran into the colour bar."""
+    import numpy as np
+    from matplotlib.figure import Figure
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    from torch_gpioius.io.datasets import Dataset
+
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(160, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    x = np.concatenate([0.06 * d[:40], 0.09 * d[40:60], 0.08 * d[60:]]) + [0.5, 0.0, 0.2]
+    y = np.r_[np.zeros(40), np.ones(20), np.zeros(100)]
+    task = np.r_[np.zeros(60), np.ones(100)].astype(np.int64)
+    grabbed = []
+    real = Figure.savefig
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: (grabbed.append(fig), real(fig, *a, **k))[1])
+    fit_dataset(Dataset(x, y, task, np.zeros(160, np.int64)), tmp_path / "fit", resolution=0.02)
+    fig = grabbed[0]
+    surf = next(c for ax in fig.axes for c in ax.collections if isinstance(c, Poly3DCollection))
+    r, g, b, _ = surf.get_cmap()(0.0)
+    assert 0.2126 * r + 0.7152 * g + 0.0722 * b < 0.85          # the certain end is not white
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)                      # the figure was closed after saving
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    ax3d = next(ax for ax in fig.axes if hasattr(ax, "zaxis"))
+    bar = next(ax for ax in fig.axes if ax is not ax3d)
+    assert not ax3d.zaxis.label.get_window_extent(renderer).overlaps(bar.get_window_extent(renderer))

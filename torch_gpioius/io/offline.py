@@ -68,13 +68,23 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
         fig = plt.figure(figsize=(7, 5.5))
         ax = fig.add_subplot(projection="3d")
         if mesh is not None:
+            from matplotlib import colormaps
+            from matplotlib.colors import LinearSegmentedColormap
+
+            # Purples from a visible lilac up: its white end drew a certain estimate white on the white figure
+            cmap = LinearSegmentedColormap.from_list("purples_visible", colormaps["Purples"](np.linspace(0.3, 1, 64)))
             _, var = model.predict(torch.tensor(np.asarray(mesh.triangles_center)), task=INNER)
             surf = ax.plot_trisurf(mesh.vertices[:, 0], mesh.vertices[:, 1], mesh.vertices[:, 2],
-                                   triangles=mesh.faces, cmap="Purples", linewidth=0, vmin=0, vmax=1)
+                                   triangles=mesh.faces, cmap=cmap, linewidth=0.1, edgecolor=(0.2, 0.1, 0.3, 0.25),
+                                   vmin=0, vmax=1)
             surf.set_array(var.detach().numpy() / prior)
-            fig.colorbar(surf, ax=ax, label="$V_{in}$ / prior variance on the estimate", shrink=0.6)
+            # pad: the colour bar sat on the z axis' label
+            fig.colorbar(surf, ax=ax, label="$V_{in}$ / prior variance on the estimate", shrink=0.6, pad=0.14)
         _markers(ax, ds, 3)
-        ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]", title=title)
+        ax.set(xlabel="x [m]", ylabel="y [m]", zlabel="z [m]")
+        import textwrap
+
+        ax.set_title(textwrap.fill(title, 55), fontsize=10)      # a long file name ran off the 3-D figure's edge
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
