@@ -180,3 +180,24 @@ def test_fig5_legend_matches_what_is_drawn(short_pair, tmp_path):
     drawn = {ln.get_color() for ax in fig.axes for ln in ax.lines if ln.get_label() in ("correlation", "paper's ratio")}
     assert len(drawn) == 2                                   # one colour per object ...
     assert not any(getattr(h, "get_color", lambda: None)() in drawn for h in handles)   # ... none claimed by the key
+
+
+def test_fig9_tick_labels_do_not_run_together(tmp_path):
+    """Issue 35, item 17: fig9's 3-D axes had ten tick labels a side, running together."""
+    import torch_gpioius as tg
+    from torch_gpioius.sim.forcefield import sphere_scene
+    from torch_gpioius.studies.figures import figure_3d_object
+
+    scene = sphere_scene()
+    pair = {m: tg.explore(scene, mode=m, max_travel=0.02, metrics_every=100) for m in ("visual-tactile", "tactile")}
+    fig = figure_3d_object("S", scene, pair, tmp_path / "fig9.png")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    renderer = canvas.get_renderer()
+    for ax in [a for a in fig.axes if hasattr(a, "zaxis")]:
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            boxes = [t.get_window_extent(renderer) for t in axis.get_ticklabels() if t.get_visible() and t.get_text()]
+            assert len(boxes) <= 6
+            assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])

@@ -288,6 +288,10 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
         ax.set_ylabel("y [m]", fontsize=7, labelpad=2)
         ax.set_zlabel("z [m]", fontsize=7, labelpad=0)
         ax.tick_params(labelsize=6, pad=0)
+        from matplotlib.ticker import MaxNLocator
+
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):          # ten ticks a side ran their labels together
+            axis.set_major_locator(MaxNLocator(4))
         final = ("no estimate: no surface in the range" if tr.has_estimate is False or np.isnan(tr.hausdorff[-1])
                  else f"final Hausdorff {100 * tr.hausdorff[-1]:.1f} cm")
         ax.set_title(f"{name}: {mode}\n{final}", fontsize=9)
