@@ -116,3 +116,14 @@ def test_claims_are_not_judged_on_runs_that_barely_explored():
     none = _trace("tactile", [0.05], [1])                                     # --max-steps 0: record 0 only
     assert "A tactile (0)" in study2d.explored_enough({"A": {"tactile": none, "visual-tactile": long}})
     assert study2d.explored_enough({"A": {"visual-tactile": long}}) is None
+
+
+def test_a_summary_of_scene_files_has_no_empty_claims_table():
+    """Issue 35, item 18: scene files gave an empty claims table."""
+    from torch_gpioius.studies.study3d import _markdown, check_claims_3d, summarize_3d
+
+    long = _trace("visual-tactile", [0.05] * 30, [1] * 30)
+    rows = summarize_3d({"bunny": {"visual-tactile": long, "tactile": long}}, {})
+    claims = check_claims_3d(rows)
+    text = _markdown(rows, claims)
+    assert claims == [] and "| claim (Sec. VI-B)" not in text and "none of them ran here" in text

@@ -172,6 +172,10 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
         lines += ["", "The paper's claims are not judged: " + (why_not or "smoke run (a few centimetres of travel)")
                   + "."]
         return "\n".join(lines) + "\n"
+    if not claims:         # scene files only: the Sec. VI-B claims are about objects E-H
+        lines += ["", "The paper's claims (Sec. VI-B) are about its objects E-H; none of them ran here, so there is no "
+                      "claim to judge (compare visual-tactile with tactile in the table above)."]
+        return "\n".join(lines) + "\n"
     lines += ["", "| claim (Sec. VI-B) | measured | holds |", "|---|---|---|"]
     for c in claims:
         lines.append(f"| {c['claim']} | {c['measured']} | {'yes' if c['holds'] else '**no**'} |")
