@@ -14,6 +14,7 @@ pytest.importorskip("viser")
 
 from torch_gpioius.io.datasets import Dataset, save_dataset  # noqa: E402
 from torch_gpioius.viewer import RunViewer, run_files  # noqa: E402
+import torch_gpioius as tg  # noqa: E402
 
 CHROMIUM = os.environ.get("GPIOIUS_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
 
@@ -131,6 +132,9 @@ def test_viewer_in_headless_chromium(which, log_2d, dataset_3d, tmp_path):
             # the chart's legend names the series without cursor placeholders, and the scene has a colour key
             assert "--" not in page.locator(".u-legend").first.inner_text()
             assert page.get_by_text("colour key").count() == 1 and page.get_by_text("touch: contacts").count() == 1
+            # issue 35, item 20: the key was cut off at 900 px; now it ends inside an 800 px window
+            last_key = page.get_by_text("true inner shape", exact=True).bounding_box()
+            assert last_key is not None and last_key["y"] + last_key["height"] <= 800
             # arrow keys in the step box step the run and leave the camera where it is (a slider thumb also
             # turned the camera)
             client = next(iter(viewer.server.get_clients().values()))
@@ -300,3 +304,31 @@ def test_a_malformed_message_closes_its_connection_with_one_line(log_2d, capfd):
     err = "".join(err) + capfd.readouterr().err
     assert "closed the connection from 127.0.0.1" in err and "DecodeError" in err
     assert "Traceback" not in err and "connection handler failed" not in err
+
+
+def test_a_study_folder_opens_on_a_visual_tactile_run_and_says_what_does_not_apply(tmp_path):
+    """Issue 35, item 20: a study folder opened on the touch-only run, with a red dot at similarity 0 where the
+    similarity does not apply; the truth checkbox did nothing for a run without a known truth."""
+    study = tmp_path / "study"
+    (study / "logs").mkdir(parents=True)
+    for mode in ("tactile", "visual-tactile"):
+        tg.explore(tg.sim.paper_objects_2d()["A"], mode=mode, max_steps=3, log=study / "logs" / f"A_{mode}.gpioius")
+    viewer = RunViewer(study, port=_free_port())
+    try:
+        assert viewer.run.path.name == "A_visual-tactile.gpioius"
+        assert viewer.run_dropdown.value == "A_visual-tactile.gpioius"
+        viewer._show_run(next(p for p in viewer.files if p.name == "A_tactile.gpioius"))
+        mark = viewer.plot.data[3]
+        assert np.isnan(mark).all()                          # no "this step" dot at 0
+        assert "do not apply (touch only)" in viewer.info.content
+        assert not viewer.layers["true shapes"].disabled     # the built-in scene A is known
+    finally:
+        viewer.close()
+
+
+def test_a_run_without_a_known_truth_disables_its_checkbox(dataset_3d):
+    viewer = RunViewer(dataset_3d, port=_free_port())
+    try:
+        assert viewer.layers["true shapes"].disabled and "true shape: not known for this run" in viewer.info.content
+    finally:
+        viewer.close()

@@ -302,7 +302,7 @@ class RunViewer:
         self.port = self.server.get_port()
         self.server.scene.set_up_direction("+z")
         self._build_gui()
-        self._show_run(self.files[0])
+        self._show_run(self._first_run())
 
     # ---------------------------------------------------------------------------------------------------- data
     def _get(self, path: Path):
@@ -340,8 +340,8 @@ class RunViewer:
         from viser import uplot
 
         gui = self.server.gui
-        self.run_dropdown = gui.add_dropdown("run", [p.name for p in self.files], initial_value=self.files[0].name,
-                                             visible=len(self.files) > 1)
+        self.run_dropdown = gui.add_dropdown("run", [p.name for p in self.files],
+                                             initial_value=self._first_run().name, visible=len(self.files) > 1)
         # a number box, not a slider: arrow keys in a form field step it without also turning the camera
         self.step_box = gui.add_number("step", initial_value=0, min=0, max=1, step=1)
         self.step_buttons = gui.add_button_group("steps", ("first", "previous", "next", "last"))
@@ -351,6 +351,8 @@ class RunViewer:
                                                                      self.skipped.items()))
         self.layers = {name: gui.add_checkbox(name, True) for name in
                        ("point cloud", "touches", "path", "estimate", "true shapes")}
+        # the key right under the layers it explains, in two columns: below the chart it was cut off at 900 px
+        gui.add_html(_colour_key_html())
         self.plot = gui.add_uplot(data=(np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1)),
                                   series=(uplot.Series(label="step"),
                                           uplot.Series(label="similarity", stroke="purple", width=2),
@@ -362,7 +364,6 @@ class RunViewer:
                                   axes=(uplot.Axis(label="step", incrs=[1, 2, 5, 10, 20, 50, 100, 200, 500, 1000]),
                                         uplot.Axis()),
                                   legend=uplot.Legend(live=False))
-        gui.add_html(_colour_key_html())
 
         @self.run_dropdown.on_update
         def _(_event) -> None:
@@ -383,6 +384,11 @@ class RunViewer:
             def _(_event) -> None:
                 self.show(self.run.steps[self._step_index()])
 
+    def _first_run(self) -> Path:
+        """The run shown first: a study folder's first visual-tactile run (the touch-only one has no similarity to
+        show), else the first file."""
+        return next((f for f in self.files if "visual-tactile" in f.name), self.files[0])
+
     def _step_index(self) -> int:
         """The step box's value as an index into the run's steps (clamped: a typed number may be anything)."""
         try:
@@ -400,6 +406,8 @@ class RunViewer:
             truth = self._truth()
             if truth is not None:
                 self._draw_truth(truth)
+            # nothing to show for a run whose world is unknown (a dataset, a real robot): say so, do not pretend
+            self.layers["true shapes"].disabled = truth is None
             self._frame_camera()
             s, r = self.run.series("similarity"), self.run.series("correlation")
             self._series = (np.asarray(steps, dtype=np.float64), s, r)
@@ -494,7 +502,9 @@ class RunViewer:
                     handle.visible = on["true shapes"]
             steps, s, r = self._series
             mark = np.full(len(steps), np.nan)
-            mark[run.steps.index(k)] = s[run.steps.index(k)] if math.isfinite(s[run.steps.index(k)]) else 0.0
+            # no marker where the similarity does not apply (touch only, a step before any touch): a red dot at 0
+            # read as a measured similarity of 0
+            mark[run.steps.index(k)] = s[run.steps.index(k)]
             self.plot.data = (steps, s, r, mark)
             # uPlot has no NaN: a NaN in auto-ranged data makes the y range NaN and the whole chart blank (the
             # "this step" marker, and unidentified or not yet fitted steps, are NaN). Fix the y range from the
@@ -508,14 +518,23 @@ class RunViewer:
             p = run.params.get(k, {})
             fmt = (lambda v: "n/a" if v is None or not math.isfinite(v) else f"{v:.3f}")
             h = p.get("hausdorff", math.nan)
+            surface_pts = int(((ds.task == 0) & (ds.y == 0)).sum())
+            if run.meta.get("touch") == "patch":         # pad points are not touches: count both, by name
+                touches = sum(1 for st in run.steps if st <= k and "contact" in run.params.get(st, {}))
+                inner = f"{touches} touch{'' if touches == 1 else 'es'} ({surface_pts} pad surface points)"
+            else:
+                inner = f"{surface_pts} contacts"
+            touch_only = run.meta.get("mode") == "tactile"
+            measures = ("similarity and correlation: do not apply (touch only)" if touch_only else
+                        f"similarity {fmt(p.get('similarity'))}, correlation {fmt(p.get('correlation'))}")
             self.info.content = (
                 f"**{run.name}** ({run.meta.get('world', 'data')} {run.meta.get('scene', '')}, "
                 f"{run.meta.get('mode', 'dataset')})  \n"
-                f"step **{k}** of {run.steps[-1]}: {int(((ds.task == 0) & (ds.y == 0)).sum())} contacts, "
+                f"step **{k}** of {run.steps[-1]}: {inner}, "
                 f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points  \n"
-                f"similarity {fmt(p.get('similarity'))}, correlation {fmt(p.get('correlation'))}, "
-                f"Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}" + self._on_body(run, k)
-                + self._no_estimate(surface))
+                f"{measures}, Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}"
+                + self._on_body(run, k) + self._no_estimate(surface)
+                + ("" if self._truth() is not None else "  \ntrue shape: not known for this run"))
         self.shown_step = k
 
     def _no_estimate(self, surface) -> str:
@@ -586,9 +605,10 @@ def frame_distance(radius: float, fov: float, fill: float = 0.5) -> float:
 
 def _colour_key_html() -> str:
     """The colour key of the scene as static HTML (swatches and labels; no script)."""
-    rows = "".join(f'<div style="display:flex;align-items:center;gap:6px;margin:1px 0">'
-                   f'<span style="width:12px;height:12px;border-radius:50%;background:rgb{c};display:inline-block">'
-                   f'</span>{label}</div>' for label, c in COLOUR_KEY)
+    rows = "".join(f'<div style="display:flex;align-items:center;gap:4px;margin:1px 0">'
+                   f'<span style="width:10px;height:10px;border-radius:50%;background:rgb{c};display:inline-block;'
+                   f'flex:none"></span>{label}</div>' for label, c in COLOUR_KEY)
+    rows = f'<div style="display:grid;grid-template-columns:1fr 1fr;column-gap:8px">{rows}</div>'
     bar = ('<div style="display:flex;align-items:center;gap:6px;margin:3px 0"><span style="width:48px;height:10px;'
            'background:linear-gradient(to right,#fcfbfd,#3f007d);display:inline-block;flex:none"></span>'
            'estimate (&mu;_in = 0) by its variance: white certain, purple the prior</div>')

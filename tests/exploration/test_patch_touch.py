@@ -59,8 +59,11 @@ def test_the_viewer_draws_the_pads_of_a_patch_run(tmp_path):
         viewer.show(steps[-1])
         pads = viewer._handles["/touch/pads"]
         assert pads.visible and len(pads.points) == 4 * len(steps)
+        # issue 35, item 20: "807 contacts" stood beside "11 of 11": pad points were counted as touches
+        assert f"{len(steps)} touches (" in viewer.info.content and "pad surface points)" in viewer.info.content
         viewer.show(steps[0])
         assert len(viewer._handles["/touch/pads"].points) == 4
+        assert "1 touch (" in viewer.info.content
     finally:
         viewer.close()
 
