@@ -109,6 +109,10 @@ def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_bo
     (GOOD.replace("scale = 0.001", "scale = 0.001\nrepair = \"false\""), "repair: must be true or false"),
     (GOOD.replace("scale = 0.001", "scale = 0.001\nresolution = 0"), "resolution: must be positive"),
     (GOOD.replace("scale = 0.001", "scale = 0.001\nresolution = -1"), "resolution: must be positive"),
+    # issue 35, item 3: out of reach (or placed in mm) failed later in the IK, naming neither the file nor the key
+    (GOOD.replace("at = [0.5, 0.0, 0.1]", "at = [500, 0.0, 100]"), r"object.at .*out of the UR5's reach"),
+    (GOOD.replace("at = [0.5, 0.0, 0.1]", "at = [1.5, 0.0, 0.1]"), r"object.at .*out of the UR5's reach"),
+    (GOOD + "[approach]\nstart = [0.5, 0, 1.9]\ndirection = [0, 0, -1]\n", r"approach.start: .*out of the UR5's reach"),
 ])
 def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
     path = _write(tmp_path, text)

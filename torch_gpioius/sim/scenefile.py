@@ -173,6 +173,25 @@ def read_scene(path) -> SceneSpec:
     return SceneSpec(path, name, world, dict(obj), dict(cover), approach, bounds, settings)
 
 
+def _check_reach(scene, spec: SceneSpec) -> None:
+    """Refuse a scene whose approach start the UR5 cannot reach, naming the file and the key that placed it (an
+    object placed in millimetres, or beyond the arm's 0.85 m, failed later inside the inverse kinematics, naming
+    neither)."""
+    from kinematics.ur5 import UnreachablePoseError
+
+    from .forcefield import simulated_ur5
+
+    try:
+        simulated_ur5(scene.start, scene.direction, scene.range[0], scene.range[1])
+    except UnreachablePoseError:
+        key = "approach.start" if spec.approach is not None else "object.at (the approach starts above the object)"
+        where = np.round(scene.start, 3).tolist()
+        raise ValueError(f"{spec.path}: {key}: the fingertip's start {where} m is out of the UR5's reach (its base at "
+                         f"the origin, {np.linalg.norm(scene.start):.3g} m away; the arm reaches about 0.85 m); place "
+                         "the object closer, in metres (scale = 0.001 converts a mesh in millimetres; positions are "
+                         "metres)") from None
+
+
 def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = False):
     """Build the world a scene file describes.
 
@@ -233,6 +252,7 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
             scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{spec.path}: {exc}") from None
+    _check_reach(scene, spec)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
     return scene.perturbed(seed)
