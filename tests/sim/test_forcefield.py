@@ -65,3 +65,4 @@ def test_the_floor_keeps_a_round_fingertip_above_the_table():
                           torch.tensor([0.01, 0.0, -0.04], dtype=torch.float64))
     up = torch.tensor([0.0, 0.02, 0.01], dtype=torch.float64)
     assert torch.equal(ctl._above_floor(up), up)
+

@@ -479,8 +479,9 @@ def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.0
     out.update_faces(out.nondegenerate_faces())
     out.remove_unreferenced_vertices()
     trimesh.repair.fix_normals(out)
-    if not out.is_watertight:  # pragma: no cover - marching cubes inside a padded grid is closed
-        raise ValueError("cover_around: the cover mesh is not closed")
+    if not out.is_watertight:
+        raise ValueError(f"cover_around: the cover mesh is not closed ({kind}, gap {gap} m, grid {h:.4g} m); try "
+                         "another resolution")
     return out
 
 
