@@ -254,7 +254,7 @@ def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_p
         counts[name] = (float(rows[0]["voxel"]), int(rows[0]["n_outer"]))
     assert counts["default"][0] == 0.05 and counts["fine"][0] == 0.01
     assert counts["fine"][1] > 4 * counts["default"][1] > 0
-    with pytest.raises(FileExistsError, match=r"voxel=0.01.* this one is voxel=None"):
+    with pytest.raises(FileExistsError, match=r"voxel=0.01.* this one is voxel=.the world's default."):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "fine",
                   smoke=True, backend="local", progress=False)
     for bad in (-0.01, math.nan, 2.0, True):

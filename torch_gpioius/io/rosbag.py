@@ -444,172 +444,246 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             unknown camera frame, a pad frame that is not a depth image or presses beyond the gel's reach).
         ValueError: bad arguments.
     """
-    from kinematics.dh import UR5_JOINT_NAMES
-    from kinematics.ur5 import UR5
-
-    from ..exploration.observations import ObservationPolicy, thin_indices, vision_observations
-    from ..sensors.pointcloud import PointCloud
-
-    topics = topics or BagTopics()
-    policy = policy or ObservationPolicy(voxel=0.05)
-    names = tuple(joint_names or UR5_JOINT_NAMES)
-    for name, value, lo, hi in (("contact_force", contact_force, 1e-3, 1e3), ("contact_spacing", contact_spacing, 0,
-                                1.0), ("max_gap", max_gap, 1e-4, 60.0), ("tip_radius", tip_radius, 0, 0.1)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and
-                                                                                  lo <= value <= hi):
-            raise ValueError(f"import_bag: {name} must be in [{lo:g}, {hi:g}], got {value!r}")
-    if len(names) != 6:
-        raise ValueError(f"import_bag: joint_names needs the 6 UR5 joints, got {len(names)}")
-    T_fixed = parse_transform(camera_transform) if camera_transform is not None else None
-    if topics.tactile is not None:
-        from ..exploration.patches import PatchSettings
-        from ..sensors.tactile import TactileCalibration
-
-        if not isinstance(tactile_calibration, TactileCalibration):
-            raise ValueError("import_bag: topics.tactile needs tactile_calibration (a TactileCalibration: pixel "
-                             f"pitch, gel thickness, contact depth), got {tactile_calibration!r}")
-        T_pad = np.eye(4) if tactile_transform is None else parse_transform(tactile_transform)
-        patch = patch or PatchSettings()
-        if not isinstance(patch, PatchSettings):
-            raise ValueError(f"import_bag: patch must be a PatchSettings, got {type(patch).__name__}")
-    if crop is not None:
-        crop = as_bounds(crop, 3)
-    path = Path(bag)
-    ur5 = UR5(tool_offset=tool_offset)
-
-    if time_window is not None:
-        try:
-            w0, w1 = (float(v) for v in time_window)
-        except (TypeError, ValueError):
-            raise ValueError(f"import_bag: time_window must be (start, end) in seconds, got {time_window!r}") from None
-        if not (math.isfinite(w0) and math.isfinite(w1) and 0 <= w0 < w1):
-            raise ValueError(f"import_bag: time_window must satisfy 0 <= start < end (finite seconds), got "
-                             f"{time_window!r}")
-    from ..voxels import VoxelAccumulator
-
-    reader = _open(path)
+    s = _BagImport.checked(bag, topics=topics, base_frame=base_frame, camera_transform=camera_transform,
+                           tool_offset=tool_offset, tip_radius=tip_radius, contact_force=contact_force,
+                           contact_spacing=contact_spacing, max_gap=max_gap, joint_names=joint_names, policy=policy,
+                           crop=crop, theta=theta, noise=noise, time_window=time_window,
+                           max_joint_speed=max_joint_speed, tactile_calibration=tactile_calibration,
+                           tactile_transform=tactile_transform, patch=patch)
+    reader = _open(s.path)
     try:
         if not list(reader.connections):
-            raise BagImportError(f"{path}: the bag has no topics")
-        wrenches = _messages(reader, path, topics.wrench, "wrench")
-        joint_msgs = _messages(reader, path, topics.joints, "joints")
-        _connections(reader, path, topics.cloud, "cloud")       # present and typed, before any work
-        tf = _TfBuffer()
-        if T_fixed is None:
-            for tf_topic in topics.tf:
-                for t, msg in _messages(reader, path, tf_topic, "tf", required=False):
-                    for ts in msg.transforms:
-                        tr, rot = ts.transform.translation, ts.transform.rotation
-                        stamp = _stamp(ts, int(t * 1e9))
-                        where = (f"{path}: topic {tf_topic}: the transform {ts.header.frame_id} -> "
-                                 f"{ts.child_frame_id} at t = {stamp:.6f} s")
-                        try:
-                            if not all(math.isfinite(v) for v in (tr.x, tr.y, tr.z)):
-                                raise ValueError(f"translation {(tr.x, tr.y, tr.z)} is not finite")
-                            T_link = _homogeneous((tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w))
-                        except ValueError as exc:
-                            raise BagImportError(f"{where}: {exc}") from None
-                        tf.add(ts.header.frame_id, ts.child_frame_id, stamp, T_link, static="static" in tf_topic)
-
-        # ---- inner: fingertip at every wrench sample
-        t_w = np.array([t for t, _ in wrenches])
-        t_first = float(t_w[0])
-        if time_window is not None:
-            inside = (t_w >= t_first + w0) & (t_w <= t_first + w1)
-            if not inside.any():
-                raise BagImportError(f"{path}: topic {topics.wrench}: no sample in the time window "
-                                     f"{_window_text(w0, w1)} after the first one (the topic spans "
-                                     f"{t_w[-1] - t_first:.3f} s)")
-            wrenches = [w for w, keep in zip(wrenches, inside) if keep]
-            t_w = t_w[inside]
-        forces = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for _, m in wrenches],
-                          dtype=np.float64)
-        if not np.isfinite(forces).all():
-            k = int(np.flatnonzero(~np.isfinite(forces).all(axis=1))[0])
-            raise BagImportError(f"{path}: topic {topics.wrench}: the force at t = {t_w[k]:.6f} s is NaN or inf")
-        t_j, q_j = _joint_table(path, topics.joints, joint_msgs, names, max_joint_speed)
-        q = _interpolate(path, topics.joints, t_j, q_j, t_w, max_gap)
-        with torch.no_grad():
-            T = ur5.forward_kinematics(torch.as_tensor(q)).numpy()
-        tips = T[:, :3, 3]
-        magnitude = np.linalg.norm(forces, axis=1)
-        touching = magnitude >= contact_force
-        if not touching.any():
-            raise BagImportError(f"{path}: topic {topics.wrench}: no sample reaches |F| >= {contact_force:g} N "
-                                 f"(largest {magnitude.max():.3g} N): no contact to learn the inner shape from")
-        contact_pts = tips.copy()
-        if tip_radius > 0:
-            direction = np.einsum("nij,nj->ni", T[:, :3, :3], forces) / np.maximum(magnitude, 1e-12)[:, None]
-            contact_pts = tips - tip_radius * direction
-        idx_c = np.flatnonzero(touching)
-        keep_c = idx_c[thin_indices(contact_pts[idx_c], contact_spacing, np.empty((0, 3)), 0.0)] \
-            if contact_spacing > 0 else idx_c
-        contacts = contact_pts[keep_c]
-        # step of each sample: 1 + the number of kept contacts strictly before it (free space arrives with the next
-        # contact, as in the exploration); contacts get 1..k
-        order = np.searchsorted(keep_c, np.arange(len(t_w)), side="left")
-        step_of = np.minimum(order + 1, len(keep_c))
-        free_idx = np.flatnonzero(~touching)
-        keep_f = free_idx[thin_indices(tips[free_idx], policy.free_space_spacing, contacts, policy.free_space_margin)]
-        free, free_steps = tips[keep_f], step_of[keep_f]
-
-        # ---- inner: the gel pad's frames at contacts, as patches
-        pads = {"surface": [], "free": [], "surface_steps": [], "free_steps": []}
-        n_pad = n_pad_used = n_pad_off = n_pad_empty = 0
-        if topics.tactile is not None:
-            n_pad, n_pad_used, n_pad_off, n_pad_empty = _import_pads(
-                reader, path, topics, t_w, touching, step_of, t_j, q_j, max_gap, ur5, T_pad, tactile_calibration,
-                patch, None if time_window is None else (t_first + w0, t_first + w1), pads)
-            if pads["surface"]:
-                far = _far_from(free, np.concatenate(pads["surface"]), policy.free_space_margin)
-                free, free_steps = free[far], free_steps[far]
-
-        # ---- outer: one cloud at a time into the base frame, the exploration's vision rule, then the voxels
-        base = base_frame.lstrip("/")
-        cloud_frames = set()
-        n_clouds = n_raw = n_declared = n_used = 0
-        no_voxel = ObservationPolicy(vision_free_offset=policy.vision_free_offset, voxel=None,
-                                     free_space_spacing=policy.free_space_spacing,
-                                     free_space_margin=policy.free_space_margin)
-        if policy.voxel:
-            seen_acc, free_acc = VoxelAccumulator(policy.voxel), VoxelAccumulator(policy.voxel)
-        else:
-            seen_all, free_all = [], []
-        for t, msg in _iter_messages(reader, path, topics.cloud, "cloud"):
-            if time_window is not None and not t_first + w0 <= t <= t_first + w1:
-                continue
-            n_clouds += 1
-            n_declared += int(msg.height) * int(msg.width)
-            pts = decode_point_cloud2(msg, topic=topics.cloud)
-            n_raw += len(pts)
-            if len(pts) == 0:
-                continue
-            frame = msg.header.frame_id.lstrip("/")
-            cloud_frames.add(frame)
-            if T_fixed is not None:
-                T_bc = T_fixed
-            else:
-                try:
-                    T_bc = tf.lookup(base, frame, t)
-                except LookupError as exc:
-                    raise BagImportError(f"{path}: topic {topics.cloud}: {exc}; pass camera_transform / "
-                                         "--camera-transform") from None
-            pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
-            del pts
-            try:
-                x, y = vision_observations(PointCloud(pts_b, origin=T_bc[:3, 3]), no_voxel, crop)
-            except ValueError:
-                continue  # nothing of this cloud inside the crop box
-            n_used += 1
-            if policy.voxel:
-                seen_acc.add(x[y == 0])
-                free_acc.add(x[y == 1])
-            else:
-                seen_all.append(x[y == 0])
-                free_all.append(x[y == 1])
+            raise BagImportError(f"{s.path}: the bag has no topics")
+        wrenches = _messages(reader, s.path, s.topics.wrench, "wrench")
+        joint_msgs = _messages(reader, s.path, s.topics.joints, "joints")
+        _connections(reader, s.path, s.topics.cloud, "cloud")       # present and typed, before any work
+        tf = None if s.T_fixed is not None else _read_tf(reader, s)
+        inner = _inner_from_wrenches(s, wrenches, joint_msgs)
+        pads = _pads(reader, s, inner)
+        outer = _outer_from_clouds(reader, s, tf, inner["t_first"])
     finally:
         reader.close()
-    window = "" if time_window is None else f" in the time window {_window_text(w0, w1)}"
+    return _bag_dataset(s, inner, pads, outer)
+
+
+@dataclass(frozen=True)
+class _BagImport:
+    """:func:`import_bag`'s settings, checked once before the bag is opened (fields as its arguments; ``window`` is
+    ``(start, end)`` [s] after the first wrench sample or None, ``T_fixed`` the camera transform or None, ``ur5``
+    the kinematics with the tool offset)."""
+
+    path: Path
+    topics: BagTopics
+    base: str
+    T_fixed: np.ndarray | None
+    tool_offset: tuple
+    tip_radius: float
+    contact_force: float
+    contact_spacing: float
+    max_gap: float
+    names: tuple
+    policy: object
+    crop: np.ndarray | None
+    theta: float | None
+    noise: float | None
+    window: tuple | None
+    max_joint_speed: float
+    calibration: object
+    T_pad: np.ndarray | None
+    patch: object
+    ur5: object
+
+    @classmethod
+    def checked(cls, bag, *, topics, base_frame, camera_transform, tool_offset, tip_radius, contact_force,
+                contact_spacing, max_gap, joint_names, policy, crop, theta, noise, time_window, max_joint_speed,
+                tactile_calibration, tactile_transform, patch) -> "_BagImport":
+        from kinematics.dh import UR5_JOINT_NAMES
+        from kinematics.ur5 import UR5
+
+        from ..exploration.observations import ObservationPolicy
+
+        topics = topics or BagTopics()
+        policy = policy or ObservationPolicy(voxel=0.05)
+        names = tuple(joint_names or UR5_JOINT_NAMES)
+        for name, value, lo, hi in (("contact_force", contact_force, 1e-3, 1e3),
+                                    ("contact_spacing", contact_spacing, 0, 1.0), ("max_gap", max_gap, 1e-4, 60.0),
+                                    ("tip_radius", tip_radius, 0, 0.1)):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value) and
+                                                                                      lo <= value <= hi):
+                raise ValueError(f"import_bag: {name} must be in [{lo:g}, {hi:g}], got {value!r}")
+        if len(names) != 6:
+            raise ValueError(f"import_bag: joint_names needs the 6 UR5 joints, got {len(names)}")
+        T_fixed = parse_transform(camera_transform) if camera_transform is not None else None
+        T_pad = None
+        if topics.tactile is not None:
+            from ..exploration.patches import PatchSettings
+            from ..sensors.tactile import TactileCalibration
+
+            if not isinstance(tactile_calibration, TactileCalibration):
+                raise ValueError("import_bag: topics.tactile needs tactile_calibration (a TactileCalibration: pixel "
+                                 f"pitch, gel thickness, contact depth), got {tactile_calibration!r}")
+            T_pad = np.eye(4) if tactile_transform is None else parse_transform(tactile_transform)
+            patch = patch or PatchSettings()
+            if not isinstance(patch, PatchSettings):
+                raise ValueError(f"import_bag: patch must be a PatchSettings, got {type(patch).__name__}")
+        if crop is not None:
+            crop = as_bounds(crop, 3)
+        window = None
+        if time_window is not None:
+            try:
+                w0, w1 = (float(v) for v in time_window)
+            except (TypeError, ValueError):
+                raise ValueError(f"import_bag: time_window must be (start, end) in seconds, got {time_window!r}") \
+                    from None
+            if not (math.isfinite(w0) and math.isfinite(w1) and 0 <= w0 < w1):
+                raise ValueError(f"import_bag: time_window must satisfy 0 <= start < end (finite seconds), got "
+                                 f"{time_window!r}")
+            window = (w0, w1)
+        return cls(Path(bag), topics, base_frame.lstrip("/"), T_fixed, tuple(tool_offset), tip_radius, contact_force,
+                   contact_spacing, max_gap, names, policy, crop, theta, noise, window, max_joint_speed,
+                   tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset))
+
+    def in_window(self, t: float, t_first: float) -> bool:
+        return self.window is None or t_first + self.window[0] <= t <= t_first + self.window[1]
+
+
+def _read_tf(reader, s: _BagImport):
+    """Every transform of the tf topics, checked (finite, a rotation), into a buffer for lookups."""
+    tf = _TfBuffer()
+    for tf_topic in s.topics.tf:
+        for t, msg in _messages(reader, s.path, tf_topic, "tf", required=False):
+            for ts in msg.transforms:
+                tr, rot = ts.transform.translation, ts.transform.rotation
+                stamp = _stamp(ts, int(t * 1e9))
+                where = (f"{s.path}: topic {tf_topic}: the transform {ts.header.frame_id} -> "
+                         f"{ts.child_frame_id} at t = {stamp:.6f} s")
+                try:
+                    if not all(math.isfinite(v) for v in (tr.x, tr.y, tr.z)):
+                        raise ValueError(f"translation {(tr.x, tr.y, tr.z)} is not finite")
+                    T_link = _homogeneous((tr.x, tr.y, tr.z), (rot.x, rot.y, rot.z, rot.w))
+                except ValueError as exc:
+                    raise BagImportError(f"{where}: {exc}") from None
+                tf.add(ts.header.frame_id, ts.child_frame_id, stamp, T_link, static="static" in tf_topic)
+    return tf
+
+
+def _inner_from_wrenches(s: _BagImport, wrenches: list, joint_msgs: list) -> dict:
+    """The fingertip at every wrench sample (joint states interpolated, forward kinematics): contacts where
+    ``|F| >= contact_force`` (thinned), free space elsewhere, each with its step."""
+    from ..exploration.observations import thin_indices
+
+    path, topics = s.path, s.topics
+    t_w = np.array([t for t, _ in wrenches])
+    t_first = float(t_w[0])
+    if s.window is not None:
+        inside = np.array([s.in_window(t, t_first) for t in t_w])
+        if not inside.any():
+            raise BagImportError(f"{path}: topic {topics.wrench}: no sample in the time window "
+                                 f"{_window_text(*s.window)} after the first one (the topic spans "
+                                 f"{t_w[-1] - t_first:.3f} s)")
+        wrenches = [w for w, keep in zip(wrenches, inside) if keep]
+        t_w = t_w[inside]
+    forces = np.array([[m.wrench.force.x, m.wrench.force.y, m.wrench.force.z] for _, m in wrenches],
+                      dtype=np.float64)
+    if not np.isfinite(forces).all():
+        k = int(np.flatnonzero(~np.isfinite(forces).all(axis=1))[0])
+        raise BagImportError(f"{path}: topic {topics.wrench}: the force at t = {t_w[k]:.6f} s is NaN or inf")
+    t_j, q_j = _joint_table(path, topics.joints, joint_msgs, s.names, s.max_joint_speed)
+    q = _interpolate(path, topics.joints, t_j, q_j, t_w, s.max_gap)
+    with torch.no_grad():
+        T = s.ur5.forward_kinematics(torch.as_tensor(q)).numpy()
+    tips = T[:, :3, 3]
+    magnitude = np.linalg.norm(forces, axis=1)
+    touching = magnitude >= s.contact_force
+    if not touching.any():
+        raise BagImportError(f"{path}: topic {topics.wrench}: no sample reaches |F| >= {s.contact_force:g} N "
+                             f"(largest {magnitude.max():.3g} N): no contact to learn the inner shape from")
+    contact_pts = tips.copy()
+    if s.tip_radius > 0:
+        direction = np.einsum("nij,nj->ni", T[:, :3, :3], forces) / np.maximum(magnitude, 1e-12)[:, None]
+        contact_pts = tips - s.tip_radius * direction
+    idx_c = np.flatnonzero(touching)
+    keep_c = idx_c[thin_indices(contact_pts[idx_c], s.contact_spacing, np.empty((0, 3)), 0.0)] \
+        if s.contact_spacing > 0 else idx_c
+    contacts = contact_pts[keep_c]
+    # step of each sample: 1 + the number of kept contacts strictly before it (free space arrives with the next
+    # contact, as in the exploration); contacts get 1..k
+    order = np.searchsorted(keep_c, np.arange(len(t_w)), side="left")
+    step_of = np.minimum(order + 1, len(keep_c))
+    free_idx = np.flatnonzero(~touching)
+    keep_f = free_idx[thin_indices(tips[free_idx], s.policy.free_space_spacing, contacts,
+                                   s.policy.free_space_margin)]
+    return {"t_w": t_w, "t_first": t_first, "forces": forces, "tips": tips, "touching": touching,
+            "step_of": step_of, "t_j": t_j, "q_j": q_j, "contacts": contacts, "free": tips[keep_f],
+            "free_steps": step_of[keep_f], "n_wrench": len(wrenches), "n_joints": len(joint_msgs)}
+
+
+def _pads(reader, s: _BagImport, inner: dict) -> dict:
+    """The gel pad's frames at contacts, as patches (``topics.tactile``); the fingertip's free space is then kept
+    the policy's margin from their surface points (``inner`` is updated)."""
+    pads = {"surface": [], "free": [], "surface_steps": [], "free_steps": [], "counts": (0, 0, 0, 0)}
+    if s.topics.tactile is None:
+        return pads
+    window = None if s.window is None else (inner["t_first"] + s.window[0], inner["t_first"] + s.window[1])
+    pads["counts"] = _import_pads(reader, s.path, s.topics, inner["t_w"], inner["touching"], inner["step_of"],
+                                  inner["t_j"], inner["q_j"], s.max_gap, s.ur5, s.T_pad, s.calibration, s.patch,
+                                  window, pads)
+    if pads["surface"]:
+        far = _far_from(inner["free"], np.concatenate(pads["surface"]), s.policy.free_space_margin)
+        inner["free"], inner["free_steps"] = inner["free"][far], inner["free_steps"][far]
+    return pads
+
+
+def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
+    """One cloud at a time into the base frame, the exploration's vision rule (surface and free space along the
+    rays), then the voxels; memory holds one cloud and the occupied voxels."""
+    from ..exploration.observations import ObservationPolicy, vision_observations
+    from ..sensors.pointcloud import PointCloud
+    from ..voxels import VoxelAccumulator
+
+    path, topics, policy = s.path, s.topics, s.policy
+    cloud_frames = set()
+    n_clouds = n_raw = n_declared = n_used = 0
+    no_voxel = ObservationPolicy(vision_free_offset=policy.vision_free_offset, voxel=None,
+                                 free_space_spacing=policy.free_space_spacing,
+                                 free_space_margin=policy.free_space_margin)
+    if policy.voxel:
+        seen_acc, free_acc = VoxelAccumulator(policy.voxel), VoxelAccumulator(policy.voxel)
+    else:
+        seen_all, free_all = [], []
+    for t, msg in _iter_messages(reader, path, topics.cloud, "cloud"):
+        if not s.in_window(t, t_first):
+            continue
+        n_clouds += 1
+        n_declared += int(msg.height) * int(msg.width)
+        pts = decode_point_cloud2(msg, topic=topics.cloud)
+        n_raw += len(pts)
+        if len(pts) == 0:
+            continue
+        frame = msg.header.frame_id.lstrip("/")
+        cloud_frames.add(frame)
+        if s.T_fixed is not None:
+            T_bc = s.T_fixed
+        else:
+            try:
+                T_bc = tf.lookup(s.base, frame, t)
+            except LookupError as exc:
+                raise BagImportError(f"{path}: topic {topics.cloud}: {exc}; pass camera_transform / "
+                                     "--camera-transform") from None
+        pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
+        del pts
+        try:
+            x, y = vision_observations(PointCloud(pts_b, origin=T_bc[:3, 3]), no_voxel, s.crop)
+        except ValueError:
+            continue  # nothing of this cloud inside the crop box
+        n_used += 1
+        if policy.voxel:
+            seen_acc.add(x[y == 0])
+            free_acc.add(x[y == 1])
+        else:
+            seen_all.append(x[y == 0])
+            free_all.append(x[y == 1])
+    window = "" if s.window is None else f" in the time window {_window_text(*s.window)}"
     if n_clouds == 0:
         raise BagImportError(f"{path}: topic {topics.cloud}: no cloud{window}")
     if n_declared == 0:
@@ -618,12 +692,20 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         raise BagImportError(f"{path}: topic {topics.cloud}: every point of every cloud{window} is NaN or inf "
                              f"({n_declared} points, no depth)")
     if not n_used:
-        raise BagImportError(f"{path}: topic {topics.cloud}: no cloud point lies inside the crop box {crop.tolist()}")
+        raise BagImportError(f"{path}: topic {topics.cloud}: no cloud point lies inside the crop box "
+                             f"{s.crop.tolist()}")
     if policy.voxel:
         seen, free_o = seen_acc.mean(), free_acc.mean()
     else:
         seen = np.concatenate(seen_all)
         free_o = np.concatenate(free_all) if free_all else np.empty((0, 3))
+    return {"seen": seen, "free": free_o, "frames": sorted(cloud_frames), "n_clouds": n_clouds, "n_raw": n_raw}
+
+
+def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset:
+    """The imported observations as a :class:`Dataset`, with the bag's topics, frames, thresholds and counts."""
+    contacts, free, free_steps = inner["contacts"], inner["free"], inner["free_steps"]
+    seen, free_o = outer["seen"], outer["free"]
     p_surf = np.concatenate(pads["surface"]) if pads["surface"] else np.empty((0, 3))
     p_free = np.concatenate(pads["free"]) if pads["free"] else np.empty((0, 3))
     x = np.concatenate([contacts, p_surf, free, p_free, seen, free_o])
@@ -633,26 +715,29 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
     task = np.concatenate([np.zeros(n_inner), np.ones(len(seen) + len(free_o))]).astype(np.int64)
     step = np.concatenate([np.arange(1, len(contacts) + 1), *pads["surface_steps"], np.asarray(free_steps),
                            *pads["free_steps"], np.zeros(len(seen) + len(free_o))]).astype(np.int64)
-    meta = {"source": f"rosbag:{path.name}", "frame": base, "bag_topics": {"cloud": topics.cloud,
-            "wrench": topics.wrench, "joints": topics.joints}, "camera_frames": sorted(cloud_frames),
-            "contact_force": contact_force, "contact_spacing": contact_spacing, "tip_radius": tip_radius,
-            "tool_offset": [float(v) for v in tool_offset], "voxel_size": policy.voxel,
-            "time_window": None if time_window is None else [w0, w1],
-            "counts": {"wrench": len(wrenches), "joint_states": len(joint_msgs), "clouds": n_clouds,
-                       "cloud_points": int(n_raw), "contacts": int(len(contacts)), "free_space": int(len(free)),
-                       "outer_surface": int(len(seen)), "outer_free_space": int(len(free_o))}}
+    topics = s.topics
+    meta = {"source": f"rosbag:{s.path.name}", "frame": s.base, "bag_topics": {"cloud": topics.cloud,
+            "wrench": topics.wrench, "joints": topics.joints}, "camera_frames": outer["frames"],
+            "contact_force": s.contact_force, "contact_spacing": s.contact_spacing, "tip_radius": s.tip_radius,
+            "tool_offset": [float(v) for v in s.tool_offset], "voxel_size": s.policy.voxel,
+            "time_window": None if s.window is None else list(s.window),
+            "counts": {"wrench": inner["n_wrench"], "joint_states": inner["n_joints"], "clouds": outer["n_clouds"],
+                       "cloud_points": int(outer["n_raw"]), "contacts": int(len(contacts)),
+                       "free_space": int(len(free)), "outer_surface": int(len(seen)),
+                       "outer_free_space": int(len(free_o))}}
     if topics.tactile is not None:
+        n_pad, n_pad_used, n_pad_off, n_pad_empty = pads["counts"]
         meta["bag_topics"]["tactile"] = topics.tactile
-        meta["tactile"] = {"calibration": dataclasses.asdict(tactile_calibration), "T_tool_pad": T_pad.tolist(),
-                           "patch": dataclasses.asdict(patch)}
+        meta["tactile"] = {"calibration": dataclasses.asdict(s.calibration), "T_tool_pad": s.T_pad.tolist(),
+                           "patch": dataclasses.asdict(s.patch)}
         meta["counts"].update({"pad_frames": n_pad, "pad_frames_used": n_pad_used,
                                "pad_frames_out_of_contact": n_pad_off, "pad_frames_untouched": n_pad_empty,
                                "patch_surface": int(len(p_surf)), "patch_free_space": int(len(p_free))})
-    if theta is not None:
-        meta["theta"] = theta
-    if noise is not None:
-        meta["noise"] = noise
-    trace = {"positions": tips, "forces": forces, "timestamps": t_w - t_w[0]}
+    if s.theta is not None:
+        meta["theta"] = s.theta
+    if s.noise is not None:
+        meta["noise"] = s.noise
+    trace = {"positions": inner["tips"], "forces": inner["forces"], "timestamps": inner["t_w"] - inner["t_w"][0]}
     return Dataset(x, y, task, step, meta=meta, trace=trace)
 
 

@@ -36,7 +36,7 @@ import numpy as np
 from .._validation import as_device, as_float
 from .stats import median_interval, paired_difference
 
-__all__ = ["run_sweep", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
+__all__ = ["run_sweep", "SweepSettings", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
            "FRACTIONS", "MAX_SEEDS"]
 
 #: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants.
@@ -786,78 +786,148 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         FileExistsError: ``out`` holds something else and ``force`` is False.
         RuntimeError: another sweep is writing to ``out``.
     """
-    from .._progress import progress as reporter
-    from ..exploration.registry import canonical_world_name, world_entry
-    from ..io.outputs import FolderLock, claim_folder
+    settings = SweepSettings.checked(
+        world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
+        max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
+        force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device)
+    return settings.run()
 
-    world = canonical_world_name(world, warn=True)
-    if world not in _worlds():
-        raise ValueError(f"world: must be one of {_worlds()}, got {world!r}")
-    entry = world_entry(world)
-    scene_files = _scene_files(scenes, world)
-    objects = tuple(dict.fromkeys(objects or ([] if scene_files else entry.object_names)))
-    clash = sorted(set(objects) & set(scene_files))
-    if clash:
-        raise ValueError(f"scenes: {clash} are also the names of objects; rename the scene (its name key)")
+
+@dataclass(frozen=True)
+class SweepSettings:
+    """Everything one sweep runs with, checked once (:meth:`checked`), then run in short steps (:meth:`run`): claim
+    and lock the folder, plan the runs, execute those not yet done, aggregate. Fields as :func:`run_sweep`'s
+    arguments; ``scene_files`` maps a scene's name to its file."""
+
+    world: str
+    objects: tuple
+    modes: tuple
+    seeds: int
+    out: Path
+    workers: int | None
+    address: str | None
+    max_travel: float | None
+    max_steps: int | None
+    smoke: bool
+    progress: bool
+    threads: int
+    backend: str
+    force: bool
+    scene_files: dict
+    voxel: float | None
+    touch: str
+    outer_tol: float | None
+    device: str | None
+
+    @classmethod
+    def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
+                threads, backend, force, scenes, voxel, touch, outer_tol, device) -> "SweepSettings":
+        """The settings, each checked before anything runs (raises ValueError naming the argument)."""
+        from ..exploration.registry import canonical_world_name, world_entry
+
+        world = canonical_world_name(world, warn=True)
+        if world not in _worlds():
+            raise ValueError(f"world: must be one of {_worlds()}, got {world!r}")
+        entry = world_entry(world)
+        scene_files = _scene_files(scenes, world)
+        objects = tuple(dict.fromkeys(objects or ([] if scene_files else entry.object_names)))
+        clash = sorted(set(objects) & set(scene_files))
+        if clash:
+            raise ValueError(f"scenes: {clash} are also the names of objects; rename the scene (its name key)")
+        modes = _checked_modes(modes)
+        if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
+            raise ValueError(f"seeds: must be an integer in [1, {MAX_SEEDS}], got {seeds!r}")
+        for name in objects:        # fail before starting anything
+            if name not in entry.object_names:
+                raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {entry.object_names}")
+        if voxel is not None:
+            from ..exploration.observations import check_voxel
+
+            voxel = check_voxel(voxel)
+            if getattr(entry.cls, "dim", 3) != 3:
+                raise ValueError(f"voxel: the {world} world's camera view is sampled at its spacing, not "
+                                 "voxel-averaged; --voxel applies to the 3-D worlds")
+        if touch not in ("point", "patch"):
+            raise ValueError(f"touch: must be 'point' or 'patch', got {touch!r}")
+        if outer_tol is not None:
+            outer_tol = as_float(outer_tol, "outer_tol", positive=True)
+            if touch == "patch":
+                raise ValueError("outer_tol: patch runs use the batched engine, which has no truncated outer basis")
+        if device is not None:
+            device = str(as_device(device))      # fails here, before any run, on a device this machine lacks
+        return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
+                   threads, backend, force, scene_files, voxel, touch, outer_tol, device)
+
+    def run(self) -> dict:
+        """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
+        from ..io.outputs import FolderLock
+
+        out = self._claim()
+        with FolderLock(out, "gpioius study"):
+            running = self._prepare(out)
+            specs = self._specs(out)
+            todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
+            t0 = time.perf_counter()
+            try:
+                used = self._execute(todo)
+            finally:
+                if running.exists() and not any(running.iterdir()):
+                    running.rmdir()
+            seconds = time.perf_counter() - t0
+            result = aggregate(out, None, self.smoke, world=self.world, max_travel=self.max_travel)
+        result.update(runs=len(specs), skipped=len(specs) - len(todo), seconds=seconds, backend=used)
+        return result
+
+    def _claim(self) -> Path:
+        from ..io.outputs import claim_folder
+
+        identity = {} if self.outer_tol is None else {"outer_tol": self.outer_tol}   # older folders: exact
+        return claim_folder(self.out, "study", self.force, world=self.world, voxel=self.voxel,
+                            touch=None if self.touch == "point" else self.touch, **identity)   # older: point runs
+
+    @staticmethod
+    def _prepare(out: Path) -> Path:
+        """The folder's ``runs/`` and a ``running/`` without stale markers (the lock is held: nobody else runs)."""
+        (out / "runs").mkdir(parents=True, exist_ok=True)
+        running = out / "running"
+        for stale in running.glob("*.pid") if running.exists() else []:
+            stale.unlink(missing_ok=True)
+        return running
+
+    def _specs(self, out: Path) -> list[RunSpec]:
+        return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
+                        self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device)
+                for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
+
+    def _execute(self, todo: list[RunSpec]) -> str:
+        """Run ``todo`` on Ray or in-process; returns how (for the report)."""
+        from .._progress import progress as reporter
+
+        use_ray = self.backend == "ray" or (self.backend == "auto" and _ray_available()
+                                            and (len(todo) > 1 or self.address))
+        bar = reporter(len(todo), f"study ({self.world})", self.progress)
+        try:
+            if todo and use_ray:
+                _run_on_ray(todo, self.workers, self.address, bar)
+                where = f" at {self.address}" if self.address else f" (local, {self.workers or os.cpu_count()} workers)"
+                return "Ray" + where
+            for spec in todo:
+                bar.set_postfix_str(spec.key)
+                run_one(spec)
+                bar.update(1)
+            return "in-process (sequential)"
+        finally:
+            bar.close()
+
+
+def _checked_modes(modes) -> tuple:
     modes = tuple(dict.fromkeys(modes))
     bad = [m for m in modes if m not in MODES]
     if bad:
         raise ValueError(f"modes: unknown {bad}; choose among {MODES}")
     if not modes:
         raise ValueError("modes: at least one mode is needed")
-    if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
-        raise ValueError(f"seeds: must be an integer in [1, {MAX_SEEDS}], got {seeds!r}")
-    for name in objects:        # fail before starting anything
-        if name not in entry.object_names:
-            raise ValueError(f"objects: unknown {name!r} in the {world} world; choose among {entry.object_names}")
-    if voxel is not None:
-        from ..exploration.observations import check_voxel
-
-        voxel = check_voxel(voxel)
-        if getattr(entry.cls, "dim", 3) != 3:
-            raise ValueError(f"voxel: the {world} world's camera view is sampled at its spacing, not voxel-averaged; "
-                             "--voxel applies to the 3-D worlds")
-    if touch not in ("point", "patch"):
-        raise ValueError(f"touch: must be 'point' or 'patch', got {touch!r}")
-    if outer_tol is not None:
-        outer_tol = as_float(outer_tol, "outer_tol", positive=True)
-        if touch == "patch":
-            raise ValueError("outer_tol: patch runs use the batched engine, which has no truncated outer basis")
-    if device is not None:
-        device = str(as_device(device))      # fails here, before any run, on a device this machine lacks
-    identity = {} if outer_tol is None else {"outer_tol": outer_tol}   # folders of older versions: exact
-    out = claim_folder(out, "study", force, world=world, voxel=voxel,
-                       touch=None if touch == "point" else touch, **identity)   # older folders hold point runs
-    with FolderLock(out, "gpioius study"):
-        (out / "runs").mkdir(parents=True, exist_ok=True)
-        running = out / "running"
-        for stale in running.glob("*.pid") if running.exists() else []:   # we hold the lock: nobody else runs
-            stale.unlink(missing_ok=True)
-        specs = [RunSpec(world, o, m, s, str(out), smoke, max_travel, max_steps, threads, scene_files.get(o), voxel, touch,
-                         outer_tol, device)
-                 for o in (*objects, *scene_files) for m in modes for s in range(seeds)]
-        todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
-        use_ray = backend == "ray" or (backend == "auto" and _ray_available() and (len(todo) > 1 or address))
-        t0 = time.perf_counter()
-        bar = reporter(len(todo), f"study ({world})", progress)
-        try:
-            if todo and use_ray:
-                _run_on_ray(todo, workers, address, bar)
-                used = "Ray" + (f" at {address}" if address else f" (local, {workers or os.cpu_count()} workers)")
-            else:
-                for spec in todo:
-                    bar.set_postfix_str(spec.key)
-                    run_one(spec)
-                    bar.update(1)
-                used = "in-process (sequential)"
-        finally:
-            bar.close()
-            if running.exists() and not any(running.iterdir()):
-                running.rmdir()
-        seconds = time.perf_counter() - t0
-        result = aggregate(out, None, smoke, world=world, max_travel=max_travel)
-    result.update(runs=len(specs), skipped=len(specs) - len(todo), seconds=seconds, backend=used)
-    return result
+    return modes
 
 
 def _scene_files(scenes, world: str) -> dict[str, str]:
