@@ -173,3 +173,31 @@ def test_a_repaired_mesh_needs_no_second_repair():
             warnings.simplefilter("error", MeshRepairWarning)
             again = load_mesh(once)
         assert len(again.faces) == len(once.faces)
+
+
+def partitioned(mesh: trimesh.Trimesh, z: float = 135.0) -> trimesh.Trimesh:
+    """``mesh`` (the bottle, in mm) with a disc across its neck at height ``z`` sharing the neck's rim: each rim edge
+    then belongs to three faces, as in a scan with an internal partition."""
+    v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    ring = np.flatnonzero(np.isclose(v[:, 2], z) & np.isclose(np.hypot(v[:, 0], v[:, 1]), 12.0))
+    ring = ring[np.argsort(np.arctan2(v[ring, 1], v[ring, 0]))]
+    c = len(v)
+    disc = np.array([[c, ring[i], ring[(i + 1) % len(ring)]] for i in range(len(ring))])
+    return trimesh.Trimesh(np.vstack([v, [[0.0, 0.0, z]]]), np.vstack([f, disc]), process=False)
+
+
+def test_a_scan_with_an_internal_partition_loads_and_loses_the_partition():
+    """Issue 35, item 1: the repair's distance counted the internal disc it rightly removes ("moves the surface by
+    10.9 mm"), refusing a scan whose outside did not move at all."""
+    scan = partitioned(bottle_mm())
+    assert inspect_mesh(scan).nonmanifold_edges == 48
+    with pytest.warns(MeshRepairWarning, match=r"repaired 48 non-manifold edge\(s\) by winding-number remesh"):
+        m = load_mesh(scan, scale=0.001)
+    ref = bottle_mm()
+    ref.apply_scale(0.001)
+    assert inspect_mesh(m).closed and len(m.split(only_watertight=False)) == 1          # no disc left inside
+    assert abs(m.volume - ref.volume) < 0.01 * ref.volume
+    assert np.abs(MeshDistance(ref)(m.vertices)).max() < 0.002                           # the outside as it was
+    # what moves the outside is still measured: a remesh far coarser than the allowance is refused
+    with pytest.raises(ValueError, match="more than the .* allowed"):
+        load_mesh(scan, scale=0.001, resolution=0.02, max_repair_distance=1e-3)

@@ -132,16 +132,25 @@ def _sample(mesh: trimesh.Trimesh, n: int = 20000) -> np.ndarray:
 
 
 def _distance_between(a: trimesh.Trimesh, b: trimesh.Trimesh, outer_only: bool = False,
-                      exclude=None) -> tuple[float, float]:
+                      exclude=None, skip_interior: bool = False) -> tuple[float, float]:
     """How far a repair ``a`` is from its input ``b`` [m]: ``(moved, patched)``, the largest distance of the input's
     surface from the repair (how far existing surface moved) and of the repair's surface from the input (how far new
     patches reach from what was there: about a hole's radius for a filled hole), from dense samples to the other's
     triangles. ``outer_only``: of ``b``, only the samples outside its other pieces count (a union's internal faces
-    are gone by design); ``exclude``: a distance to pieces the repair dropped, whose samples of ``b`` do not count."""
+    are gone by design); ``exclude``: a distance to pieces the repair dropped, whose samples of ``b`` do not count;
+    ``skip_interior``: samples of ``b`` on its own interior faces (a partition across a bottle's neck, both sides
+    inside) do not count either: the winding-number remesh removes them by design, and counting them refused scans
+    whose outside did not move at all."""
     patched = MeshDistance(b, signed=False)(_sample(a))
-    if outer_only:
+    if outer_only or skip_interior:
         pb, face = trimesh.sample.sample_surface(b, 20000, seed=0)
-        pb = pb[_outside_other_pieces(b, pb, np.asarray(b.face_normals)[face])]
+        normals = np.asarray(b.face_normals)[face]
+        keep = np.ones(len(pb), dtype=bool)
+        if outer_only:
+            keep &= _outside_other_pieces(b, pb, normals)
+        if skip_interior:
+            keep &= ~_interior_faces(b, pb, normals)
+        pb = pb[keep]
     else:
         pb = _sample(b)
     if exclude is not None:
@@ -195,6 +204,20 @@ def _outside_other_pieces(mesh: trimesh.Trimesh, points: np.ndarray, normals: np
     q = np.asarray(points, dtype=np.float64) + eps * np.asarray(normals, dtype=np.float64)
     w = igl.fast_winding_number(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64), q)
     return np.abs(w) < 0.5
+
+
+def _interior_faces(mesh: trimesh.Trimesh, points: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """`(n,)` bool: surface points `(n, 3)` of ``mesh`` with its inside on both sides (an internal partition). A point
+    of the outer surface has a side where the generalized winding number is ~0 (outside); across a partition it
+    jumps between ~1/2 and ~3/2, never near 0. Tested a little off the surface on both sides along ``normals``."""
+    import igl
+
+    eps = 1e-3 * float(mesh.extents.max())
+    V, F = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+    p, n = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+    w_out = np.abs(igl.fast_winding_number(V, F, p + eps * n))
+    w_in = np.abs(igl.fast_winding_number(V, F, p - eps * n))
+    return np.minimum(w_out, w_in) > 0.25
 
 
 def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
@@ -272,7 +295,8 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
         # result must find nothing to repair)
         if inspect_mesh(small).closed and small.volume > 0 and overlapping_components(small) == 0:
             m, what = small, what + f" (decimated to {len(small.faces)} faces)"
-    return (m, f"{what} at {h * 1e3:.1f} mm", *_distance_between(m, mesh, outer_only=remesh))
+    # what the repair does to the outside: interior partitions of the input, which the remesh drops, do not count
+    return (m, f"{what} at {h * 1e3:.1f} mm", *_distance_between(m, mesh, outer_only=remesh, skip_interior=True))
 
 
 def as_pose(pose) -> np.ndarray | None:
