@@ -66,3 +66,44 @@ def test_relative_uncertainty_uses_the_task_prior_variance():
     rel = uncertainty_measure(m, [circle(0.2, 400)])
     assert rel == pytest.approx(raw / (0.04 / 0.1), rel=1e-12)
     assert 0.0 <= rel <= 1.0
+
+
+def test_surface_agreement_on_concentric_spheres():
+    """An estimate grown by delta everywhere: Chamfer delta, F-score 1 at thresholds >= delta and 0 below, bias
+    +delta (the estimate outside), every sample observed; shrunk, the bias is -delta."""
+    from torch_gpioius.metrics import surface_agreement
+
+    delta = 0.004
+    d = np.full(500, delta)
+    grown = surface_agreement(d, d, truth_signed=+d)
+    assert grown["chamfer"] == pytest.approx(delta) and grown["bias"] == pytest.approx(delta)
+    assert grown["fscore_1mm"] == 0.0 and grown["fscore_5mm"] == grown["fscore_10mm"] == grown["fscore_20mm"] == 1.0
+    assert grown["unseen"] == 0.0 and grown["hausdorff_observed"] == pytest.approx(delta)
+    assert surface_agreement(d, d, truth_signed=-d)["bias"] == pytest.approx(-delta)
+    # precision and recall apart: half the estimate 3 cm off (a phantom piece), the truth covered
+    est = np.r_[np.full(50, 0.001), np.full(50, 0.03)]
+    m = surface_agreement(est, np.full(100, 0.001))
+    p, r = 0.5, 1.0
+    assert m["fscore_5mm"] == pytest.approx(2 * p * r / (p + r)) and m["chamfer"] == pytest.approx(0.5 * (0.0155 + 0.001))
+    # a part nobody observed: the observed Hausdorff leaves it out, the unseen share counts it
+    truth = np.r_[np.full(80, 0.002), np.full(20, 0.05)]
+    obs = np.r_[np.ones(80, bool), np.zeros(20, bool)]
+    m = surface_agreement(np.full(100, 0.002), truth, observed=obs)
+    assert m["unseen"] == pytest.approx(0.2) and m["hausdorff_observed"] == pytest.approx(0.002)
+    assert np.isnan(surface_agreement(np.zeros(0), d)["chamfer"])
+
+
+def test_a_3d_run_records_the_fields_metrics_consistently():
+    import torch_gpioius as tg
+    from torch_gpioius.metrics import SHAPE_METRICS
+    from torch_gpioius.sim.forcefield import sphere_scene
+
+    trace = tg.explore(sphere_scene(), max_travel=0.03, metrics_every=100)
+    last = {k: float(trace.shape[k][-1]) for k in SHAPE_METRICS}
+    assert all(np.isfinite(v) for v in last.values())
+    assert 0 < last["chamfer"] <= trace.hausdorff[-1] + 1e-9
+    assert last["hausdorff_observed"] <= trace.hausdorff[-1] + 1e-9
+    f = [last[f"fscore_{t}mm"] for t in (1, 5, 10, 20)]
+    assert all(0 <= a <= b <= 1 for a, b in zip(f, f[1:]))             # more lenient, never lower
+    assert 0 <= last["unseen"] <= 1 and abs(last["bias"]) <= trace.hausdorff[-1]
+    assert trace.records()[-1]["chamfer"] == last["chamfer"]

@@ -11,7 +11,8 @@ import trimesh
 from .geometry import predict_task
 from .polylines import distance_to_segments, resample_polyline, segments
 
-__all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff", "Shape"]
+__all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff",
+           "Shape", "surface_agreement", "FSCORE_THRESHOLDS", "OBSERVED_WITHIN", "SHAPE_METRICS"]
 
 #: A shape for the metrics: an `(n, d)` point set, a list of `(k, d)` polylines, or a triangle mesh.
 Shape = Union[np.ndarray, Sequence[np.ndarray], trimesh.Trimesh]
@@ -125,3 +126,52 @@ def hausdorff_distance(a: Shape, b: Shape, spacing: float = 5e-4) -> float:
         The distance [m]; ``inf`` if one shape is empty.
     """
     return max(directed_hausdorff(a, b, spacing), directed_hausdorff(b, a, spacing))
+
+
+#: Distances [m] at which :func:`surface_agreement` reports the F-score (the visuo-tactile literature's 1-20 mm).
+FSCORE_THRESHOLDS = (0.001, 0.005, 0.010, 0.020)
+#: How far [m] a true-surface point may lie from every observation and still count as observed.
+OBSERVED_WITHIN = 0.02
+#: The names :func:`surface_agreement` returns, in the order records, logs and tables carry them.
+SHAPE_METRICS = ("chamfer", "fscore_1mm", "fscore_5mm", "fscore_10mm", "fscore_20mm", "bias", "hausdorff_observed",
+                 "unseen")
+
+
+def surface_agreement(est_to_truth: np.ndarray, truth_to_est: np.ndarray, truth_signed: np.ndarray | None = None,
+                      observed: np.ndarray | None = None, est_near_observed: np.ndarray | None = None) -> dict:
+    """The field's shape metrics from the two directed distances between an estimated and a true surface.
+
+    Args:
+        est_to_truth: `(n,)` distance [m] of samples of the estimated surface from the true surface.
+        truth_to_est: `(m,)` distance [m] of samples of the true surface from the estimated surface.
+        truth_signed: `(m,)` the same, signed: negative where the true surface lies *outside* the estimate (the
+            estimate is shrunk there), positive where inside; None: no bias.
+        observed: `(m,)` bool, the true-surface samples within :data:`OBSERVED_WITHIN` of an observation; None: every
+            sample counts as observed.
+        est_near_observed: `(n,)` bool, the estimate's samples near the observed true surface (they enter the
+            observed Hausdorff distance); None: all.
+
+    Returns:
+        ``{"chamfer", "fscore_1mm", "fscore_5mm", "fscore_10mm", "fscore_20mm", "bias", "hausdorff_observed",
+        "unseen"}``: the Chamfer distance (mean of the two mean distances) [m]; the F-score at each threshold
+        (harmonic mean of precision, the share of estimate samples within it of the truth, and recall, the share of
+        truth samples within it of the estimate); the median signed distance [m] (``bias``: negative = the estimate
+        lies inside the true surface); the Hausdorff distance over the observed true surface [m]; the share of the
+        true surface further than :data:`OBSERVED_WITHIN` from every observation. NaN where a set is empty.
+    """
+    a, b = np.asarray(est_to_truth, dtype=float), np.asarray(truth_to_est, dtype=float)
+    nan = float("nan")
+    if not len(a) or not len(b):
+        return {"chamfer": nan, **{f"fscore_{round(t * 1e3)}mm": nan for t in FSCORE_THRESHOLDS}, "bias": nan,
+                "hausdorff_observed": nan, "unseen": nan}
+    out = {"chamfer": 0.5 * (float(a.mean()) + float(b.mean()))}
+    for t in FSCORE_THRESHOLDS:
+        p, r = float((a <= t).mean()), float((b <= t).mean())
+        out[f"fscore_{round(t * 1e3)}mm"] = 0.0 if p + r == 0 else 2 * p * r / (p + r)
+    out["bias"] = nan if truth_signed is None else float(np.median(truth_signed))
+    obs = np.ones(len(b), dtype=bool) if observed is None else np.asarray(observed, dtype=bool)
+    near = np.ones(len(a), dtype=bool) if est_near_observed is None else np.asarray(est_near_observed, dtype=bool)
+    out["unseen"] = float(1.0 - obs.mean())
+    out["hausdorff_observed"] = (max(float(b[obs].max()), float(a[near].max()) if near.any() else 0.0)
+                                 if obs.any() else nan)
+    return out

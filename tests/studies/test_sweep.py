@@ -272,6 +272,10 @@ def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "p" / "runs.csv")))
     assert rows[0]["failed"] == "" and json.loads((tmp_path / "p" / "runs" / "ball_visual-tactile_0.json")
                                                    .read_text())["touch"] == "patch"
+    # the field's metrics reach runs.csv and the table (issue 34, item 5)
+    assert 0 < float(rows[0]["final_chamfer"]) <= float(rows[0]["final_hausdorff"]) + 1e-9
+    assert 0 <= float(rows[0]["final_fscore_5mm"]) <= 1 and "Chamfer final [cm]" in (tmp_path / "p" / "summary.md"
+                                                                                      ).read_text()
     # issue 35, item 6: the point default read "touch=None"
     with pytest.raises(FileExistsError, match=r"touch='patch'.* this one is touch='point'"):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,

@@ -10,6 +10,7 @@ import math
 import warnings
 
 from .._progress import progress as progress_reporter
+from ..metrics import SHAPE_METRICS
 from .protocols import Recorder
 
 __all__ = ["MetricsRecorder", "IntervalRecorder", "ProgressRecorder", "NoEstimateWarning", "REPORT_FRACTIONS"]
@@ -40,6 +41,8 @@ class MetricsRecorder(Recorder):
                                                                           float(m.hausdorff_touched),
                                                                           float(m.uncertainty))
         record.estimate = math.nan if m.estimate is None else float(m.estimate)
+        for name in SHAPE_METRICS:                       # the field's metrics (3-D worlds); NaN where not computed
+            setattr(record, name, float(m.shape.get(name, math.nan)))
 
     def start(self, run, state) -> None:
         if not run.resumed:

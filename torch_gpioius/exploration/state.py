@@ -20,6 +20,14 @@ RECORD_FIELDS = {
     "hausdorff": "Hausdorff distance of the whole estimate {mu_in = 0} to the true inner surface [m] (eq. 24)",
     "hausdorff_touched": "the same for the pieces of the estimate the fingertip touched [m]",
     "uncertainty": "uncertainty measure, eq. (23), relative to the prior variance",
+    "chamfer": "Chamfer distance: the mean of the two mean surface-to-surface distances, estimate and truth [m]",
+    "fscore_1mm": "F-score at 1 mm: harmonic mean of the estimate's and the truth's shares within 1 mm of the other",
+    "fscore_5mm": "the same at 5 mm",
+    "fscore_10mm": "the same at 10 mm",
+    "fscore_20mm": "the same at 20 mm",
+    "bias": "median signed distance of the true surface from the estimate [m]; negative: the estimate lies inside",
+    "hausdorff_observed": "Hausdorff distance over the true surface within 2 cm of an observation [m]",
+    "unseen": "share of the true surface (in range) more than 2 cm from every observation",
     "estimate": "1 where the estimate was measured and has a surface to judge (2-D: a closed curve; 3-D: surface in "
                 "the range), 0 where it was measured and has none (no estimate), NaN where not measured",
     "similarity": "the paper's similarity K_t[0,1] / K_t[0,0] (a ratio of amplitudes)",
@@ -62,6 +70,14 @@ class StepRecord:
     hausdorff_touched: float = math.nan
     uncertainty: float = math.nan
     estimate: float = math.nan
+    chamfer: float = math.nan
+    fscore_1mm: float = math.nan
+    fscore_5mm: float = math.nan
+    fscore_10mm: float = math.nan
+    fscore_20mm: float = math.nan
+    bias: float = math.nan
+    hausdorff_observed: float = math.nan
+    unseen: float = math.nan
     similarity: float = math.nan
     correlation: float = math.nan
     correlation_interval: tuple = (math.nan, math.nan)

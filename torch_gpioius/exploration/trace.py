@@ -9,6 +9,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..metrics import SHAPE_METRICS
+
 __all__ = ["Trace"]
 
 
@@ -47,6 +49,9 @@ class Trace:
         recoveries: `(n,)` cumulative number of recoveries from a stall.
         reapproaches: `(n,)` cumulative number of re-approaches after lost contact.
         reapproach_travel: `(n,)` cumulative travel of those re-approaches [m] (part of ``travel``).
+        shape: the field's shape metrics per record, ``{name: (n,)}`` for each of
+            :data:`torch_gpioius.metrics.SHAPE_METRICS` (Chamfer, F-scores, bias, observed Hausdorff, unseen share;
+            NaN where not measured, and in the 2-D world).
         estimate: `(n,)` 1 where the estimate was measured and has a surface to judge, 0 where it has none (no
             estimate), NaN where not measured.
         truncation: `(n,)` bound on the truncated outer basis' change of the Gram matrix relative to sigma^2
@@ -83,6 +88,7 @@ class Trace:
     estimate: np.ndarray = field(default_factory=lambda: np.zeros(0))
     reapproaches: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     reapproach_travel: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    shape: dict = field(default_factory=dict)
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":
@@ -113,7 +119,8 @@ class Trace:
                    recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"),
                    estimate=col("estimate"),
                    reapproaches=np.array([r.reapproaches for r in recs], dtype=np.int64),
-                   reapproach_travel=col("reapproach_travel"))
+                   reapproach_travel=col("reapproach_travel"),
+                   shape={name: col(name) for name in SHAPE_METRICS})
 
     @property
     def n_steps(self) -> int:
@@ -152,6 +159,8 @@ class Trace:
                 row["hausdorff_touched"] = float(self.hausdorff_touched[i])
             if len(self.estimate):
                 row["estimate"] = float(self.estimate[i])
+            for name, values in self.shape.items():
+                row[name] = float(values[i])
             if len(self.correlation):
                 row["correlation"] = float(self.correlation[i])
             if len(self.correlation_interval):

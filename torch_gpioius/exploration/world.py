@@ -94,6 +94,8 @@ class Measurement:
         surface: the estimated surface (2-D: list of polylines; 3-D: a ``trimesh.Trimesh`` in the range, or None).
         estimate: whether the estimate has a surface to judge (2-D: a closed curve; 3-D: surface inside the range);
             None where the world did not look (no known truth).
+        shape: the field's shape metrics (:func:`torch_gpioius.metrics.surface_agreement`: Chamfer, F-scores,
+            signed bias, Hausdorff over the observed surface, unseen share), ``{}`` where not computed.
     """
 
     hausdorff: float = math.nan
@@ -102,6 +104,7 @@ class Measurement:
     centre: np.ndarray | None = None
     surface: Any = None
     estimate: bool | None = None
+    shape: dict = field(default_factory=dict)
 
 
 @dataclass

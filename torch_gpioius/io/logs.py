@@ -18,6 +18,7 @@ import numpy as np
 import torch
 
 from ..exploration.protocols import Recorder
+from ..metrics import SHAPE_METRICS
 from ..exploration.state import ExplorationState, StepRecord
 from .datasets import DatasetError, LogWriter, TornLogWarning, read_records, replay, step_number
 
@@ -26,7 +27,8 @@ __all__ = ["LogRecorder", "restore_run", "step_values", "OLD_FIELD_NAMES"]
 #: Step-record fields of logs written before the one vocabulary, and their names now.
 OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertainty", "s": "similarity",
                    "rho": "correlation", "ci": "correlation_interval", "time": "step_time", "sim_time": "robot_time"}
-_VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "estimate", "similarity", "correlation", "step_time",
+_VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "estimate", *SHAPE_METRICS, "similarity",
+           "correlation", "step_time",
            "robot_time", "contact_distance", "contact_on_body", "truncation")
 
 
@@ -89,7 +91,8 @@ class LogRecorder(Recorder):
                 "recoveries": record.recoveries, "reapproaches": record.reapproaches,
                 "reapproach_travel": record.reapproach_travel,
                 "hausdorff": record.hausdorff, "hausdorff_touched": record.hausdorff_touched,
-                "uncertainty": record.uncertainty, "estimate": record.estimate, "similarity": record.similarity,
+                "uncertainty": record.uncertainty, "estimate": record.estimate,
+                **{name: getattr(record, name) for name in SHAPE_METRICS}, "similarity": record.similarity,
                 "correlation": record.correlation,
                 "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
@@ -178,7 +181,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         v = step_values(r.meta)
         rec = StepRecord(step=i, travel=v["travel"], hausdorff=v["hausdorff"],
                          hausdorff_touched=v["hausdorff_touched"], uncertainty=v["uncertainty"],
-                         estimate=v["estimate"],
+                         estimate=v["estimate"], **{name: v[name] for name in SHAPE_METRICS},
                          similarity=v["similarity"], correlation=v["correlation"],
                          correlation_interval=v["correlation_interval"],
                          task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64), step_time=v["step_time"],

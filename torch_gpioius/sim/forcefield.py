@@ -97,7 +97,34 @@ def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float =
             t = surface_samples(touched, spacing)
             t = t[scene.in_range(t)]
             ht = hausdorff_distance(t, truth) if len(t) else float("nan")
-    return Measurement(h, ht, uncertainty_measure(model, mesh, 0), None, mesh, estimate=True)
+    return Measurement(h, ht, uncertainty_measure(model, mesh, 0), None, mesh, estimate=True,
+                       shape=shape_metrics_3d(model, scene, mesh, est, truth))
+
+
+def shape_metrics_3d(model, scene, mesh: trimesh.Trimesh, est: np.ndarray, truth: np.ndarray) -> dict:
+    """The field's shape metrics of an estimate (:func:`torch_gpioius.metrics.surface_agreement`) from samples of the
+    estimated surface ``est`` `(n, 3)` and of the true one ``truth`` `(m, 3)` in the range, with exact
+    point-to-triangle distances in both directions; the sign of each true-surface sample from the model's mean
+    there (mu > 0: outside the estimate); "observed": within 2 cm of a surface observation of either task."""
+    from scipy.spatial import cKDTree
+
+    from ..geometry import predict_mean_task
+    from ..metrics import OBSERVED_WITHIN, surface_agreement
+    from .meshes import MeshDistance
+
+    est_to_truth = np.abs(scene.true_distance(est))
+    truth_to_est = np.asarray(MeshDistance(mesh, signed=False)(truth), dtype=float)
+    with torch.no_grad():
+        mu = predict_mean_task(model, torch.as_tensor(truth, dtype=torch.float64), 0).detach().cpu().numpy()
+    signed = np.where(mu > 0, -truth_to_est, truth_to_est)
+    x = model.train_inputs[0].detach().cpu().numpy()
+    y = model.train_targets.detach().cpu().numpy()
+    surface_obs = x[y == 0]
+    observed = (cKDTree(surface_obs).query(truth)[0] <= OBSERVED_WITHIN) if len(surface_obs) else \
+        np.zeros(len(truth), dtype=bool)
+    near = (cKDTree(truth[observed]).query(est)[0] <= OBSERVED_WITHIN) if observed.any() else \
+        np.zeros(len(est), dtype=bool)
+    return surface_agreement(est_to_truth, truth_to_est, signed, observed, near)
 
 
 def _mesh(m, name: str) -> trimesh.Trimesh:

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from .._validation import as_device, as_float
+from ..metrics import SHAPE_METRICS
 from .stats import median_interval, paired_difference
 
 __all__ = ["run_sweep", "SweepSettings", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
@@ -249,6 +250,12 @@ def read_run_file(path: str | Path) -> dict:
         if k.startswith("correlation") and (np.abs(a[np.isfinite(a)]) > 1 + 1e-9).any():
             raise bad(f"series.{k}", "holds a correlation outside [-1, 1]")
         lengths.add(len(v))
+    for k in SHAPE_METRICS:            # the field's metrics, in runs since they were recorded
+        if k in series:
+            v = series[k]
+            if not isinstance(v, list) or not all(_number(e) for e in v):
+                raise bad(f"series.{k}", "must be a list of numbers (NaN where not measured)")
+            lengths.add(len(v))
     if "estimate" in series:           # runs since the series was recorded: 1 surface, 0 none, NaN not measured
         v = series["estimate"]
         if not isinstance(v, list) or not all(_number(e) and (math.isnan(e) or e in (0, 1)) for e in v):
@@ -340,7 +347,8 @@ def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
                        "correlation": trace.correlation.tolist(),
                        "correlation_lo": trace.correlation_interval[:, 0].tolist(),
                        "correlation_hi": trace.correlation_interval[:, 1].tolist(),
-                       "estimate": trace.estimate.tolist()}}
+                       "estimate": trace.estimate.tolist(),
+                       **{name: values.tolist() for name, values in trace.shape.items()}}}
 
 
 def _n_outer(model) -> int:
@@ -476,6 +484,10 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "final_hausdorff": _final(run, "hausdorff"),
            "final_hausdorff_touched": _final(run, "hausdorff_touched"),
            "final_uncertainty": _final(run, "uncertainty"),
+           **{f"final_{k}": _final(run, k) if k in s else math.nan for k in SHAPE_METRICS},
+           # no estimate: no estimated surface agrees with the truth at any distance
+           **({f"final_{k}": 0.0 for k in SHAPE_METRICS if k.startswith("fscore")}
+              if "fscore_5mm" in s and not _has_final_estimate(run) else {}),
            "final_correlation": _last_finite(s["correlation"]),
            "final_correlation_lo": _last_finite(s["correlation_lo"]),
            "final_correlation_hi": _last_finite(s["correlation_hi"]),
@@ -493,6 +505,8 @@ def _row(run: dict, runs_by_key: dict) -> dict:
         p = int(round(100 * f))
         row[f"hausdorff_{p}"] = _at_travel(s, "hausdorff", f * ref)
         row[f"uncertainty_{p}"] = _at_travel(s, "uncertainty", f * ref)
+        for k in ("chamfer", "fscore_5mm", "bias", "unseen"):
+            row[f"{k}_{p}"] = _at_travel(s, k, f * ref) if k in s else math.nan
     return row
 
 
@@ -529,10 +543,16 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
 
 
 METRICS = ["final_hausdorff", "final_hausdorff_touched", "final_uncertainty", "final_correlation",
-           "final_similarity"] + [f"hausdorff_{int(round(100 * f))}" for f in FRACTIONS]
+           "final_similarity"] + [f"hausdorff_{int(round(100 * f))}" for f in FRACTIONS] + [
+    "final_chamfer", "final_fscore_1mm", "final_fscore_5mm", "final_fscore_10mm", "final_fscore_20mm", "final_bias",
+    "final_hausdorff_observed", "final_unseen", "chamfer_25", "fscore_5mm_25"]
 #: Metrics where NaN means "the mode has no such value" (a tactile run has no correlation), not a failure; every
 #: other metric is a distance or a variance, where NaN is "no estimate" and counts as the worst value.
-NOT_APPLICABLE_METRICS = ("final_correlation", "final_similarity", "contacts_on_body", "contacts_within")
+NOT_APPLICABLE_METRICS = ("final_correlation", "final_similarity", "contacts_on_body", "contacts_within",
+                          # a higher F-score is better (a run with no estimate has 0, set in its row), the bias is
+                          # signed, the unseen share is not an error: NaN there is "not measured" (2-D, older runs)
+                          "final_fscore_1mm", "final_fscore_5mm", "final_fscore_10mm", "final_fscore_20mm",
+                          "final_bias", "final_unseen", "fscore_5mm_25")
 
 
 def _policy(metric: str) -> str:
@@ -682,11 +702,14 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
              "runs (stalled, stopped by the robot, no estimate) stay in every statistic; a run with no estimate "
              "counts as inf, worse than any distance. On body: the median fraction of a run's contacts where the "
              "fingertip touched the body itself (not only the cover); '-' where the world cannot tell. Travel: the "
-             "median travel [m]; re-approach: the median share of it spent re-approaching after lost contact.", "",
+             "median travel [m]; re-approach: the median share of it spent re-approaching after lost contact. The "
+             "field's metrics at the end (3-D worlds): Chamfer, the mean surface-to-surface distance; F 5 mm, the "
+             "F-score at 5 mm; bias, the median signed distance of the true surface from the estimate (negative: the "
+             "estimate lies inside); unseen, the share of the true surface more than 2 cm from every observation.", "",
              "| object | mode | n (interval coverage) | failed (why) | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | "
              "H final [cm] | H touched final [cm] | U final | rho final | S final (paper) | on body | travel [m] | "
-             "re-approach |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "re-approach | Chamfer final [cm] | F 5 mm final | bias final [cm] | unseen final |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
     def cell(d: dict, scale: float = 100.0, fmt: str = ".1f") -> str:
         if d["n"] == 0:
@@ -704,7 +727,10 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
                          f"{cell(e['final_hausdorff_touched'])} | {cell(e['final_uncertainty'], 1, '.3f')} | "
                          f"{cell(e['final_correlation'], 1, '.2f')} | {cell(e['final_similarity'], 1, '.2f')} | "
                          f"{cell(on_body, 1, '.2f')} | {cell(e.get('travel', {'n': 0}), 1, '.2f')} | "
-                         f"{cell(e.get('reapproach_share', {'n': 0}), 100, '.0f')} % |")
+                         f"{cell(e.get('reapproach_share', {'n': 0}), 100, '.0f')} % | "
+                         f"{cell(e.get('final_chamfer', {'n': 0}))} | "
+                         f"{cell(e.get('final_fscore_5mm', {'n': 0}), 1, '.2f')} | "
+                         f"{cell(e.get('final_bias', {'n': 0}))} | {cell(e.get('final_unseen', {'n': 0}), 1, '.2f')} |")
     lines += ["", "Paired differences (same seed): mode - tactile, final Hausdorff [cm], with the Wilcoxon signed-rank "
               "p-value; a pair where one side has no estimate is a loss for it (inf).", "",
               "| object | mode | n | pairs with a failure | median [95 % interval] | wins / losses | p |",
