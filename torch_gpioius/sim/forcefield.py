@@ -112,7 +112,14 @@ def shape_metrics_3d(model, scene, mesh: trimesh.Trimesh, est: np.ndarray, truth
     from ..metrics import OBSERVED_WITHIN, surface_agreement
     from .meshes import MeshDistance
 
-    est_to_truth = np.abs(scene.true_distance(est))
+    # the unsigned distance to the true body by libigl's AABB tree, built once per scene (the signed field took 6 s
+    # for 18,000 samples of a torso's estimate, every measurement)
+    inner = getattr(scene, "_inner_unsigned", None)
+    if inner is None:
+        body = scene.inner if hasattr(scene, "inner") else scene.truth()["inner"]
+        inner = MeshDistance(body, signed=False)
+        scene._inner_unsigned = inner
+    est_to_truth = np.asarray(inner(est), dtype=float)
     truth_to_est = np.asarray(MeshDistance(mesh, signed=False)(truth), dtype=float)
     with torch.no_grad():
         mu = predict_mean_task(model, torch.as_tensor(truth, dtype=torch.float64), 0).detach().cpu().numpy()
