@@ -73,14 +73,15 @@ def test_cli_smoke_runs_the_mujoco_study(tmp_path, capsys):
     assert "| E |" in capsys.readouterr().out
 
 
-def _trace(mode, hausdorff, estimate):
+def _trace(mode, hausdorff, estimate, shape=None):
     from torch_gpioius.exploration import Trace
 
     n = len(hausdorff)
     return Trace(mode=mode, scene_name="box", hausdorff=np.array(hausdorff, float), uncertainty=np.full(n, 0.1),
                  similarity=np.full(n, 0.5), travel=np.linspace(0, 0.6, n), path=np.zeros((0, 3)),
                  contacts=np.zeros((n, 3)), model=None, step_time=np.full(n, 0.01), terminated="travel",
-                 robot_time=np.arange(n, dtype=float), estimate=np.array(estimate, float))
+                 robot_time=np.arange(n, dtype=float), estimate=np.array(estimate, float),
+                 shape={k: np.full(n, v) for k, v in (shape or {}).items()})
 
 
 def test_the_summary_names_runs_without_an_estimate_and_counts_valid_samples():
@@ -127,3 +128,15 @@ def test_a_summary_of_scene_files_has_no_empty_claims_table():
     claims = check_claims_3d(rows)
     text = _markdown(rows, claims)
     assert claims == [] and "| claim (Sec. VI-B)" not in text and "none of them ran here" in text
+
+
+def test_the_summary_shows_the_fields_metrics_at_the_end():
+    """Issue 34, item 5: Chamfer, F-score, bias and the unseen share beside H in simulate3d's summary."""
+    from torch_gpioius.studies.study3d import _markdown, summarize_3d
+
+    vt = _trace("visual-tactile", [0.05] * 3, [1] * 3, {"chamfer": 0.012, "fscore_5mm": 0.31, "bias": -0.011,
+                                                        "unseen": 0.25})
+    t = _trace("tactile", [0.05] * 3, [1] * 3)
+    text = _markdown(summarize_3d({"box": {"visual-tactile": vt, "tactile": t}}, {}), None)
+    assert "| Chamfer VT / T [cm] | F 5 mm VT / T | bias VT / T [cm] | unseen VT / T |" in text
+    assert "| 1.2 / - | 0.31 / - | -1.1 / - | 0.25 / - |" in text

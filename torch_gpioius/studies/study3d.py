@@ -61,6 +61,8 @@ def summarize_3d(traces: dict[str, dict[str, Trace]], hausdorff_io: dict[str, fl
                     row[f"S_{int(f * 100)}"] = float(tr.similarity[i])
             row[f"travel_{tag}_m"] = total
             row[f"estimate_{tag}"] = tr.has_estimate
+            for k in ("chamfer", "fscore_5mm", "bias", "unseen"):          # the field's metrics at the end
+                row[f"{k}_{tag}_100"] = float(tr.shape[k][-1]) if k in tr.shape and len(tr.shape[k]) else float("nan")
             row[f"reapproaches_{tag}"] = int(tr.reapproaches[-1]) if len(tr.reapproaches) else 0
             row[f"reapproach_m_{tag}"] = float(tr.reapproach_travel[-1]) if len(tr.reapproach_travel) else 0.0
             row[f"valid_{tag}"], row[f"measured_{tag}"] = estimate_counts(tr)
@@ -141,11 +143,19 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
              "uncertainty (eq. 23, relative to the prior variance); similarity the paper's K_t[0,1] / K_t[0,0]; "
              "'with estimate' how many of the run's metric samples had a surface to judge; travel the fingertip's "
              "travel and, in brackets, how many re-approaches after lost contact it held and how far they went; plan "
-             "ms the median planning step; robot time the simulated clock.", "",
+             "ms the median planning step; robot time the simulated clock. At the end: Chamfer, the mean "
+             "surface-to-surface distance; F 5 mm, the F-score at 5 mm; bias, the median signed distance of the true "
+             "surface from the estimate (negative: the estimate lies inside); unseen, the share of the true surface "
+             "more than 2 cm from every observation.", "",
              "| object | d_H inner-outer [cm] | H VT 10 / 50 / 100 % [cm] | H tactile 10 / 50 / 100 % [cm] | "
              "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps VT / T | travel VT / T [m] "
-             "(re-approaches) | plan ms VT / T | robot time VT / T [s] |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "(re-approaches) | plan ms VT / T | robot time VT / T [s] | Chamfer VT / T [cm] | F 5 mm VT / T | "
+             "bias VT / T [cm] | unseen VT / T |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+
+    def pair(r, k, scale, fmt):
+        vals = [r.get(f"{k}_{tag}_100") for tag in ("vt", "t")]
+        return " / ".join("-" if v is None or np.isnan(v) else f"{scale * v:{fmt}}" for v in vals)
 
     def travel(r, tag):
         if f"travel_{tag}_m" not in r:
@@ -162,7 +172,9 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
             f"{r.get('S_10', float('nan')):.2f} / {r.get('S_100', float('nan')):.2f} | "
             f"{r.get('steps_vt', '-')} / {r.get('steps_t', '-')} | {travel(r, 'vt')} / {travel(r, 't')} | "
             f"{r.get('median_plan_ms_vt', float('nan')):.0f} / {r.get('median_plan_ms_t', float('nan')):.0f} | "
-            f"{r.get('robot_time_s_vt', float('nan')):.0f} / {r.get('robot_time_s_t', float('nan')):.0f} |")
+            f"{r.get('robot_time_s_vt', float('nan')):.0f} / {r.get('robot_time_s_t', float('nan')):.0f} | "
+            f"{pair(r, 'chamfer', 100, '.1f')} | {pair(r, 'fscore_5mm', 1, '.2f')} | {pair(r, 'bias', 100, '.1f')} | "
+            f"{pair(r, 'unseen', 1, '.2f')} |")
     lost = [f"{r['object']} {mode}" for r in rows for mode, tag in (("visual-tactile", "vt"), ("tactile", "t"))
             if r.get(f"estimate_{tag}") is False]
     if lost:
