@@ -178,8 +178,9 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
     lost = [f"{r['object']} {mode}" for r in rows for mode, tag in (("visual-tactile", "vt"), ("tactile", "t"))
             if r.get(f"estimate_{tag}") is False]
     if lost:
-        lines += ["", f"**No estimate at the end:** {', '.join(lost)}: the estimated inner surface {{mu_in = 0}} has no "
-                      "surface inside the range, so there is nothing to judge (H 'none', the figure's panel empty)."]
+        lines += ["", f"**No estimate at the end:** {', '.join(lost)}: the estimated inner surface {{mu_in = 0}} "
+                      "has no surface inside the range, so there is nothing to judge (H 'none', the figure's panel "
+                      "empty)."]
     if claims is None:
         lines += ["", "The paper's claims are not judged: " + (why_not or "smoke run (a few centimetres of travel)")
                   + "."]
