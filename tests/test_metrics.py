@@ -107,3 +107,25 @@ def test_a_3d_run_records_the_fields_metrics_consistently():
     assert all(0 <= a <= b <= 1 for a, b in zip(f, f[1:]))             # more lenient, never lower
     assert 0 <= last["unseen"] <= 1 and abs(last["bias"]) <= trace.hausdorff[-1]
     assert trace.records()[-1]["chamfer"] == last["chamfer"]
+
+
+def test_curve_shape_metrics_on_concentric_circles():
+    """The 2-D form: an estimate 4 mm outside a true circle everywhere. Chamfer 4 mm, F-score 0 at 1 mm and 1 from
+    5 mm on, bias +4 mm (the estimate outside: the model's mean is negative on the true circle), all observed."""
+    from torch_gpioius.metrics import curve_shape_metrics
+
+    a = np.linspace(0, 2 * np.pi, 721)
+    circle = lambda r: np.stack([r * np.cos(a), r * np.sin(a)], -1)        # noqa: E731  (closed: 0 and 2 pi)
+    ring = circle(0.104)[:-1:20]
+    model = tg.GPIS(torch.as_tensor(np.r_[ring, 1.5 * ring]), torch.as_tensor(np.r_[np.zeros(36), np.ones(36)]),
+                    theta=0.1, noise=1e-4)
+    m = curve_shape_metrics(model, [circle(0.104)], [circle(0.1)], spacing=1e-3)
+    assert m["chamfer"] == pytest.approx(0.004, abs=2e-5) and m["bias"] == pytest.approx(0.004, abs=2e-5)
+    assert m["fscore_1mm"] == 0.0 and m["fscore_5mm"] == m["fscore_20mm"] == 1.0
+    assert m["unseen"] == 0.0 and m["hausdorff_observed"] == pytest.approx(0.004, abs=2e-5)
+    assert np.isnan(curve_shape_metrics(model, [], [circle(0.1)])["chamfer"])
+
+
+def test_a_2d_run_records_the_fields_metrics():
+    trace = tg.explore(tg.sim.paper_objects_2d()["A"], max_steps=6)
+    assert np.isfinite(trace.shape["chamfer"]).all() and (trace.shape["chamfer"] <= trace.hausdorff + 1e-9).all()

@@ -12,7 +12,7 @@ from .geometry import predict_task
 from .polylines import distance_to_segments, resample_polyline, segments
 
 __all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff",
-           "Shape", "surface_agreement", "FSCORE_THRESHOLDS", "OBSERVED_WITHIN", "SHAPE_METRICS"]
+           "Shape", "surface_agreement", "curve_shape_metrics", "FSCORE_THRESHOLDS", "OBSERVED_WITHIN", "SHAPE_METRICS"]
 
 #: A shape for the metrics: an `(n, d)` point set, a list of `(k, d)` polylines, or a triangle mesh.
 Shape = Union[np.ndarray, Sequence[np.ndarray], trimesh.Trimesh]
@@ -175,3 +175,27 @@ def surface_agreement(est_to_truth: np.ndarray, truth_to_est: np.ndarray, truth_
     out["hausdorff_observed"] = (max(float(b[obs].max()), float(a[near].max()) if near.any() else 0.0)
                                  if obs.any() else nan)
     return out
+
+
+def curve_shape_metrics(model, curves: Sequence[np.ndarray], truth: Sequence[np.ndarray], spacing: float = 5e-3,
+                        task: int = 0) -> dict:
+    """:func:`surface_agreement` of a 2-D estimate: closed ``curves`` `[(k, 2)]` against the ``truth`` curves, both
+    sampled by arc length at ``spacing`` [m] with exact point-to-segment distances the other way; a true-curve
+    sample lies outside the estimate where the model's mean there is positive; "observed": within
+    :data:`OBSERVED_WITHIN` of a surface observation (y = 0) of either task."""
+    from scipy.spatial import cKDTree
+
+    from .geometry import predict_mean_task
+
+    if _is_empty(curves) or _is_empty(truth):
+        return surface_agreement(np.zeros(0), np.zeros(0))
+    est, tru = _sample(list(curves), spacing), _sample(list(truth), spacing)
+    a, b = _distance_to(est, list(truth)), _distance_to(tru, list(curves))
+    x0 = model.train_inputs[0]
+    with torch.no_grad():
+        mu = predict_mean_task(model, torch.as_tensor(tru, dtype=x0.dtype, device=x0.device), task).cpu().numpy()
+    x = x0.detach().cpu().numpy()
+    obs = x[model.train_targets.detach().cpu().numpy() == 0]
+    observed = cKDTree(obs).query(tru)[0] <= OBSERVED_WITHIN if len(obs) else np.zeros(len(tru), dtype=bool)
+    near = cKDTree(tru[observed]).query(est)[0] <= OBSERVED_WITHIN if observed.any() else np.zeros(len(est), bool)
+    return surface_agreement(a, b, np.where(mu > 0, -b, b), observed, near)

@@ -51,7 +51,7 @@ class Trace:
         reapproach_travel: `(n,)` cumulative travel of those re-approaches [m] (part of ``travel``).
         shape: the field's shape metrics per record, ``{name: (n,)}`` for each of
             :data:`torch_gpioius.metrics.SHAPE_METRICS` (Chamfer, F-scores, bias, observed Hausdorff, unseen share;
-            NaN where not measured, and in the 2-D world).
+            NaN where not measured or where the world knows no truth).
         estimate: `(n,)` 1 where the estimate was measured and has a surface to judge, 0 where it has none (no
             estimate), NaN where not measured.
         truncation: `(n,)` bound on the truncated outer basis' change of the Gram matrix relative to sigma^2

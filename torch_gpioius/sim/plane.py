@@ -331,7 +331,7 @@ class Scene2D(World):
     def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
         """Hausdorff (eq. 24; whole zero set and touched pieces), uncertainty (eq. 23) and the centroid of the
         estimated region {mu_in < 0}, on a grid of ``resolution`` (default 1 cm) over :meth:`bounds` (10 cm)."""
-        from ..metrics import uncertainty_measure
+        from ..metrics import curve_shape_metrics, uncertainty_measure
         from ..surfaces import closed_curves, evaluate_grid, touched_pieces, zero_level_curves
 
         res = 0.01 if resolution is None else resolution
@@ -348,7 +348,8 @@ class Scene2D(World):
         h = hausdorff_distance(closed, [self.inner_boundary], spacing=2e-3) if closed else math.nan
         touched = closed_curves(touched_pieces(curves, contacts)) if len(contacts) else []
         ht = hausdorff_distance(touched, [self.inner_boundary], spacing=2e-3) if touched else math.nan
-        return Measurement(h, ht, unc, centre, curves, estimate=bool(closed))
+        shape = curve_shape_metrics(model, closed, [self.inner_boundary]) if closed else {}
+        return Measurement(h, ht, unc, centre, curves, estimate=bool(closed), shape=shape)
 
     def fingerprint(self) -> str:
         return geometry_hash(self.inner_boundary, self.outer_boundary, self.start, self.direction,

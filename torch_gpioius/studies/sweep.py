@@ -550,7 +550,7 @@ METRICS = ["final_hausdorff", "final_hausdorff_touched", "final_uncertainty", "f
 #: other metric is a distance or a variance, where NaN is "no estimate" and counts as the worst value.
 NOT_APPLICABLE_METRICS = ("final_correlation", "final_similarity", "contacts_on_body", "contacts_within",
                           # a higher F-score is better (a run with no estimate has 0, set in its row), the bias is
-                          # signed, the unseen share is not an error: NaN there is "not measured" (2-D, older runs)
+                          # signed, the unseen share is not an error: NaN there is "not measured" (older runs)
                           "final_fscore_1mm", "final_fscore_5mm", "final_fscore_10mm", "final_fscore_20mm",
                           "final_bias", "final_unseen", "fscore_5mm_25")
 
@@ -703,7 +703,7 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
              "counts as inf, worse than any distance. On body: the median fraction of a run's contacts where the "
              "fingertip touched the body itself (not only the cover); '-' where the world cannot tell. Travel: the "
              "median travel [m]; re-approach: the median share of it spent re-approaching after lost contact. The "
-             "field's metrics at the end (3-D worlds): Chamfer, the mean surface-to-surface distance; F 5 mm, the "
+             "field's metrics at the end: Chamfer, the mean surface-to-surface distance; F 5 mm, the "
              "F-score at 5 mm; bias, the median signed distance of the true surface from the estimate (negative: the "
              "estimate lies inside); unseen, the share of the true surface more than 2 cm from every observation.", "",
              "| object | mode | n (interval coverage) | failed (why) | H 10 % [cm] | H 25 % [cm] | H 50 % [cm] | "
