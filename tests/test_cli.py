@@ -329,6 +329,9 @@ def test_fit_reads_a_users_contacts_csv_and_cloud_with_units_and_camera_free_spa
     assert "touch.csv: 4" in capsys.readouterr().out
     assert main(["fit", str(EXAMPLE), "--cloud", cloud]) == 2            # a .gpioius file holds its own cloud
     assert "go with a contacts CSV" in capsys.readouterr().err
+    bad = tmp_path / "bad"
+    assert main(["fit", csv, "--cloud", cloud, "--units", "mm", "--camera-origin", "a b c", "--out", str(bad)]) == 2
+    assert "--camera-origin: expected three numbers" in capsys.readouterr().err and not bad.exists()
 
 
 def test_fit_says_when_there_is_no_estimate(tmp_path, capsys):

@@ -66,13 +66,15 @@ def as_float(value, name: str, *, lo: float | None = None, hi: float | None = No
     return v
 
 
-def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) for a file in millimetres") -> None:
+def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) for a file in millimetres",
+                 error: type[ValueError] = ValueError) -> None:
     """Refuse `(n, d)` positions that cannot be metres: an extent above :data:`MAX_SCENE_EXTENT` or a coordinate
     beyond :data:`MAX_COORDINATE` (a dataset in millimetres is 1000x too large, and every later step -- the kernel,
     the grid, the correlation -- goes wrong without a word).
 
     Raises:
-        ValueError: naming ``where``, the measured size and the likely units.
+        ValueError: (``error``, a subclass of it such as a reader's ``DatasetError``) naming ``where``, the measured
+            size and the likely units.
     """
     a = np.asarray(x, dtype=np.float64)
     if a.ndim != 2 or not len(a):
@@ -83,7 +85,7 @@ def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) 
         size = f"{extent:.4g} m across" if extent > MAX_SCENE_EXTENT else f"{reach:.4g} m from the origin"
         likely = "millimetres" if extent > 100 * MAX_SCENE_EXTENT or reach > 100 * MAX_COORDINATE else \
             "millimetres or centimetres"
-        raise ValueError(f"{where}: the points are {size}; positions must be in metres, and these are probably in "
+        raise error(f"{where}: the points are {size}; positions must be in metres, and these are probably in "
                          f"{likely} ({hint}; at most {MAX_SCENE_EXTENT:g} m across and {MAX_COORDINATE:g} m from the "
                          "origin are accepted)")
 

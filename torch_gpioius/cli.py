@@ -79,21 +79,24 @@ def _study(args: argparse.Namespace) -> int:
 def _fit(args: argparse.Namespace) -> int:
     from .io.offline import fit_dataset
 
-    if args.out:
-        from .io.outputs import claim_folder
-
-        claim_folder(args.out, "fit", args.force)
     source = args.dataset
     own = Path(args.dataset).suffix.lower() == ".csv"
     if not own and (args.cloud or args.camera_origin or args.units != "m"):
         raise ValueError("fit: --cloud, --units and --camera-origin go with a contacts CSV (a .gpioius file holds "
                          "its own cloud, in metres)")
+    origin = None
+    if args.camera_origin is not None:
+        try:
+            origin = [float(v) for v in args.camera_origin.replace(",", " ").split()] or None
+        except ValueError:
+            raise ValueError(f"--camera-origin: expected three numbers \"x y z\", got {args.camera_origin!r}") from None
+    if args.out:                             # arguments checked first: a refused call leaves no folder behind
+        from .io.outputs import claim_folder
+
+        claim_folder(args.out, "fit", args.force)
     if own:
         from .io.importers import dataset_from_files
 
-        origin = None
-        if args.camera_origin is not None:
-            origin = [float(v) for v in args.camera_origin.replace(",", " ").split()] or None
         ds = dataset_from_files(args.dataset, args.cloud, units=args.units, voxel=args.voxel or None,
                                 camera_origin=origin)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, args.cloud) if p)

@@ -12,7 +12,8 @@ from .geometry import predict_task
 from .polylines import distance_to_segments, resample_polyline, segments
 
 __all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff",
-           "Shape", "surface_agreement", "curve_shape_metrics", "FSCORE_THRESHOLDS", "OBSERVED_WITHIN", "SHAPE_METRICS"]
+           "Shape", "surface_agreement", "curve_shape_metrics", "observed_samples", "FSCORE_THRESHOLDS",
+           "OBSERVED_WITHIN", "SHAPE_METRICS"]
 
 #: A shape for the metrics: an `(n, d)` point set, a list of `(k, d)` polylines, or a triangle mesh.
 Shape = Union[np.ndarray, Sequence[np.ndarray], trimesh.Trimesh]
@@ -185,7 +186,6 @@ def curve_shape_metrics(model, curves: Sequence[np.ndarray], truth: Sequence[np.
     inside another undoes it), which is where the mean is positive; "observed": within :data:`OBSERVED_WITHIN` of a
     surface observation (y = 0) of either task of ``model``. ``task`` is kept for the signature's symmetry."""
     from matplotlib.path import Path as Polygon
-    from scipy.spatial import cKDTree
 
     if _is_empty(curves) or _is_empty(truth):
         return surface_agreement(np.zeros(0), np.zeros(0))
@@ -196,10 +196,19 @@ def curve_shape_metrics(model, curves: Sequence[np.ndarray], truth: Sequence[np.
     for c in curves:
         if len(c) >= 3:
             inside ^= Polygon(np.asarray(c, dtype=np.float64)[:, :2]).contains_points(tru[:, :2])
-    mu_positive = ~inside
-    x0 = model.train_inputs[0]
-    x = x0.detach().cpu().numpy()
+    observed, near = observed_samples(model, tru, est)
+    return surface_agreement(a, b, np.where(inside, b, -b), observed, near)
+
+
+def observed_samples(model, truth: np.ndarray, est: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(observed (m,), near (n,))`` for :func:`surface_agreement`: the true-surface samples `(m, d)` within
+    :data:`OBSERVED_WITHIN` of a surface observation (y = 0, either task) of ``model``, and the estimate's samples
+    `(n, d)` within it of an observed one."""
+    from scipy.spatial import cKDTree
+
+    x = model.train_inputs[0].detach().cpu().numpy()
     obs = x[model.train_targets.detach().cpu().numpy() == 0]
-    observed = cKDTree(obs).query(tru)[0] <= OBSERVED_WITHIN if len(obs) else np.zeros(len(tru), dtype=bool)
-    near = cKDTree(tru[observed]).query(est)[0] <= OBSERVED_WITHIN if observed.any() else np.zeros(len(est), bool)
-    return surface_agreement(a, b, np.where(mu_positive, -b, b), observed, near)
+    observed = cKDTree(obs).query(truth)[0] <= OBSERVED_WITHIN if len(obs) else np.zeros(len(truth), dtype=bool)
+    near = cKDTree(truth[observed]).query(est)[0] <= OBSERVED_WITHIN if observed.any() else \
+        np.zeros(len(est), dtype=bool)
+    return observed, near

@@ -80,7 +80,7 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
 def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     """One step of the pipeline; returns why the run stops here, or None to go on."""
     cfg, hw = ctx.config, ctx.hardware
-    if state.steps + state.taps + state.recoveries >= cfg.max_steps:    # evidence and recoveries count as steps
+    if _capped(state, cfg):
         return "max_steps"
     t0 = time.perf_counter()
     plan = plan_direction(state.model, torch.as_tensor(state.contact), step=cfg.step, penalty=cfg.penalty,
@@ -114,7 +114,7 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1)
     stop = stalled or _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
     # the step cap ends the run at the next step's start: this record is the last one, measured before it is logged
-    record.final = stop is not None or state.steps + state.taps + state.recoveries >= cfg.max_steps
+    record.final = stop is not None or _capped(state, cfg)
     state.records.append(record)
     for r in observers:
         r.step(ctx, state, record)
@@ -268,6 +268,11 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     record.truncation = float(getattr(m, "truncation", 0.0))
     if hasattr(m, "region_correlations"):
         record.region_correlation = m.region_correlations().detach().cpu().numpy()
+
+
+def _capped(state: ExplorationState, cfg: ExploreConfig) -> bool:
+    """Whether the step cap is reached (evidence actions and recoveries count as steps)."""
+    return state.steps + state.taps + state.recoveries >= cfg.max_steps
 
 
 def _first(reasons):

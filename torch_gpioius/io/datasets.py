@@ -243,10 +243,8 @@ def validate_observations(x: Any, y: Any, task: Any, step: Any, *, where: str, d
             raise DatasetError(f"{where}: field {name!r} must have shape ({n},), got {a.shape}")
     if not np.isfinite(x).all():
         raise DatasetError(f"{where}: field 'x' contains NaN or inf")
-    try:
-        check_metres(x, f"{where}: field 'x'", hint="convert the data to metres, or import it with units='mm'")
-    except ValueError as exc:
-        raise DatasetError(str(exc)) from None
+    check_metres(x, f"{where}: field 'x'", hint="convert the data to metres, or import it with units='mm'",
+                 error=DatasetError)
     if not np.isin(y, (0.0, 1.0)).all():
         raise DatasetError(f"{where}: field 'y' must be 0 (surface) or 1 (free space)")
     if task.dtype.kind not in "iub" and not (task.dtype.kind == "f" and np.isfinite(task).all()

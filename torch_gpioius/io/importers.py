@@ -207,10 +207,7 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
     if len(pts) == 0:
         raise DatasetError(f"{path}: the point cloud holds no (finite) points")
     pts = pts * scale
-    try:
-        check_metres(pts, str(path), hint=_units_hint(units))
-    except ValueError as exc:
-        raise DatasetError(str(exc)) from None
+    check_metres(pts, str(path), hint=_units_hint(units), error=DatasetError)
     if voxel is None:
         return pts
     try:
@@ -277,10 +274,7 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
         ys.append(_LABELS[label])
         steps.append(st)
     xs = np.asarray(xs) * scale
-    try:
-        check_metres(xs, str(path), hint=_units_hint(units))
-    except ValueError as exc:
-        raise DatasetError(str(exc)) from None
+    check_metres(xs, str(path), hint=_units_hint(units), error=DatasetError)
     return xs, np.asarray(ys), np.asarray(steps, dtype=np.int64)
 
 
@@ -342,9 +336,9 @@ def _seen_and_free(point_cloud, units: str, voxel: float | None, camera_origin) 
     if origin.shape != (3,) or not np.isfinite(origin).all():
         raise DatasetError(f"camera_origin: expected 3 finite numbers, got {camera_origin!r}")
     pts = load_point_cloud(point_cloud, units=units)
+    check_metres(np.vstack([pts, origin]), f"{point_cloud} with camera_origin",
+                 hint="the camera origin is in the cloud's frame and units", error=DatasetError)
     try:
-        check_metres(np.vstack([pts, origin]), f"{point_cloud} with camera_origin",
-                     hint="the camera origin is in the cloud's frame and units")
         policy = ObservationPolicy().with_voxel(0.0 if voxel is None else voxel)
         return vision_observations(PointCloud(pts, origin), policy)
     except ValueError as exc:

@@ -106,32 +106,21 @@ def shape_metrics_3d(model, scene, mesh: trimesh.Trimesh, est: np.ndarray, truth
     estimated surface ``est`` `(n, 3)` and of the true one ``truth`` `(m, 3)` in the range, with exact
     point-to-triangle distances in both directions; the sign of each true-surface sample from the model's mean
     there (mu > 0: outside the estimate); "observed": within 2 cm of a surface observation of either task."""
-    from scipy.spatial import cKDTree
-
     from ..geometry import predict_mean_task
-    from ..metrics import OBSERVED_WITHIN, surface_agreement
+    from ..metrics import observed_samples, surface_agreement
     from .meshes import MeshDistance
 
     # the unsigned distance to the true body by libigl's AABB tree, built once per scene (the signed field took 6 s
     # for 18,000 samples of a torso's estimate, every measurement)
     inner = getattr(scene, "_inner_unsigned", None)
     if inner is None:
-        body = scene.inner if hasattr(scene, "inner") else scene.truth()["inner"]
-        inner = MeshDistance(body, signed=False)
-        scene._inner_unsigned = inner
+        inner = scene._inner_unsigned = MeshDistance(scene.inner, signed=False)
     est_to_truth = np.asarray(inner(est), dtype=float)
     truth_to_est = np.asarray(MeshDistance(mesh, signed=False)(truth), dtype=float)
     with torch.no_grad():
         mu = predict_mean_task(model, torch.as_tensor(truth, dtype=torch.float64), 0).detach().cpu().numpy()
     signed = np.where(mu > 0, -truth_to_est, truth_to_est)
-    x = model.train_inputs[0].detach().cpu().numpy()
-    y = model.train_targets.detach().cpu().numpy()
-    surface_obs = x[y == 0]
-    observed = (cKDTree(surface_obs).query(truth)[0] <= OBSERVED_WITHIN) if len(surface_obs) else \
-        np.zeros(len(truth), dtype=bool)
-    near = (cKDTree(truth[observed]).query(est)[0] <= OBSERVED_WITHIN) if observed.any() else \
-        np.zeros(len(est), dtype=bool)
-    return surface_agreement(est_to_truth, truth_to_est, signed, observed, near)
+    return surface_agreement(est_to_truth, truth_to_est, signed, *observed_samples(model, truth, est))
 
 
 def _mesh(m, name: str) -> trimesh.Trimesh:
@@ -284,10 +273,8 @@ class Scene3D(World):
         return self._camera
 
     def hardware(self) -> Hardware:
-        from ..contact import ContactController
+        from ..contact import ContactConfig, ContactController
         from ..sensors.simulated import SimulatedForceSensor
-
-        from ..contact import ContactConfig
 
         robot = simulated_ur5(self.start, self.direction, self.range[0], self.range[1], floor=self.support)
         field = self.contact_model()

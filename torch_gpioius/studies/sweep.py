@@ -37,8 +37,8 @@ from .._validation import as_device, as_float
 from ..metrics import SHAPE_METRICS
 from .stats import median_interval, paired_difference
 
-__all__ = ["run_sweep", "SweepSettings", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES", "WORLDS",
-           "FRACTIONS", "MAX_SEEDS"]
+__all__ = ["run_sweep", "SweepSettings", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES",
+           "WORLDS", "FRACTIONS", "MAX_SEEDS"]
 
 #: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants.
 MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps")
@@ -239,7 +239,8 @@ def read_run_file(path: str | Path) -> dict:
     if not isinstance(series, dict):
         raise bad("series", "is missing or not an object")
     lengths = set()
-    for k in _SERIES:
+    # the required series, then those recorded since (the field's metrics, the estimate's 0 / 1 / NaN)
+    for k in (*_SERIES, *(k for k in (*SHAPE_METRICS, "estimate") if k in series)):
         v = series.get(k)
         if not isinstance(v, list) or not all(_number(e) for e in v):
             raise bad(f"series.{k}", "must be a list of numbers (NaN where not measured)")
@@ -249,16 +250,7 @@ def read_run_file(path: str | Path) -> dict:
                                      "variance")
         if k.startswith("correlation") and (np.abs(a[np.isfinite(a)]) > 1 + 1e-9).any():
             raise bad(f"series.{k}", "holds a correlation outside [-1, 1]")
-        lengths.add(len(v))
-    for k in SHAPE_METRICS:            # the field's metrics, in runs since they were recorded
-        if k in series:
-            v = series[k]
-            if not isinstance(v, list) or not all(_number(e) for e in v):
-                raise bad(f"series.{k}", "must be a list of numbers (NaN where not measured)")
-            lengths.add(len(v))
-    if "estimate" in series:           # runs since the series was recorded: 1 surface, 0 none, NaN not measured
-        v = series["estimate"]
-        if not isinstance(v, list) or not all(_number(e) and (math.isnan(e) or e in (0, 1)) for e in v):
+        if k == "estimate" and not all(math.isnan(e) or e in (0, 1) for e in v):
             raise bad("series.estimate", "must be a list of 0, 1 or NaN (1: the estimate has a surface to judge)")
         lengths.add(len(v))
     if len(lengths) != 1 or 0 in lengths:
