@@ -69,7 +69,7 @@ def _study(args: argparse.Namespace) -> int:
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
-                       touch=args.touch, outer_tol=args.outer_tol, device=args.device)
+                       touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -407,6 +407,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="point: the fingertip's contact; patch: a gel pad's depth map (3-D worlds); one per --out folder")
     sw.add_argument("--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP + "; one setting per --out folder")
     sw.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
+    sw.add_argument("--settings", default=None, choices=["default", "paper"],
+                    help="the scene files' settings (force-field world): default (three camera views, voxels a tenth "
+                         "of the body, a second free-space point) or paper (one fixed camera, 5 cm voxels); "
+                         "default: each file's own; one per --out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

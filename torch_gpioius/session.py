@@ -22,7 +22,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             max_travel: float | None = None, stop=None, policy=None, penalty=None,
             metrics_every: int | None = None, metrics_resolution: float | None = None,
             interval_every: int | None = None, regions: int | None = None, stall="default",
-            outer_tol: float | None = None, device=None, recorders=(), progress: bool = False,
+            outer_tol: float | None = None, device=None, restart_every="default", recorders=(),
+            progress: bool = False,
             log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None,
             overwrite: bool = False) -> Trace:
     """Explore ``world`` and record per-step metrics: the same loop for every world.
@@ -70,6 +71,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             points (fine voxels); each record's ``truncation`` says how far the Gram matrix moved (None: exact).
         device: where the model's data and exact arithmetic live ("cuda" for a GPU, float64 either way; default:
             the CPU). The world, the robot and every record stay on the CPU; a run may resume on another device.
+        restart_every: every this many steps K_t's re-learning also starts from fixed values and keeps the best
+            optimum, so that a warm start cannot hold it in a worse local optimum (default 10; None: warm starts
+            only, as before this setting existed).
         recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the
             metrics and the interval, before the log).
         progress: report progress (a bar on a terminal, plain lines otherwise).
@@ -96,7 +100,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
                                       kernel=kernel, noise=noise, max_steps=max_steps, max_travel=max_travel,
                                       stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
                                       metrics_resolution=metrics_resolution, interval_every=interval_every,
-                                      regions=regions, stall=stall, outer_tol=outer_tol, device=device)
+                                      regions=regions, stall=stall, outer_tol=outer_tol, device=device,
+                                      restart_every=restart_every)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     if log is not None:

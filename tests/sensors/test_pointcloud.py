@@ -145,3 +145,78 @@ def test_bad_inputs():
         SimulatedDepthCamera(trimesh.creation.box(), PinholeCamera.kinect_v2(), 2 * np.eye(4))
     with pytest.raises(ValueError, match="focal"):
         PinholeCamera(10, 10, 0.0, 1.0, 5, 5)
+
+
+# ------------------------------------------------------------------ several views
+EYE2 = np.array([0.5, 0.8, 0.9])                 # the mirror of EYE across the sphere's x-z plane
+
+
+def test_a_merged_capture_puts_each_views_free_space_on_its_own_rays():
+    a = sphere_camera().capture()
+    mesh = trimesh.creation.icosphere(subdivisions=5, radius=R)
+    mesh.apply_translation(C)
+    b = SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.5), look_at(EYE2, C)).capture()
+    merged = PointCloud.merge([a, b])
+    assert merged.per_point_origins and len(merged) == len(a) + len(b)
+    free = merged.free_space(0.05)
+    # each free point lies on the segment from its own camera to its seen point, 5 cm in front of the sphere
+    origins = np.concatenate([np.broadcast_to(EYE, a.points.shape), np.broadcast_to(EYE2, b.points.shape)])
+    ray = origins - merged.points
+    expected = merged.points + 0.05 * ray / np.linalg.norm(ray, axis=1, keepdims=True)
+    np.testing.assert_allclose(free, expected, atol=1e-12)
+    assert (np.linalg.norm(free - C, axis=1) > R + 0.01).all()
+    # the merged rays to ONE origin (a single-origin cloud of both views) would pass through the sphere for the
+    # second view's points: the very error per-point origins remove
+    wrong = PointCloud(merged.points, EYE).free_space(0.05)
+    assert (np.linalg.norm(wrong - C, axis=1) < R).sum() > 0.3 * len(b)
+    # both hemispheres seen: the far side's points are the second view's
+    assert ((b.points - C) @ (EYE2 - C) > 0).all()
+
+
+def test_a_merged_capture_crops_averages_and_skips_free_space_per_view():
+    a = PointCloud(np.array([[0.01, 0.01, 0.01], [0.02, 0.02, 0.02], [0.3, 0.0, 0.0]]), np.array([0.0, 0.0, 1.0]))
+    b = PointCloud(np.array([[0.011, 0.011, 0.011], [0.4, 0.0, 0.0]]))        # a capture without camera origin
+    m = PointCloud.merge([a, b])
+    assert np.isnan(m.origin[3:]).all() and m.sees_free_space
+    # free space only for the first view's three points
+    assert len(m.free_space(0.05)) == 3
+    # voxel averaging keeps the views apart: view a's two near points average, view b's near point stays itself
+    avg = m.voxel_averaged(0.05)
+    assert len(avg) == 4 and avg.origin.shape == (4, 3)
+    near = avg.points[np.linalg.norm(avg.points, axis=1) < 0.1]
+    np.testing.assert_allclose(sorted(near[:, 0]), [0.011, 0.015], atol=1e-15)
+    cropped = m.cropped([0, 0, 0], [0.1, 0.1, 0.1])     # a: two points; b: one
+    assert len(cropped) == 3 and cropped.origin.shape == (3, 3)
+    assert len(cropped.free_space(0.05)) == 2
+    with pytest.raises(ValueError, match="no point clouds"):
+        PointCloud.merge([])
+    with pytest.raises(ValueError, match="mix dimensions"):
+        PointCloud.merge([a, PointCloud(np.zeros((1, 2)))])
+    with pytest.raises(ValueError, match="per-point origins"):
+        PointCloud(np.zeros((3, 3)), np.zeros((2, 3)))
+    with pytest.raises(ValueError, match="all NaN"):
+        PointCloud(np.zeros((1, 3)), np.array([[0.0, np.nan, 1.0]]))
+    with pytest.raises(ValueError, match="free_space"):
+        PointCloud.merge([b, b]).free_space(0.05)
+
+
+def test_a_multi_view_source_draws_each_views_noise_from_the_seed():
+    from torch_gpioius.sensors import MultiViewSource
+
+    mesh = trimesh.creation.icosphere(subdivisions=5, radius=R)
+    mesh.apply_translation(C)
+    cams = [SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.25), look_at(e, C), noise_a=0.002) for e in (EYE, EYE2)]
+    src = MultiViewSource(cams, ("left", "right"))
+    one, two, again = src.reseeded(1).capture(), src.reseeded(2).capture(), src.reseeded(1).capture()
+    np.testing.assert_array_equal(one.points, again.points)
+    assert one.points.shape == two.points.shape and not np.allclose(one.points, two.points)
+    # the two views of one seed draw different noise (not one stream replayed on both)
+    n = len(cams[0].capture())
+    assert not np.allclose(np.linalg.norm(one.points[:n] - C, axis=1)[:50],
+                           np.linalg.norm(one.points[n:] - C, axis=1)[:50])
+    with pytest.raises(ValueError, match="at least one view"):
+        MultiViewSource([])
+    with pytest.raises(ValueError, match="not a PointCloudSource"):
+        MultiViewSource([cams[0], "camera"])
+    with pytest.raises(ValueError, match="names"):
+        MultiViewSource(cams, ("one",))

@@ -113,12 +113,44 @@ def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_bo
     (GOOD.replace("at = [0.5, 0.0, 0.1]", "at = [500, 0.0, 100]"), r"object.at .*out of the UR5's reach"),
     (GOOD.replace("at = [0.5, 0.0, 0.1]", "at = [1.5, 0.0, 0.1]"), r"object.at .*out of the UR5's reach"),
     (GOOD + "[approach]\nstart = [0.5, 0, 1.9]\ndirection = [0, 0, -1]\n", r"approach.start: .*out of the UR5's reach"),
+    # issue 34, item 6: the exploration's settings in the file, each checked
+    (GOOD + "[forcefield]\nsettings = \"fast\"\n", "settings: must be one of"),
+    (GOOD + "[forcefield]\nviews = [\"top\"]\n", "views"),
+    (GOOD + "[forcefield]\nkernel = \"rbf\"\n", "kernel: must be one of"),
+    (GOOD + "[forcefield]\ntheta = -0.1\n", "theta"),
+    (GOOD + "[forcefield]\nnoise = 0\n", "noise"),
+    (GOOD + "[forcefield]\nvoxel = 2.0\n", "voxel"),
 ])
 def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
     path = _write(tmp_path, text)
     with pytest.raises(ValueError, match=match) as err:
         load_scene(path)
     assert "scene.toml" in str(err.value)
+
+
+def test_a_scene_files_settings_reach_the_exploration(tmp_path):
+    """The default settings for a user's object (three views, voxels a tenth of the body, a second free-space point,
+    the Matérn-5/2), the paper's in one word, and each setting by its own key (issue 34, item 6)."""
+    from torch_gpioius.kernels import Matern52
+
+    world = load_scene(_write(tmp_path, GOOD))
+    d = world.defaults
+    assert world.views == ("fixed", "mirrored", "wrist")
+    assert d.policy.voxel == 0.02 and d.policy.vision_free_far == 0.1          # the bottle: 16 cm -> 2 cm (floor)
+    assert isinstance(d.kernel, Matern52) and d.kernel.ell == 0.1 and d.noise == 0.08
+    paper = load_scene(_write(tmp_path, GOOD + "[forcefield]\nsettings = \"paper\"\n"))
+    assert paper.views == ("fixed",) and paper.defaults.policy.voxel == 0.05 and paper.defaults.kernel is None
+    assert paper.defaults.policy.vision_free_far is None and paper.defaults.theta == 0.15
+    # the call's settings win over the file's
+    assert load_scene(_write(tmp_path, GOOD), settings="paper").views == ("fixed",)
+    own = load_scene(_write(tmp_path, GOOD + "[forcefield]\nviews = 2\nkernel = \"imq\"\ntheta = 0.12\nnoise = 0.02\n"
+                                           "voxel = 0.03\n"))
+    assert own.views == ("fixed", "mirrored") and own.defaults.kernel is None and own.defaults.theta == 0.12
+    assert own.defaults.noise == 0.02 and own.defaults.policy.voxel == 0.03
+    assert load_scene(_write(tmp_path, GOOD + "[forcefield]\ntheta = 0.07\n")).defaults.kernel.ell == 0.07
+    # and into a run: the model is built with them
+    trace = tg.explore(own, max_steps=1, metrics_every=100)
+    assert trace.model.theta == pytest.approx(0.12, rel=1e-12) and trace.model.noise == pytest.approx(0.02, rel=1e-12)
 
 
 def test_a_scene_file_names_its_repairs(tmp_path):

@@ -32,6 +32,11 @@ def _check_int(value, name: str, lo: int, hi: int) -> int:
     return int(value)
 
 
+#: Default of ``restart_every``: K_t's re-learning also tries fixed starts every this many steps (3 Newton runs
+#: instead of 1, about 1 ms each at 300 inner points; docs/theory.md, "Local optima of K_t").
+RESTART_EVERY = 10
+
+
 @dataclass(frozen=True)
 class ExploreConfig:
     """One exploration's settings (see :func:`torch_gpioius.explore` for each): build it with :meth:`from_world`.
@@ -58,6 +63,9 @@ class ExploreConfig:
         outer_tol: the truncated outer basis of ``GPIOIS(outer_tol=...)`` (an approximation for thousands of
             camera points), or None (exact).
         device: where the model's data and exact arithmetic live (a ``torch.device``), or None (the CPU).
+        restart_every: every this many steps K_t's re-learning also starts from fixed, data-independent values and
+            keeps the best optimum (``GPIOIS.fit(multi_start=True)``), so that a warm start cannot hold it in a worse
+            local optimum for the rest of the run; None: warm starts only (the first fit always multi-starts).
     """
 
     mode: str
@@ -79,12 +87,13 @@ class ExploreConfig:
     stall: NoProgress | None = NoProgress()
     outer_tol: float | None = None
     device: torch.device | None = None
+    restart_every: int | None = RESTART_EVERY
 
     @classmethod
     def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
                    kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
                    metrics_every=None, metrics_resolution=None, interval_every=None, regions=None,
-                   stall="default", outer_tol=None, device=None) -> "ExploreConfig":
+                   stall="default", outer_tol=None, device=None, restart_every="default") -> "ExploreConfig":
         """Validate the overrides and merge them with ``world.defaults`` (see :func:`torch_gpioius.explore`).
 
         Raises:
@@ -113,6 +122,8 @@ class ExploreConfig:
         step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
         if kernel is not None and theta is not None:
             raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's parameter)")
+        if kernel is None and theta is None and d.kernel is not None:      # the world's own kernel, unless told
+            kernel = d.kernel
         if kernel is not None:
             as_kernel(kernel, None)                    # an ExactKernel, or a TypeError naming what it is
             theta = None
@@ -139,9 +150,13 @@ class ExploreConfig:
             stall = NoProgress()
         if stall is not None and not isinstance(stall, NoProgress):
             raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
+        if isinstance(restart_every, str) and restart_every == "default":
+            restart_every = RESTART_EVERY
+        if restart_every is not None:
+            restart_every = _check_int(restart_every, "restart_every", 1, 1_000_000)
         return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
                    metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
-                   outer_tol, as_device(device))
+                   outer_tol, as_device(device), restart_every)
 
     # ------------------------------------------------------------------ what the loop asks of the settings
     @property
@@ -191,6 +206,7 @@ class ExploreConfig:
                "stall": None if self.stall is None else self.stall.describe()}
         if self.outer_tol is not None:            # only when set: logs written before it existed still resume
             out["outer_tol"] = self.outer_tol
+        out["restart_every"] = self.restart_every
         if self.evidence is not None and callable(getattr(self.evidence, "describe", None)):
             out["evidence_policy"] = self.evidence.describe()
         return out

@@ -222,15 +222,17 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig, conta
 
 
 def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
-    """Re-learn warm-started; a touch model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model whose
-    ``fit`` takes them (GPIOIS; GPIS learns nothing)."""
+    """Re-learn warm-started, and from fixed starts too every ``restart_every`` steps (decided by the step number,
+    so a resumed run restarts where the uninterrupted one did); a touch model's ``fit_options`` (patches: the
+    ``min_gain`` rule) go to a model whose ``fit`` takes them (GPIOIS; GPIS learns nothing)."""
     from ..models.gpiois import FitNotConvergedWarning
 
     options = cfg.touch.fit_options() if callable(getattr(cfg.touch, "fit_options", None)) else {}
     accepted = inspect.signature(model.fit).parameters
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FitNotConvergedWarning)
-        model.fit(multi_start=False, **{k: v for k, v in options.items() if k in accepted})
+        restart = cfg.restart_every is not None and state.steps > 0 and state.steps % cfg.restart_every == 0
+        model.fit(multi_start=restart, **{k: v for k, v in options.items() if k in accepted})
     for w in caught:                     # counted, and said once at the end of the run; others passed on
         if issubclass(w.category, FitNotConvergedWarning):
             state.unconverged_fits += 1

@@ -124,6 +124,9 @@ class ObservationPolicy:
             ``|F|`` below the contact threshold (y = 1, task inner) [m].
         free_space_margin: free-space samples closer than this to any contact are not recorded, and recorded ones
             are retracted when a later contact lands closer [m]; keeps the inner Gram block well conditioned.
+        vision_free_far: a second free-space point this far in front of each seen point [m] (beyond the paper, which
+            has one): the camera's rays were free all the way, and a second point holds the field up in front of
+            the object where one point 5 cm out leaves it free to swing below zero (a phantom surface); None: one.
     """
 
     vision_free_offset: float | None = 0.05
@@ -131,9 +134,10 @@ class ObservationPolicy:
     crop_margin: float | None = None
     free_space_spacing: float = 0.02
     free_space_margin: float = 0.02
+    vision_free_far: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("vision_free_offset", "voxel", "crop_margin"):
+        for name in ("vision_free_offset", "voxel", "crop_margin", "vision_free_far"):
             v = getattr(self, name)
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not
                                   (math.isfinite(v) and v > 0)):
@@ -142,6 +146,10 @@ class ObservationPolicy:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= 1.0):
                 raise ValueError(f"ObservationPolicy.{name}: must be in (0, 1] m, got {v!r}")
+        if self.vision_free_far is not None and (self.vision_free_offset is None or
+                                                 not self.vision_free_far > self.vision_free_offset):
+            raise ValueError(f"ObservationPolicy.vision_free_far: must lie beyond vision_free_offset "
+                             f"({self.vision_free_offset!r} m), got {self.vision_free_far!r}")
 
 
     def with_voxel(self, voxel: float) -> "ObservationPolicy":
@@ -254,6 +262,8 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
     xs, ys = [seen], [np.zeros(len(seen))]
     if policy.vision_free_offset is not None and cloud.sees_free_space:
         free = cloud.free_space(policy.vision_free_offset)
+        if policy.vision_free_far is not None:
+            free = np.concatenate([free, cloud.free_space(policy.vision_free_far)])
         if policy.voxel and len(free):
             free = voxel_average(free, policy.voxel)
         if len(free):

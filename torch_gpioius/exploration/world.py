@@ -70,6 +70,8 @@ class ExplorationDefaults:
         policy: the observation policy.
         metrics_every: ground-truth metrics every k steps (and always at the last).
         approach_travel: the approach gives up after this distance [m].
+        kernel: a kernel in place of the inverse multiquadric of ``theta`` (an
+            :class:`~torch_gpioius.kernels.ExactKernel`), or None; a ``theta`` given to ``explore`` replaces it.
     """
 
     theta: float
@@ -80,6 +82,7 @@ class ExplorationDefaults:
     policy: ObservationPolicy = field(default_factory=ObservationPolicy)
     metrics_every: int = 1
     approach_travel: float = 2.0
+    kernel: object = None
 
 
 @dataclass

@@ -45,6 +45,7 @@ class FitResult:
             the fit evaluated none); ``GPIOIS.fit(min_gain=...)`` predicts later gains with it.
         relearned: False when ``GPIOIS.fit(min_gain=...)`` held K_t instead of re-learning it.
         predicted_gain: the Newton decrement [nats] that decided a held fit (NaN for a full fit).
+        starts: how many starting points the fit tried (1: warm start only; more: ``multi_start``).
     """
 
     task_covariance: Tensor
@@ -55,6 +56,7 @@ class FitResult:
     hessian: np.ndarray | None = None
     relearned: bool = True
     predicted_gain: float = math.nan
+    starts: int = 1
 
 
 def chol_params_to_task_covariance(phi) -> Tensor:

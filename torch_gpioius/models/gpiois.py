@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import warnings
@@ -311,8 +312,9 @@ class GPIOIS(ImplicitSurfaceGP):
 
         Args:
             multi_start: also start from fixed, data-independent K_t values (identity; 0.1 x a correlation of 0.9)
-                and keep the best. Default: on the first fit only; later fits warm-start from the current K_t
-                (exploration adds a few points per step).
+                and from the current variances with correlation 0, and keep the best. Default: on the first fit only;
+                later fits warm-start from the current K_t (exploration adds a few points per step, and restarts
+                every ``restart_every`` steps).
             min_gain: re-learn only when the predicted gain exceeds this [nats] (None: always re-learn). For
                 scale: a 95 % profile interval spans 1.92 nats below the optimum.
             max_hold: re-learn after this many kept fits in a row, whatever the prediction.
@@ -334,8 +336,11 @@ class GPIOIS(ImplicitSurfaceGP):
             return self
         starts = [self.task_covariance]
         if multi_start:
+            # fixed, data-independent starts, and the current variances with no relation: a warm start near a
+            # correlation of 1 can sit in a local optimum that these leave (tests/models/test_gpiois.py)
             starts += [torch.eye(2, dtype=torch.float64), 0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]],
-                                                                                  dtype=torch.float64)]
+                                                                                  dtype=torch.float64),
+                       torch.diag(self.task_covariance.diagonal().clamp_min(1e-6))]
         x0 = self.train_inputs[0]
 
         def evaluate(kt: Tensor):
@@ -356,7 +361,7 @@ class GPIOIS(ImplicitSurfaceGP):
                           f"optimum (projected gradient {best.grad_norm:.3g}); the best K_t found is used "
                           "(fit_result has the details)", FitNotConvergedWarning, stacklevel=2)
         self.task_covariance = best.task_covariance
-        self.fit_result = best
+        self.fit_result = dataclasses.replace(best, starts=len(starts))
         return self
 
     def fit_state(self) -> tuple[np.ndarray, bool, int]:

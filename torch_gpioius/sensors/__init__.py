@@ -8,7 +8,7 @@ then raises an ImportError naming the ``sensors`` extra.
 
 from .base import (ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorError, SensorStale, SensorTimeout,
                    decode_status)
-from .pointcloud import PinholeCamera, PointCloud, PointCloudSource, SimulatedDepthCamera, look_at
+from .pointcloud import MultiViewSource, PinholeCamera, PointCloud, PointCloudSource, SimulatedDepthCamera, look_at
 from .optoforce import FrameParser, OptoForceDAQ, encode_config, encode_frame
 from .simulated import FAULTS, ForceFieldContact, SimulatedForceSensor, SphereSDF
 from .tactile import (DIGIT_CALIBRATION, DepthMapTactileSensor, DigitTactileSensor, TactileCalibration, TactileReading,
@@ -16,7 +16,7 @@ from .tactile import (DIGIT_CALIBRATION, DepthMapTactileSensor, DigitTactileSens
 
 __all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm", "SensorStale",
            "decode_status", "OptoForceDAQ", "FrameParser", "encode_config", "encode_frame", "SimulatedForceSensor",
-           "ForceFieldContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource",
+           "ForceFieldContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource", "MultiViewSource",
            "PinholeCamera", "SimulatedDepthCamera", "look_at", "TactileCalibration", "TactileReading", "TactileSensor",
            "DepthMapTactileSensor", "DigitTactileSensor", "depth_from_image_message", "DIGIT_CALIBRATION"]
 

@@ -17,16 +17,18 @@ import trimesh
 
 from ..voxels import voxel_average
 
-__all__ = ["PointCloud", "PointCloudSource", "PinholeCamera", "SimulatedDepthCamera", "look_at"]
+__all__ = ["PointCloud", "PointCloudSource", "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "look_at"]
 
 
 @dataclass
 class PointCloud:
-    """Points seen by a camera.
+    """Points seen by one camera, or by several (a merged capture, :meth:`merge`).
 
     Attributes:
         points: `(n, 3)` surface points [m], base frame.
-        origin: `(3,)` optical centre of the camera [m], base frame; None if unknown (no free space then).
+        origin: the optical centre [m], base frame: `(3,)` for one camera, `(n, 3)` per point for a merged capture
+            (each point's own camera; a row of NaN where that capture's camera is unknown), or None if unknown (no
+            free space then).
     """
 
     points: np.ndarray
@@ -40,10 +42,44 @@ class PointCloud:
             raise ValueError("points: contain NaN or inf")
         self.points = p
         if self.origin is not None:
-            o = np.asarray(self.origin, dtype=np.float64).reshape(-1)
-            if o.shape != (p.shape[1],) or not np.isfinite(o).all():
-                raise ValueError(f"origin: expected a finite ({p.shape[1]},) position [m], got {self.origin!r}")
+            o = np.asarray(self.origin, dtype=np.float64)
+            if o.ndim == 2:
+                if o.shape != p.shape:
+                    raise ValueError(f"origin: per-point origins must have the points' shape {p.shape}, got {o.shape}")
+                finite = np.isfinite(o)
+                if not (finite.all(axis=1) | np.isnan(o).all(axis=1)).all():
+                    raise ValueError("origin: each per-point origin must be a finite position [m] or all NaN (unknown)")
+            else:
+                o = o.reshape(-1)
+                if o.shape != (p.shape[1],) or not np.isfinite(o).all():
+                    raise ValueError(f"origin: expected a finite ({p.shape[1]},) position [m], got {self.origin!r}")
             self.origin = o
+
+    @classmethod
+    def merge(cls, clouds) -> "PointCloud":
+        """One capture from several views: the points of every cloud, each keeping its own camera's origin.
+
+        Args:
+            clouds: :class:`PointCloud` objects (at least one) of the same dimension, base frame.
+
+        Returns:
+            A cloud with per-point origins (rows of NaN for the points of a cloud without origin); the cloud itself
+            when there is one.
+
+        Raises:
+            ValueError: no clouds, or clouds of different dimensions.
+        """
+        clouds = list(clouds)
+        if not clouds:
+            raise ValueError("merge: no point clouds")
+        if len(clouds) == 1:
+            return clouds[0]
+        dims = {c.points.shape[1] for c in clouds}
+        if len(dims) != 1:
+            raise ValueError(f"merge: the clouds mix dimensions {sorted(dims)}")
+        origins = [np.full_like(c.points, np.nan) if c.origin is None else
+                   np.broadcast_to(c.origin, c.points.shape).astype(np.float64) for c in clouds]
+        return cls(np.concatenate([c.points for c in clouds]), np.concatenate(origins))
 
     def __len__(self) -> int:
         return len(self.points)
@@ -51,34 +87,47 @@ class PointCloud:
     @property
     def sees_free_space(self) -> bool:
         """Whether :meth:`free_space` can say where the view was free (it needs the camera's ``origin``)."""
-        return self.origin is not None
+        return self.origin is not None and bool(np.isfinite(self.origin).any())
+
+    @property
+    def per_point_origins(self) -> bool:
+        """Whether the cloud merges views (``origin`` is `(n, 3)`, one camera per point)."""
+        return self.origin is not None and self.origin.ndim == 2
 
     def voxel_averaged(self, voxel: float) -> "PointCloud":
-        """One mean point per occupied voxel of edge ``voxel`` [m] (paper: 0.05 m)."""
+        """One mean point per occupied voxel of edge ``voxel`` [m] (paper: 0.05 m), per view of a merged capture."""
         if len(self) == 0:
             return self
-        return dataclasses.replace(self, points=voxel_average(self.points, voxel))
+        if not self.per_point_origins:
+            return dataclasses.replace(self, points=voxel_average(self.points, voxel))
+        keys, inverse = np.unique(np.nan_to_num(self.origin, nan=np.inf), axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        parts = [voxel_average(self.points[inverse == k], voxel) for k in range(len(keys))]
+        origins = [np.broadcast_to(self.origin[inverse == k][0], part.shape) for k, part in enumerate(parts)]
+        return dataclasses.replace(self, points=np.concatenate(parts), origin=np.concatenate(origins))
 
     def cropped(self, lower, upper) -> "PointCloud":
         """The points inside the box ``lower <= p <= upper`` (`(d,)` each) [m]."""
         lo, hi = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
         keep = ((self.points >= lo) & (self.points <= hi)).all(axis=1)
-        return dataclasses.replace(self, points=self.points[keep])
+        origin = self.origin[keep] if self.per_point_origins else self.origin
+        return dataclasses.replace(self, points=self.points[keep], origin=origin)
 
     def free_space(self, offset: float) -> np.ndarray:
-        """`(n, 3)` free-space points: each seen point moved ``offset`` [m] back along its ray to the camera.
+        """`(n, 3)` free-space points: each seen point moved ``offset`` [m] back along its ray to its camera.
 
         The ray from the camera to a seen point crossed nothing before it, so a point ``offset`` in front of
-        the surface is free (outer task, y = 1). Points closer than ``offset`` to the camera give none.
+        the surface is free (outer task, y = 1). Points closer than ``offset`` to the camera give none; so do the
+        points of a merged capture whose camera is unknown.
 
         Raises:
             ValueError: the cloud has no ``origin``.
         """
-        if self.origin is None:
+        if not self.sees_free_space:
             raise ValueError("free_space: the point cloud has no camera origin; pass origin= to its source")
         ray = self.origin - self.points
         length = np.linalg.norm(ray, axis=1)
-        keep = length > offset
+        keep = np.isfinite(length) & (length > offset)
         return self.points[keep] + ray[keep] * (offset / length[keep])[:, None]
 
 
@@ -88,6 +137,47 @@ class PointCloudSource(abc.ABC):
     @abc.abstractmethod
     def capture(self) -> PointCloud:
         """One point cloud [m], base frame."""
+
+    def reseeded(self, seed) -> "PointCloudSource":
+        """The same source with its noise drawn from ``seed`` (an int, or a sequence of ints as NumPy's seed
+        sequences take; a seeded world's perturbation); a source without noise of its own (a file, a live camera)
+        returns itself."""
+        return self
+
+
+class MultiViewSource(PointCloudSource):
+    """Several point-cloud sources captured together: one :class:`PointCloud` with each point's own camera origin
+    (:meth:`PointCloud.merge`), so that each view's free space lies along its own rays.
+
+    Args:
+        sources: the views (at least one), each a :class:`PointCloudSource`.
+        names: optional name of each view (for reports), e.g. ``("fixed", "mirrored", "wrist")``.
+
+    Raises:
+        ValueError: no sources, a source that is not a :class:`PointCloudSource`, or names of another length.
+    """
+
+    def __init__(self, sources, names=None) -> None:
+        sources = list(sources)
+        if not sources:
+            raise ValueError("MultiViewSource: needs at least one view")
+        for i, src in enumerate(sources):
+            if not isinstance(src, PointCloudSource):
+                raise ValueError(f"MultiViewSource: view {i} is a {type(src).__name__}, not a PointCloudSource")
+        names = tuple(f"view {i}" for i in range(len(sources))) if names is None else tuple(str(n) for n in names)
+        if len(names) != len(sources):
+            raise ValueError(f"MultiViewSource: {len(names)} names for {len(sources)} views")
+        self.sources, self.names = sources, names
+
+    def __len__(self) -> int:
+        return len(self.sources)
+
+    def capture(self) -> PointCloud:
+        return PointCloud.merge([src.capture() for src in self.sources])
+
+    def reseeded(self, seed) -> "MultiViewSource":
+        # each view its own stream: view k of seed s draws from [s, k], never the same noise as another view
+        return MultiViewSource([src.reseeded([int(seed), k]) for k, src in enumerate(self.sources)], self.names)
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> np.ndarray:
@@ -146,6 +236,15 @@ class PinholeCamera:
         w, h = max(1, round(512 * scale)), max(1, round(424 * scale))
         return cls(w, h, 365.5 * w / 512, 365.5 * h / 424, w / 2, h / 2)
 
+    @classmethod
+    def realsense_d405(cls, scale: float = 1.0) -> "PinholeCamera":
+        """A short-range stereo depth camera for the wrist (Intel RealSense D405: 1280 x 720 px, 87 x 58 deg, depth
+        from 7 cm; its datasheet's best range ends near 50 cm, here 1 m), optionally subsampled."""
+        w, h = max(1, round(1280 * scale)), max(1, round(720 * scale))
+        fx = (w / 2) / np.tan(np.radians(87.0) / 2)
+        fy = (h / 2) / np.tan(np.radians(58.0) / 2)
+        return cls(w, h, fx, fy, w / 2, h / 2, min_depth=0.07, max_depth=1.0)
+
     def rays(self) -> np.ndarray:
         """`(height * width, 3)` ray directions in the camera frame (z = 1), row-major over pixel centres."""
         u, v = np.meshgrid(np.arange(self.width) + 0.5, np.arange(self.height) + 0.5)
@@ -196,6 +295,11 @@ class SimulatedDepthCamera(PointCloudSource):
     def origin(self) -> np.ndarray:
         """`(3,)` optical centre [m], base frame."""
         return self.T_base_camera[:3, 3].copy()
+
+    def reseeded(self, seed) -> "SimulatedDepthCamera":
+        """The same camera with its noise and dropout drawn from ``seed`` (an int or a sequence of ints)."""
+        return SimulatedDepthCamera(self.mesh, self.intrinsics, self.T_base_camera, noise_a=self.noise_a,
+                                    noise_b=self.noise_b, dropout=self.dropout, seed=seed, engine=self.engine)
 
     def depth_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free first hits: `(k, 3)` points in the camera frame and `(k,)` their pixel indices."""

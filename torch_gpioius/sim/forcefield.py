@@ -12,6 +12,7 @@ Frames: everything is in the UR5 base frame [m] (z up); the objects stand in fro
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -41,6 +42,85 @@ ROBOT_STUDY_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, ma
                                            stop=(TravelBudget(1.5),),
                                            policy=ObservationPolicy(voxel=0.05, crop_margin=0.15),
                                            metrics_every=1, approach_travel=2.0)
+
+
+#: The simulated views of a force-field scene (:meth:`Scene3D.cameras`).
+VIEWS = ("fixed", "mirrored", "wrist")
+#: The views a scene has unless told otherwise.
+DEFAULT_VIEWS = ("fixed",)
+
+
+#: What ``Scene3D.from_mesh(settings=...)`` accepts: "default" (this library's, for a user's object) or "paper".
+SETTINGS = ("default", "paper")
+
+
+def object_defaults(mesh: trimesh.Trimesh) -> ExplorationDefaults:
+    """The exploration settings for a user's object (``Scene3D.from_mesh(settings="default")``): the robot study's
+    (:data:`ROBOT_STUDY_DEFAULTS`) with three changes, each measured on shapes nobody tuned to (docs/results-real.md):
+
+    - the camera's voxels a tenth of the body's largest extent, 2-5 cm (the paper's 5 cm voxels were sized for a
+      torso, and leave a 15 cm body a handful of outer points);
+    - a second free-space point 10 cm in front of each seen point (``ObservationPolicy.vision_free_far``);
+    - a Matérn-5/2 kernel of length scale 0.1 m in place of the inverse multiquadric: with the denser camera data the
+      inverse multiquadric's heavy tails (``k ~ 1/r``) swing the mean below zero 5-10 cm away from all data, a
+      phantom surface that a light-tailed kernel does not make.
+    """
+    from ..kernels import Matern52
+
+    extent = float(np.max(mesh.extents))
+    voxel = round(float(np.clip(extent / 10.0, 0.02, 0.05)), 4)
+    d = ROBOT_STUDY_DEFAULTS
+    return dataclasses.replace(d, policy=dataclasses.replace(d.policy, voxel=voxel, vision_free_far=0.10),
+                               kernel=Matern52(0.1))
+
+
+#: The kernels ``Scene3D.from_mesh(kernel=...)`` names: the paper's inverse multiquadric and the Matérn-5/2.
+KERNELS = ("imq", "matern52")
+
+
+def _with_kernel(defaults: ExplorationDefaults, kernel, theta) -> ExplorationDefaults:
+    """``defaults`` with the kernel named by ``kernel`` ("imq", "matern52", an ExactKernel or None: as it is) and
+    its length ``theta`` [m] (None: the kernel's own)."""
+    from .._validation import as_float
+    from ..kernels import ExactKernel, Matern52
+
+    if theta is not None:
+        theta = as_float(theta, "theta", positive=True, unit="m")
+    if kernel is None:
+        kernel = "imq" if defaults.kernel is None else ("matern52" if isinstance(defaults.kernel, Matern52) else
+                                                        defaults.kernel)
+    if isinstance(kernel, ExactKernel):
+        if theta is not None:
+            raise ValueError("theta: give the length in the kernel object itself")
+        return dataclasses.replace(defaults, kernel=kernel)
+    if kernel == "imq":
+        return dataclasses.replace(defaults, kernel=None, theta=defaults.theta if theta is None else theta)
+    if kernel == "matern52":
+        ell = (defaults.kernel.ell if isinstance(defaults.kernel, Matern52) else 0.1) if theta is None else theta
+        return dataclasses.replace(defaults, kernel=Matern52(ell))
+    raise ValueError(f"kernel: must be one of {KERNELS} or an ExactKernel, got {kernel!r}")
+
+
+def as_views(views) -> tuple[str, ...]:
+    """The names of a scene's views from names, a count (1-3, in :data:`VIEWS` order) or "paper" (the fixed camera).
+
+    Raises:
+        ValueError: an unknown name, a repeated one, no views, or a count outside 1-3.
+    """
+    if isinstance(views, str):
+        views = ("fixed",) if views == "paper" else (views,)
+    if isinstance(views, (int, np.integer)) and not isinstance(views, bool):
+        if not 1 <= int(views) <= len(VIEWS):
+            raise ValueError(f"views: a count must be 1-{len(VIEWS)} ({', '.join(VIEWS)}), got {views}")
+        return VIEWS[:int(views)]
+    try:
+        names = tuple(views)
+    except TypeError:
+        raise ValueError(f"views: expected names from {VIEWS}, a count or 'paper', got {views!r}") from None
+    bad = [v for v in names if v not in VIEWS]
+    if bad or not names or len(set(names)) != len(names):
+        raise ValueError(f"views: expected distinct names from {VIEWS}, a count or 'paper', got {views!r}")
+    return names
 
 
 def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
@@ -145,7 +225,7 @@ class Scene3D(World):
         bounds: `(2, 3)` exploration range `[min corner; max corner]` [m] (trimesh's ``mesh.bounds`` layout): the
             range penalty C (eq. 25) keeps the planner inside it, and the metrics are evaluated inside it.
         name: label for figures and records.
-        camera: point-cloud source seeing the outer mesh (default: :meth:`default_camera`).
+        camera: point-cloud source seeing the outer mesh (default: :meth:`cameras` of ``views``).
         cover_stiffness: stiffness of the cover in the simulated force model [N/m].
         sensor_noise: force-sensor noise per axis [N] (the OptoForce OMD-20 is specified to about 0.01-0.03 N).
         seed: seed of the sensor and camera noise.
@@ -154,16 +234,21 @@ class Scene3D(World):
             point), a height z [m], or None (no table: the fingertip may pass under the object). Nothing passes
             the plane: the contact controller keeps the fingertip above it and the robot's gate refuses what would
             go more than 5 mm below.
+        views: the simulated camera's views of the cover when no ``camera`` is given (:data:`VIEWS`): a tuple of
+            names, their number (1: the paper's fixed camera; 2: and its mirror; 3: and the wrist view), or "paper"
+            (the fixed camera alone).
 
     Raises:
         ValueError: open or invalid meshes, an outer mesh not containing the inner one, a start inside the outer
-            mesh, an approach ray missing the inner mesh, or invalid bounds.
+            mesh, an approach ray missing the inner mesh, invalid bounds, or unknown views.
     """
 
     def __init__(self, inner: trimesh.Trimesh, outer: trimesh.Trimesh, start, direction, bounds, name: str = "",
                  camera=None, cover_stiffness: float = 5.0, sensor_noise: float = 0.02, seed: int = 0,
-                 defaults: ExplorationDefaults | None = None, support: float | str | None = "base") -> None:
+                 defaults: ExplorationDefaults | None = None, support: float | str | None = "base",
+                 views=DEFAULT_VIEWS) -> None:
         self.inner, self.outer = _mesh(inner, "inner"), _mesh(outer, "outer")
+        self.views = as_views(views)
         base = float(self.inner.bounds[0, 2])
         if support == "base":
             self.support: float | None = base
@@ -210,7 +295,9 @@ class Scene3D(World):
                   at=None, scale: float = 1.0, repair: bool = True, gap: float | None = None, bridge: float = 0.03,
                   resolution: float | None = None, name: str = "", seed: int = 0,
                   cover_stiffness: float | None = None, sensor_noise: float = 0.02,
-                  defaults: ExplorationDefaults | None = None, support: float | str | None = "base") -> "Scene3D":
+                  defaults: ExplorationDefaults | None = None, support: float | str | None = "base",
+                  settings: str = "default", views=None, kernel=None, theta: float | None = None,
+                  noise: float | None = None, voxel: float | None = None) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
         The mesh is loaded, checked and repaired if need be (:func:`torch_gpioius.sim.meshes.load_mesh`, which warns
@@ -238,16 +325,36 @@ class Scene3D(World):
             defaults: overrides of :data:`ROBOT_STUDY_DEFAULTS`.
             cover_stiffness: [N/m] (default 5 tight, 3 loose, as objects E-H).
             support: the table under the object ("base": at its lowest point; a height [m]; None: none).
+            settings: "default" (:func:`object_defaults` and all three :data:`VIEWS`) or "paper" (the robot study's
+                :data:`ROBOT_STUDY_DEFAULTS` and the paper's single fixed camera); ``defaults`` replaces either.
+            views: the camera's views (see the class; default: by ``settings``).
+            kernel: "imq" (the paper's inverse multiquadric), "matern52", or an
+                :class:`~torch_gpioius.kernels.ExactKernel` (default: by ``settings``, "matern52" or "imq").
+            theta: the kernel's length [m]: the inverse multiquadric's theta_x, or the Matérn's length scale
+                (default: by ``settings``: 0.1 Matérn, 0.15 inverse multiquadric).
+            noise: sigma^2 (default: by ``settings``, 0.08).
+            voxel: the camera's voxel edge [m] (0: every point; default: by ``settings``).
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
                 approach that misses the body (each names the problem).
         """
         from .meshes import load_mesh
+        from .._validation import as_float
 
         if cover not in ("tight", "loose"):
             raise ValueError(f"cover: the force-field world has 'tight' and 'loose' covers, got {cover!r}")
+        if settings not in SETTINGS:
+            raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
+        views = as_views(("paper" if settings == "paper" else VIEWS) if views is None else views)
         mesh = place(load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner"), at)
+        if defaults is None:
+            defaults = ROBOT_STUDY_DEFAULTS if settings == "paper" else object_defaults(mesh)
+        defaults = _with_kernel(defaults, kernel, theta)
+        if noise is not None:
+            defaults = dataclasses.replace(defaults, noise=as_float(noise, "noise", positive=True))
+        if voxel is not None:
+            defaults = dataclasses.replace(defaults, policy=defaults.policy.with_voxel(voxel))
         gap = (0.008 if cover == "tight" else 0.01) if gap is None else gap
         outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution)
         if start is None or direction is None or bounds is None:
@@ -258,7 +365,7 @@ class Scene3D(World):
             bounds = b if bounds is None else bounds
         stiffness = (5.0 if cover == "tight" else 3.0) if cover_stiffness is None else cover_stiffness
         return cls(mesh, outer, start, direction, bounds, name=name, cover_stiffness=stiffness,
-                   sensor_noise=sensor_noise, seed=seed, defaults=defaults, support=support)
+                   sensor_noise=sensor_noise, seed=seed, defaults=defaults, support=support, views=views)
 
     # ------------------------------------------------------------------ the World interface
     @property
@@ -267,10 +374,44 @@ class Scene3D(World):
 
     @property
     def camera(self):
-        """The point-cloud source (default: :meth:`default_camera`)."""
+        """The point-cloud source (default: :meth:`cameras` of :attr:`views`)."""
         if self._camera is None:
-            self._camera = self.default_camera()
+            self._camera = self.cameras(self.views)
         return self._camera
+
+    def cameras(self, views=("fixed",)):
+        """The simulated depth cameras of ``views`` (:data:`VIEWS`; names, a count or "paper"): the fixed camera
+        alone is :meth:`default_camera`; several views are one :class:`~torch_gpioius.sensors.MultiViewSource` whose
+        view k draws its noise from ``[seed, k]``.
+
+        - "fixed": the paper's camera (:meth:`default_camera`), behind the approach, 30 cm to one side, 30 cm up.
+        - "mirrored": the same camera mirrored to the other side of the approach (a second tripod, or the first one
+          moved once), so that the far side of the body is seen too.
+        - "wrist": a short-range depth camera on the arm's wrist (:meth:`PinholeCamera.realsense_d405`), 35 cm back
+          from the first contact along the approach, captured before the first touch.
+        """
+        views = as_views(views)
+        if views == ("fixed",):
+            return self.default_camera()
+        from ..sensors.pointcloud import MultiViewSource
+
+        make = {"fixed": lambda k: self.default_camera(seed=[self.seed, k]),
+                "mirrored": lambda k: self.default_camera(seed=[self.seed, k], side=-1.0),
+                "wrist": lambda k: self.wrist_camera(seed=[self.seed, k])}
+        return MultiViewSource([make[v](k) for k, v in enumerate(views)], views)
+
+    def wrist_camera(self, distance: float = 0.35, seed=0) -> SimulatedDepthCamera:
+        """A wrist-mounted short-range depth camera (:meth:`PinholeCamera.realsense_d405`; depth noise 0.5 mm +
+        2 mm/m^2 * z^2) at ``distance`` [m] back from the first contact along the approach, looking along it (an
+        approach that misses the body: from the point of its line nearest the range's centre)."""
+        try:
+            target = self.first_contact()
+        except ValueError:          # an approach that misses (the run will say so): aim along it at the range's middle
+            target = self.start + self.direction * float((self.range.mean(axis=0) - self.start) @ self.direction)
+        eye = target - distance * self.direction
+        up = (0.0, 0.0, 1.0) if abs(self.direction[2]) < 0.9 else (1.0, 0.0, 0.0)
+        return SimulatedDepthCamera(self.outer, PinholeCamera.realsense_d405(0.25), look_at(eye, target, up),
+                                    noise_a=0.0005, noise_b=0.002, seed=seed)
 
     def hardware(self) -> Hardware:
         from ..contact import ContactConfig, ContactController
@@ -308,7 +449,9 @@ class Scene3D(World):
         return geometry_hash(self.inner.vertices, self.inner.faces, self.outer.vertices, self.outer.faces,
                              self.start, self.direction, self.range,
                              [self.cover_stiffness, self.sensor_noise, self.seed,
-                              math.nan if self.support is None else self.support])
+                              math.nan if self.support is None else self.support],
+                             # the paper's single view hashes as before views existed (its logs still resume)
+                             *([] if self.views == ("fixed",) else [[VIEWS.index(v) for v in self.views]]))
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
         return {"joints": hw.robot.read_joints().numpy(), "clock": np.array([hw.robot.time]),
@@ -325,17 +468,13 @@ class Scene3D(World):
         if seed == 0:
             return self
         for start, direction in perturbed_approaches(self.start, self.direction, np.random.default_rng([seed, 3])):
-            camera = None
-            if self._camera is None or isinstance(self._camera, SimulatedDepthCamera):
-                base = self.camera
-                camera = SimulatedDepthCamera(base.mesh, base.intrinsics, base.T_base_camera, noise_a=base.noise_a,
-                                              noise_b=base.noise_b, dropout=base.dropout, seed=seed,
-                                              engine=base.engine)
+            # a given camera keeps its poses and draws its noise from the seed (PointCloudSource.reseeded); the
+            # default views are rebuilt for the perturbed approach (the wrist view follows it)
+            camera = None if self._camera is None else self._camera.reseeded(seed)
             try:
                 return Scene3D(self.inner, self.outer, start, direction, self.range, name=self.name,
-                               camera=camera if camera is not None else self._camera,
-                               cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=seed,
-                               defaults=self._defaults, support=self.support)
+                               camera=camera, cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise,
+                               seed=seed, defaults=self._defaults, support=self.support, views=self.views)
             except ValueError:
                 continue
         raise ValueError(f"seed {seed}: no perturbed approach hits the object")
@@ -398,17 +537,17 @@ class Scene3D(World):
         return ForceFieldContact(self.inner_sdf, self.outer_sdf, k_inner=k_inner,
                               k_cover=self.cover_stiffness)
 
-    def default_camera(self, scale: float = 0.5) -> SimulatedDepthCamera:
+    def default_camera(self, scale: float = 0.5, seed=None, side: float = 1.0) -> SimulatedDepthCamera:
         """A Kinect v2 (half resolution; depth noise 1.5 mm + 1.5 mm/m^2 * z^2) looking at the centre of the
         exploration range from 1.1 m, from behind the approach (so that it sees what the robot will touch),
-        30 cm to the side and 30 cm up."""
+        30 cm to the side (``side`` -1: the other side) and 30 cm up; noise from ``seed`` (default: the scene's)."""
         target = self.range.mean(axis=0)
         back = -self.direction
-        side = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
-        eye = target + back + 0.3 * side / np.linalg.norm(side) + np.array([0.0, 0.0, 0.3])
+        lateral = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
+        eye = target + back + 0.3 * side * lateral / np.linalg.norm(lateral) + np.array([0.0, 0.0, 0.3])
         eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
         return SimulatedDepthCamera(self.outer, PinholeCamera.kinect_v2(scale), look_at(eye, target),
-                                    noise_a=0.0015, noise_b=0.0015, seed=self.seed)
+                                    noise_a=0.0015, noise_b=0.0015, seed=self.seed if seed is None else seed)
 
     def true_distance(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` exact signed distance of `(n, 3)` points from the inner mesh [m] (negative inside)."""

@@ -28,6 +28,12 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     [forcefield]                      # optional: settings and cover options of one world
     cover_stiffness = 5.0             # (Scene3D.from_mesh, cover_around)
     bridge = 0.03                     # a loose cover's bridging radius
+    settings = "default"              # or "paper": one fixed camera, 5 cm voxels, the inverse multiquadric
+    views = ["fixed", "mirrored", "wrist"]   # the simulated camera's views (or a count, or "paper")
+    kernel = "matern52"               # or "imq"; theta: its length [m]; noise: sigma^2; voxel: the camera's [m]
+    theta = 0.1
+    noise = 0.08
+    voxel = 0.02
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
     slack = 0.03                      # a loose cloth's distance from the body before it settles
@@ -58,7 +64,8 @@ _TOP = {"name", "world", "object", "cover", "approach", "range", "forcefield", "
 _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
 _COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
           "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
-_SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise"},
+_SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "theta", "noise",
+                            "voxel"},
              "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
                         "sensor_noise", "timestep", "settle_time", "camera_scale"}}
 #: What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in the
@@ -192,7 +199,7 @@ def _check_reach(scene, spec: SceneSpec) -> None:
                          "metres)") from None
 
 
-def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = False):
+def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = False, settings: str | None = None):
     """Build the world a scene file describes.
 
     Args:
@@ -200,6 +207,8 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
         world: "forcefield" or "mujoco" (default: the file's ``world``).
         seed: the seeded perturbation of the approach and the noise (0: as written; ``World.perturbed``).
         smoke: a coarse MuJoCo cover (4 cm spacing) for quick checks; the force-field world ignores it.
+        settings: "default" or "paper" in place of the file's ``settings`` (force-field world; see
+            :meth:`~torch_gpioius.sim.forcefield.Scene3D.from_mesh`); the file's other settings still apply.
 
     Returns:
         A :class:`~torch_gpioius.sim.forcefield.Scene3D` or :class:`~torch_gpioius.sim.mujoco.MujocoScene`.
@@ -229,7 +238,12 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
                              f"[{'mujoco' if world == 'forcefield' else 'forcefield'}]")
         own = spec.settings[world]
         cover.update({k: v for k, v in own.items() if k in _COVER[world]})
+        settings_given = settings
         settings = {k: v for k, v in own.items() if k not in _COVER[world]}
+        if settings_given is not None:
+            if world != "forcefield":
+                raise ValueError(f"settings: {settings_given!r} applies to the force-field world, not {world}")
+            settings["settings"] = settings_given
         where = {}
         if spec.approach is not None:
             where.update(start=spec.approach["start"], direction=spec.approach["direction"])

@@ -81,19 +81,21 @@ class RunSpec:
     touch: str = "point"            # "point" (the fingertip's contact) or "patch" (a gel pad's depth map)
     outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
     device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
+    settings: str | None = None     # scene files: "default" or "paper" (Scene3D.from_mesh); None: the file's own
 
     @property
     def key(self) -> str:
         return f"{self.object}_{self.mode}_{self.seed}"
 
 
-def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None):
-    """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
-    unperturbed object)."""
+def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None,
+               settings: str | None = None):
+    """The world of one run: the named object (or the scene file ``scene``, with ``settings`` in place of its own),
+    perturbed by ``seed`` (seed 0: the unperturbed object)."""
     if scene is not None:
         from ..sim.scenefile import load_scene
 
-        return load_scene(scene, world=world, seed=seed, smoke=smoke)
+        return load_scene(scene, world=world, seed=seed, smoke=smoke, settings=settings)
     from ..exploration.registry import make_world as registry_make_world
 
     return registry_make_world(world, name, seed, smoke)
@@ -276,7 +278,7 @@ def run_one(spec: RunSpec) -> dict:
     marker.write_text(str(os.getpid()))
     t0 = time.perf_counter()
     with torch_threads(spec.threads):
-        world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene)
+        world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings)
         kw = _explore_kwargs(spec, world)
         try:
             # the folder is ours: a run that crashed before is done again over its own log
@@ -291,6 +293,10 @@ def run_one(spec: RunSpec) -> dict:
         record["n_outer"] = _n_outer(trace.model)
     record["voxel"] = kw.get("policy", world.defaults.policy).voxel or 0.0
     record["touch"] = spec.touch
+    if getattr(world, "views", None):                 # the camera's views (force-field world)
+        record["views"] = "+".join(world.views)
+    if spec.settings is not None:
+        record["settings"] = spec.settings
     if spec.device is not None:
         record["device"] = spec.device
     if "outer_tol" in kw and trace is not None:      # the truncated outer basis: its setting and largest bound
@@ -760,7 +766,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
-              device: str | None = None) -> dict:
+              device: str | None = None, settings: str | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -795,6 +801,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         device: where each run's model computes ("cuda" for a GPU, float64; None: the CPU). Not part of the
             folder's identity: runs on either device answer the same question (the trajectories differ by the
             chaos of rounding, as on two CPUs); each run's record says where it ran.
+        settings: the scene files' settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
+            ``Scene3D.from_mesh``); None: each file's own. Force-field world, scene files only; a study folder holds
+            one setting.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -804,11 +813,12 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         FileExistsError: ``out`` holds something else and ``force`` is False.
         RuntimeError: another sweep is writing to ``out``.
     """
-    settings = SweepSettings.checked(
+    sweep = SweepSettings.checked(
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
-        force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device)
-    return settings.run()
+        force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
+        settings=settings)
+    return sweep.run()
 
 
 @dataclass(frozen=True)
@@ -836,10 +846,11 @@ class SweepSettings:
     touch: str
     outer_tol: float | None
     device: str | None
+    settings: str | None = None
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
-                threads, backend, force, scenes, voxel, touch, outer_tol, device) -> "SweepSettings":
+                threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry
 
@@ -873,8 +884,16 @@ class SweepSettings:
                 raise ValueError("outer_tol: patch runs use the batched engine, which has no truncated outer basis")
         if device is not None:
             device = str(as_device(device))      # fails here, before any run, on a device this machine lacks
+        if settings is not None:
+            from ..sim.forcefield import SETTINGS
+
+            if settings not in SETTINGS:
+                raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
+            if world != "forcefield" or not scene_files:
+                raise ValueError("settings: applies to scene files in the force-field world (the built-in objects "
+                                 "E-H are the paper's, with its settings)")
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
-                   threads, backend, force, scene_files, voxel, touch, outer_tol, device)
+                   threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings)
 
     def run(self) -> dict:
         """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
@@ -900,6 +919,8 @@ class SweepSettings:
         from ..io.outputs import claim_folder
 
         identity = {} if self.outer_tol is None else {"outer_tol": self.outer_tol}   # older folders: exact
+        if self.settings is not None:                                                   # older: the files' own
+            identity["settings"] = self.settings
         return claim_folder(self.out, "study", self.force, world=self.world, voxel=self.voxel,
                             touch=None if self.touch == "point" else self.touch, **identity)   # older: point runs
 
@@ -914,7 +935,8 @@ class SweepSettings:
 
     def _specs(self, out: Path) -> list[RunSpec]:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
-                        self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device)
+                        self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
+                        self.settings if o in self.scene_files else None)
                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
 
     def _execute(self, todo: list[RunSpec]) -> str:
