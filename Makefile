@@ -26,7 +26,7 @@ demo3d: $(STAMP)
 	$(VENV)/bin/gpioius simulate3d --object all --out outputs/study3d
 
 test: $(STAMP)
-	$(PY) -m pytest -m "not slow" -q
+	$(PY) -m pytest -m "not slow" -q -n auto
 
 test-all: $(STAMP)
 	$(PY) -m pytest -q

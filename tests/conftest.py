@@ -30,3 +30,12 @@ def random_data():
     y = (rng.uniform(size=n) > 0.5).astype(float)
     t = (rng.uniform(size=n) > 0.4).astype(np.int64)
     return torch.tensor(x), torch.tensor(y), torch.tensor(t)
+
+
+def pytest_configure(config):
+    """Under pytest-xdist (``make test`` runs two workers) each worker computes with one torch thread: two workers
+    with two threads each on two cores run 2-3 times slower than one thread each (oversubscription)."""
+    import os
+
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        torch.set_num_threads(1)
