@@ -14,7 +14,8 @@ from torch_gpioius.io.runs import load_run
 def test_a_simulated_pad_explores_the_arm_and_its_patches_lie_on_the_body(mode, tmp_path):
     world = make_world("forcefield", "E", 0, smoke=True)
     log = tmp_path / "run.gpioius"
-    trace = tg.explore(world, mode, touch="patch", max_travel=0.03, metrics_every=100, log=log)
+    # the reference: every point of each patch (the default keeps the informative ones, tested below)
+    trace = tg.explore(world, mode, touch=PatchTouch(max_points=None), max_travel=0.03, metrics_every=100, log=log)
     assert trace.n_steps >= 3 and not trace.terminated.startswith("refused")
     m = trace.model
     task = m.train_task if mode == "visual-tactile" else np.zeros(m.train_targets.numel(), np.int64)
@@ -100,3 +101,65 @@ def test_a_patch_run_cut_after_a_step_resumes(tmp_path):
     decisions = [[r.meta.get("fit_relearned") for r in read_records(f) if r.kind == "step"][:4] for f in (log, copy)]
     assert decisions[0] == decisions[1]
     assert type(resumed.model._inference()).__name__ == "BatchedExactInference"
+
+
+def test_a_patch_keeps_the_contact_and_its_most_uncertain_points_and_bounds_what_it_drops():
+    """PatchTouch.select against an independent dense posterior: the contact first, then the points of largest
+    posterior variance, at most max_points and none below min_variance of the prior variance; the dropped points'
+    information bound is 1/2 sum log(1 + v / sigma^2) over them; the path's free space is always kept."""
+    import torch
+
+    from torch_gpioius.exploration.observations import Observations
+    from tests import reference as ref
+
+    rng = np.random.default_rng(0)
+    a = rng.uniform(0, 2 * np.pi, 40)
+    seen = np.c_[0.1 * np.cos(a), 0.1 * np.sin(a), rng.uniform(-0.05, 0.05, 40)]
+    touched = np.array([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]])
+    x = np.r_[touched, seen, 1.5 * seen]
+    y = np.r_[0.0, 0.0, np.zeros(40), np.ones(40)]
+    task = np.r_[0, 0, np.ones(80, dtype=int)]
+    model = tg.GPIOIS(x, y, task, theta=0.1, noise=0.006).fit()
+    # a patch of 30 points around a new contact (its first row), then 3 free-space points of the path
+    patch = np.r_[[[0.0, -0.1, 0.0]], [[0.0, -0.1, 0.0]] + rng.normal(0, 0.02, (29, 3))]
+    path = np.array([[0.0, -0.2, 0.0], [0.0, -0.22, 0.0], [0.0, -0.24, 0.0]])
+    touch = PatchTouch(max_points=8, min_variance=0.05)
+    touch._patch_rows = len(patch)
+    obs = Observations(np.r_[patch, path], np.r_[np.zeros(30), np.ones(3)], np.zeros(33, np.int64), step=3)
+    kept = touch.select(model, obs)
+    # the independent posterior variance: a dense solve of the same Gram matrix (tests/reference.py)
+    var = ref.posterior(x, y, task, model.task_covariance.numpy(), 0.1, 0.006, patch, 0)[1]
+    rel = var / (model.task_covariance[0, 0].item() / 0.1)
+    rest = 1 + np.argsort(-rel[1:], kind="stable")
+    want = [0] + [i for i in rest if rel[i] >= 0.05][:7]
+    np.testing.assert_allclose(kept.x[:-3], patch[sorted(want)], atol=0)
+    np.testing.assert_allclose(kept.x[-3:], path, atol=0)
+    dropped = np.setdiff1d(np.arange(30), want)
+    n, nats = touch.last_dropped
+    assert n == len(dropped) == 30 - len(want) and nats == pytest.approx(0.5 * np.log1p(var[dropped] / 0.006).sum(),
+                                                                        rel=1e-8)
+    assert len(want) <= 8 and kept.step == 3
+    # the reference keeps everything
+    assert len(PatchTouch(max_points=None).select(model, obs)) == 33
+    with pytest.raises(ValueError, match="max_points"):
+        PatchTouch(max_points=0)
+    with pytest.raises(ValueError, match="min_variance"):
+        PatchTouch(min_variance=1.5)
+
+
+def test_a_default_patch_run_adds_at_most_max_points_per_touch_and_logs_what_it_dropped(tmp_path):
+    log = tmp_path / "run.gpioius"
+    trace = tg.explore(make_world("forcefield", "E", 0, smoke=True), "visual-tactile", touch="patch",
+                       max_travel=0.03, metrics_every=100, log=log)
+    assert trace.n_steps >= 3
+    dropped = 0
+    for r in read_records(log):
+        if r.kind == "step" and r.meta["step"] > 0:
+            x, y, task = (r.arrays[k] for k in ("x", "y", "task"))
+            pose = r.arrays["pad_pose"]
+            local = (x - pose[:3, 3]) @ pose[:3, :3]
+            on_pad = (np.abs(local[:, :2]) <= 0.01 + 1e-9).all(axis=1) & (np.abs(local[:, 2]) <= 3e-3 + 1e-9)
+            assert on_pad.sum() <= 12                                   # the patch's rows: at most max_points
+            assert r.arrays["patch_dropped"][0] >= 0 and r.arrays["patch_dropped_nats"][0] >= 0.0
+            dropped += int(r.arrays["patch_dropped"][0])
+    assert dropped > 0

@@ -156,7 +156,7 @@ def ingest(state: ExplorationState, cfg: ExploreConfig, touch: ContactResult) ->
     close to it is retracted, the batch is added. Returns the batch and the retracted indices."""
     state.contacts.append(touch.contact.numpy())
     obs = cfg.touch.observations(touch, np.asarray(state.contacts), cfg.policy, state.steps)
-    removed = _learn(state, obs, cfg, state.contact)
+    removed, obs = _learn(state, obs, cfg, state.contact)
     return obs, removed
 
 
@@ -212,13 +212,18 @@ def unstall(ctx: Run, state: ExplorationState, record: StepRecord) -> str | None
     return None
 
 
-def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig, contact: np.ndarray) -> np.ndarray:
-    """Retract free space the new contact shows to be too close, then add the batch; the retracted indices."""
+def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
+           contact: np.ndarray) -> tuple[np.ndarray, Observations]:
+    """Retract free space the new contact shows to be too close, keep what a touch model's ``select`` keeps of the
+    batch (a patch's informative points), then add it; the retracted indices and the batch added."""
     margin = getattr(cfg.touch, "retraction_margin", None) or cfg.policy.free_space_margin
     removed = retract_free_space(state.model, contact, margin)
     state.retracted += len(removed)
+    select = getattr(cfg.touch, "select", None)
+    if callable(select):
+        obs = select(state.model, obs)
     _add(state.model, obs)
-    return removed
+    return removed, obs
 
 
 def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:

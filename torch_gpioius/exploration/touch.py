@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+import torch
 
 from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchSettings, patch_observations
@@ -44,9 +45,20 @@ class PatchTouch:
     The model takes tens of points per step, so a visual-tactile run uses the batched engine
     (``GPIOIS(inference="batched")``) and re-learns K_t by the ``min_gain`` rule (``GPIOIS.fit``).
 
+    With ``max_points``, a patch adds only its most informative points (:meth:`select`): the contact, then the
+    patch's points in order of their posterior variance under the model before the touch, at most ``max_points`` in
+    all and none whose variance is below ``min_variance`` of the prior variance. What a dropped point would have
+    told the model is bounded by its own information gain, ``1/2 log(1 + v / sigma^2)`` nats; the sum over a touch's
+    dropped points bounds what the touch lost (information gain is submodular), and every log record carries it
+    (``patch_dropped``, ``patch_dropped_nats``). The model stays exact on what it keeps.
+
     Attributes:
         settings: the patch's thinning.
         min_gain: K_t is re-learned when the exact gradient predicts more than this [nats].
+        max_points: at most this many points of each patch enter the model (default 12; None: every point of the
+            spacing thinning, the reference, whose steps grow to seconds as patches pile up: docs/results-patches.md).
+        min_variance: points whose posterior variance before the touch is below this fraction of the prior variance
+            are dropped (with ``max_points``; default 1 %).
         sensor: the pad (a :class:`~torch_gpioius.sensors.tactile.TactileSensor`); bound from the world's
             ``Hardware.tactile`` when the run starts if None.
     """
@@ -54,10 +66,22 @@ class PatchTouch:
     settings: PatchSettings = field(default_factory=PatchSettings)
     min_gain: float = 0.1
     sensor: Any = None
+    max_points: int | None = 12
+    min_variance: float = 0.01
     name: str = "patch"
     inference: str = "batched"
     _pad: Any = field(default=None, init=False, repr=False, compare=False)   # the run's hardware pad (bind)
     last_reading: Any = field(default=None, init=False, repr=False, compare=False)   # for logs and the viewer
+    _patch_rows: int = field(default=0, init=False, repr=False, compare=False)      # the last batch's patch rows
+    last_dropped: tuple = field(default=(0, 0.0), init=False, repr=False, compare=False)  # (points, nats bound)
+
+    def __post_init__(self) -> None:
+        if self.max_points is not None and (isinstance(self.max_points, bool) or
+                                            not isinstance(self.max_points, (int, np.integer)) or self.max_points < 1):
+            raise ValueError(f"PatchTouch.max_points: must be an integer >= 1 or None, got {self.max_points!r}")
+        if isinstance(self.min_variance, bool) or not (isinstance(self.min_variance, (int, float)) and
+                                                       0.0 <= self.min_variance < 1.0):
+            raise ValueError(f"PatchTouch.min_variance: must be a fraction in [0, 1), got {self.min_variance!r}")
 
     def bind(self, hardware) -> None:
         """Take the world's pad (``hardware.tactile``) unless a sensor was given.
@@ -83,7 +107,41 @@ class PatchTouch:
             return {}
         h, w = r.depth.shape
         return {"pad_pose": np.asarray(r.pose, dtype=np.float64),
-                "pad_size": np.array([w * r.calibration.pitch, h * r.calibration.pitch])}
+                "pad_size": np.array([w * r.calibration.pitch, h * r.calibration.pitch]),
+                "patch_dropped": np.array([self.last_dropped[0]], dtype=np.int64),
+                "patch_dropped_nats": np.array([self.last_dropped[1]], dtype=np.float64)}
+
+    def select(self, model, obs: Observations) -> Observations:
+        """The batch with only the patch's informative points (see the class; all of it without ``max_points``).
+
+        Args:
+            model: the model before the touch (its posterior variance of the inner task ranks the points).
+            obs: the batch of :meth:`observations` (the patch's rows first, the contact its first row).
+
+        Returns:
+            The kept rows, in their order; :attr:`last_dropped` says how many went and their information bound.
+        """
+        from ..geometry import predict_task
+        from ..metrics import prior_variance
+
+        n_patch = min(self._patch_rows, len(obs))
+        if self.max_points is None or n_patch <= 1:
+            self.last_dropped = (0, 0.0)
+            return obs
+        x0 = model.train_inputs[0]
+        with torch.no_grad():
+            var = predict_task(model, torch.as_tensor(obs.x[:n_patch], dtype=x0.dtype, device=x0.device), 0)[1]
+        var = var.detach().cpu().numpy().clip(min=0.0)
+        rel = var / prior_variance(model, 0)
+        order = np.r_[0, 1 + np.argsort(-rel[1:], kind="stable")]          # the contact first, then by variance
+        keep = np.zeros(len(obs), dtype=bool)
+        keep[n_patch:] = True                                               # the path's free space: all of it
+        chosen = [i for i in order if i == 0 or rel[i] >= self.min_variance][:self.max_points]
+        keep[chosen] = True
+        dropped = ~keep[:n_patch]
+        self.last_dropped = (int(dropped.sum()), float(0.5 * np.log1p(var[dropped] / model.noise).sum()))
+        normal = None if obs.normal is None else obs.normal[keep]
+        return Observations(obs.x[keep], obs.y[keep], obs.task[keep], normal, obs.step, obs.source)
 
     @property
     def retraction_margin(self) -> float:
@@ -102,10 +160,15 @@ class PatchTouch:
         avoid = np.concatenate([np.asarray(contacts, dtype=np.float64).reshape(-1, patch.dim), patch.x[patch.y == 0]])
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, avoid, policy.free_space_margin)
         path = Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step, source="touch")
+        self._patch_rows = len(patch)
         return Observations.concat([patch, path], source="patch")
 
     def describe(self) -> dict:
-        return {"touch": self.name, "patch": asdict(self.settings), "min_gain": self.min_gain}
+        out = {"touch": self.name, "patch": asdict(self.settings), "min_gain": self.min_gain}
+        # every patch is kept in logs written before the selection existed: they resume with max_points=None
+        if self.max_points is not None:
+            out.update(max_points=int(self.max_points), min_variance=float(self.min_variance))
+        return out
 
 
 #: Touch models by name (``explore(..., touch="point")``).
