@@ -20,6 +20,15 @@ optimum, in nats of marginal likelihood. (b) and (c) run fewer steps at large N_
     OMP_NUM_THREADS=1 python benchmarks/patch_step.py                   # N_outer 2000, N_inner 1000 and 3000
     python benchmarks/patch_step.py --inner 300 --steps 4 --others 1   # quick
     python benchmarks/patch_step.py --device cuda                      # on a GPU (float64)
+
+**Whole runs** (``--whole-run SCENE``): visual-tactile patch explorations of a scene file in the force-field world,
+every step timed (plan, ingest, re-learning: the trace's ``step_time``), at each ``--travel``, for each
+``--max-points`` (``none``: every point of each patch, the exact reference; a number: ``PatchTouch.max_points``,
+the informative points), in one run: median, 95th percentile and maximum of the step, the inner points at the end,
+and the final shape (Hausdorff, Chamfer, F-score at 1 cm, bias):
+
+    OMP_NUM_THREADS=1 python benchmarks/patch_step.py --whole-run examples/scenes/real/duck-tight.toml \
+        --travel 0.3 1.0 1.5 --max-points 12 none
 """
 
 from __future__ import annotations
@@ -137,6 +146,44 @@ def fmt(times):
     return f"{statistics.median(ms):.0f} / {statistics.fmean(ms):.0f} / {max(ms):.0f}"
 
 
+def whole_runs(scene_file: str, travels, max_points, seed: int, device) -> None:
+    """Time every step of whole patch runs (see the module docstring) and print one row per run."""
+    import warnings
+
+    from torch_gpioius.exploration.touch import PatchTouch
+    from torch_gpioius.sim.scenefile import load_scene
+
+    print("| scene | travel [m] | max_points | steps | step median / p95 / max [ms] | re-learned | N_inner at end | "
+          "H [cm] | Chamfer [cm] | F@1cm | bias [cm] | wall [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    for travel in travels:
+        for mp in max_points:
+            world = load_scene(scene_file, seed=seed)
+            touch = PatchTouch(max_points=None if mp == "none" else int(mp))
+            relearned = []
+
+            class Relearns:                                   # counts the steps whose fit re-learned K_t
+                def start(self, run, state): ...
+                def step(self, run, state, record):
+                    fr = getattr(state.model, "fit_result", None)
+                    relearned.append(bool(fr is not None and fr.relearned))
+                def end(self, run, state): ...
+
+            t0 = time.perf_counter()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                trace = tg.explore(world, touch=touch, max_travel=travel, metrics_every=10_000, device=device,
+                                   recorders=[Relearns()])
+            wall = time.perf_counter() - t0
+            st = np.asarray(trace.step_time[1:]) * 1e3              # record 0 is the first contact, not a step
+            sh = {k: float(v[-1]) for k, v in trace.shape.items()}
+            n_inner = int((trace.model.train_task == 0).sum())
+            print(f"| {world.name} | {travel:g} | {mp} | {len(st)} | {np.median(st):.0f} / {np.percentile(st, 95):.0f} / "
+                  f"{st.max():.0f} | {sum(relearned)} | {n_inner} | {trace.hausdorff[-1] * 100:.1f} | "
+                  f"{sh['chamfer'] * 100:.2f} | {sh['fscore_10mm']:.2f} | {sh['bias'] * 100:.2f} | {wall:.0f} |",
+                  flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--outer", type=int, default=2000)
@@ -148,10 +195,20 @@ def main():
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--skip", nargs="*", default=[], choices=["structured", "dense"], help="sides to leave out")
+    parser.add_argument("--whole-run", default=None, metavar="SCENE", help="time whole patch runs of this scene file")
+    parser.add_argument("--travel", type=float, nargs="+", default=[0.3, 1.0], help="whole runs' travel [m]")
+    parser.add_argument("--max-points", nargs="+", default=["12", "none"], help="whole runs' PatchTouch.max_points")
+    parser.add_argument("--seed", type=int, default=0, help="whole runs' seed")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
     dev = torch.cuda.get_device_name(device) if device.type == "cuda" else (platform.processor() or platform.machine())
+    if args.whole_run:
+        print(f"# {dev}, {os.cpu_count()} CPUs, torch {torch.__version__} ({torch.get_num_threads()} threads), "
+              f"seed {args.seed}, metrics only at the end")
+        whole_runs(args.whole_run, args.travel, args.max_points, args.seed,
+                   None if device.type == "cpu" else str(device))
+        return
     print(f"# {dev}, {os.cpu_count()} CPUs, torch {torch.__version__} ({torch.get_num_threads()} threads), float64, "
           f"N_outer {args.outer}, k {args.k}, min_gain {args.min_gain} nats")
     print("| N_inner | (a) batched: median / mean / max [ms] | re-learned | (b) today's engine [ms] | "
