@@ -107,8 +107,6 @@ def test_a_patch_keeps_the_contact_and_its_most_uncertain_points_and_bounds_what
     """PatchTouch.select against an independent dense posterior: the contact first, then the points of largest
     posterior variance, at most max_points and none below min_variance of the prior variance; the dropped points'
     information bound is 1/2 sum log(1 + v / sigma^2) over them; the path's free space is always kept."""
-    import torch
-
     from torch_gpioius.exploration.observations import Observations
     from tests import reference as ref
 
