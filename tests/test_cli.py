@@ -334,6 +334,45 @@ def test_fit_reads_a_users_contacts_csv_and_cloud_with_units_and_camera_free_spa
     assert "--camera-origin: expected three numbers" in capsys.readouterr().err and not bad.exists()
 
 
+def test_fit_takes_several_captures_each_with_its_own_camera(tmp_path, capsys):
+    """Issue 34, item 4: two captures of a sphere from opposite sides, each with its camera: every free-space point
+    lies in front of the sphere on its own capture's side (a merged cloud with one origin put the second view's free
+    space on rays to the first camera, through the body)."""
+    import trimesh
+
+    from torch_gpioius.io.importers import dataset_from_files
+
+    c = np.array([0.5, 0.0, 0.25])
+    rows = ["x,y,z,label", f"{c[0] + 0.1},{c[1]},{c[2]},contact"]
+    (tmp_path / "touch.csv").write_text("\n".join(rows) + "\n")
+    shell = trimesh.creation.icosphere(3, radius=0.1).vertices + c
+    left, right = shell[shell[:, 1] < -0.02], shell[shell[:, 1] > 0.02]
+    trimesh.PointCloud(left).export(tmp_path / "left.ply")
+    trimesh.PointCloud(right).export(tmp_path / "right.ply")
+    eyes = [c + [0, -1.0, 0], c + [0, 1.0, 0]]
+    files = [str(tmp_path / "left.ply"), str(tmp_path / "right.ply")]
+    ds = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=eyes)
+    free = ds.x[(ds.task == 1) & (ds.y == 1)]
+    assert len(free) == len(left) + len(right)
+    r = np.linalg.norm(free - c, axis=1)
+    # each free point 5 cm in front of a seen point, on its own capture's side, never inside the sphere
+    assert (r > 0.1 + 1e-3).all() and (r < 0.15 + 1e-6).all() and (np.abs(free[:, 1] - c[1]) > 0.02).all()
+    assert ds.meta["camera_origin"] == [list(e) for e in eyes]
+    out = tmp_path / "fit"
+    assert main(["fit", str(tmp_path / "touch.csv"), "--cloud", files[0], "--cloud", files[1], "--voxel", "0",
+                 "--camera-origin", " ".join(map(str, eyes[0])), "--camera-origin", " ".join(map(str, eyes[1])),
+                 "--out", str(out)]) == 0
+    assert "1 inner" in capsys.readouterr().out
+    assert main(["fit", str(tmp_path / "touch.csv"), "--cloud", files[0], "--cloud", files[1],
+                 "--camera-origin", "0 0 0"]) == 2
+    assert "1 given for 2 --cloud" in capsys.readouterr().err
+    with pytest.raises(Exception, match=r"3 origin\(s\) for 2 point clouds"):
+        dataset_from_files(tmp_path / "touch.csv", files, camera_origin=[eyes[0], eyes[1], None])
+    # a capture without camera: its points, no free space
+    one = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=[eyes[0], None])
+    assert int(((one.task == 1) & (one.y == 1)).sum()) == len(left)
+
+
 def test_fit_says_when_there_is_no_estimate(tmp_path, capsys):
     """Issue 33, item 5: a fit whose inner zero level has no surface in the data's box said nothing."""
     from torch_gpioius.io.datasets import Dataset, save_dataset

@@ -84,12 +84,16 @@ def _fit(args: argparse.Namespace) -> int:
     if not own and (args.cloud or args.camera_origin or args.units != "m"):
         raise ValueError("fit: --cloud, --units and --camera-origin go with a contacts CSV (a .gpioius file holds "
                          "its own cloud, in metres)")
-    origin = None
-    if args.camera_origin is not None:
+    origins = []
+    for text in args.camera_origin or []:
         try:
-            origin = [float(v) for v in args.camera_origin.replace(",", " ").split()] or None
+            origins.append([float(v) for v in text.replace(",", " ").split()] or None)
         except ValueError:
-            raise ValueError(f"--camera-origin: expected three numbers \"x y z\", got {args.camera_origin!r}") from None
+            raise ValueError(f"--camera-origin: expected three numbers \"x y z\", got {text!r}") from None
+    clouds = args.cloud or []
+    if origins and len(origins) != len(clouds):
+        raise ValueError(f"--camera-origin: {len(origins)} given for {len(clouds)} --cloud file(s); give one per "
+                         "cloud, in the same order")
     if args.out:                             # arguments checked first: a refused call leaves no folder behind
         from .io.outputs import claim_folder
 
@@ -97,9 +101,11 @@ def _fit(args: argparse.Namespace) -> int:
     if own:
         from .io.importers import dataset_from_files
 
-        ds = dataset_from_files(args.dataset, args.cloud, units=args.units, voxel=args.voxel or None,
+        cloud = None if not clouds else (clouds[0] if len(clouds) == 1 else clouds)
+        origin = None if not origins else (origins[0] if len(origins) == 1 else origins)
+        ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel or None,
                                 camera_origin=origin)
-        ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, args.cloud) if p)
+        ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         source = ds
     info = fit_dataset(source, args.out, theta=args.theta, noise=args.noise)
     print(f"{args.dataset}: {info['n']} observations ({info['n_inner']} inner, {info['n_outer']} outer), "
@@ -423,14 +429,15 @@ def build_parser() -> argparse.ArgumentParser:
                                      "fit.png and fit.json.")
     fit.add_argument("dataset", help="dataset or exploration log file (.gpioius), or your contacts as a CSV "
                                      "(x,y[,z],label[,step]; docs/tutorials/own-data.md)")
-    fit.add_argument("--cloud", default=None, help="with a contacts CSV: the camera's point cloud (PLY, PCD, XYZ, "
-                                                   "NPZ) in the same frame")
+    fit.add_argument("--cloud", action="append", default=None,
+                     help="with a contacts CSV: the camera's point cloud (PLY, PCD, XYZ, NPZ) in the same frame; repeat "
+                          "it for several captures (each with its own --camera-origin, in the same order)")
     fit.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the CSV and the cloud")
     fit.add_argument("--voxel", type=_voxel, default=0.05, help="voxel edge of the cloud [m] (0: every point)")
-    fit.add_argument("--camera-origin", default=None, metavar='"X Y Z"',
+    fit.add_argument("--camera-origin", action="append", default=None, metavar='"X Y Z"',
                      help="the camera's optical centre in the files' frame and units: adds the free space in front "
                           "of the seen surface (without it the model knows where the cover is, not which side is "
-                          "empty)")
+                          "empty); one per --cloud")
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
     fit.add_argument("--theta", type=float, default=None, help="IMQ theta [m] (default: the file's, else 0.1)")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 (default: the file's, else 0.006)")

@@ -278,45 +278,61 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
     return xs, np.asarray(ys), np.asarray(steps, dtype=np.int64)
 
 
-def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud: str | os.PathLike | None = None, *,
+def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *,
                        units: str = "m", voxel: float | None = 0.05, theta: float | None = None,
                        noise: float | None = None, source: str = "import", camera_origin=None) -> Dataset:
-    """Combine a contact CSV (inner, task 0) and a point cloud (outer, task 1, step 0) into a Dataset.
+    """Combine a contact CSV (inner, task 0) and one or more point clouds (outer, task 1, step 0) into a Dataset.
 
     Args:
         contacts_csv: the contacts (:func:`load_contacts_csv`).
-        point_cloud: the camera's cloud, in the contacts' frame (:func:`load_point_cloud`), or None.
+        point_cloud: the camera's cloud, in the contacts' frame (:func:`load_point_cloud`), a list of clouds (several
+            captures, e.g. from two sides), or None.
         units: both files' units ("m", "cm", "mm").
         voxel: voxel edge of the cloud [m] (None: every point).
         theta: the IMQ kernel's theta [m] recorded in the dataset (the model's default otherwise).
         noise: sigma^2 recorded in the dataset (the model's default otherwise).
         source: the dataset's ``source``.
         camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None. With it the
-            dataset also holds the camera's free space (y = 1, task 1): points 2 cm in front of the seen surface
+            dataset also holds the camera's free space (y = 1, task 1): points 5 cm in front of the seen surface
             along each ray, half the information vision gives (the model otherwise only knows where the surface
-            is, not which side is empty).
+            is, not which side is empty). With several clouds, a list of origins, one per cloud (None for a cloud
+            whose camera is unknown): each capture's free space lies along its own rays.
 
     Raises:
-        DatasetError: an unreadable file, units that cannot be metres, a 3-D cloud with 2-D contacts, or a bad
-            ``camera_origin`` (each names the file or argument).
+        DatasetError: an unreadable file, units that cannot be metres, a 3-D cloud with 2-D contacts, a bad
+            ``camera_origin``, or as many origins as clouds missing (each names the file or argument).
     """
     x_in, y_in, step_in = load_contacts_csv(contacts_csv, units=units)
     parts = [(x_in, y_in, np.zeros(len(x_in), np.int64), step_in)]
     if camera_origin is not None and point_cloud is None:
         raise DatasetError("camera_origin: gives the free space in front of a point cloud; pass point_cloud too")
-    if point_cloud is not None:
-        if camera_origin is None:
-            pts, y_out = load_point_cloud(point_cloud, units=units, voxel=voxel), None
+    clouds = [] if point_cloud is None else (list(point_cloud) if isinstance(point_cloud, (list, tuple))
+                                             else [point_cloud])
+    several = isinstance(point_cloud, (list, tuple))
+    if several:
+        origins = [None] * len(clouds) if camera_origin is None else list(camera_origin)
+        if len(origins) != len(clouds):
+            raise DatasetError(f"camera_origin: {len(origins)} origin(s) for {len(clouds)} point clouds; give one per "
+                               "cloud (None where a camera is unknown)")
+    else:
+        origins = [camera_origin] * len(clouds)
+    for cloud, origin in zip(clouds, origins):
+        if origin is None:
+            pts, y_out = load_point_cloud(cloud, units=units, voxel=voxel), None
         else:
-            pts, y_out = _seen_and_free(point_cloud, units, voxel, camera_origin)
+            pts, y_out = _seen_and_free(cloud, units, voxel, origin)
         if pts.shape[1] != x_in.shape[1]:
-            raise DatasetError(f"{point_cloud}: a 3-D point cloud needs a 3-D contact CSV (x, y, z)")
+            raise DatasetError(f"{cloud}: a 3-D point cloud needs a 3-D contact CSV (x, y, z)")
         y_out = np.zeros(len(pts)) if y_out is None else y_out
         parts.append((pts, y_out, np.ones(len(pts), np.int64), np.zeros(len(pts), np.int64)))
     x, y, task, step = (np.concatenate(a) for a in zip(*parts))
-    meta = {"source": source, "voxel_size": voxel if point_cloud is not None else None}
+    meta = {"source": source, "voxel_size": voxel if clouds else None}
+
+    def metres(o):
+        return None if o is None else [float(v) * _SCALE[units] for v in np.asarray(o, dtype=float).ravel()]
+
     if camera_origin is not None:
-        meta["camera_origin"] = [float(v) * _SCALE[units] for v in np.asarray(camera_origin, dtype=float).ravel()]
+        meta["camera_origin"] = [metres(o) for o in origins] if several else metres(camera_origin)
     if theta is not None:
         meta["theta"] = theta
     if noise is not None:
