@@ -285,8 +285,16 @@ def test_removing_inner_points_keeps_the_eigendecomposition():
     inner = torch.nonzero(t == 0).flatten()
     drop = torch.zeros(len(y), dtype=torch.bool)
     drop[inner[[2, 7, 30]]] = True
+    series = engine.series
+    assert series is not None and series.size == 60
     m.remove_observations(drop)
     assert m._inference() is engine and engine.u is u and engine.n_inner == 57
+    # the Chebyshev store drops the rows in place (no rebuild), and its T(c) is still P D P^T of the kept rows
+    assert engine.series is series and series.size == 57
+    c = float(m.task_covariance[1, 1])
+    t_store = series.t_matrices(c, derivatives=False)[0]
+    t_exact = (engine.p / (c * engine.lam + engine.noise)) @ engine.p.T
+    assert float((t_store - t_exact).abs().max()) <= 1e-9 * float(t_exact.abs().max())
     fresh = tg.GPIOIS(x[~drop], y[~drop], t[~drop], theta=0.15, noise=0.08, inference="dense",
                       task_covariance=m.task_covariance)
     xq = x[:15] + 0.01

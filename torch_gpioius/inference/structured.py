@@ -276,6 +276,22 @@ class _ChebyshevStore:
         self.w = self.w + (p_new * p_new).sum(0)
         self.size = n_new
 
+    def remove(self, keep: Tensor) -> None:
+        """Keep only the stored rows where ``keep`` `(size,)` is True, in order: the packed entries of the kept pairs
+        are gathered (O((J + 1) N_i^2) copies, no arithmetic), so a removal costs no rebuild. The truncation's
+        bound keeps the removed rows' ``|p_k|^2`` in ``w``: a larger ``w`` only overstates the remainder, so the
+        bound stays a bound."""
+        idx = torch.nonzero(keep.to(self.block.device)).flatten()
+        m = int(idx.numel())
+        if m:
+            r, c = _tril(m, idx.device)
+            a, b = idx[r], idx[c]                       # idx is increasing: a >= b, the old pair's packed order
+            self.block[:, :m * (m + 1) // 2] = self.block[:, a * (a + 1) // 2 + b].clone()
+        self._pp = GrowingRows(self.pp[idx])
+        self.pp = self._pp.data
+        self.size = m
+        self._unpack = None
+
     def t_matrices(self, c: float, derivatives: bool = True) -> tuple:
         """``T(c)`` and, with ``derivatives``, ``T'(c)``, ``T''(c)`` as `(N_i, N_i)` matrices (else None): one pass
         over the stored block."""
@@ -472,7 +488,11 @@ class StructuredExactInference:
             raw = self._raw
             raw["kio"] = GrowingRows(raw["kio"].data[keep])
             raw["c0"], raw["e"] = raw["c0"][keep][:, keep], raw["e"][keep]
-        self._series = None                # rebuilt for the remaining rows at the next factorisation
+        series = self._series
+        if series is not None and series.size <= len(keep):
+            series.remove(keep[:series.size])    # the stored rows; rows deferred by a subclass follow later
+        else:
+            self._series = None                # rebuilt for the remaining rows at the next factorisation
         self._rotated = None
         self._invalidate()
         return True
