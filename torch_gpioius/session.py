@@ -72,7 +72,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         device: where the model's data and exact arithmetic live ("cuda" for a GPU, float64 either way; default:
             the CPU). The world, the robot and every record stay on the CPU; a run may resume on another device.
         restart_every: every this many steps K_t's re-learning also starts from fixed values and keeps the best
-            optimum, so that a warm start cannot hold it in a worse local optimum (default 10; None: warm starts
+            optimum, so that a warm start cannot hold it in a worse local optimum (default 25; None: warm starts
             only, as before this setting existed).
         recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the
             metrics and the interval, before the log).
