@@ -110,6 +110,19 @@ def test_a_seeded_scene_reseeds_every_view_and_keeps_the_views():
     np.testing.assert_array_equal(c1.points, c1b.points)
     # another seed moves the approach and redraws the noise (the capture differs)
     assert c1.points.shape != c2.points.shape or not np.allclose(c1.points, c2.points)
+    # the tripods stay where they stood for the unperturbed approach, the wrist follows the perturbed one, whether or
+    # not the camera was built before the scene was perturbed
+    fixed = [v.origin for v in _views_scene(3).camera.sources]
+    cached = _views_scene(3)
+    cached.camera                                                   # built (and cached) before the perturbation
+    for base in (_views_scene(3), cached):
+        moved = base.perturbed(2)
+        np.testing.assert_allclose([v.origin for v in moved.camera.sources[:2]], fixed[:2], atol=0)
+        np.testing.assert_allclose(moved.camera.sources[2].origin, moved.first_contact() - 0.35 * moved.direction,
+                                   atol=1e-12)
+        assert np.linalg.norm(moved.direction - base.direction) > 1e-3
+    plain = sphere_scene()
+    np.testing.assert_allclose(plain.perturbed(2).camera.origin, plain.camera.origin, atol=0)
     # a user's camera of another kind is reseeded too (it was kept with the same noise on every seed)
     from torch_gpioius.sensors import MultiViewSource
 

@@ -488,11 +488,8 @@ class StructuredExactInference:
             raw = self._raw
             raw["kio"] = GrowingRows(raw["kio"].data[keep])
             raw["c0"], raw["e"] = raw["c0"][keep][:, keep], raw["e"][keep]
-        series = self._series
-        if series is not None and series.size <= len(keep):
-            series.remove(keep[:series.size])    # the stored rows; rows deferred by a subclass follow later
-        else:
-            self._series = None                # rebuilt for the remaining rows at the next factorisation
+        if self._series is not None:           # the stored rows; rows deferred by a subclass follow later
+            self._series.remove(keep[:self._series.size])
         self._rotated = None
         self._invalidate()
         return True

@@ -306,9 +306,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *,
     parts = [(x_in, y_in, np.zeros(len(x_in), np.int64), step_in)]
     if camera_origin is not None and point_cloud is None:
         raise DatasetError("camera_origin: gives the free space in front of a point cloud; pass point_cloud too")
-    clouds = [] if point_cloud is None else (list(point_cloud) if isinstance(point_cloud, (list, tuple))
-                                             else [point_cloud])
     several = isinstance(point_cloud, (list, tuple))
+    clouds = list(point_cloud) if several else ([] if point_cloud is None else [point_cloud])
     if several:
         origins = [None] * len(clouds) if camera_origin is None else list(camera_origin)
         if len(origins) != len(clouds):

@@ -285,6 +285,10 @@ class Scene3D(World):
             raise ValueError(f"sensor_noise: must be in [0, 1] N, got {sensor_noise!r}")
         self.sensor_noise, self.seed = float(sensor_noise), int(seed)
         self._camera = camera
+        self._given_camera = camera         # a user's source (perturbed reseeds it); _camera also caches the default
+        # the fixed and mirrored views stand on tripods placed for this approach; a seeded perturbation of the approach
+        # does not move them (perturbed carries it over), only the wrist view follows the arm
+        self._tripod_direction = self.direction
         self._defaults = defaults or ROBOT_STUDY_DEFAULTS
         self.first_contact()  # raises if the approach misses
 
@@ -469,14 +473,16 @@ class Scene3D(World):
             return self
         for start, direction in perturbed_approaches(self.start, self.direction, np.random.default_rng([seed, 3])):
             # a given camera keeps its poses and draws its noise from the seed (PointCloudSource.reseeded); the
-            # default views are rebuilt for the perturbed approach (the wrist view follows it)
-            camera = None if self._camera is None else self._camera.reseeded(seed)
+            # default views are rebuilt with the seed's noise: the tripods where they stood, the wrist on the new approach
+            camera = None if self._given_camera is None else self._given_camera.reseeded(seed)
             try:
-                return Scene3D(self.inner, self.outer, start, direction, self.range, name=self.name,
-                               camera=camera, cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise,
-                               seed=seed, defaults=self._defaults, support=self.support, views=self.views)
+                scene = Scene3D(self.inner, self.outer, start, direction, self.range, name=self.name,
+                                camera=camera, cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise,
+                                seed=seed, defaults=self._defaults, support=self.support, views=self.views)
             except ValueError:
                 continue
+            scene._tripod_direction = self._tripod_direction
+            return scene
         raise ValueError(f"seed {seed}: no perturbed approach hits the object")
 
     # ------------------------------------------------------------------ geometry
@@ -539,10 +545,11 @@ class Scene3D(World):
 
     def default_camera(self, scale: float = 0.5, seed=None, side: float = 1.0) -> SimulatedDepthCamera:
         """A Kinect v2 (half resolution; depth noise 1.5 mm + 1.5 mm/m^2 * z^2) looking at the centre of the
-        exploration range from 1.1 m, from behind the approach (so that it sees what the robot will touch),
+        exploration range from 1.1 m, from behind the approach (the unperturbed one of a seeded scene: a tripod does not
+        move with the arm; so that it sees what the robot will touch),
         30 cm to the side (``side`` -1: the other side) and 30 cm up; noise from ``seed`` (default: the scene's)."""
         target = self.range.mean(axis=0)
-        back = -self.direction
+        back = -self._tripod_direction                # the unperturbed approach's (see __init__)
         lateral = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
         eye = target + back + 0.3 * side * lateral / np.linalg.norm(lateral) + np.array([0.0, 0.0, 0.3])
         eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
