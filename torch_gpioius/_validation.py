@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["as_points", "as_labels", "as_tasks", "as_float", "as_bounds", "task_id", "TASK_NAMES", "check_metres",
+__all__ = ["as_points", "as_labels", "label_problem", "LABELS", "as_tasks", "as_float", "as_bounds", "task_id", "TASK_NAMES", "check_metres",
            "as_length", "MAX_SCENE_EXTENT", "MAX_COORDINATE", "MAX_LENGTH"]
 
 #: Largest extent of a scene's data [m]: a robot's tabletop workspace is ~2 m and an uncropped depth camera sees
@@ -18,6 +18,22 @@ MAX_SCENE_EXTENT = 10.0
 MAX_COORDINATE = 50.0
 #: Largest length a setting may take [m] (a travel budget, a step, a distance): larger is a units mistake.
 MAX_LENGTH = 20.0
+
+#: What a label says: 0 on a surface (touched or seen), 1 in free space (the paper's two), and a negative value at a
+#: point known to lie inside a body, ``-depth / ramp`` (the free-space ramp continued inside: a point 2 cm behind a
+#: contact with the free-space point 5 cm out is -0.4; beyond the paper, see docs/method-notes.md).
+LABELS = "0 (surface), 1 (free space) or negative (inside)"
+
+
+def label_problem(y) -> str | None:
+    """Why the labels ``y`` (an array or tensor) are not labels, naming up to five bad values (NaN and inf
+    included), or None when each is 0, 1 or a finite negative number."""
+    a = np.asarray(y.detach().cpu() if torch.is_tensor(y) else y, dtype=np.float64).reshape(-1)
+    bad = ((a != 0) & (a != 1) & ~(a < 0)) | ~np.isfinite(a)
+    if bad.any():
+        return f"labels must be {LABELS}, got {sorted(set(a[bad].tolist()))[:5]}"
+    return None
+
 
 #: Task names accepted beside the ids: 0 is the inner (tactile) shape, 1 the outer (visual) one.
 TASK_NAMES = {"inner": 0, "outer": 1}
@@ -139,20 +155,19 @@ def as_points(x, name: str = "x", dim: int | None = None, dtype: torch.dtype = t
 
 def as_labels(y, n: int, name: str = "y", dtype: torch.dtype = torch.float64,
               device: torch.device | None = None) -> Tensor:
-    """Return surface labels as an ``(n,)`` float tensor with values in {0, 1}."""
+    """Return labels as an ``(n,)`` float tensor: 0 on a surface, 1 in free space, negative inside (:data:`LABELS`)."""
     t = _tensor(y, name)
     if t.dim() != 1:
         raise ValueError(f"{name}: expected a 1-D tensor of labels, got shape {tuple(t.shape)}")
     if t.shape[0] != n:
         raise ValueError(f"{name}: length {t.shape[0]} does not match the {n} points")
     if t.is_complex():
-        raise ValueError(f"{name}: expected real labels 0 or 1, got dtype {t.dtype}")
+        raise ValueError(f"{name}: expected real labels {LABELS}, got dtype {t.dtype}")
     t = t.to(dtype=dtype, device=device)
     if not torch.isfinite(t).all():
         raise ValueError(f"{name}: contains NaN or inf labels")
-    if not ((t == 0) | (t == 1)).all():
-        bad = sorted(set(t[(t != 0) & (t != 1)].tolist()))[:5]
-        raise ValueError(f"{name}: labels must be 0 (surface) or 1 (free space), got {bad}")
+    if (problem := label_problem(t)) is not None:
+        raise ValueError(f"{name}: {problem}")
     return t
 
 

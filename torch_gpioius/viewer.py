@@ -41,6 +41,7 @@ __all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "c
 _GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (150, 150, 150), (150, 200, 255), (20, 20, 20), (0, 190, 210), (255, 140, 0)
 _PAD, _PAD_OLD = (200, 30, 120), (230, 170, 200)      # the gel pad's outline: this step's, earlier ones
 _GREEN = (30, 160, 60)
+_PURPLE = (120, 60, 170)                               # points known to lie inside a body (labels below zero)
 
 
 def run_files(source: str | os.PathLike) -> list[Path]:
@@ -75,7 +76,8 @@ def _lift(x: np.ndarray) -> np.ndarray:
 
 #: What each colour in the scene is (the GUI shows it as a key).
 COLOUR_KEY = (("camera: seen outer surface", _GREY), ("camera: free space in front of it", _LIGHT_BLUE),
-              ("touch: contacts", _BLACK), ("touch: free space", _CYAN), ("fingertip path", _ORANGE),
+              ("touch: contacts", _BLACK), ("touch: free space", _CYAN),
+              ("inside points behind contacts or the seen surface (label < 0)", _PURPLE), ("fingertip path", _ORANGE),
               ("gel pad at this step (earlier ones paler; patch runs)", _PAD), ("true inner shape", _GREEN))
 
 _LOOPBACK = ("localhost", "127.0.0.1", "::1")
@@ -472,7 +474,9 @@ class RunViewer:
             groups = {"/cloud/seen": ((ds.task == 1) & (ds.y == 0), _GREY, "point cloud"),
                       "/cloud/free": ((ds.task == 1) & (ds.y == 1), _LIGHT_BLUE, "point cloud"),
                       "/touch/contacts": ((ds.task == 0) & (ds.y == 0), _BLACK, "touches"),
-                      "/touch/free": ((ds.task == 0) & (ds.y == 1), _CYAN, "touches")}
+                      "/touch/free": ((ds.task == 0) & (ds.y == 1), _CYAN, "touches"),
+                      "/cloud/inside": ((ds.task == 1) & (ds.y < 0), _PURPLE, "point cloud"),
+                      "/touch/inside": ((ds.task == 0) & (ds.y < 0), _PURPLE, "touches")}
             for name, (mask, colour, layer) in groups.items():
                 pts = _lift(ds.x[mask]) if mask.any() else np.zeros((1, 3))
                 self._handles[name] = scene.add_point_cloud(name, pts, colour, point_size=size * (1.6 if "contacts" in name else 1.0),
@@ -531,7 +535,8 @@ class RunViewer:
                 f"**{run.name}** ({run.meta.get('world', 'data')} {run.meta.get('scene', '')}, "
                 f"{run.meta.get('mode', 'dataset')})  \n"
                 f"step **{k}** of {run.steps[-1]}: {inner}, "
-                f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points  \n"
+                f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points"
+                + (f", {int((ds.y < 0).sum())} inside" if (ds.y < 0).any() else "") + "  \n"
                 f"{measures}, Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}"
                 + self._on_body(run, k) + self._no_estimate(surface)
                 + ("" if self._truth() is not None else "  \ntrue shape: not known for this run"))

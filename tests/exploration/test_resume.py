@@ -9,6 +9,7 @@ import warnings
 
 import numpy as np
 import pytest
+import torch
 
 import torch_gpioius as tg
 from torch_gpioius.io.datasets import TornLogWarning, read_records
@@ -84,14 +85,19 @@ def _cut_after_step(log, k):
         f.truncate(end)
 
 
-def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path):
+@pytest.mark.parametrize("inside", [False, True], ids=["paper-labels", "inside-points"])
+def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path, inside):
     """The force-field world: the robot's joints and clock and the sensor's noise generator travel in the log, so a
-    run cut after step 4 and resumed ends where the uninterrupted run ends."""
+    run cut after step 4 and resumed ends where the uninterrupted run ends; so do inside points (labels below 0)."""
+    import dataclasses
+
     from torch_gpioius.sim import sphere_scene
 
     scene = sphere_scene(subdivisions=3)
     scene.sensor_noise = 0.02             # a noisy sensor: resuming must restore its generator too
     kw = dict(mode="visual-tactile", max_travel=0.1, metrics_every=100, progress=False)
+    if inside:
+        kw["policy"] = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.01)
     log = tmp_path / "run.gpioius"
     reference = tg.explore(scene, log=log, **kw)
     assert reference.n_steps > 6
@@ -101,3 +107,5 @@ def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path):
     assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
     assert np.abs(resumed.path - reference.path).max() < 1e-9
     assert np.abs(resumed.task_covariance - reference.task_covariance).max() < 1e-9
+    y = reference.model.train_targets
+    assert bool((y < 0).any()) == inside and torch.equal(resumed.model.train_targets, y)

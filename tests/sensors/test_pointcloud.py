@@ -121,6 +121,32 @@ def test_free_space_lies_on_the_rays_in_front_of_the_surface():
         PointCloud(cloud.points).free_space(0.05)
 
 
+def test_normals_of_a_seen_sphere_are_radial_and_face_the_camera():
+    cloud = sphere_camera().capture()
+    nrm = cloud.normals()
+    known = np.isfinite(nrm).all(axis=1)
+    radial = (cloud.points - C) / R
+    # a plane fitted to 12 neighbours on a 10 cm sphere sampled about every 2 mm: within a few degrees of the radius,
+    # and every known one facing the camera (out of the sphere); the grazing rim is left unknown
+    cos = np.einsum("ni,ni->n", nrm[known], radial[known])
+    assert cos.min() > 0.99
+    assert 0.9 < known.mean() < 1.0
+    to_camera = EYE - cloud.points[~known]
+    rim_cos = np.abs(np.einsum("ni,ni->n", radial[~known], to_camera)) / np.linalg.norm(to_camera, axis=1)
+    assert rim_cos.max() < 0.35                                  # only the rim (75 deg off, to the plane fit's error)
+
+
+def test_points_behind_the_seen_surface_lie_inside_at_the_depth():
+    cloud = sphere_camera().capture()
+    inside = cloud.behind(0.02)
+    assert len(inside) == np.isfinite(cloud.normals()).all(axis=1).sum()
+    np.testing.assert_allclose(np.linalg.norm(inside - C, axis=1), R - 0.02, atol=5e-4)
+    with pytest.raises(ValueError, match="origin"):
+        PointCloud(cloud.points).behind(0.02)
+    with pytest.raises(ValueError, match="depth"):
+        cloud.behind(-0.01)
+
+
 def test_file_source_loads_and_transforms(tmp_path):
     pts = np.array([[0.0, 0.0, 1.0], [0.1, 0.0, 1.0]])
     np.savez(tmp_path / "cloud.npz", points=pts * 1000)

@@ -194,6 +194,15 @@ class ExploreConfig:
                            inference=getattr(self.touch, "inference", "auto"), outer_tol=self.outer_tol)
         return model.to_device(self.device)
 
+    def _policy_record(self) -> dict:
+        """The observation policy for the header; the inside-point settings only when set, so that logs written
+        before they existed still resume."""
+        out = dataclasses.asdict(self.policy)
+        for key in ("touch_inside", "vision_inside"):
+            if out[key] is None:
+                del out[key]
+        return out
+
     def describe(self) -> dict:
         """JSON-able settings for a log's header (resume compares them)."""
         kernel = ({"kernel": InverseMultiquadricKernel.kind, "theta": self.theta} if self.kernel is None
@@ -203,7 +212,7 @@ class ExploreConfig:
                "step_length": self.step, "theta": self.theta, "kernel": kernel, "noise": float(self.noise), "max_steps": self.max_steps,
                "stop": [r.describe() for r in self.stop], "metrics_every": self.metrics_every,
                "metrics_resolution": self.metrics_resolution, "interval_every": self.interval_every,
-               "regions": self.regions, "policy": dataclasses.asdict(self.policy),
+               "regions": self.regions, "policy": self._policy_record(),
                "penalty": type(self.penalty).__name__,
                "stall": None if self.stall is None else self.stall.describe()}
         if self.outer_tol is not None:            # only when set: logs written before it existed still resume

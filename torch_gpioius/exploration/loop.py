@@ -25,7 +25,8 @@ from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
 from .config import ExploreConfig, Run
-from .observations import Observations, retract_free_space, thin_points, vision_observations
+from .observations import (Observations, drop_contradicted_inside, retract_free_space, thin_points,
+                           vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .state import ExplorationState, StepRecord
 from .trace import Trace
@@ -140,6 +141,8 @@ def begin(ctx: Run) -> ExplorationState:
                            f"{np.round(world.direction, 4).tolist()} found no contact")
     contact = first.contact.numpy()
     inner = cfg.touch.observations(first, contact[None], cfg.policy, 0)
+    if outer is not None:
+        inner = drop_contradicted_inside(inner, cfg.policy, outer.x, outer.y)
     state = ExplorationState(model=cfg.make_model(inner, outer), contacts=[contact], path=list(first.path.numpy()),
                              normal=first.force_normal)
     t0 = time.perf_counter()
@@ -222,6 +225,8 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     select = getattr(cfg.touch, "select", None)
     if callable(select):
         obs = select(state.model, obs)
+    obs = drop_contradicted_inside(obs, cfg.policy, state.model.train_inputs[0].cpu().numpy(),
+                                   state.model.train_targets.cpu().numpy())
     _add(state.model, obs)
     return removed, obs
 

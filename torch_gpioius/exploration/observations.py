@@ -18,11 +18,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from .._validation import label_problem
 from ..models.gpiois import INNER, OUTER
 from ..voxels import voxel_average
 
 __all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices", "free_space_along",
-           "retract_free_space", "vision_observations", "INNER", "OUTER"]
+           "retract_free_space", "vision_observations", "drop_contradicted_inside", "INSIDE_CLEARANCE", "INNER", "OUTER"]
 
 @dataclass
 class Observations:
@@ -35,7 +36,7 @@ class Observations:
 
     Attributes:
         x: `(n, d)` positions [m] in the world's frame (the robot base frame on a robot).
-        y: `(n,)` labels: 0 on a surface, 1 in free space.
+        y: `(n,)` labels: 0 on a surface, 1 in free space, negative inside a body (``inside_label``).
         task: `(n,)` 0 inner (touch), 1 outer (vision).
         normal: `(n, d)` outward unit normals where a sensor measured one (NaN rows where it did not), or None.
         step: the exploration step the batch arrived at (0: before exploring).
@@ -66,8 +67,8 @@ class Observations:
             raise ValueError(f"Observations: y and task must have shape ({n},), got {y.shape} and {task.shape}")
         if not np.isfinite(x).all():
             raise ValueError("Observations.x: contains NaN or inf")
-        if not np.isin(y, (0.0, 1.0)).all():
-            raise ValueError("Observations.y: labels must be 0 (surface) or 1 (free space)")
+        if (problem := label_problem(y)) is not None:
+            raise ValueError(f"Observations.y: {problem}")
         if not np.isin(task, (0, 1)).all():
             raise ValueError("Observations.task: ids must be 0 (inner) or 1 (outer)")
         self.x, self.y, self.task = x, y, task.astype(np.int64)
@@ -127,6 +128,10 @@ class ObservationPolicy:
         vision_free_far: a second free-space point this far in front of each seen point [m] (beyond the paper, which
             has one): the camera's rays were free all the way, and a second point holds the field up in front of
             the object where one point 5 cm out leaves it free to swing below zero (a phantom surface); None: one.
+        touch_inside: a point this far behind each contact along the measured contact normal (the force's direction)
+            [m], labelled inside (:meth:`inside_label`; beyond the paper, docs/method-notes.md section 13); None: none.
+        vision_inside: a point this far behind each seen point along its camera ray [m], labelled inside; it assumes
+            the object is thicker than this along the ray; None: none.
     """
 
     vision_free_offset: float | None = 0.05
@@ -135,9 +140,11 @@ class ObservationPolicy:
     free_space_spacing: float = 0.02
     free_space_margin: float = 0.02
     vision_free_far: float | None = None
+    touch_inside: float | None = None
+    vision_inside: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("vision_free_offset", "voxel", "crop_margin", "vision_free_far"):
+        for name in ("vision_free_offset", "voxel", "crop_margin", "vision_free_far", "touch_inside", "vision_inside"):
             v = getattr(self, name)
             if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not
                                   (math.isfinite(v) and v > 0)):
@@ -151,6 +158,15 @@ class ObservationPolicy:
             raise ValueError(f"ObservationPolicy.vision_free_far: must lie beyond vision_free_offset "
                              f"({self.vision_free_offset!r} m), got {self.vision_free_far!r}")
 
+
+    def inside_label(self, depth: float) -> float:
+        """The label of a point ``depth`` [m] inside a body: ``-depth / ramp``, the free-space ramp (0 on the
+        surface, 1 at ``vision_free_offset`` in front, the paper's 5 cm when that is None) continued inside."""
+        return -float(depth) / (self.vision_free_offset or 0.05)
+
+    def inside_depth(self, label) -> np.ndarray:
+        """The depth [m] an inside label stands for (the inverse of :meth:`inside_label`), elementwise."""
+        return -np.asarray(label, dtype=np.float64) * (self.vision_free_offset or 0.05)
 
     def with_voxel(self, voxel: float) -> "ObservationPolicy":
         """This policy with the camera's points averaged in voxels of edge ``voxel`` [m]; 0 keeps every point.
@@ -219,6 +235,44 @@ def free_space_along(a: np.ndarray, b: np.ndarray, spacing: float, include_end: 
     return a + np.outer(s / length, b - a)
 
 
+#: An inside point is dropped when a surface observation lies closer than this fraction of its depth: its own contact
+#: or seen point lies at the full depth, neighbours on a flat or convex surface further; closer ones mean a part
+#: thinner than the depth (a mug's wall, a bunny's ear) or an inside corner.
+INSIDE_CLEARANCE = 0.9
+
+
+def drop_contradicted_inside(obs: Observations, policy: ObservationPolicy, x_known: np.ndarray | None = None,
+                             y_known: np.ndarray | None = None) -> Observations:
+    """``obs`` without the inside points (y < 0) that other observations contradict: a free-space observation
+    (y = 1) closer than the point's depth (:meth:`ObservationPolicy.inside_depth`), or a surface observation
+    (y = 0) closer than :data:`INSIDE_CLEARANCE` of it (the far side of a thin part), among ``obs`` itself and the
+    known observations ``x_known`` `(m, d)`, ``y_known`` `(m,)` of either task.
+
+    An inside point says the body is thicker than its depth there; a robot cannot measure that, so each is checked
+    against what was seen and felt around it."""
+    from scipy.spatial import cKDTree
+
+    inside = obs.y < 0
+    if not inside.any():
+        return obs
+    xs, ys = [obs.x[~inside]], [obs.y[~inside]]
+    if x_known is not None and len(x_known):
+        xs.append(np.asarray(x_known, dtype=np.float64))
+        ys.append(np.asarray(y_known, dtype=np.float64))
+    x, y = np.concatenate(xs), np.concatenate(ys)
+    pts, depth = obs.x[inside], policy.inside_depth(obs.y[inside])
+    ok = np.ones(len(pts), dtype=bool)
+    for sel, limit in ((y == 0, INSIDE_CLEARANCE * depth), (y == 1, depth)):
+        if sel.any():
+            ok &= cKDTree(x[sel]).query(pts)[0] >= limit * (1.0 - 1e-9)
+    keep = ~inside
+    keep[np.flatnonzero(inside)[ok]] = True
+    if keep.all():
+        return obs
+    return Observations(obs.x[keep], obs.y[keep], obs.task[keep], None if obs.normal is None else obs.normal[keep],
+                        obs.step, obs.source)
+
+
 def retract_free_space(model, contact: np.ndarray, margin: float) -> np.ndarray:
     """Remove the inner free-space observations closer than ``margin`` [m] to a new ``contact``.
 
@@ -240,7 +294,8 @@ def retract_free_space(model, contact: np.ndarray, margin: float) -> np.ndarray:
 
 def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | None = None) -> tuple[np.ndarray,
                                                                                                     np.ndarray]:
-    """Outer-task observations from one capture: the seen surface (y = 0) and free space in front of it (y = 1).
+    """Outer-task observations from one capture: the seen surface (y = 0), free space in front of it (y = 1) and,
+    with ``policy.vision_inside``, points behind it along the rays (y < 0, :meth:`ObservationPolicy.inside_label`).
 
     Args:
         cloud: a :class:`torch_gpioius.sensors.PointCloud` (its ``free_space(offset)`` knows the geometry of the
@@ -269,4 +324,11 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
         if len(free):
             xs.append(free)
             ys.append(np.ones(len(free)))
+    if policy.vision_inside is not None and cloud.sees_free_space:
+        inside = cloud.behind(policy.vision_inside, policy.voxel)
+        xs.append(inside)
+        ys.append(np.full(len(inside), policy.inside_label(policy.vision_inside)))
+        obs = drop_contradicted_inside(Observations(np.concatenate(xs), np.concatenate(ys), np.ones(
+            sum(map(len, ys)), np.int64)), policy)
+        return obs.x, obs.y
     return np.concatenate(xs), np.concatenate(ys)

@@ -12,14 +12,15 @@ import torch
 from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchSettings, patch_observations
 
-__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "touch_model"]
+__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "touch_model", "inside_point"]
 
 
 @dataclass(frozen=True)
 class PointTouch:
     """A fingertip with a force sensor (Sec. VI): the settled contact point (y = 0) and the free space it crossed
     with ``|F|`` below the contact threshold (y = 1), thinned to ``policy.free_space_spacing`` and kept
-    ``policy.free_space_margin`` from every contact (docs/method-notes.md)."""
+    ``policy.free_space_margin`` from every contact (docs/method-notes.md); with ``policy.touch_inside``, also a
+    point that far behind the contact along the measured force's direction (y < 0, inside the body)."""
 
     name: str = "point"
 
@@ -28,8 +29,11 @@ class PointTouch:
         contact = np.asarray(contacts[-1], dtype=np.float64)
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, np.asarray(contacts),
                            policy.free_space_margin)
-        return Observations(np.concatenate([contact[None], free]), np.r_[0.0, np.ones(len(free))],
-                            np.zeros(1 + len(free), np.int64), step=step, source="touch")
+        inside = inside_point(contact, result, policy)
+        return Observations(np.concatenate([contact[None], inside, free]),
+                            np.r_[0.0, np.full(len(inside), policy.inside_label(policy.touch_inside or 0.0)),
+                                  np.ones(len(free))],
+                            np.zeros(1 + len(inside) + len(free), np.int64), step=step, source="touch")
 
     def describe(self) -> dict:
         return {"touch": self.name}
@@ -173,6 +177,18 @@ class PatchTouch:
 
 #: Touch models by name (``explore(..., touch="point")``).
 TOUCH_MODELS: dict[str, type] = {"point": PointTouch, "patch": PatchTouch}
+
+
+def inside_point(contact: np.ndarray, result, policy: ObservationPolicy) -> np.ndarray:
+    """`(k, d)`, k <= 1: the point ``policy.touch_inside`` [m] behind ``contact`` `(d,)` along the outward normal the
+    force sensor measured there (``result.force_normal``); none without the setting or a measured force."""
+    depth = policy.touch_inside
+    if depth is None or result is None or not len(getattr(result, "forces", ())):
+        return np.zeros((0, len(contact)))
+    normal = np.asarray(result.force_normal, dtype=np.float64).reshape(-1)
+    if normal.shape != contact.shape or not np.isfinite(normal).all() or np.linalg.norm(normal) < 0.5:
+        return np.zeros((0, len(contact)))
+    return (contact - depth * normal / np.linalg.norm(normal))[None]
 
 
 def touch_model(touch) -> object:

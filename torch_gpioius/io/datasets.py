@@ -32,7 +32,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from .._validation import check_metres
+from .._validation import check_metres, label_problem
 
 __all__ = ["FORMAT_VERSION", "FILE_KINDS", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
            "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta", "step_number"]
@@ -245,8 +245,8 @@ def validate_observations(x: Any, y: Any, task: Any, step: Any, *, where: str, d
         raise DatasetError(f"{where}: field 'x' contains NaN or inf")
     check_metres(x, f"{where}: field 'x'", hint="convert the data to metres, or import it with units='mm'",
                  error=DatasetError)
-    if not np.isin(y, (0.0, 1.0)).all():
-        raise DatasetError(f"{where}: field 'y' must be 0 (surface) or 1 (free space)")
+    if (problem := label_problem(y)) is not None:
+        raise DatasetError(f"{where}: field 'y': {problem}")
     if task.dtype.kind not in "iub" and not (task.dtype.kind == "f" and np.isfinite(task).all()
                                              and (task == np.round(task)).all()):
         raise DatasetError(f"{where}: field 'task' must hold integers 0 (inner) or 1 (outer)")

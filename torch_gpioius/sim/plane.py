@@ -181,6 +181,17 @@ class PlanarView(PointCloud):
         n = max(3, int(math.ceil(ring.length / self.spacing)))
         return np.array([ring.interpolate(i * ring.length / n).coords[0] for i in range(n)])
 
+    def behind(self, depth: float, voxel: float | None = None) -> np.ndarray:
+        """`(k, 2)` points on the curve ``depth`` [m] inside the outer polygon, every ``spacing`` (none where the
+        polygon is thinner than twice ``depth``); ``voxel`` must be None (a 2-D view is not voxel-averaged)."""
+        if voxel:
+            raise ValueError("a 2-D view is sampled at its spacing; it is not voxel-averaged (policy.voxel = None)")
+        inner = self.polygon.buffer(-float(depth), join_style="round")
+        rings = [g.exterior for g in getattr(inner, "geoms", [inner]) if not g.is_empty]
+        pts = [np.array([r.interpolate(i * r.length / n).coords[0] for i in range(n)])
+               for r in rings for n in [max(3, int(math.ceil(r.length / self.spacing)))]]
+        return np.concatenate(pts) if pts else np.zeros((0, 2))
+
     def voxel_averaged(self, voxel: float) -> "PlanarView":
         raise ValueError("a 2-D view is sampled at its spacing; it is not voxel-averaged (policy.voxel = None)")
 

@@ -1,0 +1,115 @@
+"""The observation model's inside points: labels below zero, where a touch and a camera put them, and their checks."""
+
+import dataclasses
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import shapely.geometry
+import torch
+
+import torch_gpioius as tg
+from torch_gpioius._validation import as_labels
+from torch_gpioius.exploration.observations import ObservationPolicy, Observations, vision_observations
+from torch_gpioius.exploration.touch import PointTouch
+from torch_gpioius.sim.plane import PlanarView
+
+
+def test_labels_below_zero_mean_inside_and_everything_else_is_still_refused():
+    ok = [0.0, 1.0, -0.4, -1.0, -3.0]
+    assert as_labels(torch.tensor(ok, dtype=torch.float64), 5).tolist() == ok
+    Observations(np.zeros((5, 3)), ok, np.zeros(5, int))
+    tg.GPIOIS(torch.rand(5, 3, dtype=torch.float64), torch.tensor(ok, dtype=torch.float64), torch.zeros(5, dtype=torch.long))
+    for bad, shown in ((0.5, "0.5"), (2.0, "2.0"), (float("-inf"), "-inf"), (float("nan"), "nan")):
+        with pytest.raises(ValueError, match=f"labels must be 0 \\(surface\\), 1 \\(free space\\) or negative.*{shown}"):
+            Observations(np.zeros((2, 3)), [0.0, bad], [0, 0])
+        with pytest.raises(ValueError, match="labels"):
+            as_labels(torch.tensor([0.0, bad]), 2)
+
+
+def test_the_inside_label_continues_the_free_space_ramp_inside():
+    assert ObservationPolicy().inside_label(0.02) == pytest.approx(-0.4)                # 1 at 5 cm out, 0 on it
+    assert ObservationPolicy(vision_free_offset=0.04).inside_label(0.02) == pytest.approx(-0.5)
+    assert ObservationPolicy(vision_free_offset=None).inside_label(0.05) == pytest.approx(-1.0)
+    for name in ("touch_inside", "vision_inside"):
+        with pytest.raises(ValueError, match=name):
+            ObservationPolicy(**{name: -0.02})
+        with pytest.raises(ValueError, match=name):
+            ObservationPolicy(**{name: float("nan")})
+
+
+def _touch(contact, force, free):
+    forces = torch.as_tensor(np.atleast_2d(force), dtype=torch.float64)
+    return SimpleNamespace(forces=forces, force_normal=forces[-1] / forces[-1].norm().clamp_min(1e-12),
+                           free_space=torch.as_tensor(free, dtype=torch.float64).reshape(-1, len(contact)))
+
+
+def test_a_point_touch_puts_its_inside_point_behind_the_contact_along_the_measured_force():
+    contact = np.array([0.3, 0.1, 0.2])
+    force = np.array([0.0, 3.0, 4.0])                            # 5 N, outward unit normal (0, 0.6, 0.8)
+    free = contact + np.outer(np.linspace(0.03, 0.09, 4), [0.0, 0.6, 0.8])
+    policy = ObservationPolicy(touch_inside=0.02)
+    obs = PointTouch().observations(_touch(contact, force, free), contact[None], policy, step=3)
+    np.testing.assert_allclose(obs.x[0], contact)
+    np.testing.assert_allclose(obs.x[1], contact - 0.02 * np.array([0.0, 0.6, 0.8]), atol=1e-15)
+    assert obs.y.tolist() == pytest.approx([0.0, -0.4, 1.0, 1.0, 1.0, 1.0], abs=1e-15) and (obs.task == 0).all() and obs.step == 3
+    # the paper's observations: no inside point; nor without a measured force to give the normal
+    assert (PointTouch().observations(_touch(contact, force, free), contact[None], ObservationPolicy(), 3).y >= 0).all()
+    silent = PointTouch().observations(_touch(contact, np.zeros(3), free), contact[None], policy, 3)
+    assert (silent.y >= 0).all() and len(silent) == 5
+
+
+def test_a_camera_puts_its_inside_points_behind_the_seen_outline_in_2d():
+    disc = shapely.geometry.Point(0.0, 0.0).buffer(0.1, 256)
+    view = PlanarView(np.array(disc.exterior.coords)[:-1], origin=None, polygon=disc, spacing=0.01)
+    policy = ObservationPolicy(vision_inside=0.03)
+    x, y = vision_observations(view, policy)
+    inside = x[y < 0]
+    assert len(inside) and np.allclose(y[y < 0], policy.inside_label(0.03))
+    np.testing.assert_allclose(np.linalg.norm(inside, axis=1), 0.07, atol=1e-4)     # the disc shrunk by 3 cm
+    assert len(vision_observations(view, ObservationPolicy())[1]) == (y >= 0).sum()  # the rest unchanged
+    # thinner than twice the depth: no inside point, rather than one outside the body
+    sliver = shapely.geometry.box(0.0, 0.0, 0.2, 0.04)
+    assert len(PlanarView(np.array(sliver.exterior.coords)[:-1], polygon=sliver).behind(0.03)) == 0
+
+
+def test_inside_points_of_an_exploration_lie_inside_the_true_bodies():
+    """A short visual-tactile run on a duck under a tight cover (three views): every touch's inside point lies in the
+    body, and the camera's lie in the cover (the force's direction and the cloud's normals both point out) but for the
+    few behind parts thinner than the depth (the assumption :meth:`PointCloud.behind` states)."""
+    from torch_gpioius.sim.meshes import MeshDistance
+    from torch_gpioius.sim.scenefile import load_scene
+
+    scene = load_scene("examples/scenes/real/duck-tight.toml")
+    policy = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.02)
+    trace = tg.explore(scene, max_travel=0.05, metrics_every=1000, policy=policy)
+    x, y, t = (v.numpy() for v in (trace.model.train_inputs[0], trace.model.train_targets, trace.model.train_task))
+    touch_in, seen_in = (y < 0) & (t == 0), (y < 0) & (t == 1)
+    assert touch_in.sum() == ((y == 0) & (t == 0)).sum()           # one per contact
+    assert seen_in.sum() > 50
+    depth_in = -MeshDistance(scene.inner)(x[touch_in])
+    depth_out = -MeshDistance(scene.outer)(x[seen_in])
+    # 2 cm behind a contact pressed up to a few mm into the body, along a normal a few degrees off the mesh's
+    assert depth_in.min() > 0.012 and np.median(depth_in) == pytest.approx(0.02, abs=0.004)
+    # behind noisy points along plane fits, then voxel-averaged: all but a few inside (measured: 0.2 % of the raw
+    # points' fall outside, at the beak), most near the depth
+    assert (depth_out > 0).mean() > 0.97 and np.median(depth_out) == pytest.approx(0.02, abs=0.005)
+
+
+def test_an_inside_point_that_other_observations_contradict_is_dropped():
+    """A slab 1.5 cm thick seen from both sides: 2 cm behind one face lies beyond the other face, so that point goes;
+    on a block 10 cm thick it stays; free space closer than the depth also removes it."""
+    from torch_gpioius.exploration.observations import drop_contradicted_inside
+
+    policy = ObservationPolicy(touch_inside=0.02)
+    grid = np.stack(np.meshgrid(np.linspace(-0.05, 0.05, 6), np.linspace(-0.05, 0.05, 6)), -1).reshape(-1, 2)
+    face = lambda z: np.c_[grid, np.full(len(grid), z)]                              # noqa: E731
+    touch = Observations(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -0.02]]), [0.0, policy.inside_label(0.02)], [0, 0])
+    thin = drop_contradicted_inside(touch, policy, face(-0.015), np.zeros(len(grid)))
+    assert thin.y.tolist() == [0.0]                                                  # the far face 5 mm from it
+    thick = drop_contradicted_inside(touch, policy, np.r_[face(0.0), face(-0.10)], np.zeros(2 * len(grid)))
+    assert len(thick) == 2 and thick.y[1] < 0                                        # its own face at the full depth
+    near = drop_contradicted_inside(touch, policy, np.array([[0.0, 0.015, -0.02]]), np.ones(1))
+    assert near.y.tolist() == [0.0]                                                  # free space 1.5 cm from it
+    far = drop_contradicted_inside(touch, policy, np.array([[0.0, 0.03, -0.02]]), np.ones(1))
+    assert len(far) == 2                                                             # 3 cm: beyond its depth
