@@ -8,11 +8,11 @@ a failed pair is a loss for the failed side (``torch_gpioius.studies.stats``). T
   travel lies below 0;
 * **no harm**: the upper end of the interval of the median paired difference of final H is at most
   max(10 % of the tactile-only median, 0.5 cm);
-* **similarity ordering**: for an object under a tight and a loose cover (names ``<shape>-tight`` and
-  ``<shape>-loose``), the tight cover's median final correlation is above the loose one's with disjoint 95 %
-  intervals (the outer shape predicts the inner one better when it hugs it).
+* **similarity ordering**: for an object under a tight and a looser cover (names ``<shape>-tight`` and
+  ``<shape>-loose`` or ``<shape>-wide``), the tight cover's median final correlation is above the other's with
+  disjoint 95 % intervals (the outer shape predicts the inner one better when it hugs it).
 
-    python scripts/claims_table.py outputs/real_ff
+    python scripts/claims_table.py outputs/real_ff [outputs/real_ff_wide ...]   # several folders: their runs together
 """
 
 from __future__ import annotations
@@ -58,9 +58,9 @@ def _hausdorff(x: dict, y: dict, seeds: list) -> dict:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("study", type=Path)
+    parser.add_argument("study", type=Path, nargs="+")
     args = parser.parse_args()
-    rows = list(csv.DictReader(open(args.study / "runs.csv")))
+    rows = [r for folder in args.study for r in csv.DictReader(open(folder / "runs.csv"))]
     by = defaultdict(dict)
     for r in rows:
         by[(r["object"], r["mode"])][int(r["seed"])] = r
@@ -94,14 +94,15 @@ def main() -> None:
               f"{final['wins']} / {final['losses']} | {fails[0]} / {fails[1]}{' (' + ', '.join(why) + ')' if why else ''} "
               f"| {onb[0]:.2f} / {onb[1]:.2f} |")
     print()
-    print("| shape | final correlation tight | final correlation loose | tight above loose (disjoint intervals) |")
-    print("|---|---|---|---|")
+    print("| shape | cover | final correlation tight | final correlation under it | tight above (disjoint intervals) |")
+    print("|---|---|---|---|---|")
     for o in objects:
-        if o.endswith("-tight") and o in corr and o.replace("-tight", "-loose") in corr:
-            a, b = corr[o], corr[o.replace("-tight", "-loose")]
-            holds = a["lo"] > b["hi"]
-            print(f"| {o[:-6]} | {a['median']:.2f} [{a['lo']:.2f}, {a['hi']:.2f}] | {b['median']:.2f} "
-                  f"[{b['lo']:.2f}, {b['hi']:.2f}] | {'yes' if holds else '**no**'} |")
+        for other in ("loose", "wide"):
+            if o.endswith("-tight") and o in corr and o.replace("-tight", f"-{other}") in corr:
+                a, b = corr[o], corr[o.replace("-tight", f"-{other}")]
+                holds = a["lo"] > b["hi"]
+                print(f"| {o[:-6]} | {other} | {a['median']:.2f} [{a['lo']:.2f}, {a['hi']:.2f}] | {b['median']:.2f} "
+                      f"[{b['lo']:.2f}, {b['hi']:.2f}] | {'yes' if holds else '**no**'} |")
 
 
 if __name__ == "__main__":

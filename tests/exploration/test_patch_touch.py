@@ -161,3 +161,22 @@ def test_a_default_patch_run_adds_at_most_max_points_per_touch_and_logs_what_it_
             assert r.arrays["patch_dropped"][0] >= 0 and r.arrays["patch_dropped_nats"][0] >= 0.0
             dropped += int(r.arrays["patch_dropped"][0])
     assert dropped > 0
+
+
+def test_a_patch_touch_adds_one_inside_point_behind_its_contact(tmp_path):
+    import dataclasses
+
+    world = make_world("forcefield", "E", 0, smoke=True)
+    policy = dataclasses.replace(world.defaults.policy, touch_inside=0.02)
+    log = tmp_path / "run.gpioius"
+    trace = tg.explore(world, "visual-tactile", touch="patch", policy=policy, max_travel=0.03, metrics_every=100,
+                       log=log)
+    steps = [r for r in read_records(log) if r.kind == "step" and r.meta["step"] > 0]
+    assert len(steps) >= 3
+    for r in steps:
+        x, y = r.arrays["x"], r.arrays["y"]
+        assert (y < 0).sum() == 1 and y[y < 0][0] == pytest.approx(-0.4)
+        behind = x[y < 0][0]
+        assert np.linalg.norm(behind - r.arrays["contact"]) == pytest.approx(0.02, abs=1e-12)
+        assert world.true_distance(behind[None])[0] < -0.01          # in the body, not just under the cover
+    assert (trace.model.train_targets < 0).sum() >= len(steps)

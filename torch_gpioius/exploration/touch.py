@@ -154,7 +154,9 @@ class PatchTouch:
         return self.settings.free_margin
 
     def observations(self, result, contacts: np.ndarray, policy: ObservationPolicy, step: int) -> Observations:
-        """The batch of one touch that ended in contact at ``contacts[-1]``: the pad's patch, then free space."""
+        """The batch of one touch that ended in contact at ``contacts[-1]``: the pad's patch, then free space, then
+        (with ``policy.touch_inside``) one inside point behind the fingertip's contact along the measured force, as
+        :class:`PointTouch` records it (one per touch, not one per pad point)."""
         pad = self.sensor if self.sensor is not None else self._pad
         if pad is None:
             raise ValueError("PatchTouch: no tactile pad bound (bind(hardware) or PatchTouch(sensor=...))")
@@ -164,8 +166,11 @@ class PatchTouch:
         avoid = np.concatenate([np.asarray(contacts, dtype=np.float64).reshape(-1, patch.dim), patch.x[patch.y == 0]])
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, avoid, policy.free_space_margin)
         path = Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step, source="touch")
+        inside = inside_point(np.asarray(contacts[-1], dtype=np.float64), result, policy)
+        behind = Observations(inside, np.full(len(inside), policy.inside_label(policy.touch_inside or 0.0)),
+                              np.zeros(len(inside), np.int64), step=step, source="touch")
         self._patch_rows = len(patch)
-        return Observations.concat([patch, path], source="patch")
+        return Observations.concat([patch, path, behind], source="patch")
 
     def describe(self) -> dict:
         out = {"touch": self.name, "patch": asdict(self.settings), "min_gain": self.min_gain}

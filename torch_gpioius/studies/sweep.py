@@ -291,7 +291,10 @@ def run_one(spec: RunSpec) -> dict:
     if trace is not None:
         record = _record(spec, kw, trace, time.perf_counter() - t0)
         record["n_outer"] = _n_outer(trace.model)
-    record["voxel"] = kw.get("policy", world.defaults.policy).voxel or 0.0
+    policy = kw.get("policy", world.defaults.policy)
+    record["voxel"] = policy.voxel or 0.0
+    # the inside points' depths [m] (0: the paper's labels only)
+    record["touch_inside"], record["vision_inside"] = policy.touch_inside or 0.0, policy.vision_inside or 0.0
     record["touch"] = spec.touch
     if getattr(world, "views", None):                 # the camera's views (force-field world)
         record["views"] = "+".join(world.views)
@@ -498,6 +501,7 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "contacts_within": run["contacts_within"],
            "wall_time": run["wall_time"], "median_step_time": run["median_step_time"], "reference_travel": ref,
            "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
+           "touch_inside": run.get("touch_inside", 0.0), "vision_inside": run.get("vision_inside", 0.0),
            "max_truncation": run.get("max_truncation", 0.0)}
     for f in FRACTIONS:
         p = int(round(100 * f))
