@@ -56,7 +56,8 @@ def test_sequential_sweep_writes_its_outputs_skips_finished_runs_and_repeats(tmp
     summary = json.loads((tmp_path / "a" / "summary.json").read_text())
     entry = summary["objects"]["A"]["visual-tactile"]
     assert {"median", "lo", "hi"} <= set(entry["final_hausdorff"]) and entry["n"] == 2
-    for name in ("transitions_A.png", "similarity_bands.png", "paired_final_hausdorff.png", "summary.md"):
+    for name in ("transitions_A.png", "similarity_bands.png", "paired_final_hausdorff.png", "paired_final_chamfer.png",
+                 "summary.md"):
         assert (tmp_path / "a" / name).stat().st_size > 0
     assert len(list((tmp_path / "a" / "logs").glob("*.gpioius"))) == 4
     again = run_sweep("planar", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)

@@ -541,6 +541,8 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
         figure_transition_bands(obj, [r for r in runs if r["object"] == obj], out / f"transitions_{obj}.png")
     figure_similarity_bands(runs, out / "similarity_bands.png")
     figure_paired(rows, out / "paired_final_hausdorff.png")
+    if any(math.isfinite(r.get("final_chamfer", math.nan)) for r in rows):      # 3-D worlds and the 2-D one alike
+        figure_paired(rows, out / "paired_final_chamfer.png", key="final_chamfer")
     return {"rows": rows, "summary": summary, "claims": claims}
 
 

@@ -126,9 +126,13 @@ def figure_similarity_bands(runs: list[dict], path: Path):
     return fig
 
 
+#: What :func:`figure_paired` calls each metric it can draw (all distances [m], drawn in cm).
+PAIRED_LABELS = {"final_hausdorff": "final Hausdorff distance", "final_chamfer": "final Chamfer distance"}
+
+
 def figure_paired(rows: list[dict], path: Path, key: str = "final_hausdorff"):
-    """Final Hausdorff distance per seed, tactile-only and every other mode side by side, a line per seed; each
-    panel has its own labelled log axis.
+    """A final distance per seed (``key``: the Hausdorff or the Chamfer distance, :data:`PAIRED_LABELS`),
+    tactile-only and every other mode side by side, a line per seed; each panel has its own labelled log axis.
 
     Returns:
         the ``matplotlib.figure.Figure`` (already written to ``path``).
@@ -149,10 +153,10 @@ def figure_paired(rows: list[dict], path: Path, key: str = "final_hausdorff"):
                 ax.plot([j - 0.2, j + 0.2], [np.median(vals)] * 2, color=COLORS.get(m, "k"), lw=3)
         ax.set_xticks(range(len(modes)), [m.replace("visual-tactile", "VT").replace("tactile", "T") for m in modes],
                       fontsize=7)
-        ax.set(title=f"object {obj}", ylabel="final Hausdorff distance [cm]")
+        ax.set(title=f"object {obj}", ylabel=f"{PAIRED_LABELS[key]} [cm]")
         log_axis(ax)
         ax.tick_params(labelsize=7)
-    fig.suptitle("final Hausdorff distance per seed (grey: one seed across modes; bar: median)", fontsize=9)
+    fig.suptitle(f"{PAIRED_LABELS[key]} per seed (grey: one seed across modes; bar: median)", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

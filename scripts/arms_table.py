@@ -1,0 +1,77 @@
+"""Several study folders as arms of one table: per object, the medians over seeds of H, Chamfer, F-score, bias and
+unseen share at 10 %, 25 % and the end (docs/results-real.md uses it), with the paired difference of final
+Chamfer against the first arm.
+
+Each argument is ``LABEL=FOLDER[:MODE]`` (MODE: visual-tactile by default, or tactile); objects are matched by name,
+runs by seed. A failed run's missing estimate counts as inf (worse than any distance), as in every study table.
+
+    python scripts/arms_table.py "no inside points=outputs/real_ff_noinside" \\
+        "default=outputs/real_ff_inside" "touch alone=outputs/real_ff_inside:tactile"
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import statistics
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from claims_table import _f  # noqa: E402  (scripts/ is not a package)
+from torch_gpioius.studies.stats import paired_difference  # noqa: E402
+
+COLUMNS = (("H 10 %", "hausdorff_10", 100, 1), ("H 25 %", "hausdorff_25", 100, 1),
+           ("H final", "final_hausdorff", 100, 1), ("Chamfer 25 %", "chamfer_25", 100, 2),
+           ("Chamfer final", "final_chamfer", 100, 2), ("F@1cm final", "final_fscore_10mm", 1, 2),
+           ("bias final", "final_bias", 100, 2), ("unseen 25 %", "unseen_25", 1, 2),
+           ("rho final", "final_correlation", 1, 2), ("step [ms]", "median_step_time", 1000, 0))
+
+
+def _arm(spec: str) -> tuple[str, dict]:
+    label, _, where = spec.partition("=")
+    folder, _, mode = where.partition(":")
+    runs = defaultdict(dict)
+    for r in csv.DictReader(open(Path(folder) / "runs.csv")):
+        if r["mode"] == (mode or "visual-tactile"):
+            runs[r["object"]][int(r["seed"])] = r
+    return label, runs
+
+
+def _value(run: dict, key: str) -> float:
+    v = _f(run[key])
+    failed_estimate = key not in ("final_correlation", "median_step_time", "unseen_25") and not math.isfinite(v)
+    return math.inf if failed_estimate else v
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("arms", nargs="+")
+    args = parser.parse_args()
+    arms = [_arm(a) for a in args.arms]
+    objects = sorted({o for _, runs in arms for o in runs})
+    print("| object | run | " + " | ".join(c[0] for c in COLUMNS) + " | Chamfer final - first arm (wins / losses) |")
+    print("|---|---|" + "---|" * (len(COLUMNS) + 1))
+    for o in objects:
+        first = arms[0][1].get(o, {})
+        for label, runs in arms:
+            r = runs.get(o)
+            if not r:
+                continue
+            cells = []
+            for _, key, scale, digits in COLUMNS:
+                vals = [v for v in (_value(run, key) for run in r.values()) if not math.isnan(v)]
+                cells.append(f"{scale * statistics.median(vals):.{digits}f}" if vals else "-")
+            seeds = sorted(set(r) & set(first))
+            diff = "-"
+            if runs is not arms[0][1] and seeds:
+                d = paired_difference([_value(r[s], "final_chamfer") for s in seeds],
+                                      [_value(first[s], "final_chamfer") for s in seeds])
+                diff = f"{100 * d['median']:.2f} ({d['wins']} / {d['losses']})"
+            print(f"| {o} | {label} ({len(r)}) | " + " | ".join(cells) + f" | {diff} |")
+
+
+if __name__ == "__main__":
+    main()
