@@ -349,8 +349,10 @@ class Scene3D(World):
                 (default: by ``settings``: 0.1 Matérn, 0.15 inverse multiquadric).
             noise: sigma^2 (default: by ``settings``, 0.08).
             voxel: the camera's voxel edge [m] (0: every point; default: by ``settings``).
-            touch_inside, vision_inside: depth [m] of the inside point behind each contact and behind each seen point
-                (``ObservationPolicy.touch_inside`` and ``vision_inside``; 0: none; default: by ``settings``).
+            touch_inside: depth [m] of the inside point behind each contact (``ObservationPolicy.touch_inside``; 0:
+                none; default: by ``settings``, 2 cm or none).
+            vision_inside: depth [m] of the inside points behind the seen surface (``ObservationPolicy.vision_inside``;
+                0: none; default: by ``settings``).
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
