@@ -225,8 +225,9 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     select = getattr(cfg.touch, "select", None)
     if callable(select):
         obs = select(state.model, obs)
-    obs = drop_contradicted_inside(obs, cfg.policy, state.model.train_inputs[0].cpu().numpy(),
-                                   state.model.train_targets.cpu().numpy())
+    if (obs.y < 0).any():                # the model's data leave the device only when there is something to check
+        obs = drop_contradicted_inside(obs, cfg.policy, state.model.train_inputs[0].cpu().numpy(),
+                                       state.model.train_targets.cpu().numpy())
     _add(state.model, obs)
     return removed, obs
 

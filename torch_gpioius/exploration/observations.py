@@ -130,8 +130,9 @@ class ObservationPolicy:
             the object where one point 5 cm out leaves it free to swing below zero (a phantom surface); None: one.
         touch_inside: a point this far behind each contact along the measured contact normal (the force's direction)
             [m], labelled inside (:meth:`inside_label`; beyond the paper, docs/method-notes.md section 13); None: none.
-        vision_inside: a point this far behind each seen point along its camera ray [m], labelled inside; it assumes
-            the object is thicker than this along the ray; None: none.
+        vision_inside: a point this far behind each seen point along the cloud's inward normal [m]
+            (:meth:`~torch_gpioius.sensors.PointCloud.behind`, one per voxel), labelled inside; it assumes the object
+            is thicker than this there; None: none.
     """
 
     vision_free_offset: float | None = 0.05
@@ -159,14 +160,20 @@ class ObservationPolicy:
                              f"({self.vision_free_offset!r} m), got {self.vision_free_far!r}")
 
 
+    @property
+    def ramp(self) -> float:
+        """The distance [m] over which the labels rise from 0 on a surface to 1 in free space: the camera's
+        free-space offset (the paper's 5 cm when that is None)."""
+        return self.vision_free_offset or 0.05
+
     def inside_label(self, depth: float) -> float:
-        """The label of a point ``depth`` [m] inside a body: ``-depth / ramp``, the free-space ramp (0 on the
-        surface, 1 at ``vision_free_offset`` in front, the paper's 5 cm when that is None) continued inside."""
-        return -float(depth) / (self.vision_free_offset or 0.05)
+        """The label of a point ``depth`` [m] inside a body: ``-depth / ramp`` (:attr:`ramp`), the free-space ramp
+        continued inside."""
+        return -float(depth) / self.ramp
 
     def inside_depth(self, label) -> np.ndarray:
         """The depth [m] an inside label stands for (the inverse of :meth:`inside_label`), elementwise."""
-        return -np.asarray(label, dtype=np.float64) * (self.vision_free_offset or 0.05)
+        return -np.asarray(label, dtype=np.float64) * self.ramp
 
     def with_voxel(self, voxel: float) -> "ObservationPolicy":
         """This policy with the camera's points averaged in voxels of edge ``voxel`` [m]; 0 keeps every point.

@@ -12,7 +12,7 @@ import torch
 from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchSettings, patch_observations
 
-__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "touch_model", "inside_point"]
+__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "touch_model", "inside_observation"]
 
 
 @dataclass(frozen=True)
@@ -29,11 +29,10 @@ class PointTouch:
         contact = np.asarray(contacts[-1], dtype=np.float64)
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, np.asarray(contacts),
                            policy.free_space_margin)
-        inside = inside_point(contact, result, policy)
-        return Observations(np.concatenate([contact[None], inside, free]),
-                            np.r_[0.0, np.full(len(inside), policy.inside_label(policy.touch_inside or 0.0)),
-                                  np.ones(len(free))],
-                            np.zeros(1 + len(inside) + len(free), np.int64), step=step, source="touch")
+        return Observations.concat([Observations(contact[None], [0.0], [0], step=step, source="touch"),
+                                    inside_observation(contact, result, policy, step),
+                                    Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step,
+                                                 source="touch")])
 
     def describe(self) -> dict:
         return {"touch": self.name}
@@ -166,9 +165,7 @@ class PatchTouch:
         avoid = np.concatenate([np.asarray(contacts, dtype=np.float64).reshape(-1, patch.dim), patch.x[patch.y == 0]])
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, avoid, policy.free_space_margin)
         path = Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step, source="touch")
-        inside = inside_point(np.asarray(contacts[-1], dtype=np.float64), result, policy)
-        behind = Observations(inside, np.full(len(inside), policy.inside_label(policy.touch_inside or 0.0)),
-                              np.zeros(len(inside), np.int64), step=step, source="touch")
+        behind = inside_observation(np.asarray(contacts[-1], dtype=np.float64), result, policy, step)
         self._patch_rows = len(patch)
         return Observations.concat([patch, path, behind], source="patch")
 
@@ -184,16 +181,19 @@ class PatchTouch:
 TOUCH_MODELS: dict[str, type] = {"point": PointTouch, "patch": PatchTouch}
 
 
-def inside_point(contact: np.ndarray, result, policy: ObservationPolicy) -> np.ndarray:
-    """`(k, d)`, k <= 1: the point ``policy.touch_inside`` [m] behind ``contact`` `(d,)` along the outward normal the
-    force sensor measured there (``result.force_normal``); none without the setting or a measured force."""
+def inside_observation(contact: np.ndarray, result, policy: ObservationPolicy, step: int) -> Observations:
+    """At most one inner observation: the point ``policy.touch_inside`` [m] behind ``contact`` `(d,)` along the
+    outward normal the force sensor measured there (``result.force_normal``), labelled
+    ``policy.inside_label(touch_inside)``; none without the setting or a measured force."""
     depth = policy.touch_inside
+    none = Observations.empty(len(contact), step, "touch")
     if depth is None or result is None or not len(getattr(result, "forces", ())):
-        return np.zeros((0, len(contact)))
+        return none
     normal = np.asarray(result.force_normal, dtype=np.float64).reshape(-1)
     if normal.shape != contact.shape or not np.isfinite(normal).all() or np.linalg.norm(normal) < 0.5:
-        return np.zeros((0, len(contact)))
-    return (contact - depth * normal / np.linalg.norm(normal))[None]
+        return none
+    return Observations((contact - depth * normal / np.linalg.norm(normal))[None], [policy.inside_label(depth)], [0],
+                        step=step, source="touch")
 
 
 def touch_model(touch) -> object:

@@ -94,15 +94,21 @@ class PointCloud:
         """Whether the cloud merges views (``origin`` is `(n, 3)`, one camera per point)."""
         return self.origin is not None and self.origin.ndim == 2
 
+    def view_ids(self) -> np.ndarray:
+        """`(n,)` int64: which view of a merged capture each point came from (points with one camera origin share
+        an id; an unknown origin is a view of its own); all 0 for a single view."""
+        if not self.per_point_origins:
+            return np.zeros(len(self), dtype=np.int64)
+        return np.unique(np.nan_to_num(self.origin, nan=np.inf), axis=0, return_inverse=True)[1].reshape(-1)
+
     def voxel_averaged(self, voxel: float) -> "PointCloud":
         """One mean point per occupied voxel of edge ``voxel`` [m] (paper: 0.05 m), per view of a merged capture."""
         if len(self) == 0:
             return self
         if not self.per_point_origins:
             return dataclasses.replace(self, points=voxel_average(self.points, voxel))
-        keys, inverse = np.unique(np.nan_to_num(self.origin, nan=np.inf), axis=0, return_inverse=True)
-        inverse = inverse.reshape(-1)
-        parts = [voxel_average(self.points[inverse == k], voxel) for k in range(len(keys))]
+        inverse = self.view_ids()
+        parts = [voxel_average(self.points[inverse == k], voxel) for k in range(inverse.max() + 1)]
         origins = [np.broadcast_to(self.origin[inverse == k][0], part.shape) for k, part in enumerate(parts)]
         return dataclasses.replace(self, points=np.concatenate(parts), origin=np.concatenate(origins))
 
@@ -135,8 +141,8 @@ class PointCloud:
 
         Each is the direction of least spread of the point's ``neighbours`` nearest seen points (a local plane fit).
         Written here rather than taken from Open3D's ``estimate_normals``: the same dozen lines would bring a
-        several-hundred-megabyte dependency. NaN rows where fewer than 3 neighbours exist, the camera is unknown or the ray grazes the
-        surface (more than 75 deg off the normal: which side faces the camera is then unclear).
+        several-hundred-megabyte dependency. NaN rows where fewer than 3 neighbours exist, the camera is unknown or
+        the ray grazes the surface (more than 75 deg off the normal: which side faces the camera is then unclear).
 
         Raises:
             ValueError: the cloud has no ``origin``.
@@ -189,14 +195,14 @@ class PointCloud:
         keep = np.isfinite(nrm).all(axis=1)
         pts, nrm = self.points[keep], nrm[keep]
         if voxel and len(pts):
-            views = (np.unique(np.nan_to_num(self.origin[keep], nan=np.inf), axis=0, return_inverse=True)[1].reshape(-1)
-                     if self.per_point_origins else np.zeros(len(pts), dtype=np.int64))
+            views = self.view_ids()[keep]
             parts = [voxel_average(pts[views == k], voxel, nrm[views == k]) for k in np.unique(views)]
             pts, nrm = np.concatenate([p for p, _ in parts]), np.concatenate([n for _, n in parts])
             length = np.linalg.norm(nrm, axis=1)
             ok = length > 0.5                                   # normals that agree within the voxel
             pts, nrm = pts[ok], nrm[ok] / length[ok, None]
         return pts - depth * nrm
+
 
 class PointCloudSource(abc.ABC):
     """Anything that yields a :class:`PointCloud` in the base frame: a depth camera, a file, a ROS topic."""
