@@ -27,7 +27,10 @@ COLUMNS = (("H 10 %", "hausdorff_10", 100, 1), ("H 25 %", "hausdorff_25", 100, 1
            ("H final", "final_hausdorff", 100, 1), ("Chamfer 25 %", "chamfer_25", 100, 2),
            ("Chamfer final", "final_chamfer", 100, 2), ("F@1cm final", "final_fscore_10mm", 1, 2),
            ("bias final", "final_bias", 100, 2), ("unseen 25 %", "unseen_25", 1, 2),
-           ("rho final", "final_correlation", 1, 2), ("step [ms]", "median_step_time", 1000, 0))
+           ("rho final", "final_correlation", 1, 2), ("step [ms]", "median_step_time", 1000, 0),
+           # each run's 95th percentile of its steps: the median over seeds, and the worst run
+           ("step p95 [ms]", "p95_step_time", 1000, 0), ("worst run's p95 [ms]", "p95_step_time", 1000, 0, max))
+TIMES = ("median_step_time", "p95_step_time")     # NaN there: not recorded (older runs), not a failed estimate
 
 
 def _arm(spec: str) -> tuple[str, dict]:
@@ -41,8 +44,8 @@ def _arm(spec: str) -> tuple[str, dict]:
 
 
 def _value(run: dict, key: str) -> float:
-    v = _f(run[key])
-    failed_estimate = key not in ("final_correlation", "median_step_time", "unseen_25") and not math.isfinite(v)
+    v = _f(run.get(key, math.nan))
+    failed_estimate = key not in ("final_correlation", "unseen_25", *TIMES) and not math.isfinite(v)
     return math.inf if failed_estimate else v
 
 
@@ -61,9 +64,10 @@ def main() -> None:
             if not r:
                 continue
             cells = []
-            for _, key, scale, digits in COLUMNS:
+            for _, key, scale, digits, *agg in COLUMNS:
                 vals = [v for v in (_value(run, key) for run in r.values()) if not math.isnan(v)]
-                cells.append(f"{scale * statistics.median(vals):.{digits}f}" if vals else "-")
+                summary = agg[0] if agg else statistics.median
+                cells.append(f"{scale * summary(vals):.{digits}f}" if vals else "-")
             seeds = sorted(set(r) & set(first))
             diff = "-"
             if runs is not arms[0][1] and seeds:

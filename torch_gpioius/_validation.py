@@ -233,7 +233,9 @@ def as_device(device, name: str = "device") -> torch.device | None:
             raise RuntimeError(f"device type {dev.type!r} holds no data to compute with")
         torch.zeros(1, dtype=torch.float64, device=dev).item()
     except (RuntimeError, AssertionError, TypeError, NotImplementedError) as exc:
-        raise ValueError(f"{name}: cannot use {device!r} here ({exc}); available: {', '.join(available_devices())}") \
+        # CUDA's messages run over several lines of debugging advice: the first says what went wrong
+        why = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+        raise ValueError(f"{name}: cannot use {device!r} here ({why}); available: {', '.join(available_devices())}") \
             from None
     return dev
 

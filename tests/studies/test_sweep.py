@@ -6,6 +6,7 @@ import csv
 import json
 import os
 import signal
+import statistics
 import subprocess
 import sys
 import time
@@ -281,6 +282,20 @@ def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
     assert 0 < float(rows[0]["final_chamfer"]) <= float(rows[0]["final_hausdorff"]) + 1e-9
     assert 0 <= float(rows[0]["final_fscore_5mm"]) <= 1 and "Chamfer final [cm]" in (tmp_path / "p" / "summary.md"
                                                                                       ).read_text()
+    # issue 36: the record's step times are the median, 95th percentile and maximum of the log's planning steps
+    # (every step after the approach, re-learning included)
+    from torch_gpioius.io.datasets import read_records
+    from torch_gpioius.io.logs import step_values
+
+    record = json.loads((tmp_path / "p" / "runs" / "ball_visual-tactile_0.json").read_text())
+    logged = [step_values(r.meta)["step_time"] for r in read_records(tmp_path / "p" / "logs" /
+                                                                      "ball_visual-tactile_0.gpioius")
+              if r.kind == "step"][1:]
+    assert len(logged) == record["steps"] >= 2
+    assert record["median_step_time"] == pytest.approx(statistics.median(logged), rel=1e-12)
+    assert record["max_step_time"] == max(logged)
+    assert sorted(logged)[0] <= record["p95_step_time"] <= record["max_step_time"]
+    assert float(rows[0]["p95_step_time"]) == pytest.approx(record["p95_step_time"], rel=1e-12)
     # issue 35, item 6: the point default read "touch=None"
     with pytest.raises(FileExistsError, match=r"touch='patch'.* this one is touch='point'"):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,
