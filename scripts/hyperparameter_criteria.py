@@ -10,6 +10,13 @@ by four criteria:
   residual is ``alpha_i / [G^-1]_ii`` and its variance ``1 / [G^-1]_ii``, Rasmussen & Williams eq. 5.10-5.12);
 * ``loo_inner``: the same summed over the touch task's labels only;
 * ``loo_touch``: summed over the touched surface points only (the labels nearest the inner shape);
+* ``cv_geo``: a criterion that scores the zero level itself, in metres. The touch task's data are cut, in the order
+  they arrived, into five contiguous blocks (five pieces of the path, each with its free-space and inside points);
+  each block is held out in turn, exactly (its held-out mean is ``y_B - [G^-1]_BB^-1 alpha_B``, the block form of
+  eq. 5.12), and each held-out touched surface point scores its first-order distance from the zero level of the
+  other data, ``mu_-B(x) / |grad mu(x)|`` (the gradient of the full posterior mean, analytic for the Matérn-5/2).
+  The criterion is minus the mean squared distance: how far the estimate from the rest of the path misses the
+  surface where the fingertip went next;
 
 and the shape each gives (Chamfer, F-score at 1 cm, bias, Hausdorff; ``Scene3D.measure``) beside the fixed defaults.
 docs/method-notes.md ("Learning theta and sigma^2") reports what it printed.
@@ -29,7 +36,8 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.sim.scenefile import load_scene
 
-CRITERIA = ("mll", "loo", "loo_inner", "loo_touch")
+CRITERIA = ("mll", "loo", "loo_inner", "loo_touch", "cv_geo")
+FOLDS = 5
 ELL, NOISE = (0.02, 0.5), (1e-4, 0.5)
 
 
@@ -57,10 +65,33 @@ def criterion(p, x, y, t, which: str):
     alpha = torch.cholesky_solve(r, c).squeeze(-1)
     if which == "mll":
         return -(0.5 * (r.squeeze(-1) @ alpha) + c.diagonal().log().sum())
+    if which == "cv_geo":
+        return _cv_geo(x, y, t, ell, chol, c, alpha)
     var = 1.0 / torch.cholesky_inverse(c).diagonal()
     ll = -0.5 * var.log() - 0.5 * (alpha * var) ** 2 / var
     keep = {"loo": torch.ones_like(y, dtype=torch.bool), "loo_inner": t == 0, "loo_touch": (t == 0) & (y == 0)}[which]
     return ll[keep].sum()
+
+
+def _cv_geo(x, y, t, ell, chol, c, alpha):
+    """Minus the mean squared distance [m^2] of held-out touched surface points from the other data's zero level."""
+    inv = torch.cholesky_inverse(c)
+    inner = torch.nonzero(t == 0).squeeze(-1)
+    # grad mu(x_i) = sum_j grad_x k(x_i, x_j) alpha_j; Matern-5/2: grad_x k = -(5 / 3 ell^2) (1 + z) e^-z (x - x')
+    surface = inner[y[inner] == 0]
+    d = x[surface].unsqueeze(1) - x.unsqueeze(0)
+    z = math.sqrt(5.0) * d.pow(2).sum(-1).clamp_min(1e-30).sqrt() / ell
+    kt = chol @ chol.T
+    w = -(5.0 / (3.0 * ell * ell)) * (1 + z) * torch.exp(-z) * kt[0][t]
+    grad = torch.einsum("ij,ijk,j->ik", w, d, alpha)
+    gnorm = dict(zip(surface.tolist(), grad.norm(dim=-1).clamp_min(1e-6)))
+    sq = []
+    for block in torch.tensor_split(inner, FOLDS):
+        e = -torch.linalg.solve(inv[block][:, block], alpha[block])      # mu_-B(x_B) - y_B
+        for k, i in enumerate(block.tolist()):
+            if i in gnorm:
+                sq.append((e[k] / gnorm[i]) ** 2)                     # y_i = 0: mu_-B(x_i) is the miss itself
+    return -torch.stack(sq).mean()
 
 
 def learn(x, y, t, which: str, model) -> tuple[float, float]:
