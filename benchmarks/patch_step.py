@@ -175,11 +175,11 @@ def whole_runs(scene_file: str, travels, max_points, seed: int, device) -> None:
                 trace = tg.explore(world, touch=touch, max_travel=travel, metrics_every=10_000, device=device,
                                    recorders=[Relearns()])
             wall = time.perf_counter() - t0
-            st = np.asarray(trace.step_time[1:]) * 1e3              # record 0 is the first contact, not a step
+            st = {k: 1e3 * v for k, v in trace.step_time_summary().items()}      # [ms]
             sh = {k: float(v[-1]) for k, v in trace.shape.items()}
             n_inner = int((trace.model.train_task == 0).sum())
-            print(f"| {world.name} | {travel:g} | {mp} | {len(st)} | {np.median(st):.0f} / {np.percentile(st, 95):.0f} / "
-                  f"{st.max():.0f} | {sum(relearned)} | {n_inner} | {trace.hausdorff[-1] * 100:.1f} | "
+            print(f"| {world.name} | {travel:g} | {mp} | {trace.n_steps - 1} | {st['median']:.0f} / {st['p95']:.0f} / "
+                  f"{st['max']:.0f} | {sum(relearned)} | {n_inner} | {trace.hausdorff[-1] * 100:.1f} | "
                   f"{sh['chamfer'] * 100:.2f} | {sh['fscore_10mm']:.2f} | {sh['bias'] * 100:.2f} | {wall:.0f} |",
                   flush=True)
 

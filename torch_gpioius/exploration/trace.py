@@ -142,6 +142,15 @@ class Trace:
         return {"on_body": float(b[ok_b].mean()) if ok_b.any() else float("nan"),
                 "within": float((np.abs(d[ok_d]) <= within).mean()) if ok_d.any() else float("nan")}
 
+    def step_time_summary(self) -> dict:
+        """The planning steps' wall time [s]: ``{"median", "p95", "max"}`` over every step after the first contact
+        (record 0 is the approach; plan, ingest and re-learning included, robot motion excluded); NaN without one."""
+        t = np.asarray(self.step_time[1:], dtype=float)
+        t = t[np.isfinite(t)]
+        if not len(t):
+            return {"median": math.nan, "p95": math.nan, "max": math.nan}
+        return {"median": float(np.median(t)), "p95": float(np.percentile(t, 95)), "max": float(t.max())}
+
     @property
     def sim_time(self) -> np.ndarray:
         """Deprecated name of :attr:`robot_time`."""

@@ -330,23 +330,12 @@ def _no_start_record(spec: RunSpec, kw: dict, exc: Exception, wall_time: float) 
             "series": {"travel": [0.0], **{k: nan for k in _SERIES if k != "travel"}, "estimate": [0.0]}}
 
 
-def _step_time_stats(step_time: np.ndarray) -> dict:
-    """The median, 95th percentile and maximum of a run's planning steps [s] (re-learning included; the first
-    record, the approach, left out by the caller); NaN without a step."""
-    t = np.asarray(step_time, dtype=float)
-    t = t[np.isfinite(t)]
-    if not len(t):
-        return {"median_step_time": math.nan, "p95_step_time": math.nan, "max_step_time": math.nan}
-    return {"median_step_time": float(np.median(t)), "p95_step_time": float(np.percentile(t, 95)),
-            "max_step_time": float(t.max())}
-
-
 def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
     """A finished run's result."""
     return {"world": spec.world, "object": spec.object, "mode": spec.mode, "seed": spec.seed,
             "terminated": trace.terminated, "steps": trace.n_steps - 1, "travel": float(trace.travel[-1]),
             "budget": kw.get("max_travel"), "wall_time": wall_time,
-            **_step_time_stats(trace.step_time[1:]),
+            **{f"{k}_step_time": v for k, v in trace.step_time_summary().items()},
             "taps": int(trace.taps[-1]) if len(trace.taps) else 0,
             "recoveries": int(trace.recoveries[-1]) if len(trace.recoveries) else 0,
             "reapproaches": int(trace.reapproaches[-1]) if len(trace.reapproaches) else 0,
