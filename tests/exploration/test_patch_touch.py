@@ -161,6 +161,23 @@ def test_a_default_patch_run_adds_at_most_max_points_per_touch_and_logs_what_it_
             assert r.arrays["patch_dropped"][0] >= 0 and r.arrays["patch_dropped_nats"][0] >= 0.0
             dropped += int(r.arrays["patch_dropped"][0])
     assert dropped > 0
+    # each record says how far its K_t is predicted to be from the optimum (0 after a full re-learning); the log
+    # keeps it, and the last one is the model's own
+    gaps = [r.meta["fit_gap"] for r in read_records(log) if r.kind == "step"]
+    assert np.allclose(gaps, trace.fit_gap, rtol=0, atol=0) and (trace.fit_gap >= 0).all()
+    fit = trace.model.fit_result
+    assert trace.fit_gap[-1] == (0.0 if fit.relearned else fit.predicted_gain)
+
+
+def test_the_relearning_settings_are_checked_described_and_passed_to_the_fit():
+    touch = PatchTouch()
+    assert touch.fit_options() == {"min_gain": 0.1, "track": True, "scout": 256, "max_hold": 30}
+    assert touch.describe()["relearn"] == {"track": True, "scout": 256, "max_hold": 30}
+    # the schedule of logs written before tracking describes as they do, so they resume
+    assert "relearn" not in PatchTouch(track=False, scout=None, max_hold=20).describe()
+    for bad in ({"track": 1}, {"scout": 1}, {"scout": 3.0}, {"scout": True}, {"max_hold": 0}, {"max_hold": None}):
+        with pytest.raises(ValueError, match=f"PatchTouch.{next(iter(bad))}"):
+            PatchTouch(**bad)
 
 
 def test_a_patch_touch_adds_one_inside_point_behind_its_contact(tmp_path):

@@ -135,6 +135,25 @@ def test_predicted_gain_is_the_newton_decrement_of_a_quadratic():
     assert predicted_gain(g, -a, np.zeros(3, bool)) == 0.0
 
 
+def test_a_held_newton_step_reaches_a_quadratics_maximum_within_its_caps_and_bounds():
+    from torch_gpioius.inference.optim import cholesky_bounds, held_newton_step
+
+    a = np.array([[2.0, 0.3, 0.0], [0.3, 1.0, 0.1], [0.0, 0.1, 0.5]])
+    phi = np.array([-1.0, 0.2, -1.5])
+    target = np.array([-0.8, 0.1, -1.2])            # f = -(p - target).A (p - target) / 2
+    step = held_newton_step(phi, a @ (target - phi), -a)
+    assert np.allclose(step, target, rtol=0, atol=1e-14)
+    # a step longer than the trust radius is shortened along its direction; the bounds clamp it
+    far = np.array([-1.0, 0.2, 9.0])
+    capped = held_newton_step(phi, a @ (far - phi), -a)
+    assert np.allclose((capped - phi) / np.linalg.norm(capped - phi), (far - phi) / np.linalg.norm(far - phi))
+    assert abs(capped[2] - phi[2]) <= 2.0 + 1e-12
+    lower, upper = cholesky_bounds()
+    low = held_newton_step(np.array([lower[0], 0.2, -1.5]), np.array([-1.0, 0.0, 0.0]), -a)
+    assert low[0] == lower[0]                        # at the bound, pushed past it: held there
+    assert held_newton_step(phi, np.ones(3), a) is None          # no maximum's Hessian: no step
+
+
 def _model(rng, inference="batched"):
     x, y, t = _start(rng, 300, 40)
     return tg.GPIOIS(x, y, t, theta=THETA, noise=NOISE, inference=inference).fit()
@@ -189,12 +208,135 @@ def test_held_gain_prediction_tracks_the_real_gain():
     assert all(0.5 < r < 2.0 for r in ratios), ratios
 
 
-@pytest.mark.parametrize("kwargs", [{"min_gain": -1.0}, {"min_gain": math.nan}, {"min_gain": 0.1, "max_hold": 0}])
+def _interior_model(rng):
+    """An inner shape unlike the outer one (another ellipsoid's axes): K_t's optimum has a correlation near 0.5, inside
+    its bounds (the concentric data of ``_model`` put it at 1)."""
+    x, y, t = _start(rng, 300, 0)
+    xi = _ellipsoid(rng, 40, INTERIOR_RADII)
+    return tg.GPIOIS(torch.cat([xi, x]), torch.cat([torch.zeros(40, dtype=torch.float64), y]),
+                     torch.cat([torch.zeros(40, dtype=torch.long), t]), theta=THETA, noise=NOISE,
+                     inference="batched").fit()
+
+
+INTERIOR_RADII = (0.12, 0.2, 0.15)
+
+
+def _interior_patch(rng, k):
+    c = _ellipsoid(rng, 1, INTERIOR_RADII)
+    pts = c + 0.01 * torch.tensor(rng.normal(size=(k, 3)))
+    y = torch.tensor((rng.random(k) < 0.25).astype(np.float64))
+    return torch.where(y.bool().unsqueeze(1), pts * 1.08, pts), y
+
+
+def test_a_tracking_step_raises_the_exact_mll_and_leaves_what_it_predicts():
+    """track=True: one Newton step with the held Hessian; the MLL at the new K_t is a dense solve's, it rises, and the
+    gain still to be had (a full re-learning from there, recomputed) is of the size the record reports."""
+    rng = np.random.default_rng(7)
+    model = _interior_model(rng)
+    assert 0.2 < model.correlation < 0.8
+    hessian = model.fit_result.hessian
+    for _ in range(5):
+        model.add_observations(*_interior_patch(rng, 24), 0)
+        kt_before = model.task_covariance.clone()
+        before = float(_dense(model._inference()).mll(kt_before.clone()))
+        model.fit(min_gain=0.0, track=True, max_hold=100)
+        r = model.fit_result
+        assert r.tracked and not r.relearned and r.iterations == 1
+        assert np.array_equal(r.hessian, hessian)                    # the held Hessian, not a new one
+        dense_mll = float(_dense(model._inference()).mll(model._task_matrix()))
+        assert r.mll == pytest.approx(dense_mll, rel=1e-12) and dense_mll > before
+        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+                         task_covariance=model.task_covariance, inference="structured").fit(multi_start=False)
+        remaining = best.fit_result.mll - r.mll
+        assert 0.4 * r.predicted_gain < remaining < 2.0 * r.predicted_gain       # measured ratios 0.5-1.3
+    # a held Hessian that is no maximum's cannot give a step: the fit re-learns in full
+    model.fit_result.hessian = -model.fit_result.hessian
+    model.add_observations(*_interior_patch(rng, 24), 0)
+    model.fit(min_gain=0.0, track=True, max_hold=100)
+    assert model.fit_result.relearned and not model.fit_result.tracked
+
+
+def test_no_tracking_step_leaves_a_bound_on_a_hessian_taken_at_it():
+    """Concentric shapes: K_t at a correlation of 1 (w at its lower bound). Where the gradient points back inside, the
+    Hessian held from the bound says nothing of the interior (a tracked step there once left 2.3 nats to a full
+    re-learning while predicting 0.016), so the fit re-learns in full; where it points outside, the bound holds and
+    the step tracks the other two coordinates."""
+    from torch_gpioius.inference.optim import cholesky_bounds, task_covariance_to_chol_params
+
+    rng = np.random.default_rng(7)
+    model = _model(rng)
+    lower, upper = cholesky_bounds()
+    kinds = []
+    for _ in range(5):
+        model.add_observations(*_patch(rng, 24), 0)
+        phi = task_covariance_to_chol_params(model.task_covariance)
+        _, _, free = model._chol_gradient(model._inference(), model._task_matrix())
+        leaves = bool((((phi <= lower) | (phi >= upper)) & free).any())
+        model.fit(min_gain=0.0, track=True, max_hold=100)
+        assert model.correlation > 0.999
+        kinds.append((leaves, model.fit_result.tracked))
+        if model.fit_result.tracked:
+            best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+                             task_covariance=model.task_covariance, inference="structured").fit(multi_start=False)
+            assert best.fit_result.mll - model.fit_result.mll < 2.0 * model.fit_result.predicted_gain + 1e-9
+    assert all(not (leaves and tracked) for leaves, tracked in kinds)
+    assert {tracked for _, tracked in kinds} == {True, False}            # both cases occur on this data
+
+
+def test_tracking_counts_towards_max_hold():
+    rng = np.random.default_rng(8)
+    model = _interior_model(rng)
+    kinds = []
+    for _ in range(4):
+        model.add_observations(*_interior_patch(rng, 16), 0)
+        model.fit(min_gain=0.0, track=True, max_hold=3)
+        kinds.append((model.fit_result.tracked, model.fit_result.relearned))
+    assert kinds == [(True, False)] * 3 + [(False, True)]
+
+
+@pytest.mark.filterwarnings("ignore:GPIOIS.fit. K_t's fit stopped")     # the reference's stall at the bound
+def test_scouted_restarts_find_the_other_basin_and_cost_one_full_relearning_per_basin():
+    """The fixed starts on a thinned copy (10 of the 15 touches) of a dataset whose warm start sticks at a correlation
+    of 1 (tests/models/test_gpiois.py): the copy's other basin is re-learned on all the data, which finds the same
+    optimum as the fixed starts on all the data. Where the copy finds no other basin, the full data see only the warm
+    start's Newton run."""
+    from tests.models.test_gpiois import _sticky_model, _stuck_start
+
+    full, scouted = _sticky_model(), _sticky_model()
+    full.task_covariance = scouted.task_covariance = _stuck_start()
+    full.fit(multi_start=True)
+    scouted.fit(multi_start=True, scout=10)
+    assert scouted.fit_result.starts == 4 and scouted.fit_result.scout == 10 and full.fit_result.scout == 0
+    assert scouted.correlation < 0.5
+    assert float((scouted.task_covariance - full.task_covariance).abs().max()) < 1e-6
+    # a scout as large as the data is no scout: the fixed starts run on all of it
+    whole = _sticky_model()
+    whole.task_covariance = _stuck_start()
+    assert whole.fit(multi_start=True, scout=15).fit_result.scout == 0
+    # one basin: the full engine evaluates only the warm start's run
+    rng = np.random.default_rng(9)
+    model = _model(rng)
+    for _ in range(3):
+        model.add_observations(*_patch(rng, 16), 0)
+    engine = model._inference()
+    calls = []
+    original = engine.mll_derivatives
+    engine.mll_derivatives = lambda kt: calls.append(1) or original(kt)
+    model.fit(multi_start=True, scout=30)
+    # one Newton run: an evaluation per iteration, and one more unless the Newton-decrement stop ended it
+    assert model.fit_result.scout == 30 and len(calls) in (model.fit_result.iterations, model.fit_result.iterations + 1)
+    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+                     inference="structured").fit(multi_start=True)
+    assert model.fit_result.mll == pytest.approx(best.fit_result.mll, abs=1e-7)
+
+
+@pytest.mark.parametrize("kwargs", [{"min_gain": -1.0}, {"min_gain": math.nan}, {"min_gain": 0.1, "max_hold": 0},
+                                    {"scout": 1}, {"scout": 2.5}, {"scout": True}])
 def test_bad_relearning_settings_are_refused_and_leave_the_model_alone(kwargs):
     rng = np.random.default_rng(5)
     model = _model(rng)
     before = (model.task_covariance.clone(), model.fit_result)
-    with pytest.raises(ValueError, match="min_gain|max_hold"):
+    with pytest.raises(ValueError, match="min_gain|max_hold|scout"):
         model.fit(**kwargs)
     assert torch.equal(model.task_covariance, before[0]) and model.fit_result is before[1]
 

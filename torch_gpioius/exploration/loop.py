@@ -279,6 +279,9 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     if hasattr(m, "task_covariance"):
         record.task_covariance = m.task_covariance.detach().cpu().numpy()
     record.truncation = float(getattr(m, "truncation", 0.0))
+    fit = getattr(m, "fit_result", None)
+    if fit is not None and not fit.relearned and math.isfinite(fit.predicted_gain):
+        record.fit_gap = float(fit.predicted_gain)
     if hasattr(m, "region_correlations"):
         record.region_correlation = m.region_correlations().detach().cpu().numpy()
 

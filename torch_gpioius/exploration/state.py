@@ -45,6 +45,8 @@ RECORD_FIELDS = {
     "contact_on_body": "1 if the fingertip touched the body itself at the contact, 0 if only the cover (NaN unknown)",
     "retracted": "free-space samples retracted so far",
     "truncation": "bound on the truncated outer basis' change of the Gram matrix, relative to sigma^2 (0: exact)",
+    "fit_gap": "the MLL gain predicted to remain from the K_t in use to the optimum [nats]: 0 after a full "
+               "re-learning; a held or tracked K_t's Newton decrement with the last re-learning's Hessian",
 }
 
 
@@ -93,6 +95,7 @@ class StepRecord:
     contact_distance: float = math.nan
     contact_on_body: float = math.nan
     truncation: float = 0.0
+    fit_gap: float = 0.0
     final: bool = False
     observations: Observations | None = None
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))

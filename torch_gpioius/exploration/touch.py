@@ -46,7 +46,9 @@ class PatchTouch:
     margin from the contacts and from the patch's surface points).
 
     The model takes tens of points per step, so a visual-tactile run uses the batched engine
-    (``GPIOIS(inference="batched")``) and re-learns K_t by the ``min_gain`` rule (``GPIOIS.fit``).
+    (``GPIOIS(inference="batched")``) and re-learns K_t by the ``min_gain`` rule (``GPIOIS.fit``), with held-Hessian
+    tracking steps in place of most re-learnings and the restarts' fixed starts on a thinned copy of the data
+    (``track``, ``scout``): a step's cost then stays near one factorisation as patches pile up (docs/performance.md).
 
     With ``max_points``, a patch adds only its most informative points (:meth:`select`): the contact, then the
     patch's points in order of their posterior variance under the model before the touch, at most ``max_points`` in
@@ -58,6 +60,14 @@ class PatchTouch:
     Attributes:
         settings: the patch's thinning.
         min_gain: K_t is re-learned when the exact gradient predicts more than this [nats].
+        track: move K_t by one Newton step with the last re-learning's Hessian where that raises the exact MLL and
+            leaves less to gain, instead of re-learning it to convergence (``GPIOIS.fit(track=True)``); each record's
+            ``fit_gap`` says what the step is predicted to leave [nats].
+        scout: a restart (``restart_every``) runs its fixed starts on the inner points thinned to this many and
+            re-learns on all the data only from another basin found there (``GPIOIS.fit(scout=...)``); None: on all
+            the data, whose restarts grew to 30-100 s at 1.5 m of travel.
+        max_hold: a full re-learning after this many kept or tracked fits in a row (more than ``restart_every``'s 25,
+            so that at the defaults only the restarts re-learn in full on schedule).
         max_points: at most this many points of each patch enter the model (default 12; None: every point of the
             spacing thinning, the reference, whose steps grow to seconds as patches pile up: docs/results-patches.md).
         min_variance: points whose posterior variance before the touch is below this fraction of the prior variance
@@ -71,6 +81,9 @@ class PatchTouch:
     sensor: Any = None
     max_points: int | None = 12
     min_variance: float = 0.01
+    track: bool = True
+    scout: int | None = 256
+    max_hold: int = 30
     name: str = "patch"
     inference: str = "batched"
     _pad: Any = field(default=None, init=False, repr=False, compare=False)   # the run's hardware pad (bind)
@@ -79,12 +92,17 @@ class PatchTouch:
     last_dropped: tuple = field(default=(0, 0.0), init=False, repr=False, compare=False)  # (points, nats bound)
 
     def __post_init__(self) -> None:
-        if self.max_points is not None and (isinstance(self.max_points, bool) or
-                                            not isinstance(self.max_points, (int, np.integer)) or self.max_points < 1):
+        if self.max_points is not None and not _is_int_at_least(self.max_points, 1):
             raise ValueError(f"PatchTouch.max_points: must be an integer >= 1 or None, got {self.max_points!r}")
         if isinstance(self.min_variance, bool) or not (isinstance(self.min_variance, (int, float)) and
                                                        0.0 <= self.min_variance < 1.0):
             raise ValueError(f"PatchTouch.min_variance: must be a fraction in [0, 1), got {self.min_variance!r}")
+        if not isinstance(self.track, (bool, np.bool_)):
+            raise ValueError(f"PatchTouch.track: must be True or False, got {self.track!r}")
+        if self.scout is not None and not _is_int_at_least(self.scout, 2):
+            raise ValueError(f"PatchTouch.scout: must be an integer >= 2 or None, got {self.scout!r}")
+        if not _is_int_at_least(self.max_hold, 1):
+            raise ValueError(f"PatchTouch.max_hold: must be an integer >= 1, got {self.max_hold!r}")
 
     def bind(self, hardware) -> None:
         """Take the world's pad (``hardware.tactile``) unless a sensor was given.
@@ -100,7 +118,8 @@ class PatchTouch:
             self._pad = pad                  # each run binds its own hardware's pad
 
     def fit_options(self) -> dict:
-        return {"min_gain": self.min_gain}
+        return {"min_gain": self.min_gain, "track": bool(self.track), "scout": self.scout,
+                "max_hold": int(self.max_hold)}
 
     def footprint(self) -> dict[str, np.ndarray]:
         """The last reading's pad for logs: ``pad_pose`` `(4, 4)` pad-to-base and ``pad_size`` `(2,)` [m] (width
@@ -174,7 +193,16 @@ class PatchTouch:
         # every patch is kept in logs written before the selection existed: they resume with max_points=None
         if self.max_points is not None:
             out.update(max_points=int(self.max_points), min_variance=float(self.min_variance))
+        # logs written before tracking and scouted restarts re-learned in full every time: they resume with
+        # track=False, scout=None, max_hold=20
+        if (self.track, self.scout, self.max_hold) != (False, None, 20):
+            out["relearn"] = {"track": bool(self.track), "scout": None if self.scout is None else int(self.scout),
+                              "max_hold": int(self.max_hold)}
         return out
+
+
+def _is_int_at_least(value, lo: int) -> bool:
+    return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= lo
 
 
 #: Touch models by name (``explore(..., touch="point")``).

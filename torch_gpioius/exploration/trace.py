@@ -56,6 +56,8 @@ class Trace:
             estimate), NaN where not measured.
         truncation: `(n,)` bound on the truncated outer basis' change of the Gram matrix relative to sigma^2
             (``outer_tol``; 0 with the exact engines).
+        fit_gap: `(n,)` MLL gain predicted to remain from each record's K_t to the optimum [nats] (0 after a full
+            re-learning; a held or tracked K_t's, ``PatchTouch.track``).
     """
 
     mode: str
@@ -85,6 +87,7 @@ class Trace:
     contact_on_body: np.ndarray = field(default_factory=lambda: np.zeros(0))
     recoveries: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     truncation: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    fit_gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
     estimate: np.ndarray = field(default_factory=lambda: np.zeros(0))
     reapproaches: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     reapproach_travel: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -117,7 +120,7 @@ class Trace:
                    touch=getattr(config.touch, "name", "custom"), contact_distance=col("contact_distance"),
                    contact_on_body=col("contact_on_body"),
                    recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"),
-                   estimate=col("estimate"),
+                   fit_gap=col("fit_gap"), estimate=col("estimate"),
                    reapproaches=np.array([r.reapproaches for r in recs], dtype=np.int64),
                    reapproach_travel=col("reapproach_travel"),
                    shape={name: col(name) for name in SHAPE_METRICS})
@@ -184,6 +187,8 @@ class Trace:
                 row["contact_distance"] = float(self.contact_distance[i])
                 row["contact_on_body"] = float(self.contact_on_body[i])
             row["step_time"] = float(self.step_time[i])
+            if len(self.fit_gap):
+                row["fit_gap"] = float(self.fit_gap[i])
             if len(self.robot_time):
                 row["robot_time"] = float(self.robot_time[i])
             out.append(row)

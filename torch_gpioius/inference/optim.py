@@ -27,7 +27,7 @@ from ..tolerances import tol
 
 __all__ = ["FitResult", "chol_params_to_task_covariance", "task_covariance_to_chol_params", "maximize_mll",
            "newton_maximize", "predicted_gain", "chain_to_cholesky", "cholesky_bounds",
-           "free_coordinates"]
+           "free_coordinates", "held_newton_step"]
 
 
 @dataclass
@@ -46,6 +46,10 @@ class FitResult:
         relearned: False when ``GPIOIS.fit(min_gain=...)`` held K_t instead of re-learning it.
         predicted_gain: the Newton decrement [nats] that decided a held fit (NaN for a full fit).
         starts: how many starting points the fit tried (1: warm start only; more: ``multi_start``).
+        tracked: True when ``GPIOIS.fit(track=True)`` moved K_t by one Newton step with the held Hessian instead of
+            re-learning it to convergence (``predicted_gain`` is then what is predicted to remain).
+        scout: inner points of the thinned copy of the data on which ``GPIOIS.fit(scout=...)`` ran the fixed
+            starts (0: they ran on all the data, or there were none).
     """
 
     task_covariance: Tensor
@@ -57,6 +61,8 @@ class FitResult:
     relearned: bool = True
     predicted_gain: float = math.nan
     starts: int = 1
+    tracked: bool = False
+    scout: int = 0
 
 
 def chol_params_to_task_covariance(phi) -> Tensor:
@@ -250,3 +256,34 @@ def predicted_gain(grad: np.ndarray, hess: np.ndarray, free: np.ndarray) -> floa
         return math.inf
     z = np.linalg.solve(chol, np.asarray(grad, dtype=np.float64)[idx])
     return 0.5 * float(z @ z)
+
+
+def held_newton_step(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray) -> np.ndarray | None:
+    """One projected Newton step in the Cholesky parameters with a Hessian from an earlier K_t (``GPIOIS.fit``'s
+    tracking step): ``phi + (-H)^-1 g`` on the free coordinates, shortened to :func:`step_caps` and clamped to
+    :func:`cholesky_bounds`.
+
+    Args:
+        phi: `(3,)` current Cholesky parameters.
+        grad: `(3,)` exact gradient of the MLL at ``phi``.
+        hess: `(3, 3)` Hessian of the MLL from the last full re-learning.
+
+    Returns:
+        `(3,)` the candidate parameters, or None where ``-H`` is not positive definite on the free coordinates (no
+        ascent direction can be trusted from it).
+    """
+    lower, upper = cholesky_bounds()
+    free = free_coordinates(phi, grad, lower, upper)
+    idx = np.flatnonzero(free)
+    step = np.zeros(len(phi))
+    if len(idx):
+        neg_h = -np.asarray(hess, dtype=np.float64)[np.ix_(idx, idx)]
+        try:
+            chol = np.linalg.cholesky(neg_h)
+        except np.linalg.LinAlgError:
+            return None
+        step[idx] = np.linalg.solve(chol.T, np.linalg.solve(chol, np.asarray(grad, dtype=np.float64)[idx]))
+    over = float(np.max(np.abs(step) / step_caps(phi)))
+    if over > 1.0:
+        step /= over
+    return np.minimum(np.maximum(phi + step, lower), upper)

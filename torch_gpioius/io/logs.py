@@ -29,7 +29,7 @@ OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertaint
                    "rho": "correlation", "ci": "correlation_interval", "time": "step_time", "sim_time": "robot_time"}
 _VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "estimate", *SHAPE_METRICS, "similarity",
            "correlation", "step_time",
-           "robot_time", "contact_distance", "contact_on_body", "truncation")
+           "robot_time", "contact_distance", "contact_on_body", "truncation", "fit_gap")
 
 
 def step_values(meta: dict) -> dict:
@@ -96,7 +96,8 @@ class LogRecorder(Recorder):
                 "correlation": record.correlation,
                 "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
-                "contact_on_body": record.contact_on_body, "truncation": record.truncation}
+                "contact_on_body": record.contact_on_body, "truncation": record.truncation,
+                "fit_gap": record.fit_gap}
         fit_state = getattr(state.model, "fit_state", None)
         fit_hessian = np.full((3, 3), np.nan)
         if callable(fit_state):                     # the min_gain rule's memory (patch runs), so resume decides alike
@@ -188,7 +189,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
                          robot_time=v["robot_time"], taps=v["taps"], recoveries=v["recoveries"], retracted=v["retracted"],
                          reapproaches=v["reapproaches"], reapproach_travel=v["reapproach_travel"],
                          contact_distance=v["contact_distance"], contact_on_body=v["contact_on_body"],
-                         truncation=v["truncation"])
+                         truncation=v["truncation"], fit_gap=v["fit_gap"])
         state.records.append(rec)
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it

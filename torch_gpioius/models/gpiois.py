@@ -17,8 +17,9 @@ from .base import ImplicitSurfaceGP
 from .._validation import as_float, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
-from ..inference.optim import (FitResult, chain_to_cholesky, cholesky_bounds, free_coordinates, maximize_mll,
-                               predicted_gain, task_covariance_to_chol_params)
+from ..inference.optim import (FitResult, chain_to_cholesky, chol_params_to_task_covariance, cholesky_bounds,
+                               free_coordinates, held_newton_step, maximize_mll, predicted_gain,
+                               task_covariance_to_chol_params)
 from ..inference.structured import StructuredExactInference
 from ..tolerances import tol
 
@@ -297,7 +298,7 @@ class GPIOIS(ImplicitSurfaceGP):
 
     # ------------------------------------------------------------------ learning and prediction
     def fit(self, multi_start: bool | None = None, min_gain: float | None = None,
-            max_hold: int = 20) -> "GPIOIS":
+            max_hold: int = 20, track: bool = False, scout: int | None = None) -> "GPIOIS":
         """Learn K_t (and only K_t) by maximising the exact log marginal likelihood, eq. (15)-(16).
 
         A projected, damped Newton method on the Cholesky parameters of K_t with the exact gradient and Hessian
@@ -308,7 +309,12 @@ class GPIOIS(ImplicitSurfaceGP):
         at the current K_t (O(N_i^2) with ``inference="batched"``); K_t is kept when the Newton decrement with
         the Hessian H of the last re-learning, ``g^T (-H)^-1 g / 2`` on the coordinates not held at a bound,
         predicts a gain below ``min_gain`` nats, and fewer than ``max_hold`` fits in a row have kept it.
-        Otherwise K_t is re-learned as without ``min_gain``. Inference at a kept K_t stays exact.
+        Otherwise K_t is re-learned as without ``min_gain``, or, with ``track``, moved by one Newton step with that
+        held H (one factorisation at the new K_t instead of a Newton run's three or four evaluations with exact
+        Hessians): the step is kept when the exact MLL rises and the decrement that remains at the new K_t (then
+        ``fit_result.predicted_gain``) is below the one before; otherwise (H no longer describes the likelihood) K_t
+        is re-learned in full. Inference at a kept or tracked K_t stays exact; only K_t's distance from the optimum
+        is approximate, and it is reported.
 
         Args:
             multi_start: also start from fixed, data-independent K_t values (identity; 0.1 x a correlation of 0.9)
@@ -317,40 +323,57 @@ class GPIOIS(ImplicitSurfaceGP):
                 every ``restart_every`` steps).
             min_gain: re-learn only when the predicted gain exceeds this [nats] (None: always re-learn). For
                 scale: a 95 % profile interval spans 1.92 nats below the optimum.
-            max_hold: re-learn after this many kept fits in a row, whatever the prediction.
+            max_hold: re-learn in full after this many kept or tracked fits in a row, whatever the prediction.
+            track: with ``min_gain``, replace a re-learning by one held-Hessian Newton step where that raises the MLL.
+            scout: with ``multi_start`` and more inner points than this, run the fixed starts on a copy of the data
+                whose inner points are thinned to ``scout`` (evenly along their order of arrival; every outer point
+                kept), and re-learn on all the data from each optimum found there in another basin than the warm
+                start's. A restart then costs ``scout^3`` instead of ``N_i^3`` per evaluation, plus one full
+                re-learning per other basin; the K_t kept is an optimum of the full likelihood, the best of those.
+                A basin that the thinned copy does not have is missed. None: the fixed starts run on all the
+                data.
 
         Returns:
-            self, with ``fit_result`` describing the optimisation (``relearned``, ``predicted_gain``).
+            self, with ``fit_result`` describing the optimisation (``relearned``, ``predicted_gain``, ``tracked``,
+            ``starts``, ``scout``).
 
         Raises:
-            ValueError: ``min_gain`` negative or NaN, ``max_hold`` below 1.
+            ValueError: ``min_gain`` negative or NaN, ``max_hold`` below 1, ``scout`` below 2.
         """
         if min_gain is not None and not min_gain >= 0:        # NaN fails this too
             raise ValueError(f"min_gain: must be a number of nats >= 0 (inf: hold for max_hold fits), got {min_gain!r}")
         if max_hold < 1:
             raise ValueError(f"max_hold: must be >= 1, got {max_hold!r}")
+        if scout is not None and (isinstance(scout, bool) or not isinstance(scout, (int, np.integer)) or scout < 2):
+            raise ValueError(f"scout: must be an integer >= 2 (inner points of the restarts' copy) or None, "
+                             f"got {scout!r}")
         engine = self._inference()
         if multi_start is None:
             multi_start = self.fit_result is None
-        if min_gain is not None and not multi_start and self._hold_task_covariance(engine, min_gain, max_hold):
+        if (min_gain is not None and not multi_start
+                and self._hold_task_covariance(engine, min_gain, max_hold, track)):
             return self
-        starts = [self.task_covariance]
-        if multi_start:
-            # fixed, data-independent starts, and the current variances with no relation: a warm start near a
-            # correlation of 1 can sit in a local optimum that these leave (tests/models/test_gpiois.py)
-            starts += [torch.eye(2, dtype=torch.float64), 0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]],
-                                                                                  dtype=torch.float64),
-                       torch.diag(self.task_covariance.diagonal().clamp_min(1e-6))]
         x0 = self.train_inputs[0]
 
         def evaluate(kt: Tensor):
             return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
 
-        best: FitResult | None = None
-        for kt0 in starts:
-            result = maximize_mll(evaluate, kt0)
-            if best is None or result.mll > best.mll + 1e-9 * max(1.0, abs(best.mll)):
-                best = result
+        best = maximize_mll(evaluate, self.task_covariance)
+        starts, scouted = 1, 0
+        if multi_start:
+            fixed = self._fixed_starts()
+            n_inner = int((self._train_task() == INNER).sum())
+            if scout is not None and n_inner > scout:
+                # the fixed starts on a thinned copy: a restart costs scout^3, not N_i^3, per evaluation, and the
+                # full data re-learn once more per other basin found there
+                candidates = self._scout_starts(fixed, int(scout), best.task_covariance)
+                starts, scouted = 1 + len(fixed), int(scout)
+            else:
+                starts, candidates = 1 + len(fixed), fixed
+            for kt0 in candidates:
+                result = maximize_mll(evaluate, kt0)
+                if result.mll > best.mll + 1e-9 * max(1.0, abs(best.mll)):
+                    best = result
         if not self.identified:
             present = "outer" if bool((self._train_task() == OUTER).any()) else "inner"
             warnings.warn(f"GPIOIS.fit: only {present} (task {int(present == 'outer')}) observations: the similarity "
@@ -361,8 +384,42 @@ class GPIOIS(ImplicitSurfaceGP):
                           f"optimum (projected gradient {best.grad_norm:.3g}); the best K_t found is used "
                           "(fit_result has the details)", FitNotConvergedWarning, stacklevel=2)
         self.task_covariance = best.task_covariance
-        self.fit_result = dataclasses.replace(best, starts=len(starts))
+        self.fit_result = dataclasses.replace(best, starts=starts, scout=scouted)
         return self
+
+    def _fixed_starts(self) -> list[Tensor]:
+        """The restarts' K_t: fixed, data-independent values, and the current variances with no relation (a warm
+        start near a correlation of 1 can sit in a local optimum that these leave: tests/models/test_gpiois.py)."""
+        return [torch.eye(2, dtype=torch.float64),
+                0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]], dtype=torch.float64),
+                torch.diag(self.task_covariance.diagonal().clamp_min(1e-6))]
+
+    def _scout_starts(self, fixed: list[Tensor], size: int, warm: Tensor) -> list[Tensor]:
+        """Run the warm and the fixed starts on a copy of the data with ``size`` inner points (evenly spaced in
+        arrival order, so a path's whole length is kept) and every outer point; return the copy's optima that lie
+        in other basins than the warm start's (K_t more than 1 % apart, relative to its largest entry), one per
+        basin. Which of two near-equal optima is the higher can change with the thinning, so every other basin
+        found is returned for the full data to judge, not only a better one."""
+        task = self._train_task()
+        inner = torch.nonzero(task == INNER).squeeze(-1)
+        keep = inner[torch.linspace(0, len(inner) - 1, size, device=inner.device).round().long()]
+        keep = torch.cat([keep, torch.nonzero(task == OUTER).squeeze(-1)])
+        cls = self._engine_class()
+        if cls is BatchedExactInference:          # nothing is appended to the copy: no held factorisation needed
+            cls = StructuredExactInference
+        copy = cls(self.train_inputs[0][keep], self.train_targets[keep], task[keep], self.covar_module, self.noise,
+                   self.prior_mean)
+        x0 = self.train_inputs[0]
+
+        def evaluate(kt: Tensor):
+            return copy.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
+
+        found = [maximize_mll(evaluate, warm).task_covariance]
+        for kt0 in fixed:
+            kt = maximize_mll(evaluate, kt0).task_covariance
+            if all(float((kt - other).abs().max()) > 0.01 * float(other.abs().max()) for other in found):
+                found.append(kt)
+        return found[1:]
 
     def fit_state(self) -> tuple[np.ndarray, bool, int]:
         """What ``fit(min_gain=...)`` decides from, for logs and resume: the last re-learning's `(3, 3)` Hessian
@@ -380,26 +437,63 @@ class GPIOIS(ImplicitSurfaceGP):
                                     relearned=bool(relearned))
         self._held_fits = int(held_fits)
 
-    def _hold_task_covariance(self, engine, min_gain: float, max_hold: int) -> bool:
-        """Keep K_t if the exact gradient predicts a re-learning gain below ``min_gain`` (see ``fit``)."""
+    def _hold_task_covariance(self, engine, min_gain: float, max_hold: int, track: bool = False) -> bool:
+        """Keep K_t if the exact gradient predicts a re-learning gain below ``min_gain``, or (``track``) move it by
+        one held-Hessian Newton step that raises the MLL (see ``fit``). False: re-learn in full."""
         last = self.fit_result
         if last is None or last.hessian is None or (not last.relearned and self._held_fits >= max_hold):
             return False
-        x0 = self.train_inputs[0]
-        kt = self._task_matrix()
+        mll, grad, free = self._chol_gradient(engine, self._task_matrix())
+        gain = predicted_gain(grad, last.hessian, free)
+        if gain > min_gain:
+            return track and self._track_task_covariance(engine, mll, grad, gain, free, last)
+        self._held_fits = self._held_fits + 1 if not last.relearned else 1
+        self.fit_result = FitResult(self.task_covariance, mll, float(np.abs(np.where(free, grad, 0.0)).max()), 0,
+                                    last.converged, hessian=last.hessian, relearned=False, predicted_gain=gain)
+        return True
+
+    def _chol_gradient(self, engine, kt: Tensor) -> tuple[float, np.ndarray, np.ndarray]:
+        """Exact MLL at ``kt`` with its gradient in the Cholesky parameters and the coordinates free to move
+        (O(N_i^2) at the batched engine's held K_t, one factorisation at a new one)."""
         if hasattr(engine, "mll_gradient"):
             mll, g = engine.mll_gradient(kt)
         else:
             mll, g, _ = engine.mll_derivatives(kt)
+        phi = task_covariance_to_chol_params(kt)
+        grad, _ = chain_to_cholesky(phi, g, torch.zeros(3, 3, dtype=kt.dtype, device=kt.device))
+        return mll, grad, free_coordinates(phi, grad, *cholesky_bounds())
+
+    def _track_task_covariance(self, engine, mll: float, grad: np.ndarray, gain: float, free: np.ndarray,
+                               last: FitResult) -> bool:
+        """One Newton step with the last re-learning's Hessian from the current K_t, kept if the exact MLL rises and
+        the predicted gain that remains is below ``gain``, the one before the step (the held Hessian still contracts
+        towards the optimum; near a bound of K_t it can stop doing so while the MLL still creeps up). Not taken
+        where a coordinate at its bound is free to leave it: K_t at a correlation of 1 (``w`` at its lower bound)
+        whose gradient now points inside, where the held Hessian, taken at the bound, says nothing of the
+        interior (the optimum there can be nats away: tests/inference/test_batched.py)."""
+        x0 = self.train_inputs[0]
         phi = task_covariance_to_chol_params(self.task_covariance)
-        grad, _ = chain_to_cholesky(phi, g, torch.zeros(3, 3, dtype=x0.dtype, device=x0.device))
-        free = free_coordinates(phi, grad, *cholesky_bounds())
-        gain = predicted_gain(grad, last.hessian, free)
-        if gain > min_gain:
+        lower, upper = cholesky_bounds()
+        if (((phi <= lower) | (phi >= upper)) & free).any():
             return False
+        candidate = held_newton_step(phi, grad, last.hessian)
+        if candidate is None:
+            return False
+        kt = chol_params_to_task_covariance(candidate)
+        try:
+            mll_new, grad_new, free = self._chol_gradient(engine, kt.to(dtype=x0.dtype, device=x0.device))
+        except (torch.linalg.LinAlgError, ArithmeticError):
+            return False
+        if not (math.isfinite(mll_new) and np.isfinite(grad_new).all()) or mll_new < mll:
+            return False
+        remaining = predicted_gain(grad_new, last.hessian, free)
+        if not remaining < gain:
+            return False
+        self.task_covariance = kt
         self._held_fits = self._held_fits + 1 if not last.relearned else 1
-        self.fit_result = FitResult(self.task_covariance, mll, float(np.abs(np.where(free, grad, 0.0)).max()), 0,
-                                    last.converged, hessian=last.hessian, relearned=False, predicted_gain=gain)
+        self.fit_result = FitResult(self.task_covariance, mll_new, float(np.abs(np.where(free, grad_new, 0.0)).max()),
+                                    1, last.converged, hessian=last.hessian, relearned=False,
+                                    predicted_gain=remaining, tracked=True)
         return True
 
     def predict(self, x, task: int | str = INNER) -> tuple[Tensor, Tensor]:

@@ -305,6 +305,8 @@ def run_one(spec: RunSpec) -> dict:
     if "outer_tol" in kw and trace is not None:      # the truncated outer basis: its setting and largest bound
         record["outer_tol"] = kw["outer_tol"]
         record["max_truncation"] = float(np.nanmax(trace.truncation)) if len(trace.truncation) else math.nan
+    if trace is not None and len(trace.fit_gap):     # how far a held or tracked K_t was from its optimum [nats]
+        record["max_fit_gap"] = float(np.nanmax(trace.fit_gap))
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
@@ -505,7 +507,7 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "reference_travel": ref,
            "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
            "touch_inside": run.get("touch_inside", 0.0), "vision_inside": run.get("vision_inside", 0.0),
-           "max_truncation": run.get("max_truncation", 0.0)}
+           "max_truncation": run.get("max_truncation", 0.0), "max_fit_gap": run.get("max_fit_gap", math.nan)}
     for f in FRACTIONS:
         p = int(round(100 * f))
         row[f"hausdorff_{p}"] = _at_travel(s, "hausdorff", f * ref)
