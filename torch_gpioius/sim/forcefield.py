@@ -445,7 +445,12 @@ class Scene3D(World):
         field = self.contact_model()
         sensor = SimulatedForceSensor(field, robot.read_pose, clock=lambda: robot.time,
                                       noise_std=self.sensor_noise, seed=self.seed)
-        return Hardware(robot, sensor, self.camera, ContactController(robot, sensor, ContactConfig(floor=self.support)),
+        # the default views are built afresh for each hardware, as the robot and the sensor are, so that their noise
+        # starts from the seed every time: one camera shared by every run of a scene carried its noise generator's
+        # state from one run to the next, and the same call gave another cloud in the same process (a study worker's
+        # second run of a seed-0 scene, a test run after another); a given source is the user's and used as it is
+        camera = self._given_camera if self._given_camera is not None else self.cameras(self.views)
+        return Hardware(robot, sensor, camera, ContactController(robot, sensor, ContactConfig(floor=self.support)),
                         self.tactile_pad(robot, field))
 
     def tactile_pad(self, robot, field=None):
