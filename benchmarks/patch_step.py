@@ -21,14 +21,19 @@ optimum, in nats of marginal likelihood. (b) and (c) run fewer steps at large N_
     python benchmarks/patch_step.py --inner 300 --steps 4 --others 1   # quick
     python benchmarks/patch_step.py --device cuda                      # on a GPU (float64)
 
-**Whole runs** (``--whole-run SCENE``): visual-tactile patch explorations of a scene file in the force-field world,
-every step timed (plan, ingest, re-learning: the trace's ``step_time``), at each ``--travel``, for each
-``--max-points`` (``none``: every point of each patch, the exact reference; a number: ``PatchTouch.max_points``,
-the informative points), in one run: median, 95th percentile and maximum of the step, the inner points at the end,
-and the final shape (Hausdorff, Chamfer, F-score at 1 cm, bias):
+**Whole runs** (``--whole-run SCENE``): visual-tactile patch explorations of a scene file, or of one of the
+force-field world's objects (E-H), every step timed (plan, ingest, re-learning: the trace's ``step_time``), at each
+``--travel``, for each ``--max-points`` (``none``: every point of each patch, the exact reference; a number:
+``PatchTouch.max_points``, the informative points) and each ``--relearn`` schedule of K_t (``track``: the default,
+held-Hessian tracking steps and restarts scouted on 256 inner points; ``full``: every re-learning and restart to
+convergence on all the data, the schedule before it), in one run: median, 95th percentile and maximum of the step,
+the steps that re-learned in full and that tracked, the largest ``fit_gap`` [nats], the inner points at the end, the
+final correlation and shape (Hausdorff, Chamfer, F-score at 1 cm, bias):
 
     OMP_NUM_THREADS=1 python benchmarks/patch_step.py --whole-run examples/scenes/real/duck-tight.toml \
         --travel 0.3 1.0 1.5 --max-points 12 none
+    OMP_NUM_THREADS=1 python benchmarks/patch_step.py --whole-run H --travel 1.0 --max-points 12 \
+        --relearn track full --seed 3
 """
 
 from __future__ import annotations
@@ -146,27 +151,34 @@ def fmt(times):
     return f"{statistics.median(ms):.0f} / {statistics.fmean(ms):.0f} / {max(ms):.0f}"
 
 
-def whole_runs(scene_file: str, travels, max_points, seed: int, device) -> None:
+#: ``--relearn`` schedules: PatchTouch's settings of K_t's re-learning.
+RELEARN = {"track": {}, "full": {"track": False, "scout": None, "max_hold": 20}}
+
+
+def whole_runs(scene: str, travels, max_points, seed: int, device, relearn=("track",)) -> None:
     """Time every step of whole patch runs (see the module docstring) and print one row per run."""
     import warnings
 
+    from torch_gpioius.exploration.registry import make_world
     from torch_gpioius.exploration.touch import PatchTouch
     from torch_gpioius.sim.scenefile import load_scene
 
-    print("| scene | travel [m] | max_points | steps | step median / p95 / max [ms] | re-learned | N_inner at end | "
-          "H [cm] | Chamfer [cm] | F@1cm | bias [cm] | wall [s] |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    print("| scene | travel [m] | max_points | relearn | steps | step median / p95 / max [ms] | full / tracked | "
+          "max fit_gap [nats] | N_inner at end | rho | H [cm] | Chamfer [cm] | F@1cm | bias [cm] | wall [s] |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for travel in travels:
-        for mp in max_points:
-            world = load_scene(scene_file, seed=seed)
-            touch = PatchTouch(max_points=None if mp == "none" else int(mp))
-            relearned = []
+        for mp, schedule in ((mp, r) for mp in max_points for r in relearn):
+            world = (make_world("forcefield", scene, seed) if scene in ("E", "F", "G", "H")
+                     else load_scene(scene, seed=seed))
+            touch = PatchTouch(max_points=None if mp == "none" else int(mp), **RELEARN[schedule])
+            relearned, tracked = [], []
 
-            class Relearns:                                   # counts the steps whose fit re-learned K_t
+            class Relearns:                                   # counts the steps whose fit re-learned or tracked K_t
                 def start(self, run, state): ...
                 def step(self, run, state, record):
                     fr = getattr(state.model, "fit_result", None)
                     relearned.append(bool(fr is not None and fr.relearned))
+                    tracked.append(bool(fr is not None and fr.tracked))
                 def end(self, run, state): ...
 
             t0 = time.perf_counter()
@@ -178,8 +190,10 @@ def whole_runs(scene_file: str, travels, max_points, seed: int, device) -> None:
             st = {k: 1e3 * v for k, v in trace.step_time_summary().items()}      # [ms]
             sh = {k: float(v[-1]) for k, v in trace.shape.items()}
             n_inner = int((trace.model.train_task == 0).sum())
-            print(f"| {world.name} | {travel:g} | {mp} | {trace.n_steps - 1} | {st['median']:.0f} / {st['p95']:.0f} / "
-                  f"{st['max']:.0f} | {sum(relearned)} | {n_inner} | {trace.hausdorff[-1] * 100:.1f} | "
+            print(f"| {world.name} | {travel:g} | {mp} | {schedule} | {trace.n_steps - 1} | {st['median']:.0f} / "
+                  f"{st['p95']:.0f} / {st['max']:.0f} | {sum(relearned)} / {sum(tracked)} | "
+                  f"{float(np.nanmax(trace.fit_gap)):.3f} | {n_inner} | {trace.correlation[-1]:.2f} | "
+                  f"{trace.hausdorff[-1] * 100:.1f} | "
                   f"{sh['chamfer'] * 100:.2f} | {sh['fscore_10mm']:.2f} | {sh['bias'] * 100:.2f} | {wall:.0f} |",
                   flush=True)
 
@@ -195,10 +209,13 @@ def main():
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--skip", nargs="*", default=[], choices=["structured", "dense"], help="sides to leave out")
-    parser.add_argument("--whole-run", default=None, metavar="SCENE", help="time whole patch runs of this scene file")
+    parser.add_argument("--whole-run", default=None, metavar="SCENE",
+                        help="time whole patch runs of this scene file, or of a force-field object (E-H)")
     parser.add_argument("--travel", type=float, nargs="+", default=[0.3, 1.0], help="whole runs' travel [m]")
     parser.add_argument("--max-points", nargs="+", default=["12", "none"], help="whole runs' PatchTouch.max_points")
     parser.add_argument("--seed", type=int, default=0, help="whole runs' seed")
+    parser.add_argument("--relearn", nargs="+", default=["track"], choices=sorted(RELEARN),
+                        help="whole runs' re-learning schedules of K_t")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
@@ -207,7 +224,7 @@ def main():
         print(f"# {dev}, {os.cpu_count()} CPUs, torch {torch.__version__} ({torch.get_num_threads()} threads), "
               f"seed {args.seed}, metrics only at the end")
         whole_runs(args.whole_run, args.travel, args.max_points, args.seed,
-                   None if device.type == "cpu" else str(device))
+                   None if device.type == "cpu" else str(device), args.relearn)
         return
     print(f"# {dev}, {os.cpu_count()} CPUs, torch {torch.__version__} ({torch.get_num_threads()} threads), float64, "
           f"N_outer {args.outer}, k {args.k}, min_gain {args.min_gain} nats")
