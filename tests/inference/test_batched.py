@@ -108,6 +108,45 @@ def test_a_new_task_covariance_or_outer_points_or_removal_rebuild_and_stay_exact
     _assert_exact(engine, rng)
 
 
+def test_a_hold_behind_the_store_sums_t_directly_and_equals_the_store_and_a_dense_solve():
+    """After a re-learning (the Chebyshev store current) and batches bordered in (the store behind), a new held K_t
+    sums T and T' directly; held at the same K_t through the store instead, every held quantity agrees to rounding,
+    and both equal a dense solve. A second new K_t refills the first's buffers in place."""
+    rng = np.random.default_rng(11)
+    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine.mll_derivatives(KT)                            # a Newton evaluation: the store holds every row
+    assert engine.series is not None and not engine._store_behind(KT)
+    for _ in range(6):
+        engine.append(*_patch(rng, 8), torch.zeros(8, dtype=torch.long))
+    other = torch.tensor([[0.8, 0.6], [0.6, 1.3]], dtype=torch.float64)
+    assert engine._store_behind(other)
+    direct = engine._direct_factor(other)
+    store = super(BatchedExactInference, engine).factor(other, derivatives=True)
+    for key in ("t0", "t1", "pd", "chol", "alpha_i"):
+        scale = float(store[key].abs().max())
+        assert float((direct[key] - store[key]).abs().max()) < 1e-10 * scale, key
+    assert abs(float(direct["logdet_s"] - store["logdet_s"])) < 1e-10 * abs(float(store["logdet_s"]))
+    engine._held = None
+    _assert_exact(engine, rng, other)                     # held through the direct sum
+    buffers = [engine._held[k].buf for k in ("w", "t0", "t1")]
+    third = torch.tensor([[0.5, 0.2], [0.2, 0.9]], dtype=torch.float64)
+    _assert_exact(engine, rng, third)
+    assert all(engine._held[k].buf is b for k, b in zip(("w", "t0", "t1"), buffers))   # refilled, not reallocated
+
+
+def test_the_gradient_at_a_k_t_a_newton_run_last_evaluated_uses_that_k_t():
+    """A fit called again without new data asks for the gradient at the K_t its Newton run evaluated last: the
+    engine's cache answers the factorisation, and the traces must use that K_t's S^-1, not an older held one."""
+    rng = np.random.default_rng(12)
+    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine.mll_gradient(KT)                               # held at KT
+    other = torch.tensor([[0.4, 0.2], [0.2, 0.7]], dtype=torch.float64)
+    engine.mll_derivatives(other)                         # a Newton evaluation at another K_t
+    mll, g = engine.mll_gradient(other)
+    mll_d, g_d, _ = _dense(engine).mll_derivatives(other)
+    assert mll == pytest.approx(mll_d, rel=1e-10) and float((g - g_d).abs().max()) < 1e-9 * engine.n
+
+
 def test_blocked_triangular_solves_equal_lapack():
     n = 2 * SOLVE_BLOCK + 37
     rng = np.random.default_rng(2)
