@@ -260,8 +260,8 @@ def _interior_model(rng):
 INTERIOR_RADII = (0.12, 0.2, 0.15)
 
 
-def _interior_patch(rng, k):
-    c = _ellipsoid(rng, 1, INTERIOR_RADII)
+def _interior_patch(rng, k, radii=INTERIOR_RADII):
+    c = _ellipsoid(rng, 1, radii)
     pts = c + 0.01 * torch.tensor(rng.normal(size=(k, 3)))
     y = torch.tensor((rng.random(k) < 0.25).astype(np.float64))
     return torch.where(y.bool().unsqueeze(1), pts * 1.08, pts), y
@@ -367,6 +367,37 @@ def test_scouted_restarts_find_the_other_basin_and_cost_one_full_relearning_per_
     best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
                      inference="structured").fit(multi_start=True)
     assert model.fit_result.mll == pytest.approx(best.fit_result.mll, abs=1e-7)
+
+
+@pytest.mark.filterwarnings("ignore:GPIOIS.fit. K_t's fit stopped")     # Newton's stalls on the flat ridge
+def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_all_the_data():
+    """Concentric shapes put K_t's correlation at 1; patches of another shape then move the optimum inside (a
+    correlation near 0.3). From the warm K_t the full data's Newton run walks off the ridge in many evaluations; with
+    ``scout`` the thinned copy walks and the full data polish in a few, to the same optimum."""
+    rng = np.random.default_rng(0)
+    base = _model(rng)
+    assert base.correlation > 1 - 1e-6
+    for i in range(27):
+        base.add_observations(*_interior_patch(rng, 16, (0.1, 0.22, 0.12)), 0)
+        if i < 26:
+            base.fit(min_gain=0.0)                           # re-learned every step: still at a correlation of 1
+    assert base.correlation > 1 - 1e-6
+    counts, models = [], []
+    for scout in (None, 200):
+        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+                          task_covariance=base.task_covariance, inference="batched")
+        model.fit_result = base.fit_result                  # a later fit: warm-started, no restarts
+        engine = model._inference()
+        calls = []
+        original = engine.mll_derivatives
+        engine.mll_derivatives = lambda kt, original=original, calls=calls: calls.append(1) or original(kt)
+        model.fit(min_gain=0.0, scout=scout)
+        counts.append(len(calls))
+        models.append(model)
+    plain, scouted = models
+    assert plain.correlation < 0.6 and scouted.correlation == pytest.approx(plain.correlation, abs=1e-6)
+    assert scouted.fit_result.mll == pytest.approx(plain.fit_result.mll, abs=1e-6)
+    assert counts[1] <= 4 < 8 <= counts[0], counts
 
 
 @pytest.mark.parametrize("kwargs", [{"min_gain": -1.0}, {"min_gain": math.nan}, {"min_gain": 0.1, "max_hold": 0},

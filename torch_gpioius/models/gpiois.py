@@ -25,6 +25,12 @@ from ..tolerances import tol
 
 __all__ = ["GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
 
+def _on_ridge(kt: Tensor) -> bool:
+    """Whether K_t's correlation is 1 to within ``1 - rho^2 <= 1e-6`` (the shapes' relation at its bound)."""
+    a, b, c = float(kt[0, 0]), float(kt[0, 1]), float(kt[1, 1])
+    return a > 0 and c > 0 and 1.0 - b * b / (a * c) <= 1e-6
+
+
 #: Task id of the inner (tactile) shape.
 INNER = 0
 #: Task id of the outer (visual) shape.
@@ -330,8 +336,11 @@ class GPIOIS(ImplicitSurfaceGP):
                 kept), and re-learn on all the data from each optimum found there in another basin than the warm
                 start's. A restart then costs ``scout^3`` instead of ``N_i^3`` per evaluation, plus one full
                 re-learning per other basin; the K_t kept is an optimum of the full likelihood, the best of those.
-                A basin that the thinned copy does not have is missed. None: the fixed starts run on all the
-                data.
+                A basin that the thinned copy does not have is missed. Also, a re-learning from a K_t with a
+                correlation of 1 first runs on the copy; where the copy's run leaves the bound, the full data's
+                run starts where it ended (the walk from the bound, a dozen or more evaluations, then costs
+                ``scout^3`` each) and is kept if it ends above the warm start's MLL; otherwise the full data's run
+                starts from the warm K_t. None: everything runs on all the data.
 
         Returns:
             self, with ``fit_result`` describing the optimisation (``relearned``, ``predicted_gain``, ``tracked``,
@@ -358,11 +367,15 @@ class GPIOIS(ImplicitSurfaceGP):
         def evaluate(kt: Tensor):
             return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
 
-        best = maximize_mll(evaluate, self.task_covariance)
+        n_inner = int((self._train_task() == INNER).sum())
+        best = None
+        if scout is not None and n_inner > scout and not multi_start and self.fit_result is not None:
+            best = self._scouted_escape(engine, evaluate, int(scout))
+        if best is None:
+            best = maximize_mll(evaluate, self.task_covariance)
         starts, scouted = 1, 0
         if multi_start:
             fixed = self._fixed_starts()
-            n_inner = int((self._train_task() == INNER).sum())
             if scout is not None and n_inner > scout:
                 # the fixed starts on a thinned copy: a restart costs scout^3, not N_i^3, per evaluation, and the
                 # full data re-learn once more per other basin found there
@@ -394,12 +407,9 @@ class GPIOIS(ImplicitSurfaceGP):
                 0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]], dtype=torch.float64),
                 torch.diag(self.task_covariance.diagonal().clamp_min(1e-6))]
 
-    def _scout_starts(self, fixed: list[Tensor], size: int, warm: Tensor) -> list[Tensor]:
-        """Run the warm and the fixed starts on a copy of the data with ``size`` inner points (evenly spaced in
-        arrival order, so a path's whole length is kept) and every outer point; return the copy's optima that lie
-        in other basins than the warm start's (K_t more than 1 % apart, relative to its largest entry), one per
-        basin. Which of two near-equal optima is the higher can change with the thinning, so every other basin
-        found is returned for the full data to judge, not only a better one."""
+    def _scout_copy(self, size: int):
+        """``(evaluate, engine)`` of a copy of the data with ``size`` inner points (evenly spaced in arrival order,
+        so a path's whole length is kept) and every outer point: the restarts' and the escapes' cheap likelihood."""
         task = self._train_task()
         inner = torch.nonzero(task == INNER).squeeze(-1)
         keep = inner[torch.linspace(0, len(inner) - 1, size, device=inner.device).round().long()]
@@ -414,6 +424,29 @@ class GPIOIS(ImplicitSurfaceGP):
         def evaluate(kt: Tensor):
             return copy.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
 
+        return evaluate, copy
+
+    def _scouted_escape(self, engine, evaluate, size: int) -> FitResult | None:
+        """When the current K_t has a correlation of 1 (to within ``1 - rho^2 <= 1e-6``: the optimiser stops on that
+        flat ridge before the bound of ``w``), the copy's Newton run from it; if that run leaves the ridge, the full
+        data's run starts where it ended and is kept when it ends above the current K_t's MLL. None otherwise (the
+        caller runs the full data from the current K_t)."""
+        if not _on_ridge(self.task_covariance):
+            return None
+        scout_eval, _ = self._scout_copy(size)
+        guess = maximize_mll(scout_eval, self.task_covariance).task_covariance
+        if _on_ridge(guess):
+            return None                                   # the copy stays at a correlation of 1: so does the warm start
+        mll = float(engine.mll(self._task_matrix()))
+        result = maximize_mll(evaluate, guess)
+        return result if result.mll >= mll else None
+
+    def _scout_starts(self, fixed: list[Tensor], size: int, warm: Tensor) -> list[Tensor]:
+        """Run the warm and the fixed starts on :meth:`_scout_copy`; return the copy's optima that lie in other basins
+        than the warm start's (K_t more than 1 % apart, relative to its largest entry), one per basin. Which of two
+        near-equal optima is the higher can change with the thinning, so every other basin found is returned for
+        the full data to judge, not only a better one."""
+        evaluate, _ = self._scout_copy(size)
         found = [maximize_mll(evaluate, warm).task_covariance]
         for kt0 in fixed:
             kt = maximize_mll(evaluate, kt0).task_covariance
