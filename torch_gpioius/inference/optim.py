@@ -258,7 +258,8 @@ def predicted_gain(grad: np.ndarray, hess: np.ndarray, free: np.ndarray) -> floa
     return 0.5 * float(z @ z)
 
 
-def held_newton_step(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray) -> np.ndarray | None:
+def held_newton_step(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray,
+                     free: np.ndarray | None = None) -> np.ndarray | None:
     """One projected Newton step in the Cholesky parameters with a Hessian from an earlier K_t (``GPIOIS.fit``'s
     tracking step): ``phi + (-H)^-1 g`` on the free coordinates, shortened to :func:`step_caps` and clamped to
     :func:`cholesky_bounds`.
@@ -267,13 +268,15 @@ def held_newton_step(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray) -> np.
         phi: `(3,)` current Cholesky parameters.
         grad: `(3,)` exact gradient of the MLL at ``phi``.
         hess: `(3, 3)` Hessian of the MLL from the last full re-learning.
+        free: `(3,)` bool, the coordinates to move (default: those not held at a bound, :func:`free_coordinates`).
 
     Returns:
         `(3,)` the candidate parameters, or None where ``-H`` is not positive definite on the free coordinates (no
         ascent direction can be trusted from it).
     """
     lower, upper = cholesky_bounds()
-    free = free_coordinates(phi, grad, lower, upper)
+    if free is None:
+        free = free_coordinates(phi, grad, lower, upper)
     idx = np.flatnonzero(free)
     step = np.zeros(len(phi))
     if len(idx):

@@ -31,6 +31,23 @@ def _on_ridge(kt: Tensor) -> bool:
     return a > 0 and c > 0 and 1.0 - b * b / (a * c) <= 1e-6
 
 
+def _ridge(kt: Tensor, grad: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, float]:
+    """On the ridge of a correlation of 1 (:func:`_on_ridge`) with the gradient pushing ``w = log L[1,1]`` further
+    down, hold ``w`` as if at its bound and bound its gain by ``|g_w| / 2``: the MLL depends on ``w`` through
+    ``z = e^(2w)`` only, so all that ``w -> -inf`` can still bring is ``(dMLL/dz) z = g_w / 2`` to first order in the
+    tiny ``z``, where the quadratic model's ``g_w^2 / (2 |H_ww|)`` grows without bound as ``H_ww -> 0`` (a correlation
+    of 1 then asked for a re-learning at every step, each stalling on the flat ridge).
+
+    Returns:
+        the free coordinates with ``w`` held where that applies, and the gain bound for ``w`` [nats].
+    """
+    if not (free[2] and grad[2] < 0 and _on_ridge(kt)):
+        return free, 0.0
+    held = free.copy()
+    held[2] = False
+    return held, 0.5 * abs(float(grad[2]))
+
+
 #: Task id of the inner (tactile) shape.
 INNER = 0
 #: Task id of the outer (visual) shape.
@@ -479,7 +496,8 @@ class GPIOIS(ImplicitSurfaceGP):
         if last is None or last.hessian is None or (not last.relearned and self._held_fits >= max_hold):
             return False
         mll, grad, free = self._chol_gradient(engine, self._task_matrix())
-        gain = predicted_gain(grad, last.hessian, free)
+        free, ridge_gain = _ridge(self.task_covariance, grad, free)
+        gain = predicted_gain(grad, last.hessian, free) + ridge_gain
         if gain > min_gain:
             return track and self._track_task_covariance(engine, mll, grad, gain, free, last)
         self._held_fits = self._held_fits + 1 if not last.relearned else 1
@@ -511,7 +529,7 @@ class GPIOIS(ImplicitSurfaceGP):
         lower, upper = cholesky_bounds()
         if (((phi <= lower) | (phi >= upper)) & free).any():
             return False
-        candidate = held_newton_step(phi, grad, last.hessian)
+        candidate = held_newton_step(phi, grad, last.hessian, free)
         if candidate is None:
             return False
         kt = chol_params_to_task_covariance(candidate)
@@ -521,7 +539,8 @@ class GPIOIS(ImplicitSurfaceGP):
             return False
         if not (math.isfinite(mll_new) and np.isfinite(grad_new).all()) or mll_new < mll:
             return False
-        remaining = predicted_gain(grad_new, last.hessian, free)
+        free, ridge_gain = _ridge(kt, grad_new, free)
+        remaining = predicted_gain(grad_new, last.hessian, free) + ridge_gain
         if not remaining < gain:
             return False
         self.task_covariance = kt
