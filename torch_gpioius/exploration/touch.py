@@ -63,12 +63,13 @@ class PatchTouch:
         track: move K_t by one Newton step with the last re-learning's Hessian where that raises the exact MLL and
             leaves less to gain, instead of re-learning it to convergence (``GPIOIS.fit(track=True)``); each record's
             ``fit_gap`` says what the step is predicted to leave [nats].
-        scout: a restart (``restart_every``) runs its fixed starts on the inner points thinned to this many and
-            re-learns on all the data only from another basin found there, else holds or tracks K_t as any step
-            does (``GPIOIS.fit(scout=...)``); a re-learning from a correlation of 1 walks off it on the same copy.
-            None: restarts on all the data, which grew to 30-100 s a restart at 1.5 m of travel.
-        max_hold: a full re-learning (a fresh Hessian for the tracking steps) after this many kept or tracked fits
-            in a row: on schedule, one step in 30.
+        scout: a restart (``restart_every``) re-learns from the warm start on all the data (a fresh Hessian for the
+            tracking steps), runs its fixed starts on the inner points thinned to this many and re-learns on all the
+            data again only from another basin found there (``GPIOIS.fit(scout=...)``); a re-learning from a
+            correlation of 1 walks off it on the same copy. None: every start on all the data, which made restarts
+            grow to 30-100 s at 1.5 m of travel.
+        max_hold: a full re-learning after this many kept or tracked fits in a row (more than ``restart_every``'s
+            25, so that at the defaults the restarts are the full re-learnings on schedule: 4 % of the steps).
         max_points: at most this many points of each patch enter the model (default 12; None: every point of the
             spacing thinning, the reference, whose steps grow to seconds as patches pile up: docs/results-patches.md).
         min_variance: points whose posterior variance before the touch is below this fraction of the prior variance

@@ -350,11 +350,10 @@ class GPIOIS(ImplicitSurfaceGP):
             track: with ``min_gain``, replace a re-learning by one held-Hessian Newton step where that raises the MLL.
             scout: with ``multi_start`` and more inner points than this, run the fixed starts on a copy of the data
                 whose inner points are thinned to ``scout`` (evenly along their order of arrival; every outer point
-                kept), and re-learn on all the data from each optimum found there in another basin than the current
-                K_t's; where there is none and ``min_gain`` is set, the restart holds or tracks K_t as a plain fit
-                does (the full data are re-learned when that rule asks). A restart then costs ``scout^3`` instead
-                of ``N_i^3`` per evaluation, plus one full re-learning per other basin; the K_t kept is then an
-                optimum of the full likelihood, the best of those.
+                kept), and re-learn on all the data from each optimum found there in another basin than the warm
+                start's (not on a first fit, which has no warm start). A restart then costs the warm start's
+                re-learning plus ``scout^3`` instead of ``N_i^3`` per evaluation of the fixed starts, plus one full
+                re-learning per other basin; the K_t kept is an optimum of the full likelihood, the best of those.
                 A basin that the thinned copy does not have is missed. Also, a re-learning from a K_t with a
                 correlation of 1 first runs on the copy; where the copy's run leaves the bound, the full data's
                 run starts where it ended (the walk from the bound, a dozen or more evaluations, then costs
@@ -378,29 +377,28 @@ class GPIOIS(ImplicitSurfaceGP):
         engine = self._inference()
         if multi_start is None:
             multi_start = self.fit_result is None
-        n_inner = int((self._train_task() == INNER).sum())
-        fixed = self._fixed_starts()
-        scouting = multi_start and scout is not None and n_inner > scout and self.fit_result is not None
-        # a restart's fixed starts on a thinned copy: scout^3, not N_i^3, per evaluation; the full data re-learn
-        # once more per other basin found there
-        candidates = self._scout_starts(fixed, int(scout), self.task_covariance) if scouting else fixed
-        plain = not multi_start or (scouting and not candidates)        # no start but the current K_t
-        if min_gain is not None and plain and self._hold_task_covariance(engine, min_gain, max_hold, track):
-            if scouting:                       # a restart that found no other basin: K_t followed the plain rule
-                self.fit_result = dataclasses.replace(self.fit_result, starts=1 + len(fixed), scout=int(scout))
+        if (min_gain is not None and not multi_start
+                and self._hold_task_covariance(engine, min_gain, max_hold, track)):
             return self
         x0 = self.train_inputs[0]
 
         def evaluate(kt: Tensor):
             return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
 
+        n_inner = int((self._train_task() == INNER).sum())
         best = None
-        if scout is not None and n_inner > scout and plain and self.fit_result is not None:
+        if scout is not None and n_inner > scout and not multi_start and self.fit_result is not None:
             best = self._scouted_escape(engine, evaluate, int(scout))
         if best is None:
             best = maximize_mll(evaluate, self.task_covariance)
         starts, scouted = 1, 0
         if multi_start:
+            fixed = self._fixed_starts()
+            scouting = scout is not None and n_inner > scout and self.fit_result is not None
+            # a restart's fixed starts on a thinned copy: scout^3, not N_i^3, per evaluation; the full data re-learn
+            # once more per other basin found there. The warm start's run on all the data stays: it refreshes the
+            # Hessian that the tracking steps use, on the restarts' schedule
+            candidates = self._scout_starts(fixed, int(scout), best.task_covariance) if scouting else fixed
             starts, scouted = 1 + len(fixed), (int(scout) if scouting else 0)
             for kt0 in candidates:
                 result = maximize_mll(evaluate, kt0)
