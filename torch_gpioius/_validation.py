@@ -8,7 +8,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["as_points", "as_labels", "label_problem", "LABELS", "as_tasks", "as_float", "as_bounds", "task_id", "TASK_NAMES", "check_metres",
+__all__ = ["as_points", "as_labels", "label_problem", "LABELS", "as_tasks", "as_int", "as_float", "as_bounds", "task_id", "TASK_NAMES", "check_metres",
            "as_length", "MAX_SCENE_EXTENT", "MAX_COORDINATE", "MAX_LENGTH"]
 
 #: Largest extent of a scene's data [m]: a robot's tabletop workspace is ~2 m and an uncropped depth camera sees
@@ -48,6 +48,18 @@ def _tensor(value, name: str) -> Tensor:
         return torch.as_tensor(value)
     except Exception as exc:
         raise ValueError(f"{name}: cannot be converted to a tensor ({type(exc).__name__}: {exc})") from None
+
+
+def as_int(value, name: str, lo: int, hi: int | None = None, *, allow_none: bool = False) -> int | None:
+    """An integer within ``[lo, hi]`` (no upper limit if ``hi`` is None), or None where ``allow_none``; otherwise
+    ``ValueError`` naming the field. Booleans and floats are refused, as :func:`as_float` refuses strings."""
+    if value is None and allow_none:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo or \
+            (hi is not None and value > hi):
+        within = f"in [{lo}, {hi}]" if hi is not None else f">= {lo}"
+        raise ValueError(f"{name}: must be an integer {within}{' or None' if allow_none else ''}, got {value!r}")
+    return int(value)
 
 
 def as_float(value, name: str, *, lo: float | None = None, hi: float | None = None, positive: bool = False,

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .._validation import as_device, as_float
+from .._validation import as_device, as_float, as_int
 from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
 from ..models.gpiois import GPIOIS, INNER, OUTER
 from ..models.gpis import GPIS
@@ -24,12 +24,6 @@ from .touch import touch_model
 __all__ = ["ExploreConfig", "Run", "MODES"]
 
 MODES = ("visual-tactile", "tactile")
-
-
-def _check_int(value, name: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= int(value) <= hi:
-        raise ValueError(f"{name}: must be an integer in [{lo}, {hi}], got {value!r}")
-    return int(value)
 
 
 #: Default of ``restart_every``: K_t's re-learning also tries fixed starts every this many steps (3 Newton runs from
@@ -107,7 +101,7 @@ class ExploreConfig:
         if evidence is not None and mode != "visual-tactile":
             raise ValueError("evidence: evidence-seeking is about the similarity; it needs mode='visual-tactile'")
         if regions is not None:
-            regions = _check_int(regions, "regions", 1, 64)
+            regions = as_int(regions, "regions", 1, 64)
             if mode != "visual-tactile":
                 raise ValueError("regions: a similarity per region needs mode='visual-tactile'")
         touch = touch_model(touch)
@@ -132,11 +126,11 @@ class ExploreConfig:
         else:
             theta = as_float(d.theta if theta is None else theta, "theta", positive=True, unit="m")
         noise = as_float(d.noise if noise is None else noise, "noise", positive=True)
-        max_steps = _check_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
-        metrics_every = _check_int(d.metrics_every if metrics_every is None else metrics_every, "metrics_every", 1,
+        max_steps = as_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
+        metrics_every = as_int(d.metrics_every if metrics_every is None else metrics_every, "metrics_every", 1,
                                    1_000_000)
         if interval_every is not None:
-            interval_every = _check_int(interval_every, "interval_every", 1, 1_000_000)
+            interval_every = as_int(interval_every, "interval_every", 1, 1_000_000)
         if metrics_resolution is not None:
             metrics_resolution = as_float(metrics_resolution, "metrics_resolution", lo=1e-3, hi=0.5, unit="m")
         rules = tuple(d.stop if stop is None else stop)
@@ -155,7 +149,7 @@ class ExploreConfig:
         if isinstance(restart_every, str) and restart_every == "default":
             restart_every = RESTART_EVERY
         if restart_every is not None:
-            restart_every = _check_int(restart_every, "restart_every", 1, 1_000_000)
+            restart_every = as_int(restart_every, "restart_every", 1, 1_000_000)
         return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
                    metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
                    outer_tol, as_device(device), restart_every)

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from .._validation import as_int
 from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchSettings, patch_observations
 
@@ -94,17 +95,14 @@ class PatchTouch:
     last_dropped: tuple = field(default=(0, 0.0), init=False, repr=False, compare=False)  # (points, nats bound)
 
     def __post_init__(self) -> None:
-        if self.max_points is not None and not _is_int_at_least(self.max_points, 1):
-            raise ValueError(f"PatchTouch.max_points: must be an integer >= 1 or None, got {self.max_points!r}")
+        as_int(self.max_points, "PatchTouch.max_points", 1, allow_none=True)
         if isinstance(self.min_variance, bool) or not (isinstance(self.min_variance, (int, float)) and
                                                        0.0 <= self.min_variance < 1.0):
             raise ValueError(f"PatchTouch.min_variance: must be a fraction in [0, 1), got {self.min_variance!r}")
         if not isinstance(self.track, (bool, np.bool_)):
             raise ValueError(f"PatchTouch.track: must be True or False, got {self.track!r}")
-        if self.scout is not None and not _is_int_at_least(self.scout, 2):
-            raise ValueError(f"PatchTouch.scout: must be an integer >= 2 or None, got {self.scout!r}")
-        if not _is_int_at_least(self.max_hold, 1):
-            raise ValueError(f"PatchTouch.max_hold: must be an integer >= 1, got {self.max_hold!r}")
+        as_int(self.scout, "PatchTouch.scout", 2, allow_none=True)
+        as_int(self.max_hold, "PatchTouch.max_hold", 1)
 
     def bind(self, hardware) -> None:
         """Take the world's pad (``hardware.tactile``) unless a sensor was given.
@@ -201,10 +199,6 @@ class PatchTouch:
             out["relearn"] = {"track": bool(self.track), "scout": None if self.scout is None else int(self.scout),
                               "max_hold": int(self.max_hold)}
         return out
-
-
-def _is_int_at_least(value, lo: int) -> bool:
-    return not isinstance(value, bool) and isinstance(value, (int, np.integer)) and value >= lo
 
 
 #: Touch models by name (``explore(..., touch="point")``).

@@ -14,7 +14,7 @@ from gpytorch.kernels import IndexKernel
 from torch import Tensor
 
 from .base import ImplicitSurfaceGP
-from .._validation import as_float, as_labels, as_points, as_tasks, task_id
+from .._validation import as_float, as_int, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
 from ..inference.optim import (FitResult, chain_to_cholesky, chol_params_to_task_covariance, cholesky_bounds,
@@ -371,9 +371,7 @@ class GPIOIS(ImplicitSurfaceGP):
             raise ValueError(f"min_gain: must be a number of nats >= 0 (inf: hold for max_hold fits), got {min_gain!r}")
         if max_hold < 1:
             raise ValueError(f"max_hold: must be >= 1, got {max_hold!r}")
-        if scout is not None and (isinstance(scout, bool) or not isinstance(scout, (int, np.integer)) or scout < 2):
-            raise ValueError(f"scout: must be an integer >= 2 (inner points of the restarts' copy) or None, "
-                             f"got {scout!r}")
+        scout = as_int(scout, "scout", 2, allow_none=True)
         engine = self._inference()
         if multi_start is None:
             multi_start = self.fit_result is None
