@@ -31,7 +31,8 @@ COLUMNS = (("H 10 %", "hausdorff_10", 100, 1), ("H 25 %", "hausdorff_25", 100, 1
            # each run's 95th percentile of its steps: the median over seeds, and the worst run
            ("step p95 [ms]", "p95_step_time", 1000, 0), ("worst run's p95 [ms]", "p95_step_time", 1000, 0, max),
            ("slowest step [s]", "max_step_time", 1, 1, max))
-TIMES = ("median_step_time", "p95_step_time", "max_step_time")     # NaN there: not recorded (older runs), not a failed estimate
+# NaN there: not recorded (older runs), not a failed estimate
+TIMES = ("median_step_time", "p95_step_time", "max_step_time")
 
 
 def _arm(spec: str) -> tuple[str, dict]:

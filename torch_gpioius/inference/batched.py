@@ -255,18 +255,13 @@ class BatchedExactInference(StructuredExactInference):
         the store."""
         b = b.detach()
         a, beta, c = float(b[0, 0]), float(b[0, 1]), float(b[1, 1])
-        s, lam, p, n = self.noise, self.lam, self.p, self.n_inner
-        d = 1.0 / (c * lam + s)
-        t0, t1 = (torch.cat([p * d, p * (-lam * d * d)]) @ p.T).split(n)
+        lam, p = self.lam, self.p
+        d = 1.0 / (c * lam + self.noise)
+        t0, t1 = (torch.cat([p * d, p * (-lam * d * d)]) @ p.T).split(self.n_inner)
         t0, t1 = 0.5 * (t0 + t0.T), 0.5 * (t1 + t1.T)            # exactly symmetric, as the store's unpacked T
         pd = p @ self._weight_vectors(d, derivatives=True)
-        smat = a * self.kii - beta * beta * t0
-        smat.diagonal().add_(s)
-        chol, self.jitter = robust_cholesky(smat, "inner Schur complement")
-        v = (self.yi - self.mean) - beta * pd[:, 0]
-        alpha_i = torch.cholesky_solve(v.unsqueeze(-1), chol).squeeze(-1)
         return {"a": a, "beta": beta, "c": c, "d": d, "alpha_rot": None, "t0": t0, "t1": t1, "t2": None, "pd": pd,
-                "chol": chol, "v": v, "alpha_i": alpha_i, "logdet_s": 2 * chol.diagonal().log().sum()}
+                **self._schur(a, beta, t0, pd)}
 
     def _refresh(self) -> None:
         """Posterior weights of the held factorisation (two blocked triangular solves)."""

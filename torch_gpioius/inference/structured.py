@@ -533,18 +533,22 @@ class StructuredExactInference:
             if self._raw is not None:                               # the truncated basis' complement
                 t = (t[0] + self._raw["c0"],) + tuple(t[1:])
                 pd[:, 0] += self._raw["e"]
-            smat = a * self.kii - beta * beta * t[0]
-            smat.diagonal().add_(s)      # exactly symmetric: K_ii and the unpacked T are (Cholesky reads one half)
-            chol, self.jitter = robust_cholesky(smat, "inner Schur complement")
-            v = (self.yi - self.mean) - beta * pd[:, 0]
-            alpha_i = torch.cholesky_solve(v.unsqueeze(-1), chol).squeeze(-1)
-            cache.update(t0=t[0], t1=t[1], t2=t[2], pd=pd, chol=chol, v=v, alpha_i=alpha_i,
-                         logdet_s=2 * chol.diagonal().log().sum())
+            cache.update(t0=t[0], t1=t[1], t2=t[2], pd=pd, **self._schur(a, beta, t[0], pd))
         else:
             cache.update(alpha_i=torch.zeros(0, **self._kind))
             cache["alpha_rot"] = self._query_weights(cache) * self.rt
         self._cache, self._key = cache, key
         return cache
+
+    def _schur(self, a: float, beta: float, t0: Tensor, pd: Tensor) -> dict:
+        """The inner Schur complement ``S = a K_ii - b^2 T + s I`` factorised, with ``v``, ``alpha_i = S^-1 v`` and
+        ``log det S`` (``chol``, ``v``, ``alpha_i``, ``logdet_s``); sets ``self.jitter``."""
+        smat = a * self.kii - beta * beta * t0
+        smat.diagonal().add_(self.noise)  # exactly symmetric: K_ii and the unpacked T are (Cholesky reads one half)
+        chol, self.jitter = robust_cholesky(smat, "inner Schur complement")
+        v = (self.yi - self.mean) - beta * pd[:, 0]
+        alpha_i = torch.cholesky_solve(v.unsqueeze(-1), chol).squeeze(-1)
+        return {"chol": chol, "v": v, "alpha_i": alpha_i, "logdet_s": 2 * chol.diagonal().log().sum()}
 
     @staticmethod
     def _solve_lower(f: dict, rhs: Tensor) -> Tensor:

@@ -48,6 +48,13 @@ def _ridge(kt: Tensor, grad: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, 
     return held, 0.5 * abs(float(grad[2]))
 
 
+def _held_gain(kt: Tensor, grad: np.ndarray, free: np.ndarray, hessian: np.ndarray) -> tuple[float, np.ndarray]:
+    """The re-learning gain [nats] predicted at ``kt`` with a held Hessian (the Newton decrement, ``w`` treated by
+    :func:`_ridge`), and the coordinates it leaves free."""
+    free, ridge_gain = _ridge(kt, grad, free)
+    return predicted_gain(grad, hessian, free) + ridge_gain, free
+
+
 #: Task id of the inner (tactile) shape.
 INNER = 0
 #: Task id of the outer (visual) shape.
@@ -383,21 +390,20 @@ class GPIOIS(ImplicitSurfaceGP):
         def evaluate(kt: Tensor):
             return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
 
-        n_inner = int((self._train_task() == INNER).sum())
-        best = None
-        if scout is not None and n_inner > scout and not multi_start and self.fit_result is not None:
-            best = self._scouted_escape(engine, evaluate, int(scout))
+        # the thinned copy serves a later fit with more inner points than it keeps (a first fit has no warm start)
+        scouting = (scout is not None and self.fit_result is not None
+                    and int((self._train_task() == INNER).sum()) > scout)
+        best = self._scouted_escape(engine, evaluate, scout) if scouting and not multi_start else None
         if best is None:
             best = maximize_mll(evaluate, self.task_covariance)
         starts, scouted = 1, 0
         if multi_start:
             fixed = self._fixed_starts()
-            scouting = scout is not None and n_inner > scout and self.fit_result is not None
             # a restart's fixed starts on a thinned copy: scout^3, not N_i^3, per evaluation; the full data re-learn
             # once more per other basin found there. The warm start's run on all the data stays: it refreshes the
             # Hessian that the tracking steps use, on the restarts' schedule
-            candidates = self._scout_starts(fixed, int(scout), best.task_covariance) if scouting else fixed
-            starts, scouted = 1 + len(fixed), (int(scout) if scouting else 0)
+            candidates = self._scout_starts(fixed, scout, best.task_covariance) if scouting else fixed
+            starts, scouted = 1 + len(fixed), (scout if scouting else 0)
             for kt0 in candidates:
                 result = maximize_mll(evaluate, kt0)
                 if result.mll > best.mll + 1e-9 * max(1.0, abs(best.mll)):
@@ -423,8 +429,9 @@ class GPIOIS(ImplicitSurfaceGP):
                 torch.diag(self.task_covariance.diagonal().clamp_min(1e-6))]
 
     def _scout_copy(self, size: int):
-        """``(evaluate, engine)`` of a copy of the data with ``size`` inner points (evenly spaced in arrival order,
-        so a path's whole length is kept) and every outer point: the restarts' and the escapes' cheap likelihood."""
+        """``evaluate(K_t) -> (mll, grad, hess)`` on a copy of the data with ``size`` inner points (evenly spaced in
+        arrival order, so a path's whole length is kept) and every outer point: the restarts' and the escapes' cheap
+        likelihood."""
         task = self._train_task()
         inner = torch.nonzero(task == INNER).squeeze(-1)
         keep = inner[torch.linspace(0, len(inner) - 1, size, device=inner.device).round().long()]
@@ -439,7 +446,7 @@ class GPIOIS(ImplicitSurfaceGP):
         def evaluate(kt: Tensor):
             return copy.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
 
-        return evaluate, copy
+        return evaluate
 
     def _scouted_escape(self, engine, evaluate, size: int) -> FitResult | None:
         """When the current K_t has a correlation of 1 (to within ``1 - rho^2 <= 1e-6``: the optimiser stops on that
@@ -448,8 +455,7 @@ class GPIOIS(ImplicitSurfaceGP):
         caller runs the full data from the current K_t)."""
         if not _on_ridge(self.task_covariance):
             return None
-        scout_eval, _ = self._scout_copy(size)
-        guess = maximize_mll(scout_eval, self.task_covariance).task_covariance
+        guess = maximize_mll(self._scout_copy(size), self.task_covariance).task_covariance
         if _on_ridge(guess):
             return None                                   # the copy stays at a correlation of 1: so does the warm start
         mll = float(engine.mll(self._task_matrix()))
@@ -461,7 +467,7 @@ class GPIOIS(ImplicitSurfaceGP):
         than the warm start's (K_t more than 1 % apart, relative to its largest entry), one per basin. Which of two
         near-equal optima is the higher can change with the thinning, so every other basin found is returned for
         the full data to judge, not only a better one."""
-        evaluate, _ = self._scout_copy(size)
+        evaluate = self._scout_copy(size)
         found = [maximize_mll(evaluate, warm).task_covariance]
         for kt0 in fixed:
             kt = maximize_mll(evaluate, kt0).task_covariance
@@ -492,8 +498,7 @@ class GPIOIS(ImplicitSurfaceGP):
         if last is None or last.hessian is None or (not last.relearned and self._held_fits >= max_hold):
             return False
         mll, grad, free = self._chol_gradient(engine, self._task_matrix())
-        free, ridge_gain = _ridge(self.task_covariance, grad, free)
-        gain = predicted_gain(grad, last.hessian, free) + ridge_gain
+        gain, free = _held_gain(self.task_covariance, grad, free, last.hessian)
         if gain > min_gain:
             return track and self._track_task_covariance(engine, mll, grad, gain, free, last)
         self._held_fits = self._held_fits + 1 if not last.relearned else 1
@@ -535,8 +540,7 @@ class GPIOIS(ImplicitSurfaceGP):
             return False
         if not (math.isfinite(mll_new) and np.isfinite(grad_new).all()) or mll_new < mll:
             return False
-        free, ridge_gain = _ridge(kt, grad_new, free)
-        remaining = predicted_gain(grad_new, last.hessian, free) + ridge_gain
+        remaining, free = _held_gain(kt, grad_new, free, last.hessian)
         if not remaining < gain:
             return False
         self.task_covariance = kt
