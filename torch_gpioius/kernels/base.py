@@ -12,6 +12,15 @@ taken as constants:
   the variance of a directional derivative of the process, ``-kappa''(0)`` per unit direction (for gradient or
   normal observations and for checks of smoothness).
 
+For hyper-parameter learning (``GPIOIS.learn_hyperparameters``) a kernel also names its length, optionally:
+
+* :attr:`ExactKernel.length` -- the length [m] that sets how far correlation reaches (the inverse multiquadric's
+  theta, the Matérn length scale), read and set as a float and stored as a constrained torch parameter (the
+  GPyTorch idiom: ``raw_theta``, ``raw_lengthscale``), so that it is in ``state_dict`` and checkpoints;
+* :meth:`ExactKernel.value_at` -- the values at a given length, differentiable in that length (a tensor).
+
+A kernel without them stays usable everywhere with its length fixed; learning it then raises a ``TypeError``.
+
 Stationarity is part of the contract: ``k(a, b)`` depends on ``a - b`` only (isotropic kernels on ``|a - b|``).
 :meth:`ExactKernel.describe` names the kernel and its parameters for logs, checkpoints and resume, and
 :func:`torch_gpioius.kernels.from_description` rebuilds it. ``tests/kernels/contract.py`` holds the checks every
@@ -61,6 +70,22 @@ class ExactKernel(Kernel, abc.ABC):
     @abc.abstractmethod
     def describe(self) -> dict:
         """JSON-able ``{"kernel": name, **parameters}`` (logs, checkpoints, resume)."""
+
+    #: Whether the kernel implements :attr:`length` and :meth:`value_at` (hyper-parameter learning).
+    learnable_length: bool = False
+
+    @property
+    def length(self) -> float:
+        """The kernel's length [m] (theta, the length scale), where :attr:`learnable_length` says it has one."""
+        raise TypeError(f"{type(self).__name__}: no learnable length (implement length and value_at)")
+
+    @length.setter
+    def length(self, value: float) -> None:
+        raise TypeError(f"{type(self).__name__}: no learnable length (implement length and value_at)")
+
+    def value_at(self, x1: Tensor, x2: Tensor, length: Tensor) -> Tensor:
+        """`(n, m)` values at the length ``length`` (a 0-d tensor [m]), differentiable in it and in the points."""
+        raise TypeError(f"{type(self).__name__}: no learnable length (implement length and value_at)")
 
     def forward(self, x1: Tensor, x2: Tensor, diag: bool = False, last_dim_is_batch: bool = False, **params) -> Tensor:
         """GPyTorch's entry point: the kernel matrix `(..., n, m)` (or its diagonal with ``diag=True``)."""

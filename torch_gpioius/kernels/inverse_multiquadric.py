@@ -63,6 +63,7 @@ class InverseMultiquadricKernel(ExactKernel):
     is_stationary = True
     #: The name :meth:`describe` gives (and :func:`torch_gpioius.kernels.from_description` reads).
     kind = "InverseMultiquadric"
+    learnable_length = True
 
     def __init__(self, theta: float = 0.1, learn_theta: bool = False, theta_constraint: Interval | None = None,
                  **kwargs):
@@ -93,9 +94,22 @@ class InverseMultiquadricKernel(ExactKernel):
         """theta as a Python float (the exact engines take the parameters as constants)."""
         return float(self.theta.detach().reshape(-1)[0])
 
+    @property
+    def length(self) -> float:
+        """theta [m] (the contract's learnable length)."""
+        return self._theta()
+
+    @length.setter
+    def length(self, value: float) -> None:
+        self.theta = as_float(value, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+
     def value(self, x1: Tensor, x2: Tensor) -> Tensor:
         """`(n, m)` values ``(|a - b|^2 + theta^2)^(-1/2)`` [1/m], differentiable in the points."""
         return imq(x1, x2, self._theta())
+
+    def value_at(self, x1: Tensor, x2: Tensor, length: Tensor) -> Tensor:
+        """`(n, m)` values at ``theta = length`` (0-d tensor [m]), differentiable in it."""
+        return imq(x1, x2, length)
 
     def gradient(self, x1: Tensor, x2: Tensor, value: Tensor | None = None) -> Tensor:
         """`(d, n, m)`: ``dk/da = -(a - b) k^3``."""

@@ -5,7 +5,9 @@ r"""Matérn kernel with smoothness 5/2: the second kernel, and the proof that a 
     e^{-\sqrt5\, r / \ell}, \qquad r = \|\mathbf a - \mathbf b\|
 
 Twice differentiable (the inverse multiquadric is infinitely so): level sets of a GPIS under it are smooth, but less
-rounded between sparse contacts. Its parameters are fixed during exploration, as the paper fixes theta.
+rounded between sparse contacts. The length scale is a constrained torch parameter (GPyTorch's ``raw_lengthscale``,
+``kernel.lengthscale``); it is fixed during exploration, as the paper fixes theta, unless the exploration learns it
+(``learn="all"``, :meth:`torch_gpioius.GPIOIS.learn_hyperparameters`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from __future__ import annotations
 import math
 
 import torch
+from gpytorch.constraints import GreaterThan
 from torch import Tensor
 
 from .._validation import as_float
@@ -25,7 +28,7 @@ _SQRT5 = math.sqrt(5.0)
 
 
 class Matern52(ExactKernel):
-    """Matérn-5/2 kernel with a fixed length scale and amplitude (see the module docstring).
+    """Matérn-5/2 kernel with a length scale and a fixed amplitude (see the module docstring).
 
     Args:
         lengthscale: ``ell`` [m], in the range of ``tol.theta_range``.
@@ -36,12 +39,37 @@ class Matern52(ExactKernel):
     """
 
     kind = "Matern52"
+    has_lengthscale = True          # GPyTorch registers raw_lengthscale (Positive) and its lengthscale property
+    learnable_length = True
 
     def __init__(self, lengthscale: float = 0.1, outputscale: float = 1.0, **kwargs) -> None:
+        # the raw parameter is the length scale itself (no softplus: 0.1 stays 0.1 to the bit, as the describe/rebuild
+        # round trip and resumed runs need); its range is checked where it is set and by the models' check_state
+        kwargs.setdefault("lengthscale_constraint", GreaterThan(tol.theta_range[0], transform=None))
         super().__init__(**kwargs)
-        self.ell = as_float(lengthscale, "lengthscale", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True,
-                            unit="m")
+        ell = as_float(lengthscale, "lengthscale", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True,
+                       unit="m")
+        # float64 from the start (GPyTorch makes it in the default dtype): a float32 0.1 is 1.5e-9 off
+        self.raw_lengthscale = torch.nn.Parameter(torch.zeros(*self.batch_shape, 1, 1, dtype=torch.float64),
+                                                  requires_grad=False)
+        self.length = ell
         self.sigma2 = as_float(outputscale, "outputscale", lo=1e-12, hi=1e12, positive=True)
+
+    @property
+    def ell(self) -> float:
+        """The length scale [m] as a float (the exact engines take the parameters as constants)."""
+        return float(self.lengthscale.detach().reshape(-1)[0])
+
+    @property
+    def length(self) -> float:
+        """The length scale [m] (the contract's learnable length)."""
+        return self.ell
+
+    @length.setter
+    def length(self, value: float) -> None:
+        value = as_float(value, "lengthscale", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        self.initialize(raw_lengthscale=self.raw_lengthscale_constraint.inverse_transform(
+            torch.full_like(self.raw_lengthscale, value)))
 
     def _radius(self, x1: Tensor, x2: Tensor) -> Tensor:
         # direct differences (no |a|^2 + |b|^2 - 2ab cancellation), as for the inverse multiquadric
@@ -50,6 +78,19 @@ class Matern52(ExactKernel):
     def value(self, x1: Tensor, x2: Tensor) -> Tensor:
         s = _SQRT5 * self._radius(x1, x2) / self.ell
         return self.sigma2 * (1.0 + s + s * s / 3.0) * torch.exp(-s)
+
+    def value_at(self, x1: Tensor, x2: Tensor, length: Tensor) -> Tensor:
+        """`(n, m)` values at the length scale ``length`` (0-d tensor [m]), differentiable in it."""
+        s = _SQRT5 * self._radius(x1, x2) / length
+        return self.sigma2 * (1.0 + s + s * s / 3.0) * torch.exp(-s)
+
+    def forward(self, x1: Tensor, x2: Tensor, diag: bool = False, last_dim_is_batch: bool = False, **params) -> Tensor:
+        """GPyTorch's entry point, differentiable in ``raw_lengthscale`` (for a user's own training loop)."""
+        if last_dim_is_batch:
+            raise NotImplementedError(f"{type(self).__name__}: last_dim_is_batch is not supported")
+        if diag:
+            return self.prior_variance(1.0) * x1.new_ones(x1.shape[:-1])
+        return self.value_at(x1, x2, self.lengthscale.reshape(()))
 
     def gradient(self, x1: Tensor, x2: Tensor, value: Tensor | None = None) -> Tensor:
         """``dk/da = -sigma^2 (5 / (3 ell^2)) (1 + s) e^(-s) (a - b)``, ``s = sqrt(5) r / ell``: smooth at r = 0."""

@@ -17,6 +17,7 @@ from .base import ImplicitSurfaceGP
 from .._validation import as_float, as_int, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
+from ..inference.hyperparameters import HyperparameterResult
 from ..inference.optim import (FitResult, chain_to_cholesky, chol_params_to_task_covariance, cholesky_bounds,
                                free_coordinates, held_newton_step, maximize_mll, predicted_gain,
                                task_covariance_to_chol_params)
@@ -433,9 +434,7 @@ class GPIOIS(ImplicitSurfaceGP):
         arrival order, so a path's whole length is kept) and every outer point: the restarts' and the escapes' cheap
         likelihood."""
         task = self._train_task()
-        inner = torch.nonzero(task == INNER).squeeze(-1)
-        keep = inner[torch.linspace(0, len(inner) - 1, size, device=inner.device).round().long()]
-        keep = torch.cat([keep, torch.nonzero(task == OUTER).squeeze(-1)])
+        keep = self._thinned(size)
         cls = self._engine_class()
         if cls is BatchedExactInference:          # nothing is appended to the copy: no held factorisation needed
             cls = StructuredExactInference
@@ -474,6 +473,19 @@ class GPIOIS(ImplicitSurfaceGP):
             if all(float((kt - other).abs().max()) > 0.01 * float(other.abs().max()) for other in found):
                 found.append(kt)
         return found[1:]
+
+    def _learned_task_covariance(self) -> Tensor | None:
+        return self.task_covariance
+
+    def _after_hyperparameters(self, result: HyperparameterResult) -> None:
+        self.task_covariance = result.task_covariance
+        self.fit(multi_start=False)
+
+    def _hyper_state(self) -> tuple:
+        return (self.task_covariance, self.fit_result, self._held_fits)
+
+    def _restore_hyper_state(self, state: tuple) -> None:
+        self.task_covariance, self.fit_result, self._held_fits = state
 
     def fit_state(self) -> tuple[np.ndarray, bool, int]:
         """What ``fit(min_gain=...)`` decides from, for logs and resume: the last re-learning's `(3, 3)` Hessian
