@@ -69,7 +69,8 @@ def _study(args: argparse.Namespace) -> int:
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
-                       touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings)
+                       touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
+                       learn=args.learn)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -417,6 +418,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the scene files' settings (force-field world): default (three camera views, voxels a tenth "
                          "of the body, a second free-space point) or paper (one fixed camera, 5 cm voxels); "
                          "default: each file's own; one per --out folder")
+    sw.add_argument("--learn", default=None, choices=["task", "all"],
+                    help="what the runs learn: task (K_t alone, the paper's) or all (also the kernel's length and the "
+                         "noise, by the marginal likelihood on restart steps); default: each world's own; one per "
+                         "--out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

@@ -22,7 +22,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             max_travel: float | None = None, stop=None, policy=None, penalty=None,
             metrics_every: int | None = None, metrics_resolution: float | None = None,
             interval_every: int | None = None, regions: int | None = None, stall="default",
-            outer_tol: float | None = None, device=None, restart_every="default", recorders=(),
+            outer_tol: float | None = None, device=None, restart_every="default", learn: str | None = None,
+            recorders=(),
             progress: bool = False,
             log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None,
             overwrite: bool = False) -> Trace:
@@ -74,6 +75,11 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         restart_every: every this many steps K_t's re-learning also starts from fixed values and keeps the best
             optimum, so that a warm start cannot hold it in a worse local optimum (default 25; None: warm starts
             only, as before this setting existed).
+        learn: "task" (K_t alone, the paper's) or "all": the kernel's length and sigma^2 are learned with K_t by
+            the exact marginal likelihood on every ``restart_every``-th step, from the configured values, on a copy
+            of at most 256 inner and 512 outer points, and kept only where the full data's likelihood rises
+            (``GPIOIS.learn_hyperparameters``; each record's ``length`` and ``noise`` say what was used). Default:
+            the world's (``world.defaults.learn``).
         recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the
             metrics and the interval, before the log).
         progress: report progress (a bar on a terminal, plain lines otherwise).
@@ -101,7 +107,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
                                       stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
                                       metrics_resolution=metrics_resolution, interval_every=interval_every,
                                       regions=regions, stall=stall, outer_tol=outer_tol, device=device,
-                                      restart_every=restart_every)
+                                      restart_every=restart_every, learn=learn)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     if log is not None:

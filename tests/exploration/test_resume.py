@@ -85,17 +85,21 @@ def _cut_after_step(log, k):
         f.truncate(end)
 
 
-@pytest.mark.parametrize("inside", [False, True], ids=["paper-labels", "inside-points"])
-def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path, inside):
+@pytest.mark.parametrize("inside, learn", [(False, "task"), (True, "task"), (True, "all")],
+                         ids=["paper-labels", "inside-points", "learned-length-and-noise"])
+def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path, inside, learn):
     """The force-field world: the robot's joints and clock and the sensor's noise generator travel in the log, so a
-    run cut after step 4 and resumed ends where the uninterrupted run ends; so do inside points (labels below 0)."""
+    run cut after step 4 and resumed ends where the uninterrupted run ends; so do inside points (labels below 0),
+    and a length and noise learned at step 3 (the log's raw parameters, restored to the bit)."""
     import dataclasses
 
     from torch_gpioius.sim import sphere_scene
 
     scene = sphere_scene(subdivisions=3)
     scene.sensor_noise = 0.02             # a noisy sensor: resuming must restore its generator too
-    kw = dict(mode="visual-tactile", max_travel=0.1, metrics_every=100, progress=False)
+    kw = dict(mode="visual-tactile", max_travel=0.1, metrics_every=100, progress=False, learn=learn)
+    if learn == "all":
+        kw["restart_every"] = 3
     if inside:
         kw["policy"] = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.01)
     log = tmp_path / "run.gpioius"
@@ -106,6 +110,16 @@ def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path, inside):
     assert resumed.n_steps == reference.n_steps and resumed.terminated == reference.terminated
     assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
     assert np.abs(resumed.path - reference.path).max() < 1e-9
-    assert np.abs(resumed.task_covariance - reference.task_covariance).max() < 1e-9
+    # K_t to the Newton run's own tolerance, relative (a learned length can leave K_t's entries near 8)
+    scale = max(1.0, float(np.abs(reference.task_covariance).max()))
+    assert np.abs(resumed.task_covariance - reference.task_covariance).max() < 1e-9 * scale
     y = reference.model.train_targets
     assert bool((y < 0).any()) == inside and torch.equal(resumed.model.train_targets, y)
+    # the length and noise in use: to the bit through step 5, the first resumed one (the log's raw parameters);
+    # from step 6 on, learned again from data rebuilt from the log, to the optimiser's rounding
+    np.testing.assert_array_equal(resumed.length[:6], reference.length[:6])
+    np.testing.assert_array_equal(resumed.noise[:6], reference.noise[:6])
+    np.testing.assert_allclose(resumed.length, reference.length, rtol=1e-8)
+    np.testing.assert_allclose(resumed.noise, reference.noise, rtol=1e-8)
+    if learn == "all":                  # learned at step 3 (and later restarts), kept, and different from the start
+        assert reference.length[3] != reference.length[0] and reference.model.hyper_result.kept

@@ -21,7 +21,7 @@ from .recovery import NoProgress
 from .stopping import StopRule, TravelBudget
 from .touch import touch_model
 
-__all__ = ["ExploreConfig", "Run", "MODES"]
+__all__ = ["ExploreConfig", "Run", "MODES", "LEARN", "LEARN_SIZE"]
 
 MODES = ("visual-tactile", "tactile")
 
@@ -31,6 +31,13 @@ MODES = ("visual-tactile", "tactile")
 #: "Local optima of K_t"). Every 25th step is 4 % of the steps, so the 95th percentile of the step is never a restart
 #: (every 10th step took a 1.0 m patch run's 95th percentile from 44 ms to 737 ms).
 RESTART_EVERY = 25
+
+#: What an exploration learns: "task" (K_t alone, the paper's Sec. IV-A) or "all" (the kernel's length, sigma^2 and
+#: K_t by the exact marginal likelihood, on every restart step; ``learn_hyperparameters``).
+LEARN = ("task", "all")
+#: The copy the length and sigma^2 are learned on: at most this many inner and outer points (evenly in arrival order).
+#: 256 + 512 points cost 1.0-1.3 s a learning against 7.5 s on a 0.15 m run's 1,021 (one thread; docs/method-notes.md).
+LEARN_SIZE = (256, 512)
 
 
 @dataclass(frozen=True)
@@ -62,6 +69,8 @@ class ExploreConfig:
         restart_every: every this many steps K_t's re-learning also starts from fixed, data-independent values and
             keeps the best optimum (``GPIOIS.fit(multi_start=True)``), so that a warm start cannot hold it in a worse
             local optimum for the rest of the run; None: warm starts only (the first fit always multi-starts).
+        learn: "task" (K_t alone, the paper's) or "all" (also the kernel's length and sigma^2, on every
+            ``restart_every``-th step, from the configured values; :data:`LEARN_SIZE` points at most).
     """
 
     mode: str
@@ -84,12 +93,14 @@ class ExploreConfig:
     outer_tol: float | None = None
     device: torch.device | None = None
     restart_every: int | None = RESTART_EVERY
+    learn: str = "task"
 
     @classmethod
     def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
                    kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
                    metrics_every=None, metrics_resolution=None, interval_every=None, regions=None,
-                   stall="default", outer_tol=None, device=None, restart_every="default") -> "ExploreConfig":
+                   stall="default", outer_tol=None, device=None, restart_every="default",
+                   learn=None) -> "ExploreConfig":
         """Validate the overrides and merge them with ``world.defaults`` (see :func:`torch_gpioius.explore`).
 
         Raises:
@@ -150,11 +161,30 @@ class ExploreConfig:
             restart_every = RESTART_EVERY
         if restart_every is not None:
             restart_every = as_int(restart_every, "restart_every", 1, 1_000_000)
+        learn = getattr(d, "learn", "task") if learn is None else learn
+        if learn not in LEARN:
+            raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
+        if learn == "all":
+            if restart_every is None:
+                raise ValueError("learn='all': the length and sigma^2 are learned on the restart steps; "
+                                 "restart_every=None has none")
+            if regions is not None:
+                raise ValueError("learn='all': the kernel's length and sigma^2 are learned with one similarity; "
+                                 "regions has one per region (use learn='task')")
+            if not getattr(as_kernel(kernel, theta), "learnable_length", False):
+                raise ValueError(f"learn='all': the {type(kernel).__name__} kernel has no learnable length "
+                                 "(ExactKernel.length and value_at)")
         return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
                    metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
-                   outer_tol, as_device(device), restart_every)
+                   outer_tol, as_device(device), restart_every, learn)
 
     # ------------------------------------------------------------------ what the loop asks of the settings
+    @property
+    def initial_hyperparameters(self) -> tuple[float, float]:
+        """`(length [m], sigma^2)` as configured: where every learning of ``learn="all"`` starts."""
+        length = self.theta if self.kernel is None else self.kernel.length
+        return float(length), float(self.noise)
+
     @property
     def uses_vision(self) -> bool:
         """Whether the camera's capture enters the model (visual-tactile)."""
@@ -212,6 +242,8 @@ class ExploreConfig:
         if self.outer_tol is not None:            # only when set: logs written before it existed still resume
             out["outer_tol"] = self.outer_tol
         out["restart_every"] = self.restart_every
+        if self.learn != "task":                  # only when set: logs written before it existed still resume
+            out["learn"] = self.learn
         if self.evidence is not None and callable(getattr(self.evidence, "describe", None)):
             out["evidence_policy"] = self.evidence.describe()
         return out

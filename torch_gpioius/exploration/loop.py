@@ -24,7 +24,7 @@ import torch
 from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
-from .config import ExploreConfig, Run
+from .config import LEARN_SIZE, ExploreConfig, Run
 from .observations import (Observations, drop_contradicted_inside, retract_free_space, thin_points,
                            vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
@@ -234,8 +234,10 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
 
 def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
     """Re-learn warm-started, and from fixed starts too every ``restart_every`` steps (decided by the step number,
-    so a resumed run restarts where the uninterrupted one did); a touch model's ``fit_options`` (patches: the
-    ``min_gain`` rule) go to a model whose ``fit`` takes them (GPIOIS; GPIS learns nothing)."""
+    so a resumed run restarts where the uninterrupted one did), with the kernel's length and sigma^2 first on those
+    steps when ``learn`` is "all" (from the configured values each time; not on the first fit, whose data are
+    nearly all the camera's: learned there, a 2.7 cm length held the duck's run at 1.3 cm Chamfer, docs); a touch model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model
+    whose ``fit`` takes them (GPIOIS; GPIS learns nothing else)."""
     from ..models.gpiois import FitNotConvergedWarning
 
     options = cfg.touch.fit_options() if callable(getattr(cfg.touch, "fit_options", None)) else {}
@@ -243,6 +245,8 @@ def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FitNotConvergedWarning)
         restart = cfg.restart_every is not None and state.steps > 0 and state.steps % cfg.restart_every == 0
+        if restart and cfg.learn == "all":
+            model.learn_hyperparameters(*LEARN_SIZE, start=cfg.initial_hyperparameters)
         model.fit(multi_start=restart, **{k: v for k, v in options.items() if k in accepted})
     for w in caught:                     # counted, and said once at the end of the run; others passed on
         if issubclass(w.category, FitNotConvergedWarning):
@@ -282,6 +286,9 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     fit = getattr(m, "fit_result", None)
     if fit is not None and not fit.relearned and math.isfinite(fit.predicted_gain):
         record.fit_gap = float(fit.predicted_gain)
+    record.noise = float(m.noise)
+    if getattr(m.kernel, "learnable_length", False):
+        record.length = float(m.kernel.length)
     if hasattr(m, "region_correlations"):
         record.region_correlation = m.region_correlations().detach().cpu().numpy()
 

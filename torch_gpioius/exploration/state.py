@@ -47,6 +47,9 @@ RECORD_FIELDS = {
     "truncation": "bound on the truncated outer basis' change of the Gram matrix, relative to sigma^2 (0: exact)",
     "fit_gap": "the MLL gain predicted to remain from the K_t in use to the optimum [nats]: 0 after a full "
                "re-learning; a held or tracked K_t's Newton decrement with the last re-learning's Hessian",
+    "length": "the kernel's length in use [m] (the inverse multiquadric's theta, the Matern length scale; NaN for a "
+              "kernel without one); it changes only where the run learns it (learn='all')",
+    "noise": "the noise variance sigma^2 in use",
 }
 
 
@@ -96,6 +99,8 @@ class StepRecord:
     contact_on_body: float = math.nan
     truncation: float = 0.0
     fit_gap: float = 0.0
+    length: float = math.nan
+    noise: float = math.nan
     final: bool = False
     observations: Observations | None = None
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))

@@ -58,6 +58,8 @@ class Trace:
             (``outer_tol``; 0 with the exact engines).
         fit_gap: `(n,)` MLL gain predicted to remain from each record's K_t to the optimum [nats] (0 after a full
             re-learning; a held or tracked K_t's, ``PatchTouch.track``).
+        length: `(n,)` the kernel's length in use [m] (NaN for a kernel without one; changes with ``learn="all"``).
+        noise: `(n,)` sigma^2 in use.
     """
 
     mode: str
@@ -88,6 +90,8 @@ class Trace:
     recoveries: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     truncation: np.ndarray = field(default_factory=lambda: np.zeros(0))
     fit_gap: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    length: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    noise: np.ndarray = field(default_factory=lambda: np.zeros(0))
     estimate: np.ndarray = field(default_factory=lambda: np.zeros(0))
     reapproaches: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     reapproach_travel: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -120,7 +124,7 @@ class Trace:
                    touch=getattr(config.touch, "name", "custom"), contact_distance=col("contact_distance"),
                    contact_on_body=col("contact_on_body"),
                    recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"),
-                   fit_gap=col("fit_gap"), estimate=col("estimate"),
+                   fit_gap=col("fit_gap"), length=col("length"), noise=col("noise"), estimate=col("estimate"),
                    reapproaches=np.array([r.reapproaches for r in recs], dtype=np.int64),
                    reapproach_travel=col("reapproach_travel"),
                    shape={name: col(name) for name in SHAPE_METRICS})
@@ -189,6 +193,8 @@ class Trace:
             row["step_time"] = float(self.step_time[i])
             if len(self.fit_gap):
                 row["fit_gap"] = float(self.fit_gap[i])
+            if len(self.length):
+                row["length"], row["noise"] = float(self.length[i]), float(self.noise[i])
             if len(self.robot_time):
                 row["robot_time"] = float(self.robot_time[i])
             out.append(row)

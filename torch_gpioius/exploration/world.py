@@ -72,6 +72,7 @@ class ExplorationDefaults:
         approach_travel: the approach gives up after this distance [m].
         kernel: a kernel in place of the inverse multiquadric of ``theta`` (an
             :class:`~torch_gpioius.kernels.ExactKernel`), or None; a ``theta`` given to ``explore`` replaces it.
+        learn: "task" (K_t alone, the paper's) or "all" (the kernel's length and sigma^2 too; ``explore(learn=)``).
     """
 
     theta: float
@@ -83,6 +84,7 @@ class ExplorationDefaults:
     metrics_every: int = 1
     approach_travel: float = 2.0
     kernel: object = None
+    learn: str = "task"
 
 
 @dataclass

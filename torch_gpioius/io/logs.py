@@ -29,7 +29,7 @@ OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertaint
                    "rho": "correlation", "ci": "correlation_interval", "time": "step_time", "sim_time": "robot_time"}
 _VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "estimate", *SHAPE_METRICS, "similarity",
            "correlation", "step_time",
-           "robot_time", "contact_distance", "contact_on_body", "truncation", "fit_gap")
+           "robot_time", "contact_distance", "contact_on_body", "truncation", "fit_gap", "length", "noise")
 
 
 def step_values(meta: dict) -> dict:
@@ -97,7 +97,9 @@ class LogRecorder(Recorder):
                 "correlation_interval": list(record.correlation_interval), "step_time": record.step_time,
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
                 "contact_on_body": record.contact_on_body, "truncation": record.truncation,
-                "fit_gap": record.fit_gap}
+                "fit_gap": record.fit_gap, "length": record.length, "noise": record.noise}
+        if run.config.learn == "all":               # learned length and noise, raw, so that resume restores them exactly
+            meta["hyperparameters"] = state.model.hyperparameter_state()
         fit_state = getattr(state.model, "fit_state", None)
         fit_hessian = np.full((3, 3), np.nan)
         if callable(fit_state):                     # the min_gain rule's memory (patch runs), so resume decides alike
@@ -189,10 +191,16 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
                          robot_time=v["robot_time"], taps=v["taps"], recoveries=v["recoveries"], retracted=v["retracted"],
                          reapproaches=v["reapproaches"], reapproach_travel=v["reapproach_travel"],
                          contact_distance=v["contact_distance"], contact_on_body=v["contact_on_body"],
-                         truncation=v["truncation"], fit_gap=v["fit_gap"])
+                         truncation=v["truncation"], fit_gap=v["fit_gap"], length=v["length"], noise=v["noise"])
         state.records.append(rec)
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
+    v = step_values(last.meta)
+    if config.learn == "all" and "hyperparameters" in last.meta:
+        try:                                                       # what the run had learned by its last step
+            model.load_hyperparameter_state(last.meta["hyperparameters"])
+        except ValueError as exc:
+            raise DatasetError(f"{path}: last step record: {exc}") from None
     if "local_params" in last.arrays and hasattr(model, "region_correlations"):
         model.set_params(last.arrays["local_params"])
         for rec in state.records:
@@ -203,7 +211,6 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
             model.restore_fit_state(last.arrays["fit_hessian"], last.meta.get("fit_relearned", True),
                                     last.meta.get("held_fits", 0))
     state.model = model
-    v = step_values(last.meta)
     state.travel, state.retracted, state.taps, state.recoveries = v["travel"], v["retracted"], v["taps"], v["recoveries"]
     state.reapproaches, state.reapproach_travel = v["reapproaches"], v["reapproach_travel"]
     state.steps = step_number(last.meta, f"{path}: last step")

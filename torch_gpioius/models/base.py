@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 
@@ -111,6 +112,37 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         as_float(length, "length", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
         self.covar_module.length = length
         self.likelihood.noise = torch.tensor(noise, dtype=torch.float64, device=self.likelihood.raw_noise.device)
+
+    def hyperparameter_state(self) -> dict[str, list]:
+        """The kernel's and the likelihood's raw parameters as JSON-able lists (``{"covar_module.raw_theta": ...}``):
+        what a log records each step of a run that learns them, so that a resume restores them to the bit (a length
+        set as a float passes through its constraint's transform and back, which is exact only to rounding)."""
+        out = {}
+        for prefix, module in (("covar_module", self.covar_module), ("likelihood", self.likelihood)):
+            for name, value in module.state_dict().items():
+                if "_constraint." not in name and torch.is_tensor(value) and value.is_floating_point():
+                    out[f"{prefix}.{name}"] = value.detach().cpu().tolist()
+        return out
+
+    def load_hyperparameter_state(self, state: dict) -> None:
+        """Restore :meth:`hyperparameter_state` (validated by :meth:`check_state`; on failure nothing changes).
+
+        Raises:
+            ValueError: a name this model does not have, a wrong shape, or values outside the supported ranges.
+        """
+        own = {f"{p}.{n}": v for p, m in (("covar_module", self.covar_module), ("likelihood", self.likelihood))
+               for n, v in m.state_dict().items()}
+        update = {}
+        for name, value in state.items():
+            if name not in own or "_constraint." in name:
+                raise ValueError(f"hyperparameter state: {name!r} is not a parameter of this model's kernel or "
+                                 "likelihood")
+            tensor = torch.as_tensor(value, dtype=own[name].dtype, device=own[name].device)
+            if tensor.shape != own[name].shape:
+                raise ValueError(f"hyperparameter state: {name} has shape {tuple(tensor.shape)}, the model's "
+                                 f"{tuple(own[name].shape)}")
+            update[name] = tensor
+        self.load_state_dict({**self.state_dict(), **update})
 
     def _task_matrix(self) -> Tensor:  # (T, T) task covariance used by the engine
         raise NotImplementedError
@@ -295,7 +327,8 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
 
     def learn_hyperparameters(self, size: int | None = None, outer_size: int | None = None,
                               length_bounds: tuple[float, float] = LENGTH_BOUNDS,
-                              noise_bounds: tuple[float, float] = NOISE_BOUNDS, max_iter: int = 60) -> "ImplicitSurfaceGP":
+                              noise_bounds: tuple[float, float] = NOISE_BOUNDS, max_iter: int = 60,
+                              start: tuple[float, float] | None = None) -> "ImplicitSurfaceGP":
         """Learn the kernel's length, the noise sigma^2 and K_t together by the exact log marginal likelihood.
 
         They live in the model as torch parameters (the kernel's ``raw_theta`` or ``raw_lengthscale``, the
@@ -317,6 +350,9 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             length_bounds: `(lo, hi)` of the length [m].
             noise_bounds: `(lo, hi)` of sigma^2.
             max_iter: cap on L-BFGS iterations.
+            start: `(length [m], sigma^2)` the optimiser starts from (None: the model's current values). The
+                exploration starts every learning from the run's configured values, so that one learning's optimum
+                does not hold the next in its basin.
 
         Returns:
             self, with ``hyper_result`` (:class:`~torch_gpioius.inference.hyperparameters.HyperparameterResult`).
@@ -341,10 +377,21 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             if not (range_[0] <= lo < hi <= range_[1]):
                 raise ValueError(f"{name}: need {range_[0]:g} <= lo < hi <= {range_[1]:g}, got ({lo:g}, {hi:g})")
             bounds[name] = (lo, hi)
+        if start is not None:
+            try:
+                start_length, start_noise = (float(v) for v in start)
+            except (TypeError, ValueError):
+                raise ValueError(f"start: expected (length, noise), got {start!r}") from None
+            kernel = copy.deepcopy(self.covar_module)     # the start, on a copy: the model changes only when kept
+            kernel.length = start_length
+            start_noise = as_float(start_noise, "start noise", lo=tol.noise_range[0], hi=tol.noise_range[1],
+                                   positive=True)
+        else:
+            kernel, start_noise = self.covar_module, self.noise
         keep = self._thinned(size, outer_size)
         task = self._train_task()
-        result = maximize_hyperparameters(self.covar_module, self.train_inputs[0][keep], self.train_targets[keep],
-                                          task[keep], self.noise, self._learned_task_covariance(), self.prior_mean,
+        result = maximize_hyperparameters(kernel, self.train_inputs[0][keep], self.train_targets[keep], task[keep],
+                                          start_noise, self._learned_task_covariance(), self.prior_mean,
                                           max_iter=max_iter, **bounds)
         before = (self.covar_module.length, self.noise, self._hyper_state(), self._engine, self._engine_key)
         mll_before = float(self.log_marginal_likelihood())

@@ -312,7 +312,7 @@ class Scene3D(World):
                   defaults: ExplorationDefaults | None = None, support: float | str | None = "base",
                   settings: str = "default", views=None, kernel=None, theta: float | None = None,
                   noise: float | None = None, voxel: float | None = None, touch_inside: float | None = None,
-                  vision_inside: float | None = None) -> "Scene3D":
+                  vision_inside: float | None = None, learn: str | None = None) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
         The mesh is loaded, checked and repaired if need be (:func:`torch_gpioius.sim.meshes.load_mesh`, which warns
@@ -353,6 +353,8 @@ class Scene3D(World):
                 none; default: by ``settings``, 2 cm or none).
             vision_inside: depth [m] of the inside points behind the seen surface (``ObservationPolicy.vision_inside``;
                 0: none; default: by ``settings``).
+            learn: "task" (K_t alone, the paper's) or "all" (the kernel's length and sigma^2 too, from ``theta`` and
+                ``noise`` as the start; ``explore(learn=)``); default: by ``settings``.
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
@@ -374,6 +376,12 @@ class Scene3D(World):
             defaults = dataclasses.replace(defaults, noise=as_float(noise, "noise", positive=True))
         if voxel is not None:
             defaults = dataclasses.replace(defaults, policy=defaults.policy.with_voxel(voxel))
+        if learn is not None:
+            from ..exploration.config import LEARN
+
+            if learn not in LEARN:
+                raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
+            defaults = dataclasses.replace(defaults, learn=learn)
         for key, depth in (("touch_inside", touch_inside), ("vision_inside", vision_inside)):
             if depth is not None:
                 depth = as_float(depth, key, lo=0.0, hi=0.1, unit="m (0: none)")

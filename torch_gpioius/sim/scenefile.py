@@ -36,6 +36,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     voxel = 0.02
     touch_inside = 0.02               # an inside point this deep behind each contact [m] (0: none)
     vision_inside = 0.01              # and behind each seen point [m] (0: none)
+    learn = "task"                    # or "all": the kernel's length and noise learned with K_t in the loop
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
     slack = 0.03                      # a loose cloth's distance from the body before it settles
@@ -67,7 +68,7 @@ _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
 _COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
           "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
 _SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "theta", "noise",
-                            "voxel", "touch_inside", "vision_inside"},
+                            "voxel", "touch_inside", "vision_inside", "learn"},
              "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
                         "sensor_noise", "timestep", "settle_time", "camera_scale"}}
 #: What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in the

@@ -82,6 +82,7 @@ class RunSpec:
     outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
     device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
     settings: str | None = None     # scene files: "default" or "paper" (Scene3D.from_mesh); None: the file's own
+    learn: str | None = None        # "task" or "all" (explore(learn=)); None: the world's own
 
     @property
     def key(self) -> str:
@@ -133,6 +134,8 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["touch"] = spec.touch
     if spec.outer_tol is not None and kw["mode"] == "visual-tactile" and "regions" not in kw:
         kw["outer_tol"] = spec.outer_tol
+    if spec.learn is not None:
+        kw["learn"] = spec.learn
     if spec.device is not None:
         kw["device"] = spec.device
     return kw
@@ -307,6 +310,9 @@ def run_one(spec: RunSpec) -> dict:
         record["max_truncation"] = float(np.nanmax(trace.truncation)) if len(trace.truncation) else math.nan
     if trace is not None and len(trace.fit_gap):     # how far a held or tracked K_t was from its optimum [nats]
         record["max_fit_gap"] = float(np.nanmax(trace.fit_gap))
+    if trace is not None and len(trace.length):      # the kernel's length and sigma^2 at the end (learn="all")
+        record["length"], record["noise"] = float(trace.length[-1]), float(trace.noise[-1])
+    record["learn"] = kw.get("learn") or getattr(world.defaults, "learn", "task")
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
@@ -777,7 +783,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
-              device: str | None = None, settings: str | None = None) -> dict:
+              device: str | None = None, settings: str | None = None, learn: str | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -815,6 +821,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         settings: the scene files' settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
             ``Scene3D.from_mesh``); None: each file's own. Force-field world, scene files only; a study folder holds
             one setting.
+        learn: "task" (K_t alone) or "all" (the kernel's length and sigma^2 too; ``explore(learn=)``); None: each
+            world's own. A study folder holds one setting.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -828,7 +836,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
-        settings=settings)
+        settings=settings, learn=learn)
     return sweep.run()
 
 
@@ -858,10 +866,12 @@ class SweepSettings:
     outer_tol: float | None
     device: str | None
     settings: str | None = None
+    learn: str | None = None
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
-                threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None) -> "SweepSettings":
+                threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
+                learn=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry
 
@@ -903,8 +913,15 @@ class SweepSettings:
             if world != "forcefield" or not scene_files:
                 raise ValueError("settings: applies to scene files in the force-field world (the built-in objects "
                                  "E-H are the paper's, with its settings)")
+        if learn is not None:
+            from ..exploration.config import LEARN
+
+            if learn not in LEARN:
+                raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
+            if any(m == "local" for m in modes):
+                raise ValueError("learn: the local mode has a similarity per region; learn='all' does not apply")
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
-                   threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings)
+                   threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn)
 
     def run(self) -> dict:
         """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
@@ -932,6 +949,8 @@ class SweepSettings:
         identity = {} if self.outer_tol is None else {"outer_tol": self.outer_tol}   # older folders: exact
         if self.settings is not None:                                                   # older: the files' own
             identity["settings"] = self.settings
+        if self.learn is not None:                                                      # older: the worlds' own
+            identity["learn"] = self.learn
         return claim_folder(self.out, "study", self.force, world=self.world, voxel=self.voxel,
                             touch=None if self.touch == "point" else self.touch, **identity)   # older: point runs
 
@@ -947,7 +966,7 @@ class SweepSettings:
     def _specs(self, out: Path) -> list[RunSpec]:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
-                        self.settings if o in self.scene_files else None)
+                        self.settings if o in self.scene_files else None, self.learn)
                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
 
     def _execute(self, todo: list[RunSpec]) -> str:
