@@ -418,10 +418,10 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the scene files' settings (force-field world): default (three camera views, voxels a tenth "
                          "of the body, a second free-space point) or paper (one fixed camera, 5 cm voxels); "
                          "default: each file's own; one per --out folder")
-    sw.add_argument("--learn", default=None, choices=["task", "all"],
-                    help="what the runs learn: task (K_t alone, the paper's) or all (also the kernel's length and the "
-                         "noise, by the marginal likelihood on restart steps); default: each world's own; one per "
-                         "--out folder")
+    sw.add_argument("--learn", default=None, choices=["task", "length", "all"],
+                    help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
+                         "all (the length and the noise too), by the marginal likelihood on restart steps; default: "
+                         "each world's own; one per --out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

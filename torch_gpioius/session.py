@@ -75,9 +75,10 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         restart_every: every this many steps K_t's re-learning also starts from fixed values and keeps the best
             optimum, so that a warm start cannot hold it in a worse local optimum (default 25; None: warm starts
             only, as before this setting existed).
-        learn: "task" (K_t alone, the paper's) or "all": the kernel's length and sigma^2 are learned with K_t by
-            the exact marginal likelihood on every ``restart_every``-th step, from the configured values, on a copy
-            of at most 256 inner and 512 outer points, and kept only where the full data's likelihood rises
+        learn: "task" (K_t alone, the paper's), "length" or "all": the kernel's length (and with "all" sigma^2)
+            is learned with K_t by the exact marginal likelihood on every ``restart_every``-th step, from the
+            configured values, on a copy of at most 256 inner and 512 outer points, and kept only where the full
+            data's likelihood rises
             (``GPIOIS.learn_hyperparameters``; each record's ``length`` and ``noise`` say what was used). Default:
             the world's (``world.defaults.learn``).
         recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the

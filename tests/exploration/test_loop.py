@@ -136,6 +136,9 @@ def test_lost_contact_falls_back_to_the_last_contact():
     (dict(max_travel=float("inf")), "max_travel"),
     (dict(regions=0), "regions"),
     (dict(evidence="poke"), "evidence"),
+    (dict(learn="everything"), "learn: must be one of"),
+    (dict(learn="all", restart_every=None), "restart_every=None has none"),
+    (dict(learn="length", regions=2), "regions has one per region"),
 ])
 def test_bad_exploration_settings_are_named_before_anything_moves(kwargs, field):
     scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
@@ -214,3 +217,31 @@ def test_each_reported_fraction_is_measured_where_the_travel_reaches_it():
         assert trace.travel[first - 1] < f * budget
     assert measured.sum() == len(REPORT_FRACTIONS) + 2          # record 0, the three fractions, the last
     assert trace.travel[-1] <= budget + 0.03                     # at most one step (and its regulation) past it
+
+
+@pytest.mark.filterwarnings("ignore::torch_gpioius.models.gpiois.FitNotConvergedWarning")
+@pytest.mark.filterwarnings("ignore:explore.*no estimated inner surface")
+def test_a_run_learns_its_length_and_noise_on_the_restart_steps():
+    """learn="all": the length and sigma^2 change on restart steps only, start from the configured values each time,
+    are in every record, and are what the model holds; learn="length" holds sigma^2; a kernel without a learnable
+    length is refused before anything moves. (A few touches of a 2-D circle: the learned values are not judged here,
+    and the short run's fits and estimate may be poor; the studies judge them.)"""
+    scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
+    trace = tg.explore(scene, max_steps=7, restart_every=3, learn="all", metrics_every=100)
+    assert trace.n_steps == 8 and np.isfinite(trace.length).all() and np.isfinite(trace.noise).all()
+    changed = [i for i in range(1, trace.n_steps) if trace.length[i] != trace.length[i - 1]
+               or trace.noise[i] != trace.noise[i - 1]]
+    assert set(changed) <= {3, 6} and changed                      # learned (and kept) on a restart step
+    assert trace.length[0] == pytest.approx(scene.defaults.theta, rel=1e-12)
+    assert trace.length[-1] == pytest.approx(trace.model.kernel.length, rel=0, abs=0)
+    assert trace.noise[-1] == trace.model.noise and trace.model.hyper_result.kept
+    rows = trace.records()
+    assert rows[-1]["length"] == trace.length[-1] and rows[-1]["noise"] == trace.noise[-1]
+    only_length = tg.explore(scene, max_steps=4, restart_every=3, learn="length", metrics_every=100)
+    assert np.all(only_length.noise == only_length.noise[0]) and only_length.length[3] != only_length.length[0]
+
+    class Plain(tg.kernels.Matern52):          # a kernel that does not offer its length for learning
+        learnable_length = False
+
+    with pytest.raises(ValueError, match="no learnable length"):
+        tg.explore(scene, kernel=Plain(0.1), learn="length")

@@ -135,17 +135,19 @@ def test_the_model_keeps_values_that_raise_the_full_likelihood():
     assert fresh.kernel.length == model.kernel.length and fresh.noise == model.noise
 
 
-def test_values_that_lower_the_full_likelihood_are_put_back():
+@pytest.mark.parametrize("kernel", [Matern52(0.06), InverseMultiquadricKernel(0.06)], ids=["matern", "imq"])
+def test_values_that_lower_the_full_likelihood_are_put_back(kernel):
     """Learned on a thinned copy within bounds that exclude the full data's optimum, the values can lower the full
-    likelihood: the model is then left exactly as it was, engine included."""
+    likelihood: the model is then left exactly as it was, raw parameters (the inverse multiquadric's softplus does
+    not round-trip a float) and engine included."""
     x, y, t = _sphere_data()
-    model = tg.GPIOIS(x, y, t, kernel=Matern52(0.06), noise=0.01).fit()
-    kt, mll = model.task_covariance, float(model.log_marginal_likelihood())
+    model = tg.GPIOIS(x, y, t, kernel=kernel, noise=0.01).fit()
+    kt, mll, raw = model.task_covariance, float(model.log_marginal_likelihood()), model.hyperparameter_state()
     engine = model._inference()
     model.learn_hyperparameters(size=4, outer_size=4, length_bounds=(0.3, 0.5), noise_bounds=(0.3, 0.5))
     r = model.hyper_result
     assert not r.kept and r.points == 8 and r.length >= 0.3
-    assert model.kernel.length == 0.06 and model.noise == pytest.approx(0.01, rel=1e-15)
+    assert model.hyperparameter_state() == raw and model.noise == pytest.approx(0.01, rel=1e-15)
     assert torch.equal(model.task_covariance, kt) and model._inference() is engine
     assert float(model.log_marginal_likelihood()) == mll
 
@@ -155,7 +157,8 @@ def test_bad_settings_are_refused_and_change_nothing():
     model = tg.GPIOIS(x, y, t, kernel=Matern52(0.1), noise=0.08).fit()
     kt = model.task_covariance
     for kw, match in ((dict(size=1), "size"), (dict(outer_size=0), "outer_size"),
-                      (dict(length_bounds=(0.3, 0.1)), "length_bounds"), (dict(noise_bounds=(0.0, 1.0)), "noise_bounds"),
+                      (dict(length_bounds=(0.3, 0.1)), "length_bounds"),
+                      (dict(noise_bounds=(0.0, 1.0)), "noise_bounds"),
                       (dict(length_bounds="wide"), "length_bounds"), (dict(max_iter=0), "max_iter")):
         with pytest.raises(ValueError, match=match):
             model.learn_hyperparameters(**kw)
@@ -179,6 +182,21 @@ def test_bad_settings_are_refused_and_change_nothing():
 
     with pytest.raises(TypeError, match="no learnable length"):
         tg.GPIOIS(x, y, t, kernel=Fixed(), noise=0.08, inference="dense").learn_hyperparameters()
+
+
+def test_the_hyperparameter_state_is_checked_before_it_is_loaded():
+    x, y, t = _sphere_data()
+    model = tg.GPIOIS(x, y, t, kernel=Matern52(0.1), noise=0.08)
+    state = model.hyperparameter_state()
+    assert set(state) == {"covar_module.raw_lengthscale", "likelihood.noise_covar.raw_noise"}
+    for bad, match in (({"covar_module.raw_theta": [[0.1]]}, "not a parameter"),
+                       ({"covar_module.raw_lengthscale": [0.1, 0.2]}, "shape"),
+                       ({"covar_module.raw_lengthscale": [[-0.1]]}, "lengthscale|theta|range|length")):
+        with pytest.raises(ValueError, match=match):
+            model.load_hyperparameter_state(bad)
+        assert model.hyperparameter_state() == state
+    model.load_hyperparameter_state({"covar_module.raw_lengthscale": [[0.07]]})
+    assert model.kernel.length == 0.07
 
 
 def test_gpis_learns_its_length_and_noise():

@@ -122,6 +122,7 @@ def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_bo
     (GOOD + "[forcefield]\nvoxel = 2.0\n", "voxel"),
     (GOOD + "[forcefield]\ntouch_inside = 0.5\n", "touch_inside"),
     (GOOD + "[forcefield]\nvision_inside = -0.01\n", "vision_inside"),
+    (GOOD + "[forcefield]\nlearn = \"everything\"\n", "learn: must be one of"),
 ])
 def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
     path = _write(tmp_path, text)
@@ -154,6 +155,8 @@ def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     assert own.views == ("fixed", "mirrored") and own.defaults.kernel is None and own.defaults.theta == 0.12
     assert own.defaults.noise == 0.02 and own.defaults.policy.voxel == 0.03
     assert load_scene(_write(tmp_path, GOOD + "[forcefield]\ntheta = 0.07\n")).defaults.kernel.ell == 0.07
+    assert d.learn == "task"                                                             # the paper's learning
+    assert load_scene(_write(tmp_path, GOOD + "[forcefield]\nlearn = \"length\"\n")).defaults.learn == "length"
     # and into a run: the model is built with them
     trace = tg.explore(own, max_steps=1, metrics_every=100)
     assert trace.model.theta == pytest.approx(0.12, rel=1e-12) and trace.model.noise == pytest.approx(0.02, rel=1e-12)

@@ -32,9 +32,10 @@ MODES = ("visual-tactile", "tactile")
 #: (every 10th step took a 1.0 m patch run's 95th percentile from 44 ms to 737 ms).
 RESTART_EVERY = 25
 
-#: What an exploration learns: "task" (K_t alone, the paper's Sec. IV-A) or "all" (the kernel's length, sigma^2 and
-#: K_t by the exact marginal likelihood, on every restart step; ``learn_hyperparameters``).
-LEARN = ("task", "all")
+#: What an exploration learns: "task" (K_t alone, the paper's Sec. IV-A), "length" (the kernel's length and K_t) or
+#: "all" (the length, sigma^2 and K_t), by the exact marginal likelihood, on every restart step
+#: (``learn_hyperparameters``).
+LEARN = ("task", "length", "all")
 #: The copy the length and sigma^2 are learned on: at most this many inner and outer points (evenly in arrival order).
 #: 256 + 512 points cost 1.0-1.3 s a learning against 7.5 s on a 0.15 m run's 1,021 (one thread; docs/method-notes.md).
 LEARN_SIZE = (256, 512)
@@ -69,8 +70,9 @@ class ExploreConfig:
         restart_every: every this many steps K_t's re-learning also starts from fixed, data-independent values and
             keeps the best optimum (``GPIOIS.fit(multi_start=True)``), so that a warm start cannot hold it in a worse
             local optimum for the rest of the run; None: warm starts only (the first fit always multi-starts).
-        learn: "task" (K_t alone, the paper's) or "all" (also the kernel's length and sigma^2, on every
-            ``restart_every``-th step, from the configured values; :data:`LEARN_SIZE` points at most).
+        learn: "task" (K_t alone, the paper's), "length" (also the kernel's length) or "all" (the length and
+            sigma^2 too), on every ``restart_every``-th step, from the configured values; :data:`LEARN_SIZE` points at
+            most.
     """
 
     mode: str
@@ -164,15 +166,15 @@ class ExploreConfig:
         learn = getattr(d, "learn", "task") if learn is None else learn
         if learn not in LEARN:
             raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
-        if learn == "all":
+        if learn != "task":
             if restart_every is None:
-                raise ValueError("learn='all': the length and sigma^2 are learned on the restart steps; "
+                raise ValueError(f"learn={learn!r}: the length and sigma^2 are learned on the restart steps; "
                                  "restart_every=None has none")
             if regions is not None:
-                raise ValueError("learn='all': the kernel's length and sigma^2 are learned with one similarity; "
+                raise ValueError(f"learn={learn!r}: the kernel's length is learned with one similarity; "
                                  "regions has one per region (use learn='task')")
             if not getattr(as_kernel(kernel, theta), "learnable_length", False):
-                raise ValueError(f"learn='all': the {type(kernel).__name__} kernel has no learnable length "
+                raise ValueError(f"learn={learn!r}: the {type(kernel).__name__} kernel has no learnable length "
                                  "(ExactKernel.length and value_at)")
         return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
                    metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
@@ -181,7 +183,7 @@ class ExploreConfig:
     # ------------------------------------------------------------------ what the loop asks of the settings
     @property
     def initial_hyperparameters(self) -> tuple[float, float]:
-        """`(length [m], sigma^2)` as configured: where every learning of ``learn="all"`` starts."""
+        """`(length [m], sigma^2)` as configured: where every learning of ``learn`` starts."""
         length = self.theta if self.kernel is None else self.kernel.length
         return float(length), float(self.noise)
 

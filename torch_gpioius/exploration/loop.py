@@ -235,8 +235,8 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
 def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
     """Re-learn warm-started, and from fixed starts too every ``restart_every`` steps (decided by the step number,
     so a resumed run restarts where the uninterrupted one did), with the kernel's length and sigma^2 first on those
-    steps when ``learn`` is "all" (from the configured values each time; not on the first fit, whose data are
-    nearly all the camera's: learned there, a 2.7 cm length held the duck's run at 1.3 cm Chamfer, docs); a touch model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model
+    steps when ``learn`` is "length" or "all" (from the configured values each time; not on the first fit, whose
+    data are nearly all the camera's: learned there, a 2.7 cm length held a duck's run at 1.3 cm Chamfer); a touch model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model
     whose ``fit`` takes them (GPIOIS; GPIS learns nothing else)."""
     from ..models.gpiois import FitNotConvergedWarning
 
@@ -245,8 +245,9 @@ def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FitNotConvergedWarning)
         restart = cfg.restart_every is not None and state.steps > 0 and state.steps % cfg.restart_every == 0
-        if restart and cfg.learn == "all":
-            model.learn_hyperparameters(*LEARN_SIZE, start=cfg.initial_hyperparameters)
+        if restart and cfg.learn != "task":
+            model.learn_hyperparameters(*LEARN_SIZE, start=cfg.initial_hyperparameters,
+                                        learn_noise=cfg.learn == "all")
         model.fit(multi_start=restart, **{k: v for k, v in options.items() if k in accepted})
     for w in caught:                     # counted, and said once at the end of the run; others passed on
         if issubclass(w.category, FitNotConvergedWarning):

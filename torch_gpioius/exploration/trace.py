@@ -58,7 +58,7 @@ class Trace:
             (``outer_tol``; 0 with the exact engines).
         fit_gap: `(n,)` MLL gain predicted to remain from each record's K_t to the optimum [nats] (0 after a full
             re-learning; a held or tracked K_t's, ``PatchTouch.track``).
-        length: `(n,)` the kernel's length in use [m] (NaN for a kernel without one; changes with ``learn="all"``).
+        length: `(n,)` the kernel's length in use [m] (NaN for a kernel without one; changes where learned).
         noise: `(n,)` sigma^2 in use.
     """
 

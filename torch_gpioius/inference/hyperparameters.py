@@ -109,8 +109,8 @@ def exact_mll(kernel, x: Tensor, y: Tensor, task: Tensor, length: Tensor, noise:
 
 def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: float, task_covariance: Tensor | None,
                              prior_mean: float = 1.0, length_bounds: tuple[float, float] = LENGTH_BOUNDS,
-                             noise_bounds: tuple[float, float] = NOISE_BOUNDS, max_iter: int = 60
-                             ) -> HyperparameterResult:
+                             noise_bounds: tuple[float, float] = NOISE_BOUNDS, max_iter: int = 60,
+                             learn_noise: bool = True) -> HyperparameterResult:
     """Maximise :func:`exact_mll` over the kernel length, sigma^2 and the Cholesky factor of K_t (L-BFGS with a strong
     Wolfe line search), starting from the kernel's length, ``noise`` and ``task_covariance``.
 
@@ -128,13 +128,15 @@ def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: 
         length_bounds: `(lo, hi)` of the length [m].
         noise_bounds: `(lo, hi)` of sigma^2.
         max_iter: cap on L-BFGS iterations.
+        learn_noise: False holds sigma^2 at ``noise`` (then ``noise_bounds`` is not used): the length and K_t only.
 
     Returns:
         The :class:`HyperparameterResult` (``kept`` and the full-data fields are the model's to fill).
     """
     t0 = time.perf_counter()
     dt = dict(dtype=x.dtype, device=x.device)
-    start_q = [_unsquash(kernel.length, length_bounds), _unsquash(noise, noise_bounds)]
+    fixed_noise = None if learn_noise else torch.tensor(float(noise), dtype=x.dtype, device=x.device)
+    start_q = [_unsquash(kernel.length, length_bounds), _unsquash(noise, noise_bounds) if learn_noise else 0.0]
     if task_covariance is not None:       # K_t = L L^T with log-diagonal parameters, as GPIOIS.fit
         kt0 = task_covariance.to(**dt)
         chol0 = torch.linalg.cholesky(kt0 + 1e-12 * kt0.diagonal().max() * torch.eye(len(kt0), **dt))
@@ -150,7 +152,8 @@ def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: 
         else:
             chol = torch.stack([torch.stack([q[2].exp(), zero]), torch.stack([q[3], q[4].exp()])])
             kt = chol @ chol.T
-        return _squash(q[0], length_bounds), _squash(q[1], noise_bounds), kt
+        sigma2 = _squash(q[1], noise_bounds) if fixed_noise is None else fixed_noise + 0.0 * q[1]
+        return _squash(q[0], length_bounds), sigma2, kt
 
     def objective(q: Tensor) -> Tensor:
         return exact_mll(kernel, x, y, task, *unpack(q), prior_mean=prior_mean)
@@ -175,7 +178,8 @@ def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: 
     if not best >= start:              # a failed line search (or a NaN) can end below the start: keep the start then
         q, best = start_q, start
     length, sigma2, kt = unpack(q)
-    at_bound = tuple(name for name, u in (("length", q[0]), ("noise", q[1])) if abs(float(u)) > 6.9)
+    at_bound = tuple(name for name, u in (("length", q[0]), ("noise", q[1])) if abs(float(u)) > 6.9
+                     and (learn_noise or name == "length"))
     return HyperparameterResult(length=float(length), noise=float(sigma2),
                                 task_covariance=None if task_covariance is None else kt.detach().cpu(), mll=best,
                                 mll_start=start, points=len(x), evaluations=count[0],

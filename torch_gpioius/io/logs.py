@@ -98,7 +98,7 @@ class LogRecorder(Recorder):
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
                 "contact_on_body": record.contact_on_body, "truncation": record.truncation,
                 "fit_gap": record.fit_gap, "length": record.length, "noise": record.noise}
-        if run.config.learn == "all":               # learned length and noise, raw, so that resume restores them exactly
+        if run.config.learn != "task":              # learned length and noise, raw, so that resume restores them exactly
             meta["hyperparameters"] = state.model.hyperparameter_state()
         fit_state = getattr(state.model, "fit_state", None)
         fit_hessian = np.full((3, 3), np.nan)
@@ -196,7 +196,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
     v = step_values(last.meta)
-    if config.learn == "all" and "hyperparameters" in last.meta:
+    if config.learn != "task" and "hyperparameters" in last.meta:
         try:                                                       # what the run had learned by its last step
             model.load_hyperparameter_state(last.meta["hyperparameters"])
         except ValueError as exc:

@@ -7,7 +7,7 @@ r"""Matérn kernel with smoothness 5/2: the second kernel, and the proof that a 
 Twice differentiable (the inverse multiquadric is infinitely so): level sets of a GPIS under it are smooth, but less
 rounded between sparse contacts. The length scale is a constrained torch parameter (GPyTorch's ``raw_lengthscale``,
 ``kernel.lengthscale``); it is fixed during exploration, as the paper fixes theta, unless the exploration learns it
-(``learn="all"``, :meth:`torch_gpioius.GPIOIS.learn_hyperparameters`).
+(``learn="length"`` or ``"all"``, :meth:`torch_gpioius.GPIOIS.learn_hyperparameters`).
 """
 
 from __future__ import annotations

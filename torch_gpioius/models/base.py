@@ -213,6 +213,9 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
                 raise ValueError(f"{name}: contains NaN or inf")
         if self.theta is not None:
             as_float(self.theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        elif getattr(self.covar_module, "learnable_length", False):      # e.g. the Matern length scale
+            as_float(self.covar_module.length, "kernel length", lo=tol.theta_range[0], hi=tol.theta_range[1],
+                     positive=True, unit="m")
         as_float(self.noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
         if self.prior_mean != 1.0:
             raise ValueError(f"prior mean: must be m = 1 (eq. 2; free space is labelled 1), got {self.prior_mean}")
@@ -328,7 +331,8 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
     def learn_hyperparameters(self, size: int | None = None, outer_size: int | None = None,
                               length_bounds: tuple[float, float] = LENGTH_BOUNDS,
                               noise_bounds: tuple[float, float] = NOISE_BOUNDS, max_iter: int = 60,
-                              start: tuple[float, float] | None = None) -> "ImplicitSurfaceGP":
+                              start: tuple[float, float] | None = None, learn_noise: bool = True
+                              ) -> "ImplicitSurfaceGP":
         """Learn the kernel's length, the noise sigma^2 and K_t together by the exact log marginal likelihood.
 
         They live in the model as torch parameters (the kernel's ``raw_theta`` or ``raw_lengthscale``, the
@@ -353,6 +357,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             start: `(length [m], sigma^2)` the optimiser starts from (None: the model's current values). The
                 exploration starts every learning from the run's configured values, so that one learning's optimum
                 does not hold the next in its basin.
+            learn_noise: False holds sigma^2 (at ``start``'s, else the model's): the length and K_t only.
 
         Returns:
             self, with ``hyper_result`` (:class:`~torch_gpioius.inference.hyperparameters.HyperparameterResult`).
@@ -362,8 +367,8 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             ValueError: bad sizes or bounds (the model is unchanged).
         """
         if not getattr(self.covar_module, "learnable_length", False):
-            raise TypeError(f"learn_hyperparameters: the {type(self.covar_module).__name__} kernel has no learnable length "
-                            "(ExactKernel.length and value_at)")
+            raise TypeError(f"learn_hyperparameters: the {type(self.covar_module).__name__} kernel has no learnable "
+                            "length (ExactKernel.length and value_at)")
         size = as_int(size, "size", 2, allow_none=True)
         outer_size = as_int(outer_size, "outer_size", 2, allow_none=True)
         max_iter = as_int(max_iter, "max_iter", 1, 10_000)
@@ -392,8 +397,8 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         task = self._train_task()
         result = maximize_hyperparameters(kernel, self.train_inputs[0][keep], self.train_targets[keep], task[keep],
                                           start_noise, self._learned_task_covariance(), self.prior_mean,
-                                          max_iter=max_iter, **bounds)
-        before = (self.covar_module.length, self.noise, self._hyper_state(), self._engine, self._engine_key)
+                                          max_iter=max_iter, learn_noise=bool(learn_noise), **bounds)
+        before = (self.hyperparameter_state(), self._hyper_state(), self._engine, self._engine_key)
         mll_before = float(self.log_marginal_likelihood())
         try:
             self._set_hyperparameters(result.length, result.noise)
@@ -402,9 +407,9 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         except (torch.linalg.LinAlgError, ArithmeticError, ValueError):
             mll_after = -math.inf
         kept = mll_after >= mll_before
-        if not kept:                              # put the model back as it was, engine included (no rebuild)
-            length, noise, state, engine, key = before
-            self._set_hyperparameters(length, noise)
+        if not kept:             # put the model back as it was, to the bit, engine included (no rebuild)
+            raw, state, engine, key = before
+            self.load_hyperparameter_state(raw)
             self._restore_hyper_state(state)
             self._engine, self._engine_key = engine, key
         self.hyper_result = dataclasses.replace(result, kept=kept, mll_full=max(mll_after, mll_before),

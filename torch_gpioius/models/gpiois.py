@@ -83,7 +83,8 @@ class GPIOIS(ImplicitSurfaceGP):
     free-form PSD task matrix ``K_t`` (eq. 10) held by ``gpytorch.kernels.IndexKernel(num_tasks=2, rank=2)``:
     ``K_t = W W^T`` with ``W`` the lower Cholesky factor (the paper's ``theta_t = L``); the IndexKernel's extra
     diagonal term is pinned at zero. Prior mean ``m = 1`` and noise ``sigma^2`` are fixed; ``fit()`` learns
-    ``K_t`` and only ``K_t`` by exact marginal likelihood (eq. 15-16).
+    ``K_t`` and only ``K_t`` by exact marginal likelihood (eq. 15-16); ``learn_hyperparameters()`` learns the
+    kernel's length and sigma^2 with it.
 
     The similarity of the paper is ``K_t[0,1] / K_t[0,0]`` (Sec. V-A-3): a regression coefficient of F_out on
     F_in scaled, not a correlation; it can exceed 1.
@@ -95,7 +96,8 @@ class GPIOIS(ImplicitSurfaceGP):
         theta: IMQ kernel parameter theta_x [m] (eq. 5; ignored when ``kernel`` is given).
         noise: noise variance sigma^2.
         task_covariance: `(2, 2)` initial K_t (default identity: no assumed relation between the shapes).
-        learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
+        learn_theta: make theta trainable in a user's own GPyTorch training loop (``fit`` never changes it;
+            ``learn_hyperparameters`` learns it by the exact marginal likelihood).
         inference: exact engine behind ``predict`` / ``fit`` / ``log_marginal_likelihood``: "dense" (one
             Cholesky of the full Gram matrix, the reference), "structured" (``StructuredExactInference``: fixed
             outer set, inner Schur complement; agrees with dense to ~1e-10, 100x faster at N_o = 2000), or

@@ -17,14 +17,16 @@ class GPIS(ImplicitSurfaceGP):
 
     Prior ``F ~ GP(m, k_x)`` with ``m = 1`` (almost all space is outside the object) and the IMQ kernel of
     eq. (5); labels ``y = 0`` on the surface and ``y = 1`` in free space; the estimated shape is
-    ``{x : mu(x) = 0}`` with ``mu < 0`` inside (eq. 4). Noise ``sigma^2`` and ``theta`` are fixed.
+    ``{x : mu(x) = 0}`` with ``mu < 0`` inside (eq. 4). Noise ``sigma^2`` and ``theta`` are fixed unless
+    ``learn_hyperparameters`` learns them.
 
     Args:
         train_x: `(n, d)` observed points [m], base frame.
         train_y: `(n,)` labels in {0, 1}.
         theta: IMQ kernel parameter theta_x [m] (eq. 5; ignored when ``kernel`` is given).
         noise: noise variance sigma^2.
-        learn_theta: make theta trainable in the GPyTorch idiom (``fit`` never changes it).
+        learn_theta: make theta trainable in a user's own GPyTorch training loop (``fit`` never changes it;
+            ``learn_hyperparameters`` learns it by the exact marginal likelihood).
         kernel: any :class:`~torch_gpioius.kernels.ExactKernel` in place of the inverse multiquadric.
         device: where the data and the exact arithmetic live ("cpu", "cuda", a ``torch.device``; default: where
             ``train_x`` is). Always float64.

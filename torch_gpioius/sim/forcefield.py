@@ -353,8 +353,8 @@ class Scene3D(World):
                 none; default: by ``settings``, 2 cm or none).
             vision_inside: depth [m] of the inside points behind the seen surface (``ObservationPolicy.vision_inside``;
                 0: none; default: by ``settings``).
-            learn: "task" (K_t alone, the paper's) or "all" (the kernel's length and sigma^2 too, from ``theta`` and
-                ``noise`` as the start; ``explore(learn=)``); default: by ``settings``.
+            learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from ``theta``) or "all" (the
+                length and sigma^2, from ``theta`` and ``noise``; ``explore(learn=)``); default: by ``settings``.
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an

@@ -36,7 +36,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     voxel = 0.02
     touch_inside = 0.02               # an inside point this deep behind each contact [m] (0: none)
     vision_inside = 0.01              # and behind each seen point [m] (0: none)
-    learn = "task"                    # or "all": the kernel's length and noise learned with K_t in the loop
+    learn = "task"                    # "length": the kernel's length learned with K_t; "all": the noise too
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
     slack = 0.03                      # a loose cloth's distance from the body before it settles

@@ -82,7 +82,7 @@ class RunSpec:
     outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
     device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
     settings: str | None = None     # scene files: "default" or "paper" (Scene3D.from_mesh); None: the file's own
-    learn: str | None = None        # "task" or "all" (explore(learn=)); None: the world's own
+    learn: str | None = None        # "task", "length" or "all" (explore(learn=)); None: the world's own
 
     @property
     def key(self) -> str:
@@ -310,7 +310,7 @@ def run_one(spec: RunSpec) -> dict:
         record["max_truncation"] = float(np.nanmax(trace.truncation)) if len(trace.truncation) else math.nan
     if trace is not None and len(trace.fit_gap):     # how far a held or tracked K_t was from its optimum [nats]
         record["max_fit_gap"] = float(np.nanmax(trace.fit_gap))
-    if trace is not None and len(trace.length):      # the kernel's length and sigma^2 at the end (learn="all")
+    if trace is not None and len(trace.length):      # the kernel's length and sigma^2 at the end (as learned)
         record["length"], record["noise"] = float(trace.length[-1]), float(trace.noise[-1])
     record["learn"] = kw.get("learn") or getattr(world.defaults, "learn", "task")
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
@@ -513,7 +513,10 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "reference_travel": ref,
            "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
            "touch_inside": run.get("touch_inside", 0.0), "vision_inside": run.get("vision_inside", 0.0),
-           "max_truncation": run.get("max_truncation", 0.0), "max_fit_gap": run.get("max_fit_gap", math.nan)}
+           "max_truncation": run.get("max_truncation", 0.0), "max_fit_gap": run.get("max_fit_gap", math.nan),
+           # what the run learned (older runs: K_t alone, length and noise not recorded)
+           "learn": run.get("learn", "task"), "final_length": run.get("length", math.nan),
+           "final_noise": run.get("noise", math.nan)}
     for f in FRACTIONS:
         p = int(round(100 * f))
         row[f"hausdorff_{p}"] = _at_travel(s, "hausdorff", f * ref)
@@ -821,8 +824,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         settings: the scene files' settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
             ``Scene3D.from_mesh``); None: each file's own. Force-field world, scene files only; a study folder holds
             one setting.
-        learn: "task" (K_t alone) or "all" (the kernel's length and sigma^2 too; ``explore(learn=)``); None: each
-            world's own. A study folder holds one setting.
+        learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2;
+            ``explore(learn=)``); None: each world's own. A study folder holds one setting.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
