@@ -39,6 +39,30 @@ def test_fit_prints_the_interval_and_what_it_means(capsys):
     assert "the data cannot tell" in out or "predicts the inner one" in out
 
 
+def test_fit_learns_the_length_and_noise_when_asked_and_saves_them(tmp_path, capsys):
+    """`gpioius fit --learn all`: the checkpoint holds the learned values (the model's own parameters), fit.json and
+    the printout say them, and the full data's likelihood did not fall."""
+    import json
+
+    import torch_gpioius as tg
+    from torch_gpioius.io.checkpoints import load_checkpoint
+
+    assert main(["fit", str(EXAMPLE), "--learn", "all", "--out", str(tmp_path / "fit")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"learned \(all, \d+ points, \d+ evaluations\): length = [\d.e-]+ m, sigma\^2 = ", out), out
+    info = json.loads((tmp_path / "fit" / "fit.json").read_text())
+    r = info["learned"]
+    model = load_checkpoint(tmp_path / "fit" / "model.pt")
+    assert r["kept"] and r["length"] != 0.1
+    assert model.kernel.length == pytest.approx(r["length"], rel=1e-12)
+    assert model.noise == pytest.approx(r["noise"], rel=1e-9) and info["mll"] >= r["mll_before"]
+    fixed = tg.load_dataset(EXAMPLE).to_model().fit()
+    assert info["mll"] >= float(fixed.log_marginal_likelihood()) - 1e-9 * abs(info["mll"])
+    with pytest.raises(SystemExit):                  # argparse refuses an unknown choice, naming the choices
+        main(["fit", str(EXAMPLE), "--learn", "nothing"])
+    assert "invalid choice: 'nothing'" in capsys.readouterr().err
+
+
 def test_commands_never_write_into_someone_elses_folder(tmp_path, capsys):
     theirs = tmp_path / "results"
     theirs.mkdir()

@@ -108,9 +108,15 @@ def _fit(args: argparse.Namespace) -> int:
                                 camera_origin=origin)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         source = ds
-    info = fit_dataset(source, args.out, theta=args.theta, noise=args.noise)
+    info = fit_dataset(source, args.out, theta=args.theta, noise=args.noise, learn=args.learn)
     print(f"{args.dataset}: {info['n']} observations ({info['n_inner']} inner, {info['n_outer']} outer), "
           f"theta = {info['theta']:g} m, sigma^2 = {info['noise']:g}")
+    if "learned" in info:
+        r = info["learned"]
+        print(f"learned ({args.learn}, {r['points']} points, {r['evaluations']} evaluations): length = "
+              f"{r['length']:.4g} m, sigma^2 = {r['noise']:.4g}, "
+              + ("kept (the full data's log marginal likelihood rose)" if r["kept"] else
+                 "not kept (the full data's log marginal likelihood fell; the given values stay)"))
     if "task_covariance" in info:
         kt = info["task_covariance"]
         print(f"K_t = [[{kt[0][0]:.5g}, {kt[0][1]:.5g}], [{kt[1][0]:.5g}, {kt[1][1]:.5g}]]")
@@ -446,6 +452,9 @@ def build_parser() -> argparse.ArgumentParser:
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
     fit.add_argument("--theta", type=float, default=None, help="IMQ theta [m] (default: the file's, else 0.1)")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 (default: the file's, else 0.006)")
+    fit.add_argument("--learn", default="task", choices=["task", "length", "all"],
+                     help="learn K_t alone (the paper's), also the kernel's length, or the length and the noise too "
+                          "(by the exact marginal likelihood; --theta and --noise are then the start)")
     _force(fit, "--out holds files that `gpioius fit` did not write")
     fit.set_defaults(func=_fit)
     rep = sub.add_parser("replay", parents=[common], formatter_class=fmt,

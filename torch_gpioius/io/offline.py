@@ -92,7 +92,8 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
 
 
 def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None = None, *,
-                theta: float | None = None, noise: float | None = None, resolution: float | None = None) -> dict:
+                theta: float | None = None, noise: float | None = None, resolution: float | None = None,
+                learn: str = "task") -> dict:
     """Learn K_t on a dataset (or the final state of a log); save a checkpoint and a figure.
 
     Args:
@@ -102,6 +103,10 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         theta: the IMQ kernel's theta [m] (default: the dataset's, else the model's).
         noise: sigma^2 (default: the dataset's, else the model's).
         resolution: grid spacing of the estimate [m].
+        learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2), by the
+            exact marginal likelihood on a copy of at most 256 inner and 512 outer points, kept where the full data's
+            likelihood rises (``GPIOIS.learn_hyperparameters``); the checkpoint and ``fit.json`` hold what was
+            learned.
 
     Returns:
         ``{"n", "task_covariance", "similarity", "correlation", "correlation_interval", "mll", "checkpoint",
@@ -109,14 +114,24 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         figure's grid); ``correlation_interval`` is the 95 % profile-likelihood interval of the correlation
         (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
+    from ..exploration.config import LEARN, LEARN_SIZE
+
+    if learn not in LEARN:
+        raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
     ds = path if isinstance(path, Dataset) else load_dataset(path)
     path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
     model = ds.to_model(theta=theta, noise=noise).fit()
+    if learn != "task":
+        model.learn_hyperparameters(*LEARN_SIZE, learn_noise=learn == "all")
     # 15 significant digits: theta passes through GPyTorch's positive constraint (softplus and back), which
     # leaves rounding in the last digit (0.10000000000000002) that a reader should not see
     info = {"n": len(ds), "n_inner": int((ds.task == 0).sum()), "n_outer": int((ds.task == 1).sum()),
             "theta": float(f"{model.theta:.15g}"), "noise": float(f"{model.noise:.15g}"),
-            "mll": float(model.log_marginal_likelihood())}
+            "mll": float(model.log_marginal_likelihood()), "learn": learn}
+    if model.hyper_result is not None:
+        r = model.hyper_result
+        info["learned"] = {"length": r.length, "noise": r.noise, "kept": r.kept, "mll_before": r.mll_full_before,
+                           "evaluations": r.evaluations, "points": r.points}
     if isinstance(model, GPIOIS):
         info["converged"] = bool(getattr(model.fit_result, "converged", True))
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,

@@ -1,8 +1,9 @@
 """Kernels of the GP models: the contract the exact engines rely on (:class:`ExactKernel`), the inverse
 multiquadric of the paper (eq. 5, the default) and a Matérn-5/2.
 
-A new kernel is one file: subclass :class:`ExactKernel`, implement its five methods, decorate the class with
-:func:`register_kernel` (so logs and checkpoints can name it), and subclass the contract tests in
+A new kernel is one file: subclass :class:`ExactKernel`, implement its five methods (and, for its length to be
+learned, :attr:`ExactKernel.length` and :meth:`ExactKernel.value_at` with ``learnable_length = True``), decorate the
+class with :func:`register_kernel` (so logs and checkpoints can name it), and subclass the contract tests in
 ``tests/kernels/contract.py`` for its test file.
 """
 
