@@ -538,9 +538,20 @@ class RunViewer:
                 f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points"
                 + (f", {int((ds.y < 0).sum())} inside" if (ds.y < 0).any() else "") + "  \n"
                 f"{measures}, Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}"
+                + self._learned_values(run, p)
                 + self._on_body(run, k) + self._no_estimate(surface)
                 + ("" if self._truth() is not None else "  \ntrue shape: not known for this run"))
         self.shown_step = k
+
+    @staticmethod
+    def _learned_values(run, p: dict) -> str:
+        """The kernel's length and sigma^2 at this step, for runs that learned them (``learn`` in the header)."""
+        if run.meta.get("learn", "task") == "task":
+            return ""
+        length, noise = p.get("length", math.nan), p.get("noise", math.nan)
+        if not (math.isfinite(length) and math.isfinite(noise)):
+            return ""
+        return f"  \nlearned ({run.meta['learn']}): kernel length {length * 100:.1f} cm, sigma^2 {noise:.4g}"
 
     def _no_estimate(self, surface) -> str:
         """A line saying that this step's estimate has no surface (an empty picture must not look like a bug)."""

@@ -72,7 +72,7 @@ class RunHistory:
         has_outer = bool((ds.task == 1).any())
         if not has_outer or self.meta.get("mode") == "tactile":
             inner = ds.task == 0
-            return GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise, kernel=kernel)
+            return self._learned(GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise, kernel=kernel), p)
         if "local_params" in p and self.meta.get("regions"):
             from ..models.local import LocalGPIOIS
 
@@ -80,9 +80,19 @@ class RunHistory:
                                 kernel=kernel)
             return model.set_params(p["local_params"])
         if "kt" in p and np.isfinite(p["kt"]).all():
-            return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
-                          kernel=kernel)
+            model = GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
+                           kernel=kernel)
+            return self._learned(model, p)
         return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, kernel=kernel).fit()
+
+    def _learned(self, model, p: dict):
+        """``model`` with the length and noise the run had learned by that step (its logged raw parameters)."""
+        if "hyperparameters" in p:
+            try:
+                model.load_hyperparameter_state(p["hyperparameters"])
+            except ValueError as exc:
+                raise DatasetError(f"{self.path}: the logged hyperparameters: {exc}") from None
+        return model
 
     def kernel(self):
         """The run's kernel when it is not the default inverse multiquadric (its header names it), else None."""
@@ -137,7 +147,10 @@ def load_run(path: str | os.PathLike) -> RunHistory:
             p = {"similarity": v["similarity"], "correlation": v["correlation"], "hausdorff": v["hausdorff"],
                  "estimate": v["estimate"],
                  "contact_distance": v.get("contact_distance", math.nan),
-                 "contact_on_body": v.get("contact_on_body", math.nan)}
+                 "contact_on_body": v.get("contact_on_body", math.nan),
+                 "length": v["length"], "noise": v["noise"]}
+            if isinstance(rec.meta.get("hyperparameters"), dict):   # a run that learned the length (and noise)
+                p["hyperparameters"] = rec.meta["hyperparameters"]
             for key in ("kt", "local_params", "contact", "pad_pose", "pad_size"):
                 if key in a:
                     p[key] = np.asarray(a[key], dtype=np.float64)
