@@ -86,3 +86,27 @@ def test_the_3d_fit_figure_draws_a_certain_estimate_visibly_and_keeps_the_z_labe
     ax3d = next(ax for ax in fig.axes if hasattr(ax, "zaxis"))
     bar = next(ax for ax in fig.axes if ax is not ax3d)
     assert not ax3d.zaxis.label.get_window_extent(renderer).overlaps(bar.get_window_extent(renderer))
+
+
+@pytest.mark.filterwarnings("ignore::torch_gpioius.models.gpiois.FitNotConvergedWarning")
+def test_a_replay_uses_the_runs_kernel_and_the_length_it_learned(tmp_path):
+    """A log of a Matérn-5/2 run that learned its length: the dataset's model has the header's kernel (it was the
+    inverse multiquadric of 0.1 m before), and the replay re-learns K_t at the length the run had at each step, so
+    its last correlation is the run's."""
+    import numpy as np
+
+    import torch_gpioius as tg
+    from torch_gpioius.sim import Scene2D
+
+    a = np.linspace(0, 2 * np.pi, 72, endpoint=False)
+    circle = (lambda r: np.c_[r * np.cos(a), r * np.sin(a)])
+    scene = Scene2D(circle(0.10), circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
+    log = tmp_path / "run.gpioius"
+    trace = tg.explore(scene, kernel=tg.kernels.Matern52(0.1), max_steps=7, restart_every=3, learn="length",
+                       metrics_every=100, log=log)
+    assert trace.length[-1] != 0.1 and trace.model.hyper_result.kept
+    model = tg.load_dataset(log).to_model()
+    assert isinstance(model.kernel, tg.kernels.Matern52) and model.kernel.length == 0.1
+    rows = offline.replay_log(log, tmp_path / "replay", progress=False)
+    assert rows[-1]["step"] == trace.n_steps - 1
+    assert rows[-1]["correlation"] == pytest.approx(float(trace.correlation[-1]), abs=1e-4)

@@ -365,13 +365,24 @@ class Dataset:
     def to_model(self, theta: float | None = None, noise: float | None = None, **kwargs: Any):
         """A :class:`torch_gpioius.GPIOIS` on these observations (GPIS if no outer observation), not yet fit.
 
-        ``theta``/``noise`` default to the header's values, then to 0.1 / 0.006.
+        ``theta``/``noise`` default to the header's values, then to 0.1 / 0.006. The kernel is the header's (a log
+        of a run with the Matérn-5/2 names it), unless ``kernel`` or ``theta`` is given; then the inverse
+        multiquadric of ``theta`` as before.
         """
         from ..models.gpiois import GPIOIS
         from ..models.gpis import GPIS
 
         if len(self) == 0:
             raise DatasetError("the dataset is empty: nothing to fit")
+        desc = self.meta.get("kernel")
+        if ("kernel" not in kwargs and theta is None and isinstance(desc, dict)
+                and desc.get("kernel") not in (None, "InverseMultiquadric")):
+            from ..kernels import from_description
+
+            try:
+                kwargs["kernel"] = from_description(desc)
+            except ValueError as exc:
+                raise DatasetError(f"the header's kernel: {exc}") from None
         theta = theta if theta is not None else self.meta.get("theta") or 0.1
         noise = noise if noise is not None else self.meta.get("noise") or 0.006
         if (self.task == 1).any():

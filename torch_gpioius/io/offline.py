@@ -158,18 +158,21 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
     """Re-run the estimation of an exploration log step by step and write per-step records and figures.
 
     For each logged step (every ``every``-th, and always the last) the observations up to that step are
-    rebuilt, K_t re-learned (warm-started), and the step's uncertainty (eq. 23), similarity and -- when the
+    rebuilt (with the kernel length and noise the run had learned by then, where it learned them), K_t re-learned
+    (warm-started), and the step's uncertainty (eq. 23), similarity and -- when the
     log names one of the built-in 2-D scenes -- the Hausdorff distance to its true inner shape (eq. 24) are
     recorded. Writes ``records.csv``, ``records.json`` and ``transition.png`` (the estimate at ``figures``
     evenly spaced steps; 2-D logs).
     """
     path, out = Path(path), Path(out)
-    states = {}
+    states, learned = {}, {}
     header = None
     for rec, ds in replay(path):      # one validated read: header fields, step numbers, observations
         header = ds.meta
         if rec.kind == "step":
             states[rec.meta["step"]] = ds
+            if isinstance(rec.meta.get("hyperparameters"), dict):    # the length (and noise) the run had learned
+                learned[rec.meta["step"]] = rec.meta["hyperparameters"]
     if header is None:
         header = next(iter(read_records(path))).meta
     steps = sorted(states)
@@ -198,6 +201,11 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
     for i, k in enumerate(tqdm(chosen, desc=f"replay {path.name}", disable=not progress)):
         ds = states[k]
         model = ds.to_model()
+        if k in learned:
+            try:
+                model.load_hyperparameter_state(learned[k])
+            except ValueError as exc:
+                raise DatasetError(f"{path}: step {k}: the logged hyperparameters: {exc}") from None
         if kt is not None and isinstance(model, GPIOIS):
             model.task_covariance = kt
             model.fit(multi_start=False)
