@@ -72,7 +72,8 @@ class ExplorationDefaults:
         approach_travel: the approach gives up after this distance [m].
         kernel: a kernel in place of the inverse multiquadric of ``theta`` (an
             :class:`~torch_gpioius.kernels.ExactKernel`), or None; a ``theta`` given to ``explore`` replaces it.
-        learn: "task" (K_t alone, the paper's), "length" or "all" (the kernel's length, and sigma^2; ``explore(learn=)``).
+        learn: "task" (K_t alone, the paper's), "length" or "all" (the kernel's length, and sigma^2;
+            ``explore(learn=)``).
     """
 
     theta: float

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-__all__ = ["HyperparameterResult", "LENGTH_BOUNDS", "NOISE_BOUNDS", "exact_mll", "maximize_hyperparameters"]
+__all__ = ["HyperparameterResult", "LENGTH_BOUNDS", "NOISE_BOUNDS", "exact_mll", "exact_mll_fast",
+           "maximize_hyperparameters"]
 
 #: Default bounds of the learned length [m]: below 2 cm the estimate interpolates each fingertip contact alone, above
 #: 50 cm it is smoother than any body the library explores (docs/method-notes.md section 12 measured the choices).
@@ -107,6 +108,30 @@ def exact_mll(kernel, x: Tensor, y: Tensor, task: Tensor, length: Tensor, noise:
     return -0.5 * (r * alpha).sum() - chol.diagonal().log().sum() - 0.5 * n * math.log(2.0 * math.pi)
 
 
+def exact_mll_fast(kernel, x: Tensor, y: Tensor, task: Tensor, length: Tensor, noise: Tensor,
+                   task_covariance: Tensor, prior_mean: float = 1.0) -> Tensor:
+    """:func:`exact_mll`'s value, with the same gradient by the closed form ``dL = tr(W dG) / 2``,
+    ``W = alpha alpha^T - G^-1`` (Rasmussen & Williams eq. 5.9), instead of autograd through the Cholesky factor.
+
+    The factorisation and ``G^-1`` are computed once, outside autograd; the returned tensor is ``L + S - S.detach()``
+    with the surrogate ``S = tr(W G) / 2``, where only ``G``'s elementwise construction from ``length``, ``noise`` and
+    ``task_covariance`` is differentiated (O(n^2)). Autograd through the Cholesky costs two more O(n^3) triangular
+    solves and a product: 130 against about 45 ms an evaluation at 768 points (one thread). Why by hand: torch has no
+    fused log-determinant-and-solve with this backward, and GPyTorch's exact path is the autograd one.
+    """
+    n = len(x)
+    eye = torch.eye(n, dtype=x.dtype, device=x.device)
+    gram = kernel.value_at(x, x, length) * task_covariance[task][:, task] + noise * eye
+    with torch.no_grad():
+        chol = torch.linalg.cholesky(gram)
+        r = (y - prior_mean).unsqueeze(-1)
+        alpha = torch.cholesky_solve(r, chol)
+        value = -0.5 * (r * alpha).sum() - chol.diagonal().log().sum() - 0.5 * n * math.log(2.0 * math.pi)
+        weight = alpha @ alpha.T - torch.cholesky_inverse(chol)
+    surrogate = 0.5 * (weight * gram).sum()
+    return value + surrogate - surrogate.detach()
+
+
 def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: float, task_covariance: Tensor | None,
                              prior_mean: float = 1.0, length_bounds: tuple[float, float] = LENGTH_BOUNDS,
                              noise_bounds: tuple[float, float] = NOISE_BOUNDS, max_iter: int = 60,
@@ -156,7 +181,7 @@ def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: 
         return _squash(q[0], length_bounds), sigma2, kt
 
     def objective(q: Tensor) -> Tensor:
-        return exact_mll(kernel, x, y, task, *unpack(q), prior_mean=prior_mean)
+        return exact_mll_fast(kernel, x, y, task, *unpack(q), prior_mean=prior_mean)
 
     with torch.no_grad():
         start = float(objective(p))
