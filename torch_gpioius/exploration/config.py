@@ -21,7 +21,7 @@ from .recovery import NoProgress
 from .stopping import StopRule, TravelBudget
 from .touch import touch_model
 
-__all__ = ["ExploreConfig", "Run", "MODES", "LEARN", "LEARN_SIZE"]
+__all__ = ["ExploreConfig", "Run", "MODES", "LEARN", "LEARN_SIZE", "as_learn"]
 
 MODES = ("visual-tactile", "tactile")
 
@@ -36,6 +36,19 @@ RESTART_EVERY = 25
 #: "all" (the length, sigma^2 and K_t), by the exact marginal likelihood, on every restart step
 #: (``learn_hyperparameters``).
 LEARN = ("task", "length", "all")
+
+
+def as_learn(value) -> str:
+    """``value`` if it names what an exploration learns (:data:`LEARN`).
+
+    Raises:
+        ValueError: anything else, naming the choices.
+    """
+    if not isinstance(value, str) or value not in LEARN:
+        raise ValueError(f"learn: must be one of {LEARN}, got {value!r}")
+    return value
+
+
 #: The copy the length and sigma^2 are learned on: at most this many inner and outer points (evenly in arrival order).
 #: 256 + 512 points cost 1.0-1.3 s a learning against 7.5 s on a 0.15 m run's 1,021 (one thread; docs/method-notes.md).
 LEARN_SIZE = (256, 512)
@@ -163,9 +176,7 @@ class ExploreConfig:
             restart_every = RESTART_EVERY
         if restart_every is not None:
             restart_every = as_int(restart_every, "restart_every", 1, 1_000_000)
-        learn = getattr(d, "learn", "task") if learn is None else learn
-        if learn not in LEARN:
-            raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
+        learn = as_learn(getattr(d, "learn", "task") if learn is None else learn)
         if learn != "task":
             if restart_every is None:
                 raise ValueError(f"learn={learn!r}: the length and sigma^2 are learned on the restart steps; "

@@ -114,10 +114,9 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         figure's grid); ``correlation_interval`` is the 95 % profile-likelihood interval of the correlation
         (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
-    from ..exploration.config import LEARN, LEARN_SIZE
+    from ..exploration.config import LEARN_SIZE, as_learn
 
-    if learn not in LEARN:
-        raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
+    as_learn(learn)
     ds = path if isinstance(path, Dataset) else load_dataset(path)
     path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
     model = ds.to_model(theta=theta, noise=noise).fit()

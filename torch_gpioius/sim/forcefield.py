@@ -377,10 +377,9 @@ class Scene3D(World):
         if voxel is not None:
             defaults = dataclasses.replace(defaults, policy=defaults.policy.with_voxel(voxel))
         if learn is not None:
-            from ..exploration.config import LEARN
+            from ..exploration.config import as_learn
 
-            if learn not in LEARN:
-                raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
+            learn = as_learn(learn)
             defaults = dataclasses.replace(defaults, learn=learn)
         for key, depth in (("touch_inside", touch_inside), ("vision_inside", vision_inside)):
             if depth is not None:

@@ -917,10 +917,9 @@ class SweepSettings:
                 raise ValueError("settings: applies to scene files in the force-field world (the built-in objects "
                                  "E-H are the paper's, with its settings)")
         if learn is not None:
-            from ..exploration.config import LEARN
+            from ..exploration.config import as_learn
 
-            if learn not in LEARN:
-                raise ValueError(f"learn: must be one of {LEARN}, got {learn!r}")
+            as_learn(learn)
             if any(m == "local" for m in modes):
                 raise ValueError("learn: the local mode has a similarity per region; learn='all' does not apply")
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
