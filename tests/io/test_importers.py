@@ -87,6 +87,31 @@ def test_contacts_csv(tmp_path):
             load_contacts_csv(p)
 
 
+def test_inside_points_in_a_contacts_csv(tmp_path):
+    """A point known to lie inside: `inside` with its depth in the file's units (20 mm -> y = -0.02 / 0.05 = -0.4,
+    the label the exploration gives the point behind a contact), or a negative label directly; they reach the model
+    as labels below zero. Every way to get it wrong is named by file and line."""
+    p = tmp_path / "c.csv"
+    p.write_text("x,y,z,label,depth\n100,0,0,contact,\n100,0,-20,inside,20\n100,0,-10,-0.2,\n100,0,40,free,\n")
+    x, y, _ = load_contacts_csv(p, units="mm")
+    np.testing.assert_allclose(y, [0.0, -0.4, -0.2, 1.0], rtol=1e-15)
+    np.savez(tmp_path / "cloud.npz", points=PTS)
+    ds = dataset_from_files(p, tmp_path / "cloud.npz", voxel=None, units="mm")
+    assert ds.y[:4].tolist() == y.tolist()
+    assert float(ds.to_model().train_targets.min()) == pytest.approx(-0.4, rel=1e-15)
+    for body, match in [("x,y,label,depth\n1,2,inside,\n", "c.csv:2: an inside point needs its depth"),
+                        ("x,y,label\n1,2,inside\n", "c.csv:2: an inside point needs its depth"),
+                        ("x,y,label,depth\n1,2,inside,0\n", "c.csv:2: depth '0' must be a positive"),
+                        ("x,y,label,depth\n1,2,inside,-1\n", "must be a positive"),
+                        ("x,y,label,depth\n1,2,inside,nan\n", "must be a positive"),
+                        ("x,y,label,depth\n1,2,contact,5\n", "c.csv:2: depth '5' is given for a 'contact' row"),
+                        ("x,y,label\n1,2,0.5\n", "or a negative number"),
+                        ("x,y,label\n1,2,-inf\n", "or a negative number")]:
+        p.write_text(body)
+        with pytest.raises(DatasetError, match=match):
+            load_contacts_csv(p)
+
+
 def test_dataset_from_files(tmp_path):
     (tmp_path / "c.csv").write_text("x,y,z,label\n0.1,0,0,contact\n0.3,0,0,free\n")
     np.savez(tmp_path / "cloud.npz", points=PTS)

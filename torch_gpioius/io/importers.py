@@ -217,12 +217,47 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
 
 
 _LABELS = {"0": 0.0, "1": 1.0, "contact": 0.0, "surface": 0.0, "free": 1.0, "free_space": 1.0}
+#: The distance [m] over which labels rise from 0 on a surface to 1 in free space (``ObservationPolicy.ramp`` of the
+#: defaults, and the camera free space of :func:`dataset_from_files`): a point ``d`` inside is labelled ``-d / ramp``.
+_RAMP = 0.05
+
+
+def _label(row: dict, path, line: int, scale: float) -> float:
+    """A row's label: a kind's (``contact``, ``free``, ...), ``inside`` with its ``depth`` [CSV units] behind the surface
+    (``-depth / 5 cm``, the free-space ramp continued inside, as the exploration labels its inside points), or a
+    negative number given as the label itself."""
+    label, depth = row.get("label", "").lower(), row.get("depth", "")
+    if label == "inside":
+        try:
+            d = float(depth) * scale
+        except ValueError:
+            raise DatasetError(f"{path}:{line}: an inside point needs its depth behind the surface in the depth "
+                               f"column (a positive number in the file's units), got {depth!r}") from None
+        if not (np.isfinite(d) and d > 0):
+            raise DatasetError(f"{path}:{line}: depth {depth!r} must be a positive number (how far inside the "
+                               "body the point lies)")
+        return -d / _RAMP
+    if depth:
+        raise DatasetError(f"{path}:{line}: depth {depth!r} is given for a {label!r} row; depth belongs to inside "
+                           "points only")
+    if label in _LABELS:
+        return _LABELS[label]
+    try:
+        value = float(label)
+    except ValueError:
+        value = math.nan
+    if np.isfinite(value) and value < 0:
+        return value
+    raise DatasetError(f"{path}:{line}: label {label!r} must be one of {sorted(_LABELS) + ['inside']} or a negative "
+                       "number (a point inside the body)")
 
 
 def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read inner observations from a CSV with a header ``x,y[,z],label[,step]``.
+    """Read inner observations from a CSV with a header ``x,y[,z],label[,step][,depth]``.
 
-    ``label`` is ``contact``/``surface``/0 (y = 0) or ``free``/``free_space``/1 (y = 1); ``step`` defaults to 0.
+    ``label`` is ``contact``/``surface``/0 (y = 0), ``free``/``free_space``/1 (y = 1), or a point known to lie inside
+    the body: ``inside`` with its ``depth`` behind the surface (in the file's units; y = -depth / 5 cm, as the
+    exploration labels the points behind its contacts), or a negative label given directly; ``step`` defaults to 0.
 
     Returns:
         ``x (n, d)`` [m], ``y (n,)``, ``step (n,)``.
@@ -261,9 +296,7 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
             raise DatasetError(f"{path}:{i}: coordinates {[row.get(d) for d in dims]} are not numbers") from None
         if not np.isfinite(p).all():
             raise DatasetError(f"{path}:{i}: coordinates contain NaN or inf")
-        label = row.get("label", "").lower()
-        if label not in _LABELS:
-            raise DatasetError(f"{path}:{i}: label {label!r} must be one of {sorted(_LABELS)}")
+        y = _label(row, path, i, scale)
         try:
             st = int(row["step"]) if row.get("step") else 0
         except ValueError:
@@ -271,7 +304,7 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
         if not 0 <= st < 2**62:
             raise DatasetError(f"{path}:{i}: step {row.get('step')} is out of range (a step number from 0 to 2^62)")
         xs.append(p)
-        ys.append(_LABELS[label])
+        ys.append(y)
         steps.append(st)
     xs = np.asarray(xs) * scale
     check_metres(xs, str(path), hint=_units_hint(units), error=DatasetError)
