@@ -10,7 +10,7 @@ mcap_reader = pytest.importorskip("mcap.reader")
 
 import torch_gpioius as tg  # noqa: E402
 from torch_gpioius.cli import main  # noqa: E402
-from torch_gpioius.io.foxglove import MCAP_TOPICS, PAD_TOPIC, export_mcap  # noqa: E402
+from torch_gpioius.io.foxglove import INSIDE_TOPIC, MCAP_TOPICS, PAD_TOPIC, export_mcap  # noqa: E402
 from torch_gpioius.io.runs import load_run  # noqa: E402
 
 
@@ -92,3 +92,32 @@ def test_a_patch_run_exports_its_pads(tmp_path):
     update = _decoder(last[0]).FromString(last[1].data)
     loop = np.array([[p.x, p.y, p.z] for p in update.entities[0].lines[0].points])
     np.testing.assert_allclose(loop, run.pad_footprints(run.steps[-1])[-1], atol=1e-12)
+
+
+def test_a_run_with_inside_points_exports_them_on_their_own_topic(tmp_path):
+    """Points known to lie inside (labels below 0, behind the touches and the seen surface) get their own topic at
+    each step; the camera's cloud keeps its surface and free space only."""
+    import dataclasses
+
+    from torch_gpioius.sim import sphere_scene
+
+    scene = sphere_scene(subdivisions=3)
+    policy = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.01)
+    log = tmp_path / "inside.gpioius"
+    tg.explore(scene, max_travel=0.03, metrics_every=100, policy=policy, log=log, progress=False)
+    out = tmp_path / "inside.mcap"
+    export_mcap(log, out)
+    run = load_run(log)
+    with open(out, "rb") as f:
+        reader = mcap_reader.make_reader(f)
+        topics = {c.topic for c in reader.get_summary().channels.values()}
+        assert topics == set(MCAP_TOPICS) | {INSIDE_TOPIC}
+        got = {c.topic: (s, m) for s, c, m in reader.iter_messages(topics=[INSIDE_TOPIC, "/gpioius/cloud"])}
+    ds, first = run.states[run.steps[-1]], run.states[run.steps[0]]
+    seen = first.x[(first.task == 1) & (first.y >= 0)]
+    for topic, want in ((INSIDE_TOPIC, ds.x[ds.y < 0]), ("/gpioius/cloud", seen)):
+        schema, message = got[topic]
+        pts = np.frombuffer(_decoder(schema).FromString(message.data).data, dtype=np.float32).reshape(-1, 3)
+        assert len(want) > 0
+        np.testing.assert_allclose(pts, want, atol=1e-6)
+    assert bool((ds.y[ds.task == 0] < 0).any()) and bool((ds.y[ds.task == 1] < 0).any())    # both kinds exported

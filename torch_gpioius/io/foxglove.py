@@ -4,6 +4,8 @@ extra, ``foxglove-sdk``).
 Topics, all in the run's frame (``base``, or ``scene`` in 2-D, lifted to z = 0):
 
 * ``/gpioius/cloud`` (``foxglove.PointCloud``, once): the camera's outer observations (surface and free space);
+* ``/gpioius/inside`` (``foxglove.PointCloud``, each exported step; runs with points known to lie inside only,
+  :data:`INSIDE_TOPIC`): the points labelled below zero so far, behind the touches and behind the seen surface;
 * ``/gpioius/contacts``, ``/gpioius/free_space`` (``foxglove.PointCloud``, each exported step): the touches so far;
 * ``/gpioius/path`` (``foxglove.SceneUpdate`` with a line strip): the fingertip's path so far;
 * ``/gpioius/estimate`` (``foxglove.SceneUpdate``): the inner estimate, a triangle list in 3-D or a line list in 2-D,
@@ -25,12 +27,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["export_mcap", "MCAP_TOPICS", "PAD_TOPIC"]
+__all__ = ["export_mcap", "MCAP_TOPICS", "PAD_TOPIC", "INSIDE_TOPIC"]
 
 MCAP_TOPICS = ("/gpioius/cloud", "/gpioius/contacts", "/gpioius/free_space", "/gpioius/path", "/gpioius/estimate",
                "/gpioius/metrics")
 #: The pad's outline per step, written for runs whose log records the gel pad (``touch="patch"``).
 PAD_TOPIC = "/gpioius/pad"
+#: The points known to lie inside (labels below zero, either task) per step, for runs that have them.
+INSIDE_TOPIC = "/gpioius/inside"
 
 
 def _lift(x: np.ndarray) -> np.ndarray:
@@ -128,8 +132,11 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
         metrics = foxglove.Channel("/gpioius/metrics", context=ctx)
         has_pads = any("pad_pose" in history.params.get(k, {}) for k in steps)
         pad_ch = ch.SceneUpdateChannel(PAD_TOPIC, context=ctx) if has_pads else None
+        has_inside = bool((history.states[steps[-1]].y < 0).any())
+        inside_ch = ch.PointCloudChannel(INSIDE_TOPIC, context=ctx) if has_inside else None
         first = history.states[steps[0]]
-        cloud.log(cloud_msg(first.x[first.task == 1], 0), log_time=0)
+        # the camera's surface and free space (its inside points, labels below 0, have their own topic)
+        cloud.log(cloud_msg(first.x[(first.task == 1) & (first.y >= 0)], 0), log_time=0)
         n_messages += 1
         for k in chosen:
             t_ns = int(k) * 1_000_000_000
@@ -137,6 +144,9 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
             contacts.log(cloud_msg(ds.x[(ds.task == 0) & (ds.y == 0)], k), log_time=t_ns)
             free.log(cloud_msg(ds.x[(ds.task == 0) & (ds.y == 1)], k), log_time=t_ns)
             n_messages += 2
+            if inside_ch is not None:
+                inside_ch.log(cloud_msg(ds.x[ds.y < 0], k), log_time=t_ns)
+                n_messages += 1
             if history.trajectory is not None:
                 trail = history.trajectory[history.trajectory_step <= k]
                 if len(trail) > 1:

@@ -223,9 +223,9 @@ _RAMP = 0.05
 
 
 def _label(row: dict, path, line: int, scale: float) -> float:
-    """A row's label: a kind's (``contact``, ``free``, ...), ``inside`` with its ``depth`` [CSV units] behind the surface
-    (``-depth / 5 cm``, the free-space ramp continued inside, as the exploration labels its inside points), or a
-    negative number given as the label itself."""
+    """A row's label: a kind's (``contact``, ``free``, ...), ``inside`` with its ``depth`` [CSV units] behind the
+    surface (``-depth / 5 cm``, the free-space ramp continued inside, as the exploration labels its inside points),
+    or a negative number given as the label itself."""
     label, depth = row.get("label", "").lower(), row.get("depth", "")
     if label == "inside":
         try:
