@@ -25,6 +25,18 @@ def _decoder(schema):
     return message_factory.GetMessageClass(pool.FindMessageTypeByName(schema.name))
 
 
+def _exported(log, tmp_path, topics):
+    """Export ``log`` to MCAP and read it back: the run, the file's topics, and the last message of each of
+    ``topics`` as ``(schema, message)``."""
+    out = tmp_path / (log.stem + ".mcap")
+    export_mcap(log, out)
+    with open(out, "rb") as f:
+        reader = mcap_reader.make_reader(f)
+        found = {c.topic for c in reader.get_summary().channels.values()}
+        last = {c.topic: (s, m) for s, c, m in reader.iter_messages(topics=list(topics))}
+    return load_run(log), found, last
+
+
 @pytest.fixture(scope="module")
 def log_2d(tmp_path_factory):
     path = tmp_path_factory.mktemp("runs") / "A.gpioius"
@@ -81,15 +93,10 @@ def test_a_patch_run_exports_its_pads(tmp_path):
     log = tmp_path / "patch.gpioius"
     tg.explore(make_world("forcefield", "E", 0, smoke=True), "tactile", touch="patch", max_travel=0.02,
                metrics_every=100, log=log, progress=False)
-    out = tmp_path / "patch.mcap"
-    export_mcap(log, out)
-    run = load_run(log)
-    with open(out, "rb") as f:
-        reader = mcap_reader.make_reader(f)
-        topics = {c.topic for c in reader.get_summary().channels.values()}
-        assert topics == set(MCAP_TOPICS) | {PAD_TOPIC}
-        last = [(s, m) for s, c, m in reader.iter_messages(topics=[PAD_TOPIC])][-1]
-    update = _decoder(last[0]).FromString(last[1].data)
+    run, topics, last = _exported(log, tmp_path, [PAD_TOPIC])
+    assert topics == set(MCAP_TOPICS) | {PAD_TOPIC}
+    schema, message = last[PAD_TOPIC]
+    update = _decoder(schema).FromString(message.data)
     loop = np.array([[p.x, p.y, p.z] for p in update.entities[0].lines[0].points])
     np.testing.assert_allclose(loop, run.pad_footprints(run.steps[-1])[-1], atol=1e-12)
 
@@ -105,14 +112,8 @@ def test_a_run_with_inside_points_exports_them_on_their_own_topic(tmp_path):
     policy = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.01)
     log = tmp_path / "inside.gpioius"
     tg.explore(scene, max_travel=0.03, metrics_every=100, policy=policy, log=log, progress=False)
-    out = tmp_path / "inside.mcap"
-    export_mcap(log, out)
-    run = load_run(log)
-    with open(out, "rb") as f:
-        reader = mcap_reader.make_reader(f)
-        topics = {c.topic for c in reader.get_summary().channels.values()}
-        assert topics == set(MCAP_TOPICS) | {INSIDE_TOPIC}
-        got = {c.topic: (s, m) for s, c, m in reader.iter_messages(topics=[INSIDE_TOPIC, "/gpioius/cloud"])}
+    run, topics, got = _exported(log, tmp_path, [INSIDE_TOPIC, "/gpioius/cloud"])
+    assert topics == set(MCAP_TOPICS) | {INSIDE_TOPIC}
     ds, first = run.states[run.steps[-1]], run.states[run.steps[0]]
     seen = first.x[(first.task == 1) & (first.y >= 0)]
     for topic, want in ((INSIDE_TOPIC, ds.x[ds.y < 0]), ("/gpioius/cloud", seen)):
