@@ -184,7 +184,7 @@ class ExploreConfig:
             if regions is not None:
                 raise ValueError(f"learn={learn!r}: the kernel's length is learned with one similarity; "
                                  "regions has one per region (use learn='task')")
-            if not getattr(as_kernel(kernel, theta), "learnable_length", False):
+            if kernel is not None and not getattr(kernel, "learnable_length", False):   # None: the learnable IMQ
                 raise ValueError(f"learn={learn!r}: the {type(kernel).__name__} kernel has no learnable length "
                                  "(ExactKernel.length and value_at)")
         return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,

@@ -236,8 +236,9 @@ def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
     """Re-learn warm-started, and from fixed starts too every ``restart_every`` steps (decided by the step number,
     so a resumed run restarts where the uninterrupted one did), with the kernel's length and sigma^2 first on those
     steps when ``learn`` is "length" or "all" (from the configured values each time; not on the first fit, whose
-    data are nearly all the camera's: learned there, a 2.7 cm length held a duck's run at 1.3 cm Chamfer); a touch model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model
-    whose ``fit`` takes them (GPIOIS; GPIS learns nothing else)."""
+    data are nearly all the camera's: learned there, a 2.7 cm length held a duck's run at 1.3 cm Chamfer); a touch
+    model's ``fit_options`` (patches: the ``min_gain`` rule) go to a model whose ``fit`` takes them (GPIOIS; GPIS
+    learns nothing else)."""
     from ..models.gpiois import FitNotConvergedWarning
 
     options = cfg.touch.fit_options() if callable(getattr(cfg.touch, "fit_options", None)) else {}

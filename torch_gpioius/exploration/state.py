@@ -48,7 +48,7 @@ RECORD_FIELDS = {
     "fit_gap": "the MLL gain predicted to remain from the K_t in use to the optimum [nats]: 0 after a full "
                "re-learning; a held or tracked K_t's Newton decrement with the last re-learning's Hessian",
     "length": "the kernel's length in use [m] (the inverse multiquadric's theta, the Matern length scale; NaN for a "
-              "kernel without one); it changes only where the run learns it (learn='all')",
+              "kernel without one); it changes only where the run learns it (learn='length' or 'all')",
     "noise": "the noise variance sigma^2 in use",
 }
 

@@ -2,10 +2,11 @@
 
 ``GPIOIS.fit`` learns K_t alone with an exact Newton method on the structured engine, whose eigenbasis of the outer
 block holds for one kernel length. Learning the length as well changes that basis at every evaluation, so this
-module evaluates the likelihood by one dense Cholesky of the (possibly thinned) Gram matrix instead, differentiates
-it with autograd through the kernel contract's :meth:`~torch_gpioius.kernels.ExactKernel.value_at`, and maximises it
-with L-BFGS over bounded parameters. The model then takes the values and is exact again at them (the caller
-re-learns K_t on all the data with the structured engine).
+module evaluates the likelihood by one dense Cholesky of the (possibly thinned) Gram matrix instead, takes its
+gradient by the trace form (:func:`exact_mll_fast`) through the kernel contract's
+:meth:`~torch_gpioius.kernels.ExactKernel.value_at`, and maximises it with L-BFGS over bounded parameters. The model
+then takes the values and is exact again at them (the caller re-learns K_t on all the data with the structured
+engine).
 
 Written by hand because GPyTorch's ``ExactMarginalLogLikelihood`` holds the parameters in the model (a thinned copy
 would need a second model) and has no bounds on the noise other than a lower one; the arithmetic is GPyTorch's own
@@ -43,7 +44,7 @@ class HyperparameterResult:
         mll: the exact log marginal likelihood at the optimum, on the data used [nats].
         mll_start: the same at the starting values [nats].
         points: how many observations the learning used (fewer than the model's when thinned).
-        evaluations: likelihood evaluations (each one dense Cholesky of ``points`` rows and its backward pass).
+        evaluations: likelihood evaluations (each one dense Cholesky and inverse of ``points`` rows).
         seconds: wall time of the learning [s].
         at_bound: names of the parameters ("length", "noise") that ended within 0.1 % of their log range from a
             bound.
@@ -81,6 +82,12 @@ def _unsquash(value: float, bounds: tuple[float, float]) -> float:
     return math.log(p / (1.0 - p))
 
 
+def _gram(kernel, x: Tensor, task: Tensor, length: Tensor, noise: Tensor, task_covariance: Tensor) -> Tensor:
+    """`(n, n)` ``G = k_x(length) * K_t[t, t'] + sigma^2 I``, differentiable in the parameters."""
+    eye = torch.eye(len(x), dtype=x.dtype, device=x.device)
+    return kernel.value_at(x, x, length) * task_covariance[task][:, task] + noise * eye
+
+
 def exact_mll(kernel, x: Tensor, y: Tensor, task: Tensor, length: Tensor, noise: Tensor, task_covariance: Tensor,
               prior_mean: float = 1.0) -> Tensor:
     """Exact log marginal likelihood [nats], eq. (16), differentiable in ``length``, ``noise`` and ``task_covariance``.
@@ -99,9 +106,7 @@ def exact_mll(kernel, x: Tensor, y: Tensor, task: Tensor, length: Tensor, noise:
         0-d tensor: ``-r^T G^-1 r / 2 - log|G| / 2 - n log(2 pi) / 2``, ``r = y - m``, ``G = k_x * K_t[t, t'] +
         sigma^2 I``.
     """
-    gram = kernel.value_at(x, x, length) * task_covariance[task][:, task]
-    gram = gram + noise * torch.eye(len(x), dtype=x.dtype, device=x.device)
-    chol = torch.linalg.cholesky(gram)
+    chol = torch.linalg.cholesky(_gram(kernel, x, task, length, noise, task_covariance))
     r = (y - prior_mean).unsqueeze(-1)
     alpha = torch.cholesky_solve(r, chol)
     n = len(x)
@@ -120,8 +125,7 @@ def exact_mll_fast(kernel, x: Tensor, y: Tensor, task: Tensor, length: Tensor, n
     fused log-determinant-and-solve with this backward, and GPyTorch's exact path is the autograd one.
     """
     n = len(x)
-    eye = torch.eye(n, dtype=x.dtype, device=x.device)
-    gram = kernel.value_at(x, x, length) * task_covariance[task][:, task] + noise * eye
+    gram = _gram(kernel, x, task, length, noise, task_covariance)
     with torch.no_grad():
         chol = torch.linalg.cholesky(gram)
         r = (y - prior_mean).unsqueeze(-1)
@@ -160,7 +164,7 @@ def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: 
     """
     t0 = time.perf_counter()
     dt = dict(dtype=x.dtype, device=x.device)
-    fixed_noise = None if learn_noise else torch.tensor(float(noise), dtype=x.dtype, device=x.device)
+    fixed_noise = None if learn_noise else torch.tensor(float(noise), **dt)
     start_q = [_unsquash(kernel.length, length_bounds), _unsquash(noise, noise_bounds) if learn_noise else 0.0]
     if task_covariance is not None:       # K_t = L L^T with log-diagonal parameters, as GPIOIS.fit
         kt0 = task_covariance.to(**dt)
@@ -177,7 +181,7 @@ def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: 
         else:
             chol = torch.stack([torch.stack([q[2].exp(), zero]), torch.stack([q[3], q[4].exp()])])
             kt = chol @ chol.T
-        sigma2 = _squash(q[1], noise_bounds) if fixed_noise is None else fixed_noise + 0.0 * q[1]
+        sigma2 = _squash(q[1], noise_bounds) if fixed_noise is None else fixed_noise   # q[1]: no gradient then
         return _squash(q[0], length_bounds), sigma2, kt
 
     def objective(q: Tensor) -> Tensor:

@@ -22,7 +22,7 @@ from ..metrics import SHAPE_METRICS
 from ..exploration.state import ExplorationState, StepRecord
 from .datasets import DatasetError, LogWriter, TornLogWarning, read_records, replay, step_number
 
-__all__ = ["LogRecorder", "restore_run", "step_values", "OLD_FIELD_NAMES"]
+__all__ = ["LogRecorder", "restore_run", "step_values", "load_logged_hyperparameters", "OLD_FIELD_NAMES"]
 
 #: Step-record fields of logs written before the one vocabulary, and their names now.
 OLD_FIELD_NAMES = {"h": "hausdorff", "ht": "hausdorff_touched", "u": "uncertainty", "s": "similarity",
@@ -44,6 +44,21 @@ def step_values(meta: dict) -> dict:
     out["reapproach_travel"] = float(m.get("reapproach_travel", 0.0) or 0.0)
     out["retracted"] = int(m.get("retracted", 0) or 0)
     return out
+
+
+def load_logged_hyperparameters(model, state, where: str):
+    """``model`` with the kernel length and noise a step record logged (its ``hyperparameters``, the raw
+    parameters of a run that learned them; None: the model as it is).
+
+    Raises:
+        DatasetError: the logged state does not fit the model (names ``where``).
+    """
+    if state is not None:
+        try:
+            model.load_hyperparameter_state(state)
+        except ValueError as exc:
+            raise DatasetError(f"{where}: the logged hyperparameters: {exc}") from None
+    return model
 
 
 def _num(v) -> float | None:
@@ -196,11 +211,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
     v = step_values(last.meta)
-    if config.learn != "task" and "hyperparameters" in last.meta:
-        try:                                                       # what the run had learned by its last step
-            model.load_hyperparameter_state(last.meta["hyperparameters"])
-        except ValueError as exc:
-            raise DatasetError(f"{path}: last step record: {exc}") from None
+    if config.learn != "task":                                     # what the run had learned by its last step
+        load_logged_hyperparameters(model, last.meta.get("hyperparameters"), f"{path}: last step record")
     if "local_params" in last.arrays and hasattr(model, "region_correlations"):
         model.set_params(last.arrays["local_params"])
         for rec in state.records:

@@ -14,6 +14,7 @@ from tqdm.auto import tqdm
 from .checkpoints import save_checkpoint
 from .outputs import FolderLock, StagedFiles, atomic_write
 from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
+from .logs import load_logged_hyperparameters
 from ..models.gpiois import GPIOIS, INNER
 from ..metrics import hausdorff_distance, uncertainty_measure
 from ..surfaces import closed_curves, data_bounds, evaluate_grid, grid_resolution, zero_level_curves, zero_level_mesh
@@ -199,12 +200,7 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
     kt = None
     for i, k in enumerate(tqdm(chosen, desc=f"replay {path.name}", disable=not progress)):
         ds = states[k]
-        model = ds.to_model()
-        if k in learned:
-            try:
-                model.load_hyperparameter_state(learned[k])
-            except ValueError as exc:
-                raise DatasetError(f"{path}: step {k}: the logged hyperparameters: {exc}") from None
+        model = load_logged_hyperparameters(ds.to_model(), learned.get(k), f"{path}: step {k}")
         if kt is not None and isinstance(model, GPIOIS):
             model.task_covariance = kt
             model.fit(multi_start=False)

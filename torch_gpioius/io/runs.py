@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from .datasets import Dataset, DatasetError, load_dataset, replay
-from .logs import step_values
+from .logs import load_logged_hyperparameters, step_values
 
 __all__ = ["RunHistory", "load_run", "known_truth", "estimate_surface"]
 
@@ -72,7 +72,8 @@ class RunHistory:
         has_outer = bool((ds.task == 1).any())
         if not has_outer or self.meta.get("mode") == "tactile":
             inner = ds.task == 0
-            return self._learned(GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise, kernel=kernel), p)
+            model = GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise, kernel=kernel)
+            return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
         if "local_params" in p and self.meta.get("regions"):
             from ..models.local import LocalGPIOIS
 
@@ -82,17 +83,8 @@ class RunHistory:
         if "kt" in p and np.isfinite(p["kt"]).all():
             model = GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
                            kernel=kernel)
-            return self._learned(model, p)
+            return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
         return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, kernel=kernel).fit()
-
-    def _learned(self, model, p: dict):
-        """``model`` with the length and noise the run had learned by that step (its logged raw parameters)."""
-        if "hyperparameters" in p:
-            try:
-                model.load_hyperparameter_state(p["hyperparameters"])
-            except ValueError as exc:
-                raise DatasetError(f"{self.path}: the logged hyperparameters: {exc}") from None
-        return model
 
     def kernel(self):
         """The run's kernel when it is not the default inverse multiquadric (its header names it), else None."""

@@ -76,10 +76,9 @@ class Matern52(ExactKernel):
         return torch.cdist(x1, x2, compute_mode="donot_use_mm_for_euclid_dist")
 
     def value(self, x1: Tensor, x2: Tensor) -> Tensor:
-        s = _SQRT5 * self._radius(x1, x2) / self.ell
-        return self.sigma2 * (1.0 + s + s * s / 3.0) * torch.exp(-s)
+        return self.value_at(x1, x2, self.ell)
 
-    def value_at(self, x1: Tensor, x2: Tensor, length: Tensor) -> Tensor:
+    def value_at(self, x1: Tensor, x2: Tensor, length: Tensor | float) -> Tensor:
         """`(n, m)` values at the length scale ``length`` (0-d tensor [m]), differentiable in it."""
         s = _SQRT5 * self._radius(x1, x2) / length
         return self.sigma2 * (1.0 + s + s * s / 3.0) * torch.exp(-s)

@@ -921,7 +921,7 @@ class SweepSettings:
 
             as_learn(learn)
             if any(m == "local" for m in modes):
-                raise ValueError("learn: the local mode has a similarity per region; learn='all' does not apply")
+                raise ValueError(f"learn: the local mode has a similarity per region; learn={learn!r} does not apply")
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn)
 
