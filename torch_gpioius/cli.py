@@ -406,7 +406,8 @@ def build_parser() -> argparse.ArgumentParser:
                     help="comma-separated scene files (TOML; docs/tutorials/your-object.md) run as objects; with "
                          "--scenes and no --objects only the scenes run (3-D worlds)")
     sw.add_argument("--modes", default="visual-tactile,tactile",
-                    help="comma-separated: visual-tactile, tactile, visual-tactile+taps, local, local+taps")
+                    help="comma-separated: visual-tactile, tactile, visual-tactile+taps, local, local+taps, "
+                         "visual-tactile+reach, tactile+reach")
     sw.add_argument("--seeds", type=_positive_int, default=10,
                     help="seeds per object and mode (seed 0 = unperturbed; at most 10000)")
     sw.add_argument("--out", default="outputs/study", help="output folder")

@@ -47,7 +47,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             ``tg.sim.MujocoScene``, ``tg.RobotWorld``, or a user's).
         mode: "visual-tactile" (GPIOIS on vision + touch) or "tactile" (GPIS on touch only).
         evidence: None (the paper's exploration), "taps" (evidence-seeking taps, visual-tactile only; see
-            :mod:`torch_gpioius.exploration.evidence`), or an evidence policy object.
+            :mod:`torch_gpioius.exploration.evidence`), "reach" (every 15 steps, lift off and touch the least
+            certain surface elsewhere, reached through free space; 3-D, either mode; see
+            :mod:`torch_gpioius.exploration.reach`), or an evidence policy object.
         touch: "point" (a fingertip force sensor, the paper's) or a touch model object
             (:mod:`torch_gpioius.exploration.touch`).
         step: alpha, the planned step [m], in (0, 0.1].

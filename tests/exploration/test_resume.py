@@ -123,3 +123,35 @@ def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path, inside, learn):
     np.testing.assert_allclose(resumed.noise, reference.noise, rtol=1e-8)
     if learn == "all":                  # learned at step 3 (and later restarts), kept, and different from the start
         assert reference.length[3] != reference.length[0] and reference.model.hyper_result.kept
+
+
+@pytest.mark.parametrize("cut", ["after-the-reach", "two-steps-later"])
+def test_a_run_that_reached_resumes_to_the_same_end(tmp_path, cut):
+    """A reach (lift, route through free space, approach elsewhere) is logged as the evidence action of its step:
+    a run cut right after that record, or two steps later, resumes to the uninterrupted run's end, robot and all."""
+    from torch_gpioius.exploration import ReachPolicy
+    from torch_gpioius.sim import sphere_scene
+
+    scene = sphere_scene(subdivisions=3)
+    kw = dict(mode="visual-tactile", evidence=ReachPolicy(min_steps=4), max_travel=0.45, metrics_every=100,
+              progress=False)
+    log = tmp_path / "run.gpioius"
+    reference = tg.explore(scene, log=log, **kw)
+    reached = int(np.flatnonzero(np.diff(reference.taps) > 0)[0]) + 1        # the step the first reach followed
+    assert reference.n_steps > reached + 3
+    # the log holds the whole path, the reach's lift, route and approach included (the viewer draws it from there)
+    from torch_gpioius.io.runs import load_run
+
+    np.testing.assert_array_equal(load_run(log).trajectory, reference.path)
+    if cut == "after-the-reach":
+        end = next(r.end for r in read_records(log) if r.kind == "tap" and r.meta["step"] == reached)
+        with open(log, "r+b") as f:
+            f.truncate(end)
+    else:
+        _cut_after_step(log, reached + 2)
+    resumed = tg.explore(scene, resume_from=log, **kw)
+    assert resumed.n_steps == reference.n_steps and resumed.terminated == reference.terminated
+    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
+    assert np.abs(resumed.path - reference.path).max() < 1e-9
+    np.testing.assert_array_equal(resumed.taps, reference.taps)
+    assert torch.equal(resumed.model.train_targets, reference.model.train_targets)

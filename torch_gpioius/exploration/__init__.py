@@ -11,6 +11,7 @@
 from .config import MODES, ExploreConfig, Run
 from .evidence import EVIDENCE_POLICIES, Evidence, TapPolicy, evidence_policy
 from .loop import begin, explore, run
+from .reach import ReachPlan, ReachPolicy
 from .observations import (Observations, ObservationPolicy, free_space_along, retract_free_space, thin_points,
                            vision_observations)
 from .patches import PatchSettings, patch_observations
@@ -30,7 +31,7 @@ EVIDENCE = (None, *EVIDENCE_POLICIES)
 __all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations",
            "ObservationPolicy", "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel",
            "EvidencePolicy", "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder", "Evidence",
-           "TapPolicy", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch", "TOUCH_MODELS", "touch_model",
+           "TapPolicy", "ReachPolicy", "ReachPlan", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch", "TOUCH_MODELS", "touch_model",
            "StopRule", "OnceAround", "TravelBudget", "gone_around", "largest_uncovered_gap", "World", "Hardware",
            "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash", "register_world", "world_entry",
            "world_names", "make_world", "WorldEntry", "free_space_along", "retract_free_space", "thin_points",

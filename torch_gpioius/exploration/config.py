@@ -124,8 +124,9 @@ class ExploreConfig:
         if mode not in MODES:
             raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
         evidence = evidence_policy(evidence)
-        if evidence is not None and mode != "visual-tactile":
-            raise ValueError("evidence: evidence-seeking is about the similarity; it needs mode='visual-tactile'")
+        if evidence is not None and mode != "visual-tactile" and getattr(evidence, "needs_vision", True):
+            raise ValueError(f"evidence: the {getattr(evidence, 'name', type(evidence).__name__)} policy is about the "
+                             "similarity; it needs mode='visual-tactile'")
         if regions is not None:
             regions = as_int(regions, "regions", 1, 64)
             if mode != "visual-tactile":
@@ -168,6 +169,11 @@ class ExploreConfig:
         if not isinstance(policy, ObservationPolicy):
             raise ValueError(f"policy: expected an ObservationPolicy, got {type(policy).__name__}")
         penalty = penalty if penalty is not None else world.penalty()
+        if evidence is not None and callable(getattr(evidence, "for_run", None)):   # a reach: the range and budget
+            box = (None if getattr(penalty, "lower", None) is None
+                   else np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()]))
+            evidence = evidence.for_run(dim=world.dim, bounds=box,
+                                        budget=next((r.max_travel for r in rules if isinstance(r, TravelBudget)), None))
         if isinstance(stall, str) and stall == "default":
             stall = NoProgress()
         if stall is not None and not isinstance(stall, NoProgress):

@@ -82,6 +82,8 @@ class TapPolicy:
     max_lift: float = 0.2
     local_correlation: float = 0.9
     name: str = "taps"
+    #: a tap is about the similarity, which only a camera's outer task has
+    needs_vision = True
 
     def due(self, state) -> bool:
         """Whether to tap after the current step (see the module docstring); reads the state, changes nothing."""
@@ -130,8 +132,10 @@ class TapPolicy:
         return asdict(self)
 
 
-#: Evidence policies by their shorthand (``explore(..., evidence="taps")``).
-EVIDENCE_POLICIES: dict[str, type] = {"taps": TapPolicy}
+from .reach import ReachPolicy  # noqa: E402  (reach.py builds on Evidence, defined above)
+
+#: Evidence policies by their shorthand (``explore(..., evidence="taps")``, ``evidence="reach"``).
+EVIDENCE_POLICIES: dict[str, type] = {"taps": TapPolicy, "reach": ReachPolicy}
 
 
 def evidence_policy(evidence) -> object | None:

@@ -163,17 +163,20 @@ def ingest(state: ExplorationState, cfg: ExploreConfig, touch: ContactResult) ->
     return obs, removed
 
 
-def ingest_evidence(state: ExplorationState, cfg: ExploreConfig, evidence) -> tuple[Observations, np.ndarray, str]:
+def ingest_evidence(state: ExplorationState, cfg: ExploreConfig,
+                    evidence) -> tuple[Observations, np.ndarray, str, np.ndarray]:
     """An evidence policy's touches (or a stall's recovery) into the state and the model: travel and path, the free
     space they crossed (y = 1), and the contact where the fingertip came back to rest (y = 0, when it moved
-    ``evidence.min_move``). Returns the batch, the retracted indices and the evidence's kind."""
+    ``evidence.min_move``). Returns the batch, the retracted indices, the evidence's kind and the path its touches
+    took `(m, d)` [m] (logged, so that a resumed run and a replay have the whole path)."""
     if evidence.kind == "recovery":
         state.recoveries += 1
     else:
         state.taps += 1
     state.travel += float(sum(t.travel for t in evidence.touches))     # one sum, then added (as the tap did)
-    for t in evidence.touches:
-        state.path.extend(t.path.numpy())
+    path = (np.concatenate([t.path.numpy() for t in evidence.touches]) if evidence.touches
+            else np.zeros((0, state.dim)))
+    state.path.extend(path)
     free = np.concatenate([t.free_space.numpy() for t in evidence.touches]) if evidence.touches else None
     xs, removed = [], np.zeros(0, dtype=np.int64)
     if evidence.contact is not None:
@@ -191,10 +194,10 @@ def ingest_evidence(state: ExplorationState, cfg: ExploreConfig, evidence) -> tu
             xs.append(Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=state.steps,
                                    source="evidence"))
     if not xs:
-        return Observations.empty(state.dim, state.steps, "evidence"), removed, evidence.kind
+        return Observations.empty(state.dim, state.steps, "evidence"), removed, evidence.kind, path
     obs = Observations.concat(xs)
     _add(state.model, obs)
-    return obs, removed, evidence.kind
+    return obs, removed, evidence.kind, path
 
 
 def unstall(ctx: Run, state: ExplorationState, record: StepRecord) -> str | None:

@@ -66,7 +66,8 @@ class StepRecord:
         observations: the inner observations this step's touch added (before any evidence).
         removed: `(k,)` indices (into the training set before the step) of free space retracted for them.
         touch: the contact controller's result of the step (path, forces) or of the approach (record 0).
-        evidence: ``(observations, removed, kind)`` of each evidence action or recovery taken after the touch.
+        evidence: ``(observations, removed, kind, path)`` of each evidence action or recovery taken after the touch
+            (``path`` `(m, d)`: the positions its motion visited [m]).
     """
 
     step: int

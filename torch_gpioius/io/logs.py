@@ -135,12 +135,13 @@ class LogRecorder(Recorder):
         if hasattr(state.model, "region_correlations"):
             arrays["local_params"] = state.model.params.detach().cpu().numpy()
         self.writer.append("step", meta, {**arrays, **world})
-        for ev_obs, removed, kind in record.evidence:
+        for ev_obs, removed, kind, ev_path in record.evidence:
             self.writer.append(kind, {"step": record.step, "taps": state.taps, "recoveries": state.recoveries,
                                       "reapproaches": state.reapproaches, "reapproach_travel": state.reapproach_travel,
                                       "travel": state.travel},
                                {"x": ev_obs.x, "y": ev_obs.y, "task": ev_obs.task,
                                 "removed": np.asarray(removed, dtype=np.int64), "contact": state.contact,
+                                "path": np.asarray(ev_path, dtype=np.float64).reshape(-1, dim),
                                 "normal": state.normal.numpy(), **world})
 
 
@@ -190,12 +191,14 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     end = [r for r in records[1:] if r.kind == "end"]
     taps = [r for r in records[1:] if r.kind in ("tap", "recovery")]
     state = ExplorationState(model=None)
+    for r in records[1:]:       # the path in the order the fingertip took it: each step's, then its evidence actions'
+        if r.kind in ("step", "tap", "recovery") and "path" in r.arrays:    # (logs before 2026-11 kept no tap path)
+            state.path.extend(list(np.asarray(r.arrays["path"], dtype=np.float64).reshape(-1, world.dim)))
     for i, r in enumerate(steps):
         where = f"{path}: step record {i}"
         if step_number(r.meta, where) != i:
             raise DatasetError(f"{where}: steps out of order (found step {r.meta['step']})")
         state.contacts.append(np.asarray(r.arrays["contact"], dtype=np.float64))
-        state.path.extend(list(np.asarray(r.arrays["path"], dtype=np.float64)))
         v = step_values(r.meta)
         rec = StepRecord(step=i, travel=v["travel"], hausdorff=v["hausdorff"],
                          hausdorff_touched=v["hausdorff_touched"], uncertainty=v["uncertainty"],

@@ -150,6 +150,11 @@ def load_run(path: str | os.PathLike) -> RunHistory:
             if "path" in a and len(a["path"]):
                 traj.append(np.asarray(a["path"], dtype=np.float64))
                 traj_step.append(np.full(len(a["path"]), k))
+        elif rec.kind in ("tap", "recovery"):        # an evidence action's motion, after its step's (logged since 2026-11)
+            a = rec.arrays
+            if "path" in a and len(a["path"]):
+                traj.append(np.asarray(a["path"], dtype=np.float64).reshape(-1, len(a["contact"])))
+                traj_step.append(np.full(len(a["path"]), int(rec.meta["step"])))
         elif rec.kind == "observations" and not states:
             states[0] = ds
     if header is None:

@@ -41,7 +41,8 @@ __all__ = ["run_sweep", "SweepSettings", "RunSpec", "run_one", "aggregate", "rea
            "WORLDS", "FRACTIONS", "MAX_SEEDS"]
 
 #: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants.
-MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps")
+MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps", "visual-tactile+reach",
+         "tactile+reach")
 #: Fractions of the reference travel at which the Hausdorff distance is reported.
 FRACTIONS = (0.10, 0.25, 0.50, 1.00)
 #: A contact counts as "within" when it lies this close to the true body [m] (``contacts_within`` of a run).
@@ -111,8 +112,9 @@ def _world_budget(world) -> float | None:
 
 def _explore_kwargs(spec: RunSpec, world) -> dict:
     mode, evidence = spec.mode, None
-    if mode.endswith("+taps"):
-        mode, evidence = mode[: -len("+taps")], "taps"
+    for suffix in ("+taps", "+reach"):
+        if mode.endswith(suffix):
+            mode, evidence = mode[: -len(suffix)], suffix[1:]
     kw: dict = {"evidence": evidence}
     if mode == "local":
         kw["mode"], kw["regions"] = "visual-tactile", 4

@@ -12,7 +12,8 @@ from .figures import legend_below, log_axis
 __all__ = ["figure_transition_bands", "figure_similarity_bands", "figure_paired"]
 
 COLORS = {"visual-tactile": "tab:red", "tactile": "tab:blue", "visual-tactile+taps": "tab:purple",
-          "local": "tab:orange", "local+taps": "tab:brown"}
+          "local": "tab:orange", "local+taps": "tab:brown",
+          "visual-tactile+reach": "tab:green", "tactile+reach": "tab:cyan"}
 
 
 def _plt():
