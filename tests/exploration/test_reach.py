@@ -204,3 +204,27 @@ def test_reach_settings_are_checked():
     assert cfg.evidence.budget == pytest.approx(0.3)
     np.testing.assert_allclose(np.asarray(cfg.evidence.bounds), np.stack([cfg.penalty.lower, cfg.penalty.upper]))
     assert cfg.describe()["evidence_policy"]["name"] == "reach"
+
+
+def test_a_steps_time_leaves_out_the_motion_of_its_evidence_actions(monkeypatch):
+    from torch_gpioius.exploration import loop
+
+    clock = [0.0]
+    monkeypatch.setattr(loop.time, "perf_counter", lambda: clock[0])
+
+    class Slow:                                # a robot whose every move takes 5 s of wall time
+        config = "its config"
+
+        def approach(self, direction, max_travel=0.3):
+            clock[0] += 5.0
+            return "approached"
+
+        def lift(self, direction, **kw):
+            clock[0] += 5.0
+            raise RuntimeError("refused")
+
+    t = loop._TimedToucher(Slow())
+    assert t.approach(None) == "approached" and t.motion == 5.0
+    with pytest.raises(RuntimeError):
+        t.lift(None)
+    assert t.motion == 10.0 and t.config == "its config"          # a refused move's time is motion too

@@ -184,3 +184,38 @@ def test_every_hardware_of_a_scene_sees_the_same_noisy_cloud():
     assert np.array_equal(a, second.camera.capture().points)
     again = first.camera.capture().points                 # the noise is real: the next capture draws anew
     assert a.shape != again.shape or not np.array_equal(a, again)
+
+
+def test_a_scene_takes_a_users_settings_and_back():
+    """``with_settings``: the same bodies, approach and range; the defaults and views of the setting, kept by a seed's
+    perturbation; and the studies build E-H that way."""
+    import dataclasses
+
+    from torch_gpioius.kernels import Matern52
+    from torch_gpioius.sim.forcefield import ROBOT_STUDY_DEFAULTS, VIEWS, object_defaults
+    from torch_gpioius.studies.sweep import make_world
+
+    paper = sphere_scene(radius=0.08, cover=0.01)
+    mine = paper.with_settings("default")
+    assert mine.views == VIEWS and paper.views != mine.views
+    assert mine.inner is paper.inner and mine.outer is paper.outer
+    np.testing.assert_array_equal(mine.start, paper.start)
+    np.testing.assert_array_equal(mine.range, paper.range)
+    assert mine.defaults.policy == object_defaults(paper.inner).policy
+    assert isinstance(mine.defaults.kernel, Matern52) and mine.defaults.policy.touch_inside == 0.02
+    back = mine.with_settings("paper")
+    assert back.defaults == ROBOT_STUDY_DEFAULTS and back.views == paper.views
+    seeded = mine.perturbed(2)
+    assert seeded.views == VIEWS and seeded.defaults is mine.defaults
+    assert len(seeded.camera.capture().points) > len(paper.perturbed(2).camera.capture().points)
+    with pytest.raises(ValueError, match="settings"):
+        paper.with_settings("mine")
+    own = Scene3D(paper.inner, paper.outer, paper.start, paper.direction, paper.range, camera=paper.camera)
+    with pytest.raises(ValueError, match="camera of its own"):
+        own.with_settings("default")
+    # a study of E under the user's defaults: the object's geometry and seed, the defaults' settings
+    e = make_world("forcefield", "E", 1, settings="default")
+    e_paper = make_world("forcefield", "E", 1)
+    np.testing.assert_array_equal(e.start, e_paper.start)
+    assert e.seed == e_paper.seed == 1 and e.views == VIEWS
+    assert dataclasses.replace(e.defaults, kernel=None) != dataclasses.replace(e_paper.defaults, kernel=None)

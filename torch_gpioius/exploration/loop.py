@@ -105,14 +105,15 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     t1 = time.perf_counter()
     record = StepRecord(step=state.steps, travel=0.0, touch=touch)
     record.observations, record.removed = ingest(state, cfg, touch)
+    toucher = _TimedToucher(hw.controller)          # the step's time leaves out the motion of evidence actions
     if cfg.evidence is not None and cfg.evidence.due(state):
         state.last_evidence = state.steps
-        evidence = cfg.evidence.gather(state, hw.controller)
+        evidence = cfg.evidence.gather(state, toucher)
         if evidence is not None:
             record.evidence.append(ingest_evidence(state, cfg, evidence))
-    stalled = unstall(ctx, state, record)
+    stalled = unstall(ctx, state, record, toucher)
     _fit(state.model, cfg, state)
-    _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1)
+    _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1 - toucher.motion)
     stop = stalled or _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
     # the step cap ends the run at the next step's start: this record is the last one, measured before it is logged
     record.final = stop is not None or _capped(state, cfg)
@@ -200,9 +201,10 @@ def ingest_evidence(state: ExplorationState, cfg: ExploreConfig,
     return obs, removed, evidence.kind, path
 
 
-def unstall(ctx: Run, state: ExplorationState, record: StepRecord) -> str | None:
+def unstall(ctx: Run, state: ExplorationState, record: StepRecord, toucher=None) -> str | None:
     """The no-progress rule (:mod:`~torch_gpioius.exploration.recovery`): recover when the run is stalled, plan afresh
-    afterwards; "stalled" once ``max_recoveries`` recoveries in a row left it stalled."""
+    afterwards; "stalled" once ``max_recoveries`` recoveries in a row left it stalled. The recovery moves through
+    ``toucher`` (default: the hardware's contact controller)."""
     rule = ctx.config.stall
     verdict = None if rule is None else rule.stalled(state)
     if not verdict:
@@ -212,7 +214,7 @@ def unstall(ctx: Run, state: ExplorationState, record: StepRecord) -> str | None
     if state.failed_recoveries >= rule.max_recoveries:
         return "stalled"
     state.failed_recoveries, state.last_recovery, state.previous = state.failed_recoveries + 1, state.steps, None
-    evidence = rule.recover(state, ctx.hardware.controller)
+    evidence = rule.recover(state, toucher if toucher is not None else ctx.hardware.controller)
     if evidence is not None:
         record.evidence.append(ingest_evidence(state, ctx.config, evidence))
     return None
@@ -296,6 +298,30 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
         record.length = float(m.kernel.length)
     if hasattr(m, "region_correlations"):
         record.region_correlation = m.region_correlations().detach().cpu().numpy()
+
+
+class _TimedToucher:
+    """The contact controller with the wall time of its motions (``approach``, ``lift``, ``slide``) summed in
+    ``motion`` [s]: a step's ``step_time`` is planning, ingesting and re-learning, motion excluded, and an evidence
+    action (a tap, a reach, a recovery) plans and moves within one call."""
+
+    MOVES = ("approach", "lift", "slide")
+
+    def __init__(self, toucher):
+        self._toucher, self.motion = toucher, 0.0
+
+    def __getattr__(self, name):
+        attr = getattr(self._toucher, name)
+        if name not in self.MOVES:
+            return attr
+
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            try:
+                return attr(*args, **kwargs)
+            finally:
+                self.motion += time.perf_counter() - t0
+        return timed
 
 
 def _capped(state: ExplorationState, cfg: ExploreConfig) -> bool:

@@ -497,6 +497,25 @@ class Scene3D(World):
         hw.robot.set_state(torch.as_tensor(state["joints"]), float(np.asarray(state["clock"]).reshape(-1)[0]))
         hw.sensor.set_state({k[len("sensor_"):]: v for k, v in state.items() if k.startswith("sensor_")})
 
+    def with_settings(self, settings: str) -> "Scene3D":
+        """The same objects, approach and range under other exploration settings: "default" (:func:`object_defaults`
+        of the inner mesh, all three :data:`VIEWS`) or "paper" (:data:`ROBOT_STUDY_DEFAULTS`, the fixed camera
+        alone). The built-in objects E-H are made with the paper's; this gives them a user's defaults.
+
+        Raises:
+            ValueError: an unknown setting, or a scene with a camera of its own (its views are the user's).
+        """
+        if settings not in SETTINGS:
+            raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
+        if self._given_camera is not None:
+            raise ValueError("settings: this scene has a camera of its own; its views are not the settings' to change")
+        defaults = ROBOT_STUDY_DEFAULTS if settings == "paper" else object_defaults(self.inner)
+        scene = Scene3D(self.inner, self.outer, self.start, self.direction, self.range, name=self.name,
+                        cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=self.seed,
+                        defaults=defaults, support=self.support, views="paper" if settings == "paper" else VIEWS)
+        scene._tripod_direction = self._tripod_direction
+        return scene
+
     def perturbed(self, seed: int) -> "Scene3D":
         """The same objects with a seeded perturbation (seed 0: unchanged): the start moved uniformly within a
         2 cm disc across the approach, the approach direction turned by up to 10 deg (uniform on the cap), and the

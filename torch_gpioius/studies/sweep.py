@@ -82,7 +82,7 @@ class RunSpec:
     touch: str = "point"            # "point" (the fingertip's contact) or "patch" (a gel pad's depth map)
     outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
     device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
-    settings: str | None = None     # scene files: "default" or "paper" (Scene3D.from_mesh); None: the file's own
+    settings: str | None = None     # force field: "default" or "paper" (Scene3D.with_settings); None: the world's own
     learn: str | None = None        # "task", "length" or "all" (explore(learn=)); None: the world's own
 
     @property
@@ -92,15 +92,16 @@ class RunSpec:
 
 def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None,
                settings: str | None = None):
-    """The world of one run: the named object (or the scene file ``scene``, with ``settings`` in place of its own),
-    perturbed by ``seed`` (seed 0: the unperturbed object)."""
+    """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
+    unperturbed object), under ``settings`` in place of its own (force-field world: "default" or "paper")."""
     if scene is not None:
         from ..sim.scenefile import load_scene
 
         return load_scene(scene, world=world, seed=seed, smoke=smoke, settings=settings)
     from ..exploration.registry import make_world as registry_make_world
 
-    return registry_make_world(world, name, seed, smoke)
+    made = registry_make_world(world, name, seed, smoke)
+    return made if settings is None else made.with_settings(settings)
 
 
 def _world_budget(world) -> float | None:
@@ -823,9 +824,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         device: where each run's model computes ("cuda" for a GPU, float64; None: the CPU). Not part of the
             folder's identity: runs on either device answer the same question (the trajectories differ by the
             chaos of rounding, as on two CPUs); each run's record says where it ran.
-        settings: the scene files' settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
-            ``Scene3D.from_mesh``); None: each file's own. Force-field world, scene files only; a study folder holds
-            one setting.
+        settings: the force-field world's settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
+            ``Scene3D.with_settings``), for scene files and the objects E-H alike; None: each file's own, the
+            paper's for E-H. A study folder holds one setting.
         learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2;
             ``explore(learn=)``); None: each world's own. A study folder holds one setting.
 
@@ -915,9 +916,9 @@ class SweepSettings:
 
             if settings not in SETTINGS:
                 raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
-            if world != "forcefield" or not scene_files:
-                raise ValueError("settings: applies to scene files in the force-field world (the built-in objects "
-                                 "E-H are the paper's, with its settings)")
+            if world != "forcefield":
+                raise ValueError(f"settings: applies to the force-field world (its scene files and objects E-H), "
+                                 f"not {world}")
         if learn is not None:
             from ..exploration.config import as_learn
 
