@@ -19,3 +19,4 @@ def c_left_without_recovery(c_from_the_left):
     """140 steps on C from the left with the no-progress rule off: the run stalls in the corner where body and cover
     part (from step 111 on)."""
     return tg.explore(c_from_the_left, max_steps=140, stall=None)
+

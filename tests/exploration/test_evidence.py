@@ -6,6 +6,8 @@ import pytest
 
 import torch_gpioius as tg
 
+from tests.exploration.gate import assert_within_the_gate
+
 
 def test_a_tap_over_the_loose_side_removes_the_extension(c_from_the_left, c_left_without_recovery):
     # the plain run stalls in the corner where body and cover part (step 111 on); the no-progress rule's recovery,
@@ -40,13 +42,7 @@ def test_tap_motion_passes_the_gate_and_tight_covers_get_no_tap():
     scene.hardware = lambda: made.append(original()) or made[-1]
     tr = tg.explore(scene, evidence="taps", max_travel=0.6, metrics_every=100)
     del scene.hardware
-    robot = made[0].robot
-    times, qs = robot.trajectory()
-    gate = robot.gate
-    assert bool(robot.ur5.within_limits(qs).all())
-    speed = (qs[1:] - qs[:-1]).abs() / (times[1:] - times[:-1]).clamp_min(1e-12)[:, None]
-    assert float(speed.max()) <= float(gate.max_joint_speed.max()) + 1e-9
-    assert bool(gate.in_workspace(robot.ur5.position(qs)).all())
+    assert_within_the_gate(made[0].robot)
     assert tr.taps[-1] >= 1
     tight = tg.sim.sphere_scene(radius=0.08, cover=0.008, center=(0.5, 0.0, 0.25))
     assert tg.explore(tight, evidence="taps", max_travel=0.3, metrics_every=100).taps[-1] == 0

@@ -9,6 +9,8 @@ import pytest
 import torch
 
 import torch_gpioius as tg
+
+from tests.exploration.gate import assert_within_the_gate
 from torch_gpioius.contact import ContactResult
 from torch_gpioius.exploration.reach import ReachPolicy
 from torch_gpioius.surfaces import zero_level_mesh
@@ -169,13 +171,7 @@ def test_reach_motion_passes_the_gate_and_is_paid_for_in_the_budgets():
     scene.hardware = hardware
     tr = tg.explore(scene, evidence=ReachPolicy(min_steps=8), max_travel=0.45, metrics_every=100)
     del scene.hardware
-    robot = made[0].robot
-    times, qs = robot.trajectory()
-    gate = robot.gate
-    assert bool(robot.ur5.within_limits(qs).all())
-    speed = (qs[1:] - qs[:-1]).abs() / (times[1:] - times[:-1]).clamp_min(1e-12)[:, None]
-    assert float(speed.max()) <= float(gate.max_joint_speed.max()) + 1e-9
-    assert bool(gate.in_workspace(robot.ur5.position(qs)).all())
+    assert_within_the_gate(made[0].robot)
     assert tr.taps[-1] >= 1
     reached = np.flatnonzero(np.diff(tr.taps) > 0) + 1
     # the contact after each reach is on the body (the force field's cover lets the fingertip through)
