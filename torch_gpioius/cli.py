@@ -422,10 +422,10 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP + "; one setting per --out folder")
     sw.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     sw.add_argument("--settings", default=None, choices=["default", "paper"],
-                    help="the force-field world's settings, for scene files and objects E-H alike: default (three "
+                    help="the 3-D worlds' settings, for scene files and built-in objects alike: default (three "
                          "camera views, voxels a tenth of the body, a Matern-5/2, inside points) or paper (one fixed "
                          "camera, 5 cm voxels, the inverse multiquadric); default: each file's own, the paper's for "
-                         "E-H; one per --out folder")
+                         "the built-in objects; one per --out folder")
     sw.add_argument("--learn", default=None, choices=["task", "length", "all"],
                     help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
                          "all (the length and the noise too), by the marginal likelihood on restart steps; default: "

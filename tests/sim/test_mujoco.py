@@ -332,3 +332,42 @@ def test_a_gel_pad_explores_under_the_simulated_cloth(scene, tmp_path):
     assert (d > -1e-9).all()                                  # never inside the body
     assert (scene.true_distance(free) > 0).all()
     assert type(m._inference()).__name__ == "BatchedExactInference"
+
+
+def test_more_views_see_more_of_the_scene_and_the_tripods_stay_where_they_stood(scene):
+    """The MuJoCo world's views, as the force-field world's: each view's points lie on the cloth or the box (their
+    ray-cast truth), three views see more than one and carry their own camera origins, a seed's perturbation moves
+    the wrist view with the arm and leaves the tripods, and "default" settings bring the user's defaults."""
+    from torch_gpioius.kernels import Matern52
+    from torch_gpioius.sensors import MultiViewSource
+    from torch_gpioius.sim.forcefield import VIEWS
+    from torch_gpioius.sim.mujoco.hardware import MujocoPhysics
+
+    three = scene.with_settings("default")
+    assert three.views == VIEWS and scene.views == ("fixed",)
+    assert isinstance(three.defaults.kernel, Matern52) and three.defaults.policy.touch_inside == 0.02
+    assert three.defaults.approach_travel == scene.defaults.approach_travel           # the MuJoCo world's own
+    one, many = scene.hardware().camera.capture(), three.hardware().camera.capture()
+    assert len(many.points) > 1.5 * len(one.points)
+    origins = np.unique(np.round(np.asarray(many.origin), 6), axis=0)
+    assert len(origins) == 3
+    # every point is on a surface the rays can hit: the settled cloth's elements or the box (within the noise)
+    physics = MujocoPhysics(three.model)
+    physics.set_state(three.settled)
+    cloth = np.asarray(physics.data.flexvert_xpos, dtype=np.float64)
+    pts = np.asarray(many.points)
+    to_cloth = np.min(np.linalg.norm(pts[:, None, :] - cloth[None, ::1, :], axis=-1), axis=1)
+    to_box = np.abs(three.true_distance(pts))
+    near = (to_cloth < 0.03) | (to_box < 0.01) | (pts[:, 2] < BOX_RANGE[0][2] - 0.05)     # or the table below
+    assert near.mean() > 0.99
+    # the tripods stand where the unperturbed approach put them; the wrist follows the arm
+    moved = three.perturbed(3)
+    assert not np.allclose(moved.direction, three.direction)
+    a, b = three.cameras(physics, VIEWS), moved.cameras(physics, VIEWS)
+    assert isinstance(a, MultiViewSource)
+    np.testing.assert_allclose(a.sources[0].T_base_camera, b.sources[0].T_base_camera)
+    np.testing.assert_allclose(a.sources[1].T_base_camera, b.sources[1].T_base_camera)
+    assert not np.allclose(a.sources[2].T_base_camera, b.sources[2].T_base_camera)
+    assert scene.with_settings("paper").views == ("fixed",)
+    with pytest.raises(ValueError, match="settings"):
+        scene.with_settings("mine")

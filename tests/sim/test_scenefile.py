@@ -193,6 +193,14 @@ def test_one_file_builds_both_worlds_with_each_worlds_own_cover_options(tmp_path
     with pytest.raises(ValueError, match=r"own section, \[forcefield\]"):
         load_scene(_write(tmp_path, text.replace("gap = 0.01", "gap = 0.01\nbridge = 0.02"), "b.toml"),
                    world="mujoco")
+    # a study's settings reach the MuJoCo world too: its own defaults with the user's changes, and three views
+    from torch_gpioius.kernels import Matern52
+    from torch_gpioius.sim.forcefield import VIEWS
+
+    mine = load_scene(path, world="mujoco", settings="default")
+    assert mine.views == VIEWS and isinstance(mine.defaults.kernel, Matern52) and mj.views == ("fixed",)
+    assert mine.defaults.approach_travel == mj.defaults.approach_travel
+    np.testing.assert_array_equal(mine.cover.vertices, mj.cover.vertices)
 
 
 def test_the_shipped_scene_files_parse_and_name_meshes_that_exist():

@@ -78,7 +78,7 @@ def test_bad_sweep_arguments(tmp_path):
         run_sweep("planar", objects=["Q"], out=tmp_path)
     with pytest.raises(ValueError, match="seeds"):
         run_sweep("planar", seeds=0, out=tmp_path)
-    with pytest.raises(ValueError, match="settings: applies to the force-field world"):
+    with pytest.raises(ValueError, match="settings: applies to the 3-D worlds"):
         run_sweep("planar", settings="default", out=tmp_path)
     with pytest.raises(ValueError, match="settings"):
         run_sweep("forcefield", objects=["E"], settings="mine", out=tmp_path)

@@ -54,9 +54,10 @@ DEFAULT_VIEWS = ("fixed",)
 SETTINGS = ("default", "paper")
 
 
-def object_defaults(mesh: trimesh.Trimesh) -> ExplorationDefaults:
+def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None) -> ExplorationDefaults:
     """The exploration settings for a user's object (``Scene3D.from_mesh(settings="default")``): the robot study's
-    (:data:`ROBOT_STUDY_DEFAULTS`) with four changes, each measured on shapes nobody tuned to (docs/results-real.md):
+    (:data:`ROBOT_STUDY_DEFAULTS`, or ``base``: the MuJoCo world's own) with four changes, each measured on shapes
+    nobody tuned to (docs/results-real.md):
 
     - the camera's voxels a tenth of the body's largest extent, 2-5 cm (the paper's 5 cm voxels were sized for a
       torso, and leave a 15 cm body a handful of outer points);
@@ -74,7 +75,7 @@ def object_defaults(mesh: trimesh.Trimesh) -> ExplorationDefaults:
 
     extent = float(np.max(mesh.extents))
     voxel = round(float(np.clip(extent / 10.0, 0.02, 0.05)), 4)
-    d = ROBOT_STUDY_DEFAULTS
+    d = ROBOT_STUDY_DEFAULTS if base is None else base
     policy = dataclasses.replace(d.policy, voxel=voxel, vision_free_far=0.10, touch_inside=INSIDE_DEPTH,
                                  vision_inside=INSIDE_DEPTH)
     return dataclasses.replace(d, policy=policy, kernel=Matern52(0.1))

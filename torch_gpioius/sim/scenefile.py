@@ -211,7 +211,8 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
         seed: the seeded perturbation of the approach and the noise (0: as written; ``World.perturbed``).
         smoke: a coarse MuJoCo cover (4 cm spacing) for quick checks; the force-field world ignores it.
         settings: "default" or "paper" in place of the file's ``settings`` (force-field world; see
-            :meth:`~torch_gpioius.sim.forcefield.Scene3D.from_mesh`); the file's other settings still apply.
+            :meth:`~torch_gpioius.sim.forcefield.Scene3D.from_mesh`) or the MuJoCo world's own (its defaults and
+            views: :meth:`~torch_gpioius.sim.mujoco.MujocoScene.with_settings`); the file's other settings still apply.
 
     Returns:
         A :class:`~torch_gpioius.sim.forcefield.Scene3D` or :class:`~torch_gpioius.sim.mujoco.MujocoScene`.
@@ -243,9 +244,7 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
         cover.update({k: v for k, v in own.items() if k in _COVER[world]})
         settings_given = settings
         settings = {k: v for k, v in own.items() if k not in _COVER[world]}
-        if settings_given is not None:
-            if world != "forcefield":
-                raise ValueError(f"settings: {settings_given!r} applies to the force-field world, not {world}")
+        if settings_given is not None and world == "forcefield":
             settings["settings"] = settings_given
         where = {}
         if spec.approach is not None:
@@ -266,6 +265,10 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
                 where.setdefault("bounds", b + np.array([[-0.03], [0.03]]) * np.array([1, 1, 0]))
             if smoke:
                 settings["spacing"] = max(settings.get("spacing", 0.025), 0.04)
+            if settings_given is not None:          # the settings' defaults and views for this body
+                from .mujoco.scene import mujoco_settings
+
+                settings.update(mujoco_settings(settings_given, mesh))
             scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{spec.path}: {exc}") from None

@@ -93,7 +93,7 @@ class RunSpec:
 def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None,
                settings: str | None = None):
     """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
-    unperturbed object), under ``settings`` in place of its own (force-field world: "default" or "paper")."""
+    unperturbed object), under ``settings`` in place of its own (3-D worlds: "default" or "paper")."""
     if scene is not None:
         from ..sim.scenefile import load_scene
 
@@ -824,9 +824,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         device: where each run's model computes ("cuda" for a GPU, float64; None: the CPU). Not part of the
             folder's identity: runs on either device answer the same question (the trajectories differ by the
             chaos of rounding, as on two CPUs); each run's record says where it ran.
-        settings: the force-field world's settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
-            ``Scene3D.with_settings``), for scene files and the objects E-H alike; None: each file's own, the
-            paper's for E-H. A study folder holds one setting.
+        settings: the 3-D worlds' settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
+            ``Scene3D.with_settings``, ``MujocoScene.with_settings``), for scene files and built-in objects alike;
+            None: each file's own, the paper's for the built-in objects. A study folder holds one setting.
         learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2;
             ``explore(learn=)``); None: each world's own. A study folder holds one setting.
 
@@ -916,9 +916,9 @@ class SweepSettings:
 
             if settings not in SETTINGS:
                 raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
-            if world != "forcefield":
-                raise ValueError(f"settings: applies to the force-field world (its scene files and objects E-H), "
-                                 f"not {world}")
+            if world not in ("forcefield", "mujoco"):
+                raise ValueError(f"settings: applies to the 3-D worlds (forcefield, mujoco: their scene files and "
+                                 f"objects), not {world}")
         if learn is not None:
             from ..exploration.config import as_learn
 

@@ -50,6 +50,22 @@ MUJOCO_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_ste
                                       approach_travel=0.5)
 
 
+def mujoco_settings(settings: str, mesh) -> dict:
+    """``{"defaults", "views"}`` of the MuJoCo world under ``settings`` for a body ``mesh`` (see
+    :meth:`MujocoScene.with_settings`).
+
+    Raises:
+        ValueError: an unknown setting.
+    """
+    from ..forcefield import SETTINGS, VIEWS, object_defaults
+
+    if settings not in SETTINGS:
+        raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
+    if settings == "paper":
+        return {"defaults": MUJOCO_DEFAULTS, "views": "paper"}
+    return {"defaults": object_defaults(mesh, base=MUJOCO_DEFAULTS), "views": VIEWS}
+
+
 def _require_mujoco():
     try:
         import mujoco  # noqa: F401
@@ -79,6 +95,12 @@ class MujocoScene(World):
         settle_time: simulated time the cover settles before exploring [s].
         camera_scale: image scale of the Kinect v2 model.
         defaults: overrides of :data:`MUJOCO_DEFAULTS`.
+        views: the camera's views of the settled scene, as the force-field world's
+            (:data:`torch_gpioius.sim.forcefield.VIEWS`: names, a count or "paper"; default: the fixed camera alone,
+            the paper's): "fixed" behind the approach, 30 cm to one side, 30 cm up; "mirrored", its mirror image to
+            the other side; "wrist", a short-range depth camera 35 cm back from the body along the approach, captured
+            before the first touch. The tripods stand where the unperturbed approach put them: a seed's perturbation
+            moves the arm, and with it the wrist view, not them.
 
     Raises:
         ImportError: MuJoCo is not installed (names the extra).
@@ -91,8 +113,11 @@ class MujocoScene(World):
     def __init__(self, inner, cover: CoverMesh, start, direction, bounds, *, name: str = "",
                  seed: int = 0, sensor_noise: float = 0.02, timestep: float = 0.008, settle_time: float = 1.0,
                  camera_scale: float = 0.5, defaults: ExplorationDefaults | None = None,
-                 tool_length: float = 0.05, tip_radius: float = 0.004) -> None:
+                 tool_length: float = 0.05, tip_radius: float = 0.004, views="paper") -> None:
+        from ..forcefield import as_views
+
         _require_mujoco()
+        self.views = as_views(views)
         self.body = as_body(inner)
         if len(self.body) > MAX_PRIMITIVES:
             raise ValueError(f"inner: {len(self.body)} primitives or parts; at most {MAX_PRIMITIVES} are supported")
@@ -114,6 +139,7 @@ class MujocoScene(World):
         if d.shape != (3,) or not np.isfinite(d).all() or np.linalg.norm(d) == 0:
             raise ValueError("direction: must be a finite non-zero 3-vector")
         self.direction = d / np.linalg.norm(d)
+        self._tripod_direction = self.direction         # perturbed() carries the unperturbed one over
         self.range = as_bounds(bounds, 3)
         self.name, self.seed = name, int(seed)
         self.sensor_noise, self.timestep, self.settle_time = float(sensor_noise), float(timestep), float(settle_time)
@@ -217,7 +243,7 @@ class MujocoScene(World):
         if start is None or direction is None or bounds is None:
             raise ValueError("from_primitives: start, direction and bounds are required")
         scene_kw = {k: cover_options.pop(k) for k in ("sensor_noise", "timestep", "settle_time", "camera_scale",
-                                                      "defaults") if k in cover_options}
+                                                      "defaults", "views") if k in cover_options}
         if base == "auto":
             base = "tube" if axis is not None else "cap"
         if base == "tube":
@@ -335,16 +361,70 @@ class MujocoScene(World):
         robot._target = np.asarray(self.q_start.numpy(), dtype=np.float64)
         sensor = MujocoForceSensor(physics, noise_std=self.sensor_noise, seed=self.seed)
         sensor.tare()
-        target = self.range.mean(axis=0)
-        back = -self.direction
-        side = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
-        eye = target + back + 0.3 * side / np.linalg.norm(side) + np.array([0.0, 0.0, 0.3])
-        eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
-        camera = MujocoDepthCamera(physics, PinholeCamera.kinect_v2(self.camera_scale), look_at(eye, target),
-                                   noise_a=0.0015, noise_b=0.0015, seed=self.seed)
+        camera = self.cameras(physics, self.views)
         config = ContactConfig(speed=0.08, approach_step=0.003, tip_radius=self.tip_radius, tip_stiffness=1000.0)
         return Hardware(robot, sensor, camera, ContactController(robot, sensor, config),
                         self.tactile_pad(physics, robot, sensor))
+
+    def cameras(self, physics, views=("fixed",)):
+        """The depth cameras of ``views`` (see the class) ray-cast in ``physics``: the fixed one alone is one
+        :class:`~torch_gpioius.sim.mujoco.hardware.MujocoDepthCamera` seeded by the scene's seed; several views are
+        one :class:`~torch_gpioius.sensors.MultiViewSource` whose view k draws its noise from ``[seed, k]``."""
+        from ...sensors.pointcloud import MultiViewSource, PinholeCamera, look_at
+        from ..forcefield import as_views
+        from .hardware import MujocoDepthCamera
+
+        def tripod(seed, side: float):
+            target = self.range.mean(axis=0)
+            back = -self._tripod_direction
+            across = np.cross(back, [0.0, 0.0, 1.0]) if abs(back[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
+            eye = target + back + side * 0.3 * across / np.linalg.norm(across) + np.array([0.0, 0.0, 0.3])
+            eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
+            return MujocoDepthCamera(physics, PinholeCamera.kinect_v2(self.camera_scale), look_at(eye, target),
+                                     noise_a=0.0015, noise_b=0.0015, seed=seed)
+
+        def wrist(seed):
+            target = self.first_contact()
+            up = (0.0, 0.0, 1.0) if abs(self.direction[2]) < 0.9 else (1.0, 0.0, 0.0)
+            return MujocoDepthCamera(physics, PinholeCamera.realsense_d405(0.25),
+                                     look_at(target - 0.35 * self.direction, target, up), noise_a=0.0005,
+                                     noise_b=0.002, seed=seed)
+
+        views = as_views(views)
+        if views == ("fixed",):
+            return tripod(self.seed, 1.0)
+        make = {"fixed": lambda k: tripod([self.seed, k], 1.0), "mirrored": lambda k: tripod([self.seed, k], -1.0),
+                "wrist": lambda k: wrist([self.seed, k])}
+        return MultiViewSource([make[v](k) for k, v in enumerate(views)], views)
+
+    def first_contact(self) -> np.ndarray:
+        """`(3,)` where the approach line first meets the body [m] (every millimetre, by its exact distance); the
+        point of the line nearest the range's centre if it misses within 1 m."""
+        t = np.arange(0.0, 1.0, 0.001)
+        line = self.start + t[:, None] * self.direction
+        inside = np.flatnonzero(self.body.sdf(line) < 0)
+        if len(inside):
+            return line[inside[0]]
+        return self.start + self.direction * float((self.range.mean(axis=0) - self.start) @ self.direction)
+
+    def with_settings(self, settings: str) -> "MujocoScene":
+        """The same body, cover, approach and range under other exploration settings: "default"
+        (:func:`~torch_gpioius.sim.forcefield.object_defaults` on this world's own: voxels a tenth of the body, a
+        second free-space point, the Matérn-5/2 and inside points; all three views) or "paper"
+        (:data:`MUJOCO_DEFAULTS`, the fixed camera alone). The cover settles again, to the same state.
+
+        Raises:
+            ValueError: an unknown setting.
+        """
+        return self._copy(self.start, self.direction, self.seed, **mujoco_settings(settings, self.inner))
+
+    def _copy(self, start, direction, seed: int, **changes) -> "MujocoScene":
+        kw = dict(name=self.name, seed=seed, sensor_noise=self.sensor_noise, timestep=self.timestep,
+                  settle_time=self.settle_time, camera_scale=self.camera_scale, defaults=self._defaults,
+                  tool_length=self.tool_length, tip_radius=self.tip_radius, views=self.views)
+        scene = MujocoScene(self.body, self.cover, start, direction, self.range, **{**kw, **changes})
+        scene._tripod_direction = self._tripod_direction
+        return scene
 
     def tactile_pad(self, physics, robot, sensor):
         """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
@@ -442,10 +522,7 @@ class MujocoScene(World):
         else:
             raise ValueError(f"seed {seed}: no perturbed approach passes {self.MIN_APPROACH_DEPTH * 1e3:.0f} mm into "
                              "the body")
-        return MujocoScene(self.body, self.cover, start, direction, self.range, name=self.name, seed=seed,
-                           sensor_noise=self.sensor_noise, timestep=self.timestep, settle_time=self.settle_time,
-                           camera_scale=self.camera_scale, defaults=self._defaults, tool_length=self.tool_length,
-                           tip_radius=self.tip_radius)
+        return self._copy(start, direction, seed)
 
     #: A perturbed approach must pass at least this deep [m] into the body (its centre line): one that only grazes an
     #: edge slides off it, or past it out of the workspace.
