@@ -352,8 +352,7 @@ class MujocoScene(World):
 
     def hardware(self) -> Hardware:
         from ...contact import ContactConfig, ContactController
-        from ...sensors.pointcloud import PinholeCamera, look_at
-        from .hardware import MujocoDepthCamera, MujocoForceSensor, MujocoPhysics
+        from .hardware import MujocoForceSensor, MujocoPhysics
 
         physics = MujocoPhysics(self.model)
         physics.set_state(self.settled)
