@@ -220,7 +220,7 @@ class ReachPolicy:
         Returns:
             the :class:`Evidence` (an evidence action like a tap: counted in ``state.taps``, logged as a ``tap``
             record; ``contact`` None when the fingertip ended in free space), or None when no target qualified or the
-            robot refused the lift (nothing moved then).
+            robot refused or faulted on the lift.
         """
         plan = self.plan(state)
         if plan is None:
@@ -230,8 +230,8 @@ class ReachPolicy:
         try:
             lift = toucher.lift(up / up.norm(), step=0.005, until_force_below=0.1, extra=lift_h,
                                 max_distance=lift_h + 0.05)
-        except RuntimeError:                  # refused or faulted before anything moved: no reach
-            return None
+        except RuntimeError:                  # refused, or a fault (the controller stopped or retreated): no reach; if
+            return None                       # contact is lost, the next step's recovery re-approaches
         touches = [lift]
 
         def leg(direction: np.ndarray, distance: float):
