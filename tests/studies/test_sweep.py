@@ -84,6 +84,17 @@ def test_bad_sweep_arguments(tmp_path):
         run_sweep("forcefield", objects=["E"], settings="mine", out=tmp_path)
 
 
+def test_a_studys_settings_reach_every_run_built_in_objects_and_scene_files_alike(tmp_path):
+    from torch_gpioius.studies.sweep import SweepSettings
+
+    kw = dict(world="forcefield", objects=["E"], modes=["visual-tactile"], seeds=2, out=tmp_path, workers=1,
+              address=None, max_travel=None, max_steps=None, smoke=True, progress=False, threads=1, backend="local",
+              force=False, scenes=[str(ROOT / "examples/scenes/real/duck-tight.toml")], voxel=None, touch="point",
+              outer_tol=None, device=None, settings="default")
+    specs = SweepSettings.checked(**kw)._specs(tmp_path)
+    assert {s.object for s in specs} == {"E", "duck-tight"} and {s.settings for s in specs} == {"default"}
+
+
 @pytest.mark.skipif(not hasattr(signal, "SIGKILL"), reason="needs SIGKILL")
 def test_a_real_ray_sweep_survives_a_killed_worker(tmp_path):
     pytest.importorskip("ray")

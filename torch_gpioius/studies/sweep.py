@@ -971,7 +971,7 @@ class SweepSettings:
     def _specs(self, out: Path) -> list[RunSpec]:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
-                        self.settings if o in self.scene_files else None, self.learn)
+                        self.settings, self.learn)
                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
 
     def _execute(self, todo: list[RunSpec]) -> str:
