@@ -110,6 +110,9 @@ class _Toucher:
         return r
 
     def lift(self, direction, **kw):
+        # the contact controller's own bounds on a lift (ContactController.lift raises beyond them)
+        assert 0 < kw["extra"] <= 0.1 and 0 < kw["max_distance"] <= 2.0
+        self.lift_kw = kw
         return self._next(self.lifts, "lift", direction)
 
     def approach(self, direction, max_travel=0.3):
@@ -154,6 +157,16 @@ def test_every_way_a_reach_ends_leaves_a_consistent_evidence():
     # a refused lift: nothing moved, no evidence
     t = _Toucher(RuntimeError("refused"), [])
     assert policy.gather(state, t) is None
+    # the largest clearance is the lift's bound itself, 0.1 m: asked for exactly (|0.1 n| rounds to 0.10000000000000003)
+    far = ReachPolicy(bounds=BOX, max_transit=0.8, clearances=(0.1,))
+    state = _state(state.model, contact_dir=(0.1, 0.7, 1.0))          # a normal for which |0.1 n| > 0.1
+    plan = far.plan(state)
+    assert float(np.linalg.norm(plan.waypoints[1] - plan.waypoints[0])) > 0.1
+    assert plan.lift == 0.1
+    t = _Toucher(_result(plan.waypoints[1], False), [_result(c, False) for c in plan.waypoints[2:]] +
+                 [_result(plan.target, True)])
+    far.gather(state, t)
+    assert t.lift_kw["extra"] == 0.1
 
 
 def test_reach_motion_passes_the_gate_and_is_paid_for_in_the_budgets():

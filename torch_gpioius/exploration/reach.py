@@ -59,6 +59,8 @@ class ReachPlan:
         normal: `(3,)` the estimate's outward normal there (the approach is along ``-normal``).
         waypoints: `(k, 3)` the path's corners: the contact, the lifted point, the corners of the route through free
             space, and last the point ``clearance`` out along ``normal`` from the target.
+        lift: how far the fingertip lifts off the contact along the measured normal before the route [m] (one of
+            the policy's ``clearances``).
         clearance: the target's stand-off [m].
         variance: the inner posterior variance at the target.
         near_variance: the largest inner posterior variance at the contact and the surface samples within
@@ -70,6 +72,7 @@ class ReachPlan:
     target: np.ndarray
     normal: np.ndarray
     waypoints: np.ndarray
+    lift: float
     clearance: float
     variance: float
     near_variance: float
@@ -209,8 +212,8 @@ class ReachPolicy:
                 length = h + _length(route) + g
                 if length > left:
                     break
-                return ReachPlan(pts[i], normals[i], np.concatenate([contact[None], route]), g, float(var[i]),
-                                 v_near, length, int(ok.sum()))
+                return ReachPlan(pts[i], normals[i], np.concatenate([contact[None], route]), h, g,
+                                 float(var[i]), v_near, length, int(ok.sum()))
         return None
 
     def gather(self, state, toucher) -> Evidence | None:
@@ -226,10 +229,9 @@ class ReachPolicy:
         if plan is None:
             return None
         up = torch.as_tensor(plan.waypoints[1] - plan.waypoints[0])
-        lift_h = float(up.norm())
-        try:
-            lift = toucher.lift(up / up.norm(), step=0.005, until_force_below=0.1, extra=lift_h,
-                                max_distance=lift_h + 0.05)
+        try:                                  # the clearance itself: |h n| can round above the lift's 0.1 m bound
+            lift = toucher.lift(up / up.norm(), step=0.005, until_force_below=0.1, extra=plan.lift,
+                                max_distance=plan.lift + 0.05)
         except RuntimeError:                  # refused, or a fault (the controller stopped or retreated): no reach; if
             return None                       # contact is lost, the next step's recovery re-approaches
         touches = [lift]
