@@ -9,13 +9,14 @@
 """
 
 from .config import MODES, ExploreConfig, Run
-from .evidence import EVIDENCE_POLICIES, Evidence, TapPolicy, evidence_policy
+from .evidence import Evidence, TapPolicy
 from .loop import begin, explore, run
-from .reach import ReachPlan, ReachPolicy
 from .observations import (Observations, ObservationPolicy, free_space_along, retract_free_space, thin_points,
                            vision_observations)
 from .patches import PatchSettings, patch_observations
+from .policies import EVIDENCE_POLICIES, evidence_policy
 from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel
+from .reach import ReachPlan, ReachPolicy
 from .recorders import IntervalRecorder, MetricsRecorder, NoEstimateWarning, ProgressRecorder
 from .recovery import NoProgress
 from .registry import WorldEntry, make_world, register_world, world_entry, world_names

@@ -15,7 +15,7 @@ from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
 from ..models.gpiois import GPIOIS, INNER, OUTER
 from ..models.gpis import GPIS
 from ..models.local import LocalGPIOIS
-from .evidence import evidence_policy
+from .policies import evidence_policy
 from .observations import ObservationPolicy, Observations
 from .recovery import NoProgress
 from .stopping import StopRule, TravelBudget
