@@ -96,7 +96,7 @@ class ReachPolicy:
         clear_level: the least posterior mean (inner, and outer with a camera) along the path.
         max_transit: the longest path to a target [m].
         max_checks: targets whose paths are checked, in decreasing variance.
-        bounds: `(2, 3)` the exploration range [min corner; max corner] [m]; None: set by the exploration from its
+        bounds: `(2, 3)` the exploration range `[min corner; max corner]` [m]; None: set by the exploration from its
             range penalty (eq. 25), else the model's data box.
         budget: the run's travel budget [m] (set by the exploration), or None.
     """
