@@ -71,16 +71,18 @@ class FakeDAQ:
             if pause:
                 time.sleep(pause)
 
-    def poll_config(self):
+    def poll_config(self, quiet: float = 0.2):
+        """Read everything the sensor wrote until the line has been quiet for ``quiet`` s, then record its config
+        frames. (Stopping at the first short read lost a second frame that arrived a moment later, on a loaded
+        machine: a test's own race, not the driver's.)"""
         import select
-        while select.select([self.master], [], [], 0.05)[0]:
-            data = os.read(self.master, 64)
-            for i in range(0, len(data) - 8, 9):
-                cfg = data[i:i + 9]
-                if cfg[:4] == bytes([0xAA, 0x00, 0x32, 0x03]):
-                    self.configs.append(tuple(cfg[4:7]))
-            if len(data) < 64:
-                return
+        data = b""
+        while select.select([self.master], [], [], quiet)[0]:
+            data += os.read(self.master, 64)
+        for i in range(0, len(data) - 8, 9):
+            cfg = data[i:i + 9]
+            if cfg[:4] == bytes([0xAA, 0x00, 0x32, 0x03]):
+                self.configs.append(tuple(cfg[4:7]))
 
     def hang_up(self):
         os.close(self.master)
