@@ -201,6 +201,14 @@ def test_one_file_builds_both_worlds_with_each_worlds_own_cover_options(tmp_path
     assert mine.views == VIEWS and isinstance(mine.defaults.kernel, Matern52) and mj.views == ("fixed",)
     assert mine.defaults.approach_travel == mj.defaults.approach_travel
     np.testing.assert_array_equal(mine.cover.vertices, mj.cover.vertices)
+    # the inside points' depths in the MuJoCo section, on top of the settings (a loose cloth: none behind the cloth)
+    assert mine.defaults.policy.vision_inside == 0.02
+    loose = load_scene(_write(tmp_path, text.replace("spacing = 0.03\n", "spacing = 0.03\nvision_inside = 0\n"),
+                              "c.toml"), world="mujoco", settings="default")
+    assert loose.defaults.policy.vision_inside is None and loose.defaults.policy.touch_inside == 0.02
+    with pytest.raises(ValueError, match="vision_inside"):
+        load_scene(_write(tmp_path, text.replace("spacing = 0.03\n", "spacing = 0.03\nvision_inside = 0.5\n"),
+                          "d.toml"), world="mujoco")
 
 
 def test_the_shipped_scene_files_parse_and_name_meshes_that_exist():

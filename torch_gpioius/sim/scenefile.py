@@ -40,6 +40,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
     slack = 0.03                      # a loose cloth's distance from the body before it settles
+    vision_inside = 0                 # as in [forcefield]: e.g. none behind a cloth that hangs 3 cm off
 
 ``[cover]`` holds what both worlds read (``kind``, ``gap``); an option only one world knows goes in that world's
 section, so one file builds both. Every key is checked: a misspelt one, or a ``[cover]`` option the chosen world
@@ -70,7 +71,7 @@ _COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
 _SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "theta", "noise",
                             "voxel", "touch_inside", "vision_inside", "learn"},
              "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
-                        "sensor_noise", "timestep", "settle_time", "camera_scale"}}
+                        "sensor_noise", "timestep", "settle_time", "camera_scale", "touch_inside", "vision_inside"}}
 #: What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in the
 #: force-field world, its ``slack`` in MuJoCo), so that one file serves both worlds.
 _WORLD = {w: _SETTINGS[w] | (_COVER[w] - {"kind"}) for w in _SETTINGS}
@@ -269,6 +270,17 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
                 from .mujoco.scene import mujoco_settings
 
                 settings.update(mujoco_settings(settings_given, mesh))
+            depths = {k: settings.pop(k) for k in ("touch_inside", "vision_inside") if k in settings}
+            if depths:                              # the inside points' depths on the world's (or settings') policy
+                import dataclasses
+
+                from .._validation import as_float
+                from .mujoco.scene import MUJOCO_DEFAULTS
+
+                base = settings.get("defaults", MUJOCO_DEFAULTS)
+                policy = dataclasses.replace(base.policy, **{
+                    k: as_float(v, k, lo=0.0, hi=0.1, unit="m (0: none)") or None for k, v in depths.items()})
+                settings["defaults"] = dataclasses.replace(base, policy=policy)
             scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{spec.path}: {exc}") from None
