@@ -169,11 +169,6 @@ class ExploreConfig:
         if not isinstance(policy, ObservationPolicy):
             raise ValueError(f"policy: expected an ObservationPolicy, got {type(policy).__name__}")
         penalty = penalty if penalty is not None else world.penalty()
-        if evidence is not None and callable(getattr(evidence, "for_run", None)):   # a reach: the range and budget
-            box = (None if getattr(penalty, "lower", None) is None
-                   else np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()]))
-            evidence = evidence.for_run(dim=world.dim, bounds=box,
-                                        budget=next((r.max_travel for r in rules if isinstance(r, TravelBudget)), None))
         if isinstance(stall, str) and stall == "default":
             stall = NoProgress()
         if stall is not None and not isinstance(stall, NoProgress):
@@ -193,9 +188,15 @@ class ExploreConfig:
             if kernel is not None and not getattr(kernel, "learnable_length", False):   # None: the learnable IMQ
                 raise ValueError(f"learn={learn!r}: the {type(kernel).__name__} kernel has no learnable length "
                                  "(ExactKernel.length and value_at)")
-        return cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
-                   metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
-                   outer_tol, as_device(device), restart_every, learn)
+        config = cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
+                     metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
+                     outer_tol, as_device(device), restart_every, learn)
+        if evidence is not None and callable(getattr(evidence, "for_run", None)):   # a reach: the range and budget
+            box = (None if getattr(penalty, "lower", None) is None
+                   else np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()]))
+            config = dataclasses.replace(config, evidence=evidence.for_run(dim=world.dim, bounds=box,
+                                                                           budget=config.budget))
+        return config
 
     # ------------------------------------------------------------------ what the loop asks of the settings
     @property

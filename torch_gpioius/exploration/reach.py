@@ -279,14 +279,20 @@ def _length(corners: np.ndarray) -> float:
     return float(np.linalg.norm(np.diff(corners, axis=0), axis=1).sum())
 
 
-def _sure_free(model, xs: np.ndarray, level: float) -> bool:
-    """Whether the posterior mean is at least ``level`` at every point `(m, 3)`, inner task and (GPIOIS) outer."""
+def _least_mean(model, xs: np.ndarray) -> np.ndarray:
+    """`(m,)` the smaller posterior mean of the inner task and (GPIOIS) the outer one at points `(m, 3)`."""
+    from ..geometry import predict_mean_task
+
     x0 = model.train_inputs[0]
     q = torch.as_tensor(xs, dtype=x0.dtype, device=x0.device)
     with torch.no_grad():
-        if getattr(model, "num_tasks", 1) == 1:
-            return float(model.predict_mean(q).min()) >= level
-        return all(float(model.predict_mean(q, task=t).min()) >= level for t in (0, 1))
+        means = [predict_mean_task(model, q, t) for t in range(getattr(model, "num_tasks", 1))]
+    return torch.stack(means).min(dim=0).values.cpu().numpy()
+
+
+def _sure_free(model, xs: np.ndarray, level: float) -> bool:
+    """Whether the posterior mean is at least ``level`` at every point `(m, 3)`, inner task and (GPIOIS) outer."""
+    return float(_least_mean(model, xs).min()) >= level
 
 
 class _FreeSpace:
@@ -306,15 +312,7 @@ class _FreeSpace:
         axes = [np.arange(lo[k], hi[k] + 0.5 * self.GRID, self.GRID) for k in range(3)]
         self.shape = tuple(len(a) for a in axes)
         self.nodes = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        x0 = model.train_inputs[0]
-        q = torch.as_tensor(self.nodes, dtype=x0.dtype, device=x0.device)
-        with torch.no_grad():
-            tasks = (0, 1) if getattr(model, "num_tasks", 1) > 1 else (None,)
-            free = np.ones(len(self.nodes), dtype=bool)
-            for t in tasks:
-                mu = model.predict_mean(q) if t is None else model.predict_mean(q, task=t)
-                free &= mu.cpu().numpy() >= self.level
-        self.free = free
+        self.free = _least_mean(model, self.nodes) >= self.level
         self.source = None
         self.dist = self.pred = None
 

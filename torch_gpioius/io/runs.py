@@ -147,16 +147,12 @@ def load_run(path: str | os.PathLike) -> RunHistory:
                 if key in a:
                     p[key] = np.asarray(a[key], dtype=np.float64)
             params[k] = p
-            if "path" in a and len(a["path"]):
-                traj.append(np.asarray(a["path"], dtype=np.float64))
-                traj_step.append(np.full(len(a["path"]), k))
-        elif rec.kind in ("tap", "recovery"):        # an evidence action's motion, after its step's (logged since 2026-11)
-            a = rec.arrays
-            if "path" in a and len(a["path"]):
-                traj.append(np.asarray(a["path"], dtype=np.float64).reshape(-1, len(a["contact"])))
-                traj_step.append(np.full(len(a["path"]), int(rec.meta["step"])))
         elif rec.kind == "observations" and not states:
             states[0] = ds
+        # the fingertip's path in time order: each step's, then its evidence actions' (logged since 2026-11)
+        if rec.kind in ("step", "tap", "recovery") and len(rec.arrays.get("path", ())):
+            traj.append(np.asarray(rec.arrays["path"], dtype=np.float64))
+            traj_step.append(np.full(len(rec.arrays["path"]), int(rec.meta["step"])))
     if header is None:
         raise DatasetError(f"{path}: no observations")
     if not any(k > 0 for k in states):   # a dataset: states by its step column

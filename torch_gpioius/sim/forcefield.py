@@ -30,7 +30,7 @@ from ..planning import RangePenalty
 from ..sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
 from ..sensors.simulated import ForceFieldContact
 from ..surfaces import surface_samples
-from .._validation import as_bounds
+from .._validation import as_bounds, as_float
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
 __all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d",
@@ -83,6 +83,39 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
 
 #: Depth [m] of the default inside points behind contacts and seen points (:func:`object_defaults`).
 INSIDE_DEPTH = 0.02
+
+
+def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefaults | None = None) -> dict:
+    """``{"defaults", "views"}`` of a world under ``settings`` for a body ``mesh``: "default" (:func:`object_defaults`
+    on the world's own ``paper`` settings, all three :data:`VIEWS`) or "paper" (``paper``, default
+    :data:`ROBOT_STUDY_DEFAULTS`, and the fixed camera alone). Both 3-D worlds build their settings here.
+
+    Raises:
+        ValueError: an unknown setting.
+    """
+    if settings not in SETTINGS:
+        raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
+    paper = ROBOT_STUDY_DEFAULTS if paper is None else paper
+    if settings == "paper":
+        return {"defaults": paper, "views": "paper"}
+    return {"defaults": object_defaults(mesh, base=paper), "views": VIEWS}
+
+
+def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDefaults:
+    """``defaults`` with the inside points' depths [m] given (``touch_inside``, ``vision_inside``; 0: none; None:
+    as they are), each checked to lie in [0, 0.1] m.
+
+    Raises:
+        ValueError: a depth outside that range (names it).
+    """
+    given = {k: v for k, v in depths.items() if v is not None}
+    unknown = set(given) - {"touch_inside", "vision_inside"}
+    if unknown:
+        raise ValueError(f"inside depths: unknown {sorted(unknown)}; touch_inside and vision_inside are the depths")
+    if not given:
+        return defaults
+    checked = {k: as_float(v, k, lo=0.0, hi=0.1, unit="m (0: none)") or None for k, v in given.items()}
+    return dataclasses.replace(defaults, policy=dataclasses.replace(defaults.policy, **checked))
 
 
 #: The kernels ``Scene3D.from_mesh(kernel=...)`` names: the paper's inverse multiquadric and the Matérn-5/2.
@@ -368,11 +401,10 @@ class Scene3D(World):
             raise ValueError(f"cover: the force-field world has 'tight' and 'loose' covers, got {cover!r}")
         if settings not in SETTINGS:
             raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
-        views = as_views(("paper" if settings == "paper" else VIEWS) if views is None else views)
         mesh = place(load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner"), at)
-        if defaults is None:
-            defaults = ROBOT_STUDY_DEFAULTS if settings == "paper" else object_defaults(mesh)
-        defaults = _with_kernel(defaults, kernel, theta)
+        chosen = settings_for(settings, mesh)
+        views = as_views(chosen["views"] if views is None else views)
+        defaults = _with_kernel(chosen["defaults"] if defaults is None else defaults, kernel, theta)
         if noise is not None:
             defaults = dataclasses.replace(defaults, noise=as_float(noise, "noise", positive=True))
         if voxel is not None:
@@ -382,11 +414,7 @@ class Scene3D(World):
 
             learn = as_learn(learn)
             defaults = dataclasses.replace(defaults, learn=learn)
-        for key, depth in (("touch_inside", touch_inside), ("vision_inside", vision_inside)):
-            if depth is not None:
-                depth = as_float(depth, key, lo=0.0, hi=0.1, unit="m (0: none)")
-                defaults = dataclasses.replace(defaults, policy=dataclasses.replace(defaults.policy,
-                                                                                    **{key: depth or None}))
+        defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside)
         gap = (0.008 if cover == "tight" else 0.01) if gap is None else gap
         outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution)
         if start is None or direction is None or bounds is None:
@@ -506,14 +534,12 @@ class Scene3D(World):
         Raises:
             ValueError: an unknown setting, or a scene with a camera of its own (its views are the user's).
         """
-        if settings not in SETTINGS:
-            raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
+        chosen = settings_for(settings, self.inner)
         if self._given_camera is not None:
             raise ValueError("settings: this scene has a camera of its own; its views are not the settings' to change")
-        defaults = ROBOT_STUDY_DEFAULTS if settings == "paper" else object_defaults(self.inner)
         scene = Scene3D(self.inner, self.outer, self.start, self.direction, self.range, name=self.name,
                         cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=self.seed,
-                        defaults=defaults, support=self.support, views="paper" if settings == "paper" else VIEWS)
+                        support=self.support, **chosen)
         scene._tripod_direction = self._tripod_direction
         return scene
 

@@ -266,21 +266,14 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
                 where.setdefault("bounds", b + np.array([[-0.03], [0.03]]) * np.array([1, 1, 0]))
             if smoke:
                 settings["spacing"] = max(settings.get("spacing", 0.025), 0.04)
-            if settings_given is not None:          # the settings' defaults and views for this body
-                from .mujoco.scene import mujoco_settings
+            from .forcefield import settings_for, with_inside_depths
+            from .mujoco.scene import MUJOCO_DEFAULTS
 
-                settings.update(mujoco_settings(settings_given, mesh))
+            if settings_given is not None:          # the settings' defaults and views for this body
+                settings.update(settings_for(settings_given, mesh, MUJOCO_DEFAULTS))
             depths = {k: settings.pop(k) for k in ("touch_inside", "vision_inside") if k in settings}
             if depths:                              # the inside points' depths on the world's (or settings') policy
-                import dataclasses
-
-                from .._validation import as_float
-                from .mujoco.scene import MUJOCO_DEFAULTS
-
-                base = settings.get("defaults", MUJOCO_DEFAULTS)
-                policy = dataclasses.replace(base.policy, **{
-                    k: as_float(v, k, lo=0.0, hi=0.1, unit="m (0: none)") or None for k, v in depths.items()})
-                settings["defaults"] = dataclasses.replace(base, policy=policy)
+                settings["defaults"] = with_inside_depths(settings.get("defaults", MUJOCO_DEFAULTS), **depths)
             scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{spec.path}: {exc}") from None

@@ -82,7 +82,7 @@ class RunSpec:
     touch: str = "point"            # "point" (the fingertip's contact) or "patch" (a gel pad's depth map)
     outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
     device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
-    settings: str | None = None     # force field: "default" or "paper" (Scene3D.with_settings); None: the world's own
+    settings: str | None = None     # 3-D worlds: "default" or "paper" (World.with_settings); None: the world's own
     learn: str | None = None        # "task", "length" or "all" (explore(learn=)); None: the world's own
 
     @property

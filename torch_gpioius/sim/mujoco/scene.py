@@ -50,22 +50,6 @@ MUJOCO_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_ste
                                       approach_travel=0.5)
 
 
-def mujoco_settings(settings: str, mesh) -> dict:
-    """``{"defaults", "views"}`` of the MuJoCo world under ``settings`` for a body ``mesh`` (see
-    :meth:`MujocoScene.with_settings`).
-
-    Raises:
-        ValueError: an unknown setting.
-    """
-    from ..forcefield import SETTINGS, VIEWS, object_defaults
-
-    if settings not in SETTINGS:
-        raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
-    if settings == "paper":
-        return {"defaults": MUJOCO_DEFAULTS, "views": "paper"}
-    return {"defaults": object_defaults(mesh, base=MUJOCO_DEFAULTS), "views": VIEWS}
-
-
 def _require_mujoco():
     try:
         import mujoco  # noqa: F401
@@ -399,12 +383,18 @@ class MujocoScene(World):
     def first_contact(self) -> np.ndarray:
         """`(3,)` where the approach line first meets the body [m] (every millimetre, by its exact distance); the
         point of the line nearest the range's centre if it misses within 1 m."""
-        t = np.arange(0.0, 1.0, 0.001)
-        line = self.start + t[:, None] * self.direction
-        inside = np.flatnonzero(self.body.sdf(line) < 0)
+        line, sdf = self._along(self.start, self.direction)
+        inside = np.flatnonzero(sdf < 0)
         if len(inside):
             return line[inside[0]]
         return self.start + self.direction * float((self.range.mean(axis=0) - self.start) @ self.direction)
+
+    def _along(self, start, direction, reach: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+        """`(n, 3)` points every millimetre of the line from ``start`` along ``direction`` for ``reach`` [m], and the
+        body's exact signed distance `(n,)` at each."""
+        d = np.asarray(direction, dtype=np.float64)
+        line = np.asarray(start, dtype=np.float64) + np.arange(0.0, reach, 0.001)[:, None] * d / np.linalg.norm(d)
+        return line, self.body.sdf(line)
 
     def with_settings(self, settings: str) -> "MujocoScene":
         """The same body, cover, approach and range under other exploration settings: "default"
@@ -415,7 +405,9 @@ class MujocoScene(World):
         Raises:
             ValueError: an unknown setting.
         """
-        return self._copy(self.start, self.direction, self.seed, **mujoco_settings(settings, self.inner))
+        from ..forcefield import settings_for
+
+        return self._copy(self.start, self.direction, self.seed, **settings_for(settings, self.inner, MUJOCO_DEFAULTS))
 
     def _copy(self, start, direction, seed: int, **changes) -> "MujocoScene":
         kw = dict(name=self.name, seed=seed, sensor_noise=self.sensor_noise, timestep=self.timestep,
@@ -530,9 +522,7 @@ class MujocoScene(World):
     def approach_depth(self, start, direction, reach: float = 1.0) -> float:
         """How deep [m] the line from ``start`` `(3,)` along ``direction`` `(3,)` passes into the body on its first
         passage (0 if it misses within ``reach`` [m]), from the body's exact distance every millimetre."""
-        d = np.asarray(direction, dtype=np.float64)
-        t = np.arange(0.0, reach, 0.001)
-        sdf = self.body.sdf(np.asarray(start, dtype=np.float64) + t[:, None] * d / np.linalg.norm(d))
+        _, sdf = self._along(start, direction, reach)
         inside = np.flatnonzero(sdf < 0)
         if len(inside) == 0:
             return 0.0
