@@ -70,7 +70,7 @@ def _study(args: argparse.Namespace) -> int:
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
                        touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
-                       learn=args.learn)
+                       learn=args.learn, views=args.views, kernel=args.kernel, theta=args.theta, noise=args.noise)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -311,6 +311,15 @@ def _length(option: str):
     return parse
 
 
+def _views(text: str):
+    """An argparse type for camera views: comma-separated names, a count (1-3) or "paper"."""
+    from .sim.forcefield import as_views
+
+    text = text.strip()
+    return _argument(as_views, int(text) if text.isdigit() else tuple(v.strip() for v in text.split(","))
+                     if "," in text else text)
+
+
 def _study_worlds() -> list[str]:
     from .exploration.registry import world_names
 
@@ -430,6 +439,20 @@ def build_parser() -> argparse.ArgumentParser:
                     help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
                          "all (the length and the noise too), by the marginal likelihood on restart steps; default: "
                          "each world's own; one per --out folder")
+    sw.add_argument("--views", type=_views, default=None,
+                    help="the 3-D worlds' simulated camera views in place of the settings': comma-separated names "
+                         "(fixed, mirrored, wrist), a count (1-3) or paper (the fixed camera alone); one per --out "
+                         "folder")
+    sw.add_argument("--kernel", default=None, choices=["imq", "matern52"],
+                    help="the kernel: imq (the paper's inverse multiquadric) or matern52; default: each world's own; "
+                         "one per --out folder")
+    sw.add_argument("--theta", type=_length("theta"), default=None,
+                    help="the kernel's length [m] (the inverse multiquadric's theta, the Matern's length scale; with "
+                         "--learn length or all, where the learning starts); default: the kernel's own; one per "
+                         "--out folder")
+    sw.add_argument("--noise", type=float, default=None,
+                    help="sigma^2 (with --learn all, where the learning starts); default: each world's own; one per "
+                         "--out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")

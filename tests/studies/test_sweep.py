@@ -286,6 +286,35 @@ def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_p
     assert not (tmp_path / "bad").exists() and not (tmp_path / "planar").exists()
 
 
+def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(tmp_path):
+    """--views, --kernel, --theta and --noise reach the scene and the model of each run (the record's length and
+    sigma^2 are read back from the run's model; one view sees fewer outer points than the file's three), a folder
+    holds one setting of each, and bad values are refused before anything runs."""
+    ball = _scene(tmp_path)
+    rows = {}
+    for name, kw in (("own", {}), ("one", dict(views=1, kernel="imq", theta=0.12, noise=0.05))):
+        run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / name, smoke=True,
+                  backend="local", progress=False, **kw)
+        rows[name] = json.loads((tmp_path / name / "runs" / "ball_visual-tactile_0.json").read_text())
+    own, one = rows["own"], rows["one"]
+    assert own["views"] == "fixed+mirrored+wrist" and own["kernel"] == "Matern52" and own["length"] == 0.1
+    assert one["views"] == "fixed" and one["kernel"] == "InverseMultiquadric"
+    assert one["length"] == pytest.approx(0.12, rel=1e-12) and one["noise"] == pytest.approx(0.05, rel=1e-12)
+    assert 0 < one["n_outer"] < own["n_outer"]
+    with pytest.raises(FileExistsError, match="views"):
+        run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "one",
+                  smoke=True, backend="local", progress=False, kernel="imq", theta=0.12, noise=0.05)
+    bad = [(dict(views="side"), "views"), (dict(views=4), "views"), (dict(kernel="rbf"), "kernel"),
+           (dict(theta=-0.1), "theta"), (dict(theta=math.nan), "theta"), (dict(noise=0.0), "noise"),
+           (dict(noise=math.inf), "noise")]
+    for kw, match in bad:
+        with pytest.raises(ValueError, match=match):
+            run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", **kw)
+    with pytest.raises(ValueError, match="views: the simulated camera views are the 3-D worlds'"):
+        run_sweep("planar", seeds=1, out=tmp_path / "planar", views=1)
+    assert not (tmp_path / "bad").exists() and not (tmp_path / "planar").exists()
+
+
 def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
     ball = _scene(tmp_path)
     run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,

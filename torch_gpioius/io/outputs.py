@@ -162,7 +162,8 @@ def claim_folder(path: str | os.PathLike, command: str, force: bool = False, *, 
 
 
 #: How a marker's None reads for the identity keys whose default is recorded as None.
-_DEFAULT_NAMES = {"touch": "point", "voxel": "the world's default", "outer_tol": "exact"}
+_DEFAULT_NAMES = {"touch": "point", "voxel": "the world's default", "outer_tol": "exact",
+                  **{k: "the world's own" for k in ("settings", "learn", "views", "kernel", "theta", "noise")}}
 
 
 def _shown(key: str, value):

@@ -122,9 +122,13 @@ def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDe
 KERNELS = ("imq", "matern52")
 
 
-def _with_kernel(defaults: ExplorationDefaults, kernel, theta) -> ExplorationDefaults:
+def with_kernel(defaults: ExplorationDefaults, kernel, theta) -> ExplorationDefaults:
     """``defaults`` with the kernel named by ``kernel`` ("imq", "matern52", an ExactKernel or None: as it is) and
-    its length ``theta`` [m] (None: the kernel's own)."""
+    its length ``theta`` [m] (None: the kernel's own): the inverse multiquadric's theta or the Matérn's length scale.
+
+    Raises:
+        ValueError: an unknown kernel name, a non-positive length, or a length given with a kernel object.
+    """
     from .._validation import as_float
     from ..kernels import ExactKernel, Matern52
 
@@ -404,7 +408,7 @@ class Scene3D(World):
         mesh = place(load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner"), at)
         chosen = settings_for(settings, mesh)
         views = as_views(chosen["views"] if views is None else views)
-        defaults = _with_kernel(chosen["defaults"] if defaults is None else defaults, kernel, theta)
+        defaults = with_kernel(chosen["defaults"] if defaults is None else defaults, kernel, theta)
         if noise is not None:
             defaults = dataclasses.replace(defaults, noise=as_float(noise, "noise", positive=True))
         if voxel is not None:
@@ -540,6 +544,22 @@ class Scene3D(World):
         scene = Scene3D(self.inner, self.outer, self.start, self.direction, self.range, name=self.name,
                         cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=self.seed,
                         support=self.support, **chosen)
+        scene._tripod_direction = self._tripod_direction
+        return scene
+
+    def with_views(self, views) -> "Scene3D":
+        """The same objects, approach, range and settings seen by other simulated views (:func:`as_views`: names
+        from :data:`VIEWS`, a count or "paper"); the tripods stand where they stood.
+
+        Raises:
+            ValueError: unknown views, or a scene with a camera of its own (its views are the user's).
+        """
+        views = as_views(views)
+        if self._given_camera is not None:
+            raise ValueError("views: this scene has a camera of its own; its views are not the simulated ones")
+        scene = Scene3D(self.inner, self.outer, self.start, self.direction, self.range, name=self.name,
+                        cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=self.seed,
+                        defaults=self._defaults, support=self.support, views=views)
         scene._tripod_direction = self._tripod_direction
         return scene
 

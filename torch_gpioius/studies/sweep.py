@@ -84,6 +84,10 @@ class RunSpec:
     device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
     settings: str | None = None     # 3-D worlds: "default" or "paper" (World.with_settings); None: the world's own
     learn: str | None = None        # "task", "length" or "all" (explore(learn=)); None: the world's own
+    views: tuple | None = None      # 3-D worlds: the camera's views (World.with_views); None: the world's own
+    kernel: str | None = None       # "imq" or "matern52"; None: the world's own
+    theta: float | None = None      # the kernel's length [m] (IMQ theta, Matern length scale); None: the world's own
+    noise: float | None = None      # sigma^2; None: the world's own
 
     @property
     def key(self) -> str:
@@ -91,17 +95,20 @@ class RunSpec:
 
 
 def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None,
-               settings: str | None = None):
+               settings: str | None = None, views=None):
     """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
-    unperturbed object), under ``settings`` in place of its own (3-D worlds: "default" or "paper")."""
+    unperturbed object), under ``settings`` in place of its own (3-D worlds: "default" or "paper"), seen by
+    ``views`` in place of the settings' (3-D worlds: ``with_views``)."""
     if scene is not None:
         from ..sim.scenefile import load_scene
 
-        return load_scene(scene, world=world, seed=seed, smoke=smoke, settings=settings)
-    from ..exploration.registry import make_world as registry_make_world
+        made = load_scene(scene, world=world, seed=seed, smoke=smoke, settings=settings)
+    else:
+        from ..exploration.registry import make_world as registry_make_world
 
-    made = registry_make_world(world, name, seed, smoke)
-    return made if settings is None else made.with_settings(settings)
+        made = registry_make_world(world, name, seed, smoke)
+        made = made if settings is None else made.with_settings(settings)
+    return made if views is None else made.with_views(views)
 
 
 def _world_budget(world) -> float | None:
@@ -139,6 +146,16 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["outer_tol"] = spec.outer_tol
     if spec.learn is not None:
         kw["learn"] = spec.learn
+    if spec.kernel is not None or spec.theta is not None:
+        from ..sim.forcefield import with_kernel
+
+        chosen = with_kernel(world.defaults, spec.kernel, spec.theta)
+        if chosen.kernel is None:
+            kw["theta"] = chosen.theta
+        else:
+            kw["kernel"] = chosen.kernel
+    if spec.noise is not None:
+        kw["noise"] = spec.noise
     if spec.device is not None:
         kw["device"] = spec.device
     return kw
@@ -284,7 +301,7 @@ def run_one(spec: RunSpec) -> dict:
     marker.write_text(str(os.getpid()))
     t0 = time.perf_counter()
     with torch_threads(spec.threads):
-        world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings)
+        world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings, spec.views)
         kw = _explore_kwargs(spec, world)
         try:
             # the folder is ours: a run that crashed before is done again over its own log
@@ -316,6 +333,8 @@ def run_one(spec: RunSpec) -> dict:
     if trace is not None and len(trace.length):      # the kernel's length and sigma^2 at the end (as learned)
         record["length"], record["noise"] = float(trace.length[-1]), float(trace.noise[-1])
     record["learn"] = kw.get("learn") or getattr(world.defaults, "learn", "task")
+    kernel = None if "theta" in kw else kw.get("kernel", world.defaults.kernel)
+    record["kernel"] = "InverseMultiquadric" if kernel is None else kernel.kind
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
@@ -789,7 +808,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
-              device: str | None = None, settings: str | None = None, learn: str | None = None) -> dict:
+              device: str | None = None, settings: str | None = None, learn: str | None = None,
+              views=None, kernel: str | None = None, theta: float | None = None,
+              noise: float | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -829,6 +850,14 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             None: each file's own, the paper's for the built-in objects. A study folder holds one setting.
         learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2;
             ``explore(learn=)``); None: each world's own. A study folder holds one setting.
+        views: the 3-D worlds' simulated camera views in place of the settings' (names from
+            ``torch_gpioius.sim.forcefield.VIEWS``, a count or "paper": the fixed camera alone; ``with_views``);
+            None: each world's own. A study folder holds one setting.
+        kernel: "imq" (the paper's inverse multiquadric) or "matern52"; None: each world's own.
+        theta: the kernel's length [m] (the inverse multiquadric's theta, the Matérn's length scale; where ``learn``
+            learns it, where it starts); None: the kernel's own.
+        noise: sigma^2 (where ``learn="all"`` learns it, where it starts); None: each world's own. ``kernel``,
+            ``theta`` and ``noise`` too: one setting per folder.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -842,7 +871,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
-        settings=settings, learn=learn)
+        settings=settings, learn=learn, views=views, kernel=kernel, theta=theta, noise=noise)
     return sweep.run()
 
 
@@ -873,11 +902,15 @@ class SweepSettings:
     device: str | None
     settings: str | None = None
     learn: str | None = None
+    views: tuple | None = None
+    kernel: str | None = None
+    theta: float | None = None
+    noise: float | None = None
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
-                learn=None) -> "SweepSettings":
+                learn=None, views=None, kernel=None, theta=None, noise=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry
 
@@ -925,8 +958,29 @@ class SweepSettings:
             as_learn(learn)
             if any(m == "local" for m in modes):
                 raise ValueError(f"learn: the local mode has a similarity per region; learn={learn!r} does not apply")
+        if views is not None:
+            from ..sim.forcefield import as_views
+
+            views = as_views(views)
+            if world not in ("forcefield", "mujoco"):
+                raise ValueError(f"views: the simulated camera views are the 3-D worlds' (forcefield, mujoco), not "
+                                 f"{world}'s")
+        if kernel is not None:
+            from ..sim.forcefield import KERNELS
+
+            if kernel not in KERNELS:
+                raise ValueError(f"kernel: must be one of {KERNELS}, got {kernel!r}")
+        if theta is not None:
+            from ..tolerances import tol
+
+            theta = as_float(theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        if noise is not None:
+            from ..tolerances import tol
+
+            noise = as_float(noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
-                   threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn)
+                   threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
+                   kernel, theta, noise)
 
     def run(self) -> dict:
         """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
@@ -951,11 +1005,12 @@ class SweepSettings:
     def _claim(self) -> Path:
         from ..io.outputs import claim_folder
 
-        identity = {} if self.outer_tol is None else {"outer_tol": self.outer_tol}   # older folders: exact
-        if self.settings is not None:                                                   # older: the files' own
-            identity["settings"] = self.settings
-        if self.learn is not None:                                                      # older: the worlds' own
-            identity["learn"] = self.learn
+        # every setting, None where it is the world's own: a folder of one setting refuses runs of another either
+        # way (a key left out of the call would not be compared); older folders lack the newer keys, which reads as
+        # None, the setting they ran with
+        identity = {"outer_tol": self.outer_tol, "settings": self.settings, "learn": self.learn,
+                    "views": None if self.views is None else "+".join(self.views), "kernel": self.kernel,
+                    "theta": self.theta, "noise": self.noise}
         return claim_folder(self.out, "study", self.force, world=self.world, voxel=self.voxel,
                             touch=None if self.touch == "point" else self.touch, **identity)   # older: point runs
 
@@ -971,7 +1026,7 @@ class SweepSettings:
     def _specs(self, out: Path) -> list[RunSpec]:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
-                        self.settings, self.learn)
+                        self.settings, self.learn, self.views, self.kernel, self.theta, self.noise)
                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
 
     def _execute(self, todo: list[RunSpec]) -> str:

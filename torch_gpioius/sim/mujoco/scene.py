@@ -409,6 +409,18 @@ class MujocoScene(World):
 
         return self._copy(self.start, self.direction, self.seed, **settings_for(settings, self.inner, MUJOCO_DEFAULTS))
 
+    def with_views(self, views) -> "MujocoScene":
+        """The same body, cover, approach, range and settings seen by other views
+        (:func:`~torch_gpioius.sim.forcefield.as_views`: names, a count or "paper"); the tripods stand where they
+        stood. The cover settles again, to the same state.
+
+        Raises:
+            ValueError: unknown views.
+        """
+        from ..forcefield import as_views
+
+        return self._copy(self.start, self.direction, self.seed, views=as_views(views))
+
     def _copy(self, start, direction, seed: int, **changes) -> "MujocoScene":
         kw = dict(name=self.name, seed=seed, sensor_noise=self.sensor_noise, timestep=self.timestep,
                   settle_time=self.settle_time, camera_scale=self.camera_scale, defaults=self._defaults,
