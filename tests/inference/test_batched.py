@@ -384,6 +384,44 @@ def test_scouted_restarts_find_the_other_basin_and_cost_one_full_relearning_per_
     assert model.fit_result.mll == pytest.approx(best.fit_result.mll, abs=1e-7)
 
 
+@pytest.mark.filterwarnings("ignore:GPIOIS.fit. K_t's fit stopped")     # the reference's stall at the bound
+def test_a_restart_under_the_min_gain_rule_holds_its_warm_start_and_still_finds_the_other_basin():
+    """A restart with ``min_gain`` (a patch run's fits) takes its warm start by the rule: where the exact gradient
+    predicts little, no Newton run on all the data (no full evaluation with a Hessian), and the K_t kept is within the
+    rule's gain of the best of all starts on all the data (recomputed by the structured engine's own multi-start).
+    Where the warm start sticks at a correlation of 1, the copy's fixed starts still find the other basin, which the
+    full data then re-learn: the same optimum as the restarts on all the data."""
+    from tests.models.test_gpiois import _sticky_model, _stuck_start
+
+    rng = np.random.default_rng(9)
+    model = _model(rng)
+    for _ in range(3):
+        model.add_observations(*_patch(rng, 16), 0)
+    model.fit(min_gain=0.0)                                  # a re-learning: the Hessian the rule holds with
+    engine = model._inference()
+    calls = []
+    original = engine.mll_derivatives
+    engine.mll_derivatives = lambda kt: calls.append(1) or original(kt)
+    model.add_observations(*_patch(rng, 16), 0)
+    model.fit(multi_start=True, scout=30, min_gain=0.1, track=True)
+    assert model.fit_result.starts == 4 and model.fit_result.scout == 30 and not model.fit_result.relearned
+    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+                     inference="structured").fit(multi_start=True)
+    gap = best.fit_result.mll - float(model._inference().mll(model._task_matrix()))
+    assert -1e-9 <= gap <= 0.1
+    assert len(calls) <= 1                                   # at most a tracking step's one factorisation
+    # the sticky dataset: held at its local optimum, yet the scouts find the global one
+    full, scouted = _sticky_model(), _sticky_model()
+    for m in (full, scouted):
+        m.task_covariance = _stuck_start()
+        m.fit(multi_start=False)
+        assert m.correlation > 0.999
+    full.fit(multi_start=True)
+    scouted.fit(multi_start=True, scout=10, min_gain=0.1, track=True)
+    assert scouted.correlation < 0.5 and scouted.fit_result.relearned
+    assert float((scouted.task_covariance - full.task_covariance).abs().max()) < 1e-6
+
+
 @pytest.mark.filterwarnings("ignore:GPIOIS.fit. K_t's fit stopped")     # Newton's stalls on the flat ridge
 def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_all_the_data():
     """Concentric shapes put K_t's correlation at 1; patches of another shape then move the optimum inside (a
@@ -413,6 +451,20 @@ def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_
     assert plain.correlation < 0.6 and scouted.correlation == pytest.approx(plain.correlation, abs=1e-6)
     assert scouted.fit_result.mll == pytest.approx(plain.fit_result.mll, abs=1e-6)
     assert counts[1] <= 4 < 8 <= counts[0], counts
+    # a restart under the min_gain rule, whose warm start cannot be held there (the gradient points off the ridge, where
+    # the held Hessian says nothing), walks on the copy too, and the full data polish in a few evaluations
+    restart = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+                        task_covariance=base.task_covariance, inference="batched")
+    restart.fit_result = base.fit_result
+    restart._fixed_starts = lambda: []          # no fixed start to find it: the copy's run from the warm K_t must
+    engine = restart._inference()
+    calls = []
+    original = engine.mll_derivatives
+    engine.mll_derivatives = lambda kt: calls.append(1) or original(kt)
+    restart.fit(multi_start=True, min_gain=1e3, track=True, scout=200)
+    assert restart.correlation == pytest.approx(plain.correlation, abs=1e-6)
+    assert restart.fit_result.mll == pytest.approx(plain.fit_result.mll, abs=1e-6)
+    assert len(calls) <= 4, calls
 
 
 @pytest.mark.parametrize("kwargs", [{"min_gain": -1.0}, {"min_gain": math.nan}, {"min_gain": 0.1, "max_hold": 0},

@@ -111,7 +111,8 @@ def _evaluate_trial(evaluate, phi: np.ndarray):
     return f, g, h
 
 
-def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarray, caps: Callable | None = None):
+def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarray, caps: Callable | None = None,
+                    until: Callable | None = None):
     """Maximise a smooth function of a few parameters within bounds by projected, Levenberg-damped Newton steps.
 
     Args:
@@ -122,6 +123,8 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         upper: `(k,)` upper bounds (``+inf`` for none).
         caps: ``phi -> (k,)`` the largest change of each parameter in one step (a trust region: a longer step is
             shortened along its direction), or None.
+        until: ``phi -> bool``, checked after each accepted step: True ends the run there, unconverged (a caller
+            that only needs to know where a run is heading, e.g. into a known optimum's neighbourhood), or None.
 
     Returns:
         ``(phi, f, projected_gradient_norm, iterations, converged)``; convergence as in :func:`maximize_mll`.
@@ -172,18 +175,21 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         # evaluations differ by more than the tolerance asks) end the fit instead of running to fit_max_iter
         stalls = stalls + 1 if f_new - f <= tol.fit_ftol * max(1.0, abs(f)) else 0
         phi, f, grad, hess = candidate, f_new, g_new, h_new
-        if stalls >= 3:
+        if stalls >= 3 or (until is not None and until(phi)):
             break
     return phi, f, pg_norm, it, converged
 
 
-def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0: Tensor) -> FitResult:
+def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0: Tensor,
+                 until: Callable[[Tensor], bool] | None = None) -> FitResult:
     """Maximise the marginal likelihood over K_t by projected, damped Newton steps (:func:`newton_maximize` in the
     Cholesky parameters ``phi``).
 
     Args:
         evaluate: maps a `(2, 2)` K_t to ``(mll, grad (3,), hess (3, 3))`` in ``p = (K_t00, K_t01, K_t11)``.
         kt0: `(2, 2)` starting K_t (positive definite; clamped to the parameter bounds).
+        until: ``K_t -> bool`` after each accepted step; True ends the run there, unconverged (None: run to the
+            tolerances).
 
     Returns:
         The ``FitResult``. Convergence: projected gradient infinity-norm <= ``tol.fit_gtol``, or a Newton
@@ -210,7 +216,8 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
             return first.pop()
         return value(phi)
 
-    phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper, step_caps)
+    stop = None if until is None else (lambda phi: until(chol_params_to_task_covariance(phi)))
+    phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper, step_caps, stop)
     return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged, hessian=last["hess"])
 
 

@@ -361,11 +361,14 @@ class GPIOIS(ImplicitSurfaceGP):
             scout: with ``multi_start`` and more inner points than this, run the fixed starts on a copy of the data
                 whose inner points are thinned to ``scout`` (evenly along their order of arrival; every outer point
                 kept), and re-learn on all the data from each optimum found there in another basin than the warm
-                start's (not on a first fit, which has no warm start). A restart then costs the warm start's
-                re-learning plus ``scout^3`` instead of ``N_i^3`` per evaluation of the fixed starts, plus one full
-                re-learning per other basin; the K_t kept is an optimum of the full likelihood, the best of those.
-                A basin that the thinned copy does not have is missed. Also, a re-learning from a K_t with a
-                correlation of 1 first runs on the copy; where the copy's run leaves the bound, the full data's
+                start's (not on a first fit, which has no warm start). With ``min_gain`` the warm start itself
+                follows the rule above (held, tracked, or re-learned where the gradient predicts more), so a
+                restart costs one gradient on all the data plus ``scout^3`` instead of ``N_i^3`` per evaluation of
+                the fixed starts, plus one full re-learning per other basin; without it, the warm start's full
+                re-learning too. The K_t kept is the best of those on the full likelihood (an optimum of it, or a
+                held one within the rule's predicted gain). A basin that the thinned copy does not have is missed.
+                Also, a re-learning from a K_t with a
+                correlation of 1 (a restart's warm start too) first runs on the copy; where the copy's run leaves the bound, the full data's
                 run starts where it ended (the walk from the bound, a dozen or more evaluations, then costs
                 ``scout^3`` each) and is kept if it ends above the warm start's MLL; otherwise the full data's run
                 starts from the warm K_t. None: everything runs on all the data.
@@ -396,15 +399,22 @@ class GPIOIS(ImplicitSurfaceGP):
         # the thinned copy serves a later fit with more inner points than it keeps (a first fit has no warm start)
         scouting = (scout is not None and self.fit_result is not None
                     and int((self._train_task() == INNER).sum()) > scout)
-        best = self._scouted_escape(engine, evaluate, scout) if scouting and not multi_start else None
+        best = None
+        if scouting and multi_start and min_gain is not None and self._hold_task_covariance(engine, min_gain,
+                                                                                            max_hold, track):
+            # a restart's warm start by the min_gain rule too: held or tracked where the exact gradient allows (the
+            # Hessian is refreshed by the next full re-learning, at the latest after max_hold fits), instead of a
+            # Newton run on all the data at O(N_i^3) an evaluation on every restart
+            best = self.fit_result
+        elif scouting:
+            best = self._scouted_escape(engine, evaluate, scout)
         if best is None:
             best = maximize_mll(evaluate, self.task_covariance)
         starts, scouted = 1, 0
         if multi_start:
             fixed = self._fixed_starts()
             # a restart's fixed starts on a thinned copy: scout^3, not N_i^3, per evaluation; the full data re-learn
-            # once more per other basin found there. The warm start's run on all the data stays: it refreshes the
-            # Hessian that the tracking steps use, on the restarts' schedule
+            # once more per other basin found there
             candidates = self._scout_starts(fixed, scout, best.task_covariance) if scouting else fixed
             starts, scouted = 1 + len(fixed), (scout if scouting else 0)
             for kt0 in candidates:
@@ -467,12 +477,20 @@ class GPIOIS(ImplicitSurfaceGP):
         """Run the warm and the fixed starts on :meth:`_scout_copy`; return the copy's optima that lie in other basins
         than the warm start's (K_t more than 1 % apart, relative to its largest entry), one per basin. Which of two
         near-equal optima is the higher can change with the thinning, so every other basin found is returned for
-        the full data to judge, not only a better one."""
+        the full data to judge, not only a better one.
+
+        A fixed start's run ends as soon as it comes within 1 % of an optimum already found: it is heading into that
+        basin, which is all the copy is asked (the runs that end on the ridge of a correlation of 1 creep along it
+        for a dozen steps or more)."""
         evaluate = self._scout_copy(size)
         found = [maximize_mll(evaluate, warm).task_covariance]
+
+        def known(kt: Tensor) -> bool:
+            return any(float((kt - other).abs().max()) <= 0.01 * float(other.abs().max()) for other in found)
+
         for kt0 in fixed:
-            kt = maximize_mll(evaluate, kt0).task_covariance
-            if all(float((kt - other).abs().max()) > 0.01 * float(other.abs().max()) for other in found):
+            kt = maximize_mll(evaluate, kt0, until=known).task_covariance
+            if not known(kt):
                 found.append(kt)
         return found[1:]
 
