@@ -219,3 +219,17 @@ def test_a_scene_takes_a_users_settings_and_back():
     np.testing.assert_array_equal(e.start, e_paper.start)
     assert e.seed == e_paper.seed == 1 and e.views == VIEWS
     assert dataclasses.replace(e.defaults, kernel=None) != dataclasses.replace(e_paper.defaults, kernel=None)
+    # with_views: the same scene and settings under other views; a seed's tripods stay where they stood
+    alone = seeded.with_views(1)
+    assert alone.views == ("fixed",) and alone.defaults is seeded.defaults and alone.seed == 2
+    np.testing.assert_array_equal(alone.start, seeded.start)
+    np.testing.assert_allclose(alone.cameras(("fixed",)).T_base_camera,
+                               seeded.cameras(VIEWS).sources[0].T_base_camera)
+    assert len(alone.camera.capture().points) < len(seeded.camera.capture().points)
+    e_one = make_world("forcefield", "E", 1, settings="default", views=("fixed", "wrist"))
+    assert e_one.views == ("fixed", "wrist") and e_one.defaults.kernel.describe() == e.defaults.kernel.describe()
+    assert dataclasses.replace(e_one.defaults, kernel=None) == dataclasses.replace(e.defaults, kernel=None)
+    with pytest.raises(ValueError, match="views"):
+        paper.with_views(("fixed", "fixed"))
+    with pytest.raises(ValueError, match="camera of its own"):
+        own.with_views(1)

@@ -371,3 +371,10 @@ def test_more_views_see_more_of_the_scene_and_the_tripods_stay_where_they_stood(
     assert scene.with_settings("paper").views == ("fixed",)
     with pytest.raises(ValueError, match="settings"):
         scene.with_settings("mine")
+    # other views keep the settings: the defaults seen by the fixed camera alone, the paper's by all three
+    alone = three.with_views(1)
+    assert alone.views == ("fixed",) and alone.defaults is three.defaults
+    np.testing.assert_allclose(alone.cameras(physics, ("fixed",)).T_base_camera, a.sources[0].T_base_camera)
+    assert scene.with_views(3).views == VIEWS and scene.with_views(3).defaults is scene.defaults
+    with pytest.raises(ValueError, match="views"):
+        scene.with_views("side")
