@@ -97,7 +97,9 @@ def paired_difference(a, b, level: float = 0.95, *, failed: str = "worst") -> di
         raise ValueError(f"paired_difference: a and b must pair up, got {len(a)} and {len(b)} values")
     fa, fb = ~np.isfinite(a), ~np.isfinite(b)
     if failed == "worst":
-        d = np.where(fa & fb, 0.0, np.where(fa, math.inf, np.where(fb, -math.inf, a - b)))
+        with np.errstate(invalid="ignore"):          # inf - inf where both failed: replaced by 0 below
+            diff = a - b
+        d = np.where(fa & fb, 0.0, np.where(fa, math.inf, np.where(fb, -math.inf, diff)))
     else:
         d = (a - b)[~(fa | fb)]
     out = _order_interval(d, level)
