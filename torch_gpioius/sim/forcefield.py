@@ -129,7 +129,6 @@ def with_kernel(defaults: ExplorationDefaults, kernel, theta) -> ExplorationDefa
     Raises:
         ValueError: an unknown kernel name, a non-positive length, or a length given with a kernel object.
     """
-    from .._validation import as_float
     from ..kernels import ExactKernel, Matern52
 
     if theta is not None:
@@ -399,7 +398,6 @@ class Scene3D(World):
                 approach that misses the body (each names the problem).
         """
         from .meshes import load_mesh
-        from .._validation import as_float
 
         if cover not in ("tight", "loose"):
             raise ValueError(f"cover: the force-field world has 'tight' and 'loose' covers, got {cover!r}")
@@ -541,11 +539,7 @@ class Scene3D(World):
         chosen = settings_for(settings, self.inner)
         if self._given_camera is not None:
             raise ValueError("settings: this scene has a camera of its own; its views are not the settings' to change")
-        scene = Scene3D(self.inner, self.outer, self.start, self.direction, self.range, name=self.name,
-                        cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=self.seed,
-                        support=self.support, **chosen)
-        scene._tripod_direction = self._tripod_direction
-        return scene
+        return self._copy(**chosen)
 
     def with_views(self, views) -> "Scene3D":
         """The same objects, approach, range and settings seen by other simulated views (:func:`as_views`: names
@@ -557,11 +551,7 @@ class Scene3D(World):
         views = as_views(views)
         if self._given_camera is not None:
             raise ValueError("views: this scene has a camera of its own; its views are not the simulated ones")
-        scene = Scene3D(self.inner, self.outer, self.start, self.direction, self.range, name=self.name,
-                        cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise, seed=self.seed,
-                        defaults=self._defaults, support=self.support, views=views)
-        scene._tripod_direction = self._tripod_direction
-        return scene
+        return self._copy(views=views)
 
     def perturbed(self, seed: int) -> "Scene3D":
         """The same objects with a seeded perturbation (seed 0: unchanged): the start moved uniformly within a
@@ -574,14 +564,20 @@ class Scene3D(World):
             # default views are rebuilt with the seed's noise: the tripods where they stood, the wrist on the new approach
             camera = None if self._given_camera is None else self._given_camera.reseeded(seed)
             try:
-                scene = Scene3D(self.inner, self.outer, start, direction, self.range, name=self.name,
-                                camera=camera, cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise,
-                                seed=seed, defaults=self._defaults, support=self.support, views=self.views)
+                return self._copy(start=start, direction=direction, seed=seed, camera=camera)
             except ValueError:
                 continue
-            scene._tripod_direction = self._tripod_direction
-            return scene
         raise ValueError(f"seed {seed}: no perturbed approach hits the object")
+
+    def _copy(self, **changes) -> "Scene3D":
+        """This scene with ``changes`` to its constructor's arguments; the tripods stand where they stood (a copy's
+        views are placed for this scene's unperturbed approach, not its own)."""
+        kw = dict(start=self.start, direction=self.direction, bounds=self.range, name=self.name,
+                  camera=self._given_camera, cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise,
+                  seed=self.seed, defaults=self._defaults, support=self.support, views=self.views)
+        scene = Scene3D(self.inner, self.outer, **{**kw, **changes})
+        scene._tripod_direction = self._tripod_direction
+        return scene
 
     # ------------------------------------------------------------------ geometry
     #: An approach must pass at least this deep [m] into the inner mesh: one that only grazes an edge meets less
