@@ -113,3 +113,66 @@ def test_an_inside_point_that_other_observations_contradict_is_dropped():
     assert near.y.tolist() == [0.0]                                                  # free space 1.5 cm from it
     far = drop_contradicted_inside(touch, policy, np.array([[0.0, 0.03, -0.02]]), np.ones(1))
     assert len(far) == 2                                                             # 3 cm: beyond its depth
+
+
+def _sphere(radius, n, seed=0):
+    v = np.random.default_rng(seed).normal(size=(n, 3))
+    return radius * v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def test_the_covers_gap_is_the_contacts_median_distance_to_the_seen_cover():
+    """Contacts on a sphere of 10 cm, the cover seen on one of 14 cm, sparsely (300 points, 3 cm apart, as voxel
+    means are): 4 cm along the local planes, less their sagitta (a plane through points up to 4 cm apart on a 14 cm
+    sphere cuts up to r^2 / 2R = 6 mm into it; 2-3 mm at the median); contacts under a part the camera did not see do not count, and fewer than five
+    that count give NaN."""
+    from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, cover_gap
+
+    contacts, seen = _sphere(0.10, 40, seed=1), _sphere(0.14, 300, seed=2)
+    assert 0.034 < cover_gap(contacts, seen) < 0.04
+    half = seen[seen[:, 2] > 0]                                                   # the camera saw the upper half
+    below = contacts[contacts[:, 2] < -0.05]
+    assert len(below) >= GAP_MIN_CONTACTS and np.isnan(cover_gap(below, half))
+    assert 0.034 < cover_gap(np.r_[below, contacts[contacts[:, 2] > 0.03]], half) < 0.04
+    assert np.isnan(cover_gap(contacts[:GAP_MIN_CONTACTS - 1], seen))
+    assert np.isnan(cover_gap(np.zeros((0, 3)), seen)) and np.isnan(cover_gap(contacts, np.zeros((0, 3))))
+
+
+@pytest.mark.parametrize("cover", [0.008, 0.04], ids=["tight", "wide"])
+def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off(cover):
+    """A body of 10 cm radius under a cover ``cover`` off it: the camera's inside points (2 cm behind the seen cover)
+    lie in the body under the tight cover and in the gap under the wide one. With a 2 cm limit the wide cover's are
+    removed, all of them and nothing else, once five contacts are in; never the tight one's, nor without a limit."""
+    from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, retract_vision_inside
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.02)
+    seen = _sphere(0.10 + cover, 300, seed=4)
+    inside = seen * (1.0 - 0.02 / (0.10 + cover))
+    contacts = _sphere(0.10, 12, seed=5)
+    x = np.r_[contacts, seen, inside]
+    y = np.r_[np.zeros(len(contacts) + len(seen)), np.full(len(inside), policy.inside_label(0.02))]
+    t = np.r_[np.zeros(len(contacts)), np.ones(len(seen) + len(inside))].astype(np.int64)
+
+    def model():
+        return tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), theta=0.1)
+
+    m = model()
+    assert len(retract_vision_inside(m, contacts[:GAP_MIN_CONTACTS - 1], policy)) == 0 and len(m.train_targets) == len(x)
+    assert len(retract_vision_inside(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))) == 0
+    removed = retract_vision_inside(m, contacts, policy)
+    if cover < 0.02:
+        assert len(removed) == 0 and len(m.train_targets) == len(x)
+        return
+    np.testing.assert_array_equal(removed, np.flatnonzero(y < 0))
+    np.testing.assert_array_equal(m.train_inputs[0].numpy(), x[y >= 0])
+    np.testing.assert_array_equal(m.train_task.numpy(), t[y >= 0])
+    # the model after the removal equals one built without them (its engine rebuilt, not patched)
+    ref = tg.GPIOIS(torch.as_tensor(x[y >= 0]), torch.as_tensor(y[y >= 0]), torch.as_tensor(t[y >= 0]), theta=0.1)
+    q = torch.as_tensor(_sphere(0.12, 20, seed=6))
+    torch.testing.assert_close(m.predict(q)[0], ref.predict(q)[0], rtol=0, atol=1e-10)
+    assert len(retract_vision_inside(m, contacts, policy)) == 0               # nothing left to remove
+
+
+def test_the_policy_refuses_a_gap_that_is_not_a_length():
+    for bad in (-0.02, 0.0, float("nan"), True):
+        with pytest.raises(ValueError, match="vision_inside_gap"):
+            ObservationPolicy(vision_inside_gap=bad)

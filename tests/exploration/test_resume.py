@@ -155,3 +155,40 @@ def test_a_run_that_reached_resumes_to_the_same_end(tmp_path, cut):
     assert np.abs(resumed.path - reference.path).max() < 1e-9
     np.testing.assert_array_equal(resumed.taps, reference.taps)
     assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
+
+
+def test_a_wide_covers_retracted_camera_points_are_logged_and_resume_alike(tmp_path):
+    """Under a cover 4 cm off an ellipsoid (the defaults for a user's object) the touches retract the camera's inside
+    points at the fifth contact: the log says which, its replay holds the run's final data, and a run cut before that
+    step and resumed retracts them at the same step and ends where the uninterrupted one ends."""
+    import trimesh
+
+    from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS
+    from torch_gpioius.io.runs import load_run
+    from torch_gpioius.sim.forcefield import Scene3D
+
+    body = trimesh.creation.icosphere(subdivisions=3, radius=0.06)
+    body.apply_scale([1.3, 1.0, 0.8])
+    scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1])
+    assert scene.defaults.policy.vision_inside_gap == 0.03
+    kw = dict(max_travel=0.08, metrics_every=100, progress=False)
+    log = tmp_path / "run.gpioius"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = tg.explore(scene, log=log, **kw)
+    y, t = reference.model.train_targets.numpy(), reference.model.train_task.numpy()
+    assert reference.n_steps > GAP_MIN_CONTACTS and not ((y < 0) & (t == 1)).any()
+    run = load_run(log)
+    first, last = run.states[run.steps[0]], run.states[run.steps[-1]]
+    assert ((first.y < 0) & (first.task == 1)).sum() > 50                 # the camera's, 2 cm behind the cloth
+    np.testing.assert_array_equal(last.x, reference.model.train_inputs[0].numpy())
+    np.testing.assert_array_equal(last.y, y)
+    gone = [k for k in run.steps if ((run.states[k].y < 0) & (run.states[k].task == 1)).sum() == 0]
+    assert gone[0] == GAP_MIN_CONTACTS - 1                 # step 0 is the first contact: the fifth is step 4
+    _cut_after_step(log, 2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        resumed = tg.explore(scene, resume_from=log, **kw)
+    assert resumed.n_steps == reference.n_steps
+    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
+    assert torch.equal(resumed.model.train_targets, reference.model.train_targets)

@@ -242,7 +242,7 @@ class ExploreConfig:
         """The observation policy for the header; the inside-point settings only when set, so that logs written
         before they existed still resume."""
         out = dataclasses.asdict(self.policy)
-        for key in ("touch_inside", "vision_inside"):
+        for key in ("touch_inside", "vision_inside", "vision_inside_gap"):
             if out[key] is None:
                 del out[key]
         return out

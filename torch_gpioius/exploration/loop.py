@@ -25,8 +25,8 @@ from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
-from .observations import (Observations, drop_contradicted_inside, retract_free_space, thin_points,
-                           vision_observations)
+from .observations import (Observations, drop_contradicted_inside, retract_free_space, retract_vision_inside,
+                           thin_points, vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .state import ExplorationState, StepRecord
 from .trace import Trace
@@ -225,8 +225,12 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     """Retract free space the new contact shows to be too close, keep what a touch model's ``select`` keeps of the
     batch (a patch's informative points), then add it; the retracted indices and the batch added."""
     margin = getattr(cfg.touch, "retraction_margin", None) or cfg.policy.free_space_margin
+    before = int(state.model.train_targets.shape[0])
     removed = retract_free_space(state.model, contact, margin)
     state.retracted += len(removed)
+    camera = retract_vision_inside(state.model, np.asarray(state.contacts), cfg.policy)
+    if len(camera):                      # indices into the data before this step, as the log and replays read them
+        removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
     select = getattr(cfg.touch, "select", None)
     if callable(select):
         obs = select(state.model, obs)

@@ -69,7 +69,9 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
       along the cloud's normal, labelled -0.4 (``ObservationPolicy.touch_inside``, ``vision_inside``; the free-space
       ramp continued inside). With the paper's labels alone the estimate lay 0.6-0.9 cm inside the body on tight
       covers; the inside points bring it within 4 mm (docs/method-notes.md section 13). They assume a body thicker
-      than 2 cm: on a thin-walled one (the mug) they overshoot instead.
+      than 2 cm: on a thin-walled one (the mug) they overshoot instead. They also assume a cover within 2 cm of the
+      body: the camera's are retracted once the touches show it standing more than 3 cm off
+      (``ObservationPolicy.vision_inside_gap``, :data:`COVER_GAP_LIMIT`).
     """
     from ..kernels import Matern52
 
@@ -77,12 +79,17 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
     voxel = round(float(np.clip(extent / 10.0, 0.02, 0.05)), 4)
     d = ROBOT_STUDY_DEFAULTS if base is None else base
     policy = dataclasses.replace(d.policy, voxel=voxel, vision_free_far=0.10, touch_inside=INSIDE_DEPTH,
-                                 vision_inside=INSIDE_DEPTH)
+                                 vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT)
     return dataclasses.replace(d, policy=policy, kernel=Matern52(0.1))
 
 
 #: Depth [m] of the default inside points behind contacts and seen points (:func:`object_defaults`).
 INSIDE_DEPTH = 0.02
+
+#: The cover's gap [m] beyond which the touches retract the camera's inside points (:func:`object_defaults`,
+#: ``ObservationPolicy.vision_inside_gap``): 1.5 times their depth. Measured with ``cover_gap`` on the real shapes'
+#: runs: 0.6-1.6 cm under the tight covers (8 mm), 3.9-5.3 cm under the wide ones (4 cm).
+COVER_GAP_LIMIT = 0.03
 
 
 def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefaults | None = None) -> dict:
@@ -101,17 +108,22 @@ def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefault
     return {"defaults": object_defaults(mesh, base=paper), "views": VIEWS}
 
 
+#: The inside points' settings (:func:`with_inside_depths`; ``ObservationPolicy``'s fields of these names).
+INSIDE_SETTINGS = ("touch_inside", "vision_inside", "vision_inside_gap")
+
+
 def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDefaults:
     """``defaults`` with the inside points' depths [m] given (``touch_inside``, ``vision_inside``; 0: none; None:
-    as they are), each checked to lie in [0, 0.1] m.
+    as they are) and the cover's gap beyond which the camera's are retracted (``vision_inside_gap``; 0: never),
+    each checked to lie in [0, 0.1] m.
 
     Raises:
-        ValueError: a depth outside that range (names it).
+        ValueError: a value outside that range, or an unknown name (names it).
     """
     given = {k: v for k, v in depths.items() if v is not None}
-    unknown = set(given) - {"touch_inside", "vision_inside"}
+    unknown = set(given) - set(INSIDE_SETTINGS)
     if unknown:
-        raise ValueError(f"inside depths: unknown {sorted(unknown)}; touch_inside and vision_inside are the depths")
+        raise ValueError(f"inside depths: unknown {sorted(unknown)}; the settings are {', '.join(INSIDE_SETTINGS)}")
     if not given:
         return defaults
     checked = {k: as_float(v, k, lo=0.0, hi=0.1, unit="m (0: none)") or None for k, v in given.items()}
@@ -349,7 +361,8 @@ class Scene3D(World):
                   defaults: ExplorationDefaults | None = None, support: float | str | None = "base",
                   settings: str = "default", views=None, kernel=None, theta: float | None = None,
                   noise: float | None = None, voxel: float | None = None, touch_inside: float | None = None,
-                  vision_inside: float | None = None, learn: str | None = None) -> "Scene3D":
+                  vision_inside: float | None = None, vision_inside_gap: float | None = None,
+                  learn: str | None = None) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
         The mesh is loaded, checked and repaired if need be (:func:`torch_gpioius.sim.meshes.load_mesh`, which warns
@@ -390,6 +403,8 @@ class Scene3D(World):
                 none; default: by ``settings``, 2 cm or none).
             vision_inside: depth [m] of the inside points behind the seen surface (``ObservationPolicy.vision_inside``;
                 0: none; default: by ``settings``).
+            vision_inside_gap: the cover's gap [m] beyond which the touches retract the camera's inside points
+                (``ObservationPolicy.vision_inside_gap``; 0: never; default: by ``settings``, 3 cm or never).
             learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from ``theta``) or "all" (the
                 length and sigma^2, from ``theta`` and ``noise``; ``explore(learn=)``); default: by ``settings``.
 
@@ -416,7 +431,8 @@ class Scene3D(World):
 
             learn = as_learn(learn)
             defaults = dataclasses.replace(defaults, learn=learn)
-        defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside)
+        defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside,
+                                      vision_inside_gap=vision_inside_gap)
         gap = (0.008 if cover == "tight" else 0.01) if gap is None else gap
         outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution)
         if start is None or direction is None or bounds is None:

@@ -36,6 +36,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     voxel = 0.02
     touch_inside = 0.02               # an inside point this deep behind each contact [m] (0: none)
     vision_inside = 0.01              # and behind each seen point [m] (0: none)
+    vision_inside_gap = 0.03          # the camera's retracted once touches show the cover this far off [m] (0: never)
     learn = "task"                    # "length": the kernel's length learned with K_t; "all": the noise too
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
@@ -69,9 +70,10 @@ _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
 _COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
           "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
 _SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "theta", "noise",
-                            "voxel", "touch_inside", "vision_inside", "learn"},
+                            "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "learn"},
              "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
-                        "sensor_noise", "timestep", "settle_time", "camera_scale", "touch_inside", "vision_inside"}}
+                        "sensor_noise", "timestep", "settle_time", "camera_scale", "touch_inside", "vision_inside",
+                        "vision_inside_gap"}}
 #: What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in the
 #: force-field world, its ``slack`` in MuJoCo), so that one file serves both worlds.
 _WORLD = {w: _SETTINGS[w] | (_COVER[w] - {"kind"}) for w in _SETTINGS}
@@ -266,12 +268,12 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
                 where.setdefault("bounds", b + np.array([[-0.03], [0.03]]) * np.array([1, 1, 0]))
             if smoke:
                 settings["spacing"] = max(settings.get("spacing", 0.025), 0.04)
-            from .forcefield import settings_for, with_inside_depths
+            from .forcefield import INSIDE_SETTINGS, settings_for, with_inside_depths
             from .mujoco.scene import MUJOCO_DEFAULTS
 
             if settings_given is not None:          # the settings' defaults and views for this body
                 settings.update(settings_for(settings_given, mesh, MUJOCO_DEFAULTS))
-            depths = {k: settings.pop(k) for k in ("touch_inside", "vision_inside") if k in settings}
+            depths = {k: settings.pop(k) for k in INSIDE_SETTINGS if k in settings}
             if depths:                              # the inside points' depths on the world's (or settings') policy
                 settings["defaults"] = with_inside_depths(settings.get("defaults", MUJOCO_DEFAULTS), **depths)
             scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)

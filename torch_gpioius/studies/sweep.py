@@ -314,10 +314,12 @@ def run_one(spec: RunSpec) -> dict:
     if trace is not None:
         record = _record(spec, kw, trace, time.perf_counter() - t0)
         record["n_outer"] = _n_outer(trace.model)
+        record["n_vision_inside"] = _n_outer(trace.model, inside=True)
     policy = kw.get("policy", world.defaults.policy)
     record["voxel"] = policy.voxel or 0.0
     # the inside points' depths [m] (0: the paper's labels only)
     record["touch_inside"], record["vision_inside"] = policy.touch_inside or 0.0, policy.vision_inside or 0.0
+    record["vision_inside_gap"] = policy.vision_inside_gap or 0.0      # 0: the camera's inside points always kept
     record["touch"] = spec.touch
     if getattr(world, "views", None):                 # the camera's views (force-field world)
         record["views"] = "+".join(world.views)
@@ -382,10 +384,14 @@ def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
                        **{name: values.tolist() for name, values in trace.shape.items()}}}
 
 
-def _n_outer(model) -> int:
-    """Outer (camera) points in a run's final model (GPIOIS, LocalGPIOIS); 0 for tactile-only GPIS."""
+def _n_outer(model, inside: bool = False) -> int:
+    """Outer (camera) points in a run's final model (GPIOIS, LocalGPIOIS), with ``inside`` only the camera's inside
+    points (y < 0; 0 once a wide cover's gap retracted them); 0 for tactile-only GPIS."""
     task = getattr(model, "train_task", None)
-    return 0 if task is None else int((task == 1).sum())
+    if task is None:
+        return 0
+    outer = task == 1
+    return int((outer & (model.train_targets < 0)).sum() if inside else outer.sum())
 
 
 def _set_aside(path: Path) -> Path:
@@ -535,6 +541,7 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "reference_travel": ref,
            "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
            "touch_inside": run.get("touch_inside", 0.0), "vision_inside": run.get("vision_inside", 0.0),
+           "vision_inside_gap": run.get("vision_inside_gap", 0.0), "n_vision_inside": run.get("n_vision_inside", math.nan),
            "max_truncation": run.get("max_truncation", 0.0), "max_fit_gap": run.get("max_fit_gap", math.nan),
            # what the run learned (older runs: K_t alone, length and noise not recorded)
            "learn": run.get("learn", "task"), "final_length": run.get("length", math.nan),
