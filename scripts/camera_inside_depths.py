@@ -5,7 +5,7 @@ the touches' inside points) is kept, the outer data are rebuilt from the scene's
 depths of each variant (``none``: no camera inside points; ``2``: 2 cm, as the defaults), K_t is re-learned (fixed
 starts too), and the estimate is measured as the studies do. Each line also gives the cover's gap as the touches
 show it (``cover_gap`` of the contacts and the run's seen points, as the rule computes it). docs/method-notes.md
-section 14 reports what it printed.
+section 13 reports what it printed.
 
     python scripts/camera_inside_depths.py outputs/real_ff_wide/logs/*visual-tactile*.gpioius
 

@@ -122,6 +122,7 @@ def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_bo
     (GOOD + "[forcefield]\nvoxel = 2.0\n", "voxel"),
     (GOOD + "[forcefield]\ntouch_inside = 0.5\n", "touch_inside"),
     (GOOD + "[forcefield]\nvision_inside = -0.01\n", "vision_inside"),
+    (GOOD + "[forcefield]\nvision_inside_gap = 0.2\n", "vision_inside_gap"),
     (GOOD + "[forcefield]\nlearn = \"everything\"\n", "learn: must be one of"),
 ])
 def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
@@ -142,12 +143,16 @@ def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     assert d.policy.voxel == 0.02 and d.policy.vision_free_far == 0.1          # the bottle: 16 cm -> 2 cm (floor)
     assert isinstance(d.kernel, Matern52) and d.kernel.ell == 0.1 and d.noise == 0.08
     assert d.policy.touch_inside == 0.02 and d.policy.vision_inside == 0.02               # inside points
-    plain = load_scene(_write(tmp_path, GOOD + "[forcefield]\ntouch_inside = 0\nvision_inside = 0.01\n")).defaults
+    assert d.policy.vision_inside_gap == 0.03                       # retracted behind a cover standing 3 cm off
+    plain = load_scene(_write(tmp_path, GOOD + "[forcefield]\ntouch_inside = 0\nvision_inside = 0.01\n"
+                                               "vision_inside_gap = 0\n")).defaults
     assert plain.policy.touch_inside is None and plain.policy.vision_inside == 0.01
+    assert plain.policy.vision_inside_gap is None
     paper = load_scene(_write(tmp_path, GOOD + "[forcefield]\nsettings = \"paper\"\n"))
     assert paper.views == ("fixed",) and paper.defaults.policy.voxel == 0.05 and paper.defaults.kernel is None
     assert paper.defaults.policy.vision_free_far is None and paper.defaults.theta == 0.15
     assert paper.defaults.policy.touch_inside is None and paper.defaults.policy.vision_inside is None
+    assert paper.defaults.policy.vision_inside_gap is None
     # the call's settings win over the file's
     assert load_scene(_write(tmp_path, GOOD), settings="paper").views == ("fixed",)
     own = load_scene(_write(tmp_path, GOOD + "[forcefield]\nviews = 2\nkernel = \"imq\"\ntheta = 0.12\nnoise = 0.02\n"
@@ -206,6 +211,7 @@ def test_one_file_builds_both_worlds_with_each_worlds_own_cover_options(tmp_path
     loose = load_scene(_write(tmp_path, text.replace("spacing = 0.03\n", "spacing = 0.03\nvision_inside = 0\n"),
                               "c.toml"), world="mujoco", settings="default")
     assert loose.defaults.policy.vision_inside is None and loose.defaults.policy.touch_inside == 0.02
+    assert mine.defaults.policy.vision_inside_gap == 0.03 and mj.defaults.policy.vision_inside_gap is None
     with pytest.raises(ValueError, match="vision_inside"):
         load_scene(_write(tmp_path, text.replace("spacing = 0.03\n", "spacing = 0.03\nvision_inside = 0.5\n"),
                           "d.toml"), world="mujoco")

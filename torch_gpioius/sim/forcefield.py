@@ -87,8 +87,9 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
 INSIDE_DEPTH = 0.02
 
 #: The cover's gap [m] beyond which the touches retract the camera's inside points (:func:`object_defaults`,
-#: ``ObservationPolicy.vision_inside_gap``): 1.5 times their depth. Measured with ``cover_gap`` on the real shapes'
-#: runs: 0.6-1.6 cm under the tight covers (8 mm), 3.9-5.3 cm under the wide ones (4 cm).
+#: ``ObservationPolicy.vision_inside_gap``): 1.5 times their depth. Measured with ``cover_gap`` at every step of the
+#: real shapes' runs: 0.6-1.6 cm under the tight covers (8 mm) of the bunny, duck and teddy, up to 2.8 cm under the
+#: mug's (its rim and handle), 3.9-5.3 cm under the wide ones (4 cm) (docs/method-notes.md section 13).
 COVER_GAP_LIMIT = 0.03
 
 
