@@ -24,8 +24,8 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.exploration.observations import (Observations, cover_gap, drop_contradicted_inside,
                                                     vision_observations)
-from torch_gpioius.io.runs import load_run
-from torch_gpioius.sim.scenefile import load_scene
+
+from inner_mean_offset import final_state       # scripts/ is on the path when a script runs: the same log reader
 
 VARIANTS = {"none": (), "2": (0.02,)}
 
@@ -59,13 +59,8 @@ def main(paths: list[str]) -> None:
     warnings.simplefilter("ignore")
     torch.set_num_threads(1)
     for path in paths:
-        run = load_run(path)
-        name, _, seed = run.path.stem.rsplit("_", 2)
-        scene = load_scene(f"examples/scenes/real/{name}.toml", seed=int(seed))
-        last = run.steps[-1]
-        model, data = run.model_at(last), run.states[last]
+        run, scene, model, data, contacts = final_state(path)
         inner = data.task == 0
-        contacts = data.x[inner & (data.y == 0)]
         seen = data.x[(data.task == 1) & (data.y == 0)]
         gap = cover_gap(contacts, seen, reach=max(0.02, scene.defaults.policy.voxel or 0.0))
         out = [f"gap {gap * 100:.1f}", _row("run", scene, model, contacts)]

@@ -76,16 +76,23 @@ def _row(tag: str, scene, model, contacts) -> str:
             f"bias {sh['bias'] * 100:+.2f} rho {model.correlation:.2f}")
 
 
+def final_state(path):
+    """A real-shape study log's ``(run, scene, model, data, contacts)`` at its last step: the scene rebuilt from
+    ``examples/scenes/real`` with the log's seed (its name gives both), the model and data of that step, and the
+    contacts (inner task, y = 0) `(k, 3)` [m]. scripts/camera_inside_depths.py reads its logs with it too."""
+    run = load_run(path)
+    name, _, seed = run.path.stem.rsplit("_", 2)
+    scene = load_scene(f"examples/scenes/real/{name}.toml", seed=int(seed))
+    last = run.steps[-1]
+    model, data = run.model_at(last), run.states[last]
+    return run, scene, model, data, data.x[(data.task == 0) & (data.y == 0)]
+
+
 def main(paths: list[str]) -> None:
     warnings.simplefilter("ignore")
     torch.set_num_threads(1)
     for path in paths:
-        run = load_run(path)
-        name, _, seed = run.path.stem.rsplit("_", 2)
-        scene = load_scene(f"examples/scenes/real/{name}.toml", seed=int(seed))
-        last = run.steps[-1]
-        model, data = run.model_at(last), run.states[last]
-        contacts = data.x[(data.task == 0) & (data.y == 0)]
+        run, scene, model, data, contacts = final_state(path)
         out = [_row("base", scene, model, contacts)]
         delta = gls_offset(model)
         out.append(_row(f"gls d={delta:+.3f}", scene, with_offset(model, delta), contacts))

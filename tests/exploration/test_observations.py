@@ -123,8 +123,8 @@ def _sphere(radius, n, seed=0):
 def test_the_covers_gap_is_the_contacts_median_distance_to_the_seen_cover():
     """Contacts on a sphere of 10 cm, the cover seen on one of 14 cm, sparsely (300 points, 3 cm apart, as voxel
     means are): 4 cm along the local planes, less their sagitta (a plane through points up to 4 cm apart on a 14 cm
-    sphere cuts up to r^2 / 2R = 6 mm into it; 2-3 mm at the median); contacts under a part the camera did not see do not count, and fewer than five
-    that count give NaN."""
+    sphere cuts up to r^2 / 2R = 6 mm into it; 2-3 mm at the median); contacts under a part the camera did not see
+    do not count, and fewer than five that count give NaN."""
     from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, cover_gap
 
     contacts, seen = _sphere(0.10, 40, seed=1), _sphere(0.14, 300, seed=2)
@@ -152,11 +152,9 @@ def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off
     y = np.r_[np.zeros(len(contacts) + len(seen)), np.full(len(inside), policy.inside_label(0.02))]
     t = np.r_[np.zeros(len(contacts)), np.ones(len(seen) + len(inside))].astype(np.int64)
 
-    def model():
-        return tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), theta=0.1)
-
-    m = model()
-    assert len(retract_vision_inside(m, contacts[:GAP_MIN_CONTACTS - 1], policy)) == 0 and len(m.train_targets) == len(x)
+    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), theta=0.1)
+    assert len(retract_vision_inside(m, contacts[:GAP_MIN_CONTACTS - 1], policy)) == 0
+    assert len(m.train_targets) == len(x)
     assert len(retract_vision_inside(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))) == 0
     removed = retract_vision_inside(m, contacts, policy)
     if cover < 0.02:

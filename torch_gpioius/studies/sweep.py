@@ -541,7 +541,8 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "reference_travel": ref,
            "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
            "touch_inside": run.get("touch_inside", 0.0), "vision_inside": run.get("vision_inside", 0.0),
-           "vision_inside_gap": run.get("vision_inside_gap", 0.0), "n_vision_inside": run.get("n_vision_inside", math.nan),
+           "vision_inside_gap": run.get("vision_inside_gap", 0.0),
+           "n_vision_inside": run.get("n_vision_inside", math.nan),
            "max_truncation": run.get("max_truncation", 0.0), "max_fit_gap": run.get("max_fit_gap", math.nan),
            # what the run learned (older runs: K_t alone, length and noise not recorded)
            "learn": run.get("learn", "task"), "final_length": run.get("length", math.nan),
