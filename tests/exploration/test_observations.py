@@ -137,6 +137,45 @@ def test_the_covers_gap_is_the_contacts_median_distance_to_the_seen_cover():
     assert np.isnan(cover_gap(np.zeros((0, 3)), seen)) and np.isnan(cover_gap(contacts, np.zeros((0, 3))))
 
 
+def _gap_by_hand(contacts, seen, reach, neighbours=6):
+    """The cover's gap recomputed contact by contact: the nearest seen points by sorting every distance, the plane's
+    normal as the least eigenvector of their scatter."""
+    counted = []
+    for c in contacts:
+        patch = seen[np.argsort(np.linalg.norm(seen - c, axis=1))[:neighbours]]
+        centre = patch.mean(axis=0)
+        normal = np.linalg.eigh((patch - centre).T @ (patch - centre))[1][:, 0]
+        gap = abs(float((c - centre) @ normal))
+        if np.sqrt(max(float((c - centre) @ (c - centre)) - gap ** 2, 0.0)) <= reach:
+            counted.append(gap)
+    return float(np.median(counted)) if len(counted) >= 5 else float("nan")
+
+
+def test_a_runs_gap_check_computes_each_contact_once_and_equals_the_whole_computation():
+    """CoverGap, asked at every step with one contact more, equals cover_gap on all the contacts exactly, and a
+    by-hand computation to rounding; when the seen points change (the camera's data retracted, a second capture) or
+    the contacts are not the earlier ones plus new ones (a resumed run, another run) it starts over."""
+    from torch_gpioius.exploration.observations import CoverGap, cover_gap
+
+    contacts, seen = _sphere(0.10, 30, seed=7), _sphere(0.13, 300, seed=8)
+    check = CoverGap()
+    for n in range(1, len(contacts) + 1):
+        value = check(contacts[:n], seen, 0.02)
+        ref = cover_gap(contacts[:n], seen, 0.02)
+        assert value == ref or (np.isnan(value) and np.isnan(ref))
+    assert check._along.shape == (len(contacts),)                  # each contact's plane computed once
+    assert abs(value - _gap_by_hand(contacts, seen, 0.02)) < 1e-12
+    assert 0.02 < value < 0.03
+    fewer = seen[seen[:, 2] > -0.05]                                # the seen points change: computed afresh
+    assert check(contacts, fewer, 0.02) == cover_gap(contacts, fewer, 0.02)
+    assert abs(check(contacts, fewer, 0.02) - _gap_by_hand(contacts, fewer, 0.02)) < 1e-12
+    other = _sphere(0.11, 30, seed=9)                                # other contacts: not mistaken for the earlier
+    assert check(other, fewer, 0.02) == cover_gap(other, fewer, 0.02)
+    assert check(contacts[:20], fewer, 0.05) == cover_gap(contacts[:20], fewer, 0.05)
+    with pytest.raises(ValueError, match="neighbours"):
+        CoverGap(2)
+
+
 @pytest.mark.parametrize("cover", [0.008, 0.04], ids=["tight", "wide"])
 def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off(cover):
     """A body of 10 cm radius under a cover ``cover`` off it: the camera's inside points (2 cm behind the seen cover)

@@ -228,7 +228,7 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     before = int(state.model.train_targets.shape[0])
     removed = retract_free_space(state.model, contact, margin)
     state.retracted += len(removed)
-    camera = retract_vision_inside(state.model, np.asarray(state.contacts), cfg.policy)
+    camera = retract_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     if len(camera):                      # indices into the data before this step, as the log and replays read them
         removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
     select = getattr(cfg.touch, "select", None)

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .observations import Observations
+from .observations import CoverGap, Observations
 
 __all__ = ["ExplorationState", "StepRecord", "RECORD_FIELDS"]
 
@@ -131,6 +131,8 @@ class ExplorationState:
         centre: centroid of the estimated inner region, from the last measurement (2-D stop rule).
         surface: the last measured estimate (2-D polylines or a 3-D mesh), or None.
         records: one :class:`StepRecord` per step, record 0 first.
+        gap_check: the cover's gap as the contacts show it (:class:`CoverGap`), kept from step to step so that each
+            contact's distance is computed once; rebuilt on resume, to the same values.
     """
 
     model: object
@@ -153,6 +155,7 @@ class ExplorationState:
     centre: np.ndarray | None = None
     surface: object = None
     records: list = field(default_factory=list)
+    gap_check: CoverGap = field(default_factory=CoverGap, repr=False, compare=False)
 
     @property
     def contact(self) -> np.ndarray:
