@@ -293,6 +293,36 @@ def test_a_run_told_where_to_stop_ends_there_unconverged_and_otherwise_runs_to_t
     assert len(calls) < n_full
 
 
+def test_a_fit_started_on_the_ridge_of_a_correlation_of_1_leaves_it_when_the_optimum_lies_inside():
+    """A concave quadratic in K_t's entries with its maximum inside (correlation 0.26), started at a correlation of 1
+    with ``w = log L[1, 1]`` at its lower bound: there the likelihood's gradient in ``w`` is ``2 e^(2w) dMLL/dK_t11``,
+    ~1e-10, below the gradient tolerance, and the damped Newton step along it as small, although K_t11 is 0.37 short
+    of the optimum. The fit steps along ``w`` to the trust region's edge while the function is convex along it and
+    reaches the maximum (to the optimiser's tolerance); started at a maximum on the bound (the quadratic's maximum at
+    a correlation above 1) it stays there, converged."""
+    from torch_gpioius.inference.optim import (chol_params_to_task_covariance, maximize_mll,
+                                               task_covariance_to_chol_params)
+
+    def quadratic(target):
+        def evaluate(kt):
+            p = torch.stack([kt[0, 0], kt[0, 1], kt[1, 1]])
+            d = p - target
+            return float(-0.5 * 50 * (d @ d)), -50 * d, -50 * torch.eye(3, dtype=torch.float64)
+        return evaluate
+
+    inside = torch.tensor([0.3, 0.1, 0.5], dtype=torch.float64)
+    ridge = chol_params_to_task_covariance(np.array([0.5 * math.log(0.3), 0.2 / math.sqrt(0.3), -12.0]))
+    assert 1 - float(ridge[0, 1]) ** 2 / float(ridge[0, 0] * ridge[1, 1]) < 1e-9
+    result = maximize_mll(quadratic(inside), ridge)
+    assert result.converged
+    p = torch.stack([result.task_covariance[0, 0], result.task_covariance[0, 1], result.task_covariance[1, 1]])
+    torch.testing.assert_close(p, inside, atol=1e-6, rtol=0)
+    # a maximum that wants K_t11 below K_t01^2 / K_t00: the bound of w is where the fit belongs, and it stays there
+    outside = torch.tensor([0.3, 0.2, 0.05], dtype=torch.float64)
+    result = maximize_mll(quadratic(outside), ridge)
+    assert result.converged and task_covariance_to_chol_params(result.task_covariance)[2] == -12.0
+
+
 def test_task_names_are_accepted_beside_ids(two_shape_data):
     x, y, t = two_shape_data
     names = ["inner" if int(v) == 0 else "outer" for v in t]

@@ -130,6 +130,16 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         ``(phi, f, projected_gradient_norm, iterations, converged)``; convergence as in :func:`maximize_mll`.
         Three accepted steps in a row that gain less than ``tol.fit_ftol`` (relative) end it unconverged: the
         function's rounding, not the optimum, stops progress there.
+
+    Where the Hessian is not negative definite and a free coordinate has positive curvature (the function convex
+    along it) and a gradient along it, with ``caps``: first a step along that coordinate alone, to the trust
+    region's edge in the gradient's direction, kept if the function rises (:func:`_convex_rise`). Newton's model has
+    no maximum along such a coordinate, and the damped step along it is as small as the gradient, which on a flat
+    ridge (a correlation of 1, ``w = log L[1, 1]`` near its bound, where the likelihood depends on ``w`` through
+    ``e^(2w)``) is below the gradient tolerance and the stall tolerance however much there is to gain (24 nats
+    measured on tests/inference/test_batched.py's data; an analytic case in tests/models/test_gpiois.py). Such steps
+    are not stalls. A coordinate whose edge step did not rise is not tried again in the run, so rounding-level
+    curvature at a flat maximum costs at most one evaluation.
     """
     phi = np.minimum(np.maximum(np.asarray(phi0, dtype=np.float64), lower), upper)
     f, grad, hess = value(phi)
@@ -141,17 +151,29 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     it = 0
     pg_norm = math.inf
     stalls = 0
+    refused: set = set()                  # coordinates whose edge step did not rise (rounding-level curvature)
     for it in range(1, tol.fit_max_iter + 1):
         free = free_coordinates(phi, grad, lower, upper)
         pg = np.where(free, grad, 0.0)
         pg_norm = float(np.abs(pg).max())
+        idx = np.flatnonzero(free)
+        neg_h = -hess[np.ix_(idx, idx)]
+        min_eig = float(np.linalg.eigvalsh(neg_h).min()) if len(idx) else math.inf
+        concave = min_eig > 1e-12 * max(1.0, abs(f))
+        if not concave and caps is not None:
+            rise = _convex_rise(phi, grad, hess, free, lower, upper, caps(phi), refused)
+            if rise is not None:
+                f_new, g_new, h_new = value(rise)
+                if math.isfinite(f_new) and f_new > f:
+                    phi, f, grad, hess, stalls = rise, f_new, g_new, h_new, 0
+                    if until is not None and until(phi):
+                        break
+                    continue
+                refused.add(int(np.flatnonzero(rise != phi)[0]))
         if pg_norm <= tol.fit_gtol:
             converged = True
             break
-        idx = np.flatnonzero(free)
-        neg_h = -hess[np.ix_(idx, idx)]
-        min_eig = float(np.linalg.eigvalsh(neg_h).min())
-        shift = max(damping, 0.0 if min_eig > 1e-12 * max(1.0, abs(f)) else -min_eig + 1e-8 * max(1.0, abs(f)))
+        shift = max(damping, 0.0 if concave else -min_eig + 1e-8 * max(1.0, abs(f)))
         while True:
             step = np.zeros(k)
             step[idx] = np.linalg.solve(neg_h + shift * np.eye(len(idx)), grad[idx])
@@ -178,6 +200,25 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         if stalls >= 3 or (until is not None and until(phi)):
             break
     return phi, f, pg_norm, it, converged
+
+
+def _convex_rise(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray, free: np.ndarray, lower: np.ndarray,
+                 upper: np.ndarray, caps: np.ndarray, refused: set) -> np.ndarray | None:
+    """The step of :func:`newton_maximize` along a coordinate on which the function is convex and rising: among the
+    free coordinates (not in ``refused``) with positive curvature ``hess[i, i] > 0`` and a non-zero gradient, the one
+    whose step to the trust region's edge (``caps[i]`` in the gradient's direction, clamped to the bounds) gains the
+    most to first order (convexity along it makes that a lower bound of the gain while it holds). None: no such
+    coordinate, or none that can move."""
+    best, best_gain = None, 0.0
+    for i in np.flatnonzero(free):
+        if i in refused or not (hess[i, i] > 0 and grad[i] != 0):
+            continue
+        candidate = phi.copy()
+        candidate[i] = min(max(phi[i] + math.copysign(caps[i], grad[i]), lower[i]), upper[i])
+        gain = float(grad[i] * (candidate[i] - phi[i]))
+        if gain > best_gain:
+            best, best_gain = candidate, gain
+    return best
 
 
 def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0: Tensor,

@@ -39,9 +39,16 @@ def _ridge(kt: Tensor, grad: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, 
     tiny ``z``, where the quadratic model's ``g_w^2 / (2 |H_ww|)`` grows without bound as ``H_ww -> 0`` (a correlation
     of 1 then asked for a re-learning at every step, each stalling on the flat ridge).
 
+    With the gradient pointing off the ridge (``g_w > 0``) the gain is unbounded for the rule: the likelihood is
+    convex in ``w`` there and a Hessian from any K_t says nothing of where it turns (24 nats off on
+    tests/inference/test_batched.py's data), so the rule re-learns, which steps off the ridge
+    (``optim.newton_maximize``).
+
     Returns:
         the free coordinates with ``w`` held where that applies, and the gain bound for ``w`` [nats].
     """
+    if free[2] and grad[2] > 0 and _on_ridge(kt):
+        return free, math.inf
     if not (free[2] and grad[2] < 0 and _on_ridge(kt)):
         return free, 0.0
     held = free.copy()
