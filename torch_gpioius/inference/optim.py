@@ -112,7 +112,7 @@ def _evaluate_trial(evaluate, phi: np.ndarray):
 
 
 def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarray, caps: Callable | None = None,
-                    until: Callable | None = None):
+                    until: Callable | None = None, return_hessian: bool = False):
     """Maximise a smooth function of a few parameters within bounds by projected, Levenberg-damped Newton steps.
 
     Args:
@@ -125,9 +125,12 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
             shortened along its direction), or None.
         until: ``phi -> bool``, checked after each accepted step: True ends the run there, unconverged (a caller
             that only needs to know where a run is heading, e.g. into a known optimum's neighbourhood), or None.
+        return_hessian: also return the Hessian at the last accepted point (the point returned, or the one the
+            final Newton-decrement step left), not that of a trial point it evaluated and refused.
 
     Returns:
-        ``(phi, f, projected_gradient_norm, iterations, converged)``; convergence as in :func:`maximize_mll`.
+        ``(phi, f, projected_gradient_norm, iterations, converged)`` (and the `(k, k)` Hessian with
+        ``return_hessian``); convergence as in :func:`maximize_mll`.
         Three accepted steps in a row that gain less than ``tol.fit_ftol`` (relative) end it unconverged: the
         function's rounding, not the optimum, stops progress there.
 
@@ -152,6 +155,7 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     pg_norm = math.inf
     stalls = 0
     refused: set = set()                  # coordinates whose edge step did not rise (rounding-level curvature)
+    refused_point = None                  # the last trial point refused: the same point again is not re-evaluated
     for it in range(1, tol.fit_max_iter + 1):
         free = free_coordinates(phi, grad, lower, upper)
         pg = np.where(free, grad, 0.0)
@@ -170,6 +174,7 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
                         break
                     continue
                 refused.add(int(np.flatnonzero(rise != phi)[0]))
+                refused_point = rise
         if pg_norm <= tol.fit_gtol:
             converged = True
             break
@@ -185,13 +190,17 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
             if shift == 0.0 and over <= 1.0 and 0 <= decrement <= tol.fit_ftol * max(1.0, abs(f)):
                 # Newton-decrement stop: the pure Newton step predicts a gain below tolerance; near a
                 # non-degenerate maximum its error is quadratic in that gain, so take it without re-evaluating.
-                return candidate, f, pg_norm, it, True
-            f_new, g_new, h_new = value(candidate)
+                return (candidate, f, pg_norm, it, True) + ((hess,) if return_hessian else ())
+            if refused_point is not None and np.array_equal(candidate, refused_point):
+                f_new = -math.inf
+            else:
+                f_new, g_new, h_new = value(candidate)
             if f_new >= f - 1e-12 * max(1.0, abs(f)) and math.isfinite(f_new):
                 break
+            refused_point = candidate        # a larger shift whose step is still cut to the same edge: not re-evaluated
             shift = max(10.0 * shift, 1e-6 * max(1.0, abs(f)))
             if shift > 1e12 * max(1.0, abs(f)):
-                return phi, f, pg_norm, it, False
+                return (phi, f, pg_norm, it, False) + ((hess,) if return_hessian else ())
         damping = shift / 10.0 if shift > 0 else 0.0
         # a stall: steps that gain nothing above the function's own rounding (an ill-conditioned K_t, where the
         # evaluations differ by more than the tolerance asks) end the fit instead of running to fit_max_iter
@@ -199,7 +208,7 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         phi, f, grad, hess = candidate, f_new, g_new, h_new
         if stalls >= 3 or (until is not None and until(phi)):
             break
-    return phi, f, pg_norm, it, converged
+    return (phi, f, pg_norm, it, converged) + ((hess,) if return_hessian else ())
 
 
 def _convex_rise(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray, free: np.ndarray, lower: np.ndarray,
@@ -237,20 +246,16 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         decrement below ``tol.fit_ftol * max(1, |mll|)``.
     """
     lower, upper = cholesky_bounds()
-    last = {}
 
     def value(phi):
         f, g, h = _evaluate_trial(evaluate, phi)
         if g is None:
             return f, None, None
-        grad, hess = chain_to_cholesky(phi, g, h)
-        last["hess"] = hess
-        return f, grad, hess
+        return (f, *chain_to_cholesky(phi, g, h))
 
     phi0 = task_covariance_to_chol_params(kt0)
     f0, g0, h0 = evaluate(chol_params_to_task_covariance(phi0))      # the start must evaluate (errors propagate)
     first = [(f0, *chain_to_cholesky(phi0, g0, h0))]
-    last["hess"] = first[0][2]
 
     def value_first(phi):
         if first:
@@ -258,8 +263,10 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         return value(phi)
 
     stop = None if until is None else (lambda phi: until(chol_params_to_task_covariance(phi)))
-    phi, f, pg_norm, it, converged = newton_maximize(value_first, phi0, lower, upper, step_caps, stop)
-    return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged, hessian=last["hess"])
+    # the Hessian where the run ended, for the min_gain rule (GPIOIS.fit): not a refused trial point's
+    phi, f, pg_norm, it, converged, hess = newton_maximize(value_first, phi0, lower, upper, step_caps, stop,
+                                                           return_hessian=True)
+    return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged, hessian=hess)
 
 
 def cholesky_bounds() -> tuple[np.ndarray, np.ndarray]:

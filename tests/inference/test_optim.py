@@ -1,0 +1,55 @@
+"""The K_t optimiser's Newton code (torch_gpioius.inference.optim.newton_maximize) on functions known in closed form."""
+
+import math
+
+import numpy as np
+
+from torch_gpioius.inference.optim import newton_maximize
+
+
+def _cosine(calls):
+    """f(x) = cos(3x) on one coordinate: a maximum at 0 (f'' = -9), convex and rising at x = -0.9."""
+    def value(phi):
+        x = float(phi[0])
+        calls.append(x)
+        return math.cos(3 * x), np.array([-3 * math.sin(3 * x)]), np.array([[-9 * math.cos(3 * x)]])
+    return value
+
+
+def test_a_step_to_the_edge_that_falls_is_refused_once_and_the_hessian_returned_is_the_maximums():
+    """From x = -0.9, where cos(3x) is convex and rising, the step to the trust region's edge (x = 1.1) falls: it is
+    refused, not tried again, and the damped Newton run reaches the maximum at 0; the Hessian returned is the one
+    at the end (-9), not the refused trial's (+8.9 at 1.1)."""
+    calls = []
+    phi, f, pg, it, converged, hess = newton_maximize(_cosine(calls), np.array([-0.9]), np.array([-5.0]),
+                                                      np.array([5.0]), caps=lambda p: np.array([2.0]),
+                                                      return_hessian=True)
+    assert converged and abs(float(phi[0])) < 1e-6 and f == math.cos(3 * float(phi[0]))
+    assert calls.count(calls[1]) == 1 and calls[1] == -0.9 + 2.0          # the edge trial, once
+    np.testing.assert_allclose(hess, [[-9.0]], atol=1e-5)
+    # without return_hessian the result is the same five values as before
+    assert len(newton_maximize(_cosine([]), np.array([-0.9]), np.array([-5.0]), np.array([5.0]),
+                               caps=lambda p: np.array([2.0]))) == 5
+
+
+def test_a_function_convex_and_rising_along_a_coordinate_is_climbed_to_the_edge_not_crept_along():
+    """f(w) = e^(2w) - e^(4w) / 4 (the likelihood's dependence on ``w = log L[1,1]`` near a correlation of 1, with a
+    maximum at z = e^(2w) = 2): from w = -12, where the gradient is 2e-10, below the gradient tolerance, the run
+    climbs in edge steps (each accepted, z times e^4) and then converges at w = log(2) / 2; a trial point refused
+    once is not evaluated again."""
+    calls = []
+
+    def value(phi):
+        w = float(phi[0])
+        calls.append(w)
+        z = math.exp(2 * w)
+        return z - z * z / 4, np.array([2 * z - z * z]), np.array([[4 * z - 4 * z * z]])
+
+    phi, f, pg, it, converged = newton_maximize(value, np.array([-12.0]), np.array([-12.0]), np.array([12.0]),
+                                                caps=lambda p: np.array([2.0]))
+    assert converged and abs(float(phi[0]) - 0.5 * math.log(2)) < 1e-6 and abs(f - 1.0) < 1e-12
+    assert calls[:6] == [-12.0, -10.0, -8.0, -6.0, -4.0, -2.0] and len(calls) < 20
+    assert calls.count(2.0) == 1              # past the maximum, the edge is refused once: not again as damping grows
+    # without a trust region (caps=None) the run keeps the old behaviour: it stops where the gradient is tiny
+    phi, *_ = newton_maximize(value, np.array([-12.0]), np.array([-12.0]), np.array([12.0]))
+    assert float(phi[0]) < -10
