@@ -343,7 +343,7 @@ def test_on_the_ridge_of_a_correlation_of_1_w_is_held_and_its_gain_bounded():
         if model.fit_result.tracked:
             seen.add("tracked")
             assert not at_bound_and_free
-            if 0 < bound < math.inf:      # w held: the step moved u and v only (w read back from K_t loses ~1e-7 to cancellation)
+            if 0 < bound < math.inf:  # w held: the step moved u and v only (w read back from K_t loses ~1e-7)
                 assert task_covariance_to_chol_params(model.task_covariance)[2] == pytest.approx(phi[2], abs=1e-4)
     assert seen == {"ridge", "tracked", "off", "left"}, seen
 

@@ -401,7 +401,8 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
         return none
     x = model.train_inputs[0].cpu().numpy()
     measure = gap if gap is not None else CoverGap()
-    if not measure(contacts, x[outer & (y == 0)], reach=max(0.02, policy.voxel or 0.0)) > policy.vision_inside_gap:                  # NaN (too few contacts under seen cover) keeps them
+    seen_gap = measure(contacts, x[outer & (y == 0)], reach=max(0.02, policy.voxel or 0.0))
+    if not seen_gap > policy.vision_inside_gap:             # NaN (too few contacts under seen cover) keeps them
         return none
     model.remove_observations(torch.as_tensor(inside))
     return np.flatnonzero(inside)
