@@ -487,6 +487,40 @@ def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_
     assert len(calls) <= 4, calls
 
 
+def test_a_relearning_on_the_ridge_whose_optimum_stays_there_polishes_the_copys_result():
+    """Concentric data whose optimum is at a correlation of 1; the warm K_t on the ridge but off the optimum's u and v
+    (K_t00 up by a fifth, or K_t01 down), where the gradient along ``w`` points off the ridge. From the warm K_t the
+    full data walk up ``w`` and back down to its bound (20 evaluations or more); with ``scout`` the copy makes that walk
+    and the full data start from where it ended: a few evaluations, the same optimum."""
+    from torch_gpioius.inference.optim import chol_params_to_task_covariance, task_covariance_to_chol_params
+
+    rng = np.random.default_rng(7)
+    base = _model(rng)
+    for _ in range(3):
+        base.add_observations(*_patch(rng, 24), 0)
+    base.fit(multi_start=True)
+    assert base.correlation > 1 - 1e-6
+    for shift in ((0.1, 0.0), (0.0, -0.05)):
+        phi = task_covariance_to_chol_params(base.task_covariance)
+        phi[:2] += shift
+        phi[2] = -11.0
+        counts, results = [], []
+        for scout in (None, 60):
+            model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+                              task_covariance=chol_params_to_task_covariance(phi), inference="batched")
+            model.fit_result = base.fit_result
+            engine = model._inference()
+            assert model._chol_gradient(engine, model._task_matrix())[1][2] > 0     # pointing off the ridge
+            calls = []
+            original = engine.mll_derivatives
+            engine.mll_derivatives = lambda kt, original=original, calls=calls: calls.append(1) or original(kt)
+            model.fit(min_gain=0.0, scout=scout)
+            counts.append(len(calls))
+            results.append(model.fit_result.mll)
+        assert results[1] == pytest.approx(results[0], abs=1e-6) == pytest.approx(base.fit_result.mll, abs=1e-6)
+        assert counts[1] <= 4 < 20 <= counts[0], counts
+
+
 @pytest.mark.parametrize("kwargs", [{"min_gain": -1.0}, {"min_gain": math.nan}, {"min_gain": 0.1, "max_hold": 0},
                                     {"scout": 1}, {"scout": 2.5}, {"scout": True}])
 def test_bad_relearning_settings_are_refused_and_leave_the_model_alone(kwargs):

@@ -18,14 +18,15 @@ def _cosine(calls):
 
 def test_a_step_to_the_edge_that_falls_is_refused_once_and_the_hessian_returned_is_the_maximums():
     """From x = -0.9, where cos(3x) is convex and rising, the step to the trust region's edge (x = 1.1) falls: it is
-    refused, not tried again, and the damped Newton run reaches the maximum at 0; the Hessian returned is the one
-    at the end (-9), not the refused trial's (+8.9 at 1.1)."""
+    refused and not evaluated again, later edge steps are a quarter as long (0.5), and the run reaches the
+    maximum at 0; the Hessian returned is the one at the end (-9), not the refused trial's (+8.9 at 1.1)."""
     calls = []
     phi, f, pg, it, converged, hess = newton_maximize(_cosine(calls), np.array([-0.9]), np.array([-5.0]),
                                                       np.array([5.0]), caps=lambda p: np.array([2.0]),
                                                       return_hessian=True)
     assert converged and abs(float(phi[0])) < 1e-6 and f == math.cos(3 * float(phi[0]))
     assert calls.count(calls[1]) == 1 and calls[1] == -0.9 + 2.0          # the edge trial, once
+    assert [c for c in calls if c > 0.3] == [calls[1]]                    # later edge steps a quarter as long
     np.testing.assert_allclose(hess, [[-9.0]], atol=1e-5)
     # without return_hessian the result is the same five values as before
     assert len(newton_maximize(_cosine([]), np.array([-0.9]), np.array([-5.0]), np.array([5.0]),

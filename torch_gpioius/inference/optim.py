@@ -141,8 +141,9 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     ridge (a correlation of 1, ``w = log L[1, 1]`` near its bound, where the likelihood depends on ``w`` through
     ``e^(2w)``) is below the gradient tolerance and the stall tolerance however much there is to gain (24 nats
     measured on tests/inference/test_batched.py's data; an analytic case in tests/models/test_gpiois.py). Such steps
-    are not stalls. A coordinate whose edge step did not rise is not tried again in the run, so rounding-level
-    curvature at a flat maximum costs at most one evaluation.
+    are not stalls. An edge step that fell (past where the function turns) is retried a quarter as long, and after
+    three that fell the coordinate is left to the damped steps for the rest of the run, so rounding-level curvature
+    at a flat maximum costs at most three evaluations per coordinate.
     """
     phi = np.minimum(np.maximum(np.asarray(phi0, dtype=np.float64), lower), upper)
     f, grad, hess = value(phi)
@@ -154,7 +155,7 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     it = 0
     pg_norm = math.inf
     stalls = 0
-    refused: set = set()                  # coordinates whose edge step did not rise (rounding-level curvature)
+    reach: dict = {}                      # a coordinate's edge step, as a fraction of its cap, after steps that fell
     refused_point = None                  # the last trial point refused: the same point again is not re-evaluated
     for it in range(1, tol.fit_max_iter + 1):
         free = free_coordinates(phi, grad, lower, upper)
@@ -165,7 +166,7 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         min_eig = float(np.linalg.eigvalsh(neg_h).min()) if len(idx) else math.inf
         concave = min_eig > 1e-12 * max(1.0, abs(f))
         if not concave and caps is not None:
-            rise = _convex_rise(phi, grad, hess, free, lower, upper, caps(phi), refused)
+            rise = _convex_rise(phi, grad, hess, free, lower, upper, caps(phi), reach)
             if rise is not None:
                 f_new, g_new, h_new = value(rise)
                 if math.isfinite(f_new) and f_new > f:
@@ -173,7 +174,8 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
                     if until is not None and until(phi):
                         break
                     continue
-                refused.add(int(np.flatnonzero(rise != phi)[0]))
+                i = int(np.flatnonzero(rise != phi)[0])    # it went past where the function turns: a quarter next
+                reach[i] = reach.get(i, 1.0) / 4.0
                 refused_point = rise
         if pg_norm <= tol.fit_gtol:
             converged = True
@@ -211,19 +213,25 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     return (phi, f, pg_norm, it, converged) + ((hess,) if return_hessian else ())
 
 
+#: An edge step that fell is retried a quarter as long; below this fraction of the cap the coordinate is left to the
+#: damped Newton steps for the rest of the run (at most three refused edge steps per coordinate and run).
+_EDGE_MIN = 1.0 / 16.0
+
+
 def _convex_rise(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray, free: np.ndarray, lower: np.ndarray,
-                 upper: np.ndarray, caps: np.ndarray, refused: set) -> np.ndarray | None:
+                 upper: np.ndarray, caps: np.ndarray, reach: dict) -> np.ndarray | None:
     """The step of :func:`newton_maximize` along a coordinate on which the function is convex and rising: among the
-    free coordinates (not in ``refused``) with positive curvature ``hess[i, i] > 0`` and a non-zero gradient, the one
-    whose step to the trust region's edge (``caps[i]`` in the gradient's direction, clamped to the bounds) gains the
+    free coordinates with positive curvature ``hess[i, i] > 0`` and a non-zero gradient, the one whose step to the
+    trust region's edge (``reach.get(i, 1) * caps[i]`` in the gradient's direction, clamped to the bounds; ``reach``
+    shrinks after steps that fell, and a coordinate whose reach is below :data:`_EDGE_MIN` is not tried) gains the
     most to first order (convexity along it makes that a lower bound of the gain while it holds). None: no such
     coordinate, or none that can move."""
     best, best_gain = None, 0.0
     for i in np.flatnonzero(free):
-        if i in refused or not (hess[i, i] > 0 and grad[i] != 0):
+        if reach.get(i, 1.0) < _EDGE_MIN or not (hess[i, i] > 0 and grad[i] != 0):
             continue
         candidate = phi.copy()
-        candidate[i] = min(max(phi[i] + math.copysign(caps[i], grad[i]), lower[i]), upper[i])
+        candidate[i] = min(max(phi[i] + math.copysign(reach.get(i, 1.0) * caps[i], grad[i]), lower[i]), upper[i])
         gain = float(grad[i] * (candidate[i] - phi[i]))
         if gain > best_gain:
             best, best_gain = candidate, gain
