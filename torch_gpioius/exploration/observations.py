@@ -356,10 +356,8 @@ class CoverGap:
 
             self._seen, self._tree, self._contacts = seen.copy(), cKDTree(seen), None
         done = 0 if self._contacts is None else len(self._contacts)
-        if done > len(contacts) or not np.array_equal(self._contacts, contacts[:done]):
-            done, self._contacts = 0, None
-        if done == 0:
-            self._contacts, self._gap, self._along = contacts[:0].copy(), np.zeros(0), np.zeros(0)
+        if self._contacts is None or done > len(contacts) or not np.array_equal(self._contacts, contacts[:done]):
+            done, self._contacts, self._gap, self._along = 0, contacts[:0].copy(), np.zeros(0), np.zeros(0)
         new = contacts[done:]
         if len(new):
             _, idx = self._tree.query(new, k=k)
