@@ -1,5 +1,6 @@
 """The fast exact engine (StructuredExactInference) held equal to the dense reference (issue 4)."""
 
+import functools
 import math
 
 import numpy as np
@@ -9,7 +10,7 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
 from torch_gpioius.planning import plan_direction
-from torch_gpioius.inference.structured import StructuredExactInference
+from torch_gpioius.inference.structured import DirectStructuredInference, StructuredExactInference
 from torch_gpioius.tolerances import tol
 
 REL = 1e-6  # the issue's tolerance; the engine achieves ~1e-10
@@ -57,6 +58,82 @@ def test_engine_equals_dense_values_and_derivatives(theta, noise):
             assert _rel(ms, md) < 1e-9
             assert float(((vs - vd).abs() / vd).max()) < 1e-7
     assert fast.series is not None and len(fast.series.n_j) > 1   # the expansion is really exercised
+
+
+@pytest.mark.parametrize("outer_tol", [None, 1e-1])
+def test_direct_engine_equals_dense_over_spread_task_covariances(outer_tol):
+    """DirectStructuredInference (T(c) by direct products, no Chebyshev store) equals the dense reference, and the
+    store engine, at K_t[1, 1] spread over five decades (one store window spans a factor of 2), also appended to and
+    with a truncated outer basis; it never builds a store."""
+    x, y, t = _surface_data(n_outer=500, n_inner=90, seed=7)
+    first = int((t == 0).nonzero()[60])                 # inner rows after this one are appended later
+    keep = torch.ones(len(t), dtype=torch.bool)
+    later = (t == 0) & (torch.arange(len(t)) > first)
+    keep[later] = False
+    direct = DirectStructuredInference(x[keep], y[keep], t[keep], theta=0.15, noise=0.08, outer_tol=outer_tol)
+    direct.append(x[later], y[later], t[later])
+    store = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=outer_tol)
+    xi = torch.cat([x[keep][t[keep] == 0], x[later]])   # the direct engine's inner order: kept, then appended
+    yi = torch.cat([y[keep][t[keep] == 0], y[later]])
+    xs, ys = torch.cat([xi, x[t == 1]]), torch.cat([yi, y[t == 1]])
+    ts = torch.cat([torch.zeros(len(xi), dtype=torch.long), torch.ones(int((t == 1).sum()), dtype=torch.long)])
+    xq = x[:30] + 0.01
+    for kt in ([[0.3, 0.25], [0.25, 0.4]], [[0.02, 0.03], [0.03, 0.05]], [[2.0, -3.0], [-3.0, 40.0]],
+               [[0.5, 0.01], [0.01, 4e-4]]):
+        b = torch.tensor(kt, dtype=torch.float64)
+        fd, gd, hd = direct.mll_derivatives(b)
+        fs, gs, hs = store.mll_derivatives(b)
+        assert abs(fd - fs) <= 1e-10 * len(y)
+        assert _rel(gd, gs) < 1e-8 and _rel(hd, hs) < 1e-8
+        assert abs(float(direct.mll(b)) - fd) <= 1e-12 * len(y)
+        if outer_tol is None:                            # the dense reference, exact K_oo
+            ref = DenseExactInference(xs, ys, ts, 0.15, 0.08)
+            fr, gr, hr = ref.mll_derivatives(b)
+            assert abs(fd - fr) <= 1e-10 * len(y)
+            assert _rel(gd, gr) < 1e-9 and _rel(hd, hr) < 1e-9
+            predict = functools.partial(ref.predict, b=b)
+        else:                                            # dense with the truncated basis' K' in place of K_oo
+            fr, _, predict = _dense_with_kernel(direct, xs, ys, ts, b)
+            assert abs(fd - float(fr)) <= 1e-10 * len(y)
+        for task in (0, 1):
+            md, vd = direct.predict(xq, task, b)
+            mr, vr = predict(xq, task)
+            # truncated: the complement's terms are differences of numbers ~1e3 c times the result (at c = 40 the
+            # store engine is 9e-8 off the reference, the direct one 3.5e-8)
+            assert _rel(md, mr) < (1e-9 if outer_tol is None else 1e-8 * max(1.0, kt[1][1]))
+            assert float(((vd - vr).abs() / vr).max()) < 1e-7
+    assert direct.series is None                         # no store was ever built
+    assert store.series is not None
+
+
+def test_restarts_scout_copy_uses_the_direct_engine():
+    """GPIOIS.fit(scout=...)'s thinned copy evaluates with DirectStructuredInference (for the structured, batched
+    and outer_tol engines), and its likelihood equals one built by hand on the same thinned data."""
+    x, y, t = _surface_data(n_outer=300, n_inner=120, seed=8)
+    b = torch.tensor([[0.3, 0.25], [0.25, 0.4]], dtype=torch.float64)
+    for kwargs in ({"inference": "batched"}, {"inference": "structured"}, {"outer_tol": 1e-1}):
+        m = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, task_covariance=b, **kwargs)
+        built = []
+        original = DirectStructuredInference.__init__
+
+        def spy(self, *args, **kw):
+            built.append(self)
+            original(self, *args, **kw)
+
+        DirectStructuredInference.__init__ = spy
+        try:
+            evaluate = m._scout_copy(40)
+        finally:
+            DirectStructuredInference.__init__ = original
+        assert len(built) == 1 and built[0].n_inner == 40
+        assert built[0].outer_tol == kwargs.get("outer_tol")
+        keep = m._thinned(40)
+        ref = DenseExactInference(x[keep], y[keep], t[keep], 0.15, 0.08)
+        f, g, _ = evaluate(b)
+        if "outer_tol" not in kwargs:
+            fr, gr, _ = ref.mll_derivatives(b)
+            assert abs(f - fr) <= 1e-10 * int(keep.sum()) and _rel(g, gr) < 1e-9
+        assert built[0].series is None
 
 
 def test_no_drift_after_200_incremental_additions():

@@ -21,7 +21,7 @@ from ..inference.hyperparameters import HyperparameterResult
 from ..inference.optim import (FitResult, chain_to_cholesky, chol_params_to_task_covariance, cholesky_bounds,
                                free_coordinates, held_newton_step, maximize_mll, predicted_gain,
                                task_covariance_to_chol_params)
-from ..inference.structured import StructuredExactInference
+from ..inference.structured import DirectStructuredInference, StructuredExactInference
 from ..tolerances import tol
 
 __all__ = ["GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
@@ -455,8 +455,12 @@ class GPIOIS(ImplicitSurfaceGP):
         task = self._train_task()
         keep = self._thinned(size)
         cls = self._engine_class()
-        if cls is BatchedExactInference:          # nothing is appended to the copy: no held factorisation needed
-            cls = StructuredExactInference
+        if cls in (BatchedExactInference, StructuredExactInference):
+            # nothing is appended to the copy (no held factorisation needed), and its fixed starts spread K_t over
+            # more than one Chebyshev window: T(c) by direct products
+            cls = DirectStructuredInference
+        elif isinstance(cls, functools.partial) and cls.func is StructuredExactInference:      # outer_tol
+            cls = functools.partial(DirectStructuredInference, *cls.args, **cls.keywords)
         copy = cls(self.train_inputs[0][keep], self.train_targets[keep], task[keep], self.covar_module, self.noise,
                    self.prior_mean)
         x0 = self.train_inputs[0]
