@@ -9,6 +9,7 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.inference import BatchedExactInference, DenseExactInference
 from torch_gpioius.inference.batched import SOLVE_BLOCK, _LowerFactor
+from torch_gpioius.inference.structured import DirectStructuredInference, StructuredExactInference
 from torch_gpioius.inference.optim import predicted_gain
 from torch_gpioius.planning import plan_direction
 
@@ -145,6 +146,45 @@ def test_the_gradient_at_a_k_t_a_newton_run_last_evaluated_uses_that_k_t():
     mll, g = engine.mll_gradient(other)
     mll_d, g_d, _ = _dense(engine).mll_derivatives(other)
     assert mll == pytest.approx(mll_d, rel=1e-10) and float((g - g_d).abs().max()) < 1e-9 * engine.n
+
+
+def test_the_value_alone_then_the_derivatives_at_the_same_k_t_equal_a_fresh_evaluation():
+    """``mll_value`` (a Newton trial judged by its value) equals the MLL that ``mll_derivatives`` reports there, and
+    the derivatives asked next at the same K_t (the trial accepted) reuse that factorisation and equal a fresh
+    engine's and a dense solve's; on the batched engine the value alone builds no held state (the held K_t and its
+    buffers stay), and after it the held state still answers at the held K_t."""
+    rng = np.random.default_rng(13)
+    data = _start(rng, n_inner=40)
+    for cls in (StructuredExactInference, DirectStructuredInference, BatchedExactInference):
+        engine = cls(*data, theta=THETA, noise=NOISE)
+        fresh = cls(*data, theta=THETA, noise=NOISE)
+        if cls is BatchedExactInference:
+            engine.mll_gradient(KT)                       # held at KT
+            held = engine._held
+        for i, kt in enumerate(([[0.4, 0.2], [0.2, 0.7]], [[0.05, 0.07], [0.07, 0.1]])):
+            b = torch.tensor(kt, dtype=torch.float64)
+            store = engine.series
+            value = engine.mll_value(b)
+            assert engine._cache.get("t1") is None        # the value alone: no derivative matrices yet
+            f, g, h = engine.mll_derivatives(b)
+            f_ref, g_ref, h_ref = fresh.mll_derivatives(b)
+            f_d, g_d, h_d = _dense(engine).mll_derivatives(b)
+            assert value == f                             # the same factorisation
+            if i and cls is not DirectStructuredInference:
+                # K_t[1, 1] 0.1 lies beyond the store's window (0.35-1.4) built at the first: T and its derivatives
+                # came from direct products, the store not rebuilt for a trial
+                assert engine.series is store and not store.covers(0.1, 0.07 ** 2)
+            assert f == pytest.approx(f_ref, rel=1e-12) and f == pytest.approx(f_d, rel=1e-10)
+            # the fresh engine may take T from its store where this one, beyond its store's window, took T directly
+            # (both exact to the store's 1e-13 of s): the Hessian to the dense reference's tolerance
+            assert float((g - g_ref).abs().max()) < 1e-10 * engine.n and float((h - h_ref).abs().max()) < 1e-9 * engine.n
+            assert float((g - g_d).abs().max()) < 1e-9 * engine.n and float((h - h_d).abs().max()) < 1e-9 * engine.n
+        if cls is BatchedExactInference:
+            assert engine._held is held and held["key"] == tuple(KT.flatten().tolist())
+            mll, grad = engine.mll_gradient(KT)
+            assert engine._held is held
+            f_d, g_d, _ = _dense(engine).mll_derivatives(KT)
+            assert mll == pytest.approx(f_d, rel=1e-10) and float((grad - g_d).abs().max()) < 1e-9 * engine.n
 
 
 def test_blocked_triangular_solves_equal_lapack():
@@ -519,6 +559,39 @@ def test_a_relearning_on_the_ridge_whose_optimum_stays_there_polishes_the_copys_
             results.append(model.fit_result.mll)
         assert results[1] == pytest.approx(results[0], abs=1e-6) == pytest.approx(base.fit_result.mll, abs=1e-6)
         assert counts[1] <= 4 < 20 <= counts[0], counts
+
+
+@pytest.mark.filterwarnings("ignore:GPIOIS.fit. K_t's fit stopped")
+def test_a_fit_judging_trials_by_their_value_reaches_the_same_optimum_with_fewer_hessians():
+    """GPIOIS.fit judges a Newton trial by the engine's ``mll_value`` and asks ``mll_derivatives`` only where it is
+    accepted: the walk off the ridge of a correlation of 1 (many trials refused) ends at the same K_t as with every
+    trial evaluated with its Hessian, with fewer Hessians (the edge steps up ``w`` walk by values alone too)."""
+    rng = np.random.default_rng(0)
+    base = _model(rng)
+    ridge, ridge_fit = base.task_covariance.clone(), base.fit_result
+    for _ in range(20):
+        base.add_observations(*_interior_patch(rng, 16, (0.1, 0.22, 0.12)), 0)
+    runs = []
+    for judged in (False, True):
+        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+                          task_covariance=ridge, inference="batched")
+        model.fit_result = ridge_fit                          # a later fit, warm-started on the ridge
+        if not judged:
+            likelihood = model._likelihood
+            model._likelihood = lambda engine: (likelihood(engine)[0], None)
+        engine = model._inference()
+        hessians, values = [], []
+        derivatives, value = engine.mll_derivatives, engine.mll_value
+        engine.mll_derivatives = lambda kt: hessians.append(1) or derivatives(kt)
+        engine.mll_value = lambda kt: values.append(1) or value(kt)
+        model.fit(min_gain=0.0)
+        runs.append((model, len(hessians), len(values)))
+    (plain, plain_hessians, plain_values), (judged, judged_hessians, judged_values) = runs
+    assert plain_values == 0 and plain.correlation < 0.6
+    assert judged.fit_result.converged and plain.fit_result.converged
+    assert float((judged.task_covariance - plain.task_covariance).abs().max()) < 1e-6
+    assert judged.fit_result.mll == pytest.approx(plain.fit_result.mll, abs=1e-9)
+    assert judged_hessians < plain_hessians, (judged_hessians, plain_hessians)
 
 
 @pytest.mark.parametrize("kwargs", [{"min_gain": -1.0}, {"min_gain": math.nan}, {"min_gain": 0.1, "max_hold": 0},

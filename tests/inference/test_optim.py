@@ -54,3 +54,39 @@ def test_a_function_convex_and_rising_along_a_coordinate_is_climbed_to_the_edge_
     # without a trust region (caps=None) the run keeps the old behaviour: it stops where the gradient is tiny
     phi, *_ = newton_maximize(value, np.array([-12.0]), np.array([-12.0]), np.array([12.0]))
     assert float(phi[0]) < -10
+
+
+def test_with_the_value_alone_refused_trials_and_edge_walks_cost_no_derivatives():
+    """``level`` (the function's value alone) judges trial points first, and an edge step walks on along its
+    coordinate while the value rises: the run reaches the same maximum as without it, and ``value`` (with the
+    derivatives) is asked at the start and where steps end, never at a refused trial (the cosine's edge step to 1.1;
+    the exponential's past its maximum). From w = -12 the exponential's walk climbs -10, -8, ..., 0 by values alone
+    (it rises all the way: the maximum is at log(2) / 2) and asks the derivatives first at 0."""
+    def run(value, start, with_level):
+        points, derived = [], []
+
+        def counted(phi):
+            derived.append(float(phi[0]))
+            return value(phi)
+
+        def level(phi):
+            points.append(float(phi[0]))
+            return value(phi)[0]
+
+        result = newton_maximize(counted, np.array([start]), np.array([-12.0]), np.array([12.0]),
+                                 caps=lambda p: np.array([2.0]), level=level if with_level else None)
+        return result, points, derived
+
+    def exponential(phi):
+        z = math.exp(2 * float(phi[0]))
+        return z - z * z / 4, np.array([2 * z - z * z]), np.array([[4 * z - 4 * z * z]])
+
+    for value, start, top, refused in ((_cosine([]), -0.9, 0.0, 1.1), (exponential, -12.0, 0.5 * math.log(2), 2.0)):
+        plain, _, plain_points = run(value, start, False)
+        judged, points, derived = run(value, start, True)
+        assert plain[4] and judged[4]                                            # both converged
+        assert abs(float(judged[0][0]) - top) < 1e-6 and abs(judged[1] - plain[1]) < 1e-12
+        assert any(abs(p - refused) < 1e-12 for p in points)                     # the refused trial: judged ...
+        assert not any(abs(p - refused) < 1e-12 for p in derived)                # ... by its value alone
+        assert len(derived) < len(plain_points)
+    assert derived[:2] == [-12.0, 0.0] and points[:6] == [-10.0, -8.0, -6.0, -4.0, -2.0, 0.0]

@@ -209,6 +209,16 @@ class BatchedExactInference(StructuredExactInference):
             return self._held["cache"]
         return super().factor(b, derivatives)
 
+    def mll_value(self, b: Tensor) -> float:
+        """The log marginal likelihood alone at ``b`` (a Newton trial point): at the held K_t from the held state;
+        elsewhere from the structured engine's factorisation, without building a held state (the inverse of S that
+        :meth:`_hold` adds costs more than the factorisation; a trial that is refused never needs it)."""
+        key = tuple(b.detach().flatten().tolist())
+        held = self._held
+        if self.n_inner and not (held is not None and held["key"] == key and held["n"] == self.n_inner):
+            StructuredExactInference.factor(self, b, trial=True)
+        return float(self.mll(b))
+
     def _hold(self, b: Tensor) -> None:
         """Build the held state at K_t = b from one full factorisation (with T') and the inverse of S."""
         f = self._direct_factor(b) if self._store_behind(b) else super().factor(b, derivatives=True)
@@ -255,11 +265,9 @@ class BatchedExactInference(StructuredExactInference):
         the store."""
         b = b.detach()
         a, beta, c = float(b[0, 0]), float(b[0, 1]), float(b[1, 1])
-        lam, p = self.lam, self.p
-        d = 1.0 / (c * lam + self.noise)
-        t0, t1 = (torch.cat([p * d, p * (-lam * d * d)]) @ p.T).split(self.n_inner)
-        t0, t1 = 0.5 * (t0 + t0.T), 0.5 * (t1 + t1.T)            # exactly symmetric, as the store's unpacked T
-        pd = p @ self._weight_vectors(d, derivatives=True)
+        d = 1.0 / (c * self.lam + self.noise)
+        t0, t1, _ = self._direct_t_matrices(c, (0, 1))
+        pd = self.p @ self._weight_vectors(d, derivatives=True)
         return {"a": a, "beta": beta, "c": c, "d": d, "alpha_rot": None, "t0": t0, "t1": t1, "t2": None, "pd": pd,
                 **self._schur(a, beta, t0, pd)}
 

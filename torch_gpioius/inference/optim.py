@@ -112,7 +112,7 @@ def _evaluate_trial(evaluate, phi: np.ndarray):
 
 
 def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarray, caps: Callable | None = None,
-                    until: Callable | None = None, return_hessian: bool = False):
+                    until: Callable | None = None, return_hessian: bool = False, level: Callable | None = None):
     """Maximise a smooth function of a few parameters within bounds by projected, Levenberg-damped Newton steps.
 
     Args:
@@ -127,6 +127,10 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
             that only needs to know where a run is heading, e.g. into a known optimum's neighbourhood), or None.
         return_hessian: also return the Hessian at the last accepted point (the point returned, or the one the
             final Newton-decrement step left), not that of a trial point it evaluated and refused.
+        level: ``phi -> f`` alone (``-inf`` where it cannot be evaluated), or None. With it a trial point is judged
+            by its value first and ``value`` (the derivatives) is asked only where it is accepted: the same points,
+            decisions and result, with refused trials at the cost of the value alone (for the GP's likelihood one
+            factorisation, against the Hessian's inverse and products, several times as much).
 
     Returns:
         ``(phi, f, projected_gradient_norm, iterations, converged)`` (and the `(k, k)` Hessian with
@@ -156,6 +160,16 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
     pg_norm = math.inf
     stalls = 0
     reach: dict = {}                      # a coordinate's edge step, as a fraction of its cap, after steps that fell
+
+    def judged(point: np.ndarray, floor: float):
+        """``(f, grad, hess)`` at ``point`` where ``f >= floor``, else ``(f, None, None)`` (with ``level``, the
+        derivatives are asked only where the point is accepted)."""
+        if level is None:
+            f_p, g_p, h_p = value(point)
+            return (f_p, g_p, h_p) if math.isfinite(f_p) and f_p >= floor else (f_p, None, None)
+        f_p = level(point)
+        return value(point) if math.isfinite(f_p) and f_p >= floor else (f_p, None, None)
+
     refused_point = None                  # the last trial point refused: the same point again is not re-evaluated
     for it in range(1, tol.fit_max_iter + 1):
         free = free_coordinates(phi, grad, lower, upper)
@@ -168,8 +182,11 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         if not concave and caps is not None:
             rise = _convex_rise(phi, grad, hess, free, lower, upper, caps(phi), reach)
             if rise is not None:
-                f_new, g_new, h_new = value(rise)
-                if math.isfinite(f_new) and f_new > f:
+                if level is not None:
+                    rise, f_new, g_new, h_new = _edge_walk(rise, phi, f, level, value, lower, upper, caps, reach)
+                else:
+                    f_new, g_new, h_new = judged(rise, math.nextafter(f, math.inf))
+                if g_new is not None:
                     phi, f, grad, hess, stalls = rise, f_new, g_new, h_new, 0
                     if until is not None and until(phi):
                         break
@@ -194,10 +211,10 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
                 # non-degenerate maximum its error is quadratic in that gain, so take it without re-evaluating.
                 return (candidate, f, pg_norm, it, True) + ((hess,) if return_hessian else ())
             if refused_point is not None and np.array_equal(candidate, refused_point):
-                f_new = -math.inf
+                g_new = None
             else:
-                f_new, g_new, h_new = value(candidate)
-            if f_new >= f - 1e-12 * max(1.0, abs(f)) and math.isfinite(f_new):
+                f_new, g_new, h_new = judged(candidate, f - 1e-12 * max(1.0, abs(f)))
+            if g_new is not None:
                 break
             refused_point = candidate        # a larger shift whose step is still cut to the same edge: not re-evaluated
             shift = max(10.0 * shift, 1e-6 * max(1.0, abs(f)))
@@ -211,6 +228,37 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         if stalls >= 3 or (until is not None and until(phi)):
             break
     return (phi, f, pg_norm, it, converged) + ((hess,) if return_hessian else ())
+
+
+def _edge_walk(rise: np.ndarray, phi: np.ndarray, f: float, level: Callable, value: Callable, lower: np.ndarray,
+               upper: np.ndarray, caps: Callable, reach: dict):
+    """The edge step of :func:`newton_maximize` judged by values alone: from ``phi`` to ``rise``, and on along the
+    same coordinate by steps of the same reach while the value rises (the points a run with derivatives would try
+    next while the function stays convex along it), the derivatives asked once, where the walk ends. On the ridge of
+    a correlation of 1 the likelihood rises along ``w`` for several edge steps, each a Hessian otherwise. A walk that
+    ends by a step that fell quarters the coordinate's reach, as a refused edge step does.
+
+    Returns:
+        ``(point, f, grad, hess)`` at the walk's last rising point, or ``(rise, f, None, None)`` where the first
+        step already falls (the caller refuses it).
+    """
+    i = int(np.flatnonzero(rise != phi)[0])
+    direction = math.copysign(1.0, rise[i] - phi[i])
+    best, f_best, point = None, f, rise
+    while True:
+        f_point = level(point)
+        if not (math.isfinite(f_point) and f_point > f_best):
+            if best is None:
+                return rise, f_point, None, None
+            reach[i] = reach.get(i, 1.0) / 4.0                   # it went past where the function turns
+            break
+        best, f_best = point, f_point
+        if best[i] in (lower[i], upper[i]):
+            break
+        point = best.copy()
+        point[i] = min(max(best[i] + direction * reach.get(i, 1.0) * caps(best)[i], lower[i]), upper[i])
+    f_new, g_new, h_new = value(best)
+    return best, f_new, g_new, h_new
 
 
 #: An edge step that fell is retried a quarter as long; below this fraction of the cap the coordinate is left to the
@@ -239,7 +287,8 @@ def _convex_rise(phi: np.ndarray, grad: np.ndarray, hess: np.ndarray, free: np.n
 
 
 def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0: Tensor,
-                 until: Callable[[Tensor], bool] | None = None) -> FitResult:
+                 until: Callable[[Tensor], bool] | None = None,
+                 level: Callable[[Tensor], float] | None = None) -> FitResult:
     """Maximise the marginal likelihood over K_t by projected, damped Newton steps (:func:`newton_maximize` in the
     Cholesky parameters ``phi``).
 
@@ -248,6 +297,8 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         kt0: `(2, 2)` starting K_t (positive definite; clamped to the parameter bounds).
         until: ``K_t -> bool`` after each accepted step; True ends the run there, unconverged (None: run to the
             tolerances).
+        level: maps a `(2, 2)` K_t to the MLL alone, computed the way ``evaluate`` computes it (None: trial points
+            are judged with ``evaluate``); see :func:`newton_maximize`.
 
     Returns:
         The ``FitResult``. Convergence: projected gradient infinity-norm <= ``tol.fit_gtol``, or a Newton
@@ -271,9 +322,18 @@ def maximize_mll(evaluate: Callable[[Tensor], tuple[float, Tensor, Tensor]], kt0
         return value(phi)
 
     stop = None if until is None else (lambda phi: until(chol_params_to_task_covariance(phi)))
+
+    def value_alone(phi) -> float:
+        try:
+            f = level(chol_params_to_task_covariance(phi))
+        except (torch.linalg.LinAlgError, ArithmeticError):
+            return -math.inf
+        return f if math.isfinite(f) else -math.inf
+
     # the Hessian where the run ended, for the min_gain rule (GPIOIS.fit): not a refused trial point's
     phi, f, pg_norm, it, converged, hess = newton_maximize(value_first, phi0, lower, upper, step_caps, stop,
-                                                           return_hessian=True)
+                                                           return_hessian=True,
+                                                           level=None if level is None else value_alone)
     return FitResult(chol_params_to_task_covariance(phi), f, pg_norm, it, converged, hessian=hess)
 
 

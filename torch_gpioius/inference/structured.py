@@ -504,50 +504,57 @@ class StructuredExactInference:
         """The Chebyshev store of the current window (None before the first factorisation with inner points)."""
         return self._series
 
-    def _t_matrices(self, c: float, beta: float, a: float, derivatives: bool) -> tuple:
+    def _t_matrices(self, c: float, beta: float, a: float, derivatives: bool, trial: bool = False) -> tuple:
         """T(c) = P D P^T `(N_i, N_i)`, with T'(c) and T''(c) if ``derivatives`` (else None); rebuilds the window
-        if needed."""
+        if needed, except for a ``trial``'s value outside it."""
         c = max(c, 1e-300)
         if not self.SERIES:
-            return self._direct_t_matrices(c, derivatives)
+            return self._direct_t_matrices(c, (0, 1, 2) if derivatives else (0,))
         if self._series is not None and self._series.size < self.n_inner:   # rows deferred by a subclass
             self._series.append(self.p[self._series.size:])
+        if trial and self._series is not None and not self._series.covers(c, beta * beta):
+            # a value alone outside the window (a Newton trial, often refused: a walk along w overshoots where the
+            # likelihood turns) by direct products; a rebuild costs as much as the store's order of them (1.2 s at
+            # 1,630 inner points), and three trials beyond it once cost three rebuilds in one re-learning
+            return self._direct_t_matrices(c, (0,))
         if self._series is None or not self._series.covers(c, beta * beta):
             # size the truncation for the largest b^2 a PSD K_t allows at this a, c (b^2 <= a c)
             self._series = _ChebyshevStore(self.lam, self.p, self.noise, c, max(beta * beta, a * c),
                                            self.STORE_HEADROOM)
         return self._series.t_matrices(c, derivatives)
 
-    def _direct_t_matrices(self, c: float, derivatives: bool) -> tuple:
-        """``T(c) = P D P^T`` with ``D = (c lam + s)^-1``, and ``T' = -P lam D^2 P^T``, ``T'' = 2 P lam^2 D^3 P^T``
-        (else None), each one `(N_i, r) x (r, N_i)` product, symmetrised (the Schur complement must be exactly
-        symmetric)."""
-        d = 1.0 / (c * self.lam + self.noise)
-        weights = [d] + ([-self.lam * d * d, 2.0 * self.lam * self.lam * d ** 3] if derivatives else [])
-        p = self.p
-        out = []
-        for w in weights:
-            t = (p * w) @ p.T
-            out.append(0.5 * (t + t.T))
-        return (out[0], out[1], out[2]) if derivatives else (out[0], None, None)
+    def _direct_t_matrices(self, c: float, which: tuple[int, ...]) -> tuple:
+        """``(T, T', T'')`` at ``c`` with those of ``which`` (0: ``T = P D P^T``, ``D = (c lam + s)^-1``; 1:
+        ``T' = -P lam D^2 P^T``; 2: ``T'' = 2 P lam^2 D^3 P^T``) summed directly (one `(k N_i, r) x (r, N_i)` GEMM,
+        exact, no truncation), each symmetrised (the Schur complement must be exactly symmetric, as from the store's
+        unpacked T); the others None."""
+        lam, p = self.lam, self.p
+        d = 1.0 / (c * lam + self.noise)
+        weights = {0: d, 1: -lam * d * d, 2: 2.0 * lam * lam * d ** 3}
+        blocks = (torch.cat([p * weights[j] for j in which]) @ p.T).split(self.n_inner)
+        out = dict(zip(which, (0.5 * (t + t.T) for t in blocks)))
+        return tuple(out.get(j) for j in range(3))
 
     # ------------------------------------------------------------------ factorisation
-    def factor(self, b: Tensor, derivatives: bool = False) -> dict:
+    def factor(self, b: Tensor, derivatives: bool = False, trial: bool = False) -> dict:
         """Schur factor and posterior weights for task covariance ``b`` (cached).
 
         With ``derivatives`` the cache also holds T', T'' and the c-derivative vectors that ``mll_derivatives``
-        needs; they come from the same pass over the stored expansion.
+        needs; they come from the same pass over the stored expansion. ``trial``: a Newton trial's value
+        (:meth:`mll_value`): outside the Chebyshev store's window T comes from direct products instead of a rebuild.
         """
         b = b.detach()
         key = tuple(b.flatten().tolist())
         if self._key == key and (not derivatives or self._cache.get("t1") is not None or not self.n_inner):
             return self._cache
+        if self._key == key:
+            return self._with_derivatives(self._cache)
         a, beta, c = float(b[0, 0]), float(b[0, 1]), float(b[1, 1])
         s = self.noise
         d_all = 1.0 / (c * self.lam + s)
         cache = {"a": a, "beta": beta, "c": c, "d": d_all, "alpha_rot": None}
         if self.n_inner:
-            t = self._t_matrices(c, beta, a, derivatives)
+            t = self._t_matrices(c, beta, a, derivatives, trial)
             pd = self.p @ self._weight_vectors(d_all, derivatives)  # P D rt (and its c-derivative companions)
             if self._raw is not None:                               # the truncated basis' complement
                 t = (t[0] + self._raw["c0"],) + tuple(t[1:])
@@ -558,6 +565,26 @@ class StructuredExactInference:
             cache["alpha_rot"] = self._query_weights(cache) * self.rt
         self._cache, self._key = cache, key
         return cache
+
+    def _with_derivatives(self, cache: dict) -> dict:
+        """Add T', T'' and the c-derivative vectors to a factorisation made without them (a trial point judged by
+        its value alone, then accepted), keeping its T, Schur factor and weights: the MLL and everything computed
+        from them stay what they were."""
+        c, beta = max(cache["c"], 1e-300), cache["beta"]
+        if self.SERIES and self._series is not None and self._series.covers(c, beta * beta):
+            _, t1, t2 = self._series.t_matrices(c, True)
+        else:                # T came from direct products (outside the store's window): so do its derivatives
+            _, t1, t2 = self._direct_t_matrices(c, (1, 2))
+        pd = self.p @ self._weight_vectors(cache["d"], derivatives=True)
+        pd[:, 0] = cache["pd"][:, 0]
+        cache.update(t1=t1, t2=t2, pd=pd)
+        return cache
+
+    def mll_value(self, b: Tensor) -> float:
+        """The log marginal likelihood alone [nats], as :meth:`mll_derivatives` reports it at ``b`` (one
+        factorisation; the derivatives added by a later :meth:`mll_derivatives` at the same ``b`` reuse it)."""
+        self.factor(b, trial=True)
+        return float(self.mll(b))
 
     def _schur(self, a: float, beta: float, t0: Tensor, pd: Tensor) -> dict:
         """The inner Schur complement ``S = a K_ii - b^2 T + s I`` factorised, with ``v``, ``alpha_i = S^-1 v`` and

@@ -6,6 +6,7 @@ import dataclasses
 import functools
 import math
 import warnings
+from typing import Callable
 
 import numpy as np
 import torch
@@ -398,11 +399,7 @@ class GPIOIS(ImplicitSurfaceGP):
         if (min_gain is not None and not multi_start
                 and self._hold_task_covariance(engine, min_gain, max_hold, track)):
             return self
-        x0 = self.train_inputs[0]
-
-        def evaluate(kt: Tensor):
-            return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
-
+        evaluate, level = self._likelihood(engine)
         # the thinned copy serves a later fit with more inner points than it keeps (a first fit has no warm start)
         scouting = (scout is not None and self.fit_result is not None
                     and int((self._train_task() == INNER).sum()) > scout)
@@ -414,9 +411,9 @@ class GPIOIS(ImplicitSurfaceGP):
             # Newton run on all the data at O(N_i^3) an evaluation on every restart
             best = self.fit_result
         elif scouting:
-            best = self._scouted_escape(engine, evaluate, scout)
+            best = self._scouted_escape(engine, evaluate, level, scout)
         if best is None:
-            best = maximize_mll(evaluate, self.task_covariance)
+            best = maximize_mll(evaluate, self.task_covariance, level=level)
         starts, scouted = 1, 0
         if multi_start:
             fixed = self._fixed_starts()
@@ -425,7 +422,7 @@ class GPIOIS(ImplicitSurfaceGP):
             candidates = self._scout_starts(fixed, scout, best.task_covariance) if scouting else fixed
             starts, scouted = 1 + len(fixed), (scout if scouting else 0)
             for kt0 in candidates:
-                result = maximize_mll(evaluate, kt0)
+                result = maximize_mll(evaluate, kt0, level=level)
                 if result.mll > best.mll + 1e-9 * max(1.0, abs(best.mll)):
                     best = result
         if not self.identified:
@@ -448,10 +445,25 @@ class GPIOIS(ImplicitSurfaceGP):
                 0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]], dtype=torch.float64),
                 torch.diag(self.task_covariance.diagonal().clamp_min(1e-6))]
 
-    def _scout_copy(self, size: int):
-        """``evaluate(K_t) -> (mll, grad, hess)`` on a copy of the data with ``size`` inner points (evenly spaced in
-        arrival order, so a path's whole length is kept) and every outer point: the restarts' and the escapes' cheap
-        likelihood."""
+    def _likelihood(self, engine) -> tuple[Callable, Callable | None]:
+        """``evaluate(K_t) -> (mll, grad, hess)`` and ``level(K_t) -> mll`` (None where the engine has no cheaper
+        way to the value alone than with its derivatives) on ``engine``, for ``maximize_mll``."""
+        x0 = self.train_inputs[0]
+
+        def evaluate(kt: Tensor):
+            return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
+
+        if not hasattr(engine, "mll_value"):
+            return evaluate, None
+
+        def level(kt: Tensor) -> float:
+            return engine.mll_value(kt.to(dtype=x0.dtype, device=x0.device))
+
+        return evaluate, level
+
+    def _scout_copy(self, size: int) -> tuple[Callable, Callable | None]:
+        """:meth:`_likelihood` on a copy of the data with ``size`` inner points (evenly spaced in arrival order, so a
+        path's whole length is kept) and every outer point: the restarts' and the escapes' cheap likelihood."""
         task = self._train_task()
         keep = self._thinned(size)
         cls = self._engine_class()
@@ -463,14 +475,9 @@ class GPIOIS(ImplicitSurfaceGP):
             cls = functools.partial(DirectStructuredInference, *cls.args, **cls.keywords)
         copy = cls(self.train_inputs[0][keep], self.train_targets[keep], task[keep], self.covar_module, self.noise,
                    self.prior_mean)
-        x0 = self.train_inputs[0]
+        return self._likelihood(copy)
 
-        def evaluate(kt: Tensor):
-            return copy.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
-
-        return evaluate
-
-    def _scouted_escape(self, engine, evaluate, size: int) -> FitResult | None:
+    def _scouted_escape(self, engine, evaluate, level, size: int) -> FitResult | None:
         """When the current K_t has a correlation of 1 (to within ``1 - rho^2 <= 1e-6``: the optimiser stops on that
         flat ridge before the bound of ``w``), the copy's Newton run from it; the full data's run starts where it
         ended and is kept when it ends above the current K_t's MLL. None otherwise (the caller runs the full data
@@ -480,9 +487,10 @@ class GPIOIS(ImplicitSurfaceGP):
         # from the copy's result even where it stays at a correlation of 1: its u and v are close to the full data's
         # there, and from the warm K_t (the gradient pointing off the ridge) the full run made the copy's detour again,
         # up to w's trust-region edge and back down to its bound: 17 evaluations at 1,600 inner points (13.6 s)
-        guess = maximize_mll(self._scout_copy(size), self.task_covariance).task_covariance
+        copy, copy_level = self._scout_copy(size)
+        guess = maximize_mll(copy, self.task_covariance, level=copy_level).task_covariance
         mll = float(engine.mll(self._task_matrix()))
-        result = maximize_mll(evaluate, guess)
+        result = maximize_mll(evaluate, guess, level=level)
         return result if result.mll >= mll else None
 
     def _scout_starts(self, fixed: list[Tensor], size: int, warm: Tensor) -> list[Tensor]:
@@ -494,14 +502,14 @@ class GPIOIS(ImplicitSurfaceGP):
         A fixed start's run ends as soon as it comes within 1 % of an optimum already found: it is heading into that
         basin, which is all the copy is asked (the runs that end on the ridge of a correlation of 1 creep along it
         for a dozen steps or more)."""
-        evaluate = self._scout_copy(size)
-        found = [maximize_mll(evaluate, warm).task_covariance]
+        evaluate, level = self._scout_copy(size)
+        found = [maximize_mll(evaluate, warm, level=level).task_covariance]
 
         def known(kt: Tensor) -> bool:
             return any(float((kt - other).abs().max()) <= 0.01 * float(other.abs().max()) for other in found)
 
         for kt0 in fixed:
-            kt = maximize_mll(evaluate, kt0, until=known).task_covariance
+            kt = maximize_mll(evaluate, kt0, until=known, level=level).task_covariance
             if not known(kt):
                 found.append(kt)
         return found[1:]
