@@ -519,3 +519,23 @@ def test_the_transfer_sets_the_inner_level_by_the_amplitude_ratio_not_the_geomet
         assert float((mu_in - (1 + ratio * (mu_out - 1))).abs().max()) < 0.02
     assert abs(level[1.0] - outer) < 1e-3                       # on the outer estimate's level (10.4 cm here)
     assert level[0.7] < outer - 0.01 and level[2.2] > outer + 0.02  # measured: 8.7 and 13.5 cm
+
+
+@pytest.mark.parametrize("iterations, why", [(7, "after 7 iterations, its last steps gaining less than"),
+                                             (200, "at its cap of 200 iterations")])
+def test_an_unconverged_fit_says_why_it_stopped(monkeypatch, random_data, iterations, why):
+    """FitNotConvergedWarning names the cause: the iteration cap, or steps that gained nothing above the likelihood's
+    rounding (a stall, far below the cap: the warning once said "its cap of 18 iterations" for a stall)."""
+    import dataclasses
+    from torch_gpioius.inference import optim
+    from torch_gpioius.models import gpiois as gpiois_module
+
+    real = optim.maximize_mll
+
+    def stalled(*args, **kwargs):
+        return dataclasses.replace(real(*args, **kwargs), converged=False, iterations=iterations)
+
+    monkeypatch.setattr(gpiois_module, "maximize_mll", stalled)
+    m = _model(random_data, inference="dense")
+    with pytest.warns(gpiois_module.FitNotConvergedWarning, match=why):
+        m.fit(multi_start=False)

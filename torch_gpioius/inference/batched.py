@@ -195,9 +195,11 @@ class BatchedExactInference(StructuredExactInference):
         return super().remove(drop, task)
 
     # ------------------------------------------------------------------ factorisation
-    def factor(self, b: Tensor, derivatives: bool = False) -> dict:
+    def factor(self, b: Tensor, derivatives: bool = False, trial: bool = False) -> dict:
         """As the structured engine; without ``derivatives``, at the held K_t the bordered factorisation is
-        returned, and at a new K_t the factorisation is built once with S^-1 and held for later batches."""
+        returned, and at a new K_t the factorisation is built once with S^-1 and held for later batches, except for
+        a Newton ``trial``'s value (``mll_value``): the inverse of S that :meth:`_hold` adds costs more than the
+        factorisation, and a refused trial never needs it."""
         key = tuple(b.detach().flatten().tolist())
         held = self._held
         if not derivatives and self.n_inner:
@@ -205,19 +207,11 @@ class BatchedExactInference(StructuredExactInference):
                 return held["cache"]
             if self._key == key:                 # a full factorisation at this K_t (a Newton trial's MLL)
                 return self._cache
+            if trial:
+                return super().factor(b, trial=True)
             self._hold(b)
             return self._held["cache"]
         return super().factor(b, derivatives)
-
-    def mll_value(self, b: Tensor) -> float:
-        """The log marginal likelihood alone at ``b`` (a Newton trial point): at the held K_t from the held state;
-        elsewhere from the structured engine's factorisation, without building a held state (the inverse of S that
-        :meth:`_hold` adds costs more than the factorisation; a trial that is refused never needs it)."""
-        key = tuple(b.detach().flatten().tolist())
-        held = self._held
-        if self.n_inner and not (held is not None and held["key"] == key and held["n"] == self.n_inner):
-            StructuredExactInference.factor(self, b, trial=True)
-        return float(self.mll(b))
 
     def _hold(self, b: Tensor) -> None:
         """Build the held state at K_t = b from one full factorisation (with T') and the inverse of S."""

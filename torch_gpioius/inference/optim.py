@@ -128,9 +128,10 @@ def newton_maximize(value, phi0: np.ndarray, lower: np.ndarray, upper: np.ndarra
         return_hessian: also return the Hessian at the last accepted point (the point returned, or the one the
             final Newton-decrement step left), not that of a trial point it evaluated and refused.
         level: ``phi -> f`` alone (``-inf`` where it cannot be evaluated), or None. With it a trial point is judged
-            by its value first and ``value`` (the derivatives) is asked only where it is accepted: the same points,
-            decisions and result, with refused trials at the cost of the value alone (for the GP's likelihood one
-            factorisation, against the Hessian's inverse and products, several times as much).
+            by its value first and ``value`` (the derivatives) is asked only where it is accepted, so refused trials
+            cost the value alone (for the GP's likelihood one factorisation, against the Hessian's inverse and
+            products, several times as much); the damped steps make the same decisions. An edge step walks on along
+            its coordinate by values while they rise (:func:`_edge_walk`), the derivatives asked where it ends.
 
     Returns:
         ``(phi, f, projected_gradient_norm, iterations, converged)`` (and the `(k, k)` Hessian with

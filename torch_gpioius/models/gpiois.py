@@ -431,9 +431,12 @@ class GPIOIS(ImplicitSurfaceGP):
                           "K_t[0,1] is unidentified (reported as NaN); only the observed task's variance was learned",
                           UnidentifiedSimilarityWarning, stacklevel=2)
         if not best.converged:
-            warnings.warn(f"GPIOIS.fit: K_t's fit stopped at its cap of {best.iterations} iterations, short of the "
-                          f"optimum (projected gradient {best.grad_norm:.3g}); the best K_t found is used "
-                          "(fit_result has the details)", FitNotConvergedWarning, stacklevel=2)
+            why = (f"at its cap of {best.iterations} iterations" if best.iterations >= tol.fit_max_iter else
+                   f"after {best.iterations} iterations, its last steps gaining less than the likelihood's rounding "
+                   "(tol.fit_ftol)")
+            warnings.warn(f"GPIOIS.fit: K_t's fit stopped {why}, short of the gradient tolerance (projected gradient "
+                          f"{best.grad_norm:.3g}); the best K_t found is used (fit_result has the details)",
+                          FitNotConvergedWarning, stacklevel=2)
         self.task_covariance = best.task_covariance
         self.fit_result = dataclasses.replace(best, starts=starts, scout=scouted)
         return self
