@@ -575,9 +575,8 @@ class StructuredExactInference:
             _, t1, t2 = self._series.t_matrices(c, True)
         else:                # T came from direct products (outside the store's window): so do its derivatives
             _, t1, t2 = self._direct_t_matrices(c, (1, 2))
-        pd = self.p @ self._weight_vectors(cache["d"], derivatives=True)
-        pd[:, 0] = cache["pd"][:, 0]
-        cache.update(t1=t1, t2=t2, pd=pd)
+        derivative_pd = self.p @ self._weight_vectors(cache["d"], derivatives=True)[:, 1:]
+        cache.update(t1=t1, t2=t2, pd=torch.cat([cache["pd"][:, :1], derivative_pd], dim=1))
         return cache
 
     def mll_value(self, b: Tensor) -> float:
