@@ -15,19 +15,25 @@ def gram(x, task, kt, theta, noise):
     return imq(x, x, theta) * kt[np.ix_(task, task)] + noise * np.eye(len(x))
 
 
+def _means(m, task):
+    """The prior mean of each observation: ``m`` one constant, or a constant per task ``(m_0, m_1)``."""
+    m = np.asarray(m, dtype=float)
+    return m if m.ndim == 0 else m[task]
+
+
 def posterior(x, y, task, kt, theta, noise, xq, tq, m=1.0):
-    """Eq. (12)-(13): mean and variance of F_tq at xq."""
+    """Eq. (12)-(13): mean and variance of F_tq at xq (``m``: the prior mean, or one per task)."""
     g = gram(x, task, kt, theta, noise)
     kq = imq(xq, x, theta) * kt[tq, task][None, :]
-    mean = m + kq @ np.linalg.solve(g, y - m)
+    mean = _means(m, tq) + kq @ np.linalg.solve(g, y - _means(m, task))
     var = kt[tq, tq] / theta - np.einsum("ij,ji->i", kq, np.linalg.solve(g, kq.T))
     return mean, var
 
 
 def mll(x, y, task, kt, theta, noise, m=1.0):
-    """Eq. (16) with C = -n/2 log(2 pi)."""
+    """Eq. (16) with C = -n/2 log(2 pi) (``m``: the prior mean, or one per task)."""
     g = gram(x, task, kt, theta, noise)
-    r = y - m
+    r = y - _means(m, task)
     sign, logdet = np.linalg.slogdet(g)
     assert sign > 0
     return -0.5 * logdet - 0.5 * r @ np.linalg.solve(g, r) - 0.5 * len(x) * np.log(2 * np.pi)

@@ -37,6 +37,8 @@ class Tolerances:
         noise_range: supported noise variance sigma^2.
         task_covariance_max: largest supported magnitude of a K_t entry (the optimiser's bounds keep K_t below
             2 e^24 ~ 5.3e10).
+        outer_mean_span: how far the outer task's prior mean may lie from 1 (``GPIOIS.set_outer_mean``), in label
+            units (10: a cover 10 ramps, 50 cm at the 5 cm ramp, off the body).
         structured_series: bound, relative to sigma^2, on the perturbation of the inner Schur complement (and
             of its c-derivatives, scaled by c and c^2) from truncating the Chebyshev expansion of the structured
             engine (``StructuredExactInference``).
@@ -53,6 +55,7 @@ class Tolerances:
     theta_range: tuple[float, float] = (1e-6, 1e3)
     noise_range: tuple[float, float] = (1e-12, 1e6)
     task_covariance_max: float = 1e12
+    outer_mean_span: float = 10.0
 
 
 tol = Tolerances()

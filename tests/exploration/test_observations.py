@@ -196,6 +196,8 @@ def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off
     assert len(m.train_targets) == len(x)
     assert len(retract_vision_inside(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))) == 0
     removed = retract_vision_inside(m, contacts, policy)
+
+
     if cover < 0.02:
         assert len(removed) == 0 and len(m.train_targets) == len(x)
         return
@@ -213,3 +215,44 @@ def test_the_policy_refuses_a_gap_that_is_not_a_length():
     for bad in (-0.02, 0.0, float("nan"), True):
         with pytest.raises(ValueError, match="vision_inside_gap"):
             ObservationPolicy(vision_inside_gap=bad)
+
+
+@pytest.mark.parametrize("cover", [0.008, 0.04], ids=["tight", "wide"])
+def test_the_outer_mean_stands_for_the_gap_the_touches_measure(cover):
+    """The same body and covers: with ``cover_offset`` the wide cover's gap (4 cm less the planes' sagitta) sets the
+    outer task's prior mean to 1 - gap / ramp once five contacts are in; the tight cover's (under the 2 cm limit)
+    leaves it at 1, as do no limit, no ``cover_offset``, or fewer contacts; a gap that moves by no more than
+    OFFSET_STEP leaves it where it was, one that moves further moves it."""
+    from torch_gpioius.exploration.observations import (GAP_MIN_CONTACTS, OFFSET_STEP, cover_gap,
+                                                        offset_outer_mean)
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.02, cover_offset=True)
+    seen = _sphere(0.10 + cover, 300, seed=4)
+    contacts = _sphere(0.10, 12, seed=5)
+    x, y = np.r_[contacts, seen], np.zeros(len(contacts) + len(seen))
+    t = np.r_[np.zeros(len(contacts)), np.ones(len(seen))].astype(np.int64)
+    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), theta=0.1)
+    assert not offset_outer_mean(m, contacts[:GAP_MIN_CONTACTS - 1], policy)
+    assert not offset_outer_mean(m, contacts, dataclasses.replace(policy, cover_offset=False))
+    assert not offset_outer_mean(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))
+    assert m.outer_mean == 1.0
+    changed = offset_outer_mean(m, contacts, policy)
+    gap = cover_gap(contacts, seen, reach=0.02)
+    if cover < 0.02:
+        assert not changed and m.outer_mean == 1.0
+        return
+    assert changed and 0.034 < gap < 0.04
+    assert abs(m.outer_mean - (1.0 - gap / policy.ramp)) < 1e-15
+    # the touches move on: within OFFSET_STEP the mean stays, beyond it follows
+    near = contacts * (1.0 + 0.5 * OFFSET_STEP / 0.10)
+    assert not offset_outer_mean(m, near, policy) and abs(m.outer_mean - (1.0 - gap / policy.ramp)) < 1e-15
+    deeper = contacts * (1.0 - 2 * OFFSET_STEP / 0.10)
+    assert offset_outer_mean(m, deeper, policy)
+    assert abs(m.outer_mean - (1.0 - cover_gap(deeper, seen, reach=0.02) / policy.ramp)) < 1e-15
+    assert m.outer_mean < 1.0 - gap / policy.ramp
+
+
+def test_the_policy_refuses_a_cover_offset_that_is_not_a_switch():
+    for bad in (1, "yes", None, 0.5):
+        with pytest.raises(ValueError, match="cover_offset"):
+            ObservationPolicy(cover_offset=bad)

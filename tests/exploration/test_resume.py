@@ -157,10 +157,13 @@ def test_a_run_that_reached_resumes_to_the_same_end(tmp_path, cut):
     assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
 
 
-def test_a_wide_covers_retracted_camera_points_are_logged_and_resume_alike(tmp_path):
-    """Under a cover 4 cm off an ellipsoid (the defaults for a user's object) the touches retract the camera's inside
-    points at the fifth contact: the log says which, its replay holds the run's final data, and a run cut before that
-    step and resumed retracts them at the same step and ends where the uninterrupted one ends."""
+@pytest.mark.parametrize("offset", [False, True], ids=["retracted", "outer-mean"])
+def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
+    """Under a cover 4 cm off an ellipsoid (the defaults for a user's object) the touches measure the gap at the
+    fifth contact and retract the camera's inside points there: the log says which, its replay holds the run's final
+    data. With ``cover_offset`` (the defaults) the outer task's prior mean is set to 1 - gap / ramp from that step on,
+    logged with each step, and the log's model at the last step is the run's; without it the mean stays 1.
+    Either way a run cut before that step, or after it, and resumed ends where the uninterrupted one ends."""
     import trimesh
 
     from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS
@@ -169,26 +172,39 @@ def test_a_wide_covers_retracted_camera_points_are_logged_and_resume_alike(tmp_p
 
     body = trimesh.creation.icosphere(subdivisions=3, radius=0.06)
     body.apply_scale([1.3, 1.0, 0.8])
-    scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1])
-    assert scene.defaults.policy.vision_inside_gap == 0.03
+    scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1], cover_offset=offset)
+    assert scene.defaults.policy.vision_inside_gap == 0.03 and scene.defaults.policy.cover_offset == offset
+    assert Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1]).defaults.policy.cover_offset
     kw = dict(max_travel=0.08, metrics_every=100, progress=False)
     log = tmp_path / "run.gpioius"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         reference = tg.explore(scene, log=log, **kw)
     y, t = reference.model.train_targets.numpy(), reference.model.train_task.numpy()
-    assert reference.n_steps > GAP_MIN_CONTACTS and not ((y < 0) & (t == 1)).any()
+    assert reference.n_steps > GAP_MIN_CONTACTS
     run = load_run(log)
     first, last = run.states[run.steps[0]], run.states[run.steps[-1]]
     assert ((first.y < 0) & (first.task == 1)).sum() > 50                 # the camera's, 2 cm behind the cloth
     np.testing.assert_array_equal(last.x, reference.model.train_inputs[0].numpy())
     np.testing.assert_array_equal(last.y, y)
+    means = [run.params[k]["outer_mean"] for k in run.steps]
+    assert not ((y < 0) & (t == 1)).any()                  # the camera's inside points retracted, with or without
     gone = [k for k in run.steps if ((run.states[k].y < 0) & (run.states[k].task == 1)).sum() == 0]
     assert gone[0] == GAP_MIN_CONTACTS - 1                 # step 0 is the first contact: the fifth is step 4
-    _cut_after_step(log, 2)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        resumed = tg.explore(scene, resume_from=log, **kw)
-    assert resumed.n_steps == reference.n_steps
-    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
-    assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
+    if offset:
+        assert all(v == 1.0 for v in means[:GAP_MIN_CONTACTS - 1]) and 0.0 < means[GAP_MIN_CONTACTS - 1] < 0.6
+        assert means[-1] == reference.model.outer_mean
+        q = torch.as_tensor(reference.contacts[-3:] * 0.9)
+        torch.testing.assert_close(run.model_at(run.steps[-1]).predict(q, 0)[0], reference.model.predict(q, 0)[0],
+                                   rtol=0, atol=1e-9)
+    else:
+        assert set(means) == {1.0}
+    for cut in (2, GAP_MIN_CONTACTS + 1):                  # before the gap is measured, and after
+        _cut_after_step(log, cut)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            resumed = tg.explore(scene, resume_from=log, **kw)
+        assert resumed.n_steps == reference.n_steps
+        assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
+        assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
+        assert resumed.model.outer_mean == reference.model.outer_mean

@@ -539,3 +539,118 @@ def test_an_unconverged_fit_says_why_it_stopped(monkeypatch, random_data, iterat
     m = _model(random_data, inference="dense")
     with pytest.warns(gpiois_module.FitNotConvergedWarning, match=why):
         m.fit(multi_start=False)
+
+
+# ---------------------------------------------------------------------- the outer task's prior mean
+@pytest.mark.parametrize("inference", ["dense", "structured", "batched"])
+def test_an_outer_mean_of_its_own_is_the_dense_per_task_mean_reference(random_data, inference):
+    """With the outer task's prior mean at 0.3 every engine's posterior of both tasks, its closed-form gradient, the
+    GPyTorch idiom's posterior and the MLL equal the dense reference with a mean per task; appended data and a
+    restored mean of 1 give the paper's model again."""
+    x, y, t = random_data
+    m = _model(random_data, inference=inference).set_outer_mean(0.3)
+    assert m.outer_mean == 0.3
+    xq = np.random.default_rng(7).uniform(-0.4, 0.4, (15, 2))
+    for task in (0, 1):
+        rm, rv = ref.posterior(x.numpy(), y.numpy(), t.numpy(), KT, 0.1, 0.006, xq, task, m=(1.0, 0.3))
+        mean, var = m.predict(torch.tensor(xq), task=task)
+        np.testing.assert_allclose(mean.numpy(), rm, atol=1e-8, rtol=0)
+        np.testing.assert_allclose(var.numpy(), rv, atol=1e-8, rtol=0)
+        np.testing.assert_allclose(m.predict_mean(torch.tensor(xq), task).detach().numpy(), rm, atol=1e-8, rtol=0)
+        closed = m._predict_with_gradients(torch.tensor(xq), task)
+        if closed is not None:
+            np.testing.assert_allclose(closed[0].numpy(), rm, atol=1e-8, rtol=0)
+        with torch.no_grad():
+            post = m.eval()(torch.tensor(xq), task)
+        m.train()
+        np.testing.assert_allclose(post.mean.numpy(), rm, atol=1e-8, rtol=0)
+    ref_mll = ref.mll(x.numpy(), y.numpy(), t.numpy(), KT, 0.1, 0.006, m=(1.0, 0.3))
+    assert abs(float(m.log_marginal_likelihood()) - ref_mll) < 1e-9 * len(x)
+    # an appended outer point enters with the outer mean (the engine's labels are shifted on the way in)
+    xn, yn, tn = np.array([[0.05, -0.1], [0.2, 0.2]]), np.array([0.0, 1.0]), np.array([1, 0])
+    m.add_observations(xn, yn, tn)
+    xa, ya, ta = np.r_[x.numpy(), xn], np.r_[y.numpy(), yn], np.r_[t.numpy(), tn]
+    rm, _ = ref.posterior(xa, ya, ta, KT, 0.1, 0.006, xq, 0, m=(1.0, 0.3))
+    np.testing.assert_allclose(m.predict(torch.tensor(xq), 0)[0].numpy(), rm, atol=1e-8, rtol=0)
+    m.set_outer_mean(1.0)
+    rm, _ = ref.posterior(xa, ya, ta, KT, 0.1, 0.006, xq, 1)
+    np.testing.assert_allclose(m.predict(torch.tensor(xq), 1)[0].numpy(), rm, atol=1e-8, rtol=0)
+
+
+def test_a_bad_outer_mean_is_refused_and_changes_nothing(random_data, tmp_path):
+    m = _model(random_data).set_outer_mean(0.5)
+    q = torch.tensor([[0.1, 0.0]], dtype=torch.float64)
+    before = m.predict(q, 1)[0]
+    for bad in (float("nan"), float("inf"), 12.0, -9.5, "0.5", None):
+        with pytest.raises(ValueError, match="outer_mean"):
+            m.set_outer_mean(bad)
+    assert m.outer_mean == 0.5 and torch.equal(m.predict(q, 1)[0], before)
+    state = m.state_dict()
+    state["outer_mean_module.raw_constant"] = torch.tensor(float("nan"), dtype=torch.float64)
+    with pytest.raises(ValueError):
+        m.load_state_dict(state)
+    assert m.outer_mean == 0.5
+
+
+def test_a_checkpoint_keeps_the_outer_mean_and_an_older_one_loads_with_the_papers(random_data, tmp_path):
+    """Saved and loaded, the outer mean comes back; a checkpoint saved before the outer task had a mean of its own
+    (no such entry in its state) loads with the paper's mean of 1 for both tasks."""
+    from torch_gpioius.io import checkpoints
+
+    m = _model(random_data).set_outer_mean(0.25)
+    path = checkpoints.save_checkpoint(m, tmp_path / "m.pt")
+    back = checkpoints.load_checkpoint(path)
+    q = torch.tensor([[0.1, 0.0], [-0.2, 0.1]], dtype=torch.float64)
+    assert back.outer_mean == 0.25
+    torch.testing.assert_close(back.predict(q, 1)[0], m.predict(q, 1)[0], rtol=0, atol=1e-12)
+    old = _model(random_data)
+    state = {k: v for k, v in old.state_dict().items() if not k.startswith("outer_mean_module")}
+    original = old.state_dict
+    old.state_dict = lambda *a, **k: state            # as the library before 2026-11-27 saved it
+    path = checkpoints.save_checkpoint(old, tmp_path / "old.pt")
+    old.state_dict = original
+    back = checkpoints.load_checkpoint(path)
+    assert back.outer_mean == 1.0
+    torch.testing.assert_close(back.predict(q, 0)[0], old.predict(q, 0)[0], rtol=0, atol=1e-12)
+
+
+def _fibonacci_sphere(radius, n):
+    i = np.arange(n) + 0.5
+    phi, th = np.arccos(1 - 2 * i / n), np.pi * (1 + 5 ** 0.5) * i
+    return radius * np.c_[np.cos(th) * np.sin(phi), np.sin(th) * np.sin(phi), np.cos(phi)]
+
+
+def test_the_outer_mean_takes_a_covers_offset_out_of_the_transfer():
+    """A body of 10 cm radius touched on its top cap only, under a cover 4 cm off it seen all round (surface points
+    and free space 5 and 10 cm out, the 5 cm ramp). With the paper's one prior mean, the learned K_t carries the
+    cover's offset onto the body: away from the touches the inner zero level lies over a centimetre outside the
+    body, towards the cover. With the outer mean at 1 - 4 cm / 5 cm it lies within 8 mm of the body all round."""
+    from torch_gpioius.kernels import Matern52
+
+    body, gap = 0.10, 0.04
+    seen = _fibonacci_sphere(body + gap, 200)
+    out = seen / np.linalg.norm(seen, axis=1, keepdims=True)
+    touch = _fibonacci_sphere(body, 400)
+    touch = touch[touch[:, 2] > 0.07]
+    free = touch / body * (body + 0.05)
+    x = np.r_[touch, free, seen, seen + 0.05 * out, seen + 0.10 * out]
+    y = np.r_[np.zeros(len(touch)), np.ones(len(free)), np.zeros(len(seen)), np.ones(2 * len(seen))]
+    t = np.r_[np.zeros(2 * len(touch)), np.ones(3 * len(seen))].astype(np.int64)
+    directions = np.array([[0, 0, -1], [1, 0, 0], [0, 1, 0], [0.6, 0, -0.8], [-0.6, 0.6, -0.52]])
+    r = np.linspace(0.0, 0.2, 2001)
+
+    def zero_radius(outer_mean):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", tg.models.gpiois.FitNotConvergedWarning)
+            m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), noise=0.08,
+                          kernel=Matern52(0.1)).set_outer_mean(outer_mean).fit(multi_start=True)
+        radii = []
+        for d in directions / np.linalg.norm(directions, axis=1, keepdims=True):
+            mu = m.predict_mean(torch.as_tensor(np.outer(r, d)), 0).detach().numpy()
+            crossing = np.flatnonzero((mu[:-1] < 0) & (mu[1:] >= 0))
+            radii.append(r[crossing[-1]] if len(crossing) else np.nan)
+        return np.array(radii)
+
+    paper, offset = zero_radius(1.0), zero_radius(1.0 - gap / 0.05)
+    assert (paper > body + 0.009).all(), paper
+    assert (np.abs(offset - body) < 0.008).all(), offset

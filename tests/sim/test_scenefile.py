@@ -123,6 +123,7 @@ def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_bo
     (GOOD + "[forcefield]\ntouch_inside = 0.5\n", "touch_inside"),
     (GOOD + "[forcefield]\nvision_inside = -0.01\n", "vision_inside"),
     (GOOD + "[forcefield]\nvision_inside_gap = 0.2\n", "vision_inside_gap"),
+    (GOOD + "[forcefield]\ncover_offset = 1\n", "cover_offset: must be true or false"),
     (GOOD + "[forcefield]\nlearn = \"everything\"\n", "learn: must be one of"),
 ])
 def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
@@ -144,15 +145,16 @@ def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     assert isinstance(d.kernel, Matern52) and d.kernel.ell == 0.1 and d.noise == 0.08
     assert d.policy.touch_inside == 0.02 and d.policy.vision_inside == 0.02               # inside points
     assert d.policy.vision_inside_gap == 0.03                       # retracted behind a cover standing 3 cm off
+    assert d.policy.cover_offset                                    # and the outer mean then stands for the gap
     plain = load_scene(_write(tmp_path, GOOD + "[forcefield]\ntouch_inside = 0\nvision_inside = 0.01\n"
-                                               "vision_inside_gap = 0\n")).defaults
+                                               "vision_inside_gap = 0\ncover_offset = false\n")).defaults
     assert plain.policy.touch_inside is None and plain.policy.vision_inside == 0.01
-    assert plain.policy.vision_inside_gap is None
+    assert plain.policy.vision_inside_gap is None and not plain.policy.cover_offset
     paper = load_scene(_write(tmp_path, GOOD + "[forcefield]\nsettings = \"paper\"\n"))
     assert paper.views == ("fixed",) and paper.defaults.policy.voxel == 0.05 and paper.defaults.kernel is None
     assert paper.defaults.policy.vision_free_far is None and paper.defaults.theta == 0.15
     assert paper.defaults.policy.touch_inside is None and paper.defaults.policy.vision_inside is None
-    assert paper.defaults.policy.vision_inside_gap is None
+    assert paper.defaults.policy.vision_inside_gap is None and not paper.defaults.policy.cover_offset
     # the call's settings win over the file's
     assert load_scene(_write(tmp_path, GOOD), settings="paper").views == ("fixed",)
     own = load_scene(_write(tmp_path, GOOD + "[forcefield]\nviews = 2\nkernel = \"imq\"\ntheta = 0.12\nnoise = 0.02\n"
@@ -212,6 +214,7 @@ def test_one_file_builds_both_worlds_with_each_worlds_own_cover_options(tmp_path
                               "c.toml"), world="mujoco", settings="default")
     assert loose.defaults.policy.vision_inside is None and loose.defaults.policy.touch_inside == 0.02
     assert mine.defaults.policy.vision_inside_gap == 0.03 and mj.defaults.policy.vision_inside_gap is None
+    assert mine.defaults.policy.cover_offset and not mj.defaults.policy.cover_offset
     with pytest.raises(ValueError, match="vision_inside"):
         load_scene(_write(tmp_path, text.replace("spacing = 0.03\n", "spacing = 0.03\nvision_inside = 0.5\n"),
                           "d.toml"), world="mujoco")

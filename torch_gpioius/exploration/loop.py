@@ -25,8 +25,8 @@ from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
-from .observations import (Observations, drop_contradicted_inside, retract_free_space, retract_vision_inside,
-                           thin_points, vision_observations)
+from .observations import (Observations, drop_contradicted_inside, offset_outer_mean, retract_free_space,
+                           retract_vision_inside, thin_points, vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .state import ExplorationState, StepRecord
 from .trace import Trace
@@ -231,6 +231,7 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     camera = retract_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     if len(camera):                      # indices into the data before this step, as the log and replays read them
         removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
+    offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     select = getattr(cfg.touch, "select", None)
     if callable(select):
         obs = select(state.model, obs)

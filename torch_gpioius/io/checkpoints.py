@@ -154,6 +154,9 @@ def load_checkpoint(path: str | os.PathLike):
             model = GPIS(tensors["train_x"], tensors["train_y"], theta=payload["theta"], noise=payload["noise"])
         else:
             raise CheckpointError(f"{path}: unknown model kind {payload['kind']!r}")
+        if payload["kind"] == "GPIOIS" and "outer_mean_module.raw_constant" not in state:
+            # saved before the outer task had a prior mean of its own (2026-11-27): the paper's, 1, for both tasks
+            state = {**state, "outer_mean_module.raw_constant": torch.ones((), dtype=torch.float64)}
         model.load_state_dict(state)
     except (KeyError, ValueError, RuntimeError) as exc:
         raise CheckpointError(f"{path}: checkpoint data is inconsistent ({exc})") from exc

@@ -113,6 +113,8 @@ class LogRecorder(Recorder):
                 "robot_time": record.robot_time, "contact_distance": record.contact_distance,
                 "contact_on_body": record.contact_on_body, "truncation": record.truncation,
                 "fit_gap": record.fit_gap, "length": record.length, "noise": record.noise}
+        if hasattr(state.model, "outer_mean"):      # the cover's offset (ObservationPolicy.cover_offset)
+            meta["outer_mean"] = state.model.outer_mean
         if run.config.learn != "task":              # learned length and noise, raw, so that resume restores them exactly
             meta["hyperparameters"] = state.model.hyperparameter_state()
         fit_state = getattr(state.model, "fit_state", None)
@@ -222,6 +224,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
             rec.region_correlation = np.full(model.regions, np.nan)
     elif hasattr(model, "task_covariance"):
         model.task_covariance = torch.as_tensor(last.arrays["kt"])
+        if isinstance(last.meta.get("outer_mean"), (int, float)):       # logged since 2026-11-27
+            model.set_outer_mean(float(last.meta["outer_mean"]))
         if "fit_hessian" in last.arrays and callable(getattr(model, "restore_fit_state", None)):
             model.restore_fit_state(last.arrays["fit_hessian"], last.meta.get("fit_relearned", True),
                                     last.meta.get("held_fits", 0))

@@ -82,7 +82,7 @@ class RunHistory:
             return model.set_params(p["local_params"])
         if "kt" in p and np.isfinite(p["kt"]).all():
             model = GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
-                           kernel=kernel)
+                           kernel=kernel).set_outer_mean(p.get("outer_mean", 1.0))
             return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
         return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, kernel=kernel).fit()
 
@@ -143,6 +143,8 @@ def load_run(path: str | os.PathLike) -> RunHistory:
                  "length": v["length"], "noise": v["noise"]}
             if isinstance(rec.meta.get("hyperparameters"), dict):   # a run that learned the length (and noise)
                 p["hyperparameters"] = rec.meta["hyperparameters"]
+            if isinstance(rec.meta.get("outer_mean"), (int, float)):  # logged since 2026-11-27
+                p["outer_mean"] = float(rec.meta["outer_mean"])
             for key in ("kt", "local_params", "contact", "pad_pose", "pad_size"):
                 if key in a:
                     p[key] = np.asarray(a[key], dtype=np.float64)

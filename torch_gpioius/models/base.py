@@ -167,14 +167,19 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         x = self.train_inputs[0]
         key = self._key(x.shape[0])
         if self._engine is None or self._engine_key != key:
-            self._engine = self._engine_class()(x, self.train_targets, self._train_task(), self.covar_module,
-                                                self.noise, self.prior_mean)
+            self._engine = self._engine_class()(x, self._engine_targets(self.train_targets, self._train_task()),
+                                                self._train_task(), self.covar_module, self.noise, self.prior_mean)
             self._engine_key = key
         return self._engine
 
+    def _engine_targets(self, y: Tensor, task: Tensor) -> Tensor:
+        """The labels `(n,)` as the engines take them, which subtract the one prior mean :attr:`prior_mean` from
+        every label: the labels themselves (GPIOIS shifts those of a task whose prior mean differs)."""
+        return y
+
     def _append_to_engine(self, x: Tensor, y: Tensor, task: Tensor) -> None:
         if self._engine is not None:
-            self._engine.append(x, y, task)
+            self._engine.append(x, self._engine_targets(y, task), task)
             n = self._engine.n
             self._engine_key = self._key(n)
 
@@ -395,7 +400,8 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             kernel, start_noise = self.covar_module, self.noise
         keep = self._thinned(size, outer_size)
         task = self._train_task()
-        result = maximize_hyperparameters(kernel, self.train_inputs[0][keep], self.train_targets[keep], task[keep],
+        y = self._engine_targets(self.train_targets, task)[keep]
+        result = maximize_hyperparameters(kernel, self.train_inputs[0][keep], y, task[keep],
                                           start_noise, self._learned_task_covariance(), self.prior_mean,
                                           max_iter=max_iter, learn_noise=bool(learn_noise), **bounds)
         before = (self.hyperparameter_state(), self._hyper_state(), self._engine, self._engine_key)

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from gpytorch.distributions import MultivariateNormal
 from gpytorch.kernels import IndexKernel
+from gpytorch.means import ConstantMean
 from torch import Tensor
 
 from .base import ImplicitSurfaceGP
@@ -154,6 +155,11 @@ class GPIOIS(ImplicitSurfaceGP):
         self.task_covar_module.raw_var.data.fill_(_ZERO_VAR_RAW)
         self.task_covar_module.raw_var.requires_grad_(False)
         self.task_covariance = torch.eye(2, dtype=torch.float64) if task_covariance is None else task_covariance
+        #: The outer task's constant prior mean (``mean_module`` is the inner task's, m = 1): 1, the paper's, unless
+        #: set by :meth:`set_outer_mean`.
+        self.outer_mean_module = ConstantMean().double()
+        self.outer_mean_module.constant.data.fill_(1.0)
+        self.outer_mean_module.raw_constant.requires_grad_(False)
         #: Outcome of the last ``fit()`` (None before the first).
         self.fit_result: FitResult | None = None
         self._held_fits = 0
@@ -163,7 +169,8 @@ class GPIOIS(ImplicitSurfaceGP):
     def forward(self, x: Tensor, task: Tensor) -> MultivariateNormal:
         """GPyTorch prior at `(n, d)` points with `(n, 1)` task ids: mean m, covariance k_x ∘ K_t (eq. 9)."""
         covar = self.covar_module(x).mul(self.task_covar_module(task))
-        return MultivariateNormal(self.mean_module(x), covar)
+        outer = task.squeeze(-1) == OUTER
+        return MultivariateNormal(torch.where(outer, self.outer_mean_module(x), self.mean_module(x)), covar)
 
     def __call__(self, x, task=None, **kwargs):
         """``model(x, task)``: GPyTorch prior (train mode) or posterior (eval mode) of F_task at x.
@@ -243,8 +250,61 @@ class GPIOIS(ImplicitSurfaceGP):
         kt = self.task_covariance
         return float(kt[0, 1] / torch.sqrt(kt[0, 0] * kt[1, 1]))
 
+    # ------------------------------------------------------------------ the outer task's prior mean
+    @property
+    def outer_mean(self) -> float:
+        """The outer task's constant prior mean (the inner task's is m = 1, eq. 2): 1 unless set."""
+        return float(self.outer_mean_module.constant.reshape(-1)[0])
+
+    def set_outer_mean(self, value: float) -> "GPIOIS":
+        """Set the outer task's constant prior mean (1: the paper's model, one mean for both tasks).
+
+        With a correlation near 1 the inner estimate away from the touches is ``1 + r (mu_out - m_out)`` (``r =
+        K_t[0,1] / K_t[1,1]``): a cover that stands off the body by ``g`` everywhere is the body's field shifted by
+        ``g / ramp`` label units (the labels rise from 0 on a surface to 1 a ramp out), and an outer mean of ``1 -
+        g / ramp`` lets the transfer carry the cover's shape without its offset (docs/method-notes.md section 15).
+        The labels stay as they are (0, 1, negative inside); the engines see each task's residual from its own mean.
+        The engine is rebuilt at the next use; K_t is kept (re-learn with :meth:`fit`).
+
+        Args:
+            value: the mean, in label units, within ``1 +- tol.outer_mean_span``.
+
+        Raises:
+            ValueError: not a finite number in that range; the model is left unchanged.
+        """
+        value = as_float(value, "outer_mean", lo=1.0 - tol.outer_mean_span, hi=1.0 + tol.outer_mean_span)
+        if value != self.outer_mean:
+            self.outer_mean_module.constant.data.fill_(value)
+            self._engine = None
+        return self
+
+    def _outer_shift(self) -> float:
+        """How far the engines' labels of the outer task lie above the labels (``1 - outer_mean``): the engines
+        subtract one mean, 1, from every label."""
+        module = getattr(self, "outer_mean_module", None)
+        return 0.0 if module is None else 1.0 - float(module.constant.reshape(-1)[0])
+
+    def _engine_targets(self, y: Tensor, task: Tensor) -> Tensor:
+        shift = self._outer_shift()
+        return y if shift == 0.0 else y + shift * (task == OUTER).to(y.dtype)
+
+    def _predict(self, x, task: int) -> tuple[Tensor, Tensor]:
+        mean, var = super()._predict(x, task)
+        return (mean - self._outer_shift(), var) if task == OUTER and self._outer_shift() else (mean, var)
+
+    def _predict_mean(self, x, task: int) -> Tensor:
+        mean = super()._predict_mean(x, task)
+        return mean - self._outer_shift() if task == OUTER and self._outer_shift() else mean
+
+    def _predict_with_gradients(self, x, task: int):
+        out = super()._predict_with_gradients(x, task)
+        if out is None or task_id(task) != OUTER or not self._outer_shift():
+            return out
+        return (out[0] - self._outer_shift(),) + tuple(out[1:])
+
     def check_state(self) -> None:
         super().check_state()
+        as_float(self.outer_mean, "outer_mean", lo=1.0 - tol.outer_mean_span, hi=1.0 + tol.outer_mean_span)
         kt = self.task_covariance
         if float(kt.abs().max()) > tol.task_covariance_max:
             raise ValueError(f"task_covariance: entries above {tol.task_covariance_max:g} are outside the supported range")
@@ -315,7 +375,7 @@ class GPIOIS(ImplicitSurfaceGP):
         return StructuredExactInference if has_outer and self.noise >= 1e-8 else DenseExactInference
 
     def _key(self, n: int) -> tuple:
-        return super()._key(n) + (getattr(self, "outer_tol", None),)
+        return super()._key(n) + (getattr(self, "outer_tol", None), self._outer_shift())
 
     @property
     def truncation(self) -> float:
@@ -476,8 +536,8 @@ class GPIOIS(ImplicitSurfaceGP):
             cls = DirectStructuredInference
         elif isinstance(cls, functools.partial) and cls.func is StructuredExactInference:      # outer_tol
             cls = functools.partial(DirectStructuredInference, *cls.args, **cls.keywords)
-        copy = cls(self.train_inputs[0][keep], self.train_targets[keep], task[keep], self.covar_module, self.noise,
-                   self.prior_mean)
+        copy = cls(self.train_inputs[0][keep], self._engine_targets(self.train_targets, task)[keep], task[keep],
+                   self.covar_module, self.noise, self.prior_mean)
         return self._likelihood(copy)
 
     def _scouted_escape(self, engine, evaluate, level, size: int) -> FitResult | None:

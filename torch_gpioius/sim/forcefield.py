@@ -71,7 +71,9 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
       covers; the inside points bring it within 4 mm (docs/method-notes.md section 13). They assume a body thicker
       than 2 cm: on a thin-walled one (the mug) they overshoot instead. They also assume a cover within 2 cm of the
       body: the camera's are retracted once the touches show it standing more than 3 cm off
-      (``ObservationPolicy.vision_inside_gap``, :data:`COVER_GAP_LIMIT`).
+      (``ObservationPolicy.vision_inside_gap``, :data:`COVER_GAP_LIMIT`), and from then on the outer task's prior mean
+      stands for the gap they measure (``ObservationPolicy.cover_offset``), so that the transfer does not carry the
+      cover's offset onto the body (docs/method-notes.md section 15).
     """
     from ..kernels import Matern52
 
@@ -79,7 +81,7 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
     voxel = round(float(np.clip(extent / 10.0, 0.02, 0.05)), 4)
     d = ROBOT_STUDY_DEFAULTS if base is None else base
     policy = dataclasses.replace(d.policy, voxel=voxel, vision_free_far=0.10, touch_inside=INSIDE_DEPTH,
-                                 vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT)
+                                 vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT, cover_offset=True)
     return dataclasses.replace(d, policy=policy, kernel=Matern52(0.1))
 
 
@@ -110,13 +112,14 @@ def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefault
 
 
 #: The inside points' settings (:func:`with_inside_depths`; ``ObservationPolicy``'s fields of these names).
-INSIDE_SETTINGS = ("touch_inside", "vision_inside", "vision_inside_gap")
+INSIDE_SETTINGS = ("touch_inside", "vision_inside", "vision_inside_gap", "cover_offset")
 
 
 def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDefaults:
     """``defaults`` with the inside points' depths [m] given (``touch_inside``, ``vision_inside``; 0: none; None:
-    as they are) and the cover's gap beyond which the camera's are retracted (``vision_inside_gap``; 0: never),
-    each checked to lie in [0, 0.1] m.
+    as they are), the cover's gap beyond which the camera's are retracted (``vision_inside_gap``; 0: never), each
+    checked to lie in [0, 0.1] m, and whether the outer task's prior mean then stands for that gap (``cover_offset``,
+    True or False).
 
     Raises:
         ValueError: a value outside that range, or an unknown name (names it).
@@ -127,7 +130,12 @@ def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDe
         raise ValueError(f"inside depths: unknown {sorted(unknown)}; the settings are {', '.join(INSIDE_SETTINGS)}")
     if not given:
         return defaults
+    offset = given.pop("cover_offset", None)
+    if offset is not None and not isinstance(offset, bool):
+        raise ValueError(f"cover_offset: must be true or false, got {offset!r}")
     checked = {k: as_float(v, k, lo=0.0, hi=0.1, unit="m (0: none)") or None for k, v in given.items()}
+    if offset is not None:
+        checked["cover_offset"] = offset
     return dataclasses.replace(defaults, policy=dataclasses.replace(defaults.policy, **checked))
 
 
@@ -363,7 +371,7 @@ class Scene3D(World):
                   settings: str = "default", views=None, kernel=None, theta: float | None = None,
                   noise: float | None = None, voxel: float | None = None, touch_inside: float | None = None,
                   vision_inside: float | None = None, vision_inside_gap: float | None = None,
-                  learn: str | None = None) -> "Scene3D":
+                  learn: str | None = None, cover_offset: bool | None = None) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
         The mesh is loaded, checked and repaired if need be (:func:`torch_gpioius.sim.meshes.load_mesh`, which warns
@@ -406,6 +414,8 @@ class Scene3D(World):
                 0: none; default: by ``settings``).
             vision_inside_gap: the cover's gap [m] beyond which the touches retract the camera's inside points
                 (``ObservationPolicy.vision_inside_gap``; 0: never; default: by ``settings``, 3 cm or never).
+            cover_offset: beyond that gap, the outer task's prior mean stands for the gap the touches measure
+                (``ObservationPolicy.cover_offset``; default: by ``settings``, on or off).
             learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from ``theta``) or "all" (the
                 length and sigma^2, from ``theta`` and ``noise``; ``explore(learn=)``); default: by ``settings``.
 
@@ -433,7 +443,7 @@ class Scene3D(World):
             learn = as_learn(learn)
             defaults = dataclasses.replace(defaults, learn=learn)
         defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside,
-                                      vision_inside_gap=vision_inside_gap)
+                                      vision_inside_gap=vision_inside_gap, cover_offset=cover_offset)
         gap = (0.008 if cover == "tight" else 0.01) if gap is None else gap
         outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution)
         if start is None or direction is None or bounds is None:

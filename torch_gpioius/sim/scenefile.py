@@ -37,6 +37,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     touch_inside = 0.02               # an inside point this deep behind each contact [m] (0: none)
     vision_inside = 0.01              # and behind each seen point [m] (0: none)
     vision_inside_gap = 0.03          # the camera's retracted once touches show the cover this far off [m] (0: never)
+    cover_offset = true               # and the outer task's prior mean then stands for the gap they measure
     learn = "task"                    # "length": the kernel's length learned with K_t; "all": the noise too
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
@@ -70,10 +71,11 @@ _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
 _COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
           "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
 _SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "theta", "noise",
-                            "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "learn"},
+                            "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "cover_offset",
+                            "learn"},
              "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
                         "sensor_noise", "timestep", "settle_time", "camera_scale", "touch_inside", "vision_inside",
-                        "vision_inside_gap"}}
+                        "vision_inside_gap", "cover_offset"}}
 #: What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in the
 #: force-field world, its ``slack`` in MuJoCo), so that one file serves both worlds.
 _WORLD = {w: _SETTINGS[w] | (_COVER[w] - {"kind"}) for w in _SETTINGS}
