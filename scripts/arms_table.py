@@ -27,7 +27,8 @@ COLUMNS = (("H 10 %", "hausdorff_10", 100, 1), ("H 25 %", "hausdorff_25", 100, 1
            ("H final", "final_hausdorff", 100, 1), ("Chamfer 25 %", "chamfer_25", 100, 2),
            ("Chamfer final", "final_chamfer", 100, 2), ("F@1cm final", "final_fscore_10mm", 1, 2),
            ("bias final", "final_bias", 100, 2), ("unseen 25 %", "unseen_25", 1, 2),
-           ("rho final", "final_correlation", 1, 2), ("length final [cm]", "final_length", 100, 1),
+           ("rho final", "final_correlation", 1, 2), ("outer mean final", "final_outer_mean", 1, 2),
+           ("length final [cm]", "final_length", 100, 1),
            ("sigma^2 final", "final_noise", 1, 4), ("step [ms]", "median_step_time", 1000, 0),
            # each run's 95th percentile of its steps: the median over seeds, and the worst run
            ("step p95 [ms]", "p95_step_time", 1000, 0), ("worst run's p95 [ms]", "p95_step_time", 1000, 0, max),

@@ -315,6 +315,8 @@ def run_one(spec: RunSpec) -> dict:
         record = _record(spec, kw, trace, time.perf_counter() - t0)
         record["n_outer"] = _n_outer(trace.model)
         record["n_vision_inside"] = _n_outer(trace.model, inside=True)
+        # the outer task's prior mean at the end (1: the paper's; 1 - gap / ramp once the touches set it)
+        record["outer_mean"] = float(getattr(trace.model, "outer_mean", math.nan))
     policy = kw.get("policy", world.defaults.policy)
     record["voxel"] = policy.voxel or 0.0
     # the inside points' depths [m] (0: the paper's labels only)
@@ -543,6 +545,9 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "touch_inside": run.get("touch_inside", 0.0), "vision_inside": run.get("vision_inside", 0.0),
            "vision_inside_gap": run.get("vision_inside_gap", 0.0),
            "n_vision_inside": run.get("n_vision_inside", math.nan),
+           # the outer task's prior mean at the end (runs before 2026-11-27: the paper's 1; touch alone: NaN)
+           "final_outer_mean": run.get("outer_mean", 1.0 if run["mode"] != "tactile" else math.nan),
+
            "max_truncation": run.get("max_truncation", 0.0), "max_fit_gap": run.get("max_fit_gap", math.nan),
            # what the run learned (older runs: K_t alone, length and noise not recorded)
            "learn": run.get("learn", "task"), "final_length": run.get("length", math.nan),
