@@ -188,6 +188,9 @@ def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
     np.testing.assert_array_equal(last.x, reference.model.train_inputs[0].numpy())
     np.testing.assert_array_equal(last.y, y)
     means = [run.params[k]["outer_mean"] for k in run.steps]
+    # the header names cover_offset only when it is on, so that logs written before it existed still resume
+    assert run.meta["policy"].get("cover_offset", False) is offset and ("cover_offset" in run.meta["policy"]) is offset
+
     assert not ((y < 0) & (t == 1)).any()                  # the camera's inside points retracted, with or without
     gone = [k for k in run.steps if ((run.states[k].y < 0) & (run.states[k].task == 1)).sum() == 0]
     assert gone[0] == GAP_MIN_CONTACTS - 1                 # step 0 is the first contact: the fifth is step 4
