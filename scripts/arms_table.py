@@ -33,8 +33,8 @@ COLUMNS = (("H 10 %", "hausdorff_10", 100, 1), ("H 25 %", "hausdorff_25", 100, 1
            # each run's 95th percentile of its steps: the median over seeds, and the worst run
            ("step p95 [ms]", "p95_step_time", 1000, 0), ("worst run's p95 [ms]", "p95_step_time", 1000, 0, max),
            ("slowest step [s]", "max_step_time", 1, 1, max))
-# NaN there: not recorded (older runs; no learnable length), not a failed estimate
-TIMES = ("median_step_time", "p95_step_time", "max_step_time", "final_length", "final_noise")
+# NaN there: not recorded (older runs; no learnable length; touch alone has no outer mean), not a failed estimate
+TIMES = ("median_step_time", "p95_step_time", "max_step_time", "final_length", "final_noise", "final_outer_mean")
 
 
 def _arm(spec: str) -> tuple[str, dict]:
