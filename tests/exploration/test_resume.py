@@ -161,7 +161,7 @@ def test_a_run_that_reached_resumes_to_the_same_end(tmp_path, cut):
 def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
     """Under a cover 4 cm off an ellipsoid (the defaults for a user's object) the touches measure the gap at the
     fifth contact and retract the camera's inside points there: the log says which, its replay holds the run's final
-    data. With ``cover_offset`` (the defaults) the outer task's prior mean is set to 1 - gap / ramp from that step on,
+    data. With ``cover_offset`` (an option) the outer task's prior mean is set to 1 - gap / ramp from that step on,
     logged with each step, and the log's model at the last step is the run's; without it the mean stays 1.
     Either way a run cut before that step, or after it, and resumed ends where the uninterrupted one ends."""
     import trimesh
@@ -174,7 +174,7 @@ def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
     body.apply_scale([1.3, 1.0, 0.8])
     scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1], cover_offset=offset)
     assert scene.defaults.policy.vision_inside_gap == 0.03 and scene.defaults.policy.cover_offset == offset
-    assert Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1]).defaults.policy.cover_offset
+    assert not Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1]).defaults.policy.cover_offset
     kw = dict(max_travel=0.08, metrics_every=100, progress=False)
     log = tmp_path / "run.gpioius"
     with warnings.catch_warnings():

@@ -145,7 +145,9 @@ def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     assert isinstance(d.kernel, Matern52) and d.kernel.ell == 0.1 and d.noise == 0.08
     assert d.policy.touch_inside == 0.02 and d.policy.vision_inside == 0.02               # inside points
     assert d.policy.vision_inside_gap == 0.03                       # retracted behind a cover standing 3 cm off
-    assert d.policy.cover_offset                                    # and the outer mean then stands for the gap
+    assert not d.policy.cover_offset                                # the outer mean is an option, off
+    on = load_scene(_write(tmp_path, GOOD + "[forcefield]\ncover_offset = true\n")).defaults
+    assert on.policy.cover_offset and on.policy.vision_inside_gap == 0.03
     plain = load_scene(_write(tmp_path, GOOD + "[forcefield]\ntouch_inside = 0\nvision_inside = 0.01\n"
                                                "vision_inside_gap = 0\ncover_offset = false\n")).defaults
     assert plain.policy.touch_inside is None and plain.policy.vision_inside == 0.01
@@ -214,7 +216,7 @@ def test_one_file_builds_both_worlds_with_each_worlds_own_cover_options(tmp_path
                               "c.toml"), world="mujoco", settings="default")
     assert loose.defaults.policy.vision_inside is None and loose.defaults.policy.touch_inside == 0.02
     assert mine.defaults.policy.vision_inside_gap == 0.03 and mj.defaults.policy.vision_inside_gap is None
-    assert mine.defaults.policy.cover_offset and not mj.defaults.policy.cover_offset
+    assert not mine.defaults.policy.cover_offset and not mj.defaults.policy.cover_offset
     with pytest.raises(ValueError, match="vision_inside"):
         load_scene(_write(tmp_path, text.replace("spacing = 0.03\n", "spacing = 0.03\nvision_inside = 0.5\n"),
                           "d.toml"), world="mujoco")

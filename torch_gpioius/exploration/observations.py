@@ -142,7 +142,8 @@ class ObservationPolicy:
         cover_offset: once the touches show the cover standing off the body by more than ``vision_inside_gap``, the
             outer task's prior mean is set to ``1 - gap / ramp`` (:func:`offset_outer_mean`), so that the transfer
             carries the cover's shape onto the body without its offset (the camera's inside points are retracted
-            as without it; docs/method-notes.md section 15); False: the paper's one mean for both tasks.
+            as without it; docs/method-notes.md section 15); False (the default everywhere): the paper's one mean
+            for both tasks.
     """
 
     vision_free_offset: float | None = 0.05

@@ -37,7 +37,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     touch_inside = 0.02               # an inside point this deep behind each contact [m] (0: none)
     vision_inside = 0.01              # and behind each seen point [m] (0: none)
     vision_inside_gap = 0.03          # the camera's retracted once touches show the cover this far off [m] (0: never)
-    cover_offset = true               # and the outer task's prior mean then stands for the gap they measure
+    cover_offset = false              # true: the outer task's prior mean then stands for the gap they measure
     learn = "task"                    # "length": the kernel's length learned with K_t; "all": the noise too
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
