@@ -623,8 +623,10 @@ def _fibonacci_sphere(radius, n):
 def test_the_outer_mean_takes_a_covers_offset_out_of_the_transfer():
     """A body of 10 cm radius touched on its top cap only, under a cover 4 cm off it seen all round (surface points
     and free space 5 and 10 cm out, the 5 cm ramp). With the paper's one prior mean, the learned K_t carries the
-    cover's offset onto the body: away from the touches the inner zero level lies over a centimetre outside the
-    body, towards the cover. With the outer mean at 1 - 4 cm / 5 cm it lies within 8 mm of the body all round."""
+    cover's offset onto the body: away from the touches the inner zero level lies outside the body, towards the
+    cover (measured 9.5-16 mm). With the outer mean at 1 - 4 cm / 5 cm it lies within 8 mm of the body all round
+    (measured 5-6 mm inside: the outer field's zero level, without points inside the cover, lies a little deeper
+    than the offset says), closer than with one mean in every direction."""
     from torch_gpioius.kernels import Matern52
 
     body, gap = 0.10, 0.04
@@ -652,5 +654,6 @@ def test_the_outer_mean_takes_a_covers_offset_out_of_the_transfer():
         return np.array(radii)
 
     paper, offset = zero_radius(1.0), zero_radius(1.0 - gap / 0.05)
-    assert (paper > body + 0.009).all(), paper
+    assert (paper > body + 0.007).all(), paper
     assert (np.abs(offset - body) < 0.008).all(), offset
+    assert (np.abs(offset - body) < np.abs(paper - body)).all(), (offset, paper)
