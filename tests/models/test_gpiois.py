@@ -575,6 +575,12 @@ def test_an_outer_mean_of_its_own_is_the_dense_per_task_mean_reference(random_da
     m.set_outer_mean(1.0)
     rm, _ = ref.posterior(xa, ya, ta, KT, 0.1, 0.006, xq, 1)
     np.testing.assert_allclose(m.predict(torch.tensor(xq), 1)[0].numpy(), rm, atol=1e-8, rtol=0)
+    # a mean set between appends: the next append does not go into an engine built for the old mean
+    m.set_outer_mean(0.6)
+    m.add_observations(np.array([[-0.15, 0.05]]), np.array([0.0]), np.array([1]))
+    xb, yb, tb = np.r_[xa, [[-0.15, 0.05]]], np.r_[ya, 0.0], np.r_[ta, 1]
+    rm, _ = ref.posterior(xb, yb, tb, KT, 0.1, 0.006, xq, 0, m=(1.0, 0.6))
+    np.testing.assert_allclose(m.predict(torch.tensor(xq), 0)[0].numpy(), rm, atol=1e-8, rtol=0)
 
 
 def test_a_bad_outer_mean_is_refused_and_changes_nothing(random_data, tmp_path):

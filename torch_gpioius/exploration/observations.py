@@ -407,13 +407,21 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
     inside = outer & (y < 0)
     if not inside.any():
         return none
-    x = model.train_inputs[0].cpu().numpy()
-    measure = gap if gap is not None else CoverGap()
-    seen_gap = measure(contacts, x[outer & (y == 0)], reach=max(0.02, policy.voxel or 0.0))
+    seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
     if not seen_gap > policy.vision_inside_gap:             # NaN (too few contacts under seen cover) keeps them
         return none
     model.remove_observations(torch.as_tensor(inside))
     return np.flatnonzero(inside)
+
+
+def _seen_gap(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
+              gap: CoverGap | None) -> float:
+    """The cover's gap [m] the ``contacts`` show under the model's seen points (outer task, ``y == 0``; ``y`` and
+    ``outer`` the model's labels and outer-task mask), with a reach of the camera's voxel or 2 cm: what
+    :func:`retract_vision_inside` and :func:`offset_outer_mean` decide by. ``gap``: the run's :class:`CoverGap`."""
+    measure = gap if gap is not None else CoverGap()
+    seen = model.train_inputs[0].cpu().numpy()[outer & (y == 0)]
+    return measure(contacts, seen, reach=max(0.02, policy.voxel or 0.0))
 
 
 #: The outer task's prior mean follows the touches' gap (:func:`offset_outer_mean`) once that moved by more than this
@@ -446,9 +454,7 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
         return False
     y = model.train_targets.cpu().numpy()
     outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
-    x = model.train_inputs[0].cpu().numpy()
-    measure = gap if gap is not None else CoverGap()
-    seen_gap = measure(contacts, x[outer & (y == 0)], reach=max(0.02, policy.voxel or 0.0))
+    seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
     current = (1.0 - model.outer_mean) * policy.ramp             # the gap the mean stands for now [m]
     if not math.isfinite(seen_gap) or (current == 0.0 and not seen_gap > policy.vision_inside_gap):
         return False

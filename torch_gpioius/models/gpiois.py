@@ -28,6 +28,12 @@ from ..tolerances import tol
 
 __all__ = ["GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
 
+def _check_outer_mean(value) -> float:
+    """``value`` as the outer task's prior mean: a finite number within ``1 +- tol.outer_mean_span``, else a
+    ValueError naming ``outer_mean``."""
+    return as_float(value, "outer_mean", lo=1.0 - tol.outer_mean_span, hi=1.0 + tol.outer_mean_span)
+
+
 def _on_ridge(kt: Tensor) -> bool:
     """Whether K_t's correlation is 1 to within ``1 - rho^2 <= 1e-6`` (the shapes' relation at its bound)."""
     a, b, c = float(kt[0, 0]), float(kt[0, 1]), float(kt[1, 1])
@@ -272,17 +278,16 @@ class GPIOIS(ImplicitSurfaceGP):
         Raises:
             ValueError: not a finite number in that range; the model is left unchanged.
         """
-        value = as_float(value, "outer_mean", lo=1.0 - tol.outer_mean_span, hi=1.0 + tol.outer_mean_span)
+        value = _check_outer_mean(value)
         if value != self.outer_mean:
             self.outer_mean_module.constant.data.fill_(value)
-            self._engine = None
+            self._engine = None          # not appended to: its labels were shifted for the old mean
         return self
 
     def _outer_shift(self) -> float:
         """How far the engines' labels of the outer task lie above the labels (``1 - outer_mean``): the engines
-        subtract one mean, 1, from every label."""
-        module = getattr(self, "outer_mean_module", None)
-        return 0.0 if module is None else 1.0 - float(module.constant.reshape(-1)[0])
+        subtract one mean, 1, from every label. 0 while the constructor has not made the mean yet."""
+        return 1.0 - self.outer_mean if hasattr(self, "outer_mean_module") else 0.0
 
     def _engine_targets(self, y: Tensor, task: Tensor) -> Tensor:
         shift = self._outer_shift()
@@ -290,21 +295,21 @@ class GPIOIS(ImplicitSurfaceGP):
 
     def _predict(self, x, task: int) -> tuple[Tensor, Tensor]:
         mean, var = super()._predict(x, task)
-        return (mean - self._outer_shift(), var) if task == OUTER and self._outer_shift() else (mean, var)
+        return (mean - self._outer_shift(), var) if task == OUTER else (mean, var)
 
     def _predict_mean(self, x, task: int) -> Tensor:
         mean = super()._predict_mean(x, task)
-        return mean - self._outer_shift() if task == OUTER and self._outer_shift() else mean
+        return mean - self._outer_shift() if task == OUTER else mean
 
     def _predict_with_gradients(self, x, task: int):
         out = super()._predict_with_gradients(x, task)
-        if out is None or task_id(task) != OUTER or not self._outer_shift():
+        if out is None or task_id(task) != OUTER:
             return out
         return (out[0] - self._outer_shift(),) + tuple(out[1:])
 
     def check_state(self) -> None:
         super().check_state()
-        as_float(self.outer_mean, "outer_mean", lo=1.0 - tol.outer_mean_span, hi=1.0 + tol.outer_mean_span)
+        _check_outer_mean(self.outer_mean)
         kt = self.task_covariance
         if float(kt.abs().max()) > tol.task_covariance_max:
             raise ValueError(f"task_covariance: entries above {tol.task_covariance_max:g} are outside the supported range")

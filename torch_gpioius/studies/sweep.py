@@ -547,7 +547,6 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "n_vision_inside": run.get("n_vision_inside", math.nan),
            # the outer task's prior mean at the end (runs before 2026-11-27: the paper's 1; touch alone: NaN)
            "final_outer_mean": run.get("outer_mean", 1.0 if run["mode"] != "tactile" else math.nan),
-
            "max_truncation": run.get("max_truncation", 0.0), "max_fit_gap": run.get("max_fit_gap", math.nan),
            # what the run learned (older runs: K_t alone, length and noise not recorded)
            "learn": run.get("learn", "task"), "final_length": run.get("length", math.nan),
