@@ -1,0 +1,86 @@
+"""scripts/worst_errors.py and scripts/claims_table.py's per-seed count, on a study run here."""
+
+import csv
+import importlib.util
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _load(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+SCENE = """
+name = "ball"
+[object]
+mesh = "ball.stl"
+at = [0.5, 0.0, 0.15]
+[cover]
+kind = "tight"
+gap = 0.008
+"""
+
+
+def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(tmp_path):
+    """On a smoke study of a 6 cm ball: the script's Hausdorff distance is the study's own final one (the same
+    world rebuilt from the record), its two exact worst distances lie within the samples' spacing below it (the
+    study's is between samples, so up to a spacing above the exact one) and one of them reaches it, each worst
+    place lies where its samples do (a body sample inside the body's box), and the nearest contact is no nearer
+    than the closest one to that place recomputed here."""
+    from torch_gpioius.io.runs import load_run
+    from torch_gpioius.studies.sweep import run_sweep
+
+    trimesh.creation.icosphere(3, 0.06).export(tmp_path / "ball.stl")
+    (tmp_path / "ball.toml").write_text(SCENE)
+    run_sweep("forcefield", scenes=[tmp_path / "ball.toml"], modes=["visual-tactile"], seeds=1, out=tmp_path / "s",
+              smoke=True, backend="local", progress=False)
+    row = next(csv.DictReader(open(tmp_path / "s" / "runs.csv")))
+    log = tmp_path / "s" / "logs" / "ball_visual-tactile_0.gpioius"
+    worst = _load("worst_errors")
+    w = worst.worst_errors(log, tmp_path)
+    assert w is not None
+    assert w["hausdorff"] == pytest.approx(float(row["final_hausdorff"]), abs=1e-9)
+    exact = [w["estimate->body"]["worst"], w["body->estimate"]["worst"]]
+    assert max(exact) <= w["hausdorff"] + 1e-9
+    assert max(exact) >= w["hausdorff"] - 2 * worst.SPACING
+    box = w["body->estimate"]["box"]
+    assert np.all(box >= -1e-9) and np.all(box <= 1 + 1e-9)
+    for side in ("estimate->body", "body->estimate"):
+        assert 0.0 <= w[side]["share"] <= 1.0 and math.isfinite(w[side]["touch"]) and math.isfinite(w[side]["camera"])
+    # the nearest contact to the body's worst sample, recomputed from the log's final data
+    run = load_run(log)
+    data = run.states[run.steps[-1]]
+    contacts = np.asarray(data.x)[(np.asarray(data.task) == 0) & (np.asarray(data.y) == 0)]
+    seen = np.asarray(data.x)[(np.asarray(data.task) == 1) & (np.asarray(data.y) == 0)]
+    world = worst.world_of(log, tmp_path)
+    for side in ("estimate->body", "body->estimate"):
+        p = w[side]["point"]
+        assert w[side]["touch"] == pytest.approx(np.linalg.norm(contacts - p, axis=1).min(), abs=1e-12)
+        assert w[side]["camera"] == pytest.approx(np.linalg.norm(seen - p, axis=1).min(), abs=1e-12)
+    # the body's worst sample lies on the body (the ball's exact distance, within the mesh's facets), the
+    # estimate's worst one as far from it as the script says (its exact distance to the sphere, 2 mm of facets)
+    assert abs(world.true_distance(w["body->estimate"]["point"][None])[0]) < 1e-3
+    centre = world.inner.bounds.mean(axis=0)
+    off = abs(np.linalg.norm(w["estimate->body"]["point"] - centre) - 0.06)
+    assert off == pytest.approx(w["estimate->body"]["worst"], abs=2e-3)
+    text = worst.report(log, tmp_path, 0.02)
+    assert text.startswith("ball_visual-tactile_0: H ") and "body->estimate worst" in text
+
+
+def test_claims_table_counts_the_seeds_on_which_the_looser_cover_is_less_similar():
+    """Paired by seed, only seeds both have with finite correlations; a difference within SEED_MARGIN (a K_t on the
+    cone's boundary) is no difference."""
+    claims = _load("claims_table")
+    tight = {0: 1.0, 1: 1.0, 2: 0.9995, 3: 1.0, 4: math.nan}
+    wide = {0: 0.95, 1: 1.0 - claims.SEED_MARGIN / 2, 2: 0.99, 4: 0.5, 5: 0.1}
+    assert claims.seeds_lower(tight, wide) == (2, 3)
+    assert claims.seeds_lower({}, wide) == (0, 0)
