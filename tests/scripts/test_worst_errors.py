@@ -7,7 +7,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import trimesh
+
+from tests.scenes import ball_scene
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -19,17 +20,6 @@ def _load(name: str):
     return module
 
 
-SCENE = """
-name = "ball"
-[object]
-mesh = "ball.stl"
-at = [0.5, 0.0, 0.15]
-[cover]
-kind = "tight"
-gap = 0.008
-"""
-
-
 def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(tmp_path):
     """On a smoke study of a 6 cm ball: the script's Hausdorff distance is the study's own final one (the same
     world rebuilt from the record), its two exact worst distances lie within the samples' spacing below it (the
@@ -39,9 +29,7 @@ def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(
     from torch_gpioius.io.runs import load_run
     from torch_gpioius.studies.sweep import run_sweep
 
-    trimesh.creation.icosphere(3, 0.06).export(tmp_path / "ball.stl")
-    (tmp_path / "ball.toml").write_text(SCENE)
-    run_sweep("forcefield", scenes=[tmp_path / "ball.toml"], modes=["visual-tactile"], seeds=1, out=tmp_path / "s",
+    run_sweep("forcefield", scenes=[ball_scene(tmp_path)], modes=["visual-tactile"], seeds=1, out=tmp_path / "s",
               smoke=True, backend="local", progress=False)
     row = next(csv.DictReader(open(tmp_path / "s" / "runs.csv")))
     log = tmp_path / "s" / "logs" / "ball_visual-tactile_0.gpioius"

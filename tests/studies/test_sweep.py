@@ -19,6 +19,8 @@ from scipy.stats import wilcoxon
 from torch_gpioius.studies.stats import median_interval, paired_difference
 from torch_gpioius.studies.sweep import make_world, run_sweep
 
+from tests.scenes import ball_scene
+
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -197,31 +199,11 @@ def test_damaged_and_foreign_run_files_are_named_and_damaged_runs_done_again(tmp
     assert read_run_file(out / "runs" / "A_tactile_1.json")["seed"] == 1
 
 
-SCENE = """
-name = "{name}"
-[object]
-mesh = "ball.stl"
-at = [0.5, 0.0, 0.15]
-[cover]
-kind = "tight"
-gap = 0.008
-{extra}"""
-
-
-def _scene(tmp_path, name="ball", extra=""):
-    import trimesh
-
-    trimesh.creation.icosphere(3, 0.06).export(tmp_path / "ball.stl")
-    path = tmp_path / f"{name}.toml"
-    path.write_text(SCENE.format(name=name, extra=extra))
-    return path
-
-
 def test_scene_files_run_as_objects_and_a_run_that_never_touches_is_a_counted_failure(tmp_path):
     """A scene file is an object of the study under its own name. A run whose approach misses the body (here the
     approach aims past the ball's side) fails before any estimate; it is recorded as a failure with its reason,
     counts as the worst result, and the study goes on."""
-    ball = _scene(tmp_path)
+    ball = ball_scene(tmp_path)
     out = run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "s",
                     smoke=True, backend="local", progress=False)
     rows = list(csv.DictReader(open(tmp_path / "s" / "runs.csv")))
@@ -249,7 +231,7 @@ def test_scene_files_run_as_objects_and_a_run_that_never_touches_is_a_counted_fa
     assert record["terminated"].startswith("refused: approach")
     assert failure(read_run_file(tmp_path / "s" / "runs" / f"{spec.key}.json")).startswith("approach")
     with pytest.raises(ValueError, match="also the names of objects"):
-        run_sweep("forcefield", objects=["E"], scenes=[_scene(tmp_path, "E")], out=tmp_path / "t")
+        run_sweep("forcefield", objects=["E"], scenes=[ball_scene(tmp_path, "E")], out=tmp_path / "t")
     with pytest.raises(ValueError, match="does not build scene files"):
         run_sweep("planar", scenes=[ball], out=tmp_path / "u")
     with pytest.raises(ValueError, match="two scene files"):
@@ -261,7 +243,7 @@ def test_scene_files_run_as_objects_and_a_run_that_never_touches_is_a_counted_fa
 def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_path):
     """--voxel reaches the camera: finer voxels keep more outer points; each run records its voxel and outer
     count; a folder holds one setting; bad values and the 2-D world are refused before anything runs."""
-    ball = _scene(tmp_path)
+    ball = ball_scene(tmp_path)
     counts = {}
     for voxel, name in ((None, "default"), (0.01, "fine")):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / name, smoke=True,
@@ -290,7 +272,7 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
     """--views, --kernel, --theta and --noise reach the scene and the model of each run (the record's length and
     sigma^2 are read back from the run's model; one view sees fewer outer points than the file's three), a folder
     holds one setting of each, and bad values are refused before anything runs."""
-    ball = _scene(tmp_path)
+    ball = ball_scene(tmp_path)
     rows = {}
     for name, kw in (("own", {}), ("one", dict(views=1, kernel="imq", theta=0.12, noise=0.05))):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / name, smoke=True,
@@ -316,7 +298,7 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
 
 
 def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
-    ball = _scene(tmp_path)
+    ball = ball_scene(tmp_path)
     run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,
               backend="local", progress=False, touch="patch")
     rows = list(csv.DictReader(open(tmp_path / "p" / "runs.csv")))
