@@ -55,8 +55,9 @@ def worst_errors(log: Path, scenes: Path, far: float = 0.02) -> dict | None:
     Returns:
         ``hausdorff`` [m] as the studies measure it; per direction (``"estimate->body"``, ``"body->estimate"``) a
         dict with ``worst`` [m] (exact point-to-mesh distance of the worst sample), ``point`` `(3,)` (that sample,
-        base frame [m]), ``box`` `(3,)` (its place in the body's bounding box, 0-1 per axis), ``touch`` and ``camera`` [m] (the nearest contact and seen point; NaN
-        when the run has none) and ``share`` (of samples more than ``far`` off); ``near`` (observations within
+        base frame [m]), ``box`` `(3,)` (its place in the body's bounding box, 0-1 per axis), ``touch`` and
+        ``camera`` [m] (the nearest contact and seen point; NaN when the run has none) and ``share`` (of samples
+        more than ``far`` off); ``near`` (observations within
         :data:`NEAR` of the estimate's far samples, by ``(task, kind)``; empty when none is far) and ``outer_mean``
         (the outer task's median posterior mean there; NaN without one).
     """
