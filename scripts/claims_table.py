@@ -93,8 +93,8 @@ def main() -> None:
     for o in objects:
         vt, t = by[(o, "visual-tactile")], by[(o, "tactile")]
         if vt:                           # the similarity's ordering needs the visual-tactile runs alone
-            corr[o] = median_interval([_f(r["final_correlation"]) for _, r in sorted(vt.items())], failed="drop")
-            by_seed[o] = {s: _f(r["final_correlation"]) for s, r in vt.items()}
+            by_seed[o] = {s: _f(vt[s]["final_correlation"]) for s in sorted(vt)}
+            corr[o] = median_interval(list(by_seed[o].values()), failed="drop")
         seeds = sorted(set(vt) & set(t))
         if not seeds:
             continue

@@ -22,10 +22,10 @@ def _load(name: str):
 
 def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(tmp_path):
     """On a smoke study of a 6 cm ball: the script's Hausdorff distance is the study's own final one (the same
-    world rebuilt from the record), its two exact worst distances lie within the samples' spacing below it (the
-    study's is between samples, so up to a spacing above the exact one) and one of them reaches it, each worst
-    place lies where its samples do (a body sample inside the body's box), and the nearest contact is no nearer
-    than the closest one to that place recomputed here."""
+    world rebuilt from the record); the larger of its two exact worst distances lies at most that and at least two
+    sample spacings below it (the study's is between samples of both surfaces, each a spacing apart); the body's
+    worst place lies in the body's box and on the ball, the estimate's as far from the sphere as reported; the
+    nearest contact and seen point equal the ones recomputed from the log's final data."""
     from torch_gpioius.io.runs import load_run
     from torch_gpioius.studies.sweep import run_sweep
 
