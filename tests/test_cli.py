@@ -409,3 +409,17 @@ def test_fit_says_when_there_is_no_estimate(tmp_path, capsys):
     assert "no estimate: the inner zero level {mu_in = 0} has no surface" in capsys.readouterr().out
     assert main(["fit", str(EXAMPLE)]) == 0
     assert "no estimate" not in capsys.readouterr().out
+
+
+def test_replay_locks_its_folder(tmp_path, capsys):
+    """Issue 51, item 6: two replays into one folder both exited 0, and one run's output was lost."""
+    from torch_gpioius.io.outputs import FolderLock
+
+    out = tmp_path / "rep"
+    out.mkdir()
+    with FolderLock(out, "gpioius replay"):
+        assert main(["replay", "data/example_2d.gpioius", "--out", str(out), "--every", "40", "--quiet"]) == 2
+    assert "another gpioius replay (pid" in capsys.readouterr().err
+    assert not (out / "records.csv").exists()
+    assert main(["replay", "data/example_2d.gpioius", "--out", str(out), "--every", "40", "--quiet"]) == 0
+    assert (out / "records.csv").exists() and not list(out.glob(".staging.*"))

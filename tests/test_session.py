@@ -54,3 +54,28 @@ def test_a_missing_resume_log_is_named(tmp_path):
         tg.explore(_a(), mode="tactile", resume_from=tmp_path / "nothere.gpioius")
     with pytest.raises(ValueError, match="resume_from: .*is a folder"):
         tg.explore(_a(), mode="tactile", resume_from=tmp_path)
+
+
+def test_overwrite_replaces_a_link_at_the_log_path_and_never_writes_through_it(tmp_path):
+    """Issue 51, item 4: `tg.explore(log=link, overwrite=True)` wrote the log into the link's target."""
+    target = tmp_path / "elsewhere.txt"
+    target.write_text("keep")
+    log = tmp_path / "run.gpioius"
+    os.symlink(target, log)
+    tg.explore(_a(), mode="tactile", max_steps=1, log=log, overwrite=True)
+    assert target.read_text() == "keep"
+    assert not log.is_symlink() and log.stat().st_size > 100
+    assert tg.explore(_a(), mode="tactile", max_steps=1, resume_from=log).n_steps == 2
+
+
+def test_a_log_is_never_resumed_through_a_link(tmp_path):
+    from torch_gpioius.io.datasets import DatasetError, LogWriter
+
+    real = tmp_path / "real.gpioius"
+    tg.explore(_a(), mode="tactile", max_steps=1, log=real)
+    before = real.read_bytes()
+    link = tmp_path / "link.gpioius"
+    os.symlink(real, link)
+    with pytest.raises(DatasetError, match="is a symbolic link"):
+        LogWriter(link, resume=True)
+    assert real.read_bytes() == before

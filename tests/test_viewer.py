@@ -215,6 +215,48 @@ def test_a_public_bind_keeps_the_host_check_and_warns(log_2d, capsys):
         viewer.close()
 
 
+def _own_address() -> str | None:
+    """A non-loopback IPv4 address of this machine (the interface a route out would use), or None."""
+    s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        s.connect(("192.0.2.1", 80))                  # no packet is sent: only a route is chosen
+        address = s.getsockname()[0]
+    except OSError:
+        return None
+    finally:
+        s.close()
+    return None if address.startswith("127.") else address
+
+
+def test_a_public_bind_accepts_the_machines_own_address(log_2d, monkeypatch):
+    """Issue 51, item 14: `view --host 0.0.0.0` refused the machine's own IP address (its host name resolved to
+    127.0.1.1 alone); `--allow-host '*'` was taken as a literal name."""
+    from websockets.sync.client import connect
+
+    import torch_gpioius.viewer as viewer_mod
+    from torch_gpioius.viewer import check_hosts, interface_addresses
+
+    with pytest.raises(ValueError, match="wildcards are not accepted"):
+        check_hosts(["*"])
+    with pytest.raises(ValueError, match="wildcards"):
+        check_hosts(["*.lab.example"])
+    address = _own_address()
+    if address is None:
+        pytest.skip("this machine has no non-loopback IPv4 address")
+    assert address in interface_addresses()
+    # the names a resolver gives may miss the address: the connection's own local address still counts
+    monkeypatch.setattr(viewer_mod, "machine_names", lambda: frozenset({"localhost"}))
+    viewer = RunViewer(log_2d, host="0.0.0.0", port=_free_port())
+    try:
+        protocol = ["viser-v" + __import__("viser").__version__]
+        sock = socket.create_connection((address, viewer.port), timeout=10)
+        with connect(f"ws://{address}:{viewer.port}", sock=sock, origin=f"http://{address}:{viewer.port}",
+                     open_timeout=10, subprotocols=protocol) as ws:
+            assert ws.recv(timeout=10)
+    finally:
+        viewer.close()
+
+
 def test_cross_site_pages_cannot_open_the_websocket(log_2d):
     """A page of another origin is refused at the handshake (403) and sees nothing of the run; the viewer's own
     page gets its connection."""

@@ -22,14 +22,18 @@ MAX_LENGTH = 20.0
 #: What a label says: 0 on a surface (touched or seen), 1 in free space (the paper's two), and a negative value at a
 #: point known to lie inside a body, ``-depth / ramp`` (the free-space ramp continued inside: a point 2 cm behind a
 #: contact with the free-space point 5 cm out is -0.4; beyond the paper, see docs/method-notes.md).
-LABELS = "0 (surface), 1 (free space) or negative (inside)"
+#: The lowest label accepted: a point 1 m behind a surface at the defaults' 5 cm ramp. Further down is a units or sign
+#: mistake (a CSV label of -1e6 fitted a K_t of 2.6e10 and a correlation of 0.0000 [-0.00, 0.00]; -1e308 ended in
+#: "Eigenvalues did not converge").
+MIN_LABEL = -20.0
+LABELS = f"0 (surface), 1 (free space) or negative (inside, down to {MIN_LABEL:g})"
 
 
 def label_problem(y) -> str | None:
     """Why the labels ``y`` (an array or tensor) are not labels, naming up to five bad values (NaN and inf
-    included), or None when each is 0, 1 or a finite negative number."""
+    included), or None when each is 0, 1 or a finite negative number not below :data:`MIN_LABEL`."""
     a = np.asarray(y.detach().cpu() if torch.is_tensor(y) else y, dtype=np.float64).reshape(-1)
-    bad = ((a != 0) & (a != 1) & ~(a < 0)) | ~np.isfinite(a)
+    bad = ((a != 0) & (a != 1) & ~(a < 0)) | ~np.isfinite(a) | (a < MIN_LABEL)
     if bad.any():
         return f"labels must be {LABELS}, got {sorted(set(a[bad].tolist()))[:5]}"
     return None

@@ -180,6 +180,7 @@ def _import_bag(args: argparse.Namespace) -> int:
 
     from .io.outputs import check_new_file
 
+    _not_the_recording(args.bag, args.out)
     out = check_new_file(args.out, args.force, "--out")       # before the (long) import
     window = None
     if args.start is not None or args.end is not None:      # an open end: later than any recording
@@ -216,6 +217,17 @@ def _import_bag(args: argparse.Namespace) -> int:
               f"({c['pad_frames_out_of_contact']} out of contact, {c['pad_frames_untouched']} with no pixel pressed)")
     print(f"wrote {path}; next: gpioius fit {path} --out outputs/fit")
     return 0
+
+
+def _not_the_recording(bag: str, out: str) -> None:
+    """Refuse an ``--out`` that is the recording itself, or a file inside a bag's folder (``--force`` replaced the
+    recording with its own dataset)."""
+    import os
+
+    src, dst = os.path.realpath(bag), os.path.realpath(out)
+    if dst == src or (os.path.isdir(src) and dst.startswith(src.rstrip(os.sep) + os.sep)):
+        raise ValueError(f"--out: {out} is {'the recording' if dst == src else 'inside the recording'} {bag}; write "
+                         "the dataset elsewhere (--force never replaces the input)")
 
 
 def _export(args: argparse.Namespace) -> int:

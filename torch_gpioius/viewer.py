@@ -105,7 +105,39 @@ def machine_names() -> frozenset[str]:
             names.update(info[4][0] for info in socket.getaddrinfo(name, None))
         except OSError:                  # a host name that does not resolve: the name itself still counts
             pass
+    # the host name often resolves to 127.0.x.x alone (Debian's /etc/hosts): the interfaces' own addresses too
+    names.update(interface_addresses())
     return frozenset(n.lower() for n in names if n)
+
+
+def interface_addresses() -> set[str]:
+    """This machine's interface addresses (IPv4 by ``SIOCGIFADDR``, IPv6 from ``/proc/net/if_inet6``); empty where
+    the platform offers neither (the standard library has no portable call for it)."""
+    import ipaddress
+    import socket
+    import struct
+
+    found: set[str] = set()
+    try:
+        import fcntl
+
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            for _, name in socket.if_nameindex():
+                try:
+                    packed = fcntl.ioctl(s.fileno(), 0x8915, struct.pack("256s", name[:15].encode()))   # SIOCGIFADDR
+                    found.add(socket.inet_ntoa(packed[20:24]))
+                except OSError:          # an interface without an IPv4 address
+                    pass
+    except (ImportError, OSError, AttributeError):
+        pass
+    try:
+        with open("/proc/net/if_inet6") as f:
+            for line in f:
+                raw = line.split()[0]
+                found.add(str(ipaddress.IPv6Address(bytes.fromhex(raw))))
+    except (OSError, ValueError, IndexError):
+        pass
+    return found
 
 
 def _all_interfaces(bound_host: str) -> bool:
@@ -164,6 +196,10 @@ def check_hosts(hosts) -> tuple[str, ...]:
         hosts = (hosts,)
     out = []
     for h in hosts or ():
+        if isinstance(h, str) and ("*" in h or "?" in h):
+            raise ValueError(f"allow_hosts: {h!r}: wildcards are not accepted; a wildcard would let any site's page "
+                             "that points its own name at this machine drive the viewer (DNS rebinding). Name each "
+                             "host, e.g. --allow-host lab-pc.example.org")
         if not isinstance(h, str) or not h.strip() or any(c in h for c in "/@ ") or h.count(":") == 1:
             raise ValueError(f"allow_hosts: {h!r} is not a host name or address (give it without scheme or port, "
                              "e.g. lab-pc.example.org)")
@@ -211,10 +247,12 @@ def _install_origin_check(bound_host: str, allowed_hosts: tuple[str, ...] = ()) 
     def serve(handler, host, port, *args, process_request=None, **kwargs):
         def check(connection, request):
             h = request.headers
+            # bound to every interface, the address the client reached is one of this machine's by definition
+            here = machine | _local_address(connection) if _all_interfaces(bound_host) else machine
             if h.get("Upgrade", "").lower() == "websocket" and (
                     len(h.get_all("Host")) != 1 or len(h.get_all("Origin")) > 1      # ambiguous: refused
                     or not origin_allowed(h["Origin"] if "Origin" in h else None, h["Host"], bound_host,
-                                          allowed_hosts, machine)):
+                                          allowed_hosts, here)):
                 return connection.respond(http.HTTPStatus.FORBIDDEN, "gpioius view: cross-origin WebSocket refused\n")
             return process_request(connection, request) if process_request is not None else None
 
@@ -233,6 +271,14 @@ def _install_origin_check(bound_host: str, allowed_hosts: tuple[str, ...] = ()) 
     server_mod = _Proxy(real.asyncio.server, serve=serve)
     proxy = _Proxy(real, asyncio=_Proxy(real.asyncio, server=server_mod), _wrapped_websockets=real)
     _infra.websockets = proxy
+
+
+def _local_address(connection) -> frozenset[str]:
+    """The address a client connected to (empty where the transport has none)."""
+    try:
+        return frozenset({str(connection.local_address[0]).lower()})
+    except Exception:                      # pragma: no cover - a transport without an address
+        return frozenset()
 
 
 def _peer(connection) -> str:

@@ -113,6 +113,7 @@ def test_versions_magic_and_header(tmp_path):
     ("x", np.zeros((4, 5)), "'x' must have shape"),
     ("y", np.array([0, 1, 2, 0]), "'y': labels must be 0 \\(surface\\), 1 \\(free space\\) or negative .*2"),
     ("y", np.array([0, 1, 0.5, 0]), "'y': labels must be .*0.5"),
+    ("y", np.array([0, 1, -1e300, 0]), "'y': labels must be .*down to -20.*-1e\\+300"),    # issue 51, item 12
     ("task", np.array([0, 1, 3, 0]), "'task' must be 0"),
     ("task", np.array([0.5, 0, 0, 0]), "'task' must hold integers"),
     ("step", np.array([0, -1, 0, 0]), "'step' must be >= 0"),

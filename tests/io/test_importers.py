@@ -95,7 +95,7 @@ def test_inside_points_in_a_contacts_csv(tmp_path):
     p.write_text("x,y,z,label,depth\n100,0,0,contact,\n100,0,-20,inside,20\n100,0,-10,-0.2,\n100,0,40,free,\n")
     x, y, _ = load_contacts_csv(p, units="mm")
     np.testing.assert_allclose(y, [0.0, -0.4, -0.2, 1.0], rtol=1e-15)
-    np.savez(tmp_path / "cloud.npz", points=PTS)
+    np.savez(tmp_path / "cloud.npz", points=PTS * 1000 + [100, 0, 0])          # millimetres, around the contacts
     ds = dataset_from_files(p, tmp_path / "cloud.npz", voxel=None, units="mm")
     assert ds.y[:4].tolist() == y.tolist()
     assert float(ds.to_model().train_targets.min()) == pytest.approx(-0.4, rel=1e-15)
@@ -267,3 +267,101 @@ def test_a_garbage_file_is_named_as_not_a_mesh(tmp_path, ext):
     else:
         with pytest.raises(ValueError, match=rf"g.{ext}\): not a (readable )?{ext.upper()} mesh"):
             load_mesh(p)
+
+
+def _ball_files(tmp_path, shift=(0.0, 0.0, 0.0), contacts_scale=1.0):
+    """A 10 cm ball's contacts (CSV, ``contacts_scale`` x metres) and its cover's cloud (PLY, metres, moved by
+    ``shift``)."""
+    import trimesh
+
+    c = np.array([0.5, 0.0, 0.25])
+    rng = np.random.default_rng(3)
+    d = rng.normal(size=(20, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    rows = ["x,y,z,label"] + [",".join(f"{v:.6f}" for v in p) + ",contact" for p in (d * 0.1 + c) * contacts_scale]
+    (tmp_path / "touch.csv").write_text("\n".join(rows) + "\n")
+    shell = trimesh.creation.icosphere(3, radius=0.108).vertices
+    shell = shell[shell[:, 0] < 0.03] + c + np.asarray(shift)
+    trimesh.PointCloud(shell).export(tmp_path / "cloud.ply")
+    return tmp_path / "touch.csv", tmp_path / "cloud.ply", c
+
+
+def test_a_cloud_that_does_not_belong_to_the_contacts_is_refused(tmp_path):
+    """Issue 51, item 11: a cloud 1.5 m from the contacts (a frame mistake) fitted with a correlation of -0.76, and
+    a millimetre CSV with a metre cloud under --units mm passed, each with exit 0 and no warning."""
+    import warnings
+
+    from torch_gpioius.io.importers import dataset_from_files
+
+    csv_path, cloud, c = _ball_files(tmp_path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ok = dataset_from_files(csv_path, cloud, voxel=0.02, camera_origin=c + [-1.0, 0.0, 0.3])
+    assert (ok.task == 1).any()
+    far_csv, far_cloud, _ = _ball_files(tmp_path, shift=(1.5, 0.0, 0.0))
+    with pytest.raises(DatasetError, match=r"outside the cloud's box.*not in one frame or not in one unit"):
+        dataset_from_files(far_csv, far_cloud, voxel=0.02)
+    mm_csv, m_cloud, _ = _ball_files(tmp_path, contacts_scale=1000.0)
+    with pytest.raises(DatasetError, match="not in one frame or not in one unit"):
+        dataset_from_files(mm_csv, m_cloud, units="mm", voxel=0.02)
+
+
+def test_a_camera_inside_the_cloud_is_warned_of(tmp_path):
+    """Issue 51, item 11: a camera origin inside the object gave a correlation of -0.67, read out as a finding."""
+    from torch_gpioius.io.importers import dataset_from_files
+
+    csv_path, cloud, c = _ball_files(tmp_path)
+    with pytest.warns(UserWarning, match="camera origin .* lies inside the cloud's convex hull"):
+        dataset_from_files(csv_path, cloud, voxel=0.02, camera_origin=c)
+
+
+@pytest.mark.parametrize("row, match", [("0.5,0,0.2,-1e6", "below -20"), ("0.5,0,0.2,-1e308", "below -20"),
+                                        ("0.5,0,0.2,inside", "positive number")])
+def test_negative_labels_have_a_bound(tmp_path, row, match):
+    """Issue 51, item 12: a CSV label of -1e6 fitted with exit 0 (K_t 2.6e10, correlation 0.0000 [-0.00, 0.00]);
+    at -1e308 the message was "Eigenvalues did not converge"."""
+    path = tmp_path / "c.csv"
+    path.write_text("x,y,z,label,depth\n0.5,0,0.25,contact,\n" + row + ",\n")
+    with pytest.raises(DatasetError, match=match):
+        load_contacts_csv(path)
+    path.write_text("x,y,z,label,depth\n0.5,0,0.25,inside,2\n")          # 2 m deep: refused too
+    with pytest.raises(DatasetError, match="more than 1 m"):
+        load_contacts_csv(path)
+    path.write_text("x,y,z,label,depth\n0.5,0,0.25,inside,0.5\n0.5,0,0.2,-19.5,\n")   # 0.5 m and -19.5: kept
+    assert load_contacts_csv(path)[1].tolist() == [-10.0, -19.5]
+
+
+def test_a_model_refuses_labels_below_the_bound():
+    import torch
+
+    import torch_gpioius as tg
+
+    x = torch.tensor([[0.0, 0.0], [0.1, 0.0], [0.2, 0.0]], dtype=torch.float64)
+    with pytest.raises(ValueError, match=r"y: labels must be .*down to -20.*-1e\+300"):
+        tg.GPIS(x, torch.tensor([0.0, 1.0, -1e300], dtype=torch.float64))
+    assert tg.GPIS(x, torch.tensor([0.0, 1.0, -20.0], dtype=torch.float64)).train_targets.min() == -20.0
+
+
+def test_an_npz_cloud_that_would_expand_without_bound_is_refused_before_it_expands(tmp_path, monkeypatch):
+    """Issue 51, item 15: a 4.6 MB zip bomb in an NPZ cloud reached 4.9 GB before a MemoryError."""
+    import io
+    import zipfile
+
+    import torch_gpioius.io.importers as importers
+
+    bomb = tmp_path / "bomb.npz"
+    np.savez_compressed(bomb, points=np.zeros((20_000, 3)))
+    assert bomb.stat().st_size < 10_000                        # 480 kB of points in a few kB
+    monkeypatch.setattr(importers, "MAX_CLOUD_BYTES", 100_000)
+    with pytest.raises(DatasetError, match=r"bomb.npz: 'points' expands to .* more than"):
+        load_point_cloud(bomb)
+    monkeypatch.undo()
+    assert load_point_cloud(bomb).shape == (20_000, 3)         # under the real bound it loads
+    # a header that declares far more than the member holds (numpy would allocate the declared shape first)
+    buf = io.BytesIO()
+    np.lib.format.write_array_header_1_0(buf, {"descr": "<f8", "fortran_order": False, "shape": (10**9, 3)})
+    liar = tmp_path / "liar.npz"
+    with zipfile.ZipFile(liar, "w") as zf:
+        zf.writestr("points.npy", buf.getvalue() + np.zeros(6).tobytes())
+    with pytest.raises(DatasetError, match=r"declares shape \(1000000000, 3\)"):
+        load_point_cloud(liar)

@@ -117,6 +117,14 @@ def test_cli_import_then_fit_and_replay(mcap_bag, recording, tmp_path, capsys):
     assert load_dataset(out).meta["time_window"] == [0.0, 2.5]
     assert main(["import-bag", str(mcap_bag), "--out", str(out), "--force", "--start", "0.5"]) == 2
     assert "no cloud in the time window from 0.5 s on" in capsys.readouterr().err
+    # issue 51, item 9: `import-bag IN --out IN --force` replaced the recording with its own dataset
+    recorded = {p: p.read_bytes() for p in ([mcap_bag] if mcap_bag.is_file() else mcap_bag.rglob("*"))
+                if p.is_file()}
+    inside = mcap_bag / "x.gpioius" if mcap_bag.is_dir() else mcap_bag
+    for target in (mcap_bag, inside):
+        assert main(["import-bag", str(mcap_bag), "--out", str(target), "--force", "--tool-offset", "0 0 0.05"]) == 2
+        assert "the recording" in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in recorded} == recorded
 
 
 def _with(msgs, topic, fn):

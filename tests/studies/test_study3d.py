@@ -29,6 +29,28 @@ def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):
     contacts = np.array([[r["contact_x"], r["contact_y"], r["contact_z"]] for r in records
                          if r["mode"] == "tactile"])
     np.testing.assert_allclose(touched, contacts)
+    # issue 51, item 5: a re-run killed half-way left the new run's partial logs beside the old run's summary
+    import torch_gpioius.studies.study3d as study3d
+
+    before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()
+              and p.name != ".lock"}
+    real, calls = study3d.explore, []
+
+    def killed_after_one_run(*args, **kw):
+        if calls:
+            raise KeyboardInterrupt
+        calls.append(kw["log"])
+        return real(*args, **kw)
+
+    study3d.explore = killed_after_one_run
+    try:
+        assert main(["simulate3d", "--object", "G", "--smoke", "--quiet", "--out", str(tmp_path)]) == 130
+    finally:
+        study3d.explore = real
+    assert calls and not str(calls[0]).startswith(str(tmp_path / "logs"))        # the new run wrote elsewhere
+    after = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()
+             and p.name != ".lock"}
+    assert after == before                        # the old run whole: its logs, records and summary, nothing else
 
 
 def test_check_claims_on_hand_made_rows():

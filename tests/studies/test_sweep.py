@@ -377,3 +377,63 @@ def test_a_fraction_whose_estimate_vanished_is_not_filled_by_a_later_one():
     assert _at_travel(series, "hausdorff", 0.15) == 0.03
     old = {k: v for k, v in series.items() if k != "estimate"}
     assert _at_travel(old, "hausdorff", 0.06) == 0.03            # older run files: as read then
+
+
+def test_an_edited_scene_file_is_run_again_and_a_scene_that_cannot_be_built_is_a_failed_row(tmp_path, capsys):
+    """Issue 51, items 7 and 8: a scene file edited after its study ran was reported with the old body's results
+    ("1 runs (1 already done)"); and a scene that could not be built ended a 30-run study after the others ran,
+    with no runs.csv."""
+    import warnings
+
+    from torch_gpioius.studies.sweep import read_run_file
+
+    ball = ball_scene(tmp_path)
+    broken = tmp_path / "broken.toml"
+    (tmp_path / "broken.stl").write_text("solid nothing\nthis is not a mesh\n")
+    broken.write_text(ball.read_text().replace('"ball"', '"broken"').replace("ball.stl", "broken.stl"))
+    kw = dict(modes=["tactile"], seeds=1, out=tmp_path / "s", smoke=True, backend="local", progress=False)
+    first = run_sweep("forcefield", scenes=[ball, broken], **kw)
+    assert first["runs"] == 2 and first["skipped"] == 0
+    rows = {r["object"]: r for r in csv.DictReader(open(tmp_path / "s" / "runs.csv"))}
+    assert rows["ball"]["failed"] == "" and rows["broken"]["failed"].startswith("scene: ")
+    assert "broken" in first["summary"]["objects"]
+    old = read_run_file(tmp_path / "s" / "runs" / "ball_tactile_0.json")
+    again = run_sweep("forcefield", scenes=[ball, broken], **kw)           # nothing changed: both done
+    assert again["skipped"] == 2
+    # the ball's cover edited: its run is another run now; the broken scene's is still done
+    ball.write_text(ball.read_text().replace("gap = 0.008", "gap = 0.012"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        edited = run_sweep("forcefield", scenes=[ball, broken], **kw)
+    assert edited["skipped"] == 1
+    assert any("scene file as it was before it changed" in str(w.message) for w in caught)
+    new = read_run_file(tmp_path / "s" / "runs" / "ball_tactile_0.json")
+    assert new["scene_hash"] != old["scene_hash"]
+    assert (tmp_path / "s" / "runs" / "ball_tactile_0.json.stale").exists()
+    assert [r["object"] for r in csv.DictReader(open(tmp_path / "s" / "runs.csv"))].count("ball") == 1
+
+
+def test_claims_are_not_judged_on_too_few_seeds():
+    """Issue 51, item 13: `study --seeds 2` judged the paper's claims "holds: yes" beside its own table's 50 %
+    coverage and Wilcoxon p = 0.5."""
+    from torch_gpioius.studies.sweep import METRICS, MIN_SEEDS_TO_JUDGE, _claims, _summarize
+
+    def rows(seeds):
+        out = []
+        for obj in ("E", "H"):
+            for mode, h in (("visual-tactile", 0.01), ("tactile", 0.05)):
+                for s in range(seeds):
+                    r = {m: h + 1e-4 * s for m in METRICS}
+                    r.update(final_correlation=0.9 if obj == "E" else 0.2, object=obj, mode=mode, seed=s, failed="",
+                             taps=0, travel=1.5, recoveries=0, reapproaches=0, reapproach_share=0.0,
+                             contacts_on_body=1.0, contacts_within=1.0)
+                    out.append(r)
+        return out
+
+    few = _claims(_summarize(rows(2)))
+    assert few and all(c["holds"] is None for c in few)
+    assert all(c["measured"].startswith("too few seeds to judge (2;") for c in few)
+    enough = _claims(_summarize(rows(MIN_SEEDS_TO_JUDGE)))
+    assert all(c["holds"] is not None for c in enough)
+    assert {c["claim"]: c["holds"] for c in enough}["E (tight): visual-tactile accurate from the beginning (10 % of "
+                                                     "travel)"] is True

@@ -441,6 +441,18 @@ def _atomic_write(path: Path, blob: bytes) -> None:
     atomic_write(path, blob)
 
 
+def _open_no_link(path: Path, flags: int, mode: str):
+    """``open(path, mode)`` that refuses a symbolic link at ``path`` instead of writing into its target."""
+    try:
+        fd = os.open(path, flags | getattr(os, "O_NOFOLLOW", 0), 0o644)
+    except OSError as e:
+        if os.path.islink(path):
+            raise DatasetError(f"{path}: is a symbolic link; a log is written to a plain file, never through a "
+                               "link (resume from the file it points to, or remove the link)") from None
+        raise
+    return os.fdopen(fd, mode)
+
+
 class LogWriter:
     """Append-only writer: every :meth:`append` is durable (flush + fsync) before it returns.
 
@@ -458,14 +470,16 @@ class LogWriter:
                 warnings.simplefilter("ignore", TornLogWarning)
                 for rec in read_records(self.path):
                     end = rec.end
-            self._f = open(self.path, "r+b")
+            self._f = _open_no_link(self.path, os.O_RDWR, "r+b")
             self._f.truncate(end)
             self._f.seek(end)
         else:
             meta = {**(meta or {}), "file": "log"}
             meta.setdefault("units", UNITS)
             check_meta(meta, f"LogWriter({self.path})")
-            self._f = open(self.path, "wb")
+            if os.path.islink(self.path):            # a link at the target is replaced, never followed
+                os.unlink(self.path)
+            self._f = _open_no_link(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, "wb")
             self._f.write(MAGIC + struct.pack(">H", FORMAT_VERSION))
             self._write(_encode("header", meta, {}))
             _fsync_dir(self.path)

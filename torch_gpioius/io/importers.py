@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import check_metres
+from .._validation import MIN_LABEL, check_metres
 from ..sensors.pointcloud import PointCloud, PointCloudSource
 from ..voxels import VOXEL_RANGE, voxel_average  # noqa: F401  (re-exported: the 0.2 home of voxel_average)
 from .datasets import Dataset, DatasetError
@@ -151,6 +151,40 @@ def _ply_vertex_count(path: Path) -> int:
     return n
 
 
+#: The largest ``points`` array an NPZ cloud may hold [bytes]: 50 million points (a depth camera gives about 0.3
+#: million a frame). A compressed member states its expanded size, which is checked before anything is expanded.
+MAX_CLOUD_BYTES = 50_000_000 * 3 * 8
+
+
+def _check_npz_points(path: Path) -> None:
+    """Refuse an NPZ whose ``points`` member would expand beyond :data:`MAX_CLOUD_BYTES`, or whose array header
+    declares more elements than the member holds (numpy allocates the declared shape before reading): a 4.6 MB zip
+    bomb reached 4.9 GB before a MemoryError."""
+    import zipfile
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            info = next((i for i in zf.infolist() if i.filename in ("points", "points.npy")), None)
+            if info is None:
+                return                          # np.load names the missing array
+            if info.file_size > MAX_CLOUD_BYTES:
+                raise DatasetError(f"{path}: 'points' expands to {info.file_size / 1e9:.2g} GB, more than the "
+                                   f"{MAX_CLOUD_BYTES / 1e9:.2g} GB a cloud may hold (voxel-average or crop it first)")
+            with zf.open(info) as f:
+                version = np.lib.format.read_magic(f)
+                header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                          else np.lib.format.read_array_header_2_0)(f, max_header_size=10_000)
+                shape, _, dtype = header
+                declared = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+                if dtype.hasobject or declared > info.file_size:
+                    raise DatasetError(f"{path}: 'points' declares shape {shape} of {dtype}, "
+                                       f"{declared / 1e6:.3g} MB, in a member of {info.file_size / 1e6:.3g} MB")
+    except DatasetError:
+        raise
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as exc:
+        raise DatasetError(f"{path}: not a readable NPZ point cloud ({type(exc).__name__}: {exc})") from None
+
+
 def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float | None = None,
                      drop_nonfinite: bool = True) -> np.ndarray:
     """Read a point cloud (PLY or XYZ via trimesh, PCD, or NPZ with a ``points`` array) as `(n, 3)` [m].
@@ -175,6 +209,7 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
         if ext == ".pcd":
             pts = _read_pcd(path)
         elif ext == ".npz":
+            _check_npz_points(path)
             with np.load(path, allow_pickle=False) as z:
                 if "points" not in z.files:
                     raise DatasetError(f"{path}: NPZ point cloud needs a 'points' array (has {z.files})")
@@ -236,6 +271,9 @@ def _label(row: dict, path, line: int, scale: float) -> float:
         if not (np.isfinite(d) and d > 0):
             raise DatasetError(f"{path}:{line}: depth {depth!r} must be a positive number (how far inside the "
                                "body the point lies)")
+        if -d / _RAMP < MIN_LABEL:
+            raise DatasetError(f"{path}:{line}: depth {depth!r} is {d:g} m behind the surface, more than "
+                               f"{-MIN_LABEL * _RAMP:g} m: a units mistake?")
         return -d / _RAMP
     if depth:
         raise DatasetError(f"{path}:{line}: depth {depth!r} is given for a {label!r} row; depth belongs to inside "
@@ -246,8 +284,11 @@ def _label(row: dict, path, line: int, scale: float) -> float:
         value = float(label)
     except ValueError:
         value = math.nan
-    if np.isfinite(value) and value < 0:
+    if np.isfinite(value) and MIN_LABEL <= value < 0:
         return value
+    if np.isfinite(value) and value < MIN_LABEL:
+        raise DatasetError(f"{path}:{line}: label {label!r} is below {MIN_LABEL:g} (a point 1 m inside at the 5 cm "
+                           "ramp); an inside point's label is -depth / 5 cm: a units or sign mistake?")
     raise DatasetError(f"{path}:{line}: label {label!r} must be one of {sorted(_LABELS) + ['inside']} or a negative "
                        "number (a point inside the body)")
 
@@ -357,6 +398,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *,
             raise DatasetError(f"{cloud}: a 3-D point cloud needs a 3-D contact CSV (x, y, z)")
         y_out = np.zeros(len(pts)) if y_out is None else y_out
         parts.append((pts, y_out, np.ones(len(pts), np.int64), np.zeros(len(pts), np.int64)))
+    for cloud, origin, (pts, y_out, *_rest) in zip(clouds, origins, parts[1:]):
+        _check_together(contacts_csv, x_in, y_in, cloud, pts[y_out == 0], origin, units)
     x, y, task, step = (np.concatenate(a) for a in zip(*parts))
     meta = {"source": source, "voxel_size": voxel if clouds else None}
 
@@ -370,6 +413,52 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *,
     if noise is not None:
         meta["noise"] = noise
     return Dataset(x, y, task, step, meta=meta)
+
+
+def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts: np.ndarray, origin,
+                    units: str) -> None:
+    """Refuse contacts that lie far outside a cloud's box, and warn of a camera inside the cloud's hull: both mean
+    that the files are not in one frame or one unit (a cloud 1.5 m from the contacts gave a correlation of -0.76,
+    a camera inside the object -0.67, each read out as a finding).
+
+    The contacts touch the body under the cover the camera saw, so they lie inside the cloud's box or near it: the
+    median contact may lie at most ``max(5 cm, a quarter of the box's diagonal)`` outside it. ``pts`` `(m, d)` [m]
+    are the cloud's seen points; ``origin`` its camera in the file's units, or None.
+
+    Raises:
+        DatasetError: naming both files and the distance.
+    """
+    touched = x_in[y_in == 0] if (y_in == 0).any() else x_in
+    seen = pts
+    lo, hi = seen.min(axis=0), seen.max(axis=0)
+    diagonal = float(np.linalg.norm(hi - lo))
+    outside = np.linalg.norm(np.maximum(lo - touched, 0.0) + np.maximum(touched - hi, 0.0), axis=1)
+    allowed = max(0.05, 0.25 * diagonal)
+    if float(np.median(outside)) > allowed:
+        raise DatasetError(
+            f"{contacts_csv} and {cloud}: the contacts lie {np.median(outside) * 100:.1f} cm (median) outside the "
+            f"cloud's box [{_fmt(lo)} .. {_fmt(hi)}] m, more than {allowed * 100:.1f} cm: the files are not in one "
+            "frame or not in one unit (--units applies to both; a cloud in another frame needs transforming first)")
+    if origin is None or len(seen) <= seen.shape[1] + 1:
+        return
+    o = np.asarray(origin, dtype=np.float64).reshape(-1) * _scale(units, Path(cloud))
+    from scipy.spatial import Delaunay, QhullError
+
+    sample = seen if len(seen) <= 4000 else seen[np.linspace(0, len(seen) - 1, 4000).astype(int)]
+    try:
+        inside = Delaunay(sample).find_simplex(o[None, :])[0] >= 0
+    except QhullError:              # a flat cloud has no volume to lie inside
+        return
+    if inside:
+        import warnings
+
+        warnings.warn(f"{cloud}: the camera origin {_fmt(o)} m lies inside the cloud's convex hull; a camera sees a "
+                      "surface from outside it, so its free space would lie inside the body. Is the origin in the "
+                      "cloud's frame and units?", UserWarning, stacklevel=3)
+
+
+def _fmt(v) -> str:
+    return "(" + ", ".join(f"{float(a):.3g}" for a in np.asarray(v).ravel()) + ")"
 
 
 def _seen_and_free(point_cloud, units: str, voxel: float | None, camera_origin) -> tuple[np.ndarray, np.ndarray]:

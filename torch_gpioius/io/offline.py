@@ -195,6 +195,15 @@ def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 
         shapes = known_truth(header)
         truth = None if shapes is None else shapes["inner"][0]
     out.mkdir(parents=True, exist_ok=True)
+    # one writer at a time (a second replay into the folder is refused with the holder's pid), and its three files
+    # moved in together when all are written
+    with FolderLock(out, "gpioius replay"), StagedFiles(out) as staged:
+        return _replay_steps(path, staged.path, states, learned, chosen, truth, figures, resolution, progress)
+
+
+def _replay_steps(path: Path, out: Path, states: dict, learned: dict, chosen: list[int], truth, figures: int,
+                  resolution: float, progress: bool) -> list[dict]:
+    """:func:`replay_log`'s steps, records and figure, written into ``out`` (its staging folder)."""
     rows, snapshots = [], {}
     shots = set(np.unique(np.linspace(0, len(chosen) - 1, max(1, figures)).round().astype(int)).tolist())
     kt = None

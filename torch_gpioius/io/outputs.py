@@ -30,7 +30,8 @@ import os
 import secrets
 from pathlib import Path
 
-__all__ = ["MARKER", "atomic_write", "check_new_file", "check_distinct", "claim_folder", "FolderLock", "StagedFiles"]
+__all__ = ["MARKER", "atomic_write", "check_new_file", "check_distinct", "claim_folder", "FolderLock", "StagedFiles",
+           "remove_stale_staging", "STAGING_PREFIX"]
 
 #: The file by which a command marks an output folder as its own (JSON: command, version, and e.g. the world).
 MARKER = ".gpioius-output.json"
@@ -186,7 +187,18 @@ class FolderLock:
         import fcntl
 
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+        # never through a link: a link planted at .lock would have its target truncated and overwritten with our pid
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        except OSError as e:
+            if os.path.islink(self.path):
+                raise RuntimeError(f"{self.path}: is a symbolic link; the lock must be a plain file (remove the link "
+                                   "or choose another --out)") from None
+            raise RuntimeError(f"{self.path}: cannot open the folder's lock ({e.strerror})") from None
+        if not os.path.isfile(self.path) or os.path.islink(self.path):
+            os.close(fd)
+            raise RuntimeError(f"{self.path}: is not a plain file; the lock must be one (remove it or choose another "
+                               "--out)")
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except OSError:
@@ -219,9 +231,11 @@ class FolderLock:
 class StagedFiles:
     """Files that belong together, written into a private staging folder and moved into ``folder`` at the end.
 
-    Use as a context manager: write into :attr:`path`; on a clean exit every file there replaces the one of its
-    name in ``folder`` (each by an atomic rename, all after the last one was written); on an exception nothing in
-    ``folder`` changes and the staging folder is removed.
+    Use as a context manager: write into :attr:`path` (subfolders too: a study's ``logs/``); on a clean exit every
+    file there replaces the one of its relative path in ``folder`` (each by an atomic rename, all after the last one
+    was written); on an exception nothing in ``folder`` changes and the staging folder is removed. A process killed
+    with SIGKILL cannot remove its staging folder: the next :class:`StagedFiles` in that folder removes every
+    staging folder whose process no longer runs (:func:`remove_stale_staging`).
 
     Args:
         folder: the output folder (must exist).
@@ -233,10 +247,11 @@ class StagedFiles:
 
     def __init__(self, folder: str | os.PathLike) -> None:
         self.folder = Path(folder)
-        self.path = self.folder / f".staging.{os.getpid()}.{secrets.token_hex(4)}"
+        self.path = self.folder / f"{STAGING_PREFIX}{os.getpid()}.{secrets.token_hex(4)}"
         self.moved: list[Path] = []
 
     def __enter__(self) -> "StagedFiles":
+        remove_stale_staging(self.folder)
         self.path.mkdir()
         return self
 
@@ -245,15 +260,59 @@ class StagedFiles:
 
         try:
             if exc_type is None:
-                staged = sorted(p for p in self.path.iterdir() if p.is_file())
+                staged = sorted(p for p in self.path.rglob("*") if p.is_file() and not p.is_symlink())
                 for p in staged:
                     with open(p, "rb") as f:
                         os.fsync(f.fileno())
                 for p in staged:
-                    target = self.folder / p.name
+                    target = self.folder / p.relative_to(self.path)
+                    if target.parent != self.folder:
+                        if target.parent.is_symlink():       # never move a result through a planted link
+                            target.parent.unlink()
+                        target.parent.mkdir(parents=True, exist_ok=True)
                     os.replace(p, target)
                     self.moved.append(target)
-                if self.moved:
-                    _fsync_dir(self.moved[-1])
+                for target in {t.parent: t for t in self.moved}.values():
+                    _fsync_dir(target)
         finally:
             shutil.rmtree(self.path, ignore_errors=True)
+
+
+#: The name every staging folder starts with (``.staging.<pid>.<random>``).
+STAGING_PREFIX = ".staging."
+
+
+def remove_stale_staging(folder: str | os.PathLike) -> list[Path]:
+    """Remove the staging folders in ``folder`` whose process no longer runs (a fit or study killed with SIGKILL
+    leaves its ``.staging.<pid>.*`` behind, a partial model.pt or logs in it); those of running processes stay.
+
+    Returns:
+        the folders removed.
+    """
+    import shutil
+
+    removed = []
+    for p in Path(folder).glob(f"{STAGING_PREFIX}*"):
+        try:
+            pid = int(p.name[len(STAGING_PREFIX):].split(".", 1)[0])
+        except ValueError:
+            continue
+        if p.is_dir() and not p.is_symlink() and not _running(pid):
+            shutil.rmtree(p, ignore_errors=True)
+            removed.append(p)
+    return removed
+
+
+def _running(pid: int) -> bool:
+    """Whether a process of this id runs (one we may not signal runs too)."""
+    if pid <= 0:
+        return False
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True

@@ -62,7 +62,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["SceneSpec", "read_scene", "load_scene", "resolve_mesh", "SCENE_WORLDS"]
+__all__ = ["SceneSpec", "read_scene", "load_scene", "resolve_mesh", "scene_fingerprint", "SCENE_WORLDS"]
 
 #: The worlds a scene file can be built in.
 SCENE_WORLDS = ("forcefield", "mujoco")
@@ -114,6 +114,31 @@ def resolve_mesh(ref: str, base: Path) -> Path:
     if not path.is_file():
         raise ValueError(f"object.mesh: no such file {str(path)!r}")
     return path
+
+
+def scene_fingerprint(path) -> str:
+    """What a scene is made of, as one hash: the scene file's bytes (every setting) and its mesh file's bytes.
+
+    A study keys its finished runs by the scene's name; this tells a run of an edited scene file (another mesh,
+    another gap) from one of the file as it was, so that a stale result is never reported for the new scene.
+
+    Returns:
+        a hex digest (sha256, 16 characters).
+
+    Raises:
+        ValueError: the scene file or its mesh cannot be read (names the file).
+    """
+    import hashlib
+
+    spec = read_scene(path)
+    digest = hashlib.sha256()
+    for p in (spec.path, resolve_mesh(spec.object["mesh"], spec.path.parent)):
+        try:
+            digest.update(Path(p).read_bytes())
+        except OSError as exc:
+            raise ValueError(f"{p}: cannot read ({exc.strerror or exc})") from None
+        digest.update(b"\0")
+    return digest.hexdigest()[:16]
 
 
 def _vector(v, label: str, path: Path) -> np.ndarray:

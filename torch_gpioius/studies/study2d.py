@@ -217,14 +217,24 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
     Returns:
         ``{"traces": ..., "rows": ..., "claims": ..., "seconds": ...}``.
     """
-    from .._progress import progress as reporter
-
     scenes = paper_objects_2d()
     unknown = [o for o in objects if o not in scenes]
     if unknown:
         raise ValueError(f"objects: unknown {unknown}; choose among {sorted(scenes)}")
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    from ..io.outputs import StagedFiles
+
+    final = Path(out)
+    final.mkdir(parents=True, exist_ok=True)
+    # written into a staging folder and moved in at the end: a killed run leaves the earlier run's files whole
+    with StagedFiles(final) as staged:
+        return _run_study(scenes, objects, staged.path, max_steps, progress, smoke, explore_kwargs)
+
+
+def _run_study(scenes: dict, objects, out: Path, max_steps: int, progress: bool, smoke: bool,
+               explore_kwargs: dict) -> dict:
+    """:func:`run_study`'s runs, figures and tables, written into ``out`` (its staging folder)."""
+    from .._progress import progress as reporter
+
     t0 = time.perf_counter()
     traces: dict[str, dict[str, Trace]] = {}
     jobs = [(o, m) for o in objects for m in MODES]

@@ -235,9 +235,8 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
             tactile-only runs have no camera points. None: exact.
         **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, device, ...).
     """
-    from .._progress import progress as reporter
-
     from ..exploration.registry import world_entry
+    from ..io.outputs import StagedFiles
 
     entry = world_entry(world)
     if voxel is not None:
@@ -259,7 +258,21 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     scenes = {o: entry.build(o, smoke) for o in objects}
     scenes.update({n: load_scene(p, world=entry.name, smoke=smoke) for n, p in zip(names, files)})
     objects = list(scenes)
-    out = Path(out)
+    final = Path(out)
+    final.mkdir(parents=True, exist_ok=True)
+    # the run's files are written into a staging folder and moved in at the end: a run killed half-way leaves the
+    # earlier run's logs, records and summary whole, never the new run's logs beside the old run's summary
+    with StagedFiles(final) as staged:
+        return _run_study_3d(scenes, objects, modes, staged.path, max_travel, metrics_every, progress, smoke, voxel,
+                             outer_tol, explore_kwargs)
+
+
+def _run_study_3d(scenes: dict, objects: list, modes, out: Path, max_travel: float, metrics_every: int,
+                  progress: bool, smoke: bool, voxel: float | None, outer_tol: float | None,
+                  explore_kwargs: dict) -> dict:
+    """:func:`run_study_3d`'s runs, figures and tables, written into ``out`` (its staging folder)."""
+    from .._progress import progress as reporter
+
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     traces: dict[str, dict[str, Trace]] = {}

@@ -27,8 +27,9 @@ import csv
 import json
 import math
 import os
+import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +89,8 @@ class RunSpec:
     kernel: str | None = None       # "imq" or "matern52"; None: the world's own
     theta: float | None = None      # the kernel's length [m] (IMQ theta, Matern length scale); None: the world's own
     noise: float | None = None      # sigma^2; None: the world's own
+    scene_hash: str | None = None   # the scene file's content (scenefile.scene_fingerprint): a run of an edited
+    #                                 scene is another run, whatever its name
 
     @property
     def key(self) -> str:
@@ -290,18 +293,23 @@ def run_one(spec: RunSpec) -> dict:
 
     out = Path(spec.out)
     result_path = out / "runs" / f"{spec.key}.json"
-    if result_path.exists():
-        try:
-            return read_run_file(result_path)
-        except RunFileError:
-            _set_aside(result_path)                 # damaged: kept for inspection, and the run is done again
+    if _finished(result_path, spec):
+        return read_run_file(result_path)
     for sub in ("runs", "logs", "running"):
         (out / sub).mkdir(parents=True, exist_ok=True)
     marker = out / "running" / f"{spec.key}.pid"
     marker.write_text(str(os.getpid()))
     t0 = time.perf_counter()
     with torch_threads(spec.threads):
-        world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings, spec.views)
+        try:
+            world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings, spec.views)
+        except (ValueError, RuntimeError, OSError) as exc:
+            # a scene that cannot be built (a cover that does not close, a mesh that will not load) is a failed
+            # row with its cause; the study goes on and writes its tables
+            record = scene_failure_record(spec, exc, time.perf_counter() - t0)
+            _atomic_json(result_path, record)
+            marker.unlink(missing_ok=True)
+            return record
         kw = _explore_kwargs(spec, world)
         try:
             # the folder is ours: a run that crashed before is done again over its own log
@@ -327,6 +335,8 @@ def run_one(spec: RunSpec) -> dict:
         record["views"] = "+".join(world.views)
     if spec.settings is not None:
         record["settings"] = spec.settings
+    if spec.scene_hash is not None:
+        record["scene_hash"] = spec.scene_hash
     if spec.device is not None:
         record["device"] = spec.device
     if "outer_tol" in kw and trace is not None:      # the truncated outer basis: its setting and largest bound
@@ -364,6 +374,15 @@ def _no_start_record(spec: RunSpec, kw: dict, exc: Exception, wall_time: float) 
             "series": {"travel": [0.0], **{k: nan for k in _SERIES if k != "travel"}, "estimate": [0.0]}}
 
 
+def scene_failure_record(spec: RunSpec, exc: BaseException, wall_time: float = 0.0) -> dict:
+    """The result of a run whose world could not be built: terminated "refused: scene: <why>", no estimate."""
+    record = _no_start_record(spec, {"max_travel": spec.max_travel}, exc, wall_time)
+    record["terminated"] = f"refused: scene: {exc}"
+    if spec.scene_hash is not None:
+        record["scene_hash"] = spec.scene_hash
+    return record
+
+
 def _record(spec: RunSpec, kw: dict, trace, wall_time: float) -> dict:
     """A finished run's result."""
     return {"world": spec.world, "object": spec.object, "mode": spec.mode, "seed": spec.seed,
@@ -396,27 +415,32 @@ def _n_outer(model, inside: bool = False) -> int:
     return int((outer & (model.train_targets < 0)).sum() if inside else outer.sum())
 
 
-def _set_aside(path: Path) -> Path:
-    """Rename a damaged result file to ``<name>.invalid`` (kept for inspection) so that its run is done again."""
+def _set_aside(path: Path, suffix: str = "invalid", why: str = "damaged or foreign result") -> Path:
+    """Rename a result file to ``<name>.<suffix>`` (kept for inspection) so that its run is done again."""
     import warnings
 
-    bad = path.with_name(path.name + ".invalid")
+    bad = path.with_name(path.name + "." + suffix)
     os.replace(path, bad)
-    warnings.warn(f"{path}: damaged or foreign result, renamed to {bad.name}; the run will be done again",
-                  RuntimeWarning, stacklevel=3)
+    warnings.warn(f"{path}: {why}, renamed to {bad.name}; the run will be done again", RuntimeWarning, stacklevel=3)
     return bad
 
 
-def _finished(path: Path) -> bool:
-    """Whether a run's result file exists and is valid (a damaged one is set aside, so the run is done again)."""
+def _finished(path: Path, spec: RunSpec | None = None) -> bool:
+    """Whether a run's result file exists, is valid and (with ``spec``) is a run of the same scene: a damaged one is
+    set aside, and so is one of a scene file since edited (another mesh, another gap: its ``scene_hash`` differs),
+    so the run is done again."""
     if not path.exists():
         return False
     try:
-        read_run_file(path)
-        return True
+        run = read_run_file(path)
     except RunFileError:
         _set_aside(path)
         return False
+    if spec is not None and spec.scene_hash is not None and run.get("scene_hash") != spec.scene_hash:
+        _set_aside(path, "stale", f"a run of the scene file as it was before it changed (scene_hash "
+                                  f"{run.get('scene_hash')}, now {spec.scene_hash})")
+        return False
+    return True
 
 
 # ---------------------------------------------------------------------------------------------- aggregation
@@ -461,6 +485,8 @@ def failure(run: dict) -> str:
     t = run["terminated"]
     if t == "stalled":
         return "stalled"
+    if t.startswith("refused: scene"):
+        return "scene: " + t[len("refused: scene"):].lstrip(": ")[:60]
     if t.startswith("refused: approach"):
         return "approach: " + _short_reason(t[len("refused: approach"):].lstrip(": "))
     if t.startswith("refused"):
@@ -682,13 +708,25 @@ def _early_benefit(summary: dict, obj: str, key: str, mode: str = "visual-tactil
                          f"[{_cm(pair['lo'])}, {_cm(pair['hi'])}] cm, p = {pair['p_wilcoxon']:.3g}")
 
 
+#: The fewest seeds per object and mode on which a claim is judged: with n seeds the order-statistic interval of a
+#: median covers at most 1 - 2^(1-n) (93.75 % at 5, 96.9 % at 6) and the smallest two-sided Wilcoxon p is 2^(1-n); a
+#: study of 2 seeds judged "holds: yes" beside its own table's 50 % coverage and p = 0.5.
+MIN_SEEDS_TO_JUDGE = 6
+
+
 def _claims(summary: dict) -> list[dict]:
     """The paper's claims about the objects present (A-D: Sec. V; E-H: Sec. VI), each judged by a stated rule."""
     objs = summary["objects"]
     claims = []
+    seeds = min((e["n"] for modes in objs.values() for e in modes.values()), default=0)
+    too_few = seeds < MIN_SEEDS_TO_JUDGE
 
     def add(claim: str, rule: str, result: tuple[bool | None, str]) -> None:
-        claims.append({"claim": claim, "rule": rule, "holds": result[0], "measured": result[1]})
+        holds, measured = result
+        if too_few:          # a 95 % interval needs 6 seeds: fewer cannot hold or fail a claim
+            holds, measured = None, (f"too few seeds to judge ({seeds}; a 95 % interval of a median and a Wilcoxon "
+                                     f"p below 0.05 need {MIN_SEEDS_TO_JUDGE}): {measured}")
+        claims.append({"claim": claim, "rule": rule, "holds": holds, "measured": measured})
 
     rule_early = ("95 % interval of the median paired VT - T below 0 and median VT <= half median T")
     rule_harm = ("upper end of the 95 % interval of the median paired VT - T (final) <= max(10 % of median T, 0.5 cm)")
@@ -797,7 +835,7 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
     else:
         lines += ["", "| claim | rule | measured | holds |", "|---|---|---|---|"]
         for c in claims:
-            holds = "n/a" if c["holds"] is None else ("yes" if c["holds"] else "**no**")
+            holds = "not judged" if c["holds"] is None else ("yes" if c["holds"] else "**no**")
             lines.append(f"| {c['claim']} | {c['rule']} | {c['measured']} | {holds} |")
     return "\n".join(lines) + "\n"
 
@@ -918,6 +956,7 @@ class SweepSettings:
     kernel: str | None = None
     theta: float | None = None
     noise: float | None = None
+    scene_hashes: dict = field(default_factory=dict)    # a scene's name -> scenefile.scene_fingerprint
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
@@ -990,9 +1029,12 @@ class SweepSettings:
             from ..tolerances import tol
 
             noise = as_float(noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
+        from ..sim.scenefile import scene_fingerprint
+
+        hashes = {name: scene_fingerprint(path) for name, path in scene_files.items()}
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
-                   kernel, theta, noise)
+                   kernel, theta, noise, hashes)
 
     def run(self) -> dict:
         """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
@@ -1002,16 +1044,17 @@ class SweepSettings:
         with FolderLock(out, "gpioius study"):
             running = self._prepare(out)
             specs = self._specs(out)
-            todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json")]
+            todo = [s for s in specs if not _finished(out / "runs" / f"{s.key}.json", s)]
+            skipped = len(specs) - len(todo)
             t0 = time.perf_counter()
             try:
-                used = self._execute(todo)
+                used = self._execute(self._built_first(todo))
             finally:
                 if running.exists() and not any(running.iterdir()):
                     running.rmdir()
             seconds = time.perf_counter() - t0
             result = aggregate(out, None, self.smoke, world=self.world, max_travel=self.max_travel)
-        result.update(runs=len(specs), skipped=len(specs) - len(todo), seconds=seconds, backend=used)
+        result.update(runs=len(specs), skipped=skipped, seconds=seconds, backend=used)
         return result
 
     def _claim(self) -> Path:
@@ -1038,8 +1081,30 @@ class SweepSettings:
     def _specs(self, out: Path) -> list[RunSpec]:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
-                        self.settings, self.learn, self.views, self.kernel, self.theta, self.noise)
+                        self.settings, self.learn, self.views, self.kernel, self.theta, self.noise,
+                        self.scene_hashes.get(o))
                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
+
+    def _built_first(self, todo: list[RunSpec]) -> list[RunSpec]:
+        """Build each scene file that has runs to do once, before the first run: a scene that cannot be built (a
+        cover that does not close, a mesh that will not load) gets a failed row for each of its runs, with the cause,
+        and the other runs go ahead (a 30-run study used to die at such a scene after 29 minutes of runs)."""
+        broken: dict[str, BaseException] = {}
+        for name in dict.fromkeys(s.object for s in todo if s.scene is not None):
+            spec = next(s for s in todo if s.object == name)
+            try:
+                make_world(self.world, name, 0, self.smoke, spec.scene, self.settings, self.views)
+            except (ValueError, RuntimeError, OSError) as exc:
+                broken[name] = exc
+        for spec in todo:
+            if spec.object in broken:
+                out = Path(spec.out) / "runs"
+                out.mkdir(parents=True, exist_ok=True)
+                _atomic_json(out / f"{spec.key}.json", scene_failure_record(spec, broken[spec.object]))
+        if broken and self.progress:
+            for name, exc in broken.items():
+                print(f"study: scene {name!r} cannot be built, its runs are failed rows: {exc}", file=sys.stderr)
+        return [s for s in todo if s.object not in broken]
 
     def _execute(self, todo: list[RunSpec]) -> str:
         """Run ``todo`` on Ray or in-process; returns how (for the report)."""
