@@ -3,6 +3,7 @@
 import re
 
 import numpy as np
+import torch
 import pytest
 
 from torch_gpioius.cli import build_parser, main
@@ -423,3 +424,52 @@ def test_replay_locks_its_folder(tmp_path, capsys):
     assert not (out / "records.csv").exists()
     assert main(["replay", "data/example_2d.gpioius", "--out", str(out), "--every", "40", "--quiet"]) == 0
     assert (out / "records.csv").exists() and not list(out.glob(".staging.*"))
+
+
+def test_fit_writes_a_folder_for_3d_contacts_alone(tmp_path, capsys):
+    """Issue 51, item 20: `gpioius fit contacts.csv --out DIR` (3-D contacts, no cloud) crashed in _plot_estimate
+    with "GPIS.predict() got an unexpected keyword argument 'task'" and left only the lock files."""
+    import json
+
+    rng = np.random.default_rng(4)
+    d = rng.normal(size=(40, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    c = np.array([0.5, 0.0, 0.25])
+    rows = ["x,y,z,label"] + [f"{p[0]:.5f},{p[1]:.5f},{p[2]:.5f},contact" for p in d[:30] * 0.08 + c] + \
+        [f"{p[0]:.5f},{p[1]:.5f},{p[2]:.5f},free" for p in d[30:] * 0.13 + c]
+    (tmp_path / "touch.csv").write_text("\n".join(rows) + "\n")
+    out = tmp_path / "fit"
+    assert main(["fit", str(tmp_path / "touch.csv"), "--out", str(out)]) == 0
+    assert "tactile-only GPIS" in capsys.readouterr().out
+    assert (out / "fit.png").stat().st_size > 0 and json.loads((out / "fit.json").read_text())["n_outer"] == 0
+    import torch_gpioius as tg
+
+    model = tg.load_checkpoint(out / "model.pt")
+    q = torch.tensor([[0.5, 0.0, 0.25]], dtype=torch.float64)
+    assert torch.equal(model.predict(q, task=0)[0], model.predict(q)[0])
+    with pytest.raises(ValueError, match="a GPIS models the inner shape only"):
+        model.predict(q, task="outer")
+
+
+def test_unquoted_numbers_get_a_hint_at_the_quotes(capsys):
+    """Issue 51, item 27: `--camera-origin 0.5 -0.8 0.45` without quotes gave "unrecognized arguments: -0.8 0.45"."""
+    with pytest.raises(SystemExit):
+        main(["fit", "c.csv", "--cloud", "a.ply", "--camera-origin", "0.5", "-0.8", "0.45"])
+    err = capsys.readouterr().err
+    assert "unrecognized arguments: -0.8 0.45" in err
+    assert '--camera-origin takes its numbers as one quoted argument: --camera-origin "0.5 -0.8 0.45"' in err
+
+
+def test_missing_extras_are_named_with_both_ways_to_install():
+    """Issue 51, item 27: missing-extra messages said `pip install 'torch_gpioius[viewer]'` while the README installs
+    with `-e ".[...]"`."""
+    from torch_gpioius._extras import install_hint
+
+    assert install_hint("viewer") == "pip install 'torch_gpioius[viewer]' (in a checkout: pip install -e '.[viewer]')"
+    import pathlib
+
+    for path in pathlib.Path("torch_gpioius").rglob("*.py"):
+        if path.name != "_extras.py":                # every other message asks install_hint
+            text = path.read_text()
+            assert "pip install torch_gpioius[" not in text, path           # unquoted: a glob in zsh
+            assert ": pip install 'torch_gpioius[" not in text, path         # a message: install_hint says it

@@ -192,3 +192,11 @@ def test_the_readme_tables_writing_commands_each_name_their_own_folder():
         assert "--out" in argv, f"README: `{c}` writes the command's default folder; name one"
         outs.append(argv[argv.index("--out") + 1])
     assert len(set(outs)) == len(outs), f"README: two commands write one folder: {outs}"
+
+
+def test_the_readme_says_what_a_second_run_into_its_own_folder_does():
+    """Issue 51, item 23: the README said "No command replaces existing files ... unless given --force", while a
+    second `fit --out` into its own folder replaces the earlier fit (as `--help` says)."""
+    text = (ROOT / "README.md").read_text()
+    assert "No command replaces existing files" not in text
+    assert "into its own folder replaces that folder's results" in text

@@ -2,6 +2,7 @@
 
 import os
 
+import numpy as np
 import pytest
 
 import torch_gpioius as tg
@@ -79,3 +80,28 @@ def test_a_log_is_never_resumed_through_a_link(tmp_path):
     with pytest.raises(DatasetError, match="is a symbolic link"):
         LogWriter(link, resume=True)
     assert real.read_bytes() == before
+
+
+def test_the_shipped_example_resumes(tmp_path):
+    """Issue 51, item 28: `data/example_2d.gpioius` could not be resumed: the refusal named the policy, whose only
+    difference was a newer field at its off value (`vision_free_far: None`)."""
+    import shutil
+
+    from torch_gpioius.io.runs import load_run
+
+    log = tmp_path / "example.gpioius"
+    shutil.copy("data/example_2d.gpioius", log)
+    run = load_run(log)
+    done = tg.explore(_a(), mode="visual-tactile", max_steps=run.meta["max_steps"], resume_from=log)
+    assert done.n_steps == run.steps[-1] + 1
+    np.testing.assert_array_equal(done.model.train_targets.numpy(), run.states[run.steps[-1]].y)
+
+
+def test_a_field_added_since_a_log_was_written_matches_at_its_off_value():
+    """Issue 51, item 28: a policy whose only difference is a newer field at its off value means the same."""
+    from torch_gpioius.io.logs import _same
+
+    old = {"voxel": None, "ramp": 0.05}
+    assert _same(old, {"voxel": None, "ramp": 0.05, "vision_free_far": None, "cover_offset": False})
+    assert not _same(old, {"voxel": None, "ramp": 0.05, "vision_free_far": 0.3})      # a setting that acts
+    assert not _same({**old, "gone": 0.02}, old)

@@ -374,3 +374,65 @@ def test_a_run_without_a_known_truth_disables_its_checkbox(dataset_3d):
         assert viewer.layers["true shapes"].disabled and "true shape: not known for this run" in viewer.info.content
     finally:
         viewer.close()
+
+
+@pytest.mark.parametrize("value", [float("nan"), "abc", [1, 2], None])
+def test_a_step_typed_as_nonsense_is_one_line_and_keeps_the_step(log_2d, capfd, value):
+    """Issue 51, item 18: the step control given NaN, a string or a list logged "Task exception was never
+    retrieved" (viser casts the value inside its own message handler)."""
+    import asyncio
+
+    from viser import _messages
+
+    viewer = RunViewer(log_2d, port=_free_port())
+    try:
+        before = viewer.step_box.value
+        handler = viewer.server.gui._websock_interface._incoming_handlers[_messages.GuiUpdateMessage][0]
+        message = _messages.GuiUpdateMessage(uuid=viewer.step_box._impl.uuid, updates={"value": value})
+        asyncio.run(handler(0, message))                   # no exception escapes the handler
+        assert viewer.step_box.value == before
+    finally:
+        viewer.close()
+    assert "gpioius view: ignored a control update it cannot use" in capfd.readouterr().err
+
+
+def test_a_scene_file_runs_truth_is_shown_while_the_file_is_unchanged(tmp_path):
+    """Issue 51, item 22: the viewer said "true shape: not known for this run" for a scene-file run whose fig9 drew
+    the true surface."""
+    from tests.scenes import ball_scene
+    from torch_gpioius.io.runs import known_truth, load_run
+    from torch_gpioius.sim.scenefile import load_scene
+
+    path = ball_scene(tmp_path)
+    log = tmp_path / "ball.gpioius"
+    tg.explore(load_scene(path), mode="tactile", max_travel=0.02, metrics_every=100, log=log, progress=False)
+    meta = load_run(log).meta
+    assert meta["scene_file"]["path"] == str(path.resolve())
+    truth = known_truth(meta)
+    assert truth is not None and abs(truth["inner"].bounding_sphere.primitive.radius - 0.06) < 0.002
+    viewer = RunViewer(log, port=_free_port())
+    try:
+        assert "/truth/inner" in viewer._handles and not viewer.layers["true shapes"].disabled
+    finally:
+        viewer.close()
+    path.write_text(path.read_text().replace("gap = 0.008", "gap = 0.01"))      # another scene now: not this run's
+    assert known_truth(meta) is None
+
+
+def test_a_taken_port_is_named_with_the_one_served(log_2d, monkeypatch, capsys):
+    """Issue 51, item 24: `view --port 8770` with the port taken served on 8771 and said nothing."""
+    import torch_gpioius.viewer as viewer_mod
+
+    taken = socket.socket()
+    taken.bind(("127.0.0.1", 0))
+    taken.listen(1)
+    port = taken.getsockname()[1]
+    monkeypatch.setattr(viewer_mod.time, "sleep", lambda s: (_ for _ in ()).throw(KeyboardInterrupt))
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            viewer_mod.serve(log_2d, port=port, open_browser=False)
+    finally:
+        taken.close()
+    err = capsys.readouterr().err
+    assert f"port {port} is taken; serving on port " in err
+    assert viewer_mod.port_note(0, 51234) is None and viewer_mod.port_note(8080, 8080) is None

@@ -599,12 +599,41 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str] | None) -> argparse.
     hints = []
     for token in extra:
         name = token.split("=", 1)[0]
-        if name.startswith("-"):
+        if name.startswith("-") and not _is_number(name):
             close = difflib.get_close_matches(name, known, n=2, cutoff=0.6)
             if close:
                 hints.append(f"{name}: did you mean {' or '.join(close)}?")
+    vector = _unquoted_vector(list(argv if argv is not None else sys.argv[1:]), extra)
+    if vector:
+        hints.append(vector)
     sub.error(f"unrecognized arguments: {' '.join(extra)}" + (f" ({'; '.join(hints)})" if hints else ""))
     raise AssertionError("unreachable")  # pragma: no cover - error() exits
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _unquoted_vector(argv: list[str], extra: list[str]) -> str | None:
+    """A hint for an option's several numbers given unquoted (``--camera-origin 0.5 -0.8 0.45`` left ``-0.8 0.45``
+    over): the option's numbers go in one quoted argument."""
+    if not extra or not all(_is_number(t) for t in extra):
+        return None
+    try:
+        i = argv.index(extra[0])
+    except ValueError:
+        return None
+    j = i - 1
+    while j >= 0 and _is_number(argv[j]):
+        j -= 1
+    if j < 0 or not argv[j].startswith("--"):
+        return None
+    values = " ".join(argv[j + 1:i] + extra)
+    return f"{argv[j]} takes its numbers as one quoted argument: {argv[j]} \"{values}\""
 
 
 def main(argv: list[str] | None = None) -> int:

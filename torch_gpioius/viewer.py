@@ -273,6 +273,30 @@ def _install_origin_check(bound_host: str, allowed_hosts: tuple[str, ...] = ()) 
     _infra.websockets = proxy
 
 
+def _guard_gui_updates(server) -> None:
+    """Make a GUI update the viewer cannot use (a step typed as NaN, a string or a list) end in one line, not in an
+    asyncio task's unretrieved exception.
+
+    viser (1.1) casts each update to its control's type inside its own message handler (``int("abc")`` raises
+    there), before any callback of ours runs, and offers no hook for it: its handler is swapped for one that calls it
+    and reports what it refuses; the control keeps its value."""
+    from viser import _messages
+
+    api = server.gui
+    original = api._handle_gui_updates
+
+    async def guarded(client_id, message) -> None:
+        try:
+            await original(client_id, message)
+        except (TypeError, ValueError, OverflowError, AssertionError) as exc:
+            shown = " ".join(repr(message.updates).split())[:120]
+            print(f"gpioius view: ignored a control update it cannot use ({type(exc).__name__}: {shown})",
+                  file=sys.stderr, flush=True)
+
+    api._websock_interface.unregister_handler(_messages.GuiUpdateMessage, original)
+    api._websock_interface.register_handler(_messages.GuiUpdateMessage, guarded)
+
+
 def _local_address(connection) -> frozenset[str]:
     """The address a client connected to (empty where the transport has none)."""
     try:
@@ -312,7 +336,9 @@ class RunViewer:
         try:
             import viser
         except ImportError as exc:  # pragma: no cover - extra missing
-            raise ImportError("gpioius view needs the 'viewer' extra: pip install 'torch_gpioius[viewer]'") from exc
+            from ._extras import install_hint
+
+            raise ImportError(f"gpioius view needs the 'viewer' extra: {install_hint('viewer')}") from exc
         from .io.datasets import DatasetError
         from .io.runs import load_run
 
@@ -347,6 +373,7 @@ class RunViewer:
         self.run = self._runs[self.files[0]]
         _install_origin_check(host, allow_hosts)
         self.server = viser.ViserServer(host=host, port=port, verbose=False)
+        _guard_gui_updates(self.server)
         self.port = self.server.get_port()
         self.server.scene.set_up_direction("+z")
         self._build_gui()
@@ -684,6 +711,14 @@ def _browser_host(host: str) -> str:
     return f"[{host}]" if ":" in host else host
 
 
+def port_note(asked: int, served: int) -> str | None:
+    """The line that says a viewer serves on another port than the one asked for (viser takes the next free port
+    when the asked one is taken), or None (the port asked for, or 0: any)."""
+    if asked and served != asked:
+        return f"gpioius view: port {asked} is taken; serving on port {served} instead"
+    return None
+
+
 def serve(source: str | os.PathLike, *, port: int = 8080, open_browser: bool = True,
           resolution: float | None = None, host: str = "127.0.0.1", allow_hosts=()) -> None:
     """Serve :class:`RunViewer` until interrupted (Ctrl-C); the address is printed once every run is loaded.
@@ -697,6 +732,9 @@ def serve(source: str | os.PathLike, *, port: int = 8080, open_browser: bool = T
     if warning:
         print(warning, file=sys.stderr, flush=True)
     url = f"http://{_browser_host(host)}:{viewer.port}"
+    moved = port_note(port, viewer.port)
+    if moved:
+        print(moved, file=sys.stderr, flush=True)
     for path, why in viewer.skipped.items():
         print(f"gpioius view: left out {path}: {why}", file=sys.stderr, flush=True)
     print(f"gpioius view: {len(viewer.files)} run(s) at {url} (Ctrl-C to stop)", flush=True)

@@ -365,3 +365,11 @@ def test_an_npz_cloud_that_would_expand_without_bound_is_refused_before_it_expan
         zf.writestr("points.npy", buf.getvalue() + np.zeros(6).tobytes())
     with pytest.raises(DatasetError, match=r"declares shape \(1000000000, 3\)"):
         load_point_cloud(liar)
+
+
+def test_a_spreadsheets_csv_with_a_byte_order_mark_is_read(tmp_path):
+    """Issue 51, item 25: a CSV saved as "CSV UTF-8" (with a byte-order mark) was refused: got ['\\ufeffx', ...]."""
+    p = tmp_path / "c.csv"
+    p.write_bytes("x,y,z,label\n0.5,0,0.25,contact\n0.5,0,0.35,free\n".encode("utf-8-sig"))
+    x, y, _ = load_contacts_csv(p)
+    assert x.shape == (2, 3) and y.tolist() == [0.0, 1.0]

@@ -201,3 +201,14 @@ def test_a_scan_with_an_internal_partition_loads_and_loses_the_partition():
     # what moves the outside is still measured: a remesh far coarser than the allowance is refused
     with pytest.raises(ValueError, match="more than the .* allowed"):
         load_mesh(scan, scale=0.001, resolution=0.02, max_repair_distance=1e-3)
+
+
+def test_a_flat_mesh_is_refused_without_a_stray_numpy_warning():
+    """Issue 51, item 29: a flat mesh printed "invalid value encountered in divide" before its refusal."""
+    import warnings
+
+    flat = trimesh.Trimesh([[0, 0, 0], [0.1, 0, 0], [0, 0.1, 0], [0.1, 0.1, 0]], [[0, 1, 2], [1, 3, 2]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        with pytest.raises(ValueError, match="encloses no volume"):
+            load_mesh(flat)

@@ -12,6 +12,8 @@ from torch_gpioius.sim.forcefield import Scene3D, approach_from_above, cover_aro
 from torch_gpioius.sim.meshes import MeshDistance, MeshRepairWarning
 from torch_gpioius.sim.scenefile import load_scene, read_scene
 
+from tests.scenes import ball_scene
+
 PROFILE = np.array([[0, 0], [30, 0], [30, 100], [26, 115], [12, 135], [12, 160], [0, 160]], dtype=float)
 
 
@@ -256,3 +258,40 @@ def test_a_standing_carton_and_bottle_get_closed_covers_at_the_default_grid(shap
         assert outer.is_watertight and outer.volume > body.volume
         d = MeshDistance(body)(outer.vertices)
         assert d.min() > 0.004 and np.median(d) == pytest.approx(0.008, abs=0.002)
+
+
+@pytest.mark.parametrize("extra, match", [
+    ("[forcefield]\nvoxel = 1e-6\n", r"\[forcefield\] voxel: must be 0 .* or an edge in \[0.0001, 1\] m, got 1e-06"),
+    ("[forcefield]\ncover_stiffness = inf\n", r"forcefield.cover_stiffness: must be a finite number, got inf"),
+    ("[forcefield]\ncover_stiffness = -5.0\n", r"\[forcefield\] cover_stiffness: must be in \(0, 1e\+07\]"),
+    ("[mujoco]\nvision_inside = nan\n", r"mujoco.vision_inside: must be a finite number"),
+    ("[forcefield]\ncover_offset = 1\n", r"\[forcefield\] cover_offset: must be true or false"),
+])
+def test_scene_values_are_checked_when_the_file_is_read(tmp_path, extra, match):
+    """Issue 51, item 26: `voxel = 1e-6` passed the parser, then failed with "voxel size must be a number in
+    [0.0001, 10] m"; `cover_stiffness = inf` was accepted, then stopped the robot. Each is named by file and key
+    when the file is read."""
+    path = ball_scene(tmp_path, extra=extra)
+    with pytest.raises(ValueError, match=match) as info:
+        read_scene(path)
+    assert str(path) in str(info.value)
+
+
+def test_a_pose_a_deep_file_and_an_unknown_cover_key_are_named(tmp_path):
+    """Issue 51, item 26: `pose = "up"` gave "could not convert string to float"; a deeply nested TOML "maximum
+    recursion depth exceeded"; an unknown [cover] key's list of allowed keys mixed both worlds' options."""
+    path = ball_scene(tmp_path)
+    text = path.read_text()
+    path.write_text(text.replace('mesh = "ball.stl"', 'mesh = "ball.stl"\npose = "up"'))
+    with pytest.raises(ValueError, match=r"object.pose: expected a \(4, 4\) transform .* got 'up'"):
+        read_scene(path)
+    path.write_text(text.replace('mesh = "ball.stl"', 'mesh = "ball.stl"\npose = { rpy_deg = ["a", 0, 0] }'))
+    with pytest.raises(ValueError, match=r"object.pose: rpy_deg: expected numbers"):
+        read_scene(path)
+    path.write_text("a = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(ValueError, match="nested too deeply"):
+        read_scene(path)
+    path.write_text(text.replace("gap = 0.008", "gap = 0.008\nslak = 0.03"))
+    with pytest.raises(ValueError, match=r"unknown key\(s\) \['slak'\]; \[cover\] takes \['gap', 'kind'\] in every "
+                                         r"world, and a world's own options \(forcefield: \['bridge'"):
+        read_scene(path)

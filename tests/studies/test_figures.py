@@ -166,6 +166,26 @@ def test_a_log_panel_with_no_estimate_says_so_instead_of_failing(tmp_path):
     assert ax.get_yscale() == "log"
 
 
+@pytest.mark.parametrize("values", [(3.9, 4.6), (3.95, 4.05), (12.0, 13.5), (0.21, 0.26)])
+def test_a_narrow_log_panel_has_at_least_two_ticks_to_read_from(values):
+    """Issue 51, item 30: MuJoCo's fig9 Hausdorff panel (3.9-4.6 cm) had a single y tick."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from torch_gpioius.studies.figures import log_axis
+
+    fig, ax = plt.subplots()
+    ax.plot([0.0, 0.5, 1.0], [values[0], np.mean(values), values[1]])
+    log_axis(ax)
+    fig.canvas.draw()
+    lo, hi = ax.get_ylim()
+    shown = [t for t in ax.get_yticks() if lo <= t <= hi]
+    assert len(shown) >= 2, (values, shown)
+    plt.close(fig)
+
+
 def test_fig5_legend_matches_what_is_drawn(short_pair, tmp_path):
     """Issue 35, item 15: the legend's line styles did not match the per-object colours (and showed the dashed
     reference as a solid line)."""
@@ -201,3 +221,34 @@ def test_fig9_tick_labels_do_not_run_together(tmp_path):
             boxes = [t.get_window_extent(renderer) for t in axis.get_ticklabels() if t.get_visible() and t.get_text()]
             assert len(boxes) <= 6
             assert not any(a.overlaps(b) for i, a in enumerate(boxes) for b in boxes[i + 1:])
+    # issue 51, item 30: the 3-D panels were small in a wide canvas, the dark estimate hard to tell from the grey wire
+    # of the true shape, and the cover was not drawn
+    panels = [a for a in fig.axes if hasattr(a, "zaxis")]
+    width, height = fig.get_size_inches() * fig.dpi
+    assert all(a.get_window_extent(renderer).width > 0.4 * width for a in panels)
+    from matplotlib.colors import to_rgba
+
+    legend = {t.get_text() for lg in fig.legends for t in lg.get_texts()}
+    assert {"true inner surface (green wire)", "cover (outer surface)"} <= legend
+    for ax in panels:
+        wire, skin, estimate = ax.collections[1], ax.collections[0], ax.collections[2]
+        assert to_rgba(wire.get_edgecolor()[0])[1] > to_rgba(wire.get_edgecolor()[0])[0]     # green
+        assert skin.get_facecolor()[0][3] > 0 and skin.get_facecolor()[0][2] > 0.8            # the pale blue cover
+        lightest = min(np.mean(c[:3]) for c in estimate.get_facecolor())
+        assert lightest > 0.25                           # the certain end of the map is no darker than magenta
+    assert all(a.get_xlabel() for a in fig.axes if not hasattr(a, "zaxis") and a.lines)
+
+
+def test_svg_curves_are_strokes_with_axes(short_pair, tmp_path):
+    """Issue 51, item 30: `curves/*.svg` were black filled shapes without axes."""
+    import re
+
+    from torch_gpioius.io.export import export_run
+
+    _, _, logs = short_pair
+    export_run(logs / "visual-tactile.gpioius", tmp_path / "d.svg")
+    text = (tmp_path / "d.svg").read_text()
+    estimate = re.search(r'<g id="estimate" fill="none" stroke="#d62728"[^>]*>(.*?)</g>', text, re.S).group(1)
+    assert estimate.count("<path") >= 1 and "fill=" not in estimate
+    axes = re.search(r'<g id="axes"[^>]*>(.*?)</g>', text, re.S).group(1)
+    assert "x [mm]" in axes and "y [mm]" in axes and axes.count("<text") >= 6

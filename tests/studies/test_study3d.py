@@ -19,6 +19,12 @@ def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):
     assert {r["mode"] for r in records} == {"visual-tactile", "tactile"}
     assert all("contact_z" in r and "robot_time" in r for r in records)
     assert "| G |" in capsys.readouterr().out
+    # issue 51, item 21: the 3-D summary says why each run ended (a MuJoCo run stopped on "lost-contact" after one
+    # step said so only in summary.json)
+    summary = (tmp_path / "summary.md").read_text()
+    assert "steps (ended by)" in summary
+    for r in json.loads((tmp_path / "summary.json").read_text())["rows"]:
+        assert f"{r['steps_vt']} ({r['terminated_vt']}) / {r['steps_t']} ({r['terminated_t']})" in summary
     import trimesh
 
     mesh = trimesh.load(tmp_path / "meshes" / "G_visual-tactile_inner.ply")

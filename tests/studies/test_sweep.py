@@ -84,6 +84,19 @@ def test_bad_sweep_arguments(tmp_path):
         run_sweep("planar", settings="default", out=tmp_path)
     with pytest.raises(ValueError, match="settings"):
         run_sweep("forcefield", objects=["E"], settings="mine", out=tmp_path)
+    with pytest.raises(ValueError, match="workers: must be a positive integer"):
+        run_sweep("planar", workers=0, out=tmp_path)
+
+
+def test_workers_are_capped_at_the_cores_of_a_local_run():
+    """Issue 51, item 17: `study --workers 1000` started one Ray process per run."""
+    from torch_gpioius.studies.sweep import _checked_workers
+
+    cores = os.cpu_count()
+    with pytest.warns(UserWarning, match=f"workers: 1000 parallel runs on {cores} cores .* running {cores} at a time"):
+        assert _checked_workers(1000, None) == cores
+    assert _checked_workers(1, None) == 1 and _checked_workers(None, None) is None
+    assert _checked_workers(1000, "ray://head:10001") == 1000          # a cluster's CPUs bound it there
 
 
 def test_a_studys_settings_reach_every_run_built_in_objects_and_scene_files_alike(tmp_path):
@@ -437,3 +450,21 @@ def test_claims_are_not_judged_on_too_few_seeds():
     assert all(c["holds"] is not None for c in enough)
     assert {c["claim"]: c["holds"] for c in enough}["E (tight): visual-tactile accurate from the beginning (10 % of "
                                                      "travel)"] is True
+
+
+def test_a_local_study_runs_in_process_when_ray_cannot_start(tmp_path, monkeypatch, capsys):
+    """Issue 51, item 18: Ray failing to start under a memory limit ended the study on a raw "node timed out during
+    startup"."""
+    pytest.importorskip("ray")
+    import ray
+
+    def refuse(*args, **kw):
+        raise Exception("The current node timed out during startup. This could happen because some of the Ray "
+                        "processes failed to startup.")
+
+    monkeypatch.setattr(ray, "init", refuse)
+    out = run_sweep("planar", objects=["A"], modes=["tactile"], seeds=2, out=tmp_path / "s", smoke=True,
+                    backend="ray", progress=False, max_steps=3)
+    assert out["runs"] == 2 and out["backend"] == "in-process (sequential)"
+    assert "study: Ray could not start (Exception: The current node timed out" in capsys.readouterr().err
+    assert len(list(csv.DictReader(open(tmp_path / "s" / "runs.csv")))) == 2

@@ -205,10 +205,14 @@ MAX_VOXEL = 1.0
 
 
 def check_voxel(voxel) -> float:
-    """``voxel`` [m] as a float in [0, ``MAX_VOXEL``] (0: no averaging); raises ValueError naming the value."""
+    """``voxel`` [m] as a float: 0 (no averaging) or an edge in [``VOXEL_RANGE[0]``, ``MAX_VOXEL``] (the smallest
+    edge the averaging takes, :data:`torch_gpioius.voxels.VOXEL_RANGE`); raises ValueError naming the value."""
+    from ..voxels import VOXEL_RANGE
+
     if isinstance(voxel, bool) or not isinstance(voxel, (int, float)) or not (
-            math.isfinite(voxel) and 0 <= voxel <= MAX_VOXEL):
-        raise ValueError(f"voxel: must be an edge in [0, {MAX_VOXEL:g}] m (0 keeps every camera point), got {voxel!r}")
+            math.isfinite(voxel) and (voxel == 0 or VOXEL_RANGE[0] <= voxel <= MAX_VOXEL)):
+        raise ValueError(f"voxel: must be 0 (keep every camera point) or an edge in [{VOXEL_RANGE[0]:g}, "
+                         f"{MAX_VOXEL:g}] m, got {voxel!r}")
     return float(voxel)
 
 

@@ -168,6 +168,10 @@ class World(abc.ABC):
     kind: str = ""
     name: str = ""
     dim: int = 3
+    #: The scene file the world was built from, ``{"path": absolute path, "hash": its content's digest}``
+    #: (:func:`torch_gpioius.sim.scenefile.scene_fingerprint`), or None: a log records it, so that a viewer or an
+    #: export can rebuild the true shapes of a user's scene while the file is unchanged.
+    scene_file: dict | None = None
     start: np.ndarray
     direction: np.ndarray
 
@@ -227,8 +231,11 @@ class World(abc.ABC):
 
     def describe(self) -> dict:
         """JSON-able description for log headers."""
-        return {"world": self.kind or type(self).__name__, "scene": self.name, "dim": self.dim,
-                "scene_fingerprint": self.fingerprint()}
+        out = {"world": self.kind or type(self).__name__, "scene": self.name, "dim": self.dim,
+               "scene_fingerprint": self.fingerprint()}
+        if self.scene_file:
+            out["scene_file"] = dict(self.scene_file)
+        return out
 
     def truth(self) -> dict | None:
         """The true shapes for viewers and exports: 2-D ``{"inner": [(m, 2)], "outer": [(m, 2)]}`` closed polylines,

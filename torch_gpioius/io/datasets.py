@@ -313,8 +313,9 @@ def step_number(meta: dict, where: str) -> int:
     v = meta.get("step")
     if v is None and "step" not in meta:
         raise DatasetError(f"{where}: field 'step' is missing")
-    if not (isinstance(v, int) and not isinstance(v, bool) and v >= 0):
-        raise DatasetError(f"{where}: field 'step' must be a non-negative integer, got {v!r}")
+    if not (isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 2**62):
+        shown = v if not isinstance(v, int) or abs(v) < 10**20 else f"{float(v):.3g}"
+        raise DatasetError(f"{where}: field 'step' must be a non-negative integer below 2^62, got {shown!r}")
     return v
 
 

@@ -13,7 +13,7 @@ from ..surfaces import data_bounds, grid_resolution  # noqa: F401  (grid_resolut
 from .datasets import DatasetError
 from .outputs import atomic_write, check_distinct, check_new_file
 
-__all__ = ["export_run", "export_model", "write_surface", "grid_resolution", "MESH_FORMATS", "CURVE_FORMATS"]
+__all__ = ["export_run", "export_model", "write_surface", "curves_svg", "grid_resolution", "MESH_FORMATS", "CURVE_FORMATS"]
 
 #: File endings trimesh writes meshes to.
 MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")
@@ -65,22 +65,18 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
         raise ValueError(f"{path}: a 2-D estimate is a set of closed curves; write one of {', '.join(CURVE_FORMATS)}")
     curves = [np.asarray(c, dtype=np.float64) for c in surface]
     path.parent.mkdir(parents=True, exist_ok=True)
-    if ext in (".svg", ".dxf"):
-        # drawings are in millimetres, the unit CAD and drawing programs expect (metres made an SVG 0.3 units wide);
-        # SVG's y axis points down, so y is negated there and the drawing stands upright
-        flip = np.array([1000.0, -1000.0 if ext == ".svg" else 1000.0])
+    if ext == ".svg":
+        return atomic_write(path, curves_svg(curves))
+    if ext == ".dxf":
+        # drawings are in millimetres, the unit CAD and drawing programs expect (metres made an SVG 0.3 units wide)
+        flip = np.array([1000.0, 1000.0])
         entities, vertices = [], []
         for c in curves:
             start = sum(len(v) for v in vertices)
             vertices.append(c * flip)
             entities.append(trimesh.path.entities.Line(np.arange(start, start + len(c))))
         p = trimesh.path.Path2D(entities=entities, vertices=np.concatenate(vertices))
-        text = p.export(file_type=ext[1:])
-        if ext == ".svg":
-            (x0, y0), (x1, y1) = p.bounds
-            text = text.replace('width="100%"', f'width="{x1 - x0:.3f}mm"', 1).replace(
-                'height="100%"', f'height="{y1 - y0:.3f}mm"', 1)
-        return atomic_write(path, text)
+        return atomic_write(path, p.export(file_type="dxf"))
     # PLY / OBJ: a line set in the z = 0 plane with the variance as colours
     vertices = np.concatenate([np.column_stack([c, np.zeros(len(c))]) for c in curves])
     offsets = np.cumsum([0] + [len(c) for c in curves])
@@ -99,6 +95,59 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
     for a, b in zip(offsets[:-1], offsets[1:]):
         lines.append("l " + " ".join(str(i + 1) for i in range(a, b)))
     return atomic_write(path, "\n".join(lines) + "\n")
+
+
+def curves_svg(curves: list[np.ndarray], colour: str = "#d62728") -> str:
+    """An SVG drawing of closed curves `(m, 2)` [m] in millimetres, upright, with axes.
+
+    The curves are unfilled strokes (``<g id="estimate">``); a frame with ticks every 10, 20 or 50 mm, their labels
+    and the axis names sit in a group of their own (``<g id="axes">``) that a drawing program can hide or delete.
+    The document declares its size in millimetres and one user unit is 1 mm. Written here because trimesh's SVG
+    export fills every closed path in black and draws no axes.
+    """
+    mm = [np.asarray(c, dtype=np.float64) * np.array([1000.0, -1000.0]) for c in curves]   # SVG's y points down
+    pts = np.concatenate(mm)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    span = float(max((hi - lo).max(), 1.0))
+    step = next(t for t in (1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000) if span / t <= 8)
+    x_ticks = np.arange(np.ceil(lo[0] / step) * step, hi[0] + 1e-9, step)
+    y_ticks = np.arange(np.ceil(-hi[1] / step) * step, -lo[1] + 1e-9, step)        # in the drawing's y (up)
+    font = max(span / 40, 2.5)
+    pad = np.array([4.5 * font, 3.0 * font])                                        # room for the labels
+    x0, y0 = lo[0] - pad[0], lo[1] - font
+    width, height = hi[0] - lo[0] + pad[0] + font, hi[1] - lo[1] + pad[1] + font
+
+    def num(v: float) -> str:
+        return f"{v:.3f}".rstrip("0").rstrip(".")
+
+    out = [f'<svg xmlns="http://www.w3.org/2000/svg" width="{width:.3f}mm" height="{height:.3f}mm" '
+           f'viewBox="{x0:.3f} {y0:.3f} {width:.3f} {height:.3f}">',
+           f'<g id="axes" stroke="#888888" stroke-width="{font / 12:.3f}" fill="none" font-family="sans-serif">',
+           f'<rect x="{lo[0]:.3f}" y="{lo[1]:.3f}" width="{hi[0] - lo[0]:.3f}" height="{hi[1] - lo[1]:.3f}"/>']
+    tick = font / 2
+    for t in x_ticks:
+        out.append(f'<line x1="{t:.3f}" y1="{hi[1]:.3f}" x2="{t:.3f}" y2="{hi[1] + tick:.3f}"/>')
+        out.append(f'<text x="{t:.3f}" y="{hi[1] + tick + font:.3f}" font-size="{font:.3f}" text-anchor="middle" '
+                   f'stroke="none" fill="#555555">{num(t)}</text>')
+    for t in y_ticks:
+        out.append(f'<line x1="{lo[0] - tick:.3f}" y1="{-t:.3f}" x2="{lo[0]:.3f}" y2="{-t:.3f}"/>')
+        out.append(f'<text x="{lo[0] - tick - font / 4:.3f}" y="{-t + font / 3:.3f}" font-size="{font:.3f}" '
+                   f'text-anchor="end" stroke="none" fill="#555555">{num(t)}</text>')
+    out.append(f'<text x="{(lo[0] + hi[0]) / 2:.3f}" y="{hi[1] + tick + 2.2 * font:.3f}" font-size="{font:.3f}" '
+               'text-anchor="middle" stroke="none" fill="#555555">x [mm]</text>')
+    cx, cy = lo[0] - 3.6 * font, (lo[1] + hi[1]) / 2
+    out.append(f'<text x="{cx:.3f}" y="{cy:.3f}" font-size="{font:.3f}" text-anchor="middle" stroke="none" '
+               f'fill="#555555" transform="rotate(-90 {cx:.3f} {cy:.3f})">y [mm]</text>')
+    out.append("</g>")
+    out.append(f'<g id="estimate" fill="none" stroke="{colour}" stroke-width="{font / 6:.3f}" '
+               'stroke-linejoin="round">')
+    for c in mm:
+        closed = len(c) > 2 and np.allclose(c[0], c[-1])
+        body = " L".join(f"{x:.4f},{y:.4f}" for x, y in (c[:-1] if closed else c))
+        out.append(f'<path d="M{body}{" Z" if closed else ""}"/>')
+    out.append("</g>")
+    out.append("</svg>")
+    return "\n".join(out) + "\n"
 
 
 def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,

@@ -64,7 +64,9 @@ def export_mcap(run: str | os.PathLike, path: str | os.PathLike, *, every: int |
     try:
         import foxglove  # noqa: F401
     except ImportError as exc:  # pragma: no cover - extra missing
-        raise ImportError("MCAP export needs the 'foxglove' extra: pip install 'torch_gpioius[foxglove]'") from exc
+        from .._extras import install_hint
+
+        raise ImportError(f"MCAP export needs the 'foxglove' extra: {install_hint('foxglove')}") from exc
     from ..surfaces import grid_resolution
     from .outputs import check_new_file
     from .runs import load_run

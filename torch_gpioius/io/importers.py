@@ -309,7 +309,9 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
     path = Path(path)
     scale = _scale(units, path)
     try:
-        with open(path, newline="") as f:
+        # utf-8-sig: a spreadsheet's "CSV UTF-8" starts with a byte-order mark, which read as part of the first
+        # column's name ('\ufeffx')
+        with open(path, newline="", encoding="utf-8-sig") as f:
             reader = csv.DictReader(f)
             rows = list(reader)
             header = [c.strip().lower() for c in reader.fieldnames or [] if c is not None]

@@ -32,18 +32,47 @@ _VALUES = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "estimate"
            "robot_time", "contact_distance", "contact_on_body", "truncation", "fit_gap", "length", "noise")
 
 
-def step_values(meta: dict) -> dict:
-    """A step record's values by their current names (old names mapped; NaN where absent or null)."""
+def step_values(meta: dict, where: str = "a step record") -> dict:
+    """A step record's values by their current names (old names mapped; NaN where absent or null).
+
+    Raises:
+        DatasetError: a value of the wrong type (a list where a number belongs, a count that is not a whole
+            number), naming ``where`` and the field.
+    """
     m = {OLD_FIELD_NAMES.get(k, k): v for k, v in meta.items()}
-    out = {k: (math.nan if m.get(k) is None else float(m[k])) for k in _VALUES}
+
+    def number(key: str, default=math.nan) -> float:
+        v = m.get(key)
+        if v is None:
+            return default
+        if isinstance(v, bool) or not isinstance(v, (int, float)):
+            raise DatasetError(f"{where}: field {key!r} must be a number or null, got {_shown(v)}")
+        try:
+            return float(v)
+        except OverflowError:
+            raise DatasetError(f"{where}: field {key!r} is out of range ({_shown(v)})") from None
+
+    def count(key: str) -> int:
+        v = number(key, 0.0)
+        if not (math.isfinite(v) and v >= 0 and v == int(v) and v < 2**62):
+            raise DatasetError(f"{where}: field {key!r} must be a count (a whole number >= 0), got {_shown(m[key])}")
+        return int(v)
+
+    out = {k: number(k) for k in _VALUES}
     ci = m.get("correlation_interval") or [math.nan, math.nan]
+    if not isinstance(ci, (list, tuple)) or len(ci) != 2 or not all(
+            v is None or (isinstance(v, (int, float)) and not isinstance(v, bool)) for v in ci):
+        raise DatasetError(f"{where}: field 'correlation_interval' must be two numbers, got {_shown(ci)}")
     out["correlation_interval"] = tuple(math.nan if v is None else float(v) for v in ci)
-    out["taps"] = int(m.get("taps", 0) or 0)
-    out["recoveries"] = int(m.get("recoveries", 0) or 0)
-    out["reapproaches"] = int(m.get("reapproaches", 0) or 0)
-    out["reapproach_travel"] = float(m.get("reapproach_travel", 0.0) or 0.0)
-    out["retracted"] = int(m.get("retracted", 0) or 0)
+    for key in ("taps", "recoveries", "reapproaches", "retracted"):
+        out[key] = count(key)
+    out["reapproach_travel"] = number("reapproach_travel", 0.0)
     return out
+
+
+def _shown(v) -> str:
+    text = repr(v)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def load_logged_hyperparameters(model, state, where: str):
@@ -147,11 +176,19 @@ class LogRecorder(Recorder):
                                 "normal": state.normal.numpy(), **world})
 
 
+#: Header keys a resumed run need not match: where the world's scene file lies (a folder moved, a log written before
+#: the key existed); its geometry is compared by ``scene_fingerprint``.
+_NOT_COMPARED = frozenset({"scene_file"})
+
+
 def _same(have, want) -> bool:
     if isinstance(want, float) and isinstance(have, (int, float)) and not isinstance(have, bool):
         return math.isclose(have, want, rel_tol=1e-12, abs_tol=0.0)
     if isinstance(want, dict) and isinstance(have, dict):
-        return set(want) == set(have) and all(_same(have[k], want[k]) for k in want)
+        # a field added since the log was written, at its off value (None, False), means what its absence meant
+        # (the shipped example's policy lacks vision_free_far: None, which is no far free-space point either way)
+        absent = [k for k in set(want) ^ set(have) if (want if k in want else have)[k] not in (None, False)]
+        return not absent and all(_same(have[k], want[k]) for k in set(want) & set(have))
     if isinstance(want, (list, tuple)) and isinstance(have, (list, tuple)):
         return len(want) == len(have) and all(_same(a, b) for a, b in zip(have, want))
     return have == want
@@ -182,6 +219,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     header = records[0].meta
     want = {**world.describe(), **config.describe()}
     for key, value in want.items():
+        if key in _NOT_COMPARED:
+            continue
         have = header.get(key)
         if not _same(have, value):
             what = "world geometry" if key == "scene_fingerprint" else key
@@ -201,7 +240,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         if step_number(r.meta, where) != i:
             raise DatasetError(f"{where}: steps out of order (found step {r.meta['step']})")
         state.contacts.append(np.asarray(r.arrays["contact"], dtype=np.float64))
-        v = step_values(r.meta)
+        v = step_values(r.meta, f"{path}: step record ending at byte {r.end}")
         rec = StepRecord(step=i, travel=v["travel"], hausdorff=v["hausdorff"],
                          hausdorff_touched=v["hausdorff_touched"], uncertainty=v["uncertainty"],
                          estimate=v["estimate"], **{name: v[name] for name in SHAPE_METRICS},
@@ -215,7 +254,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         state.records.append(rec)
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
-    v = step_values(last.meta)
+    v = step_values(last.meta, f"{path}: step record ending at byte {last.end}")
     if config.learn != "task":                                     # what the run had learned by its last step
         load_logged_hyperparameters(model, last.meta.get("hyperparameters"), f"{path}: last step record")
     if "local_params" in last.arrays and hasattr(model, "region_correlations"):

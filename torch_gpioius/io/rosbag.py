@@ -256,7 +256,9 @@ def _open(path: Path):
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
     except ImportError as exc:  # pragma: no cover - the extra is missing
-        raise ImportError("import_bag needs the 'rosbag' extra: pip install 'torch_gpioius[rosbag]'") from exc
+        from .._extras import install_hint
+
+        raise ImportError(f"import_bag needs the 'rosbag' extra: {install_hint('rosbag')}") from exc
     if not path.exists():
         raise BagImportError(f"{path}: no such bag")
     try:

@@ -135,7 +135,7 @@ def load_run(path: str | os.PathLike) -> RunHistory:
             k = int(rec.meta["step"])
             states[k] = ds
             a = rec.arrays
-            v = step_values(rec.meta)
+            v = step_values(rec.meta, f"{path}: step record ending at byte {rec.end}")
             p = {"similarity": v["similarity"], "correlation": v["correlation"], "hausdorff": v["hausdorff"],
                  "estimate": v["estimate"],
                  "contact_distance": v.get("contact_distance", math.nan),
@@ -183,6 +183,10 @@ def known_truth(meta: dict) -> dict | None:
     """
     from ..exploration.registry import world_entry
 
+    if meta.get("scene_file"):          # a user's scene: its file, while it is the one the run explored
+        from ..sim.scenefile import truth_of_scene_file
+
+        return truth_of_scene_file(meta)
     world, name = meta.get("world"), meta.get("scene")
     if not isinstance(world, str) or not isinstance(name, str):
         return None

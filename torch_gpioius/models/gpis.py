@@ -66,28 +66,34 @@ class GPIS(ImplicitSurfaceGP):
         self._inference().factor(self._task_matrix())
         return self
 
-    def predict(self, x) -> tuple[Tensor, Tensor]:
+    def predict(self, x, task: int | str = 0) -> tuple[Tensor, Tensor]:
         """Posterior mean and variance of F, eq. (2)-(3). Differentiable with respect to ``x``.
 
         Args:
             x: `(m, d)` query points [m], base frame.
+            task: the inner shape (0 or "inner"), the only one a GPIS has; accepted so that GPIS and GPIOIS answer
+                the same call (a tactile-only fit is a GPIS).
 
         Returns:
             `(m,)` mean (``< 0`` inside, ``0`` on the surface) and `(m,)` variance.
-        """
-        return self._predict(x, 0)
 
-    def predict_mean(self, x) -> Tensor:
+        Raises:
+            ValueError: ``task`` is the outer shape, which a GPIS does not model.
+        """
+        return self._predict(x, _inner_only(task))
+
+    def predict_mean(self, x, task: int | str = 0) -> Tensor:
         """Posterior mean of F, eq. (2), without the variance: ``O(m n)`` where :meth:`predict` costs ``O(m n^2)``
         (meshing the estimate on a grid). Differentiable with respect to ``x``.
 
         Args:
             x: `(m, d)` query points [m], base frame.
+            task: 0 / "inner" (see :meth:`predict`).
 
         Returns:
             `(m,)` mean, equal to ``predict(x)[0]``.
         """
-        return self._predict_mean(x, 0)
+        return self._predict_mean(x, _inner_only(task))
 
     def add_observations(self, x, y) -> "GPIS":
         """Append observations; the posterior updates (exactly) at the next query.
@@ -108,3 +114,14 @@ class GPIS(ImplicitSurfaceGP):
         self._engine = engine
         self._append_to_engine(x, y, task)
         return self
+
+
+def _inner_only(task) -> int:
+    """0 for the inner task (a GPIS models that one only); the outer one refused by name."""
+    from .._validation import task_id
+
+    t = task_id(task, "task")
+    if t != 0:
+        raise ValueError("task: a GPIS models the inner shape only (task 0, \"inner\"); the outer shape needs a "
+                         "GPIOIS")
+    return 0

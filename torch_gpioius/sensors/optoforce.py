@@ -129,7 +129,7 @@ class OptoForceDAQ(ForceSensor):
             ``port`` is then only used in messages.
 
     Raises:
-        ImportError: pyserial is missing (``pip install torch_gpioius[sensors]``).
+        ImportError: pyserial is missing (``pip install 'torch_gpioius[sensors]'``).
         SensorDisconnected: the port cannot be opened.
     """
 
@@ -157,7 +157,9 @@ class OptoForceDAQ(ForceSensor):
             try:
                 serial = importlib.import_module("serial")
             except ImportError as exc:  # pragma: no cover - depends on the environment
-                raise ImportError("OptoForceDAQ needs pyserial: pip install torch_gpioius[sensors]") from exc
+                from .._extras import install_hint
+
+                raise ImportError(f"OptoForceDAQ needs pyserial: {install_hint('sensors')}") from exc
             try:
                 serial_port = serial.serial_for_url(port, baudrate=self.BAUDRATE, timeout=0.005)
             except (OSError, serial.SerialException) as exc:

@@ -403,7 +403,9 @@ class SimulatedDepthCamera(PointCloudSource):
             try:
                 from trimesh.ray.ray_pyembree import RayMeshIntersector
             except ImportError as exc:
-                raise ImportError("engine='embree' needs embreex: pip install torch_gpioius[raycast]") from exc
+                from .._extras import install_hint
+
+                raise ImportError(f"engine='embree' needs embreex: {install_hint('raycast')}") from exc
             return RayMeshIntersector(self.mesh)
         from trimesh.ray.ray_triangle import RayMeshIntersector
 

@@ -746,6 +746,8 @@ def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.0
     if not (math.isfinite(h) and 0 < h <= 0.05):
         raise ValueError(f"resolution: must be in (0, 0.05] m, got {resolution!r}")
     reach = gap + (2 * bridge if kind == "loose" else 0.0) + 3 * h
+    from .meshes import check_grid
+
     check_grid(mesh.bounds[0] - reach, mesh.bounds[1] + reach + h, h, "resolution", "the cover's grid")
     # a level set that passes exactly through grid nodes (a flat face at a grid plane's distance) gives marching
     # cubes zero-area triangles, and the mesh without them is open: the grid starts at an irrational fraction of a
@@ -768,27 +770,6 @@ def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.0
 #: Fractions of a cell by which :func:`cover_around` shifts its grid, the first one always (irrational: no flat face
 #: of a body placed at round coordinates lies at a node's distance), the others when a grid still gives an open mesh.
 _GRID_SHIFTS = (1 / math.pi, 1 / math.e, 1 / math.sqrt(5), 0.5 + 1 / (4 * math.pi))
-
-#: The most nodes a sampled grid may have (a cover's, a repair's remesh): at about 80 bytes a node, 2 GB.
-MAX_GRID_NODES = 25_000_000
-
-
-def check_grid(lo, hi, h: float, name: str, what: str) -> None:
-    """Refuse a grid of spacing ``h`` [m] over the box ``lo``..``hi`` [m] with more than :data:`MAX_GRID_NODES` nodes,
-    before it is allocated, naming the setting ``name`` and the spacing it would take (a scene's
-    ``object.resolution = 2e-4`` allocated 4.5 GB, then died with a raw ``_ArrayMemoryError``).
-
-    Raises:
-        ValueError: naming ``name``, the nodes, the memory and the smallest spacing that fits.
-    """
-    extent = np.maximum(np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float), 0.0)
-    nodes = float(np.prod(np.floor(extent / h) + 1))
-    if nodes > MAX_GRID_NODES:
-        smallest = float(np.cbrt(np.prod(extent) / MAX_GRID_NODES)) * 1.05
-        raise ValueError(f"{name}: {h * 1e3:.3g} mm over {what} of {' x '.join(f'{e:.3g}' for e in extent)} m needs "
-                         f"{nodes:.3g} grid nodes (about {nodes * 80 / 1e9:.2g} GB); at most {MAX_GRID_NODES:.3g}: "
-                         f"use {smallest * 1e3:.2g} mm or more")
-
 
 def _cover_on_grid(mesh: trimesh.Trimesh, kind: str, gap: float, bridge: float, h: float, lo: np.ndarray,
                    hi: np.ndarray) -> trimesh.Trimesh:

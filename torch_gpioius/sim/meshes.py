@@ -178,7 +178,8 @@ def _fill_holes(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
         n += 1
     m = trimesh.Trimesh(np.concatenate(new_v), np.concatenate(new_f), process=False)
     trimesh.repair.fix_winding(m)
-    trimesh.repair.fix_normals(m)
+    with np.errstate(invalid="ignore", divide="ignore"):     # a flat sheet, filled, has zero volume (refused later)
+        trimesh.repair.fix_normals(m)
     return m
 
 
@@ -218,6 +219,27 @@ def _interior_faces(mesh: trimesh.Trimesh, points: np.ndarray, normals: np.ndarr
     w_out = np.abs(igl.fast_winding_number(V, F, p + eps * n))
     w_in = np.abs(igl.fast_winding_number(V, F, p - eps * n))
     return np.minimum(w_out, w_in) > 0.25
+
+
+#: The most nodes a sampled grid may have (a cover's, a repair's remesh): at about 80 bytes a node, 2 GB.
+MAX_GRID_NODES = 25_000_000
+
+
+def check_grid(lo, hi, h: float, name: str, what: str) -> None:
+    """Refuse a grid of spacing ``h`` [m] over the box ``lo``..``hi`` [m] with more than :data:`MAX_GRID_NODES` nodes,
+    before it is allocated, naming the setting ``name`` and the spacing it would take (a scene's
+    ``object.resolution = 2e-4`` allocated 4.5 GB, then died with a raw ``_ArrayMemoryError``).
+
+    Raises:
+        ValueError: naming ``name``, the nodes, the memory and the smallest spacing that fits.
+    """
+    extent = np.maximum(np.asarray(hi, dtype=float) - np.asarray(lo, dtype=float), 0.0)
+    nodes = float(np.prod(np.floor(extent / h) + 1))
+    if nodes > MAX_GRID_NODES:
+        smallest = float(np.cbrt(np.prod(extent) / MAX_GRID_NODES)) * 1.05
+        raise ValueError(f"{name}: {h * 1e3:.3g} mm over {what} of {' x '.join(f'{e:.3g}' for e in extent)} m needs "
+                         f"{nodes:.3g} grid nodes (about {nodes * 80 / 1e9:.2g} GB); at most {MAX_GRID_NODES:.3g}: "
+                         f"use {smallest * 1e3:.2g} mm or more")
 
 
 def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
@@ -268,6 +290,7 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
     # a grid offset by an irrational fraction of a cell: a face lying on grid nodes (a box on a grid of its own
     # spacing) would give marching cubes zero-area triangles and an open result
     lo, hi = lo - (3 + 1 / math.pi) * h, hi + 3 * h
+    check_grid(lo, hi + h, h, "resolution", "the repair's grid")
     axes = [np.arange(a, b + h / 2, h) for a, b in zip(lo, hi)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     w = igl.fast_winding_number(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64),
@@ -299,6 +322,14 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
     return (m, f"{what} at {h * 1e3:.1f} mm", *_distance_between(m, mesh, outer_only=remesh, skip_interior=True))
 
 
+def _numbers(value, name: str) -> np.ndarray:
+    """``value`` as a flat float array, or ValueError naming ``name`` (a string where numbers belong)."""
+    try:
+        return np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: expected numbers, got {value!r}") from None
+
+
 def as_pose(pose) -> np.ndarray | None:
     """A `(4, 4)` homogeneous transform [m] from a matrix, or from ``{"position": (3,), "quat": (4,) w-x-y-z}`` /
     ``{"position", "rpy_deg": (3,)}`` (roll, pitch, yaw about fixed x, y, z in degrees); None stays None.
@@ -315,22 +346,25 @@ def as_pose(pose) -> np.ndarray | None:
         if "quat" in pose and "rpy_deg" in pose:
             raise ValueError("pose: give quat or rpy_deg, not both")
         T = np.eye(4)
-        p = np.asarray(pose.get("position", (0.0, 0.0, 0.0)), dtype=np.float64).reshape(-1)
+        p = _numbers(pose.get("position", (0.0, 0.0, 0.0)), "pose.position")
         if p.shape != (3,) or not np.isfinite(p).all():
             raise ValueError(f"pose.position: expected a finite (3,) position [m], got {pose.get('position')!r}")
         T[:3, 3] = p
         if "quat" in pose:
-            q = np.asarray(pose["quat"], dtype=np.float64).reshape(-1)
+            q = _numbers(pose["quat"], "pose.quat")
             if q.shape != (4,) or not np.isfinite(q).all() or np.linalg.norm(q) < 1e-9:
                 raise ValueError(f"pose.quat: expected a non-zero (4,) quaternion w-x-y-z, got {pose['quat']!r}")
             T[:3, :3] = trimesh.transformations.quaternion_matrix(q / np.linalg.norm(q))[:3, :3]
         elif "rpy_deg" in pose:
-            r = np.asarray(pose["rpy_deg"], dtype=np.float64).reshape(-1)
+            r = _numbers(pose["rpy_deg"], "pose.rpy_deg")
             if r.shape != (3,) or not np.isfinite(r).all():
                 raise ValueError(f"pose.rpy_deg: expected 3 finite angles [deg], got {pose['rpy_deg']!r}")
             T[:3, :3] = trimesh.transformations.euler_matrix(*np.radians(r), axes="sxyz")[:3, :3]
         return T
-    T = np.asarray(pose, dtype=np.float64)
+    try:
+        T = np.asarray(pose, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"pose: expected a (4, 4) transform or {{position, quat | rpy_deg}}, got {pose!r}") from None
     if T.shape != (4, 4) or not np.isfinite(T).all():
         raise ValueError(f"pose: expected a finite (4, 4) transform, got shape {T.shape}")
     R = T[:3, :3]

@@ -62,7 +62,8 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
-__all__ = ["SceneSpec", "read_scene", "load_scene", "resolve_mesh", "scene_fingerprint", "SCENE_WORLDS"]
+__all__ = ["SceneSpec", "read_scene", "load_scene", "resolve_mesh", "scene_fingerprint", "truth_of_scene_file",
+           "SCENE_WORLDS"]
 
 #: The worlds a scene file can be built in.
 SCENE_WORLDS = ("forcefield", "mujoco")
@@ -97,7 +98,7 @@ class SceneSpec:
 
 def resolve_mesh(ref: str, base: Path) -> Path:
     """The file a scene's ``object.mesh`` names: a path relative to the scene file, or ``pybullet:<name>`` for a mesh
-    that ships inside the ``pybullet`` wheel (bunny, duck, teddy, mug; ``pip install torch_gpioius[shapes]``).
+    that ships inside the ``pybullet`` wheel (bunny, duck, teddy, mug; ``pip install 'torch_gpioius[shapes]'``).
 
     Raises:
         ValueError: pybullet is not installed, or the file does not exist.
@@ -106,7 +107,9 @@ def resolve_mesh(ref: str, base: Path) -> Path:
         try:
             import pybullet_data
         except ImportError:
-            raise ValueError(f"object.mesh: {ref!r} needs pybullet's data: pip install torch_gpioius[shapes]") from None
+            from .._extras import install_hint
+
+            raise ValueError(f"object.mesh: {ref!r} needs pybullet's data: {install_hint('shapes')}") from None
         path = Path(pybullet_data.getDataPath()) / ref[len("pybullet:"):]
     else:
         path = Path(ref)
@@ -163,6 +166,9 @@ def read_scene(path) -> SceneSpec:
         raise ValueError(f"{path}: cannot read the scene file ({exc.strerror or exc})") from None
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"{path}: not a valid TOML scene file ({exc})") from None
+    except RecursionError:
+        raise ValueError(f"{path}: not a scene file: its values are nested too deeply to read") from None
+    _check_finite(data, path, "")
 
     def bad(key: str, why: str) -> ValueError:
         return ValueError(f"{path}: {key}: {why}")
@@ -187,7 +193,17 @@ def read_scene(path) -> SceneSpec:
         raise bad("[cover]", "missing, or its kind is not \"tight\", \"loose\" or \"foam\"")
     every_cover = set().union(*_COVER.values())
     if set(cover) - every_cover:
-        raise bad("cover", f"unknown key(s) {sorted(set(cover) - every_cover)}; allowed {sorted(every_cover)}")
+        both = sorted(set.intersection(*_COVER.values()))
+        own = "; ".join(f"{w}: {sorted(_COVER[w] - set(both))}" for w in SCENE_WORLDS)
+        raise bad("cover", f"unknown key(s) {sorted(set(cover) - every_cover)}; [cover] takes {both} in every world, "
+                           f"and a world's own options ({own})")
+    if "pose" in obj:
+        from .meshes import as_pose
+
+        try:
+            as_pose(obj["pose"])
+        except (ValueError, TypeError) as exc:
+            raise bad("object.pose", str(exc).removeprefix("pose").lstrip(".:").strip() or "malformed") from None
     if "at" in obj:
         obj = dict(obj, at=_vector(obj["at"], "object.at", path))
     approach = data.get("approach")
@@ -210,7 +226,54 @@ def read_scene(path) -> SceneSpec:
             raise bad(f"[{w}]", f"unknown key(s) {sorted(set(s) - _WORLD[w]) if isinstance(s, dict) else s!r}; "
                                 f"allowed {sorted(_WORLD[w])}")
         settings[w] = dict(s)
+        for key, value in s.items():
+            problem = _setting_problem(key, value)
+            if problem:
+                raise bad(f"[{w}] {key}", problem)
     return SceneSpec(path, name, world, dict(obj), dict(cover), approach, bounds, settings)
+
+
+def _check_finite(value, path: Path, key: str) -> None:
+    """Refuse inf and nan anywhere in a scene file (TOML has them), naming the key (``cover_stiffness = inf`` was
+    accepted, then stopped the robot)."""
+    if isinstance(value, float) and not np.isfinite(value):
+        raise ValueError(f"{path}: {key or 'a value'}: must be a finite number, got {value!r}")
+    if isinstance(value, dict):
+        for k, v in value.items():
+            _check_finite(v, path, f"{key}.{k}" if key else str(k))
+    elif isinstance(value, list):
+        for v in value:
+            _check_finite(v, path, key)
+
+
+#: The scene settings whose values are checked when the file is read, not when the world is built: key ->
+#: (lowest, highest, whether the lowest is allowed) for lengths and numbers [SI units].
+_RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, True), "theta": (1e-3, 10.0, False),
+           "noise": (1e-6, 10.0, False), "touch_inside": (0.0, 0.2, True), "vision_inside": (0.0, 0.2, True),
+           "vision_inside_gap": (0.0, 0.5, True), "bridge": (0.0, 0.2, False), "gap": (0.0, 0.2, False),
+           "resolution": (0.0, 0.05, False), "spacing": (0.0, 0.2, False), "timestep": (0.0, 0.1, False),
+           "settle_time": (0.0, 60.0, True)}
+
+
+def _setting_problem(key: str, value) -> str | None:
+    """Why a world section's ``key = value`` cannot be used, or None (the world checks the rest when it builds)."""
+    if key == "voxel":
+        from ..exploration.observations import check_voxel
+
+        try:
+            check_voxel(value)
+        except ValueError as exc:
+            return str(exc).removeprefix("voxel: ")
+        return None
+    if key == "cover_offset" and not isinstance(value, bool):
+        return f"must be true or false, got {value!r}"
+    if key in _RANGES:
+        lo, hi, closed = _RANGES[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            return f"must be a number, got {value!r}"
+        if not (value <= hi and (value >= lo if closed else value > lo)):
+            return f"must be in {'[' if closed else '('}{lo:g}, {hi:g}], got {value!r}"
+    return None
 
 
 def _check_reach(scene, spec: SceneSpec) -> None:
@@ -309,4 +372,22 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
     _check_reach(scene, spec)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
-    return scene.perturbed(seed)
+    made = scene.perturbed(seed)
+    made.scene_file = {"path": str(spec.path.resolve()), "hash": scene_fingerprint(spec.path)}
+    return made
+
+
+def truth_of_scene_file(meta: dict) -> dict | None:
+    """The true shapes (``World.truth()``) of the scene file a log's header names (``scene_file``), rebuilt in the
+    header's world, or None: no scene file named, the file is gone, or it changed since the run (its content's
+    digest differs: another body's shapes would be drawn as this run's truth)."""
+    info = meta.get("scene_file")
+    if not isinstance(info, dict) or not isinstance(info.get("path"), str):
+        return None
+    path = Path(info["path"])
+    try:
+        if not path.is_file() or scene_fingerprint(path) != info.get("hash"):
+            return None
+        return load_scene(path, world=meta.get("world") if meta.get("world") in SCENE_WORLDS else None).truth()
+    except (ValueError, ImportError, OSError):
+        return None

@@ -46,8 +46,22 @@ def log_axis(ax, axis: str = "y") -> None:
         ax.text(0.5, 0.5, "no estimate in any run", transform=ax.transAxes, ha="center", va="center", fontsize=8)
         return
     a = ax.yaxis if axis == "y" else ax.xaxis
+    lo = ax.dataLim.y0 if axis == "y" else ax.dataLim.x0
+    lo = lo if np.isfinite(lo) and lo > 0 else hi / 10
+    # the ticks that fall inside the data's range: 1-2-5 per decade, or every integer multiple where a narrow range
+    # (3.9-4.6 cm) would hold one tick of them or none; a range narrower still stays linear
+    for subs in ((1.0, 2.0, 5.0), tuple(float(k) for k in range(1, 10))):
+        decades = np.arange(np.floor(np.log10(lo)) - 1, np.ceil(np.log10(hi)) + 1)
+        ticks = np.array([m * 10 ** d for d in decades for m in subs])
+        if ((ticks >= lo * 0.97) & (ticks <= hi * 1.03)).sum() >= 2:
+            break
+    else:
+        from matplotlib.ticker import MaxNLocator
+
+        a.set_major_locator(MaxNLocator(4))
+        return
     (ax.set_yscale if axis == "y" else ax.set_xscale)("log")
-    a.set_major_locator(LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    a.set_major_locator(LogLocator(base=10, subs=subs))
     a.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     a.set_minor_formatter(NullFormatter())
 
@@ -127,7 +141,8 @@ def _transitions(ax_u, ax_h, pair: dict, reference: str = "tactile") -> None:
     ax_u.set_ylabel("uncertainty, eq. (23)\n[V / prior variance]")
     log_axis(ax_u)
     ax_h.set_ylabel("Hausdorff distance [cm]")
-    ax_h.set_xlabel("travel since first contact [m]")
+    for ax in (ax_u, ax_h):                  # the upper panel had none: a reader could not tell what its x axis was
+        ax.set_xlabel("travel since first contact [m]")
     log_axis(ax_h)
     fraction_labels(ax_u, [f * total for f in FRACTION_MARKS], [f"{int(f * 100)} %" for f in FRACTION_MARKS])
 
@@ -243,10 +258,13 @@ def figure_2d_object(name: str, scene, pair: dict, path: Path, resolution: float
 
 
 def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
-    """Fig. 9: per mode the final estimate in the exploration range coloured by its posterior variance (with a
-    colour bar), the true inner surface as a grey wire, the path and the contacts; then the transitions."""
+    """Fig. 9: per mode, a large panel of the final estimate in the exploration range coloured by its posterior
+    variance (a colour map whose certain end is a bright magenta, not the dark end that hid it in the wire), the
+    true inner surface as a green wire, the cover the camera saw as a pale skin, the path and the contacts; below,
+    the colour bar and the transitions."""
     import torch
     from matplotlib import cm, colors
+    from matplotlib.colors import LinearSegmentedColormap
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     from ..geometry import predict_task
@@ -254,63 +272,69 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
     from ..surfaces import clip_mesh
 
     plt = _plt()
-    fig = plt.figure(figsize=(17, 5.2))
-    # an empty column between the colour bar and the transitions keeps the bar's label clear of their y labels
-    grid = fig.add_gridspec(2, 5, width_ratios=[1.25, 1.25, 0.06, 0.3, 1.1], wspace=0.35)
+    fig = plt.figure(figsize=(13, 11))
+    grid = fig.add_gridspec(2, 2, height_ratios=[2.4, 1.0], hspace=0.2, wspace=0.0)
     norm = colors.Normalize(0.0, 1.0)
-    cmap = plt.get_cmap("viridis")
+    cmap = LinearSegmentedColormap.from_list("plasma_bright", plt.get_cmap("plasma")(np.linspace(0.3, 0.95, 64)))
     lo, hi = scene.range[0], scene.range[1]
     truth = clip_mesh(scene.inner, lo, hi)
+    cover = clip_mesh(scene.outer, lo, hi) if getattr(scene, "outer", None) is not None else None
     for j, mode in enumerate(MODES):
-        ax = fig.add_subplot(grid[:, j], projection="3d")
+        ax = fig.add_subplot(grid[0, j], projection="3d")
         tr = pair.get(mode)
         if tr is None:
             continue
         mesh = tr.final_mesh
+        if cover is not None:
+            tri = cover.triangles[:: max(1, len(cover.triangles) // 1500)]
+            ax.add_collection3d(Poly3DCollection(tri, facecolors=(0.45, 0.65, 0.95, 0.12), edgecolors="none"))
         if truth is not None:
             tri = truth.triangles[:: max(1, len(truth.triangles) // 1500)]
-            ax.add_collection3d(Poly3DCollection(tri, facecolors="none", edgecolors="0.55", linewidths=0.15))
+            ax.add_collection3d(Poly3DCollection(tri, facecolors="none", edgecolors=(0.1, 0.55, 0.2, 0.45),
+                                                 linewidths=0.2))
         if mesh is not None:
             x0 = tr.model.train_inputs[0]
             with torch.no_grad():
                 _, var = predict_task(tr.model, torch.as_tensor(np.array(mesh.triangles_center), dtype=x0.dtype), 0)
             rel = var.cpu().numpy() / prior_variance(tr.model, 0)
             ax.add_collection3d(Poly3DCollection(mesh.triangles, facecolors=cmap(norm(rel)), edgecolor="none",
-                                                 alpha=0.8))
+                                                 alpha=0.85))
         ax.plot(*tr.path.T, "-", color="tab:orange", lw=1)
-        ax.scatter(*tr.contacts.T, s=2, c="k")
-        ax.scatter(*tr.contacts[0], s=25, c="red", marker="*")
+        ax.scatter(*tr.contacts.T, s=3, c="k")
+        ax.scatter(*tr.contacts[0], s=30, c="red", marker="*")
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_zlim(lo[2], hi[2])
-        ax.set_box_aspect(hi - lo)
-        ax.set_xlabel("x [m]", fontsize=7, labelpad=2)
-        ax.set_ylabel("y [m]", fontsize=7, labelpad=2)
-        ax.set_zlabel("z [m]", fontsize=7, labelpad=0)
-        ax.tick_params(labelsize=6, pad=0)
+        ax.set_box_aspect(hi - lo, zoom=1.15)          # the panel's box fills its cell
+        ax.set_xlabel("x [m]", fontsize=8, labelpad=2)
+        ax.set_ylabel("y [m]", fontsize=8, labelpad=2)
+        ax.set_zlabel("z [m]", fontsize=8, labelpad=0)
+        ax.tick_params(labelsize=7, pad=0)
         from matplotlib.ticker import MaxNLocator
 
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):          # ten ticks a side ran their labels together
             axis.set_major_locator(MaxNLocator(4))
         final = ("no estimate: no surface in the range" if tr.has_estimate is False or np.isnan(tr.hausdorff[-1])
                  else f"final Hausdorff {100 * tr.hausdorff[-1]:.1f} cm")
-        ax.set_title(f"{name}: {mode}\n{final}", fontsize=9)
+        ax.set_title(f"{name}: {mode}\n{final}", fontsize=10)
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
     handles = [Line2D([], [], color="tab:orange", label="fingertip path"),
                Line2D([], [], ls="", marker="o", ms=2, color="k", label="contacts"),
                Line2D([], [], ls="", marker="*", ms=6, color="red", label="first contact"),
-               Patch(facecolor="none", edgecolor="0.55", label="true inner surface (wire)"),
-               Patch(facecolor=cmap(0.6), label="estimate $\\mu_{in}=0$, coloured by $V_{in}$")]
-    cax = fig.add_subplot(grid[:, 2])
+               Patch(facecolor="none", edgecolor=(0.1, 0.55, 0.2), label="true inner surface (green wire)"),
+               Patch(facecolor=(0.55, 0.7, 0.9, 0.3), label="cover (outer surface)"),
+               Patch(facecolor=cmap(0.3), label="estimate $\\mu_{in}=0$, coloured by $V_{in}$")]
+    bottom = grid[1, :].subgridspec(1, 5, width_ratios=[0.04, 0.05, 0.12, 1, 1], wspace=0.3)
+    cax = fig.add_subplot(bottom[0, 1])
     fig.colorbar(cm.ScalarMappable(norm=norm, cmap=cmap), cax=cax, label="$V_{in}$ / prior variance on the estimate")
-    ax_u = fig.add_subplot(grid[0, 4])
-    ax_h = fig.add_subplot(grid[1, 4], sharex=ax_u)
+    ax_u = fig.add_subplot(bottom[0, 3])
+    ax_h = fig.add_subplot(bottom[0, 4], sharex=ax_u)
     _transitions(ax_u, ax_h, pair)
     h, lab = ax_h.get_legend_handles_labels()
-    fig.subplots_adjust(left=0.02, right=0.98, top=0.88, bottom=0.2)
-    legend_below(fig, handles + h, [x.get_label() for x in handles] + lab, ncol=5)
+    fig.subplots_adjust(left=0.01, right=0.99, top=0.95, bottom=0.12)
+    legend_below(fig, handles + h, [x.get_label() for x in handles] + lab, ncol=4)
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return fig

@@ -141,14 +141,16 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
     lines = ["Columns: H is the Hausdorff distance (eq. 24) from the estimated inner surface to the true one at 10, 50 "
              "and 100 % of the run's travel ('none': the estimate had no surface inside the range there); U the "
              "uncertainty (eq. 23, relative to the prior variance); similarity the paper's K_t[0,1] / K_t[0,0]; "
-             "'with estimate' how many of the run's metric samples had a surface to judge; travel the fingertip's "
+             "'with estimate' how many of the run's metric samples had a surface to judge; steps, with what ended the "
+             "run in brackets (travel: its budget; lost-contact, stalled, refused: the world or the robot stopped "
+             "it before); travel the fingertip's "
              "travel and, in brackets, how many re-approaches after lost contact it held and how far they went; plan "
              "ms the median planning step; robot time the simulated clock. At the end: Chamfer, the mean "
              "surface-to-surface distance; F 5 mm, the F-score at 5 mm; bias, the median signed distance of the true "
              "surface from the estimate (negative: the estimate lies inside); unseen, the share of the true surface "
              "more than 2 cm from every observation.", "",
              "| object | d_H inner-outer [cm] | H VT 10 / 50 / 100 % [cm] | H tactile 10 / 50 / 100 % [cm] | "
-             "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps VT / T | travel VT / T [m] "
+             "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps (ended by) VT / T | travel VT / T [m] "
              "(re-approaches) | plan ms VT / T | robot time VT / T [s] | Chamfer VT / T [cm] | F 5 mm VT / T | "
              "bias VT / T [cm] | unseen VT / T |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -162,6 +164,11 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
             return "-"
         return (f"{r[f'travel_{tag}_m']:.2f} ({r.get(f'reapproaches_{tag}', 0)}: "
                 f"{r.get(f'reapproach_m_{tag}', 0.0):.2f} m)")
+    def steps(r, tag):
+        if f"steps_{tag}" not in r:
+            return "-"
+        return f"{r[f'steps_{tag}']} ({r.get(f'terminated_{tag}', '?')})"
+
     for r in rows:
         lines.append(
             f"| {r['object']} | {h(r['inner_outer_hausdorff_m'])} | "
@@ -170,7 +177,7 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
             f"{valid(r, 'vt')} / {valid(r, 't')} | "
             f"{r.get('U_vt_100', float('nan')):.3f} / {r.get('U_t_100', float('nan')):.3f} | "
             f"{r.get('S_10', float('nan')):.2f} / {r.get('S_100', float('nan')):.2f} | "
-            f"{r.get('steps_vt', '-')} / {r.get('steps_t', '-')} | {travel(r, 'vt')} / {travel(r, 't')} | "
+            f"{steps(r, 'vt')} / {steps(r, 't')} | {travel(r, 'vt')} / {travel(r, 't')} | "
             f"{r.get('median_plan_ms_vt', float('nan')):.0f} / {r.get('median_plan_ms_t', float('nan')):.0f} | "
             f"{r.get('robot_time_s_vt', float('nan')):.0f} / {r.get('robot_time_s_t', float('nan')):.0f} | "
             f"{pair(r, 'chamfer', 100, '.1f')} | {pair(r, 'fscore_5mm', 1, '.2f')} | {pair(r, 'bias', 100, '.1f')} | "

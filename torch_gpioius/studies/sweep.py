@@ -111,7 +111,11 @@ def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str
 
         made = registry_make_world(world, name, seed, smoke)
         made = made if settings is None else made.with_settings(settings)
-    return made if views is None else made.with_views(views)
+    if views is None:
+        return made
+    viewed = made.with_views(views)
+    viewed.scene_file = made.scene_file          # the same scene file, seen otherwise
+    return viewed
 
 
 def _world_budget(world) -> float | None:
@@ -975,6 +979,7 @@ class SweepSettings:
         if clash:
             raise ValueError(f"scenes: {clash} are also the names of objects; rename the scene (its name key)")
         modes = _checked_modes(modes)
+        workers = _checked_workers(workers, address)
         if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= MAX_SEEDS:
             raise ValueError(f"seeds: must be an integer in [1, {MAX_SEEDS}], got {seeds!r}")
         for name in objects:        # fail before starting anything
@@ -1115,9 +1120,17 @@ class SweepSettings:
         bar = reporter(len(todo), f"study ({self.world})", self.progress)
         try:
             if todo and use_ray:
-                _run_on_ray(todo, self.workers, self.address, bar)
-                where = f" at {self.address}" if self.address else f" (local, {self.workers or os.cpu_count()} workers)"
-                return "Ray" + where
+                try:
+                    _run_on_ray(todo, self.workers, self.address, bar)
+                    where = (f" at {self.address}" if self.address
+                             else f" (local, {self.workers or os.cpu_count()} workers)")
+                    return "Ray" + where
+                except RayStartError as exc:
+                    if self.address:               # a cluster the user named: its failure is theirs to see
+                        raise ValueError(f"address: {exc}") from None
+                    print(f"study: {exc}; running the runs in this process, one after another", file=sys.stderr,
+                          flush=True)
+                    todo = [s for s in todo if not _finished(Path(s.out) / "runs" / f"{s.key}.json", s)]
             for spec in todo:
                 bar.set_postfix_str(spec.key)
                 run_one(spec)
@@ -1125,6 +1138,24 @@ class SweepSettings:
             return "in-process (sequential)"
         finally:
             bar.close()
+
+
+def _checked_workers(workers, address: str | None) -> int | None:
+    """``workers`` as a positive integer, capped at this machine's cores for a local run (each worker is a process
+    with its own runs; ``--workers 1000`` started one Ray process per run), with a warning that says so. On a
+    cluster (``address``) the cluster's CPUs bound it instead."""
+    if workers is None:
+        return None
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+        raise ValueError(f"workers: must be a positive integer, got {workers!r}")
+    cores = os.cpu_count() or 1
+    if address is None and workers > cores:
+        import warnings
+
+        warnings.warn(f"workers: {workers} parallel runs on {cores} cores would only compete for them; running "
+                      f"{cores} at a time (pass --address to run more on a Ray cluster)", UserWarning, stacklevel=3)
+        return cores
+    return workers
 
 
 def _checked_modes(modes) -> tuple:
@@ -1176,6 +1207,10 @@ def _quiet_ray_auth_banner() -> None:
         log.addFilter(_DropMessage("Token authentication is enabled for this Ray cluster"))
 
 
+class RayStartError(RuntimeError):
+    """Ray could not start (a memory limit, a node that timed out during startup): a local study runs in-process."""
+
+
 def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, bar) -> None:
     import ray
 
@@ -1184,10 +1219,18 @@ def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, 
     if started_here:
         kw = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
                   runtime_env={"env_vars": {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}})
-        if address:
-            ray.init(address=address, **kw)
-        else:
-            ray.init(num_cpus=workers or os.cpu_count(), **kw)
+        try:
+            if address:
+                ray.init(address=address, **kw)
+            else:
+                ray.init(num_cpus=workers or os.cpu_count(), **kw)
+        except Exception as exc:         # Ray raises its own and plain exceptions alike ("node timed out ...")
+            try:
+                ray.shutdown()
+            except Exception:            # pragma: no cover - nothing was started
+                pass
+            raise RayStartError(f"Ray could not start ({type(exc).__name__}: {' '.join(str(exc).split())[:160]})") \
+                from None
     try:
         task = ray.remote(num_cpus=1, max_retries=3, retry_exceptions=False)(run_one)
         pending = {task.remote(s): s for s in specs}

@@ -103,7 +103,9 @@ def convex_parts(mesh: trimesh.Trimesh, threshold: float = 0.05, max_parts: int 
     try:
         import coacd
     except ImportError as exc:   # pragma: no cover - depends on the environment
-        raise ImportError("a mesh body in the MuJoCo world needs 'coacd': pip install torch_gpioius[mujoco]") from exc
+        from ..._extras import install_hint
+
+        raise ImportError(f"a mesh body in the MuJoCo world needs 'coacd': {install_hint('mujoco')}") from exc
     key = hashlib.sha256(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes()
                          + np.ascontiguousarray(mesh.faces, dtype=np.int64).tobytes()
                          + json.dumps([threshold, max_parts, seed, 1000, 60,

@@ -54,7 +54,9 @@ def _require_mujoco():
     try:
         import mujoco  # noqa: F401
     except ImportError as exc:   # pragma: no cover - depends on the environment
-        raise ImportError("the MuJoCo world needs the 'mujoco' package: pip install torch_gpioius[mujoco]") from exc
+        from ..._extras import install_hint
+
+        raise ImportError(f"the MuJoCo world needs the 'mujoco' package: {install_hint('mujoco')}") from exc
 
 
 class MujocoScene(World):
