@@ -11,7 +11,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "torch_gpioius"
 
 #: The layers, lowest first (docs/architecture.md). A module may import its own layer and those before it.
 LAYERS = [
-    {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines"},
+    {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines", "_extras"},
     {"kernels"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"}, {"sensors"},
     {"contact"}, {"exploration"}, {"sim"}, {"io"}, {"session"}, {"studies"}, {"viewer"}, {"cli"}, {"(root)"},
 ]

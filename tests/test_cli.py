@@ -473,3 +473,22 @@ def test_missing_extras_are_named_with_both_ways_to_install():
             text = path.read_text()
             assert "pip install torch_gpioius[" not in text, path           # unquoted: a glob in zsh
             assert ": pip install 'torch_gpioius[" not in text, path         # a message: install_hint says it
+
+
+def test_fit_on_one_contact_and_one_seen_point_says_it_cannot_tell(tmp_path, capsys):
+    """Issue 51, item 13 (and issue 52, item 5): `fit --learn all` on one contact and one cloud point reported a
+    correlation of 1.0000 [0.79, 1.00], "the outer shape predicts the inner one"."""
+    import json
+
+    (tmp_path / "c.csv").write_text("x,y,z,label\n0.5,0,0.25,contact\n0.5,0,0.35,free\n")
+    np.savez(tmp_path / "cloud.npz", points=np.array([[0.5, 0.0, 0.258]]))
+    out = tmp_path / "fit"
+    assert main(["fit", str(tmp_path / "c.csv"), "--cloud", str(tmp_path / "cloud.npz"), "--voxel", "0",
+                 "--learn", "all", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "too few observations to tell: the contacts cover 1 and the seen surface 1 patch(es)" in printed
+    assert "predicts the inner one" not in printed
+    support = json.loads((out / "fit.json").read_text())["similarity_support"]
+    assert support["inner"] == 1 and support["outer"] == 1 and support["enough"] is False
+    assert main(["fit", str(EXAMPLE)]) == 0                      # the example: enough (4 and 10 patches)
+    assert "too few" not in capsys.readouterr().out

@@ -123,7 +123,8 @@ def _fit(args: argparse.Namespace) -> int:
         lo, hi = info["correlation_interval"]
         print(f"correlation = {info['correlation']:.4f}, 95 % profile-likelihood interval [{lo:.2f}, {hi:.2f}]   "
               f"(the paper's similarity K_t[0,1]/K_t[0,0] = {info['similarity']:.4f})")
-        print("  " + _interval_reading(lo, hi))
+        support = info["similarity_support"]
+        print("  " + (support["reason"] if not support["enough"] else _interval_reading(lo, hi)))
     else:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")

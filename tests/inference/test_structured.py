@@ -213,7 +213,7 @@ def test_structured_needs_outer_points():
 # ---------------------------------------------------------------------------------------------------------------
 # The Chebyshev expansion of T(c) (structured._ChebyshevStore) against independent references.
 
-from torch_gpioius import structured as st_mod  # noqa: E402
+from torch_gpioius.inference import structured as st_mod  # noqa: E402
 
 
 def _chebyshev_sum(coef, x, order):

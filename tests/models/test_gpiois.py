@@ -663,3 +663,18 @@ def test_the_outer_mean_takes_a_covers_offset_out_of_the_transfer():
     assert (paper > body + 0.007).all(), paper
     assert (np.abs(offset - body) < 0.008).all(), offset
     assert (np.abs(offset - body) < np.abs(paper - body)).all(), (offset, paper)
+
+
+def test_similarity_support_counts_patches_one_length_apart():
+    """The data behind the similarity, counted as patches one kernel length apart (issue 51, item 13): points 1 cm
+    apart along 1 m make 10 patches of 0.1 m (each kept point covers the next 10 cm), 0 points make none."""
+    from torch_gpioius.models.gpiois import MIN_SIMILARITY_PATCHES, _patches
+
+    line = np.c_[np.arange(0.0, 1.0, 0.01), np.zeros(100)]
+    assert _patches(line, 0.1) == 10 and _patches(line[:0], 0.1) == 0 and _patches(line, 2.0) == 1
+    x = np.r_[line[:5], line[::11] + [0.0, 0.05]]                    # 5 contacts within 4 cm, 10 seen points
+    y = np.zeros(len(x))
+    task = np.r_[np.zeros(5), np.ones(10)].astype(np.int64)          # 11 cm apart
+    support = tg.GPIOIS(torch.tensor(x), torch.tensor(y), torch.tensor(task), theta=0.1).similarity_support()
+    assert support["inner"] == 1 and support["outer"] == 10 and support["enough"] is False
+    assert f"at least {MIN_SIMILARITY_PATCHES} of each" in support["reason"]

@@ -135,7 +135,8 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
     if isinstance(model, GPIOIS):
         info["converged"] = bool(getattr(model.fit_result, "converged", True))
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
-                    correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)))
+                    correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)),
+                    similarity_support=model.similarity_support())
     res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
     info["estimate"] = has_surface(model, ds.x, res)
     if out is not None:

@@ -83,6 +83,25 @@ class FitNotConvergedWarning(RuntimeWarning):
     itself is the result they report; an exploration counts these fits and says so once at the end."""
 
 
+def _patches(points: np.ndarray, spacing: float) -> int:
+    """How many points `(n, d)` a greedy pass keeps when each kept point removes those within ``spacing`` [m]."""
+    if len(points) == 0:
+        return 0
+    from scipy.spatial import cKDTree
+
+    tree, taken, kept = cKDTree(points), np.zeros(len(points), dtype=bool), 0
+    for i in range(len(points)):
+        if not taken[i]:
+            kept += 1
+            taken[tree.query_ball_point(points[i], spacing)] = True
+    return kept
+
+
+#: The fewest patches of surface observations of each task (:meth:`GPIOIS.similarity_support`) from which the
+#: similarity is read out as a finding; below it the interval is reported with "too few observations to tell".
+MIN_SIMILARITY_PATCHES = 4
+
+
 class UnidentifiedSimilarityWarning(UserWarning):
     """The data observe only one task, so the similarity between the shapes cannot be learned from them."""
 
@@ -255,6 +274,35 @@ class GPIOIS(ImplicitSurfaceGP):
             return float("nan")
         kt = self.task_covariance
         return float(kt[0, 1] / torch.sqrt(kt[0, 0] * kt[1, 1]))
+
+    def similarity_support(self) -> dict:
+        """How much the data can say about the similarity: the surface observations of each task counted as patches
+        one kernel length apart (greedy thinning at the length: observations closer than that vary together, and
+        the similarity is learned from how the two shapes vary together across patches).
+
+        Returns:
+            ``{"inner": patches, "outer": patches, "length": the spacing [m], "enough": bool, "reason": str}``;
+            ``enough`` is False below :data:`MIN_SIMILARITY_PATCHES` patches of either task, and ``reason`` then
+            says so in one sentence (empty otherwise). One contact and one cloud point reported a correlation of
+            1.0000 [0.79, 1.00], and a 22-point cloud of a 22 cm bottle an interval of [1.00, 1.00].
+        """
+        try:
+            length = float(self.kernel.length)
+        except TypeError:                       # a kernel without a length: the paper's theta
+            length = float(self.theta or 0.1)
+        x = self.train_inputs[0].detach().cpu().numpy()
+        y = self.train_targets.detach().cpu().numpy()
+        task = self._train_task().cpu().numpy()
+        counts = {}
+        for name, t in (("inner", INNER), ("outer", OUTER)):
+            pts = x[(task == t) & (y == 0)]
+            counts[name] = _patches(pts, length)
+        enough = min(counts.values()) >= MIN_SIMILARITY_PATCHES
+        reason = "" if enough else (
+            f"too few observations to tell: the contacts cover {counts['inner']} and the seen surface "
+            f"{counts['outer']} patch(es) one kernel length ({length:g} m) apart; the similarity needs at least "
+            f"{MIN_SIMILARITY_PATCHES} of each")
+        return {**counts, "length": length, "enough": enough, "reason": reason}
 
     # ------------------------------------------------------------------ the outer task's prior mean
     @property
