@@ -95,22 +95,31 @@ def _fit(args: argparse.Namespace) -> int:
     if origins and len(origins) != len(clouds):
         raise ValueError(f"--camera-origin: {len(origins)} given for {len(clouds)} --cloud file(s); give one per "
                          "cloud, in the same order")
+    if args.theta is not None:
+        warnings.warn("--theta is the inverse multiquadric's length scale (the paper's name); --settings with a "
+                      "scene file's [estimator] or the Python API's kernel= carry a kernel's own", DeprecationWarning)
     if args.out:                             # arguments checked first: a refused call leaves no folder behind
         from .io.outputs import claim_folder
 
         claim_folder(args.out, "fit", args.force)
+    settings = args.settings if args.settings is not None else ("default" if own else None)
     if own:
         from .io.importers import dataset_from_files
 
         cloud = None if not clouds else (clouds[0] if len(clouds) == 1 else clouds)
         origin = None if not origins else (origins[0] if len(origins) == 1 else origins)
-        ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel or None,
-                                camera_origin=origin)
+        ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel, camera_origin=origin,
+                                settings=settings)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
-        source = ds
-    info = fit_dataset(source, args.out, theta=args.theta, noise=args.noise, learn=args.learn)
+        source, settings = ds, None                  # the dataset holds the settings it was labelled with
+    info = fit_dataset(source, args.out, theta=args.theta, noise=args.noise, learn=args.learn, settings=settings,
+                       mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution, force=args.force)
+    if info["settings"] is not None:
+        from .models.estimator import EstimatorSettings
+
+        print(EstimatorSettings.from_dict(info["settings"]).summary())
     print(f"{args.dataset}: {info['n']} observations ({info['n_inner']} inner, {info['n_outer']} outer), "
-          f"theta = {info['theta']:g} m, sigma^2 = {info['noise']:g}")
+          f"lengthscale = {info['lengthscale']:g} m, sigma^2 = {info['noise']:g}")
     if "learned" in info:
         r = info["learned"]
         print(f"learned ({args.learn}, {r['points']} points, {r['evaluations']} evaluations): length = "
@@ -133,6 +142,9 @@ def _fit(args: argparse.Namespace) -> int:
     if not info["estimate"]:
         print("no estimate: the inner zero level {mu_in = 0} has no surface in the data's box, so there is no shape to "
               "show or export (too few contacts, or units other than metres?)")
+    for key, what in (("mesh", "the inner estimate"), ("outer_mesh", "the outer estimate")):
+        if info.get(key):
+            print(f"wrote {what} to {info[key]}")
     if args.out:
         print(f"wrote {info['checkpoint']}, {info['figure']} and fit.json")
     return 0
@@ -247,7 +259,8 @@ def _export(args: argparse.Namespace) -> int:
     size = f" ({info['vertices']} vertices, {info['faces']} faces)" if "vertices" in info else ""
     for key in ("inner", "outer"):
         if info[key]:
-            print(f"wrote the {key} estimate at step {info['step']} to {info[key]}{size if key == 'inner' else ''}")
+            at = "" if info["step"] is None else f" at step {info['step']}"
+            print(f"wrote the {key} estimate{at} to {info[key]}{size if key == 'inner' else ''}")
     return 0
 
 
@@ -299,6 +312,11 @@ DEVICE_HELP = ("where the GP arithmetic runs: cpu, or cuda for a GPU (float64 ei
 OUTER_TOL_HELP = ("visual-tactile runs with a truncated outer basis dropping a PSD part of trace <= OUTER_TOL * "
                   "sigma^2 (an approximation for thousands of camera points, e.g. 1e-3 with --voxel 0.01; "
                   "docs/performance.md); default: exact")
+
+
+def _fit_voxel(text: str):
+    """``fit --voxel``: "auto" or an edge [m]."""
+    return "auto" if text == "auto" else _voxel(text)
 
 
 def _device(text: str) -> str:
@@ -482,17 +500,29 @@ def build_parser() -> argparse.ArgumentParser:
                      help="with a contacts CSV: the camera's point cloud (PLY, PCD, XYZ, NPZ) in the same frame; repeat "
                           "it for several captures (each with its own --camera-origin, in the same order)")
     fit.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the CSV and the cloud")
-    fit.add_argument("--voxel", type=_voxel, default=0.05, help="voxel edge of the cloud [m] (0: every point)")
+    fit.add_argument("--voxel", type=_fit_voxel, default="auto",
+                     help="voxel edge of the cloud [m] (0: every point; auto: the settings' rule, a tenth of the "
+                          "clouds' largest extent within 2-5 cm by default)")
     fit.add_argument("--camera-origin", action="append", default=None, metavar='"X Y Z"',
                      help="the camera's optical centre in the files' frame and units: adds the free space in front "
                           "of the seen surface (without it the model knows where the cover is, not which side is "
                           "empty); one per --cloud")
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
-    fit.add_argument("--theta", type=float, default=None, help="IMQ theta [m] (default: the file's, else 0.1)")
-    fit.add_argument("--noise", type=float, default=None, help="sigma^2 (default: the file's, else 0.006)")
-    fit.add_argument("--learn", default="task", choices=["task", "length", "all"],
+    fit.add_argument("--settings", default=None, choices=["default", "paper"],
+                     help="the estimator's settings (kernel, sigma^2, labels, voxels): default (this library's, "
+                          "measured best on shapes nobody tuned to) or paper (the robot experiment's); default: "
+                          "'default' for a contacts CSV, the file's own for a .gpioius file")
+    fit.add_argument("--mesh", default=None, metavar="EST.ply",
+                     help="write the inner estimate {mu_in = 0} there (PLY, OBJ, STL, OFF, GLB; SVG, DXF in 2-D)")
+    fit.add_argument("--outer-mesh", default=None, metavar="OUT.ply", help="write the outer estimate there")
+    fit.add_argument("--resolution", type=_length("resolution"), default=None,
+                     help="grid of the estimate [m] (default 5 mm in 2-D, 2 cm in 3-D)")
+    fit.add_argument("--theta", type=float, default=None,
+                     help="deprecated: the inverse multiquadric's length scale [m] in place of the settings' kernel")
+    fit.add_argument("--noise", type=float, default=None, help="sigma^2 in place of the settings'")
+    fit.add_argument("--learn", default=None, choices=["task", "length", "all"],
                      help="learn K_t alone (the paper's), also the kernel's length, or the length and the noise too "
-                          "(by the exact marginal likelihood; --theta and --noise are then the start)")
+                          "(by the exact marginal likelihood, from the settings' values); default: the settings'")
     _force(fit, "--out holds files that `gpioius fit` did not write")
     fit.set_defaults(func=_fit)
     rep = sub.add_parser("replay", parents=[common], formatter_class=fmt,

@@ -8,7 +8,7 @@ from tests.reference import imq
 def test_values_match_formula():
     rng = np.random.default_rng(0)
     a, b = rng.normal(size=(7, 3)), rng.normal(size=(5, 3))
-    k = InverseMultiquadricKernel(theta=0.15)
+    k = InverseMultiquadricKernel(lengthscale=0.15)
     got = k(torch.tensor(a), torch.tensor(b)).to_dense().numpy()
     expected = (((a[:, None] - b[None]) ** 2).sum(-1) + 0.15**2) ** -0.5
     np.testing.assert_allclose(got, expected, rtol=1e-13)
@@ -18,7 +18,7 @@ def test_values_match_formula():
 
 
 def test_diag_and_batch():
-    k = InverseMultiquadricKernel(theta=0.1, batch_shape=torch.Size([4]))
+    k = InverseMultiquadricKernel(lengthscale=0.1, batch_shape=torch.Size([4]))
     x = torch.randn(4, 6, 2, dtype=torch.float64)
     full = k(x).to_dense()
     assert full.shape == (4, 6, 6)
@@ -32,17 +32,25 @@ def test_diag_and_batch():
 
 def test_theta_fixed_by_default_and_learnable_on_request():
     assert not InverseMultiquadricKernel(0.1).raw_theta.requires_grad
-    k = InverseMultiquadricKernel(0.1, learn_theta=True)
+    k = InverseMultiquadricKernel(0.1, learn_lengthscale=True)
     assert k.raw_theta.requires_grad
     assert abs(float(k.theta.detach()) - 0.1) < 1e-12
     k.theta = 0.3
     assert abs(float(k.theta.detach()) - 0.3) < 1e-12
 
 
-def test_bad_theta():
+def test_bad_lengthscale_and_the_theta_alias():
     import pytest
-    with pytest.raises(ValueError, match="theta"):
-        InverseMultiquadricKernel(theta=-1.0)
+    with pytest.raises(ValueError, match="lengthscale"):
+        InverseMultiquadricKernel(lengthscale=-1.0)
+    with pytest.warns(DeprecationWarning, match=r"InverseMultiquadricKernel\(theta=...\) is .*lengthscale"):
+        k = InverseMultiquadricKernel(theta=0.12)
+    assert k.length == 0.12 and float(k.lengthscale) == pytest.approx(0.12, rel=1e-15)
+    assert k.describe() == {"kernel": "InverseMultiquadric", "lengthscale": 0.12}
+    from torch_gpioius.kernels import from_description
+
+    old = from_description({"kernel": "InverseMultiquadric", "theta": 0.12})        # a description of before
+    assert old.describe() == k.describe() and repr(old) == "InverseMultiquadricKernel(lengthscale=0.12)"
 
 
 from tests.kernels.contract import KernelContract  # noqa: E402
@@ -50,4 +58,4 @@ from tests.kernels.contract import KernelContract  # noqa: E402
 
 class TestContract(KernelContract):
     def make(self):
-        return InverseMultiquadricKernel(theta=0.12)
+        return InverseMultiquadricKernel(lengthscale=0.12)

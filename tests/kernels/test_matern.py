@@ -69,4 +69,4 @@ def test_gpiois_with_matern_is_exact_on_both_engines(two_shape_data):
     fast.fit()
     torch.testing.assert_close(fast.task_covariance, dense.task_covariance, rtol=1e-6, atol=1e-9)
     assert tg.metrics.prior_variance(fast, 0) == pytest.approx(float(fast.task_covariance[0, 0]) * 1.0)
-    assert fast.theta is None and fast.kernel.describe()["kernel"] == "Matern52"
+    assert fast.theta == fast.lengthscale == fast.kernel.length and fast.kernel.describe()["kernel"] == "Matern52"

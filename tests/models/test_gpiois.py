@@ -194,8 +194,8 @@ def test_robust_cholesky_refuses_what_rounding_cannot_explain_and_never_loops():
 
 
 @pytest.mark.parametrize("kwargs, match", [
-    (dict(theta=1e-170), "theta"), (dict(theta=float("nan")), "theta"), (dict(theta="abc"), "theta"),
-    (dict(theta=True), "theta"), (dict(noise=1e-20), "noise"), (dict(noise=-1.0), "noise"),
+    (dict(theta=1e-170), "lengthscale"), (dict(theta=float("nan")), "lengthscale"), (dict(theta="abc"), "lengthscale"),
+    (dict(theta=True), "lengthscale"), (dict(noise=1e-20), "noise"), (dict(noise=-1.0), "noise"),
     (dict(noise=float("inf")), "noise"),
     (dict(task_covariance=[[1e308, 0.0], [0.0, 1e308]]), "task_covariance"),
     (dict(task_covariance="eye"), "task_covariance"),

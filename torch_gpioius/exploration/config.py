@@ -12,6 +12,7 @@ import torch
 
 from .._validation import as_device, as_float, as_int
 from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
+from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, as_learn
 from ..models.gpiois import GPIOIS, INNER, OUTER
 from ..models.gpis import GPIS
 from ..models.local import LocalGPIOIS
@@ -24,29 +25,6 @@ from .touch import touch_model
 __all__ = ["ExploreConfig", "Run", "MODES", "LEARN", "LEARN_SIZE", "as_learn"]
 
 MODES = ("visual-tactile", "tactile")
-
-
-#: Default of ``restart_every``: K_t's re-learning also tries fixed starts every this many steps (3 Newton runs from
-#: far-off starts besides the warm one: 250-270 ms against 1-2 ms at 34 inner and 731 outer points; docs/theory.md,
-#: "Local optima of K_t"). Every 25th step is 4 % of the steps, so the 95th percentile of the step is never a restart
-#: (every 10th step took a 1.0 m patch run's 95th percentile from 44 ms to 737 ms).
-RESTART_EVERY = 25
-
-#: What an exploration learns: "task" (K_t alone, the paper's Sec. IV-A), "length" (the kernel's length and K_t) or
-#: "all" (the length, sigma^2 and K_t), by the exact marginal likelihood, on every restart step
-#: (``learn_hyperparameters``).
-LEARN = ("task", "length", "all")
-
-
-def as_learn(value) -> str:
-    """``value`` if it names what an exploration learns (:data:`LEARN`).
-
-    Raises:
-        ValueError: anything else, naming the choices.
-    """
-    if not isinstance(value, str) or value not in LEARN:
-        raise ValueError(f"learn: must be one of {LEARN}, got {value!r}")
-    return value
 
 
 #: The copy the length and sigma^2 are learned on: at most this many inner and outer points (evenly in arrival order).
@@ -92,12 +70,9 @@ class ExploreConfig:
     evidence: object
     touch: object
     step: float
-    theta: float | None
-    kernel: ExactKernel | None
-    noise: float
+    estimator: EstimatorSettings
     max_steps: int
     stop: tuple
-    policy: ObservationPolicy
     penalty: object
     metrics_every: int
     metrics_resolution: float | None
@@ -107,15 +82,42 @@ class ExploreConfig:
     stall: NoProgress | None = NoProgress()
     outer_tol: float | None = None
     device: torch.device | None = None
-    restart_every: int | None = RESTART_EVERY
-    learn: str = "task"
+
+    # the estimator's settings as the loop reads them
+    @property
+    def kernel(self) -> ExactKernel | None:
+        """The kernel, or None for the inverse multiquadric (whose length is :attr:`theta`)."""
+        k = self.estimator.kernel
+        return None if isinstance(k, InverseMultiquadricKernel) else k
+
+    @property
+    def theta(self) -> float | None:
+        """The inverse multiquadric's length scale [m] (None for another kernel)."""
+        k = self.estimator.kernel
+        return float(k.length) if isinstance(k, InverseMultiquadricKernel) else None
+
+    @property
+    def noise(self) -> float:
+        return self.estimator.noise
+
+    @property
+    def policy(self) -> ObservationPolicy:
+        return self.estimator.labels
+
+    @property
+    def learn(self) -> str:
+        return self.estimator.learn
+
+    @property
+    def restart_every(self) -> int | None:
+        return self.estimator.restart_every
 
     @classmethod
     def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
                    kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
                    metrics_every=None, metrics_resolution=None, interval_every=None, regions=None,
                    stall="default", outer_tol=None, device=None, restart_every="default",
-                   learn=None) -> "ExploreConfig":
+                   learn=None, settings=None) -> "ExploreConfig":
         """Validate the overrides and merge them with ``world.defaults`` (see :func:`torch_gpioius.explore`).
 
         Raises:
@@ -143,16 +145,8 @@ class ExploreConfig:
                                  "engine, which has no truncated outer basis")
         d = world.defaults
         step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
-        if kernel is not None and theta is not None:
-            raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's parameter)")
-        if kernel is None and theta is None and d.kernel is not None:      # the world's own kernel, unless told
-            kernel = d.kernel
-        if kernel is not None:
-            as_kernel(kernel, None)                    # an ExactKernel, or a TypeError naming what it is
-            theta = None
-        else:
-            theta = as_float(d.theta if theta is None else theta, "theta", positive=True, unit="m")
-        noise = as_float(d.noise if noise is None else noise, "noise", positive=True)
+        estimator = _estimator(world, settings, theta=theta, kernel=kernel, noise=noise, policy=policy, learn=learn,
+                               restart_every=restart_every)
         max_steps = as_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
         metrics_every = as_int(d.metrics_every if metrics_every is None else metrics_every, "metrics_every", 1,
                                    1_000_000)
@@ -165,32 +159,22 @@ class ExploreConfig:
             raise ValueError("stop: every rule must be a torch_gpioius.exploration.StopRule")
         if max_travel is not None:
             rules = tuple(r for r in rules if not isinstance(r, TravelBudget)) + (TravelBudget(max_travel),)
-        policy = policy or d.policy
-        if not isinstance(policy, ObservationPolicy):
-            raise ValueError(f"policy: expected an ObservationPolicy, got {type(policy).__name__}")
         penalty = penalty if penalty is not None else world.penalty()
         if isinstance(stall, str) and stall == "default":
             stall = NoProgress()
         if stall is not None and not isinstance(stall, NoProgress):
             raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
-        if isinstance(restart_every, str) and restart_every == "default":
-            restart_every = RESTART_EVERY
-        if restart_every is not None:
-            restart_every = as_int(restart_every, "restart_every", 1, 1_000_000)
-        learn = as_learn(getattr(d, "learn", "task") if learn is None else learn)
+        learn = estimator.learn
         if learn != "task":
-            if restart_every is None:
+            if estimator.restart_every is None:
                 raise ValueError(f"learn={learn!r}: the length and sigma^2 are learned on the restart steps; "
                                  "restart_every=None has none")
             if regions is not None:
                 raise ValueError(f"learn={learn!r}: the kernel's length is learned with one similarity; "
                                  "regions has one per region (use learn='task')")
-            if kernel is not None and not getattr(kernel, "learnable_length", False):   # None: the learnable IMQ
-                raise ValueError(f"learn={learn!r}: the {type(kernel).__name__} kernel has no learnable length "
-                                 "(ExactKernel.length and value_at)")
-        config = cls(mode, evidence, touch, step, theta, kernel, noise, max_steps, rules, policy, penalty,
-                     metrics_every, metrics_resolution, interval_every, regions, float(d.approach_travel), stall,
-                     outer_tol, as_device(device), restart_every, learn)
+        config = cls(mode, evidence, touch, step, estimator, max_steps, rules, penalty, metrics_every,
+                     metrics_resolution, interval_every, regions, float(d.approach_travel), stall, outer_tol,
+                     as_device(device))
         if evidence is not None and callable(getattr(evidence, "for_run", None)):   # a reach: the range and budget
             box = (None if getattr(penalty, "lower", None) is None
                    else np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()]))
@@ -202,8 +186,7 @@ class ExploreConfig:
     @property
     def initial_hyperparameters(self) -> tuple[float, float]:
         """`(length [m], sigma^2)` as configured: where every learning of ``learn`` starts."""
-        length = self.theta if self.kernel is None else self.kernel.length
-        return float(length), float(self.noise)
+        return float(self.estimator.kernel.length), float(self.noise)
 
     @property
     def uses_vision(self) -> bool:
@@ -225,16 +208,14 @@ class ExploreConfig:
 
     def model_for(self, x: np.ndarray, y: np.ndarray, task: np.ndarray):
         """The model of this mode on observations in the given order (GPIS keeps the inner ones)."""
-        # the default kernel is built from theta as given (a kernel passed through its constraint and back can
-        # differ in the last bit); another kernel is copied (a GPyTorch module belongs to one model)
-        theta, kernel = self.theta, None if self.kernel is None else copy.deepcopy(self.kernel)
+        kernel = self.estimator.new_kernel()          # a copy: a GPyTorch module belongs to one model
         if not self.uses_vision:
             inner = np.asarray(task) == INNER
-            model = GPIS(np.asarray(x)[inner], np.asarray(y)[inner], theta=theta, noise=self.noise, kernel=kernel)
+            model = GPIS(np.asarray(x)[inner], np.asarray(y)[inner], noise=self.noise, kernel=kernel)
         elif self.regions is not None:
-            model = LocalGPIOIS(x, y, task, regions=self.regions, theta=theta, noise=self.noise, kernel=kernel)
+            model = LocalGPIOIS(x, y, task, regions=self.regions, noise=self.noise, kernel=kernel)
         else:
-            model = GPIOIS(x, y, task, theta=theta, noise=self.noise, kernel=kernel,
+            model = GPIOIS(x, y, task, noise=self.noise, kernel=kernel,
                            inference=getattr(self.touch, "inference", "auto"), outer_tol=self.outer_tol)
         return model.to_device(self.device)
 
@@ -250,9 +231,9 @@ class ExploreConfig:
         return out
 
     def describe(self) -> dict:
-        """JSON-able settings for a log's header (resume compares them)."""
-        kernel = ({"kernel": InverseMultiquadricKernel.kind, "theta": self.theta} if self.kernel is None
-                  else self.kernel.describe())
+        """JSON-able settings for a log's header (resume compares them); ``estimator`` holds the estimator's
+        settings whole (:meth:`~torch_gpioius.models.estimator.EstimatorSettings.to_dict`)."""
+        kernel = self.estimator.kernel.describe()
         evidence = None if self.evidence is None else getattr(self.evidence, "name", type(self.evidence).__name__)
         out = {"mode": self.mode, "evidence": evidence, "touch": getattr(self.touch, "name", type(self.touch).__name__),
                "step_length": self.step, "theta": self.theta, "kernel": kernel, "noise": float(self.noise), "max_steps": self.max_steps,
@@ -268,7 +249,53 @@ class ExploreConfig:
             out["learn"] = self.learn
         if self.evidence is not None and callable(getattr(self.evidence, "describe", None)):
             out["evidence_policy"] = self.evidence.describe()
+        out["estimator"] = self.estimator.to_dict()
         return out
+
+
+def _estimator(world, settings, *, theta, kernel, noise, policy, learn, restart_every) -> EstimatorSettings:
+    """The estimator's settings of one exploration: ``settings`` (an :class:`EstimatorSettings` or a preset's name;
+    a preset's voxel rule sized to the world's object) or the world's own, with the single settings given beside
+    it in their place."""
+    if settings is None:
+        est = world.defaults.estimator
+    elif isinstance(settings, EstimatorSettings):
+        est = settings
+    elif isinstance(settings, str):
+        est = EstimatorSettings.preset(settings)
+    else:
+        raise ValueError(f"settings: expected EstimatorSettings or a preset's name, got {type(settings).__name__}")
+    if est.voxel_rule is not None and est is not world.defaults.estimator:
+        extent = getattr(world, "object_extent", None)
+        if extent is not None:
+            est = est.for_extent(extent)
+    if kernel is not None and theta is not None:
+        raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's length scale)")
+    changes = {}
+    if kernel is not None:
+        changes["kernel"] = as_kernel(kernel, None)        # an ExactKernel, or a TypeError naming what it is
+    elif theta is not None:
+        from ..tolerances import tol
+
+        changes["kernel"] = InverseMultiquadricKernel(lengthscale=as_float(
+            theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m"))
+    if noise is not None:
+        changes["noise"] = as_float(noise, "noise", positive=True)
+    if policy is not None:
+        if not isinstance(policy, ObservationPolicy):
+            raise ValueError(f"policy: expected an ObservationPolicy, got {type(policy).__name__}")
+        changes["labels"] = policy
+        changes["voxel_rule"] = None
+    if learn is not None:
+        changes["learn"] = as_learn(learn)
+    if not (isinstance(restart_every, str) and restart_every == "default"):
+        changes["restart_every"] = restart_every
+    if changes.get("learn", est.learn) != "task":
+        k = changes.get("kernel", est.kernel)
+        if not getattr(k, "learnable_length", False):
+            raise ValueError(f"learn={changes.get('learn', est.learn)!r}: the {type(k).__name__} kernel has no "
+                             "learnable length (ExactKernel.length and value_at)")
+    return est.replace(**changes) if changes else est
 
 
 @dataclass

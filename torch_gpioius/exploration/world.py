@@ -17,6 +17,7 @@ camera -- is a :class:`World` that supplies
 from __future__ import annotations
 
 import abc
+import dataclasses
 import hashlib
 import math
 from dataclasses import dataclass, field
@@ -26,6 +27,8 @@ import numpy as np
 
 from .._validation import as_bounds
 from ..contact import ContactController
+from ..kernels import InverseMultiquadricKernel
+from ..models.estimator import EstimatorSettings
 from .observations import ObservationPolicy
 from .protocols import Toucher
 from .registry import register_world
@@ -57,35 +60,91 @@ class Hardware:
     tactile: Any = None
 
 
-@dataclass(frozen=True)
+_UNSET = object()
+
+
+@dataclass(frozen=True, init=False)
 class ExplorationDefaults:
     """A world's own exploration settings; every one can be overridden in :func:`torch_gpioius.explore`.
 
+    The estimator's part (kernel, sigma^2, labels, what is learned) is one
+    :class:`~torch_gpioius.models.estimator.EstimatorSettings`, defined in the model layer: the world only suggests
+    which settings its objects run with (the robot study's objects E-H the paper's, a user's mesh the library's
+    default), and ``explore(settings=...)`` gives any other. The properties ``theta``, ``noise``, ``policy``,
+    ``kernel`` and ``learn`` read it, and the constructor still takes them (they then change the estimator's
+    settings), so that code written against the earlier fields keeps working.
+
     Attributes:
-        theta: IMQ kernel parameter theta_x [m].
-        noise: sigma^2.
         step: alpha, the planned step [m].
         max_steps: cap on planning steps.
         stop: the world's stop rules (:mod:`torch_gpioius.exploration.stopping`).
-        policy: the observation policy.
         metrics_every: ground-truth metrics every k steps (and always at the last).
         approach_travel: the approach gives up after this distance [m].
-        kernel: a kernel in place of the inverse multiquadric of ``theta`` (an
-            :class:`~torch_gpioius.kernels.ExactKernel`), or None; a ``theta`` given to ``explore`` replaces it.
-        learn: "task" (K_t alone, the paper's), "length" or "all" (the kernel's length, and sigma^2;
-            ``explore(learn=)``).
+        estimator: the estimator's settings.
     """
 
-    theta: float
-    noise: float
-    step: float = 0.01
-    max_steps: int = 400
-    stop: tuple[StopRule, ...] = ()
-    policy: ObservationPolicy = field(default_factory=ObservationPolicy)
-    metrics_every: int = 1
-    approach_travel: float = 2.0
-    kernel: object = None
-    learn: str = "task"
+    step: float
+    max_steps: int
+    stop: tuple[StopRule, ...]
+    metrics_every: int
+    approach_travel: float
+    estimator: EstimatorSettings
+
+    def __init__(self, theta=_UNSET, noise=_UNSET, step: float = 0.01, max_steps: int = 400,
+                 stop: tuple[StopRule, ...] = (), policy=_UNSET, metrics_every: int = 1, approach_travel: float = 2.0,
+                 kernel=_UNSET, learn=_UNSET, estimator: EstimatorSettings | None = None) -> None:
+        base = estimator if estimator is not None else EstimatorSettings.paper_2d()
+        changes = {}
+        if kernel is not _UNSET and kernel is not None:
+            changes["kernel"] = kernel
+        elif theta is not _UNSET and theta is not None:
+            changes["kernel"] = InverseMultiquadricKernel(lengthscale=theta)
+        elif kernel is None and estimator is not None:      # kernel=None: the inverse multiquadric (earlier API)
+            changes["kernel"] = InverseMultiquadricKernel(lengthscale=base.lengthscale or 0.1)
+        if noise is not _UNSET and noise is not None:
+            changes["noise"] = noise
+        if policy is not _UNSET and policy is not None:
+            changes["labels"] = policy
+            if estimator is not None and policy.voxel != base.labels.voxel:
+                changes["voxel_rule"] = None               # a voxel given outright replaces the rule
+        if learn is not _UNSET and learn is not None:
+            changes["learn"] = learn
+        # the settings keep their preset's name unchanged; changed, or built from the earlier fields, they are custom
+        settings = base if estimator is not None and not changes else dataclasses.replace(base, **changes,
+                                                                                           name="custom")
+        for name, value in (("step", step), ("max_steps", max_steps), ("stop", tuple(stop)),
+                            ("metrics_every", metrics_every), ("approach_travel", approach_travel),
+                            ("estimator", settings)):
+            object.__setattr__(self, name, value)
+
+    @property
+    def theta(self) -> float | None:
+        """The kernel's length scale [m] (the paper's theta for the inverse multiquadric)."""
+        return self.estimator.lengthscale
+
+    @property
+    def noise(self) -> float:
+        return self.estimator.noise
+
+    @property
+    def policy(self) -> ObservationPolicy:
+        return self.estimator.labels
+
+    @property
+    def kernel(self):
+        """The kernel, or None for the inverse multiquadric (the earlier field's meaning: ``theta`` gives it)."""
+        k = self.estimator.kernel
+        return None if isinstance(k, InverseMultiquadricKernel) else k
+
+    @property
+    def learn(self) -> str:
+        return self.estimator.learn
+
+    def with_estimator(self, estimator: EstimatorSettings) -> "ExplorationDefaults":
+        """These defaults with another estimator's settings."""
+        if not isinstance(estimator, EstimatorSettings):
+            raise ValueError(f"settings: expected EstimatorSettings, got {type(estimator).__name__}")
+        return dataclasses.replace(self, estimator=estimator)
 
 
 @dataclass
@@ -276,9 +335,8 @@ class RobotWorld(World):
         self.range = as_bounds(bounds, 3)
         self.name, self.reference = name, reference
         self.controller = ContactController(robot, sensor, config)
-        self._defaults = defaults or ExplorationDefaults(
-            theta=0.15, noise=0.08, stop=(TravelBudget(1.5),),
-            policy=ObservationPolicy(voxel=0.05, crop_margin=0.15), metrics_every=5)
+        self._defaults = defaults or ExplorationDefaults(stop=(TravelBudget(1.5),), metrics_every=5,
+                                                         estimator=EstimatorSettings.paper())
 
     @property
     def defaults(self) -> ExplorationDefaults:

@@ -86,9 +86,11 @@ def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None
                "train_y": model.train_targets.detach().cpu().clone()}
     if kind == "GPIOIS":
         tensors["train_task"] = model.train_inputs[1].detach().cpu().reshape(-1).clone()
+    kernel = model.kernel.describe()
+    _check_extra(kernel, "the kernel's description")
     payload = {
         "format": _FORMAT, "version": CHECKPOINT_VERSION, "library_version": __version__, "kind": kind,
-        "theta": float(model.theta), "noise": float(model.noise),
+        "kernel": kernel, "noise": float(model.noise),
         "inference": getattr(model, "inference", "dense"), "state_dict": state, "tensors": tensors,
         "sha256": _digest(state, tensors), "extra": dict(extra or {}),
     }
@@ -145,13 +147,14 @@ def load_checkpoint(path: str | os.PathLike):
     if not ok:
         raise CheckpointError(f"{path}: contents do not match the stored SHA-256 (the file was modified)")
     try:
-        if not isinstance(payload.get("theta"), float) or not isinstance(payload.get("noise"), float):
-            raise CheckpointError(f"{path}: fields 'theta' and 'noise' must be numbers")
+        if not isinstance(payload.get("noise"), float):
+            raise CheckpointError(f"{path}: field 'noise' must be a number")
+        kernel = _kernel(payload, path)
         if payload["kind"] == "GPIOIS":
-            model = GPIOIS(tensors["train_x"], tensors["train_y"], tensors["train_task"], theta=payload["theta"],
+            model = GPIOIS(tensors["train_x"], tensors["train_y"], tensors["train_task"], kernel=kernel,
                            noise=payload["noise"], inference=payload["inference"])
         elif payload["kind"] == "GPIS":
-            model = GPIS(tensors["train_x"], tensors["train_y"], theta=payload["theta"], noise=payload["noise"])
+            model = GPIS(tensors["train_x"], tensors["train_y"], kernel=kernel, noise=payload["noise"])
         else:
             raise CheckpointError(f"{path}: unknown model kind {payload['kind']!r}")
         if payload["kind"] == "GPIOIS" and "outer_mean_module.raw_constant" not in state:
@@ -162,3 +165,17 @@ def load_checkpoint(path: str | os.PathLike):
         raise CheckpointError(f"{path}: checkpoint data is inconsistent ({exc})") from exc
     model.eval()
     return model
+
+
+def _kernel(payload: dict, path: Path):
+    """The kernel a checkpoint names (its description), or the inverse multiquadric of its ``theta`` (checkpoints
+    written before the kernel carried its description)."""
+    from ..kernels import InverseMultiquadricKernel, from_description
+
+    if "kernel" in payload:
+        if not isinstance(payload["kernel"], dict):
+            raise CheckpointError(f"{path}: field 'kernel' must be a kernel's description")
+        return from_description(payload["kernel"])
+    if not isinstance(payload.get("theta"), float):
+        raise CheckpointError(f"{path}: fields 'kernel' (or 'theta') must describe the kernel")
+    return InverseMultiquadricKernel(lengthscale=payload["theta"])

@@ -363,34 +363,49 @@ class Dataset:
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
-    def to_model(self, theta: float | None = None, noise: float | None = None, **kwargs: Any):
+    def to_model(self, theta: float | None = None, noise: float | None = None, *, settings=None, **kwargs: Any):
         """A :class:`torch_gpioius.GPIOIS` on these observations (GPIS if no outer observation), not yet fit.
 
-        ``theta``/``noise`` default to the header's values, then to 0.1 / 0.006. The kernel is the header's (a log
-        of a run with the Matérn-5/2 names it), unless ``kernel`` or ``theta`` is given; then the inverse
-        multiquadric of ``theta`` as before.
+        The kernel and sigma^2 are, in order: ``settings`` (an
+        :class:`~torch_gpioius.models.estimator.EstimatorSettings`), else the header's (``estimator``, else its
+        ``kernel`` and ``noise``; a log of a run with the Matérn-5/2 names it), else the inverse multiquadric of
+        0.1 m and 0.006; ``kernel``, ``noise`` or ``theta`` given here replace them (``theta``: the inverse
+        multiquadric's length scale, the paper's name).
         """
+        from ..kernels import InverseMultiquadricKernel, from_description
+        from ..models.estimator import EstimatorSettings
         from ..models.gpiois import GPIOIS
         from ..models.gpis import GPIS
 
         if len(self) == 0:
             raise DatasetError("the dataset is empty: nothing to fit")
-        desc = self.meta.get("kernel")
-        if ("kernel" not in kwargs and theta is None and isinstance(desc, dict)
-                and desc.get("kernel") not in (None, "InverseMultiquadric")):
-            from ..kernels import from_description
-
+        if settings is None and isinstance(self.meta.get("estimator"), dict):
             try:
-                kwargs["kernel"] = from_description(desc)
+                settings = EstimatorSettings.from_dict(self.meta["estimator"])
             except ValueError as exc:
-                raise DatasetError(f"the header's kernel: {exc}") from None
-        theta = theta if theta is not None else self.meta.get("theta") or 0.1
-        noise = noise if noise is not None else self.meta.get("noise") or 0.006
+                raise DatasetError(f"the header's estimator settings: {exc}") from None
+        if "kernel" in kwargs and theta is not None:
+            raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's length scale)")
+        if theta is not None:
+            kwargs["kernel"] = InverseMultiquadricKernel(lengthscale=theta)
+        elif "kernel" not in kwargs:
+            desc = self.meta.get("kernel")
+            if settings is not None:
+                kwargs["kernel"] = settings.new_kernel()
+            elif isinstance(desc, dict) and desc.get("kernel") is not None:
+                try:
+                    kwargs["kernel"] = from_description(desc)
+                except ValueError as exc:
+                    raise DatasetError(f"the header's kernel: {exc}") from None
+            else:
+                kwargs["kernel"] = InverseMultiquadricKernel(lengthscale=float(self.meta.get("theta") or 0.1))
+        if noise is None:
+            noise = settings.noise if settings is not None else (self.meta.get("noise") or 0.006)
         if (self.task == 1).any():
             if not (self.task == 0).any():
                 raise DatasetError("the dataset has outer (visual) observations only; GPIOIS needs touches too")
-            return GPIOIS(self.x, self.y, self.task, theta=theta, noise=noise, **kwargs)
-        return GPIS(self.x, self.y, theta=theta, noise=noise, **kwargs)
+            return GPIOIS(self.x, self.y, self.task, noise=noise, **kwargs)
+        return GPIS(self.x, self.y, noise=noise, **kwargs)
 
 
 def _fsync_dir(path: Path) -> None:

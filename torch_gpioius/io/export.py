@@ -13,7 +13,7 @@ from ..surfaces import data_bounds, grid_resolution  # noqa: F401  (grid_resolut
 from .datasets import DatasetError
 from .outputs import atomic_write, check_distinct, check_new_file
 
-__all__ = ["export_run", "export_model", "write_surface", "curves_svg", "grid_resolution", "MESH_FORMATS", "CURVE_FORMATS"]
+__all__ = ["export_run", "export_model", "write_estimate", "write_surface", "curves_svg", "grid_resolution", "MESH_FORMATS", "CURVE_FORMATS"]
 
 #: File endings trimesh writes meshes to.
 MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")
@@ -186,6 +186,8 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
     for target in (mesh, outer):
         if target is not None:
             check_new_file(target, force, "export")
+    if Path(run).is_dir():
+        return _export_fit(Path(run), mesh, outer, step, resolution, bounds)
     history = load_run(run)
     if step is not None and (isinstance(step, bool) or not isinstance(step, (int, np.integer))):
         raise ValueError(f"export: step must be a step number, got {step!r}")
@@ -241,3 +243,50 @@ def export_model(model, path: str | os.PathLike, bounds, resolution: float, task
     if surface is None or (bounds.shape[1] == 2 and not surface):
         return None
     return write_surface(surface, var, path, prior_variance(model, task))
+
+
+def write_estimate(model, bounds, path: str | os.PathLike, resolution: float, task: int = 0) -> str:
+    """:func:`export_model`, refusing what it cannot write: a format that does not suit the model's dimension, or an
+    estimate that does not cross ``bounds`` `(2, d)` [m].
+
+    Returns:
+        the path written, as a string.
+
+    Raises:
+        ValueError: a format that does not suit (names the file and the formats that do).
+        DatasetError: no surface in the box.
+    """
+    bounds = np.asarray(bounds, dtype=np.float64)
+    dim = bounds.shape[1]
+    allowed = MESH_FORMATS if dim == 3 else CURVE_FORMATS
+    if Path(path).suffix.lower() not in allowed:
+        raise ValueError(f"{path}: a {dim}-D estimate is {'a mesh' if dim == 3 else 'a set of closed curves'}; write "
+                         f"one of {', '.join(allowed)}")
+    written = export_model(model, path, bounds, resolution, task)
+    if written is None:
+        raise DatasetError(f"{path}: the {'inner' if task == 0 else 'outer'} estimate does not cross the box of the "
+                           "observations: nothing to write")
+    return str(written)
+
+
+def _export_fit(folder: Path, mesh, outer, step, resolution, bounds) -> dict:
+    """:func:`export_run` of a ``gpioius fit --out`` folder: its checkpoint's estimate."""
+    from .checkpoints import load_checkpoint
+
+    if not (folder / "model.pt").is_file():
+        raise ValueError(f"export: {folder} is a folder without model.pt (give a log, a dataset or a `gpioius fit "
+                         "--out` folder)")
+    if step is not None:
+        raise ValueError("export: --step applies to a log; a fit folder holds one model")
+    model = load_checkpoint(folder / "model.pt")
+    x = model.train_inputs[0].detach().cpu().numpy()
+    dim = x.shape[1]
+    box = data_bounds(x, pad=0.05) if bounds is None else as_bounds(bounds, dim)
+    res = grid_resolution(resolution, dim)
+    if outer is not None and getattr(model, "num_tasks", 1) < 2:
+        raise ValueError(f"export: {folder} holds a tactile-only model; drop --outer")
+    out = {"step": None, "inner": None, "outer": None}
+    for key, target, task in (("inner", mesh, 0), ("outer", outer, 1)):
+        if target is not None:
+            out[key] = write_estimate(model, box, target, res, task)
+    return out

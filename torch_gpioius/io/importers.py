@@ -294,7 +294,8 @@ def _label(row: dict, path, line: int, scale: float) -> float:
 
 
 def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Read inner observations from a CSV with a header ``x,y[,z],label[,step][,depth]``.
+    """Read inner observations from a CSV with a header ``x,y[,z],label[,step][,depth]`` (and optionally each
+    contact's normal or force, :func:`read_contacts_csv`).
 
     ``label`` is ``contact``/``surface``/0 (y = 0), ``free``/``free_space``/1 (y = 1), or a point known to lie inside
     the body: ``inside`` with its ``depth`` behind the surface (in the file's units; y = -depth / 5 cm, as the
@@ -305,6 +306,29 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
 
     Raises:
         DatasetError: naming the file, the line and the field.
+    """
+    x, y, step, _ = read_contacts_csv(path, units=units)
+    return x, y, step
+
+
+#: The columns of a contact's direction: its outward surface normal, or the force the surface exerted on the
+#: fingertip (which points out of the body too; its size is not used).
+_NORMAL_COLUMNS = {"n": ("nx", "ny", "nz"), "f": ("fx", "fy", "fz")}
+
+
+def read_contacts_csv(path: str | os.PathLike, *, units: str = "m"):
+    """:func:`load_contacts_csv` with each contact's outward direction, as gpis-touch and GPisMap take normals: columns
+    ``nx,ny[,nz]`` (the outward surface normal) or ``fx,fy[,fz]`` (the force the surface exerted on the fingertip,
+    which points out of the body; any units, only its direction is used). A contact row without them, and every
+    other row, has none (NaN). With them, the estimator places an inside point behind each contact, as an
+    exploration places it behind the force it measured.
+
+    Returns:
+        ``x (n, d)`` [m], ``y (n,)``, ``step (n,)``, ``normal (n, d)``: unit outward directions, NaN rows where none.
+
+    Raises:
+        DatasetError: naming the file, the line and the field (both kinds of direction given, a zero or
+            non-numeric one, a direction on a row that is not a contact).
     """
     path = Path(path)
     scale = _scale(units, path)
@@ -326,7 +350,13 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
     dims = ["x", "y", "z"] if "z" in cols else ["x", "y"]
     if not {"x", "y", "label"} <= set(cols):
         raise DatasetError(f"{path}: header must contain x, y[, z] and label, got {cols}")
-    xs, ys, steps = [], [], []
+    kinds = [k for k, names in _NORMAL_COLUMNS.items() if any(c in cols for c in names)]
+    if len(kinds) > 1:
+        raise DatasetError(f"{path}: the header gives both normals (nx, ny, nz) and forces (fx, fy, fz); give one")
+    direction = _NORMAL_COLUMNS[kinds[0]][:len(dims)] if kinds else None
+    if direction is not None and not set(direction) <= set(cols):
+        raise DatasetError(f"{path}: a contact's direction needs the columns {list(direction)}, got {cols}")
+    xs, ys, steps, normals = [], [], [], []
     for i, row in enumerate(rows, start=2):
         if None in row:
             raise DatasetError(f"{path}:{i}: the row has more fields than the header ({len(cols)} columns: {cols})")
@@ -349,72 +379,200 @@ def load_contacts_csv(path: str | os.PathLike, *, units: str = "m") -> tuple[np.
         xs.append(p)
         ys.append(y)
         steps.append(st)
+        normals.append(_direction(row, direction, y, path, i) if direction else np.full(len(dims), np.nan))
     xs = np.asarray(xs) * scale
     check_metres(xs, str(path), hint=_units_hint(units), error=DatasetError)
-    return xs, np.asarray(ys), np.asarray(steps, dtype=np.int64)
+    return xs, np.asarray(ys), np.asarray(steps, dtype=np.int64), np.asarray(normals, dtype=np.float64)
 
 
-def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *,
-                       units: str = "m", voxel: float | None = 0.05, theta: float | None = None,
-                       noise: float | None = None, source: str = "import", camera_origin=None) -> Dataset:
-    """Combine a contact CSV (inner, task 0) and one or more point clouds (outer, task 1, step 0) into a Dataset.
+def _direction(row: dict, columns: tuple, label: float, path: Path, line: int) -> np.ndarray:
+    """A row's unit outward direction from its normal or force columns (NaN where empty)."""
+    raw = [row.get(c, "") for c in columns]
+    if all(v == "" for v in raw):
+        return np.full(len(columns), np.nan)
+    if label != 0.0:
+        raise DatasetError(f"{path}:{line}: {', '.join(columns)} belong to contact rows (label contact), not to a "
+                           f"row labelled {row.get('label')!r}")
+    try:
+        v = np.array([float(c) for c in raw])
+    except ValueError:
+        raise DatasetError(f"{path}:{line}: {', '.join(columns)} {raw} are not numbers") from None
+    n = float(np.linalg.norm(v))
+    if not (np.isfinite(v).all() and n > 0):
+        raise DatasetError(f"{path}:{line}: {', '.join(columns)} {raw} is not a direction (zero, NaN or inf)")
+    return v / n
+
+
+def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, units: str = "m", voxel="auto",
+                       settings="default", theta: float | None = None, noise: float | None = None,
+                       source: str = "import", camera_origin=None) -> Dataset:
+    """A user's contacts (inner, task 0) and camera captures (outer, task 1, step 0) labelled as an exploration with
+    the same estimator settings labels them, in one Dataset.
+
+    The estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings`, the ``"default"`` preset
+    unless told) decide the labels exactly as in a simulated run: each capture's seen surface (y = 0), its free space
+    along its own rays (y = 1, near and, with ``vision_free_far``, far), inside points behind the seen surface along
+    the cloud's normals (estimated from the points and turned towards the capture's camera) and behind each contact
+    along its normal or force (:func:`read_contacts_csv`), every inside point that other observations contradict
+    dropped, and the camera's inside points retracted when the contacts show the cover standing off the body by
+    more than ``vision_inside_gap``. The voxel follows the settings' rule from the clouds' extent.
 
     Args:
-        contacts_csv: the contacts (:func:`load_contacts_csv`).
+        contacts_csv: the contacts (:func:`read_contacts_csv`).
         point_cloud: the camera's cloud, in the contacts' frame (:func:`load_point_cloud`), a list of clouds (several
             captures, e.g. from two sides), or None.
         units: both files' units ("m", "cm", "mm").
-        voxel: voxel edge of the cloud [m] (None: every point).
-        theta: the IMQ kernel's theta [m] recorded in the dataset (the model's default otherwise).
-        noise: sigma^2 recorded in the dataset (the model's default otherwise).
+        voxel: "auto" (the settings' voxel rule from the clouds' largest extent, or their fixed voxel), an edge [m],
+            or 0 / None (every point).
+        settings: an :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's name ("default",
+            "paper").
+        theta: the inverse multiquadric's length scale [m] in place of the settings' kernel (the paper's name;
+            deprecated: give ``settings`` with the kernel).
+        noise: sigma^2 in place of the settings'.
         source: the dataset's ``source``.
-        camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None. With it the
-            dataset also holds the camera's free space (y = 1, task 1): points 5 cm in front of the seen surface
-            along each ray, half the information vision gives (the model otherwise only knows where the surface
-            is, not which side is empty). With several clouds, a list of origins, one per cloud (None for a cloud
-            whose camera is unknown): each capture's free space lies along its own rays.
+        camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None; with several clouds,
+            a list of origins, one per cloud (None for a cloud whose camera is unknown: its points, no free space and
+            no inside points).
+
+    Returns:
+        A :class:`Dataset` whose ``meta["estimator"]`` holds the settings used (the voxel resolved), and
+        ``meta["cover_gap"]`` the gap the contacts show under the seen cover [m] (NaN with too few contacts).
 
     Raises:
         DatasetError: an unreadable file, units that cannot be metres, a 3-D cloud with 2-D contacts, a bad
-            ``camera_origin``, or as many origins as clouds missing (each names the file or argument).
+            ``camera_origin``, as many origins as clouds missing, contacts far outside the clouds (each names the
+            file or argument).
     """
-    x_in, y_in, step_in = load_contacts_csv(contacts_csv, units=units)
-    parts = [(x_in, y_in, np.zeros(len(x_in), np.int64), step_in)]
+    from ..exploration.observations import cover_gap, drop_contradicted_inside, vision_observations
+    from ..models.estimator import EstimatorSettings
+
+    est = EstimatorSettings.preset(settings) if isinstance(settings, str) else settings
+    if not isinstance(est, EstimatorSettings):
+        raise DatasetError(f"settings: expected EstimatorSettings or a preset's name, got {type(settings).__name__}")
+    if theta is not None:
+        from ..kernels import InverseMultiquadricKernel
+
+        est = est.replace(kernel=InverseMultiquadricKernel(lengthscale=theta))
+    if noise is not None:
+        est = est.replace(noise=noise)
+    x_in, y_in, step_in, normal_in = read_contacts_csv(contacts_csv, units=units)
+    dim = x_in.shape[1]
     if camera_origin is not None and point_cloud is None:
         raise DatasetError("camera_origin: gives the free space in front of a point cloud; pass point_cloud too")
     several = isinstance(point_cloud, (list, tuple))
-    clouds = list(point_cloud) if several else ([] if point_cloud is None else [point_cloud])
+    files = list(point_cloud) if several else ([] if point_cloud is None else [point_cloud])
     if several:
-        origins = [None] * len(clouds) if camera_origin is None else list(camera_origin)
-        if len(origins) != len(clouds):
-            raise DatasetError(f"camera_origin: {len(origins)} origin(s) for {len(clouds)} point clouds; give one per "
+        origins = [None] * len(files) if camera_origin is None else list(camera_origin)
+        if len(origins) != len(files):
+            raise DatasetError(f"camera_origin: {len(origins)} origin(s) for {len(files)} point clouds; give one per "
                                "cloud (None where a camera is unknown)")
     else:
-        origins = [camera_origin] * len(clouds)
-    for cloud, origin in zip(clouds, origins):
-        if origin is None:
-            pts, y_out = load_point_cloud(cloud, units=units, voxel=voxel), None
-        else:
-            pts, y_out = _seen_and_free(cloud, units, voxel, origin)
-        if pts.shape[1] != x_in.shape[1]:
-            raise DatasetError(f"{cloud}: a 3-D point cloud needs a 3-D contact CSV (x, y, z)")
-        y_out = np.zeros(len(pts)) if y_out is None else y_out
-        parts.append((pts, y_out, np.ones(len(pts), np.int64), np.zeros(len(pts), np.int64)))
-    for cloud, origin, (pts, y_out, *_rest) in zip(clouds, origins, parts[1:]):
-        _check_together(contacts_csv, x_in, y_in, cloud, pts[y_out == 0], origin, units)
-    x, y, task, step = (np.concatenate(a) for a in zip(*parts))
-    meta = {"source": source, "voxel_size": voxel if clouds else None}
+        origins = [camera_origin] * len(files)
+    captures = [_capture(f, o, units, dim) for f, o in zip(files, origins)]
+    if captures:
+        everything = np.concatenate([c.points for c in captures])
+        est = _resolved_voxel(est, voxel, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
+    parts_x, parts_y, parts_t = [], [], []
+    outer = np.zeros((0, dim)), np.zeros(0)
+    if captures:
+        from ..sensors.pointcloud import PointCloud
+
+        try:
+            outer = vision_observations(PointCloud.merge(captures), est.labels)
+        except ValueError as exc:
+            raise DatasetError(f"{', '.join(map(str, files))}: {exc}") from None
+        for f, o, c in zip(files, origins, captures):
+            _check_together(contacts_csv, x_in, y_in, f, c.points, o, units)
+    inner, inner_steps = _inner_with_inside_points(x_in, y_in, normal_in, step_in, est.labels)
+    kept = drop_contradicted_inside(inner, est.labels, outer[0], outer[1])
+    inner_steps = inner_steps[_subsequence(inner.x, kept.x)]
+    inner = kept
+    gap = math.nan
+    if captures and est.labels.vision_inside_gap is not None:
+        seen = outer[0][outer[1] == 0]
+        gap = cover_gap(x_in[y_in == 0], seen, reach=max(0.02, est.labels.voxel or 0.0))
+        if gap > est.labels.vision_inside_gap:            # the cover stands off: its inside points lie in the gap
+            keep = outer[1] >= 0
+            outer = outer[0][keep], outer[1][keep]
+    steps = np.r_[inner_steps, np.zeros(len(outer[1]), np.int64)]
+    x = np.concatenate([inner.x, outer[0]])
+    y = np.concatenate([inner.y, outer[1]])
+    task = np.r_[np.zeros(len(inner), np.int64), np.ones(len(outer[1]), np.int64)]
+    meta = {"source": source, "voxel_size": est.labels.voxel if captures else None, "estimator": est.to_dict(),
+            "cover_gap": None if not math.isfinite(gap) else float(gap)}
+    meta["kernel"], meta["noise"] = est.kernel.describe(), float(est.noise)
 
     def metres(o):
         return None if o is None else [float(v) * _SCALE[units] for v in np.asarray(o, dtype=float).ravel()]
 
     if camera_origin is not None:
         meta["camera_origin"] = [metres(o) for o in origins] if several else metres(camera_origin)
-    if theta is not None:
-        meta["theta"] = theta
-    if noise is not None:
-        meta["noise"] = noise
-    return Dataset(x, y, task, step, meta=meta)
+    return Dataset(x, y, task, steps, meta=meta)
+
+
+def _capture(path, origin, units: str, dim: int):
+    """One capture as a :class:`~torch_gpioius.sensors.PointCloud` [m] with its camera (or None): every finite
+    point of the file, in metres."""
+    from ..sensors.pointcloud import PointCloud
+
+    pts = load_point_cloud(path, units=units)
+    if pts.shape[1] != dim:
+        raise DatasetError(f"{path}: a 3-D point cloud needs a 3-D contact CSV (x, y, z)")
+    if origin is None:
+        return PointCloud(pts)
+    try:
+        o = np.asarray(origin, dtype=np.float64).reshape(-1) * _scale(units, Path(path))
+    except (TypeError, ValueError):
+        raise DatasetError(f"camera_origin: expected 3 numbers, got {origin!r}") from None
+    if o.shape != (3,) or not np.isfinite(o).all():
+        raise DatasetError(f"camera_origin: expected 3 finite numbers, got {origin!r}")
+    check_metres(np.vstack([pts, o]), f"{path} with camera_origin",
+                 hint="the camera origin is in the cloud's frame and units", error=DatasetError)
+    return PointCloud(pts, o)
+
+
+def _resolved_voxel(est, voxel, extent: float):
+    """The settings with the voxel asked for: "auto" (their rule from ``extent`` [m], or their fixed voxel), an edge
+    [m], or 0 / None (every point)."""
+    if isinstance(voxel, str):
+        if voxel != "auto":
+            raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
+        return est.for_extent(extent)
+    try:
+        return est.with_voxel(0.0 if voxel is None else voxel)
+    except ValueError as exc:
+        raise DatasetError(str(exc)) from None
+
+
+def _inner_with_inside_points(x: np.ndarray, y: np.ndarray, normal: np.ndarray, step: np.ndarray, labels):
+    """The contacts' rows, each contact with a normal followed by its inside point ``labels.touch_inside`` behind it
+    (as an exploration records a touch), and each row's step."""
+    from ..exploration.observations import Observations
+
+    xs, ys, steps = [], [], []
+    depth = labels.touch_inside
+    for p, label, n, k in zip(x, y, normal, step):
+        xs.append(p)
+        ys.append(label)
+        steps.append(k)
+        if depth is not None and label == 0 and np.isfinite(n).all():
+            xs.append(p - depth * n)
+            ys.append(labels.inside_label(depth))
+            steps.append(k)
+    d = x.shape[1]
+    return (Observations(np.asarray(xs, dtype=np.float64).reshape(-1, d), np.asarray(ys, dtype=np.float64),
+                         np.zeros(len(ys), np.int64), source="touch"), np.asarray(steps, dtype=np.int64))
+
+
+def _subsequence(rows: np.ndarray, kept: np.ndarray) -> np.ndarray:
+    """`(n,)` bool: which of ``rows`` `(n, d)` the order-preserving subset ``kept`` `(k, d)` holds."""
+    mask = np.zeros(len(rows), dtype=bool)
+    j = 0
+    for i, r in enumerate(rows):
+        if j < len(kept) and np.array_equal(r, kept[j]):
+            mask[i] = True
+            j += 1
+    return mask
 
 
 def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts: np.ndarray, origin,
@@ -461,27 +619,6 @@ def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts
 
 def _fmt(v) -> str:
     return "(" + ", ".join(f"{float(a):.3g}" for a in np.asarray(v).ravel()) + ")"
-
-
-def _seen_and_free(point_cloud, units: str, voxel: float | None, camera_origin) -> tuple[np.ndarray, np.ndarray]:
-    """The cloud's surface points (y = 0) and the free space in front of them along the rays to ``camera_origin``
-    (y = 1), as vision gives them in an exploration (:func:`torch_gpioius.exploration.vision_observations`)."""
-    from ..exploration.observations import ObservationPolicy, vision_observations
-
-    try:
-        origin = np.asarray(camera_origin, dtype=np.float64).reshape(-1) * _scale(units, Path(point_cloud))
-    except (TypeError, ValueError):
-        raise DatasetError(f"camera_origin: expected 3 numbers, got {camera_origin!r}") from None
-    if origin.shape != (3,) or not np.isfinite(origin).all():
-        raise DatasetError(f"camera_origin: expected 3 finite numbers, got {camera_origin!r}")
-    pts = load_point_cloud(point_cloud, units=units)
-    check_metres(np.vstack([pts, origin]), f"{point_cloud} with camera_origin",
-                 hint="the camera origin is in the cloud's frame and units", error=DatasetError)
-    try:
-        policy = ObservationPolicy().with_voxel(0.0 if voxel is None else voxel)
-        return vision_observations(PointCloud(pts, origin), policy)
-    except ValueError as exc:
-        raise DatasetError(str(exc)) from None
 
 
 class FilePointCloud(PointCloudSource):

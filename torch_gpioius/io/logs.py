@@ -181,6 +181,19 @@ class LogRecorder(Recorder):
 _NOT_COMPARED = frozenset({"scene_file"})
 
 
+#: Header keys added since logs were first written: a log without one resumes on the keys it has (``estimator``
+#: holds the estimator's settings whole; the log's ``kernel``, ``noise`` and ``policy`` say the same of older runs).
+_ADDED = frozenset({"estimator"})
+
+
+def _kernel_now(description):
+    """A kernel's description as the kernel describes itself now (an inverse multiquadric's ``theta`` is its
+    ``lengthscale``)."""
+    if isinstance(description, dict) and description.get("kernel") == "InverseMultiquadric" and "theta" in description:
+        description = {**{k: v for k, v in description.items() if k != "theta"}, "lengthscale": description["theta"]}
+    return description
+
+
 def _same(have, want) -> bool:
     if isinstance(want, float) and isinstance(have, (int, float)) and not isinstance(have, bool):
         return math.isclose(have, want, rel_tol=1e-12, abs_tol=0.0)
@@ -219,9 +232,9 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
     header = records[0].meta
     want = {**world.describe(), **config.describe()}
     for key, value in want.items():
-        if key in _NOT_COMPARED:
+        if key in _NOT_COMPARED or (key in _ADDED and key not in header):
             continue
-        have = header.get(key)
+        have = _kernel_now(header.get(key)) if key == "kernel" else header.get(key)
         if not _same(have, value):
             what = "world geometry" if key == "scene_fingerprint" else key
             raise ValueError(f"{path}: cannot resume: the log was written with {key}={have!r}, this call asks "

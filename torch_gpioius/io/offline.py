@@ -94,40 +94,61 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
 
 def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None = None, *,
                 theta: float | None = None, noise: float | None = None, resolution: float | None = None,
-                learn: str = "task") -> dict:
-    """Learn K_t on a dataset (or the final state of a log); save a checkpoint and a figure.
+                learn: str | None = None, settings=None, mesh: str | os.PathLike | None = None,
+                outer_mesh: str | os.PathLike | None = None, force: bool = False) -> dict:
+    """Learn K_t on a dataset (or the final state of a log); save a checkpoint, a figure and the estimate's meshes.
 
     Args:
         path: a ``.gpioius`` dataset or log, or a :class:`Dataset` (e.g. from
-            :func:`torch_gpioius.io.importers.dataset_from_files`).
+            :func:`torch_gpioius.io.importers.dataset_from_files`, which labels a user's files by estimator settings).
         out: folder for ``model.pt``, ``fit.png`` and ``fit.json`` (None: write nothing).
-        theta: the IMQ kernel's theta [m] (default: the dataset's, else the model's).
-        noise: sigma^2 (default: the dataset's, else the model's).
-        resolution: grid spacing of the estimate [m].
+        theta: the inverse multiquadric's length scale [m] (the paper's name) in place of the settings' kernel.
+        noise: sigma^2 in place of the settings'.
+        resolution: grid spacing of the estimate [m] (its figure and meshes).
         learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2), by the
             exact marginal likelihood on a copy of at most 256 inner and 512 outer points, kept where the full data's
-            likelihood rises (``GPIOIS.learn_hyperparameters``); the checkpoint and ``fit.json`` hold what was
-            learned.
+            likelihood rises (``GPIOIS.learn_hyperparameters``); None: the settings'. The checkpoint and ``fit.json``
+            hold what was learned.
+        settings: the estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings` or a
+            preset's name); None: the file's own (a dataset records the settings it was labelled with), else the
+            inverse multiquadric of 0.1 m and 0.006 of earlier files.
+        mesh: write the inner estimate ``{mu_in = 0}`` here (PLY, OBJ, STL, OFF, GLB in 3-D; SVG, DXF, PLY, OBJ
+            curves in 2-D; coloured by its variance where the format allows).
+        outer_mesh: write the outer estimate here (visual-tactile data only).
+        force: replace existing mesh files.
 
     Returns:
-        ``{"n", "task_covariance", "similarity", "correlation", "correlation_interval", "mll", "checkpoint",
-        "figure", "estimate"}``; ``estimate`` says whether the inner estimate has a surface in the data's box (on the
-        figure's grid); ``correlation_interval`` is the 95 % profile-likelihood interval of the correlation
-        (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
+        ``{"n", "settings", "task_covariance", "similarity", "correlation", "correlation_interval", "mll",
+        "checkpoint", "figure", "estimate", "mesh", "outer_mesh"}``; ``estimate`` says whether the inner estimate
+        has a surface in the data's box (on the figure's grid); ``correlation_interval`` is the 95 %
+        profile-likelihood interval of the correlation (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
-    from ..exploration.config import LEARN_SIZE, as_learn
+    from ..exploration.config import LEARN_SIZE
+    from ..models.estimator import EstimatorSettings, as_learn
+    from .export import write_estimate
+    from .outputs import check_distinct, check_new_file
 
-    as_learn(learn)
+    if learn is not None:
+        as_learn(learn)
+    if isinstance(settings, str):
+        settings = EstimatorSettings.preset(settings)
+    for option, target in (("--mesh", mesh), ("--outer-mesh", outer_mesh)):
+        if target is not None:
+            check_new_file(target, force, option)      # before the fit: a refused file costs nothing
+    check_distinct(mesh=mesh, outer_mesh=outer_mesh)
     ds = path if isinstance(path, Dataset) else load_dataset(path)
     path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
-    model = ds.to_model(theta=theta, noise=noise).fit()
+    model = ds.to_model(theta=theta, noise=noise, settings=settings).fit()
+    used = settings if settings is not None else _file_settings(ds)
+    learn = learn if learn is not None else (used.learn if used is not None else "task")
     if learn != "task":
         model.learn_hyperparameters(*LEARN_SIZE, learn_noise=learn == "all")
-    # 15 significant digits: theta passes through GPyTorch's positive constraint (softplus and back), which
+    # 15 significant digits: a length passes through GPyTorch's positive constraint (softplus and back), which
     # leaves rounding in the last digit (0.10000000000000002) that a reader should not see
     info = {"n": len(ds), "n_inner": int((ds.task == 0).sum()), "n_outer": int((ds.task == 1).sum()),
-            "theta": float(f"{model.theta:.15g}"), "noise": float(f"{model.noise:.15g}"),
-            "mll": float(model.log_marginal_likelihood()), "learn": learn}
+            "kernel": model.kernel.describe(), "lengthscale": float(f"{model.lengthscale:.15g}"),
+            "noise": float(f"{model.noise:.15g}"), "mll": float(model.log_marginal_likelihood()), "learn": learn,
+            "settings": None if used is None else used.to_dict()}
     if model.hyper_result is not None:
         r = model.hyper_result
         info["learned"] = {"length": r.length, "noise": r.noise, "kept": r.kept, "mll_before": r.mll_full_before,
@@ -139,19 +160,34 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
                     similarity_support=model.similarity_support())
     res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
     info["estimate"] = has_surface(model, ds.x, res)
+    info["mesh"] = info["outer_mesh"] = None
+    for key, target, task in (("mesh", mesh, INNER), ("outer_mesh", outer_mesh, 1)):
+        if target is not None:
+            if task == 1 and not isinstance(model, GPIOIS):
+                raise ValueError("--outer-mesh: the data have no outer (camera) observations, so no outer estimate")
+            info[key] = write_estimate(model, data_bounds(ds.x, pad=max(0.05, 2 * res)), target, res, task)
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
         # one fit's three files together: staged, then moved in when all are written (a failure, or a second fit
         # into the same folder, never leaves a model.pt of one fit beside the fit.json of another)
         with FolderLock(out, "gpioius fit"), StagedFiles(out) as staged:
-            save_checkpoint(model, staged.path / "model.pt", extra={"dataset": str(path)})
+            save_checkpoint(model, staged.path / "model.pt",
+                            extra={"dataset": str(path), "settings": info["settings"]})
             _plot_estimate(model, ds, staged.path / "fit.png",
                            f"{' + '.join(Path(p).name for p in str(path).split(' + '))}: estimated inner shape "
                            "over its variance", res)
             info["checkpoint"], info["figure"] = str(out / "model.pt"), str(out / "fit.png")
             atomic_write(staged.path / "fit.json", json.dumps(info, indent=2))
     return info
+
+
+def _file_settings(ds: Dataset):
+    """The estimator settings a dataset records (``meta["estimator"]``), or None."""
+    from ..models.estimator import EstimatorSettings
+
+    data = ds.meta.get("estimator")
+    return EstimatorSettings.from_dict(data) if isinstance(data, dict) else None
 
 
 def replay_log(path: str | os.PathLike, out: str | os.PathLike, *, every: int = 1, figures: int = 4,

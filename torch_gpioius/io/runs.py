@@ -66,34 +66,36 @@ class RunHistory:
 
         k = self.nearest_step(step)
         ds, p = self.states[k], self.params.get(k, {})
-        theta = float(self.meta.get("theta") or 0.1)
         noise = float(self.meta.get("noise") or 0.006)
         kernel = self.kernel()
         has_outer = bool((ds.task == 1).any())
         if not has_outer or self.meta.get("mode") == "tactile":
             inner = ds.task == 0
-            model = GPIS(ds.x[inner], ds.y[inner], theta=theta, noise=noise, kernel=kernel)
+            model = GPIS(ds.x[inner], ds.y[inner], noise=noise, kernel=kernel)
             return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
         if "local_params" in p and self.meta.get("regions"):
             from ..models.local import LocalGPIOIS
 
-            model = LocalGPIOIS(ds.x, ds.y, ds.task, regions=int(self.meta["regions"]), theta=theta, noise=noise,
-                                kernel=kernel)
+            model = LocalGPIOIS(ds.x, ds.y, ds.task, regions=int(self.meta["regions"]), noise=noise, kernel=kernel)
             return model.set_params(p["local_params"])
         if "kt" in p and np.isfinite(p["kt"]).all():
-            model = GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
+            model = GPIOIS(ds.x, ds.y, ds.task, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
                            kernel=kernel).set_outer_mean(p.get("outer_mean", 1.0))
             return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
-        return GPIOIS(ds.x, ds.y, ds.task, theta=theta, noise=noise, kernel=kernel).fit()
+        return GPIOIS(ds.x, ds.y, ds.task, noise=noise, kernel=kernel).fit()
 
     def kernel(self):
-        """The run's kernel when it is not the default inverse multiquadric (its header names it), else None."""
-        desc = self.meta.get("kernel")
-        if isinstance(desc, dict) and desc.get("kernel") not in (None, "InverseMultiquadric"):
-            from ..kernels import from_description
+        """A new copy of the run's kernel as its header describes it (the inverse multiquadric of the header's
+        ``theta`` in files that describe none)."""
+        from ..kernels import InverseMultiquadricKernel, from_description
 
-            return from_description(desc)
-        return None
+        desc = self.meta.get("kernel")
+        if isinstance(desc, dict) and desc.get("kernel") is not None:
+            try:
+                return from_description(desc)
+            except ValueError as exc:
+                raise DatasetError(f"{self.path}: the header's kernel: {exc}") from None
+        return InverseMultiquadricKernel(lengthscale=float(self.meta.get("theta") or 0.1))
 
     def pad_footprints(self, step: int) -> np.ndarray:
         """`(p, 4, 3)` the corners of the gel pad at every patch up to ``step`` [m], base frame (in order around

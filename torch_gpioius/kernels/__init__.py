@@ -41,6 +41,8 @@ def from_description(description: dict) -> ExactKernel:
     if not isinstance(description, dict) or "kernel" not in description:
         raise ValueError(f"kernel description: expected a dict with a 'kernel' name, got {description!r}")
     params = {k: v for k, v in description.items() if k != "kernel"}
+    if description["kernel"] == InverseMultiquadricKernel.kind and "theta" in params:
+        params["lengthscale"] = params.pop("theta")          # descriptions written before lengthscale was its name
     cls = KERNELS.get(description["kernel"])
     if cls is None:
         raise ValueError(f"kernel: unknown {description['kernel']!r}; registered: {sorted(KERNELS)}")
@@ -51,7 +53,8 @@ def from_description(description: dict) -> ExactKernel:
 
 
 def as_kernel(kernel, theta: float | None) -> ExactKernel:
-    """``kernel`` if given (an :class:`ExactKernel`), else the paper's inverse multiquadric with ``theta`` [m].
+    """``kernel`` if given (an :class:`ExactKernel`), else the paper's inverse multiquadric with length scale
+    ``theta`` [m] (the paper's name; 0.1 when None).
 
     Raises:
         TypeError: ``kernel`` is not an :class:`ExactKernel`.

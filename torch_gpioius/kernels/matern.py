@@ -107,3 +107,6 @@ class Matern52(ExactKernel):
 
     def describe(self) -> dict:
         return {"kernel": self.kind, "lengthscale": self.ell, "outputscale": self.sigma2}
+
+    def __repr__(self) -> str:
+        return f"Matern52(lengthscale={self.ell:g}, outputscale={self.sigma2:g})"

@@ -48,9 +48,12 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
     def __init__(self, train_inputs: tuple[Tensor, ...], train_y: Tensor, theta: float | None, noise: float,
                  learn_theta: bool = False, kernel: ExactKernel | None = None):
         likelihood = _fixed_likelihood(noise)
+        if kernel is not None and theta is not None:
+            raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's lengthscale; a kernel "
+                             "carries its own)")
         if kernel is None:
-            kernel = InverseMultiquadricKernel(0.1 if theta is None else theta, learn_theta=learn_theta)
-        kernel = as_kernel(kernel, theta)
+            kernel = InverseMultiquadricKernel(0.1 if theta is None else theta, learn_lengthscale=learn_theta)
+        kernel = as_kernel(kernel, None)
         super().__init__(train_inputs, train_y, likelihood)
         self.mean_module = ConstantMean().double()
         self.mean_module.constant.data.fill_(1.0)
@@ -68,11 +71,18 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         return self.covar_module
 
     @property
+    def lengthscale(self) -> float | None:
+        """The kernel's length scale [m] (the inverse multiquadric's theta_x, eq. 5; a Matérn's length scale); None
+        for a kernel without one."""
+        try:
+            return float(self.covar_module.length)
+        except TypeError:
+            return None
+
+    @property
     def theta(self) -> float | None:
-        """The inverse multiquadric's theta_x [m] (eq. 5); None for another kernel (see :attr:`kernel`)."""
-        if isinstance(self.covar_module, InverseMultiquadricKernel):
-            return float(self.covar_module.theta.detach().reshape(-1)[0])
-        return None
+        """The paper's name of :attr:`lengthscale` [m] (eq. 5), for every kernel that has a length."""
+        return self.lengthscale
 
     @property
     def noise(self) -> float:
@@ -431,3 +441,13 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             Scalar tensor [nats].
         """
         return self._inference().mll(self._task_matrix())
+
+
+def deprecated_theta(theta, owner: str) -> None:
+    """Warn that ``theta=`` (the paper's symbol, where users typed it) is the inverse multiquadric's lengthscale now,
+    carried by the kernel (``kernel=InverseMultiquadricKernel(lengthscale=...)``)."""
+    if theta is not None:
+        import warnings
+
+        warnings.warn(f"{owner}(theta=...) is an alias of kernel=InverseMultiquadricKernel(lengthscale=...): the "
+                      "kernel carries its length", DeprecationWarning, stacklevel=3)

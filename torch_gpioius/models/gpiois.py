@@ -15,7 +15,7 @@ from gpytorch.kernels import IndexKernel
 from gpytorch.means import ConstantMean
 from torch import Tensor
 
-from .base import ImplicitSurfaceGP
+from .base import ImplicitSurfaceGP, deprecated_theta
 from .._validation import as_float, as_int, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
@@ -153,16 +153,17 @@ class GPIOIS(ImplicitSurfaceGP):
         ValueError: NaN/inf coordinates, empty data, mismatched lengths, labels or task ids outside {0, 1}.
 
     Example:
-        >>> model = GPIOIS(x, y, task, theta=0.1, noise=0.006).fit()
+        >>> model = GPIOIS(x, y, task, kernel=Matern52(lengthscale=0.1), noise=0.006).fit()
         >>> mean, var = model.predict(grid, task=0)   # F_in posterior, eq. (12)-(13)
         >>> model.similarity                          # K_t[0,1] / K_t[0,0]
     """
 
     num_tasks = 2
 
-    def __init__(self, train_x, train_y, train_task, theta: float = 0.1, noise: float = 0.006,
+    def __init__(self, train_x, train_y, train_task, theta: float | None = None, noise: float = 0.006,
                  task_covariance: Tensor | None = None, learn_theta: bool = False, inference: str = "auto",
                  kernel=None, device=None, outer_tol: float | None = None):
+        deprecated_theta(theta, "GPIOIS")
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")
@@ -771,6 +772,6 @@ class GPIOIS(ImplicitSurfaceGP):
     def __repr__(self) -> str:
         kt = self.task_covariance
         n_in = int((self._train_task() == INNER).sum())
-        return (f"GPIOIS(n_inner={n_in}, n_outer={self._train_task().numel() - n_in}, theta={self.theta:g}, "
+        return (f"GPIOIS(n_inner={n_in}, n_outer={self._train_task().numel() - n_in}, kernel={self.kernel!r}, "
                 f"noise={self.noise:g}, K_t={[[round(v, 6) for v in r] for r in kt.tolist()]}, "
                 f"similarity={self.similarity:.4g})")

@@ -6,7 +6,7 @@ import torch
 from gpytorch.distributions import MultivariateNormal
 from torch import Tensor
 
-from .base import ImplicitSurfaceGP
+from .base import ImplicitSurfaceGP, deprecated_theta
 from .._validation import as_labels, as_points
 
 __all__ = ["GPIS"]
@@ -37,8 +37,9 @@ class GPIS(ImplicitSurfaceGP):
 
     num_tasks = 1
 
-    def __init__(self, train_x, train_y, theta: float = 0.1, noise: float = 0.006, learn_theta: bool = False,
+    def __init__(self, train_x, train_y, theta: float | None = None, noise: float = 0.006, learn_theta: bool = False,
                  kernel=None, device=None):
+        deprecated_theta(theta, "GPIS")
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         super().__init__((x,), y, theta, noise, learn_theta, kernel)

@@ -20,7 +20,7 @@ from .._validation import as_labels, as_points, as_tasks, task_id
 from ..inference.local import LocalDenseInference, LocalStructuredInference, region_weights
 from ..inference.optim import FitResult, newton_maximize
 from ..tolerances import tol
-from .base import ImplicitSurfaceGP
+from .base import ImplicitSurfaceGP, deprecated_theta
 from .gpiois import INNER, OUTER, UnidentifiedSimilarityWarning
 
 __all__ = ["LocalGPIOIS", "kmeans_regions"]
@@ -76,8 +76,9 @@ class LocalGPIOIS(ImplicitSurfaceGP):
 
     num_tasks = 2
 
-    def __init__(self, train_x, train_y, train_task, regions: int = 4, theta: float = 0.1, noise: float = 0.006,
+    def __init__(self, train_x, train_y, train_task, regions: int = 4, theta: float | None = None, noise: float = 0.006,
                  centres=None, tau: float | None = None, inference: str = "auto", kernel=None):
+        deprecated_theta(theta, "LocalGPIOIS")
         x = as_points(train_x, "train_x")
         y = as_labels(train_y, x.shape[0], "train_y")
         t = as_tasks(train_task, x.shape[0], "train_task")

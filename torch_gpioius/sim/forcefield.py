@@ -21,6 +21,7 @@ import trimesh
 import torch
 
 from ..exploration.observations import ObservationPolicy
+from ..models.estimator import COVER_GAP_LIMIT, INSIDE_DEPTH, EstimatorSettings  # noqa: F401
 from ..exploration.stopping import TravelBudget
 from ..exploration.registry import register_world
 from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash,
@@ -38,10 +39,8 @@ __all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "esti
 
 #: The robot study's settings (Sec. VI-A): theta 0.15, sigma^2 0.08, alpha 1 cm, 1.5 m of travel, the range
 #: penalty of eq. (25), the camera averaged in 5 cm voxels and cropped to 15 cm around the range.
-ROBOT_STUDY_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_steps=400,
-                                           stop=(TravelBudget(1.5),),
-                                           policy=ObservationPolicy(voxel=0.05, crop_margin=0.15),
-                                           metrics_every=1, approach_travel=2.0)
+ROBOT_STUDY_DEFAULTS = ExplorationDefaults(step=0.01, max_steps=400, stop=(TravelBudget(1.5),), metrics_every=1,
+                                           approach_travel=2.0, estimator=EstimatorSettings.paper())
 
 
 #: The simulated views of a force-field scene (:meth:`Scene3D.cameras`).
@@ -76,24 +75,10 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
       the real shapes' wide covers, worse early there and on the robot study's loose sleeve and poncho
       (docs/method-notes.md section 15).
     """
-    from ..kernels import Matern52
-
-    extent = float(np.max(mesh.extents))
-    voxel = round(float(np.clip(extent / 10.0, 0.02, 0.05)), 4)
     d = ROBOT_STUDY_DEFAULTS if base is None else base
-    policy = dataclasses.replace(d.policy, voxel=voxel, vision_free_far=0.10, touch_inside=INSIDE_DEPTH,
-                                 vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT)
-    return dataclasses.replace(d, policy=policy, kernel=Matern52(0.1))
+    return d.with_estimator(EstimatorSettings.default().for_extent(float(np.max(mesh.extents))))
 
 
-#: Depth [m] of the default inside points behind contacts and seen points (:func:`object_defaults`).
-INSIDE_DEPTH = 0.02
-
-#: The cover's gap [m] beyond which the touches retract the camera's inside points (:func:`object_defaults`,
-#: ``ObservationPolicy.vision_inside_gap``): 1.5 times their depth. Measured with ``cover_gap`` at every step of the
-#: real shapes' runs: 0.6-1.6 cm under the tight covers (8 mm) of the bunny, duck and teddy, up to 2.8 cm under the
-#: mug's (its rim and handle), 3.9-5.3 cm under the wide ones (4 cm) (docs/method-notes.md section 13).
-COVER_GAP_LIMIT = 0.03
 
 
 def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefaults | None = None) -> dict:

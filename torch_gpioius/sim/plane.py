@@ -19,6 +19,7 @@ from shapely.geometry import LineString, Point, Polygon
 
 from ..contact import ContactResult
 from ..exploration.observations import ObservationPolicy, free_space_along
+from ..models.estimator import EstimatorSettings
 from ..exploration.stopping import OnceAround
 from ..exploration.registry import register_world
 from ..exploration.world import ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash
@@ -329,8 +330,8 @@ class Scene2D(World):
     @property
     def defaults(self) -> ExplorationDefaults:
         """The paper's 2-D settings: theta 0.1, sigma^2 0.006, alpha 1 cm, C = 0, once around (or 400 steps)."""
-        return ExplorationDefaults(theta=0.1, noise=0.006, step=0.01, max_steps=400, stop=(OnceAround(),),
-                                   policy=ObservationPolicy(), metrics_every=1, approach_travel=10.0)
+        return ExplorationDefaults(step=0.01, max_steps=400, stop=(OnceAround(),), metrics_every=1,
+                                   approach_travel=10.0, estimator=EstimatorSettings.paper_2d())
 
     def hardware(self) -> Hardware:
         gate = PlanarGate(self.bounds(0.5), max_step=1.0)

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 from ...exploration.observations import ObservationPolicy
+from ...models.estimator import EstimatorSettings
 from ...exploration.stopping import TravelBudget
 from ...exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash,
                                   perturbed_approaches)
@@ -45,9 +46,8 @@ def _limited(value, name: str) -> float:
     return as_float(value, name, lo=lo, hi=hi, unit=unit)
 
 #: The robot study's settings in the MuJoCo world (as the force-field world's; the camera at half Kinect resolution).
-MUJOCO_DEFAULTS = ExplorationDefaults(theta=0.15, noise=0.08, step=0.01, max_steps=400, stop=(TravelBudget(1.5),),
-                                      policy=ObservationPolicy(voxel=0.05, crop_margin=0.15), metrics_every=1,
-                                      approach_travel=0.5)
+MUJOCO_DEFAULTS = ExplorationDefaults(step=0.01, max_steps=400, stop=(TravelBudget(1.5),), metrics_every=1,
+                                      approach_travel=0.5, estimator=EstimatorSettings.paper())
 
 
 def _require_mujoco():

@@ -1,0 +1,339 @@
+"""The estimator's settings in one object: what turns observations into a model and its labels.
+
+:class:`EstimatorSettings` holds the kernel (which carries its own length scale), the noise ``sigma^2``, the labelling
+policy (:class:`~torch_gpioius.models.labels.ObservationPolicy`: free space near and far, the inside points behind
+touches and behind the seen surface with their depth, the cover-gap retraction, the camera's voxels), the rule that
+sizes the voxels to the object, what is learned and the restart schedule of K_t's fit. Every path that makes a model
+takes one: an exploration in any world, ``gpioius fit`` on a user's files, a bag import, ``replay``, ``export`` and
+the studies. A world suggests one for its objects (the robot study's objects E-H ran the paper's; a user's mesh gets
+the default), but the object lives here, in the model layer, so that a user's own data meets the same settings as a
+simulated run.
+
+Presets (:func:`EstimatorSettings.preset`):
+
+* ``"default"``: what measured best on shapes nobody tuned to (docs/method-notes.md sections 12-15): a Matérn-5/2 of
+  length scale 0.1 m, sigma^2 = 0.08, the camera's points averaged in voxels a tenth of the object's largest extent
+  (2-5 cm), a second free-space point 10 cm in front of each seen point, inside points 2 cm behind every contact and
+  every seen point, and those behind the seen surface retracted once the touches show the cover standing more than
+  3 cm off the body;
+* ``"paper"``: the paper's robot experiment (Sec. VI): the inverse multiquadric of theta = 0.15 m, sigma^2 = 0.08,
+  5 cm voxels, no inside points;
+* ``"paper-2d"``: the paper's 2-D simulation (Sec. V): the inverse multiquadric of theta = 0.1 m, sigma^2 = 0.006.
+
+:meth:`EstimatorSettings.to_dict` and :meth:`EstimatorSettings.from_dict` give the plain dict that logs, datasets,
+checkpoints, run records and scene files store.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import as_float, as_int
+from ..kernels import ExactKernel, InverseMultiquadricKernel, Matern52, as_kernel, from_description
+from .labels import ObservationPolicy
+
+__all__ = ["EstimatorSettings", "VoxelRule", "PRESETS", "LEARN", "as_learn", "RESTART_EVERY"]
+
+#: What an estimator learns besides K_t: "task" (K_t alone, the paper's Sec. IV-A), "length" (the kernel's length
+#: scale and K_t) or "all" (the length, sigma^2 and K_t), by the exact marginal likelihood.
+LEARN = ("task", "length", "all")
+
+#: Default of ``restart_every``: K_t's re-learning also tries fixed starts every this many steps (3 Newton runs from
+#: far-off starts besides the warm one: 250-270 ms against 1-2 ms at 34 inner and 731 outer points; docs/theory.md,
+#: "Local optima of K_t"). Every 25th step is 4 % of the steps, so the 95th percentile of the step is never a restart.
+RESTART_EVERY = 25
+
+
+def as_learn(value) -> str:
+    """``value`` if it names what an estimator learns (:data:`LEARN`).
+
+    Raises:
+        ValueError: anything else, naming the choices.
+    """
+    if not isinstance(value, str) or value not in LEARN:
+        raise ValueError(f"learn: must be one of {LEARN}, got {value!r}")
+    return value
+
+
+@dataclass(frozen=True)
+class VoxelRule:
+    """The camera's voxel edge from the object's size: ``fraction`` of its largest extent, clipped to ``[lo, hi]``
+    [m], rounded to 0.1 mm. The paper's 5 cm voxels were sized for a torso and leave a 15 cm body a handful of outer
+    points; a tenth of the body keeps about ten across any object (docs/method-notes.md).
+
+    Raises:
+        ValueError: a fraction outside (0, 1], or bounds not ordered within the voxels' range.
+    """
+
+    fraction: float = 0.1
+    lo: float = 0.02
+    hi: float = 0.05
+
+    def __post_init__(self) -> None:
+        from .labels import MAX_VOXEL
+
+        as_float(self.fraction, "voxel_rule.fraction", lo=1e-3, hi=1.0, positive=True)
+        as_float(self.lo, "voxel_rule.lo", lo=1e-4, hi=MAX_VOXEL, positive=True, unit="m")
+        as_float(self.hi, "voxel_rule.hi", lo=1e-4, hi=MAX_VOXEL, positive=True, unit="m")
+        if not self.lo <= self.hi:
+            raise ValueError(f"voxel_rule: lo ({self.lo:g} m) must not exceed hi ({self.hi:g} m)")
+
+    def voxel(self, extent: float) -> float:
+        """The voxel edge [m] for an object whose largest extent is ``extent`` [m]."""
+        extent = as_float(extent, "extent", positive=True, unit="m")
+        return round(float(np.clip(extent * self.fraction, self.lo, self.hi)), 4)
+
+
+@dataclass(frozen=True, eq=False)
+class EstimatorSettings:
+    """Everything that turns observations into a model and labels (see the module docstring).
+
+    Attributes:
+        kernel: an :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length scale; each model gets a copy.
+        noise: sigma^2 on the Gram matrix's diagonal (eq. 12).
+        labels: the labelling policy (free space, inside points, cover-gap retraction, voxels, crop).
+        voxel_rule: sizes ``labels.voxel`` to the object (:meth:`for_extent`), or None: ``labels.voxel`` as it is.
+        learn: "task", "length" or "all" (:data:`LEARN`).
+        restart_every: K_t's fit also starts from fixed values every this many steps of an exploration (None: warm
+            starts only; a fit on files always does).
+        name: the preset it came from ("default", "paper", "paper-2d"), or "custom" once changed.
+    """
+
+    kernel: ExactKernel
+    noise: float
+    labels: ObservationPolicy = dataclasses.field(default_factory=ObservationPolicy)
+    voxel_rule: VoxelRule | None = None
+    learn: str = "task"
+    restart_every: int | None = RESTART_EVERY
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kernel", as_kernel(self.kernel, None))
+        object.__setattr__(self, "noise", as_float(self.noise, "noise", lo=1e-8, hi=100.0, positive=True))
+        if not isinstance(self.labels, ObservationPolicy):
+            raise ValueError(f"labels: expected an ObservationPolicy, got {type(self.labels).__name__}")
+        if self.voxel_rule is not None and not isinstance(self.voxel_rule, VoxelRule):
+            raise ValueError(f"voxel_rule: expected a VoxelRule or None, got {type(self.voxel_rule).__name__}")
+        as_learn(self.learn)
+        if self.learn != "task" and not getattr(self.kernel, "learnable_length", False):
+            raise ValueError(f"learn={self.learn!r}: the {type(self.kernel).__name__} kernel has no learnable length")
+        if self.restart_every is not None:
+            object.__setattr__(self, "restart_every", as_int(self.restart_every, "restart_every", 1, 1_000_000))
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"name: expected a non-empty string, got {self.name!r}")
+
+    # ------------------------------------------------------------------ presets
+    @classmethod
+    def preset(cls, name: str) -> "EstimatorSettings":
+        """A named preset: "default", "paper" or "paper-2d" (:data:`PRESETS`; see the module docstring).
+
+        Raises:
+            ValueError: an unknown name, naming the choices.
+        """
+        if name not in PRESETS:
+            raise ValueError(f"settings: must be one of {tuple(PRESETS)}, got {name!r}")
+        return PRESETS[name]()
+
+    @classmethod
+    def default(cls) -> "EstimatorSettings":
+        """This library's settings for a user's object (see the module docstring)."""
+        labels = ObservationPolicy(crop_margin=0.15, vision_free_far=0.10, touch_inside=INSIDE_DEPTH,
+                                   vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT, voxel=0.05)
+        return cls(Matern52(lengthscale=0.1), 0.08, labels, VoxelRule(), name="default")
+
+    @classmethod
+    def paper(cls) -> "EstimatorSettings":
+        """The paper's robot experiment (Sec. VI)."""
+        return cls(InverseMultiquadricKernel(lengthscale=0.15), 0.08, ObservationPolicy(voxel=0.05, crop_margin=0.15),
+                   name="paper")
+
+    @classmethod
+    def paper_2d(cls) -> "EstimatorSettings":
+        """The paper's 2-D simulation (Sec. V)."""
+        return cls(InverseMultiquadricKernel(lengthscale=0.1), 0.006, ObservationPolicy(), name="paper-2d")
+
+    # ------------------------------------------------------------------ derived settings
+    @property
+    def lengthscale(self) -> float | None:
+        """The kernel's length scale [m] (None for a kernel without one)."""
+        try:
+            return float(self.kernel.length)
+        except TypeError:
+            return None
+
+    def replace(self, **changes) -> "EstimatorSettings":
+        """A copy with ``changes`` (field names; ``labels`` may also be given as a dict of policy fields to change).
+        It is named "custom" unless ``name`` is among the changes."""
+        if isinstance(changes.get("labels"), dict):
+            changes["labels"] = dataclasses.replace(self.labels, **changes["labels"])
+        changes.setdefault("name", "custom")
+        return dataclasses.replace(self, **changes)
+
+    def for_extent(self, extent: float) -> "EstimatorSettings":
+        """These settings with the voxel rule applied to an object whose largest extent is ``extent`` [m] (the
+        body's in a simulated world, the camera's cloud for a user's files); unchanged without a rule."""
+        if self.voxel_rule is None:
+            return self
+        voxel = self.voxel_rule.voxel(extent)
+        if voxel == self.labels.voxel:
+            return self
+        return dataclasses.replace(self, labels=dataclasses.replace(self.labels, voxel=voxel))
+
+    def with_voxel(self, voxel: float) -> "EstimatorSettings":
+        """These settings with a fixed voxel edge [m] (0: every camera point), the rule dropped."""
+        return self.replace(labels=self.labels.with_voxel(voxel), voxel_rule=None)
+
+    def new_kernel(self) -> ExactKernel:
+        """A copy of the kernel for one model (a GPyTorch module belongs to one model)."""
+        return copy.deepcopy(self.kernel)
+
+    def make_model(self, x, y, task=None, **kwargs):
+        """A model on observations `(n, d)` [m] with labels `(n,)`: a GPIOIS when ``task`` `(n,)` holds both tasks, a
+        GPIS on the inner (task 0) observations otherwise; ``kwargs`` go to the model (``inference``, ...)."""
+        from .gpiois import GPIOIS
+        from .gpis import GPIS
+
+        x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        if task is not None:
+            task = np.asarray(task)
+            if (task == 1).any() and (task == 0).any():
+                return GPIOIS(x, y, task, noise=self.noise, kernel=self.new_kernel(), **kwargs)
+            x, y = x[task == 0], y[task == 0]
+        return GPIS(x, y, noise=self.noise, kernel=self.new_kernel(), **kwargs)
+
+    # ------------------------------------------------------------------ as plain data
+    def to_dict(self) -> dict:
+        """The settings as plain, JSON-able data (what logs, datasets, checkpoints, run records and scene files
+        store)."""
+        return {"name": self.name, "kernel": self.kernel.describe(), "noise": float(self.noise),
+                "labels": dataclasses.asdict(self.labels),
+                "voxel_rule": None if self.voxel_rule is None else dataclasses.asdict(self.voxel_rule),
+                "learn": self.learn, "restart_every": self.restart_every}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "EstimatorSettings":
+        """Settings from :meth:`to_dict`'s data, or a partial dict on top of a preset: ``{"preset": "default",
+        "noise": 0.02, "labels": {"voxel": 0.03}}`` (a scene file's ``[estimator]`` section). ``kernel`` may be a
+        description (``{"kernel": "Matern52", "lengthscale": 0.1}``) or a registered name with ``lengthscale``.
+
+        Raises:
+            ValueError: unknown keys or values (each named).
+        """
+        if not isinstance(data, dict):
+            raise ValueError(f"estimator settings: expected a table of settings, got {type(data).__name__}")
+        known = {"name", "preset", "kernel", "lengthscale", "noise", "labels", "voxel_rule", "learn", "restart_every"}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"estimator settings: unknown key(s) {unknown}; allowed {sorted(known)}")
+        full = {"kernel", "noise", "labels"} <= set(data) and "preset" not in data     # to_dict's whole form
+        base_name = None if full else data.get("preset", data.get("name") if data.get("name") in PRESETS else None)
+        settings = cls.preset(base_name) if base_name is not None else None
+        kernel = data.get("kernel")
+        if isinstance(kernel, str):
+            kernel = _kernel_by_name(kernel, data.get("lengthscale"))
+        elif isinstance(kernel, dict):
+            kernel = from_description(kernel)
+        elif kernel is not None:
+            raise ValueError(f"kernel: expected a name or a description, got {kernel!r}")
+        if kernel is None and data.get("lengthscale") is not None:
+            if settings is None:
+                raise ValueError("lengthscale: give the kernel (or a preset) it belongs to")
+            kernel = copy.deepcopy(settings.kernel)
+            kernel.length = as_float(data["lengthscale"], "lengthscale", positive=True, unit="m")
+        labels = data.get("labels")
+        if labels is not None and not isinstance(labels, dict):
+            raise ValueError(f"labels: expected a table of ObservationPolicy fields, got {labels!r}")
+        fields = {f.name for f in dataclasses.fields(ObservationPolicy)}
+        if labels is not None and set(labels) - fields:
+            raise ValueError(f"labels: unknown field(s) {sorted(set(labels) - fields)}; allowed {sorted(fields)}")
+        rule = data.get("voxel_rule", ...)
+        if rule is not ... and rule is not None:
+            if not isinstance(rule, dict) or set(rule) - {"fraction", "lo", "hi"}:
+                raise ValueError(f"voxel_rule: expected fraction, lo and hi, got {rule!r}")
+            rule = VoxelRule(**rule)
+        try:
+            if settings is None:
+                if kernel is None or "noise" not in data:
+                    raise ValueError("estimator settings: without a preset, give kernel and noise")
+                return cls(kernel, data["noise"], ObservationPolicy(**(labels or {})),
+                           None if rule is ... else rule, data.get("learn", "task"),
+                           data.get("restart_every", RESTART_EVERY), data.get("name") or "custom")
+            # a preset with changes: its own name only when nothing changed
+            changes = {}
+            if kernel is not None:
+                changes["kernel"] = kernel
+            for key in ("noise", "learn", "restart_every"):
+                if key in data:
+                    changes[key] = data[key]
+            if labels:
+                changes["labels"] = dataclasses.replace(settings.labels, **labels)
+            if rule is not ...:
+                changes["voxel_rule"] = rule
+            if not changes:
+                return settings
+            name = data.get("name") if data.get("name") and data.get("name") not in PRESETS else "custom"
+            return dataclasses.replace(settings, **changes, name=name)
+        except TypeError as exc:
+            raise ValueError(f"estimator settings: {exc}") from None
+
+    # ------------------------------------------------------------------ reading
+    def __eq__(self, other) -> bool:
+        return isinstance(other, EstimatorSettings) and self.to_dict() == other.to_dict()
+
+    def __hash__(self) -> int:
+        return hash(repr(sorted(self.to_dict().items(), key=lambda kv: kv[0])))
+
+    def summary(self) -> str:
+        """One line of what these settings are (``gpioius fit`` prints it)."""
+        p = self.labels
+        inside = ("no inside points" if not (p.touch_inside or p.vision_inside) else
+                  f"inside points {_cm(p.touch_inside)} behind contacts, {_cm(p.vision_inside)} behind the seen "
+                  f"surface" + (f" (retracted past a {_cm(p.vision_inside_gap)} cover gap)" if p.vision_inside_gap
+                                else ""))
+        voxel = ("voxels a tenth of the object (" + f"{_cm(self.voxel_rule.lo)}-{_cm(self.voxel_rule.hi)})"
+                 if self.voxel_rule is not None else f"{_cm(p.voxel)} voxels" if p.voxel else "every camera point")
+        free = f"free space {_cm(p.vision_free_offset)}" + (f" and {_cm(p.vision_free_far)}" if p.vision_free_far
+                                                               else "") + " in front of the seen surface"
+        return (f"settings {self.name}: {self.kernel!r}, sigma^2 = {self.noise:g}, {voxel}, {free}, {inside}; "
+                f"learns {_LEARNS[self.learn]}")
+
+    def __repr__(self) -> str:
+        return f"EstimatorSettings({self.summary()})"
+
+
+_LEARNS = {"task": "K_t", "length": "K_t and the kernel's length scale", "all": "K_t, the length scale and sigma^2"}
+
+
+def _cm(v) -> str:
+    return "none" if v is None else f"{100 * float(v):g} cm"
+
+
+def _kernel_by_name(name: str, lengthscale) -> ExactKernel:
+    """A kernel from the names users type ("imq", "matern52", or a registered kind) and a length scale [m]."""
+    from ..kernels import KERNELS
+
+    aliases = {"imq": InverseMultiquadricKernel.kind, "matern52": Matern52.kind}
+    kind = aliases.get(name.lower(), name)
+    cls = KERNELS.get(kind)
+    if cls is None:
+        raise ValueError(f"kernel: unknown {name!r}; choose among {sorted({*aliases, *KERNELS})}")
+    return cls() if lengthscale is None else cls(lengthscale=as_float(lengthscale, "lengthscale", positive=True,
+                                                                       unit="m"))
+
+
+#: Depth [m] of the default inside points behind contacts and seen points.
+INSIDE_DEPTH = 0.02
+
+#: The cover's gap [m] beyond which the touches retract the camera's inside points (``vision_inside_gap``): 1.5 times
+#: their depth. Measured with ``cover_gap`` at every step of the real shapes' runs: 0.6-1.6 cm under the tight covers
+#: (8 mm) of the bunny, duck and teddy, up to 2.8 cm under the mug's (its rim and handle), 3.9-5.3 cm under the wide
+#: ones (4 cm) (docs/method-notes.md section 13).
+COVER_GAP_LIMIT = 0.03
+
+#: The named presets.
+PRESETS = {"default": EstimatorSettings.default, "paper": EstimatorSettings.paper,
+           "paper-2d": EstimatorSettings.paper_2d}

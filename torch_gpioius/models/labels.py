@@ -1,0 +1,122 @@
+"""The labelling policy of the estimator: which observations a touch and a capture become, and with which labels.
+
+An estimator turns observations into a model with labels (0 on a surface, 1 in free space, negative inside); the
+:class:`ObservationPolicy` says which points carry which label: the camera's free space in front of the seen surface
+(one point, or two), the touch's free space along the path, points known to lie inside behind contacts and behind the
+seen surface, the cover-gap retraction, and the voxels the camera's points are averaged in. It belongs to the model
+layer (:class:`~torch_gpioius.models.estimator.EstimatorSettings` holds one), not to a world: a simulated run, a fit on
+a user's files and a bag import label alike. :mod:`torch_gpioius.exploration.observations` applies it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+__all__ = ["ObservationPolicy", "check_voxel", "MAX_VOXEL"]
+
+
+@dataclass(frozen=True)
+class ObservationPolicy:
+    """Which observations the exploration records (see docs/method-notes.md for the evidence).
+
+    Attributes:
+        vision_free_offset: distance in front of each seen outer point (along the camera ray, or outward in the 2-D
+            view) of the camera's free-space point (y = 1, task outer) [m]; ``None`` disables them.
+        voxel: edge of the voxels the camera's points are averaged in [m] (paper: 0.05); ``None`` keeps them all.
+        crop_margin: the cloud is cropped to the exploration range grown by this [m] (what a real camera sees
+            beyond, tables and walls, is not the object); ``None`` keeps everything.
+        free_space_spacing: spacing of the free-space samples along the path the fingertip occupied with
+            ``|F|`` below the contact threshold (y = 1, task inner) [m].
+        free_space_margin: free-space samples closer than this to any contact are not recorded, and recorded ones
+            are retracted when a later contact lands closer [m]; keeps the inner Gram block well conditioned.
+        vision_free_far: a second free-space point this far in front of each seen point [m] (beyond the paper, which
+            has one): the camera's rays were free all the way, and a second point holds the field up in front of
+            the object where one point 5 cm out leaves it free to swing below zero (a phantom surface); None: one.
+        touch_inside: a point this far behind each contact along the measured contact normal (the force's direction)
+            [m], labelled inside (:meth:`inside_label`; beyond the paper, docs/method-notes.md section 13); None: none.
+        vision_inside: a point this far behind each seen point along the cloud's inward normal [m]
+            (:meth:`~torch_gpioius.sensors.PointCloud.behind`, one per voxel), labelled inside; it assumes the object
+            is thicker than this there; None: none.
+        vision_inside_gap: the camera's inside points are retracted, all of them, once the touches show the cover
+            standing off the body by more than this [m] (:func:`retract_vision_inside`: the median distance from
+            the contacts to the seen cover, :func:`cover_gap`): behind a cover that
+            far off, ``vision_inside`` deep lies in the gap, free space for the body, and the task correlation
+            carries it onto the inner estimate as body. None: kept whatever the touches show.
+        cover_offset: once the touches show the cover standing off the body by more than ``vision_inside_gap``, the
+            outer task's prior mean is set to ``1 - gap / ramp`` (:func:`offset_outer_mean`), so that the transfer
+            carries the cover's shape onto the body without its offset (the camera's inside points are retracted
+            as without it; docs/method-notes.md section 15); False (the default everywhere): the paper's one mean
+            for both tasks.
+    """
+
+    vision_free_offset: float | None = 0.05
+    voxel: float | None = None
+    crop_margin: float | None = None
+    free_space_spacing: float = 0.02
+    free_space_margin: float = 0.02
+    vision_free_far: float | None = None
+    touch_inside: float | None = None
+    vision_inside: float | None = None
+    vision_inside_gap: float | None = None
+    cover_offset: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.cover_offset, bool):
+            raise ValueError(f"ObservationPolicy.cover_offset: must be True or False, got {self.cover_offset!r}")
+        for name in ("vision_free_offset", "voxel", "crop_margin", "vision_free_far", "touch_inside", "vision_inside",
+                     "vision_inside_gap"):
+            v = getattr(self, name)
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not
+                                  (math.isfinite(v) and v > 0)):
+                raise ValueError(f"ObservationPolicy.{name}: must be a positive number [m] or None, got {v!r}")
+        for name in ("free_space_spacing", "free_space_margin"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= 1.0):
+                raise ValueError(f"ObservationPolicy.{name}: must be in (0, 1] m, got {v!r}")
+        if self.vision_free_far is not None and (self.vision_free_offset is None or
+                                                 not self.vision_free_far > self.vision_free_offset):
+            raise ValueError(f"ObservationPolicy.vision_free_far: must lie beyond vision_free_offset "
+                             f"({self.vision_free_offset!r} m), got {self.vision_free_far!r}")
+
+
+    @property
+    def ramp(self) -> float:
+        """The distance [m] over which the labels rise from 0 on a surface to 1 in free space: the camera's
+        free-space offset (the paper's 5 cm when that is None)."""
+        return self.vision_free_offset or 0.05
+
+    def inside_label(self, depth: float) -> float:
+        """The label of a point ``depth`` [m] inside a body: ``-depth / ramp`` (:attr:`ramp`), the free-space ramp
+        continued inside."""
+        return -float(depth) / self.ramp
+
+    def inside_depth(self, label) -> np.ndarray:
+        """The depth [m] an inside label stands for (the inverse of :meth:`inside_label`), elementwise."""
+        return -np.asarray(label, dtype=np.float64) * self.ramp
+
+    def with_voxel(self, voxel: float) -> "ObservationPolicy":
+        """This policy with the camera's points averaged in voxels of edge ``voxel`` [m]; 0 keeps every point.
+
+        Raises:
+            ValueError: ``voxel`` negative, above 1 m or not a finite number.
+        """
+        return replace(self, voxel=check_voxel(voxel) or None)
+
+
+#: Largest voxel edge accepted [m]: coarser than a metre averages a whole object into a point.
+MAX_VOXEL = 1.0
+
+
+def check_voxel(voxel) -> float:
+    """``voxel`` [m] as a float: 0 (no averaging) or an edge in [``VOXEL_RANGE[0]``, ``MAX_VOXEL``] (the smallest
+    edge the averaging takes, :data:`torch_gpioius.voxels.VOXEL_RANGE`); raises ValueError naming the value."""
+    from ..voxels import VOXEL_RANGE
+
+    if isinstance(voxel, bool) or not isinstance(voxel, (int, float)) or not (
+            math.isfinite(voxel) and (voxel == 0 or VOXEL_RANGE[0] <= voxel <= MAX_VOXEL)):
+        raise ValueError(f"voxel: must be 0 (keep every camera point) or an edge in [{VOXEL_RANGE[0]:g}, "
+                         f"{MAX_VOXEL:g}] m, got {voxel!r}")
+    return float(voxel)
