@@ -23,7 +23,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             metrics_every: int | None = None, metrics_resolution: float | None = None,
             interval_every: int | None = None, regions: int | None = None, stall="default",
             outer_tol: float | None = None, device=None, restart_every="default", learn: str | None = None,
-            recorders=(),
+            settings=None, recorders=(),
             progress: bool = False,
             log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None,
             overwrite: bool = False) -> Trace:
@@ -39,8 +39,11 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     world's stop rules (2-D: once around the shape; robot study: 1.5 m of travel), after ``max_steps``, when contact
     is lost, or when the robot refuses a command.
 
-    Every world-specific setting is the world's (``world.defaults``: theta, sigma^2, alpha, stop rules, observation
-    policy; its hardware, camera and range penalty); the arguments below override them for one run.
+    Every world-specific setting is the world's (``world.defaults``: alpha, stop rules, the estimator's settings it
+    suggests for its object; its hardware, camera and range penalty); the arguments below override them for one run.
+    The estimator's settings (kernel, sigma^2, labels, voxels, what is learned) are one
+    :class:`~torch_gpioius.models.estimator.EstimatorSettings`: ``settings`` gives another whole, and ``kernel``,
+    ``noise``, ``policy``, ``learn`` and ``restart_every`` change one of them.
 
     Args:
         world: a :class:`~torch_gpioius.exploration.world.World` (``tg.sim.Scene2D``, ``tg.sim.Scene3D``,
@@ -53,8 +56,12 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         touch: "point" (a fingertip force sensor, the paper's) or a touch model object
             (:mod:`torch_gpioius.exploration.touch`).
         step: alpha, the planned step [m], in (0, 0.1].
-        theta: IMQ kernel parameter [m]; kernel: another :class:`~torch_gpioius.kernels.ExactKernel` instead (give
-            one of the two); noise: sigma^2.
+        settings: the estimator's settings (an :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a
+            preset's name: "default", "paper", "paper-2d"; a preset's voxel rule sized to the world's object); None:
+            the world's.
+        theta: the inverse multiquadric's length scale [m] (the paper's name); kernel: an
+            :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length, instead (give one of the two);
+            noise: sigma^2.
         max_steps: cap on planning steps.
         max_travel: fingertip travel budget since the first contact [m] (adds or replaces a ``TravelBudget``).
         stop: stop rules replacing the world's.
@@ -110,7 +117,7 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
                                       stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
                                       metrics_resolution=metrics_resolution, interval_every=interval_every,
                                       regions=regions, stall=stall, outer_tol=outer_tol, device=device,
-                                      restart_every=restart_every, learn=learn)
+                                      restart_every=restart_every, learn=learn, settings=settings)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     if log is not None:

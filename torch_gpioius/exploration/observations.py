@@ -93,6 +93,12 @@ class Observations:
     def dim(self) -> int:
         return self.x.shape[1]
 
+    def subset(self, keep: np.ndarray) -> "Observations":
+        """The observations ``keep`` (a `(n,)` bool mask or indices) selects, in order."""
+        keep = np.asarray(keep)
+        return Observations(self.x[keep], self.y[keep], self.task[keep],
+                            None if self.normal is None else self.normal[keep], self.step, self.source)
+
     @classmethod
     def empty(cls, dim: int, step: int = 0, source: str = "") -> "Observations":
         """No observation (a touch that added nothing)."""

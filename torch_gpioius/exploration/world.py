@@ -301,6 +301,14 @@ class World(abc.ABC):
         3-D ``{"inner": Trimesh, "outer": Trimesh | None}`` [m]; None where the world does not know them."""
         return None
 
+    @property
+    def object_extent(self) -> float | None:
+        """The largest extent [m] of the body, where the world knows it (its ``inner`` mesh): what the estimator
+        settings' voxel rule sizes the camera's voxels to; None elsewhere."""
+        inner = getattr(self, "inner", None)
+        extents = getattr(inner, "extents", None)
+        return None if extents is None else float(np.max(extents))
+
 
 class RobotWorld(World):
     """A real robot: a UR5 (``kinematics.RTDEUR5``), a force sensor (``OptoForceDAQ``) and a point-cloud source.

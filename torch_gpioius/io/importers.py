@@ -484,9 +484,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         for f, o, c in zip(files, origins, captures):
             _check_together(contacts_csv, x_in, y_in, f, c.points, o, units)
     inner, inner_steps = _inner_with_inside_points(x_in, y_in, normal_in, step_in, est.labels)
-    kept = drop_contradicted_inside(inner, est.labels, outer[0], outer[1])
-    inner_steps = inner_steps[_subsequence(inner.x, kept.x)]
-    inner = kept
+    keep = _uncontradicted(inner, inner_steps, est.labels, outer, drop_contradicted_inside)
+    inner, inner_steps = inner.subset(keep), inner_steps[keep]
     gap = math.nan
     if captures and est.labels.vision_inside_gap is not None:
         seen = outer[0][outer[1] == 0]
@@ -564,15 +563,24 @@ def _inner_with_inside_points(x: np.ndarray, y: np.ndarray, normal: np.ndarray, 
                          np.zeros(len(ys), np.int64), source="touch"), np.asarray(steps, dtype=np.int64))
 
 
-def _subsequence(rows: np.ndarray, kept: np.ndarray) -> np.ndarray:
-    """`(n,)` bool: which of ``rows`` `(n, d)` the order-preserving subset ``kept`` `(k, d)` holds."""
-    mask = np.zeros(len(rows), dtype=bool)
-    j = 0
-    for i, r in enumerate(rows):
-        if j < len(kept) and np.array_equal(r, kept[j]):
-            mask[i] = True
-            j += 1
-    return mask
+def _uncontradicted(inner, steps: np.ndarray, labels, outer, drop) -> np.ndarray:
+    """`(n,)` bool: the inner rows kept once the inside points that other observations contradict are dropped
+    (``drop``: :func:`~torch_gpioius.exploration.observations.drop_contradicted_inside`), each judged as an
+    exploration judged it when it was placed: against the camera's observations and the touches of its step and
+    before (the CSV's ``step`` column; all of them where it has none)."""
+    from ..exploration.observations import Observations
+
+    keep = np.ones(len(inner), dtype=bool)
+    inside = inner.y < 0
+    for step in np.unique(steps[inside]):
+        mine = inside & (steps == step)
+        known = ~inside & (steps <= step)
+        batch = Observations(inner.x[mine], inner.y[mine], inner.task[mine])
+        kept = drop(batch, labels, np.concatenate([inner.x[known], outer[0]]),
+                    np.concatenate([inner.y[known], outer[1]]))
+        survived = {tuple(p) for p in kept.x}
+        keep[np.flatnonzero(mine)] = [tuple(p) in survived for p in inner.x[mine]]
+    return keep
 
 
 def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts: np.ndarray, origin,
