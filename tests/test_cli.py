@@ -294,7 +294,8 @@ def test_warnings_reach_the_user_as_one_line(capsys, monkeypatch, tmp_path):
 
     def fit(*args, **kwargs):
         w.warn("GPIOIS.fit: K_t's fit stopped at its cap", RuntimeWarning)
-        return {"n": 1, "n_inner": 1, "n_outer": 0, "theta": 0.1, "noise": 0.006, "mll": 1.0, "estimate": True}
+        return {"n": 1, "n_inner": 1, "n_outer": 0, "lengthscale": 0.1, "noise": 0.006, "mll": 1.0, "estimate": True,
+                "settings": None}
 
     monkeypatch.setattr(offline, "fit_dataset", fit)
     assert main(["fit", str(EXAMPLE)]) == 0
@@ -351,7 +352,7 @@ def test_fit_reads_a_users_contacts_csv_and_cloud_with_units_and_camera_free_spa
                  "--out", str(out)]) == 0
     with_free = json.loads((out / "fit.json").read_text())
     assert with_free["n_outer"] > plain["n_outer"]                       # the camera's free space was added
-    assert "touch.csv: 4" in capsys.readouterr().out
+    assert "touch.csv: " in capsys.readouterr().out and with_free["n_inner"] == 40
     assert main(["fit", str(EXAMPLE), "--cloud", cloud]) == 2            # a .gpioius file holds its own cloud
     assert "go with a contacts CSV" in capsys.readouterr().err
     bad = tmp_path / "bad"
@@ -376,7 +377,7 @@ def test_fit_takes_several_captures_each_with_its_own_camera(tmp_path, capsys):
     trimesh.PointCloud(right).export(tmp_path / "right.ply")
     eyes = [c + [0, -1.0, 0], c + [0, 1.0, 0]]
     files = [str(tmp_path / "left.ply"), str(tmp_path / "right.ply")]
-    ds = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=eyes)
+    ds = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=eyes, settings="paper")
     free = ds.x[(ds.task == 1) & (ds.y == 1)]
     assert len(free) == len(left) + len(right)
     r = np.linalg.norm(free - c, axis=1)
@@ -394,7 +395,8 @@ def test_fit_takes_several_captures_each_with_its_own_camera(tmp_path, capsys):
     with pytest.raises(Exception, match=r"3 origin\(s\) for 2 point clouds"):
         dataset_from_files(tmp_path / "touch.csv", files, camera_origin=[eyes[0], eyes[1], None])
     # a capture without camera: its points, no free space
-    one = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=[eyes[0], None])
+    one = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=[eyes[0], None],
+                             settings="paper")
     assert int(((one.task == 1) & (one.y == 1)).sum()) == len(left)
 
 

@@ -214,7 +214,8 @@ def _import_bag(args: argparse.Namespace) -> int:
     ds = import_bag(args.bag, topics=topics, base_frame=args.base_frame, camera_transform=args.camera_transform,
                     tool_offset=tool, tip_radius=args.tip_radius, contact_force=args.contact_force,
                     contact_spacing=args.contact_spacing, max_gap=args.max_gap,
-                    policy=ObservationPolicy(voxel=args.voxel), crop=None if crop is None else [crop[:3], crop[3:]],
+                    policy=None if args.voxel is None else ObservationPolicy(voxel=args.voxel),
+                    settings=args.settings, crop=None if crop is None else [crop[:3], crop[3:]],
                     time_window=window, tactile_calibration=calibration, tactile_transform=args.tactile_transform)
     path = save_dataset(ds, out, overwrite=args.force)
     c = ds.meta["counts"]
@@ -223,13 +224,17 @@ def _import_bag(args: argparse.Namespace) -> int:
           f"{c['cloud_points']} finite points in {frames} -> {ds.meta['frame']}")
     print(f"inner: {c['contacts']} contacts (|F| >= {args.contact_force:g} N), {c['free_space']} free-space points; "
           f"outer: {c['outer_surface']} surface + {c['outer_free_space']} free-space points "
-          f"({args.voxel * 100:g} cm voxels)")
+          f"({_voxels_text(ds.meta['voxel_size'])})")
     if args.tactile_topic is not None:
         print(f"pad {args.tactile_topic}: {c['pad_frames']} frames, {c['pad_frames_used']} at contacts -> "
               f"{c['patch_surface']} surface + {c['patch_free_space']} free-space points "
               f"({c['pad_frames_out_of_contact']} out of contact, {c['pad_frames_untouched']} with no pixel pressed)")
     print(f"wrote {path}; next: gpioius fit {path} --out outputs/fit")
     return 0
+
+
+def _voxels_text(voxel) -> str:
+    return "every camera point" if not voxel else f"{voxel * 100:g} cm voxels"
 
 
 def _not_the_recording(bag: str, out: str) -> None:
@@ -557,7 +562,12 @@ def build_parser() -> argparse.ArgumentParser:
     bag.add_argument("--contact-force", type=float, default=1.0, help="|F| of a contact [N] (paper: 1.0)")
     bag.add_argument("--contact-spacing", type=float, default=0.005, help="thin contacts to this spacing [m]")
     bag.add_argument("--max-gap", type=float, default=0.1, help="longest joint-state gap to interpolate over [s]")
-    bag.add_argument("--voxel", type=float, default=0.05, help="voxel edge for the cloud [m] (paper: 0.05)")
+    bag.add_argument("--voxel", type=float, default=None,
+                     help="voxel edge for the cloud [m] (default: the settings': a tenth of the --crop box, 2-5 cm, "
+                          "by default; 5 cm without a crop box)")
+    bag.add_argument("--settings", default="default", choices=["default", "paper"],
+                     help="the estimator's settings the dataset records for fit (kernel, sigma^2, free space, voxels; "
+                          "inside points are not placed from a bag yet)")
     bag.add_argument("--crop", default=None, help="keep cloud points in 'xmin ymin zmin xmax ymax zmax' [m]")
     bag.add_argument("--start", type=float, default=None,
                      help="import from this many seconds after the first wrench sample (default: the beginning)")

@@ -179,8 +179,10 @@ def test_complex_and_boolean_points_are_refused(tmp_path):
 
 def test_dataset_from_files_validates_its_parameters(tmp_path):
     (tmp_path / "a.csv").write_text("x,y,label\n0.1,0.2,contact\n")
-    with pytest.raises(DatasetError, match="theta"):
+    with pytest.raises(ValueError, match="lengthscale"):
         dataset_from_files(tmp_path / "a.csv", theta=-1)
+    with pytest.raises(ValueError, match="settings: must be one of"):
+        dataset_from_files(tmp_path / "a.csv", settings="mine")
 
 
 # ------------------------------------------------------------------------------- issue 33: units, columns, steps
@@ -373,3 +375,19 @@ def test_a_spreadsheets_csv_with_a_byte_order_mark_is_read(tmp_path):
     p.write_bytes("x,y,z,label\n0.5,0,0.25,contact\n0.5,0,0.35,free\n".encode("utf-8-sig"))
     x, y, _ = load_contacts_csv(p)
     assert x.shape == (2, 3) and y.tolist() == [0.0, 1.0]
+
+
+def test_a_capture_that_sees_only_the_top_is_not_taken_for_another_frame(tmp_path):
+    """The contacts lie inside the box of every capture together; a wrist camera's view of the top alone lies far
+    from the contacts on the sides, and is no frame mistake."""
+    from torch_gpioius.io.importers import dataset_from_files
+
+    csv_path, cloud, c = _ball_files(tmp_path)
+    import trimesh
+
+    top = trimesh.creation.icosphere(3, radius=0.108).vertices
+    top = top[top[:, 2] > 0.1] + c
+    trimesh.PointCloud(top).export(tmp_path / "top.ply")
+    ds = dataset_from_files(csv_path, [cloud, tmp_path / "top.ply"], voxel=0.02,
+                            camera_origin=[c + [-1.0, 0.0, 0.3], c + [0.0, 0.0, 0.5]])
+    assert (ds.task == 1).sum() > 50

@@ -20,7 +20,7 @@ def test_a_failed_fit_leaves_the_earlier_fit_whole(tmp_path, monkeypatch):
     first = fit_dataset(DATA, out, theta=0.1, noise=0.006, resolution=0.02)
     before = _snapshot(out)
     assert set(before) == {"model.pt", "fit.png", "fit.json"}
-    assert json.loads(before["fit.json"])["theta"] == first["theta"]
+    assert json.loads(before["fit.json"])["lengthscale"] == first["lengthscale"]
 
     def broken(*args, **kwargs):
         raise RuntimeError("figure failed")

@@ -481,8 +481,10 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             outer = vision_observations(PointCloud.merge(captures), est.labels)
         except ValueError as exc:
             raise DatasetError(f"{', '.join(map(str, files))}: {exc}") from None
+        # the box of every capture together: one view may see only the top of the body, away from the contacts
+        _check_together(contacts_csv, x_in, y_in, " + ".join(map(str, files)), everything)
         for f, o, c in zip(files, origins, captures):
-            _check_together(contacts_csv, x_in, y_in, f, c.points, o, units)
+            _check_camera(f, c.points, o, units)
     inner, inner_steps = _inner_with_inside_points(x_in, y_in, normal_in, step_in, est.labels)
     keep = _uncontradicted(inner, inner_steps, est.labels, outer, drop_contradicted_inside)
     inner, inner_steps = inner.subset(keep), inner_steps[keep]
@@ -583,15 +585,14 @@ def _uncontradicted(inner, steps: np.ndarray, labels, outer, drop) -> np.ndarray
     return keep
 
 
-def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts: np.ndarray, origin,
-                    units: str) -> None:
-    """Refuse contacts that lie far outside a cloud's box, and warn of a camera inside the cloud's hull: both mean
-    that the files are not in one frame or one unit (a cloud 1.5 m from the contacts gave a correlation of -0.76,
-    a camera inside the object -0.67, each read out as a finding).
+def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts: np.ndarray) -> None:
+    """Refuse contacts that lie far outside the clouds' box (with :func:`_check_camera`, the checks that the files
+    are in one frame and one unit: a cloud 1.5 m from the contacts gave a correlation of -0.76, a camera inside the
+    object -0.67, each read out as a finding).
 
-    The contacts touch the body under the cover the camera saw, so they lie inside the cloud's box or near it: the
-    median contact may lie at most ``max(5 cm, a quarter of the box's diagonal)`` outside it. ``pts`` `(m, d)` [m]
-    are the cloud's seen points; ``origin`` its camera in the file's units, or None.
+    The contacts touch the body under the cover the camera saw, so they lie inside the box of every capture together
+    or near it: the median contact may lie at most ``max(5 cm, a quarter of the box's diagonal)`` outside it (one
+    capture alone may see only the body's top). ``pts`` `(m, d)` [m] are the captures' points.
 
     Raises:
         DatasetError: naming both files and the distance.
@@ -607,6 +608,10 @@ def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts
             f"{contacts_csv} and {cloud}: the contacts lie {np.median(outside) * 100:.1f} cm (median) outside the "
             f"cloud's box [{_fmt(lo)} .. {_fmt(hi)}] m, more than {allowed * 100:.1f} cm: the files are not in one "
             "frame or not in one unit (--units applies to both; a cloud in another frame needs transforming first)")
+
+
+def _check_camera(cloud, seen: np.ndarray, origin, units: str) -> None:
+    """Warn of a camera origin inside its own capture's convex hull (a camera sees a surface from outside it)."""
     if origin is None or len(seen) <= seen.shape[1] + 1:
         return
     o = np.asarray(origin, dtype=np.float64).reshape(-1) * _scale(units, Path(cloud))

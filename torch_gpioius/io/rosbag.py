@@ -392,7 +392,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
                joint_names: Sequence[str] | None = None, policy=None, crop=None,
                theta: float | None = None, noise: float | None = None, time_window=None,
                max_joint_speed: float = UR5_MAX_JOINT_SPEED, tactile_calibration=None, tactile_transform=None,
-               patch=None) -> Dataset:
+               patch=None, settings=None) -> Dataset:
     """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
 
     Args:
@@ -423,6 +423,11 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             gives at ``tool_offset``), in the same forms as ``camera_transform``; default identity (the gel centred
             on the fingertip centre, facing along the tool's z axis).
         patch: :class:`~torch_gpioius.exploration.patches.PatchSettings` (thinning and free-space margin).
+        settings: the estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's
+            name), recorded in the dataset for ``fit``; their labels give the free space and the voxel (a voxel rule
+            sized to ``crop``'s largest extent, else the labels' voxel) unless ``policy`` is given. Inside points
+            are not placed from a bag yet (the recorded settings say so). None: the paper's 5 cm voxels, and the
+            fit's kernel from ``theta`` / ``noise``.
 
     With ``topics.tactile``, every pad frame stamped at a contact (the nearest wrench sample within ``max_gap``
     has ``|F| >= contact_force``) becomes a patch (:func:`~torch_gpioius.exploration.patches.patch_observations`)
@@ -451,7 +456,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
                            contact_spacing=contact_spacing, max_gap=max_gap, joint_names=joint_names, policy=policy,
                            crop=crop, theta=theta, noise=noise, time_window=time_window,
                            max_joint_speed=max_joint_speed, tactile_calibration=tactile_calibration,
-                           tactile_transform=tactile_transform, patch=patch)
+                           tactile_transform=tactile_transform, patch=patch, settings=settings)
     reader = _open(s.path)
     try:
         if not list(reader.connections):
@@ -494,18 +499,20 @@ class _BagImport:
     T_pad: np.ndarray | None
     patch: object
     ur5: object
+    estimator: object = None
 
     @classmethod
     def checked(cls, bag, *, topics, base_frame, camera_transform, tool_offset, tip_radius, contact_force,
                 contact_spacing, max_gap, joint_names, policy, crop, theta, noise, time_window, max_joint_speed,
-                tactile_calibration, tactile_transform, patch) -> "_BagImport":
+                tactile_calibration, tactile_transform, patch, settings=None) -> "_BagImport":
         from kinematics.dh import UR5_JOINT_NAMES
         from kinematics.ur5 import UR5
 
         from ..exploration.observations import ObservationPolicy
 
         topics = topics or BagTopics()
-        policy = policy or ObservationPolicy(voxel=0.05)
+        estimator = _bag_settings(settings, crop, policy)
+        policy = policy or (estimator.labels if estimator is not None else ObservationPolicy(voxel=0.05))
         names = tuple(joint_names or UR5_JOINT_NAMES)
         for name, value, lo, hi in (("contact_force", contact_force, 1e-3, 1e3),
                                     ("contact_spacing", contact_spacing, 0, 1.0), ("max_gap", max_gap, 1e-4, 60.0),
@@ -543,7 +550,7 @@ class _BagImport:
             window = (w0, w1)
         return cls(Path(bag), topics, base_frame.lstrip("/"), T_fixed, tuple(tool_offset), tip_radius, contact_force,
                    contact_spacing, max_gap, names, policy, crop, theta, noise, window, max_joint_speed,
-                   tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset))
+                   tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset), estimator)
 
     def in_window(self, t: float, t_first: float) -> bool:
         return self.window is None or t_first + self.window[0] <= t <= t_first + self.window[1]
@@ -705,6 +712,26 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
     return {"seen": seen, "free": free_o, "frames": sorted(cloud_frames), "n_clouds": n_clouds, "n_raw": n_raw}
 
 
+def _bag_settings(settings, crop, policy):
+    """The estimator settings a bag import records (None without ``settings``): the voxel rule sized to ``crop``,
+    ``policy`` in place of the labels where given, and no inside points (not placed from a bag yet)."""
+    if settings is None:
+        return None
+    from ..models.estimator import EstimatorSettings
+
+    est = EstimatorSettings.preset(settings) if isinstance(settings, str) else settings
+    if not isinstance(est, EstimatorSettings):
+        raise ValueError(f"import_bag: settings must be EstimatorSettings or a preset's name, got {settings!r}")
+    if crop is not None and est.voxel_rule is not None:
+        box = np.asarray(crop, dtype=np.float64)
+        est = est.for_extent(float(np.max(box[1] - box[0])))
+    if policy is not None:
+        est = est.replace(labels=policy, voxel_rule=None)
+    if est.labels.touch_inside or est.labels.vision_inside:
+        est = est.replace(labels={"touch_inside": None, "vision_inside": None, "vision_inside_gap": None})
+    return est
+
+
 def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset:
     """The imported observations as a :class:`Dataset`, with the bag's topics, frames, thresholds and counts."""
     contacts, free, free_steps = inner["contacts"], inner["free"], inner["free_steps"]
@@ -740,6 +767,8 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
         meta["theta"] = s.theta
     if s.noise is not None:
         meta["noise"] = s.noise
+    if s.estimator is not None:
+        meta["estimator"] = s.estimator.to_dict()
     trace = {"positions": inner["tips"], "forces": inner["forces"], "timestamps": inner["t_w"] - inner["t_w"][0]}
     return Dataset(x, y, task, step, meta=meta, trace=trace)
 
