@@ -118,7 +118,7 @@ def test_curve_shape_metrics_on_concentric_circles():
     circle = lambda r: np.stack([r * np.cos(a), r * np.sin(a)], -1)        # noqa: E731  (closed: 0 and 2 pi)
     ring = circle(0.104)[:-1:20]
     model = tg.GPIS(torch.as_tensor(np.r_[ring, 1.5 * ring]), torch.as_tensor(np.r_[np.zeros(36), np.ones(36)]),
-                    theta=0.1, noise=1e-4)
+                    kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=1e-4)
     m = curve_shape_metrics(model, [circle(0.104)], [circle(0.1)], spacing=1e-3)
     assert m["chamfer"] == pytest.approx(0.004, abs=2e-5) and m["bias"] == pytest.approx(0.004, abs=2e-5)
     assert m["fscore_1mm"] == 0.0 and m["fscore_5mm"] == m["fscore_20mm"] == 1.0

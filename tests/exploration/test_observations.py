@@ -191,7 +191,7 @@ def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off
     y = np.r_[np.zeros(len(contacts) + len(seen)), np.full(len(inside), policy.inside_label(0.02))]
     t = np.r_[np.zeros(len(contacts)), np.ones(len(seen) + len(inside))].astype(np.int64)
 
-    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), theta=0.1)
+    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), kernel=tg.kernels.InverseMultiquadricKernel(0.1))
     assert len(retract_vision_inside(m, contacts[:GAP_MIN_CONTACTS - 1], policy)) == 0
     assert len(m.train_targets) == len(x)
     assert len(retract_vision_inside(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))) == 0
@@ -205,7 +205,7 @@ def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off
     np.testing.assert_array_equal(m.train_inputs[0].numpy(), x[y >= 0])
     np.testing.assert_array_equal(m.train_task.numpy(), t[y >= 0])
     # the model after the removal equals one built without them (its engine rebuilt, not patched)
-    ref = tg.GPIOIS(torch.as_tensor(x[y >= 0]), torch.as_tensor(y[y >= 0]), torch.as_tensor(t[y >= 0]), theta=0.1)
+    ref = tg.GPIOIS(torch.as_tensor(x[y >= 0]), torch.as_tensor(y[y >= 0]), torch.as_tensor(t[y >= 0]), kernel=tg.kernels.InverseMultiquadricKernel(0.1))
     q = torch.as_tensor(_sphere(0.12, 20, seed=6))
     torch.testing.assert_close(m.predict(q)[0], ref.predict(q)[0], rtol=0, atol=1e-10)
     assert len(retract_vision_inside(m, contacts, policy)) == 0               # nothing left to remove
@@ -231,7 +231,7 @@ def test_the_outer_mean_stands_for_the_gap_the_touches_measure(cover):
     contacts = _sphere(0.10, 12, seed=5)
     x, y = np.r_[contacts, seen], np.zeros(len(contacts) + len(seen))
     t = np.r_[np.zeros(len(contacts)), np.ones(len(seen))].astype(np.int64)
-    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), theta=0.1)
+    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), kernel=tg.kernels.InverseMultiquadricKernel(0.1))
     assert not offset_outer_mean(m, contacts[:GAP_MIN_CONTACTS - 1], policy)
     assert not offset_outer_mean(m, contacts, dataclasses.replace(policy, cover_offset=False))
     assert not offset_outer_mean(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))

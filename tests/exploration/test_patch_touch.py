@@ -117,7 +117,7 @@ def test_a_patch_keeps_the_contact_and_its_most_uncertain_points_and_bounds_what
     x = np.r_[touched, seen, 1.5 * seen]
     y = np.r_[0.0, 0.0, np.zeros(40), np.ones(40)]
     task = np.r_[0, 0, np.ones(80, dtype=int)]
-    model = tg.GPIOIS(x, y, task, theta=0.1, noise=0.006).fit()
+    model = tg.GPIOIS(x, y, task, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006).fit()
     # a patch of 30 points around a new contact (its first row), then 3 free-space points of the path
     patch = np.r_[[[0.0, -0.1, 0.0]], [[0.0, -0.1, 0.0]] + rng.normal(0, 0.02, (29, 3))]
     path = np.array([[0.0, -0.2, 0.0], [0.0, -0.22, 0.0], [0.0, -0.24, 0.0]])

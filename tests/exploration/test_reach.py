@@ -35,7 +35,7 @@ def _sphere_model(side: str = "upper") -> tg.GPIS:
         u = u[u[:, 2] > 0.0]
     x = np.concatenate([CENTRE + RADIUS * u, CENTRE + (RADIUS + 0.05) * u])
     y = np.concatenate([np.zeros(len(u)), np.ones(len(u))])
-    return tg.GPIS(x, y, theta=0.1, noise=0.01)
+    return tg.GPIS(x, y, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.01)
 
 
 def _state(model, contact_dir=(0.0, 0.0, 1.0), travel: float = 0.0):

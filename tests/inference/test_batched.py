@@ -235,7 +235,7 @@ def test_a_held_newton_step_reaches_a_quadratics_maximum_within_its_caps_and_bou
 
 def _model(rng, inference="batched"):
     x, y, t = _start(rng, 300, 40)
-    return tg.GPIOIS(x, y, t, theta=THETA, noise=NOISE, inference=inference).fit()
+    return tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE, inference=inference).fit()
 
 
 def test_fit_holds_task_covariance_while_the_gradient_predicts_little_and_relearns_otherwise():
@@ -262,7 +262,7 @@ def test_fit_holds_task_covariance_while_the_gradient_predicts_little_and_relear
     mll_d, g_d, _ = dense.mll_derivatives(model._task_matrix())
     assert held.mll == pytest.approx(mll_d, rel=1e-12)
     # min_gain = 0 re-learns every time; the result equals a full fit from the same start
-    twin = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+    twin = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                      task_covariance=kt_held, inference="structured").fit(multi_start=False)
     model.fit(min_gain=0.0)
     assert model.fit_result.relearned
@@ -284,7 +284,7 @@ def test_held_gain_prediction_tracks_the_real_gain():
         model.fit(min_gain=math.inf, max_hold=100)
         predicted = model.fit_result.predicted_gain
         held_mll = model.fit_result.mll
-        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                          task_covariance=model.task_covariance, inference="structured").fit(multi_start=False)
         ratios.append(predicted / (best.fit_result.mll - held_mll))
     assert all(0.5 < r < 2.0 for r in ratios), ratios
@@ -296,7 +296,7 @@ def _interior_model(rng):
     x, y, t = _start(rng, 300, 0)
     xi = _ellipsoid(rng, 40, INTERIOR_RADII)
     return tg.GPIOIS(torch.cat([xi, x]), torch.cat([torch.zeros(40, dtype=torch.float64), y]),
-                     torch.cat([torch.zeros(40, dtype=torch.long), t]), theta=THETA, noise=NOISE,
+                     torch.cat([torch.zeros(40, dtype=torch.long), t]), kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                      inference="batched").fit()
 
 
@@ -327,7 +327,7 @@ def test_a_tracking_step_raises_the_exact_mll_and_leaves_what_it_predicts():
         assert np.array_equal(r.hessian, hessian)                    # the held Hessian, not a new one
         dense_mll = float(_dense(model._inference()).mll(model._task_matrix()))
         assert r.mll == pytest.approx(dense_mll, rel=1e-12) and dense_mll > before
-        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                          task_covariance=model.task_covariance, inference="structured").fit(multi_start=False)
         remaining = best.fit_result.mll - r.mll
         assert 0.4 * r.predicted_gain < remaining < 2.0 * r.predicted_gain       # measured ratios 0.5-1.3
@@ -376,7 +376,7 @@ def test_on_the_ridge_of_a_correlation_of_1_w_is_held_and_its_gain_bounded():
             assert model.fit_result.relearned or model.fit_result.tracked
             if model.fit_result.relearned:      # and the re-learning reaches the optimum off the ridge
                 seen.add("left")
-                best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA,
+                best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA),
                                  noise=NOISE, inference="structured").fit(multi_start=True)
                 assert model.correlation < 0.99
                 assert model.fit_result.mll == pytest.approx(best.fit_result.mll, abs=1e-6)
@@ -436,7 +436,7 @@ def test_scouted_restarts_find_the_other_basin_and_cost_one_full_relearning_per_
     # one step per coordinate along which the likelihood looked convex and did not rise (newton_maximize)
     assert model.fit_result.scout == 30
     assert model.fit_result.iterations <= len(calls) <= model.fit_result.iterations + 4
-    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                      inference="structured").fit(multi_start=True)
     assert model.fit_result.mll == pytest.approx(best.fit_result.mll, abs=1e-7)
 
@@ -462,7 +462,7 @@ def test_a_restart_under_the_min_gain_rule_holds_its_warm_start_and_still_finds_
     model.add_observations(*_patch(rng, 16), 0)
     model.fit(multi_start=True, scout=30, min_gain=0.1, track=True)
     assert model.fit_result.starts == 4 and model.fit_result.scout == 30 and not model.fit_result.relearned
-    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, theta=THETA, noise=NOISE,
+    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                      inference="structured").fit(multi_start=True)
     gap = best.fit_result.mll - float(model._inference().mll(model._task_matrix()))
     assert -1e-9 <= gap <= 0.1
@@ -497,7 +497,7 @@ def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_
     base.task_covariance, base.fit_result = ridge, ridge_fit  # the warm K_t, a re-learning at a correlation of 1
     counts, models = [], []
     for scout in (None, 200):
-        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                           task_covariance=base.task_covariance, inference="batched")
         model.fit_result = base.fit_result                  # a later fit: warm-started, no restarts
         engine = model._inference()
@@ -513,7 +513,7 @@ def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_
     assert counts[1] <= 4 < 8 <= counts[0], counts
     # a restart under the min_gain rule, whose warm start cannot be held there (the gradient points off the ridge, where
     # the held Hessian says nothing), walks on the copy too, and the full data polish in a few evaluations
-    restart = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+    restart = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                         task_covariance=base.task_covariance, inference="batched")
     restart.fit_result = base.fit_result
     restart._fixed_starts = lambda: []          # no fixed start to find it: the copy's run from the warm K_t must
@@ -546,7 +546,7 @@ def test_a_relearning_on_the_ridge_whose_optimum_stays_there_polishes_the_copys_
         phi[2] = -11.0
         counts, results = [], []
         for scout in (None, 60):
-            model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+            model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                               task_covariance=chol_params_to_task_covariance(phi), inference="batched")
             model.fit_result = base.fit_result
             engine = model._inference()
@@ -573,7 +573,7 @@ def test_a_fit_judging_trials_by_their_value_reaches_the_same_optimum_with_fewer
         base.add_observations(*_interior_patch(rng, 16, (0.1, 0.22, 0.12)), 0)
     runs = []
     for judged in (False, True):
-        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, theta=THETA, noise=NOISE,
+        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
                           task_covariance=ridge, inference="batched")
         model.fit_result = ridge_fit                          # a later fit, warm-started on the ridge
         if not judged:

@@ -112,7 +112,7 @@ def test_restarts_scout_copy_uses_the_direct_engine():
     x, y, t = _surface_data(n_outer=300, n_inner=120, seed=8)
     b = torch.tensor([[0.3, 0.25], [0.25, 0.4]], dtype=torch.float64)
     for kwargs in ({"inference": "batched"}, {"inference": "structured"}, {"outer_tol": 1e-1}):
-        m = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, task_covariance=b, **kwargs)
+        m = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, task_covariance=b, **kwargs)
         built = []
         original = DirectStructuredInference.__init__
 
@@ -170,8 +170,8 @@ def test_no_drift_after_200_incremental_additions():
 def test_models_fit_and_plan_agree():
     """K_t, MLL, mu, V and the planned direction: structured vs dense models, within the issue's tolerances."""
     x, y, t = _surface_data(n_outer=500, n_inner=100, seed=2)
-    dense = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="dense").fit()
-    fast = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="structured").fit()
+    dense = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="dense").fit()
+    fast = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="structured").fit()
     assert _rel(fast.task_covariance, dense.task_covariance) < REL
     assert abs(float(fast.log_marginal_likelihood() - dense.log_marginal_likelihood())) < REL * abs(
         float(dense.log_marginal_likelihood()))
@@ -191,13 +191,13 @@ def test_exploration_data_structured_equals_dense():
     trace = tg.explore(scene, mode="visual-tactile", max_steps=15)
     m = trace.model
     assert isinstance(m._inference(), StructuredExactInference)
-    dense = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, theta=0.1, noise=0.006,
+    dense = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006,
                       task_covariance=m.task_covariance, inference="dense")
     xq = torch.as_tensor(scene.sample_boundary("inner", 0.05))
     torch.testing.assert_close(m.predict(xq)[0], dense.predict(xq)[0], rtol=1e-9, atol=1e-12)
     torch.testing.assert_close(m.predict(xq)[1], dense.predict(xq)[1], rtol=1e-7, atol=1e-12)
     refit_dense = dense.fit(multi_start=False)
-    refit_fast = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, theta=0.1, noise=0.006,
+    refit_fast = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006,
                            task_covariance=m.task_covariance, inference="structured").fit(multi_start=False)
     assert _rel(refit_fast.task_covariance, refit_dense.task_covariance) < REL
 
@@ -343,8 +343,8 @@ def test_closed_form_gradients_equal_autograd():
 
 def test_planner_geometry_closed_form_equals_autograd():
     x, y, t = _surface_data(n_outer=300, n_inner=50, seed=6)
-    fast = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="structured").fit()
-    dense = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="dense",
+    fast = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="structured").fit()
+    dense = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="dense",
                       task_covariance=fast.task_covariance)
     xq = x[:10] + 0.01
     a = tg.geometry.surface_geometry(fast, xq)            # closed form
@@ -358,7 +358,7 @@ def test_planner_geometry_closed_form_equals_autograd():
 
 def test_removing_inner_points_keeps_the_eigendecomposition():
     x, y, t = _surface_data(n_outer=300, n_inner=60, seed=7)
-    m = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, inference="structured").fit()
+    m = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="structured").fit()
     engine = m._inference()
     u = engine.u
     inner = torch.nonzero(t == 0).flatten()
@@ -376,7 +376,7 @@ def test_removing_inner_points_keeps_the_eigendecomposition():
     t_store = series.t_matrices(c, derivatives=False)[0]
     t_exact = (engine.p / (c * engine.lam + engine.noise)) @ engine.p.T
     assert float((t_store - t_exact).abs().max()) <= 1e-9 * float(t_exact.abs().max())
-    fresh = tg.GPIOIS(x[~drop], y[~drop], t[~drop], theta=0.15, noise=0.08, inference="dense",
+    fresh = tg.GPIOIS(x[~drop], y[~drop], t[~drop], kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="dense",
                       task_covariance=m.task_covariance)
     xq = x[:15] + 0.01
     for task in (0, 1):
@@ -510,8 +510,8 @@ def test_truncated_engine_grows_and_shrinks_like_a_fresh_one():
 
 def test_model_outer_tol_fits_near_the_exact_model_and_reports_its_bound():
     x, y, t = _surface_data(n_outer=1200, n_inner=100, seed=8)
-    exact = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08).fit()
-    approx = tg.GPIOIS(x, y, t, theta=0.15, noise=0.08, outer_tol=1e-2).fit()
+    exact = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08).fit()
+    approx = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, outer_tol=1e-2).fit()
     assert exact.truncation == 0.0 and approx._inference().truncated
     assert 0 < approx.truncation <= 1e-2 * float(approx.task_covariance[1, 1])
     assert _rel(approx.task_covariance, exact.task_covariance) < 1e-4

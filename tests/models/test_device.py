@@ -17,11 +17,11 @@ def _data():
 def test_device_cpu_is_the_default_arithmetic():
     x, y, task = _data()
     q = x[:5] + 0.01
-    a = tg.GPIOIS(x, y, task, theta=0.2, noise=0.01).fit()
-    b = tg.GPIOIS(x, y, task, theta=0.2, noise=0.01, device="cpu").fit()
+    a = tg.GPIOIS(x, y, task, kernel=tg.kernels.InverseMultiquadricKernel(0.2), noise=0.01).fit()
+    b = tg.GPIOIS(x, y, task, kernel=tg.kernels.InverseMultiquadricKernel(0.2), noise=0.01, device="cpu").fit()
     assert torch.equal(a.task_covariance, b.task_covariance)
     assert torch.equal(a.predict(q)[0], b.predict(q)[0])
-    c = tg.GPIS(x, y, theta=0.2, device=torch.device("cpu"))
+    c = tg.GPIS(x, y, kernel=tg.kernels.InverseMultiquadricKernel(0.2), device=torch.device("cpu"))
     assert c.train_inputs[0].device.type == "cpu" and c.train_inputs[0].dtype == torch.float64
 
 

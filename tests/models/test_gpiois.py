@@ -15,7 +15,7 @@ KT = np.array([[0.8, 0.5], [0.5, 1.3]])
 
 def _model(data, kt=KT, **kw):
     x, y, t = data
-    return tg.GPIOIS(x, y, t, theta=0.1, noise=0.006, task_covariance=torch.tensor(kt), **kw)
+    return tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006, task_covariance=torch.tensor(kt), **kw)
 
 
 @pytest.mark.parametrize("inference", ["dense", "structured"])
@@ -86,7 +86,7 @@ def test_mll_derivatives_match_finite_differences(random_data):
 @pytest.mark.parametrize("inference", ["dense", "structured"])
 def test_fit_reaches_stationary_psd_optimum_at_least_as_good_as_multistart(two_shape_data, inference):
     x, y, t = (d.numpy() for d in two_shape_data)
-    m = tg.GPIOIS(*two_shape_data, theta=0.1, noise=0.006, inference=inference).fit()
+    m = tg.GPIOIS(*two_shape_data, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006, inference=inference).fit()
     kt = m.task_covariance.numpy()
     assert np.linalg.eigvalsh(kt).min() >= 0
     assert m.fit_result.converged
@@ -200,6 +200,7 @@ def test_robust_cholesky_refuses_what_rounding_cannot_explain_and_never_loops():
     (dict(task_covariance=[[1e308, 0.0], [0.0, 1e308]]), "task_covariance"),
     (dict(task_covariance="eye"), "task_covariance"),
 ])
+@pytest.mark.filterwarnings("ignore:GPIOIS\\(theta=...\\) is an alias:DeprecationWarning")   # the alias, on purpose
 def test_hyper_parameters_are_validated_up_front(kwargs, match):
     x = torch.tensor([[0.0, 0.0], [0.1, 0.0]])
     with pytest.raises(ValueError, match=match):
@@ -445,7 +446,8 @@ def _sticky_model():
     from pathlib import Path
 
     z = np.load(Path(__file__).with_name("warm_start_sticks.npz"))
-    return tg.GPIOIS(z["x"], z["y"], z["task"], theta=float(z["theta"]), noise=float(z["noise"]))
+    return tg.GPIOIS(z["x"], z["y"], z["task"], kernel=tg.kernels.InverseMultiquadricKernel(float(z["theta"])),
+                     noise=float(z["noise"]))
 
 
 def _stuck_start():
@@ -511,7 +513,7 @@ def test_the_transfer_sets_the_inner_level_by_the_amplitude_ratio_not_the_geomet
     level = {}
     for ratio in (0.7, 1.0, 2.2):
         kt = torch.tensor([[ratio ** 2, ratio], [ratio, 1.0]], dtype=torch.float64)
-        model = tg.GPIOIS(x, y, task, theta=0.1, noise=0.006, task_covariance=kt)
+        model = tg.GPIOIS(x, y, task, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006, task_covariance=kt)
         level[ratio] = zero(model.predict_mean(side, 0))
         outer = zero(model.predict_mean(side, 1))
         # the closed form away from the touches: mu_in = 1 + r (mu_out - 1) (the touches' pull is below 1e-3 here)
@@ -675,6 +677,6 @@ def test_similarity_support_counts_patches_one_length_apart():
     x = np.r_[line[:5], line[::11] + [0.0, 0.05]]                    # 5 contacts within 4 cm, 10 seen points
     y = np.zeros(len(x))
     task = np.r_[np.zeros(5), np.ones(10)].astype(np.int64)          # 11 cm apart
-    support = tg.GPIOIS(torch.tensor(x), torch.tensor(y), torch.tensor(task), theta=0.1).similarity_support()
+    support = tg.GPIOIS(torch.tensor(x), torch.tensor(y), torch.tensor(task), kernel=tg.kernels.InverseMultiquadricKernel(0.1)).similarity_support()
     assert support["inner"] == 1 and support["outer"] == 10 and support["enough"] is False
     assert f"at least {MIN_SIMILARITY_PATCHES} of each" in support["reason"]

@@ -10,7 +10,7 @@ def test_gpis_matches_reference():
     rng = np.random.default_rng(3)
     x = rng.uniform(-0.3, 0.3, (40, 3))
     y = (rng.uniform(size=40) > 0.5).astype(float)
-    m = tg.GPIS(torch.tensor(x), torch.tensor(y), theta=0.15, noise=0.08)
+    m = tg.GPIS(torch.tensor(x), torch.tensor(y), kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08)
     xq = rng.uniform(-0.3, 0.3, (12, 3))
     mean, var = m.predict(torch.tensor(xq))
     one = np.ones((1, 1))
@@ -48,7 +48,8 @@ def test_learn_theta_in_the_gpytorch_idiom():
     a = np.linspace(0, 2 * np.pi, 30, endpoint=False)
     x = np.concatenate([0.2 * np.stack([np.cos(a), np.sin(a)], -1), 0.35 * np.stack([np.cos(a), np.sin(a)], -1)])
     y = np.concatenate([np.zeros(30), np.ones(30)])
-    m = tg.GPIS(torch.tensor(x), torch.tensor(y), theta=0.02, learn_theta=True)
+    m = tg.GPIS(torch.tensor(x), torch.tensor(y),
+                kernel=tg.kernels.InverseMultiquadricKernel(0.02, learn_lengthscale=True))
     from gpytorch.mlls import ExactMarginalLogLikelihood
     mll = ExactMarginalLogLikelihood(m.likelihood, m)
     params = [p for p in m.parameters() if p.requires_grad]
@@ -74,7 +75,7 @@ def test_gpytorch_gradients_exact_only_inside_context():
     n = 820
     x = rng.uniform(-0.5, 0.5, (n, 3))
     y = (rng.uniform(size=n) > 0.5).astype(float)
-    m = tg.GPIS(torch.tensor(x), torch.tensor(y), theta=0.15, noise=0.08).eval()
+    m = tg.GPIS(torch.tensor(x), torch.tensor(y), kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08).eval()
     q = torch.tensor([[0.05, -0.1, 0.2]], dtype=torch.float64)
     fd, err = ref.richardson_derivative(lambda p: float(m.predict(torch.tensor(p))[1]), q.numpy(), 1e-3)
     xq = q.clone().requires_grad_(True)

@@ -54,7 +54,7 @@ def test_metrics_agree_with_the_analytic_sphere():
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     x = np.concatenate([C + R * d, C + (R + 0.06) * d[:60]])
     y = np.r_[np.zeros(150), np.ones(60)]
-    model = tg.GPIS(x, y, theta=0.15, noise=0.006)
+    model = tg.GPIS(x, y, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.006)
     m = estimate_metrics_3d(model, scene, resolution=0.01)
     est = surface_samples(m.surface, 0.003)
     est = est[scene.in_range(est)]

@@ -422,6 +422,8 @@ def test_an_edited_scene_file_is_run_again_and_a_scene_that_cannot_be_built_is_a
     assert any("scene file as it was before it changed" in str(w.message) for w in caught)
     new = read_run_file(tmp_path / "s" / "runs" / "ball_tactile_0.json")
     assert new["scene_hash"] != old["scene_hash"]
+    # issue 52: a run records the estimator's settings it ran with (a scene file: the default settings)
+    assert new["estimator"]["name"] == "default" and new["estimator"]["kernel"]["kernel"] == "Matern52"
     assert (tmp_path / "s" / "runs" / "ball_tactile_0.json.stale").exists()
     assert [r["object"] for r in csv.DictReader(open(tmp_path / "s" / "runs.csv"))].count("ball") == 1
 

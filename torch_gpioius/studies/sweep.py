@@ -351,6 +351,8 @@ def run_one(spec: RunSpec) -> dict:
     if trace is not None and len(trace.length):      # the kernel's length and sigma^2 at the end (as learned)
         record["length"], record["noise"] = float(trace.length[-1]), float(trace.noise[-1])
     record["learn"] = kw.get("learn") or getattr(world.defaults, "learn", "task")
+    if trace is not None:               # the estimator's settings the run used, as its log's header records them
+        record["estimator"] = _logged_estimator(out / "logs" / f"{spec.key}.gpioius")
     kernel = None if "theta" in kw else kw.get("kernel", world.defaults.kernel)
     record["kernel"] = "InverseMultiquadric" if kernel is None else kernel.kind
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
@@ -376,6 +378,18 @@ def _no_start_record(spec: RunSpec, kw: dict, exc: Exception, wall_time: float) 
             "wall_time": wall_time, "median_step_time": math.nan, "taps": 0, "recoveries": 0,
             "contacts_on_body": math.nan, "contacts_within": math.nan,
             "series": {"travel": [0.0], **{k: nan for k in _SERIES if k != "travel"}, "estimate": [0.0]}}
+
+
+def _logged_estimator(log: Path) -> dict | None:
+    """The ``estimator`` of a log's header (None where it records none)."""
+    from ..io.datasets import read_records
+
+    try:
+        header = next(iter(read_records(log)))
+    except (StopIteration, OSError, ValueError):
+        return None
+    value = header.meta.get("estimator")
+    return value if isinstance(value, dict) else None
 
 
 def scene_failure_record(spec: RunSpec, exc: BaseException, wall_time: float = 0.0) -> dict:
