@@ -3,7 +3,6 @@ and what recorders see of a run (:class:`Run`)."""
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 from dataclasses import dataclass
 
@@ -12,7 +11,7 @@ import torch
 
 from .._validation import as_device, as_float, as_int
 from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
-from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, as_learn
+from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, as_learn  # noqa: F401 (re-exported)
 from ..models.gpiois import GPIOIS, INNER, OUTER
 from ..models.gpis import GPIS
 from ..models.local import LocalGPIOIS

@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 import math
 import os
-import re
 from pathlib import Path
 
 import numpy as np
@@ -472,7 +471,6 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     if captures:
         everything = np.concatenate([c.points for c in captures])
         est = _resolved_voxel(est, voxel, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
-    parts_x, parts_y, parts_t = [], [], []
     outer = np.zeros((0, dim)), np.zeros(0)
     if captures:
         from ..sensors.pointcloud import PointCloud

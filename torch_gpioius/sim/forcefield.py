@@ -20,7 +20,6 @@ import trimesh
 
 import torch
 
-from ..exploration.observations import ObservationPolicy
 from ..models.estimator import COVER_GAP_LIMIT, INSIDE_DEPTH, EstimatorSettings  # noqa: F401
 from ..exploration.stopping import TravelBudget
 from ..exploration.registry import register_world

@@ -160,7 +160,7 @@ def parse_object_set(text: str) -> list[SetObject]:
         names = [n.strip() for n in rest.split(",") if n.strip()]
         if not names:
             raise ValueError(f"objects: {text!r} names no pybullet mesh")
-        known = {"duck": "duck.obj", "teddy": "teddy_vhacd.obj", "bunny": "bunny.obj", "mug": "objects/mug.obj"}
+        known = {"duck": "duck.obj", "teddy": "teddy2_VHACD_CHs.obj", "bunny": "bunny.obj", "mug": "objects/mug.obj"}
         return [SetObject(n.replace("/", "-").rsplit(".", 1)[0], "pybullet:" + known.get(n, n),
                           _size(np.random.default_rng(_SALT + 900_000 + i)), i) for i, n in enumerate(names)]
     if family == "folder":

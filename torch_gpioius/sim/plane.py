@@ -18,7 +18,7 @@ import torch
 from shapely.geometry import LineString, Point, Polygon
 
 from ..contact import ContactResult
-from ..exploration.observations import ObservationPolicy, free_space_along
+from ..exploration.observations import free_space_along
 from ..models.estimator import EstimatorSettings
 from ..exploration.stopping import OnceAround
 from ..exploration.registry import register_world

@@ -15,7 +15,6 @@ import math
 import numpy as np
 import torch
 
-from ...exploration.observations import ObservationPolicy
 from ...models.estimator import EstimatorSettings
 from ...exploration.stopping import TravelBudget
 from ...exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash,
