@@ -298,3 +298,24 @@ def test_a_grid_too_fine_is_refused_before_it_is_allocated():
         cover_around(box, "tight", resolution=2e-4)
     with pytest.raises(ValueError, match=r"resolution: 0.2 mm over the repair's grid"):
         repair_mesh(box, 2e-4, remesh=True)
+
+
+def test_the_cover_of_a_remeshed_teddy_closes_and_its_far_corners_lie_outside():
+    """A teddy (pybullet's convex pieces, united and decimated by the loader) scaled to 14.2 cm: the pseudo-normal
+    sign of the body's distance flipped at slivers, so the corners of the cover's grid read "inside" and the cover
+    came out open on every shifted grid. The winding number decides where the offset is off a face's normal."""
+    pytest.importorskip("pybullet_data")
+    from pathlib import Path
+
+    from torch_gpioius.sim.forcefield import cover_around, place
+    from torch_gpioius.sim.meshes import MeshDistance, load_mesh
+    from torch_gpioius.sim.scenefile import resolve_mesh
+
+    body = load_mesh(resolve_mesh("pybullet:teddy2_VHACD_CHs.obj", Path(".")))
+    body.apply_scale(0.1419 / float(np.max(body.extents)))
+    body = place(body, [0.5, 0.0, 0.1])
+    lo, hi = body.bounds[0] - 0.03, body.bounds[1] + 0.03
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    assert (MeshDistance(body)(corners) > 0).all()
+    cover = cover_around(body, "tight", gap=0.008)
+    assert cover.is_watertight and cover.volume > body.volume

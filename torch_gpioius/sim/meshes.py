@@ -475,7 +475,8 @@ class MeshDistance:
 
     The unsigned distance and closest point come from libigl's AABB tree (built once); the sign from the
     pseudo-normal of the closest feature: the face normal inside a triangle, the sum of the two face normals on an
-    edge, the angle-weighted vertex normal at a vertex.
+    edge, the angle-weighted vertex normal at a vertex; where the offset is not along that normal (off a face's
+    interior on a mesh with slivers), from libigl's generalized winding number.
 
     Args:
         mesh: a closed ``trimesh.Trimesh`` [m] (any mesh with ``signed=False``).
@@ -521,7 +522,18 @@ class MeshDistance:
         at_vertex = zero.sum(1) >= 2
         if at_vertex.any():
             n[at_vertex] = self._vertex_n[self._F[face[at_vertex], bary[at_vertex].argmax(1)]]
-        sign = np.where(np.einsum("ij,ij->i", p - c, n) >= 0, 1.0, -1.0)
+        along = np.einsum("ij,ij->i", p - c, n)
+        sign = np.where(along >= 0, 1.0, -1.0)
+        # off a face's interior the pseudo-normal decides the side only on a clean mesh: a sliver's normal (a
+        # remesh's or a decimation's) or an almost-closest second feature flips it (a teddy's cover came out open,
+        # its grid's corners "inside"); where the offset is not along the normal, the generalized winding number
+        # decides instead
+        ambiguous = (np.abs(along) < 0.999 * d) & (d > 0)
+        if ambiguous.any():
+            import igl
+
+            w = igl.fast_winding_number(self._V, self._F, p[ambiguous])
+            sign[ambiguous] = np.where(np.abs(w) > 0.5, -1.0, 1.0)
         return sign * d, c, face
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
