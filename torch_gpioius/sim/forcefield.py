@@ -139,6 +139,8 @@ def with_kernel(defaults: ExplorationDefaults, kernel, theta) -> ExplorationDefa
 
     if theta is not None:
         theta = as_float(theta, "theta", positive=True, unit="m")
+    if kernel is None and theta is None:            # nothing asked: the settings keep their kernel and their name
+        return defaults
     if kernel is None:
         kernel = "imq" if defaults.kernel is None else ("matern52" if isinstance(defaults.kernel, Matern52) else
                                                         defaults.kernel)
