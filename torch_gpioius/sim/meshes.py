@@ -496,6 +496,7 @@ class MeshDistance:
         self._F = np.ascontiguousarray(mesh.faces, dtype=np.int64)
         self._tree = igl.AABB()
         self._tree.init(self._V, self._F)
+        self._winding = None            # libigl's winding-number tree, built at the first ambiguous point
         if signed:
             self._face_n = np.asarray(mesh.face_normals)
             self._vertex_n = np.asarray(mesh.vertex_normals)         # trimesh weights them by the face angles
@@ -530,11 +531,18 @@ class MeshDistance:
         # decides instead
         ambiguous = (np.abs(along) < 0.999 * d) & (d > 0)
         if ambiguous.any():
+            sign[ambiguous] = np.where(np.abs(self.winding_number(p[ambiguous])) > 0.5, -1.0, 1.0)
+        return sign * d, c, face
+
+    def winding_number(self, points: np.ndarray) -> np.ndarray:
+        """`(n,)` libigl's fast generalized winding number of `(n, 3)` points [m] (about 1 inside, 0 outside), its
+        tree built once per mesh (rebuilding it cost 50-90 ms a call on a 20,000-face mesh, for a few points)."""
+        if self._winding is None:
             import igl
 
-            w = igl.fast_winding_number(self._V, self._F, p[ambiguous])
-            sign[ambiguous] = np.where(np.abs(w) > 0.5, -1.0, 1.0)
-        return sign * d, c, face
+            self._winding = igl.FastWindingNumberBVH()
+            self._winding.init(self._V, self._F)
+        return self._winding.winding_number(np.ascontiguousarray(np.asarray(points, dtype=np.float64).reshape(-1, 3)))
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` signed distance [m] of `(n, 3)` points [m] (unsigned with ``signed=False``)."""
