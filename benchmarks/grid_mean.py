@@ -24,6 +24,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from planning_step import NOISE, THETA, make_data  # noqa: E402
 
 import torch_gpioius as tg  # noqa: E402
+from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ  # noqa: E402
 from torch_gpioius.surfaces import evaluate_grid  # noqa: E402
 
 
@@ -31,7 +32,7 @@ def one(n_outer: int, n_inner: int, spacing: float, device: str) -> dict:
     xo, yo, xi, yi = make_data(n_outer, n_inner)
     model = tg.GPIOIS(torch.cat([xi, xo]), torch.cat([yi, yo]),
                       torch.cat([torch.zeros(n_inner, dtype=torch.long), torch.ones(n_outer, dtype=torch.long)]),
-                      theta=THETA, noise=NOISE, inference="structured", device=device).fit()
+                      kernel=IMQ(THETA), noise=NOISE, inference="structured", device=device).fit()
     box = np.array([[-0.3, -0.23, -0.35], [0.3, 0.23, 0.35]])     # the inner ellipsoid's box grown by 5 cm
     t0 = time.perf_counter()
     mean_only = evaluate_grid(model, box, spacing, 0, variance=False)

@@ -51,6 +51,7 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
 from torch_gpioius.planning import plan_direction
+from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 THETA, NOISE, STEP = 0.15, 0.08, 0.01
 OUTER_RADII, OUTER_FAR, INNER_RADII = (0.25, 0.18, 0.3), (0.30, 0.23, 0.35), (0.2, 0.14, 0.25)
@@ -103,7 +104,7 @@ def run_side(inference: str, xo, yo, x0, y0, patches, min_gain, device):
     y = torch.cat([y0, yo]).to(device)
     t = torch.cat([torch.zeros(len(x0), dtype=torch.long), torch.ones(n_o, dtype=torch.long)]).to(device)
     t_setup = time.perf_counter()
-    model = tg.GPIOIS(x, y, t, theta=THETA, noise=NOISE, inference="structured" if inference == "dense" else inference)
+    model = tg.GPIOIS(x, y, t, kernel=IMQ(THETA), noise=NOISE, inference="structured" if inference == "dense" else inference)
     model.fit()
     setup = time.perf_counter() - t_setup
     times, relearned, kt_prev = [], 0, model.task_covariance
@@ -113,7 +114,7 @@ def run_side(inference: str, xo, yo, x0, y0, patches, min_gain, device):
         if inference == "dense":                 # a fresh dense model on all data, warm-started
             data = (torch.cat([model.train_inputs[0], xn]), torch.cat([model.train_targets, yn]),
                     torch.cat([model.train_task, torch.zeros(len(xn), dtype=torch.long, device=device)]))
-            model = tg.GPIOIS(*data, theta=THETA, noise=NOISE, task_covariance=kt_prev, inference="dense")
+            model = tg.GPIOIS(*data, kernel=IMQ(THETA), noise=NOISE, task_covariance=kt_prev, inference="dense")
             model.fit(multi_start=False)
         else:
             model.add_observations(xn, yn, 0)
@@ -129,7 +130,7 @@ def exactness(model, seed: int = 1):
     """(a)'s posterior, MLL and gradient against a dense solve at (a)'s K_t, and the MLL gap to the optimum."""
     x, y, t = model.train_inputs[0], model.train_targets, model.train_task
     kt = model._task_matrix()
-    dense = DenseExactInference(x, y, t, THETA, NOISE)
+    dense = DenseExactInference(x, y, t, IMQ(THETA), NOISE)
     rng = np.random.default_rng(seed)
     q = torch.tensor(_ellipsoid(rng, 200, INNER_RADII) * rng.uniform(0.9, 1.1, size=(200, 1)), device=x.device)
     mu_a, v_a = model.predict(q, 0)
@@ -138,7 +139,7 @@ def exactness(model, seed: int = 1):
     mll_a, g_a = engine.mll_gradient(kt)
     mll_d, g_d, _ = dense.mll_derivatives(kt)
     held_mll = mll_d
-    best = tg.GPIOIS(x, y, t, theta=THETA, noise=NOISE, task_covariance=model.task_covariance,
+    best = tg.GPIOIS(x, y, t, kernel=IMQ(THETA), noise=NOISE, task_covariance=model.task_covariance,
                      inference="structured").fit(multi_start=False)
     prior = float(kt[0, 0])                   # the IMQ kernel is 1 at distance 0: prior variance K_t[0,0]
     return {"mu": float((mu_a - mu_d).abs().max()), "V": float((v_a - v_d).abs().max()) / prior,

@@ -42,6 +42,7 @@ import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
 from torch_gpioius.inference.optim import chain_to_cholesky, chol_params_to_task_covariance, task_covariance_to_chol_params
 from torch_gpioius.planning import plan_direction
+from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 THETA, NOISE, STEP = 0.15, 0.08, 0.01
 
@@ -68,7 +69,7 @@ def make_data(n_outer: int, n_inner_total: int, seed: int = 0):
 
 def naive_step(x, y, t, kt_init, contact):
     """Per-step GPyTorch refit with L-BFGS; returns K_t, MLL, mu, V at contact, direction."""
-    model = tg.GPIOIS(x, y, t, theta=THETA, noise=NOISE, task_covariance=kt_init, inference="dense")
+    model = tg.GPIOIS(x, y, t, kernel=IMQ(THETA), noise=NOISE, task_covariance=kt_init, inference="dense")
     model.train()
     mll = gpytorch.mlls.ExactMarginalLogLikelihood(model.likelihood, model)
     params = [model.task_covar_module.covar_factor]
@@ -114,7 +115,7 @@ def timed_steps(n_outer: int, n_inner: int, steps: int, record: bool, device: st
     t0 = time.perf_counter()
     model = tg.GPIOIS(torch.cat([xi_all[:n_inner], xo]), torch.cat([yi_all[:n_inner], yo]),
                       torch.cat([torch.zeros(n_inner, dtype=torch.long), torch.ones(n_outer, dtype=torch.long)]),
-                      theta=THETA, noise=NOISE, inference="structured", device=device, **model_kwargs)
+                      kernel=IMQ(THETA), noise=NOISE, inference="structured", device=device, **model_kwargs)
     model._inference()
     t_engine = time.perf_counter() - t0
     model.fit()
@@ -160,7 +161,7 @@ def run(n_outer: int, n_inner: int, steps: int, naive: bool, device: str = "cpu"
         kt_f = f["kt"]
         # the dense exact engine (one Cholesky of the full Gram matrix) at the fast K_t: the same quantities in
         # plain exact arithmetic, and the Newton step from there (distance to the exact optimum)
-        dense = DenseExactInference(x, y, t, THETA, NOISE)
+        dense = DenseExactInference(x, y, t, IMQ(THETA), NOISE)
         mll_d, g_d, h_d = dense.mll_derivatives(kt_f)
         mu_d, v_d = dense.predict(contact[None], 0, kt_f)
         phi = task_covariance_to_chol_params(kt_f)

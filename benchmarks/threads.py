@@ -29,6 +29,7 @@ WORK = r"""
 import json, sys, time, torch
 torch.set_num_threads(int(sys.argv[1]))
 import torch_gpioius as tg
+from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 t = time.perf_counter()
 tr = tg.explore(tg.sim.paper_objects_2d()["B"], mode="visual-tactile", max_steps=int(sys.argv[2]), progress=False)
 t2d = time.perf_counter() - t
@@ -38,7 +39,7 @@ from torch_gpioius.planning import plan_direction
 xo, yo, xi, yi = make_data(2000, 300 + 5 * 8)
 m = tg.GPIOIS(torch.cat([xi[:300], xo]), torch.cat([yi[:300], yo]),
               torch.cat([torch.zeros(300, dtype=torch.long), torch.ones(2000, dtype=torch.long)]),
-              theta=THETA, noise=NOISE).fit()
+              kernel=IMQ(THETA), noise=NOISE).fit()
 t = time.perf_counter()
 for k in range(6):
     nx, ny = xi[300 + 5 * k:305 + 5 * k], yi[300 + 5 * k:305 + 5 * k]

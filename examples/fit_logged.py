@@ -30,7 +30,7 @@ def main() -> None:
 
     ds = tg.load_dataset(args.data)
     print(f"{args.data.name}: {len(ds)} observations, steps 0..{ds.step.max()}, units {ds.meta['units']}, "
-          f"theta {ds.meta['theta']}, sigma^2 {ds.meta['noise']}, scene {ds.meta.get('scene')}")
+          f"kernel {tg.kernels.kernel_of_record(ds.meta)!r}, sigma^2 {ds.meta['noise']}, scene {ds.meta.get('scene')}")
     info = fit_dataset(args.data, args.out)
     print(f"similarity {info['similarity']:.4f}, MLL {info['mll']:.3f}; checkpoint {info['checkpoint']}")
 

@@ -66,7 +66,7 @@ def main() -> None:
         sims = []
         for key, (inner_free, outer_free) in settings.items():
             x, y, t = observations(scene, inner_free, outer_free, spacing)
-            model = tg.GPIOIS(x, y, t, theta=0.1, noise=0.006).fit()
+            model = tg.GPIOIS(x, y, t, kernel=tg.InverseMultiquadricKernel(0.1), noise=0.006).fit()
             sims.append(f"{model.similarity:8.3f} (rho {model.correlation:4.2f})")
         print(f"{label:<16}" + "".join(f"{s:>22}" for s in sims))
         bounds = scene.bounds(0.08)                       # (2, 2): [min corner; max corner]

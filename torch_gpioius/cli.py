@@ -70,7 +70,7 @@ def _study(args: argparse.Namespace) -> int:
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
                        touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
-                       learn=args.learn, views=args.views, kernel=args.kernel, theta=args.theta, noise=args.noise)
+                       learn=args.learn, views=args.views, kernel=_kernel_choice(args), noise=args.noise)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -95,9 +95,9 @@ def _fit(args: argparse.Namespace) -> int:
     if origins and len(origins) != len(clouds):
         raise ValueError(f"--camera-origin: {len(origins)} given for {len(clouds)} --cloud file(s); give one per "
                          "cloud, in the same order")
-    if args.theta is not None:
-        warnings.warn("--theta is the inverse multiquadric's length scale (the paper's name); --settings with a "
-                      "scene file's [estimator] or the Python API's kernel= carry a kernel's own", DeprecationWarning)
+    from .models.base import kernel_for_theta
+
+    kernel = kernel_for_theta(args.theta, None, "gpioius fit --theta; fit_dataset")   # deprecated: the kernel's own
     if args.out:                             # arguments checked first: a refused call leaves no folder behind
         from .io.outputs import claim_folder
 
@@ -112,7 +112,7 @@ def _fit(args: argparse.Namespace) -> int:
                                 settings=settings)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         source, settings = ds, None                  # the dataset holds the settings it was labelled with
-    info = fit_dataset(source, args.out, theta=args.theta, noise=args.noise, learn=args.learn, settings=settings,
+    info = fit_dataset(source, args.out, kernel=kernel, noise=args.noise, learn=args.learn, settings=settings,
                        mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution, force=args.force)
     if info["settings"] is not None:
         from .models.estimator import EstimatorSettings
@@ -347,6 +347,35 @@ def _length(option: str):
     return parse
 
 
+def _kernel_names() -> str:
+    """The kernel names the command line takes, from the kernel registry (aliases and registered kinds)."""
+    from .kernels import KERNEL_ALIASES, KERNELS
+
+    return ", ".join([*KERNEL_ALIASES, *(k for k in KERNELS if k not in KERNEL_ALIASES.values())])
+
+
+def _kernel_name(text: str) -> str:
+    """An argparse type for a kernel's name (checked against the kernel registry)."""
+    from .kernels import kernel_kind
+
+    _argument(kernel_kind, text)
+    return text                      # as typed: a study folder records the name its command line gave
+
+
+def _kernel_choice(args: argparse.Namespace):
+    """``--kernel`` and ``--lengthscale`` (or the deprecated ``--theta``) as one KernelChoice, or None."""
+    from .kernels import KernelChoice
+
+    length = args.lengthscale
+    if args.theta is not None:
+        if length is not None:
+            raise ValueError("--theta, --lengthscale: the same length under two names; give --lengthscale")
+        warnings.warn("--theta is --lengthscale under the paper's name", DeprecationWarning)
+        length = args.theta
+    choice = KernelChoice(args.kernel, length)
+    return choice if choice else None
+
+
 def _views(text: str):
     """An argparse type for camera views: comma-separated names, a count (1-3) or "paper"."""
     from .sim.forcefield import as_views
@@ -479,13 +508,14 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the 3-D worlds' simulated camera views in place of the settings': comma-separated names "
                          "(fixed, mirrored, wrist), a count (1-3) or paper (the fixed camera alone); one per --out "
                          "folder")
-    sw.add_argument("--kernel", default=None, choices=["imq", "matern52"],
-                    help="the kernel: imq (the paper's inverse multiquadric) or matern52; default: each world's own; "
-                         "one per --out folder")
+    sw.add_argument("--kernel", default=None, type=_kernel_name,
+                    help=f"the kernel: {_kernel_names()} (imq: the paper's inverse multiquadric; a kernel registered "
+                         "with register_kernel by its kind); default: each world's own; one per --out folder")
+    sw.add_argument("--lengthscale", type=_length("lengthscale"), default=None,
+                    help="the kernel's length scale [m] (the paper's theta for the inverse multiquadric; with --learn "
+                         "length or all, where the learning starts); default: the kernel's own; one per --out folder")
     sw.add_argument("--theta", type=_length("theta"), default=None,
-                    help="the kernel's length [m] (the inverse multiquadric's theta, the Matern's length scale; with "
-                         "--learn length or all, where the learning starts); default: the kernel's own; one per "
-                         "--out folder")
+                    help="deprecated: --lengthscale under the paper's name")
     sw.add_argument("--noise", type=float, default=None,
                     help="sigma^2 (with --learn all, where the learning starts); default: each world's own; one per "
                          "--out folder")
@@ -566,8 +596,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="voxel edge for the cloud [m] (default: the settings': a tenth of the --crop box, 2-5 cm, "
                           "by default; 5 cm without a crop box)")
     bag.add_argument("--settings", default="default", choices=["default", "paper"],
-                     help="the estimator's settings the dataset records for fit (kernel, sigma^2, free space, voxels; "
-                          "inside points are not placed from a bag yet)")
+                     help="the estimator's settings the dataset records for fit (kernel, sigma^2, free space, voxels) "
+                          "and its labels: inside points behind the contacts, along the measured forces (none behind "
+                          "the seen surface: a bag's clouds come from a moving camera)")
     bag.add_argument("--crop", default=None, help="keep cloud points in 'xmin ymin zmin xmax ymax zmax' [m]")
     bag.add_argument("--start", type=float, default=None,
                      help="import from this many seconds after the first wrench sample (default: the beginning)")

@@ -13,6 +13,7 @@ from .exploration.loop import run
 from .exploration.trace import Trace
 from .exploration.world import World
 from .io.logs import LogRecorder, restore_run
+from .models.base import kernel_for_theta
 
 __all__ = ["explore"]
 
@@ -59,9 +60,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         settings: the estimator's settings (an :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a
             preset's name: "default", "paper", "paper-2d"; a preset's voxel rule sized to the world's object); None:
             the world's.
-        theta: the inverse multiquadric's length scale [m] (the paper's name); kernel: an
-            :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length, instead (give one of the two);
-            noise: sigma^2.
+        kernel: an :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length scale, in place of the
+            settings' (``theta=``, the paper's name for the inverse multiquadric's length scale, is a deprecated
+            alias of ``kernel=InverseMultiquadricKernel(lengthscale=...)``); noise: sigma^2.
         max_steps: cap on planning steps.
         max_travel: fingertip travel budget since the first contact [m] (adds or replaces a ``TravelBudget``).
         stop: stop rules replacing the world's.
@@ -112,8 +113,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     if not isinstance(world, World):
         raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
                         f"{type(world).__name__}")
-    config = ExploreConfig.from_world(world, mode, evidence=evidence, touch=touch, step=step, theta=theta,
-                                      kernel=kernel, noise=noise, max_steps=max_steps, max_travel=max_travel,
+    kernel = kernel_for_theta(theta, kernel, "explore")       # the paper's name, a deprecated alias
+    config = ExploreConfig.from_world(world, mode, evidence=evidence, touch=touch, step=step, kernel=kernel, noise=noise, max_steps=max_steps, max_travel=max_travel,
                                       stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
                                       metrics_resolution=metrics_resolution, interval_every=interval_every,
                                       regions=regions, stall=stall, outer_tol=outer_tol, device=device,

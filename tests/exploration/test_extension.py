@@ -126,8 +126,9 @@ class BallWorld(World):
 
     @property
     def defaults(self):
-        return ExplorationDefaults(theta=0.1, noise=0.006, step=0.01, max_steps=40, stop=(TravelBudget(0.15),),
-                                   policy=ObservationPolicy(voxel=0.02), approach_travel=0.3)
+        settings = tg.EstimatorSettings(tg.kernels.InverseMultiquadricKernel(0.1), 0.006, ObservationPolicy(voxel=0.02))
+        return ExplorationDefaults(step=0.01, max_steps=40, stop=(TravelBudget(0.15),), approach_travel=0.3,
+                                   estimator=settings)
 
     def hardware(self):
         robot = Gantry(self.start, self.range[0] - 0.1, self.range[1] + 0.1)

@@ -232,7 +232,7 @@ def test_a_run_learns_its_length_and_noise_on_the_restart_steps():
     changed = [i for i in range(1, trace.n_steps) if trace.length[i] != trace.length[i - 1]
                or trace.noise[i] != trace.noise[i - 1]]
     assert set(changed) <= {3, 6} and changed                      # learned (and kept) on a restart step
-    assert trace.length[0] == pytest.approx(scene.defaults.theta, rel=1e-12)
+    assert trace.length[0] == pytest.approx(scene.defaults.lengthscale, rel=1e-12)
     assert trace.length[-1] == pytest.approx(trace.model.kernel.length, rel=0, abs=0)
     assert trace.noise[-1] == trace.model.noise and trace.model.hyper_result.kept
     rows = trace.records()

@@ -12,6 +12,7 @@ from torch_gpioius.inference.batched import SOLVE_BLOCK, _LowerFactor
 from torch_gpioius.inference.structured import DirectStructuredInference, StructuredExactInference
 from torch_gpioius.inference.optim import predicted_gain
 from torch_gpioius.planning import plan_direction
+from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 THETA, NOISE = 0.15, 0.08
 KT = torch.tensor([[0.9, 0.7], [0.7, 1.1]], dtype=torch.float64)
@@ -45,7 +46,7 @@ def _dense(engine):
     x = torch.cat([engine.xi, engine.xo])
     y = torch.cat([engine.yi, engine.yo])
     t = torch.cat([torch.zeros(engine.n_inner, dtype=torch.long), torch.ones(len(engine.xo), dtype=torch.long)])
-    return DenseExactInference(x, y, t, THETA, NOISE)
+    return DenseExactInference(x, y, t, IMQ(THETA), NOISE)
 
 
 def _assert_exact(engine, rng, kt=KT):
@@ -66,7 +67,7 @@ def _assert_exact(engine, rng, kt=KT):
 
 def test_hundreds_of_batched_appends_stay_exact():
     rng = np.random.default_rng(0)
-    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine = BatchedExactInference(*_start(rng), kernel=IMQ(THETA), noise=NOISE)
     engine.factor(KT)                                   # builds the held factorisation
     for step in range(240):
         x, y = _patch(rng, int(rng.integers(1, 9)))
@@ -79,7 +80,7 @@ def test_hundreds_of_batched_appends_stay_exact():
     # the bordered inverse did not drift from the inverse of a fresh factorisation
     fresh = BatchedExactInference(torch.cat([engine.xi, engine.xo]), torch.cat([engine.yi, engine.yo]),
                                   torch.cat([torch.zeros(engine.n_inner, dtype=torch.long),
-                                             torch.ones(len(engine.xo), dtype=torch.long)]), theta=THETA,
+                                             torch.ones(len(engine.xo), dtype=torch.long)]), kernel=IMQ(THETA),
                                   noise=NOISE)
     fresh.factor(KT)
     w1, w2 = engine._held["w"].view, fresh._held["w"].view
@@ -88,7 +89,7 @@ def test_hundreds_of_batched_appends_stay_exact():
 
 def test_a_new_task_covariance_or_outer_points_or_removal_rebuild_and_stay_exact():
     rng = np.random.default_rng(1)
-    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine = BatchedExactInference(*_start(rng), kernel=IMQ(THETA), noise=NOISE)
     engine.factor(KT)
     for _ in range(5):
         x, y = _patch(rng, 6)
@@ -114,7 +115,7 @@ def test_a_hold_behind_the_store_sums_t_directly_and_equals_the_store_and_a_dens
     sums T and T' directly; held at the same K_t through the store instead, every held quantity agrees to rounding,
     and both equal a dense solve. A second new K_t refills the first's buffers in place."""
     rng = np.random.default_rng(11)
-    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine = BatchedExactInference(*_start(rng), kernel=IMQ(THETA), noise=NOISE)
     engine.mll_derivatives(KT)                            # a Newton evaluation: the store holds every row
     assert engine.series is not None and not engine._store_behind(KT)
     for _ in range(6):
@@ -139,7 +140,7 @@ def test_the_gradient_at_a_k_t_a_newton_run_last_evaluated_uses_that_k_t():
     """A fit called again without new data asks for the gradient at the K_t its Newton run evaluated last: the
     engine's cache answers the factorisation, and the traces must use that K_t's S^-1, not an older held one."""
     rng = np.random.default_rng(12)
-    engine = BatchedExactInference(*_start(rng), theta=THETA, noise=NOISE)
+    engine = BatchedExactInference(*_start(rng), kernel=IMQ(THETA), noise=NOISE)
     engine.mll_gradient(KT)                               # held at KT
     other = torch.tensor([[0.4, 0.2], [0.2, 0.7]], dtype=torch.float64)
     engine.mll_derivatives(other)                         # a Newton evaluation at another K_t
@@ -156,8 +157,8 @@ def test_the_value_alone_then_the_derivatives_at_the_same_k_t_equal_a_fresh_eval
     rng = np.random.default_rng(13)
     data = _start(rng, n_inner=40)
     for cls in (StructuredExactInference, DirectStructuredInference, BatchedExactInference):
-        engine = cls(*data, theta=THETA, noise=NOISE)
-        fresh = cls(*data, theta=THETA, noise=NOISE)
+        engine = cls(*data, kernel=IMQ(THETA), noise=NOISE)
+        fresh = cls(*data, kernel=IMQ(THETA), noise=NOISE)
         if cls is BatchedExactInference:
             engine.mll_gradient(KT)                       # held at KT
             held = engine._held
@@ -235,7 +236,7 @@ def test_a_held_newton_step_reaches_a_quadratics_maximum_within_its_caps_and_bou
 
 def _model(rng, inference="batched"):
     x, y, t = _start(rng, 300, 40)
-    return tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE, inference=inference).fit()
+    return tg.GPIOIS(x, y, t, kernel=IMQ(THETA), noise=NOISE, inference=inference).fit()
 
 
 def test_fit_holds_task_covariance_while_the_gradient_predicts_little_and_relearns_otherwise():
@@ -262,7 +263,7 @@ def test_fit_holds_task_covariance_while_the_gradient_predicts_little_and_relear
     mll_d, g_d, _ = dense.mll_derivatives(model._task_matrix())
     assert held.mll == pytest.approx(mll_d, rel=1e-12)
     # min_gain = 0 re-learns every time; the result equals a full fit from the same start
-    twin = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+    twin = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=IMQ(THETA), noise=NOISE,
                      task_covariance=kt_held, inference="structured").fit(multi_start=False)
     model.fit(min_gain=0.0)
     assert model.fit_result.relearned
@@ -284,7 +285,7 @@ def test_held_gain_prediction_tracks_the_real_gain():
         model.fit(min_gain=math.inf, max_hold=100)
         predicted = model.fit_result.predicted_gain
         held_mll = model.fit_result.mll
-        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=IMQ(THETA), noise=NOISE,
                          task_covariance=model.task_covariance, inference="structured").fit(multi_start=False)
         ratios.append(predicted / (best.fit_result.mll - held_mll))
     assert all(0.5 < r < 2.0 for r in ratios), ratios
@@ -296,7 +297,7 @@ def _interior_model(rng):
     x, y, t = _start(rng, 300, 0)
     xi = _ellipsoid(rng, 40, INTERIOR_RADII)
     return tg.GPIOIS(torch.cat([xi, x]), torch.cat([torch.zeros(40, dtype=torch.float64), y]),
-                     torch.cat([torch.zeros(40, dtype=torch.long), t]), kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+                     torch.cat([torch.zeros(40, dtype=torch.long), t]), kernel=IMQ(THETA), noise=NOISE,
                      inference="batched").fit()
 
 
@@ -327,7 +328,7 @@ def test_a_tracking_step_raises_the_exact_mll_and_leaves_what_it_predicts():
         assert np.array_equal(r.hessian, hessian)                    # the held Hessian, not a new one
         dense_mll = float(_dense(model._inference()).mll(model._task_matrix()))
         assert r.mll == pytest.approx(dense_mll, rel=1e-12) and dense_mll > before
-        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+        best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=IMQ(THETA), noise=NOISE,
                          task_covariance=model.task_covariance, inference="structured").fit(multi_start=False)
         remaining = best.fit_result.mll - r.mll
         assert 0.4 * r.predicted_gain < remaining < 2.0 * r.predicted_gain       # measured ratios 0.5-1.3
@@ -376,7 +377,7 @@ def test_on_the_ridge_of_a_correlation_of_1_w_is_held_and_its_gain_bounded():
             assert model.fit_result.relearned or model.fit_result.tracked
             if model.fit_result.relearned:      # and the re-learning reaches the optimum off the ridge
                 seen.add("left")
-                best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA),
+                best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=IMQ(THETA),
                                  noise=NOISE, inference="structured").fit(multi_start=True)
                 assert model.correlation < 0.99
                 assert model.fit_result.mll == pytest.approx(best.fit_result.mll, abs=1e-6)
@@ -436,7 +437,7 @@ def test_scouted_restarts_find_the_other_basin_and_cost_one_full_relearning_per_
     # one step per coordinate along which the likelihood looked convex and did not rise (newton_maximize)
     assert model.fit_result.scout == 30
     assert model.fit_result.iterations <= len(calls) <= model.fit_result.iterations + 4
-    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=IMQ(THETA), noise=NOISE,
                      inference="structured").fit(multi_start=True)
     assert model.fit_result.mll == pytest.approx(best.fit_result.mll, abs=1e-7)
 
@@ -462,7 +463,7 @@ def test_a_restart_under_the_min_gain_rule_holds_its_warm_start_and_still_finds_
     model.add_observations(*_patch(rng, 16), 0)
     model.fit(multi_start=True, scout=30, min_gain=0.1, track=True)
     assert model.fit_result.starts == 4 and model.fit_result.scout == 30 and not model.fit_result.relearned
-    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+    best = tg.GPIOIS(model.train_inputs[0], model.train_targets, model.train_task, kernel=IMQ(THETA), noise=NOISE,
                      inference="structured").fit(multi_start=True)
     gap = best.fit_result.mll - float(model._inference().mll(model._task_matrix()))
     assert -1e-9 <= gap <= 0.1
@@ -497,7 +498,7 @@ def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_
     base.task_covariance, base.fit_result = ridge, ridge_fit  # the warm K_t, a re-learning at a correlation of 1
     counts, models = [], []
     for scout in (None, 200):
-        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=IMQ(THETA), noise=NOISE,
                           task_covariance=base.task_covariance, inference="batched")
         model.fit_result = base.fit_result                  # a later fit: warm-started, no restarts
         engine = model._inference()
@@ -513,7 +514,7 @@ def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_
     assert counts[1] <= 4 < 8 <= counts[0], counts
     # a restart under the min_gain rule, whose warm start cannot be held there (the gradient points off the ridge, where
     # the held Hessian says nothing), walks on the copy too, and the full data polish in a few evaluations
-    restart = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+    restart = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=IMQ(THETA), noise=NOISE,
                         task_covariance=base.task_covariance, inference="batched")
     restart.fit_result = base.fit_result
     restart._fixed_starts = lambda: []          # no fixed start to find it: the copy's run from the warm K_t must
@@ -546,7 +547,7 @@ def test_a_relearning_on_the_ridge_whose_optimum_stays_there_polishes_the_copys_
         phi[2] = -11.0
         counts, results = [], []
         for scout in (None, 60):
-            model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+            model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=IMQ(THETA), noise=NOISE,
                               task_covariance=chol_params_to_task_covariance(phi), inference="batched")
             model.fit_result = base.fit_result
             engine = model._inference()
@@ -573,7 +574,7 @@ def test_a_fit_judging_trials_by_their_value_reaches_the_same_optimum_with_fewer
         base.add_observations(*_interior_patch(rng, 16, (0.1, 0.22, 0.12)), 0)
     runs = []
     for judged in (False, True):
-        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=tg.kernels.InverseMultiquadricKernel(THETA), noise=NOISE,
+        model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=IMQ(THETA), noise=NOISE,
                           task_covariance=ridge, inference="batched")
         model.fit_result = ridge_fit                          # a later fit, warm-started on the ridge
         if not judged:

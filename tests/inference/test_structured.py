@@ -12,6 +12,7 @@ from torch_gpioius.inference import DenseExactInference
 from torch_gpioius.planning import plan_direction
 from torch_gpioius.inference.structured import DirectStructuredInference, StructuredExactInference
 from torch_gpioius.tolerances import tol
+from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 REL = 1e-6  # the issue's tolerance; the engine achieves ~1e-10
 
@@ -43,8 +44,8 @@ def test_engine_equals_dense_values_and_derivatives(theta, noise):
     x, y, t = _surface_data()
     perm = torch.randperm(len(y), generator=torch.Generator().manual_seed(0))   # task order must not matter
     x, y, t = x[perm], y[perm], t[perm]
-    dense = DenseExactInference(x, y, t, theta, noise)
-    fast = StructuredExactInference(x, y, t, theta, noise)
+    dense = DenseExactInference(x, y, t, IMQ(theta), noise)
+    fast = StructuredExactInference(x, y, t, IMQ(theta), noise)
     xq = x[:40] + 0.01
     for kt in ([[0.3, 0.25], [0.25, 0.4]], [[0.05, 0.01], [0.01, 0.6]], [[1.0, -0.5], [-0.5, 0.3]]):
         b = torch.tensor(kt, dtype=torch.float64)
@@ -70,9 +71,9 @@ def test_direct_engine_equals_dense_over_spread_task_covariances(outer_tol):
     keep = torch.ones(len(t), dtype=torch.bool)
     later = (t == 0) & (torch.arange(len(t)) > first)
     keep[later] = False
-    direct = DirectStructuredInference(x[keep], y[keep], t[keep], theta=0.15, noise=0.08, outer_tol=outer_tol)
+    direct = DirectStructuredInference(x[keep], y[keep], t[keep], kernel=IMQ(0.15), noise=0.08, outer_tol=outer_tol)
     direct.append(x[later], y[later], t[later])
-    store = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=outer_tol)
+    store = StructuredExactInference(x, y, t, kernel=IMQ(0.15), noise=0.08, outer_tol=outer_tol)
     xi = torch.cat([x[keep][t[keep] == 0], x[later]])   # the direct engine's inner order: kept, then appended
     yi = torch.cat([y[keep][t[keep] == 0], y[later]])
     xs, ys = torch.cat([xi, x[t == 1]]), torch.cat([yi, y[t == 1]])
@@ -87,7 +88,7 @@ def test_direct_engine_equals_dense_over_spread_task_covariances(outer_tol):
         assert _rel(gd, gs) < 1e-8 and _rel(hd, hs) < 1e-8
         assert abs(float(direct.mll(b)) - fd) <= 1e-12 * len(y)
         if outer_tol is None:                            # the dense reference, exact K_oo
-            ref = DenseExactInference(xs, ys, ts, 0.15, 0.08)
+            ref = DenseExactInference(xs, ys, ts, IMQ(0.15), 0.08)
             fr, gr, hr = ref.mll_derivatives(b)
             assert abs(fd - fr) <= 1e-10 * len(y)
             assert _rel(gd, gr) < 1e-9 and _rel(hd, hr) < 1e-9
@@ -112,7 +113,7 @@ def test_restarts_scout_copy_uses_the_direct_engine():
     x, y, t = _surface_data(n_outer=300, n_inner=120, seed=8)
     b = torch.tensor([[0.3, 0.25], [0.25, 0.4]], dtype=torch.float64)
     for kwargs in ({"inference": "batched"}, {"inference": "structured"}, {"outer_tol": 1e-1}):
-        m = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, task_covariance=b, **kwargs)
+        m = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08, task_covariance=b, **kwargs)
         built = []
         original = DirectStructuredInference.__init__
 
@@ -128,7 +129,7 @@ def test_restarts_scout_copy_uses_the_direct_engine():
         assert len(built) == 1 and built[0].n_inner == 40
         assert built[0].outer_tol == kwargs.get("outer_tol")
         keep = m._thinned(40)
-        ref = DenseExactInference(x[keep], y[keep], t[keep], 0.15, 0.08)
+        ref = DenseExactInference(x[keep], y[keep], t[keep], IMQ(0.15), 0.08)
         evaluate, level = evaluate
         f, g, _ = evaluate(b)
         assert level(b) == f
@@ -144,7 +145,7 @@ def test_no_drift_after_200_incremental_additions():
     xi, yi = x[inner], y[inner]
     start = torch.cat([x[inner][:60], x[outer]]), torch.cat([yi[:60], y[outer]]), torch.cat(
         [torch.zeros(60, dtype=torch.long), torch.ones(int(outer.sum()), dtype=torch.long)])
-    fast = StructuredExactInference(*start, theta=0.15, noise=0.08)
+    fast = StructuredExactInference(*start, kernel=IMQ(0.15), noise=0.08)
     b = torch.tensor([[0.3, 0.2], [0.2, 0.5]], dtype=torch.float64)
     fast.mll_derivatives(b)                       # builds the split, then grows it
     for k in range(60, 260):
@@ -157,7 +158,7 @@ def test_no_drift_after_200_incremental_additions():
     dense = DenseExactInference(torch.cat([xi, x[outer]]), torch.cat([yi, y[outer]]),
                                 torch.cat([torch.zeros(260, dtype=torch.long), torch.ones(int(outer.sum()),
                                                                                           dtype=torch.long)]),
-                                0.15, 0.08)         # a fresh dense solve
+                                IMQ(0.15), 0.08)    # a fresh dense solve
     fd, gd, hd = dense.mll_derivatives(b)
     fs, gs, hs = fast.mll_derivatives(b)
     assert abs(fs - fd) <= 1e-9 * abs(fd) and _rel(gs, gd) < 1e-8 and _rel(hs, hd) < 1e-8
@@ -170,8 +171,8 @@ def test_no_drift_after_200_incremental_additions():
 def test_models_fit_and_plan_agree():
     """K_t, MLL, mu, V and the planned direction: structured vs dense models, within the issue's tolerances."""
     x, y, t = _surface_data(n_outer=500, n_inner=100, seed=2)
-    dense = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="dense").fit()
-    fast = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="structured").fit()
+    dense = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08, inference="dense").fit()
+    fast = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08, inference="structured").fit()
     assert _rel(fast.task_covariance, dense.task_covariance) < REL
     assert abs(float(fast.log_marginal_likelihood() - dense.log_marginal_likelihood())) < REL * abs(
         float(dense.log_marginal_likelihood()))
@@ -191,13 +192,13 @@ def test_exploration_data_structured_equals_dense():
     trace = tg.explore(scene, mode="visual-tactile", max_steps=15)
     m = trace.model
     assert isinstance(m._inference(), StructuredExactInference)
-    dense = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006,
+    dense = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, kernel=IMQ(0.1), noise=0.006,
                       task_covariance=m.task_covariance, inference="dense")
     xq = torch.as_tensor(scene.sample_boundary("inner", 0.05))
     torch.testing.assert_close(m.predict(xq)[0], dense.predict(xq)[0], rtol=1e-9, atol=1e-12)
     torch.testing.assert_close(m.predict(xq)[1], dense.predict(xq)[1], rtol=1e-7, atol=1e-12)
     refit_dense = dense.fit(multi_start=False)
-    refit_fast = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006,
+    refit_fast = tg.GPIOIS(m.train_inputs[0], m.train_targets, m.train_task, kernel=IMQ(0.1), noise=0.006,
                            task_covariance=m.task_covariance, inference="structured").fit(multi_start=False)
     assert _rel(refit_fast.task_covariance, refit_dense.task_covariance) < REL
 
@@ -257,7 +258,7 @@ def test_truncation_bounds_hold_for_every_order(lam):
 
 def _store_case(seed=3, n_outer=300, n_inner=40):
     x, y, t = _surface_data(n_outer=n_outer, n_inner=n_inner, seed=seed)
-    eng = StructuredExactInference(x, y, t, theta=0.15, noise=0.08)
+    eng = StructuredExactInference(x, y, t, kernel=IMQ(0.15), noise=0.08)
     return eng
 
 
@@ -307,8 +308,8 @@ def test_store_grown_by_appends_equals_direct_sum():
 
 def test_window_moves_with_c_and_results_stay_exact():
     x, y, t = _surface_data(n_outer=400, n_inner=60, seed=4)
-    dense = DenseExactInference(x, y, t, 0.15, 0.08)
-    fast = StructuredExactInference(x, y, t, 0.15, 0.08)
+    dense = DenseExactInference(x, y, t, IMQ(0.15), 0.08)
+    fast = StructuredExactInference(x, y, t, IMQ(0.15), 0.08)
     centres = []
     for c in (0.05, 0.09, 0.5, 4.0, 0.02):                  # leaves the window [c0/2, 2 c0] several times
         b = torch.tensor([[0.3, 0.05], [0.05, c]], dtype=torch.float64)
@@ -322,7 +323,7 @@ def test_window_moves_with_c_and_results_stay_exact():
 
 def test_closed_form_gradients_equal_autograd():
     x, y, t = _surface_data(n_outer=300, n_inner=50, seed=5)
-    fast = StructuredExactInference(x, y, t, 0.15, 0.08)
+    fast = StructuredExactInference(x, y, t, IMQ(0.15), 0.08)
     new = x[t == 0][:3] + 0.004
     fast.append(new, torch.tensor([0.0, 1.0, 1.0], dtype=torch.float64), torch.zeros(3, dtype=torch.long))
     b = torch.tensor([[0.3, 0.2], [0.2, 0.4]], dtype=torch.float64)
@@ -343,8 +344,8 @@ def test_closed_form_gradients_equal_autograd():
 
 def test_planner_geometry_closed_form_equals_autograd():
     x, y, t = _surface_data(n_outer=300, n_inner=50, seed=6)
-    fast = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="structured").fit()
-    dense = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="dense",
+    fast = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08, inference="structured").fit()
+    dense = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08, inference="dense",
                       task_covariance=fast.task_covariance)
     xq = x[:10] + 0.01
     a = tg.geometry.surface_geometry(fast, xq)            # closed form
@@ -358,7 +359,7 @@ def test_planner_geometry_closed_form_equals_autograd():
 
 def test_removing_inner_points_keeps_the_eigendecomposition():
     x, y, t = _surface_data(n_outer=300, n_inner=60, seed=7)
-    m = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="structured").fit()
+    m = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08, inference="structured").fit()
     engine = m._inference()
     u = engine.u
     inner = torch.nonzero(t == 0).flatten()
@@ -376,7 +377,7 @@ def test_removing_inner_points_keeps_the_eigendecomposition():
     t_store = series.t_matrices(c, derivatives=False)[0]
     t_exact = (engine.p / (c * engine.lam + engine.noise)) @ engine.p.T
     assert float((t_store - t_exact).abs().max()) <= 1e-9 * float(t_exact.abs().max())
-    fresh = tg.GPIOIS(x[~drop], y[~drop], t[~drop], kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, inference="dense",
+    fresh = tg.GPIOIS(x[~drop], y[~drop], t[~drop], kernel=IMQ(0.15), noise=0.08, inference="dense",
                       task_covariance=m.task_covariance)
     xq = x[:15] + 0.01
     for task in (0, 1):
@@ -424,7 +425,7 @@ def test_truncated_engine_is_exact_for_its_kernel():
     """With K' in place of K_oo the engine's arithmetic is exact: MLL, its gradient and Hessian, mean, variance and
     their x-gradients equal a dense solve with K' (and autograd through it)."""
     x, y, t = _surface_data(n_outer=1200, n_inner=100, seed=4)
-    eng = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=1e-1)
+    eng = StructuredExactInference(x, y, t, kernel=IMQ(0.15), noise=0.08, outer_tol=1e-1)
     assert eng.truncated and eng.rank < 1200 and 0 < eng.dropped_trace <= 1e-1 * 0.08
     xq = x[:25] + 0.01
     for kt in ([[0.3, 0.25], [0.25, 0.4]], [[1.0, -0.5], [-0.5, 0.3]]):
@@ -455,12 +456,12 @@ def test_truncated_engine_is_within_its_bound_of_the_exact_one():
     """|MLL' - MLL| <= (delta + c tr(E) |alpha'|^2 (1 + delta)) / 2 with delta = c tr(E) / s (the Gram matrices
     differ by c E >= 0 in the outer block); a tighter tolerance moves everything towards the exact engine."""
     x, y, t = _surface_data(n_outer=1200, n_inner=100, seed=5)
-    exact = StructuredExactInference(x, y, t, theta=0.15, noise=0.08)
+    exact = StructuredExactInference(x, y, t, kernel=IMQ(0.15), noise=0.08)
     b = torch.tensor([[0.3, 0.25], [0.25, 0.4]], dtype=torch.float64)
     xq = x[:25] + 0.01
     errors = []
     for outer_tol in (10.0, 1e-1, 1e-3):
-        eng = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=outer_tol)
+        eng = StructuredExactInference(x, y, t, kernel=IMQ(0.15), noise=0.08, outer_tol=outer_tol)
         delta = eng.truncation(0.4)
         assert delta == pytest.approx(0.4 * eng.dropped_trace / 0.08, rel=1e-12) and delta <= 0.4 * outer_tol
         _, alpha, _ = _dense_with_kernel(eng, x, y, t, b)
@@ -478,14 +479,14 @@ def test_truncated_engine_grows_and_shrinks_like_a_fresh_one():
     inner = torch.nonzero(t == 0).flatten()
     first = torch.ones(len(y), dtype=torch.bool)
     first[inner[40:]] = False
-    eng = StructuredExactInference(x[first], y[first], t[first], theta=0.15, noise=0.08, outer_tol=1e-2)
+    eng = StructuredExactInference(x[first], y[first], t[first], kernel=IMQ(0.15), noise=0.08, outer_tol=1e-2)
     u = eng.u
     b = torch.tensor([[0.3, 0.2], [0.2, 0.5]], dtype=torch.float64)
     eng.mll_derivatives(b)
     for k in range(40, 80, 5):
         eng.append(x[inner[k:k + 5]], y[inner[k:k + 5]], torch.zeros(5, dtype=torch.long))
     assert eng.u is u
-    fresh = StructuredExactInference(x, y, t, theta=0.15, noise=0.08, outer_tol=1e-2)
+    fresh = StructuredExactInference(x, y, t, kernel=IMQ(0.15), noise=0.08, outer_tol=1e-2)
     torch.testing.assert_close(fresh.lam, eng.lam, rtol=0, atol=0)       # the same outer points, the same basis
     f1, g1, h1 = eng.mll_derivatives(b)
     f2, g2, h2 = fresh.mll_derivatives(b)
@@ -499,7 +500,7 @@ def test_truncated_engine_grows_and_shrinks_like_a_fresh_one():
     assert eng.remove(drop, tasks)
     keep = torch.ones(len(y), dtype=torch.bool)
     keep[inner[[3, 50, 70]]] = False
-    fresh = StructuredExactInference(x[keep], y[keep], t[keep], theta=0.15, noise=0.08, outer_tol=1e-2)
+    fresh = StructuredExactInference(x[keep], y[keep], t[keep], kernel=IMQ(0.15), noise=0.08, outer_tol=1e-2)
     xq = x[:10] + 0.01
     torch.testing.assert_close(eng.predict(xq, 0, b)[1], fresh.predict(xq, 0, b)[1], rtol=1e-9, atol=1e-12)
     assert abs(float(eng.mll(b) - fresh.mll(b))) <= 1e-10 * abs(float(fresh.mll(b)))
@@ -510,8 +511,8 @@ def test_truncated_engine_grows_and_shrinks_like_a_fresh_one():
 
 def test_model_outer_tol_fits_near_the_exact_model_and_reports_its_bound():
     x, y, t = _surface_data(n_outer=1200, n_inner=100, seed=8)
-    exact = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08).fit()
-    approx = tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.15), noise=0.08, outer_tol=1e-2).fit()
+    exact = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08).fit()
+    approx = tg.GPIOIS(x, y, t, kernel=IMQ(0.15), noise=0.08, outer_tol=1e-2).fit()
     assert exact.truncation == 0.0 and approx._inference().truncated
     assert 0 < approx.truncation <= 1e-2 * float(approx.task_covariance[1, 1])
     assert _rel(approx.task_covariance, exact.task_covariance) < 1e-4

@@ -179,8 +179,8 @@ def test_complex_and_boolean_points_are_refused(tmp_path):
 
 def test_dataset_from_files_validates_its_parameters(tmp_path):
     (tmp_path / "a.csv").write_text("x,y,label\n0.1,0.2,contact\n")
-    with pytest.raises(ValueError, match="lengthscale"):
-        dataset_from_files(tmp_path / "a.csv", theta=-1)
+    with pytest.raises(ValueError, match="noise"):
+        dataset_from_files(tmp_path / "a.csv", noise=-1)
     with pytest.raises(ValueError, match="settings: must be one of"):
         dataset_from_files(tmp_path / "a.csv", settings="mine")
 

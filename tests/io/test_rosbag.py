@@ -455,3 +455,30 @@ def test_cli_imports_a_pad_topic(recording, tmp_path, capsys):
     text = capsys.readouterr().out
     ds = load_dataset(out)
     assert f"{ds.meta['counts']['patch_surface']} surface" in text and ds.meta["counts"]["pad_frames_used"] >= 3
+
+
+def test_a_bag_imported_with_the_default_settings_has_inside_points_behind_its_contacts(recording, mcap_bag):
+    """Issue 52: offline data gets what exploration gets. With the default settings each contact has an inside
+    point 2 cm behind it along the measured force (on the recorded sphere: radially, 2 cm under the surface), with
+    the contact's step and label; the paper's settings place none, and none lies behind the seen surface."""
+    from torch_gpioius.models.estimator import EstimatorSettings
+
+    msgs, truth = recording
+    c, r = truth["center"], truth["radius"]
+    ds = _import(mcap_bag, truth, settings="default")
+    labels = EstimatorSettings.default().labels
+    inner = ds.task == 0
+    contacts, inside = inner & (ds.y == 0), inner & (ds.y < 0)
+    assert inside.sum() >= 0.8 * contacts.sum() and ds.meta["counts"]["inside_points"] == int(inside.sum())
+    np.testing.assert_allclose(ds.y[inside], labels.inside_label(labels.touch_inside))
+    # the force is the sphere's normal to the joint interpolation's error (~1e-5 m on the contact; the force's
+    # direction within a degree): 2e-4 m of margin
+    np.testing.assert_allclose(np.linalg.norm(ds.x[inside] - c, axis=1), r - labels.touch_inside, atol=2e-4)
+    step_of = dict(zip(ds.step[contacts], ds.x[contacts]))
+    for p, k in zip(ds.x[inside], ds.step[inside]):
+        assert np.linalg.norm(step_of[k] - p) == pytest.approx(labels.touch_inside, abs=1e-9)
+    assert not ((ds.task == 1) & (ds.y < 0)).any()
+    assert ds.meta["estimator"]["labels"]["touch_inside"] == labels.touch_inside
+    assert ds.meta["estimator"]["labels"]["vision_inside"] is None
+    paper = _import(mcap_bag, truth, settings="paper")
+    assert not (paper.y < 0).any() and paper.meta["counts"]["inside_points"] == 0

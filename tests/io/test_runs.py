@@ -32,7 +32,7 @@ def test_model_at_uses_the_length_and_noise_the_run_had_learned(tmp_path):
     q = torch.tensor([[0.0, 0.0], [0.11, 0.02], [-0.2, 0.05]], dtype=torch.float64)
     torch.testing.assert_close(last.predict(q, 0)[0], trace.model.predict(q, 0)[0], rtol=1e-9, atol=1e-10)
     early = run.model_at(2)                      # before the first learning: the configured values
-    assert early.kernel.length == pytest.approx(scene.defaults.theta, rel=1e-12)
+    assert early.kernel.length == pytest.approx(scene.defaults.lengthscale, rel=1e-12)
     assert early.noise == pytest.approx(scene.defaults.noise, rel=1e-12)
     assert math.isclose(run.params[run.steps[-1]]["length"], trace.length[-1], rel_tol=1e-15)
 

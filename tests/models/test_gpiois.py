@@ -9,13 +9,14 @@ from scipy.optimize import minimize
 
 import torch_gpioius as tg
 from tests import reference as ref
+from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 KT = np.array([[0.8, 0.5], [0.5, 1.3]])
 
 
 def _model(data, kt=KT, **kw):
     x, y, t = data
-    return tg.GPIOIS(x, y, t, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006, task_covariance=torch.tensor(kt), **kw)
+    return tg.GPIOIS(x, y, t, kernel=IMQ(0.1), noise=0.006, task_covariance=torch.tensor(kt), **kw)
 
 
 @pytest.mark.parametrize("inference", ["dense", "structured"])
@@ -72,7 +73,7 @@ def test_exact_above_gpytorch_cholesky_threshold():
 
 def test_mll_derivatives_match_finite_differences(random_data):
     x, y, t = (d.numpy() for d in random_data)
-    engine = tg.DenseExactInference(*random_data, theta=0.1, noise=0.006)
+    engine = tg.DenseExactInference(*random_data, kernel=IMQ(0.1), noise=0.006)
     f, g, h = engine.mll_derivatives(torch.tensor(KT))
     assert abs(f - ref.mll(x, y, t, KT, 0.1, 0.006)) < 1e-8
     basis = np.array([[[1, 0], [0, 0.0]], [[0, 1], [1, 0.0]], [[0, 0], [0, 1.0]]]).reshape(3, 4)
@@ -86,7 +87,7 @@ def test_mll_derivatives_match_finite_differences(random_data):
 @pytest.mark.parametrize("inference", ["dense", "structured"])
 def test_fit_reaches_stationary_psd_optimum_at_least_as_good_as_multistart(two_shape_data, inference):
     x, y, t = (d.numpy() for d in two_shape_data)
-    m = tg.GPIOIS(*two_shape_data, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006, inference=inference).fit()
+    m = tg.GPIOIS(*two_shape_data, kernel=IMQ(0.1), noise=0.006, inference=inference).fit()
     kt = m.task_covariance.numpy()
     assert np.linalg.eigvalsh(kt).min() >= 0
     assert m.fit_result.converged
@@ -446,7 +447,7 @@ def _sticky_model():
     from pathlib import Path
 
     z = np.load(Path(__file__).with_name("warm_start_sticks.npz"))
-    return tg.GPIOIS(z["x"], z["y"], z["task"], kernel=tg.kernels.InverseMultiquadricKernel(float(z["theta"])),
+    return tg.GPIOIS(z["x"], z["y"], z["task"], kernel=IMQ(float(z["theta"])),
                      noise=float(z["noise"]))
 
 
@@ -513,7 +514,7 @@ def test_the_transfer_sets_the_inner_level_by_the_amplitude_ratio_not_the_geomet
     level = {}
     for ratio in (0.7, 1.0, 2.2):
         kt = torch.tensor([[ratio ** 2, ratio], [ratio, 1.0]], dtype=torch.float64)
-        model = tg.GPIOIS(x, y, task, kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006, task_covariance=kt)
+        model = tg.GPIOIS(x, y, task, kernel=IMQ(0.1), noise=0.006, task_covariance=kt)
         level[ratio] = zero(model.predict_mean(side, 0))
         outer = zero(model.predict_mean(side, 1))
         # the closed form away from the touches: mu_in = 1 + r (mu_out - 1) (the touches' pull is below 1e-3 here)
@@ -677,6 +678,6 @@ def test_similarity_support_counts_patches_one_length_apart():
     x = np.r_[line[:5], line[::11] + [0.0, 0.05]]                    # 5 contacts within 4 cm, 10 seen points
     y = np.zeros(len(x))
     task = np.r_[np.zeros(5), np.ones(10)].astype(np.int64)          # 11 cm apart
-    support = tg.GPIOIS(torch.tensor(x), torch.tensor(y), torch.tensor(task), kernel=tg.kernels.InverseMultiquadricKernel(0.1)).similarity_support()
+    support = tg.GPIOIS(torch.tensor(x), torch.tensor(y), torch.tensor(task), kernel=IMQ(0.1)).similarity_support()
     assert support["inner"] == 1 and support["outer"] == 10 and support["enough"] is False
     assert f"at least {MIN_SIMILARITY_PATCHES} of each" in support["reason"]

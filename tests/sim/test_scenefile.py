@@ -118,7 +118,7 @@ def test_a_scene_file_builds_the_forcefield_world_and_a_short_run_touches_the_bo
     # issue 34, item 6: the exploration's settings in the file, each checked
     (GOOD + "[forcefield]\nsettings = \"fast\"\n", "settings: must be one of"),
     (GOOD + "[forcefield]\nviews = [\"top\"]\n", "views"),
-    (GOOD + "[forcefield]\nkernel = \"rbf\"\n", "kernel: must be one of"),
+    (GOOD + "[forcefield]\nkernel = \"rbf\"\n", "kernel: unknown 'rbf'; choose among"),
     (GOOD + "[forcefield]\ntheta = -0.1\n", "theta"),
     (GOOD + "[forcefield]\nnoise = 0\n", "noise"),
     (GOOD + "[forcefield]\nvoxel = 2.0\n", "voxel"),
@@ -155,17 +155,21 @@ def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     assert plain.policy.touch_inside is None and plain.policy.vision_inside == 0.01
     assert plain.policy.vision_inside_gap is None and not plain.policy.cover_offset
     paper = load_scene(_write(tmp_path, GOOD + "[forcefield]\nsettings = \"paper\"\n"))
-    assert paper.views == ("fixed",) and paper.defaults.policy.voxel == 0.05 and paper.defaults.kernel is None
-    assert paper.defaults.policy.vision_free_far is None and paper.defaults.theta == 0.15
+    assert paper.views == ("fixed",) and paper.defaults.policy.voxel == 0.05 and paper.defaults.kernel.kind == "InverseMultiquadric"
+    assert paper.defaults.policy.vision_free_far is None and paper.defaults.lengthscale == 0.15
     assert paper.defaults.policy.touch_inside is None and paper.defaults.policy.vision_inside is None
     assert paper.defaults.policy.vision_inside_gap is None and not paper.defaults.policy.cover_offset
     # the call's settings win over the file's
     assert load_scene(_write(tmp_path, GOOD), settings="paper").views == ("fixed",)
     own = load_scene(_write(tmp_path, GOOD + "[forcefield]\nviews = 2\nkernel = \"imq\"\ntheta = 0.12\nnoise = 0.02\n"
                                            "voxel = 0.03\n"))
-    assert own.views == ("fixed", "mirrored") and own.defaults.kernel is None and own.defaults.theta == 0.12
+    assert own.views == ("fixed", "mirrored") and own.defaults.kernel.kind == "InverseMultiquadric"
+    assert own.defaults.lengthscale == 0.12
     assert own.defaults.noise == 0.02 and own.defaults.policy.voxel == 0.03
     assert load_scene(_write(tmp_path, GOOD + "[forcefield]\ntheta = 0.07\n")).defaults.kernel.ell == 0.07
+    assert load_scene(_write(tmp_path, GOOD + "[forcefield]\nlengthscale = 0.07\n")).defaults.kernel.ell == 0.07
+    with pytest.raises(ValueError, match="lengthscale, theta: the same length under two names"):
+        load_scene(_write(tmp_path, GOOD + "[forcefield]\nlengthscale = 0.07\ntheta = 0.07\n"))
     assert d.learn == "task"                                                             # the paper's learning
     assert load_scene(_write(tmp_path, GOOD + "[forcefield]\nlearn = \"length\"\n")).defaults.learn == "length"
     # and into a run: the model is built with them

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from scipy.stats import wilcoxon
 
+from torch_gpioius.kernels import KernelChoice
 from torch_gpioius.studies.stats import median_interval, paired_difference
 from torch_gpioius.studies.sweep import make_world, run_sweep
 
@@ -65,7 +66,7 @@ def test_sequential_sweep_writes_its_outputs_skips_finished_runs_and_repeats(tmp
     assert len(list((tmp_path / "a" / "logs").glob("*.gpioius"))) == 4
     again = run_sweep("planar", objects=["A"], seeds=2, out=tmp_path / "a", smoke=True, backend="local", progress=False)
     assert again["skipped"] == 4
-    b = run_sweep("planar", objects=["A"], seeds=2, out=tmp_path / "b", smoke=True, backend="local", progress=False)
+    run_sweep("planar", objects=["A"], seeds=2, out=tmp_path / "b", smoke=True, backend="local", progress=False)
     rows_b = list(csv.DictReader(open(tmp_path / "b" / "runs.csv")))
     for ra, rb in zip(rows, rows_b):                               # the same seed gives identical numbers
         assert ra["final_hausdorff"] == rb["final_hausdorff"] and ra["travel"] == rb["travel"]
@@ -282,12 +283,12 @@ def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_p
 
 
 def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(tmp_path):
-    """--views, --kernel, --theta and --noise reach the scene and the model of each run (the record's length and
+    """--views, --kernel, --lengthscale and --noise reach the scene and the model of each run (the record's length and
     sigma^2 are read back from the run's model; one view sees fewer outer points than the file's three), a folder
     holds one setting of each, and bad values are refused before anything runs."""
     ball = ball_scene(tmp_path)
     rows = {}
-    for name, kw in (("own", {}), ("one", dict(views=1, kernel="imq", theta=0.12, noise=0.05))):
+    for name, kw in (("own", {}), ("one", dict(views=1, kernel=KernelChoice("imq", 0.12), noise=0.05))):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / name, smoke=True,
                   backend="local", progress=False, **kw)
         rows[name] = json.loads((tmp_path / name / "runs" / "ball_visual-tactile_0.json").read_text())
@@ -298,9 +299,10 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
     assert 0 < one["n_outer"] < own["n_outer"]
     with pytest.raises(FileExistsError, match="views"):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "one",
-                  smoke=True, backend="local", progress=False, kernel="imq", theta=0.12, noise=0.05)
+                  smoke=True, backend="local", progress=False, kernel=KernelChoice("imq", 0.12), noise=0.05)
     bad = [(dict(views="side"), "views"), (dict(views=4), "views"), (dict(kernel="rbf"), "kernel"),
-           (dict(theta=-0.1), "theta"), (dict(theta=math.nan), "theta"), (dict(noise=0.0), "noise"),
+           (dict(kernel=0.1), "kernel"), (dict(kernel=KernelChoice(lengthscale=2e3)), "lengthscale"),
+           (dict(noise=0.0), "noise"),
            (dict(noise=math.inf), "noise")]
     for kw, match in bad:
         with pytest.raises(ValueError, match=match):

@@ -10,8 +10,8 @@ import numpy as np
 import torch
 
 from .._validation import as_device, as_float, as_int
-from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
-from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, as_learn  # noqa: F401 (re-exported)
+from ..kernels import InverseMultiquadricKernel, as_kernel
+from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, EstimatorView, as_learn  # noqa: F401
 from ..models.gpiois import GPIOIS, INNER, OUTER
 from ..models.gpis import GPIS
 from ..models.local import LocalGPIOIS
@@ -32,7 +32,7 @@ LEARN_SIZE = (256, 512)
 
 
 @dataclass(frozen=True)
-class ExploreConfig:
+class ExploreConfig(EstimatorView):
     """One exploration's settings (see :func:`torch_gpioius.explore` for each): build it with :meth:`from_world`.
 
     Attributes:
@@ -40,12 +40,10 @@ class ExploreConfig:
         evidence: the evidence policy (e.g. :class:`~torch_gpioius.exploration.evidence.TapPolicy`) or None.
         touch: the touch model (:class:`~torch_gpioius.exploration.touch.PointTouch` by default).
         step: alpha, the planned step [m].
-        theta: theta_x of the default inverse multiquadric kernel [m] (None when ``kernel`` is given).
-        kernel: a kernel in place of the inverse multiquadric, or None.
-        noise: sigma^2.
+        estimator: the estimator's settings (kernel, sigma^2, labels, what is learned; read through ``kernel``,
+            ``lengthscale``, ``noise``, ``policy``, ``learn`` and ``restart_every``).
         max_steps: cap on planning steps (evidence actions count as steps).
         stop: the stop rules.
-        policy: the observation policy.
         penalty: C(x) of eq. (19) / (25).
         metrics_every: ground-truth metrics every k steps (and at the last).
         metrics_resolution: grid of the metrics [m] (None: the world's).
@@ -82,37 +80,8 @@ class ExploreConfig:
     outer_tol: float | None = None
     device: torch.device | None = None
 
-    # the estimator's settings as the loop reads them
-    @property
-    def kernel(self) -> ExactKernel | None:
-        """The kernel, or None for the inverse multiquadric (whose length is :attr:`theta`)."""
-        k = self.estimator.kernel
-        return None if isinstance(k, InverseMultiquadricKernel) else k
-
-    @property
-    def theta(self) -> float | None:
-        """The inverse multiquadric's length scale [m] (None for another kernel)."""
-        k = self.estimator.kernel
-        return float(k.length) if isinstance(k, InverseMultiquadricKernel) else None
-
-    @property
-    def noise(self) -> float:
-        return self.estimator.noise
-
-    @property
-    def policy(self) -> ObservationPolicy:
-        return self.estimator.labels
-
-    @property
-    def learn(self) -> str:
-        return self.estimator.learn
-
-    @property
-    def restart_every(self) -> int | None:
-        return self.estimator.restart_every
-
     @classmethod
-    def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None, theta=None,
+    def from_world(cls, world, mode: str = "visual-tactile", *, evidence=None, touch=None, step=None,
                    kernel=None, noise=None, max_steps=None, max_travel=None, stop=None, policy=None, penalty=None,
                    metrics_every=None, metrics_resolution=None, interval_every=None, regions=None,
                    stall="default", outer_tol=None, device=None, restart_every="default",
@@ -144,7 +113,7 @@ class ExploreConfig:
                                  "engine, which has no truncated outer basis")
         d = world.defaults
         step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
-        estimator = _estimator(world, settings, theta=theta, kernel=kernel, noise=noise, policy=policy, learn=learn,
+        estimator = _estimator(world, settings, kernel=kernel, noise=noise, policy=policy, learn=learn,
                                restart_every=restart_every)
         max_steps = as_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
         metrics_every = as_int(d.metrics_every if metrics_every is None else metrics_every, "metrics_every", 1,
@@ -233,9 +202,11 @@ class ExploreConfig:
         """JSON-able settings for a log's header (resume compares them); ``estimator`` holds the estimator's
         settings whole (:meth:`~torch_gpioius.models.estimator.EstimatorSettings.to_dict`)."""
         kernel = self.estimator.kernel.describe()
+        theta = self.lengthscale if isinstance(self.kernel, InverseMultiquadricKernel) else None  # earlier logs' key
         evidence = None if self.evidence is None else getattr(self.evidence, "name", type(self.evidence).__name__)
         out = {"mode": self.mode, "evidence": evidence, "touch": getattr(self.touch, "name", type(self.touch).__name__),
-               "step_length": self.step, "theta": self.theta, "kernel": kernel, "noise": float(self.noise), "max_steps": self.max_steps,
+               "step_length": self.step, "theta": theta, "kernel": kernel,
+               "noise": float(self.noise), "max_steps": self.max_steps,
                "stop": [r.describe() for r in self.stop], "metrics_every": self.metrics_every,
                "metrics_resolution": self.metrics_resolution, "interval_every": self.interval_every,
                "regions": self.regions, "policy": self._policy_record(),
@@ -252,7 +223,7 @@ class ExploreConfig:
         return out
 
 
-def _estimator(world, settings, *, theta, kernel, noise, policy, learn, restart_every) -> EstimatorSettings:
+def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) -> EstimatorSettings:
     """The estimator's settings of one exploration: ``settings`` (an :class:`EstimatorSettings` or a preset's name;
     a preset's voxel rule sized to the world's object) or the world's own, with the single settings given beside
     it in their place."""
@@ -268,16 +239,9 @@ def _estimator(world, settings, *, theta, kernel, noise, policy, learn, restart_
         extent = getattr(world, "object_extent", None)
         if extent is not None:
             est = est.for_extent(extent)
-    if kernel is not None and theta is not None:
-        raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's length scale)")
     changes = {}
     if kernel is not None:
-        changes["kernel"] = as_kernel(kernel, None)        # an ExactKernel, or a TypeError naming what it is
-    elif theta is not None:
-        from ..tolerances import tol
-
-        changes["kernel"] = InverseMultiquadricKernel(lengthscale=as_float(
-            theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m"))
+        changes["kernel"] = as_kernel(kernel)        # an ExactKernel, or a TypeError naming what it is
     if noise is not None:
         changes["noise"] = as_float(noise, "noise", positive=True)
     if policy is not None:

@@ -24,7 +24,8 @@ from ..models.labels import MAX_VOXEL, ObservationPolicy, check_voxel
 from ..voxels import voxel_average
 
 __all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices", "free_space_along",
-           "retract_free_space", "vision_observations", "drop_contradicted_inside", "INSIDE_CLEARANCE",
+           "retract_free_space", "vision_observations", "drop_contradicted_inside", "uncontradicted",
+           "uncontradicted_by_step", "INSIDE_CLEARANCE",
            "retract_vision_inside", "offset_outer_mean", "cover_gap", "CoverGap", "GAP_MIN_CONTACTS", "INNER", "OUTER"]
 
 @dataclass
@@ -180,27 +181,53 @@ def drop_contradicted_inside(obs: Observations, policy: ObservationPolicy, x_kno
 
     An inside point says the body is thicker than its depth there; a robot cannot measure that, so each is checked
     against what was seen and felt around it."""
-    from scipy.spatial import cKDTree
-
-    inside = obs.y < 0
-    if not inside.any():
-        return obs
-    xs, ys = [obs.x[~inside]], [obs.y[~inside]]
-    if x_known is not None and len(x_known):
-        xs.append(np.asarray(x_known, dtype=np.float64))
-        ys.append(np.asarray(y_known, dtype=np.float64))
-    x, y = np.concatenate(xs), np.concatenate(ys)
-    pts, depth = obs.x[inside], policy.inside_depth(obs.y[inside])
-    ok = np.ones(len(pts), dtype=bool)
-    for sel, limit in ((y == 0, INSIDE_CLEARANCE * depth), (y == 1, depth)):
-        if sel.any():
-            ok &= cKDTree(x[sel]).query(pts)[0] >= limit * (1.0 - 1e-9)
-    keep = ~inside
-    keep[np.flatnonzero(inside)[ok]] = True
+    keep = uncontradicted(obs.x, obs.y, policy, x_known, y_known)
     if keep.all():
         return obs
     return Observations(obs.x[keep], obs.y[keep], obs.task[keep], None if obs.normal is None else obs.normal[keep],
                         obs.step, obs.source)
+
+
+def uncontradicted(x: np.ndarray, y: np.ndarray, policy: ObservationPolicy, x_known: np.ndarray | None = None,
+                   y_known: np.ndarray | None = None) -> np.ndarray:
+    """`(n,)` bool: which of the observations `x` `(n, d)` [m], `y` `(n,)` :func:`drop_contradicted_inside` keeps
+    (every one that is not an inside point, and each inside point no other observation contradicts)."""
+    from scipy.spatial import cKDTree
+
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    inside = y < 0
+    keep = ~inside
+    if not inside.any():
+        return keep
+    xs, ys = [x[~inside]], [y[~inside]]
+    if x_known is not None and len(x_known):
+        xs.append(np.asarray(x_known, dtype=np.float64))
+        ys.append(np.asarray(y_known, dtype=np.float64))
+    xa, ya = np.concatenate(xs), np.concatenate(ys)
+    pts, depth = x[inside], policy.inside_depth(y[inside])
+    ok = np.ones(len(pts), dtype=bool)
+    for sel, limit in ((ya == 0, INSIDE_CLEARANCE * depth), (ya == 1, depth)):
+        if sel.any():
+            ok &= cKDTree(xa[sel]).query(pts)[0] >= limit * (1.0 - 1e-9)
+    keep[np.flatnonzero(inside)[ok]] = True
+    return keep
+
+
+def uncontradicted_by_step(x: np.ndarray, y: np.ndarray, steps: np.ndarray, policy: ObservationPolicy,
+                           x_other: np.ndarray, y_other: np.ndarray) -> np.ndarray:
+    """`(n,)` bool: the inner observations `x` `(n, d)`, `y` `(n,)` kept once the inside points that other
+    observations contradict are dropped, each judged as an exploration judged it when it was placed: against the
+    observations `x_other` `(m, d)`, `y_other` `(m,)` known throughout (the camera's) and the inner ones of its
+    ``steps`` `(n,)` and before. Logged files (a contacts CSV with steps, a bag) are labelled here."""
+    x, y, steps = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64), np.asarray(steps)
+    keep = np.ones(len(y), dtype=bool)
+    inside = y < 0
+    for step in np.unique(steps[inside]):
+        mine = inside & (steps == step)
+        known = ~inside & (steps <= step)
+        keep[mine] = uncontradicted(x[mine], y[mine], policy, np.concatenate([x[known], x_other]),
+                                    np.concatenate([y[known], y_other]))
+    return keep
 
 
 def retract_free_space(model, contact: np.ndarray, margin: float) -> np.ndarray:

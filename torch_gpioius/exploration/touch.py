@@ -209,15 +209,16 @@ def inside_observation(contact: np.ndarray, result, policy: ObservationPolicy, s
     """At most one inner observation: the point ``policy.touch_inside`` [m] behind ``contact`` `(d,)` along the
     outward normal the force sensor measured there (``result.force_normal``), labelled
     ``policy.inside_label(touch_inside)``; none without the setting or a measured force."""
-    depth = policy.touch_inside
     none = Observations.empty(len(contact), step, "touch")
-    if depth is None or result is None or not len(getattr(result, "forces", ())):
+    if policy.touch_inside is None or result is None or not len(getattr(result, "forces", ())):
         return none
     normal = np.asarray(result.force_normal, dtype=np.float64).reshape(-1)
-    if normal.shape != contact.shape or not np.isfinite(normal).all() or np.linalg.norm(normal) < 0.5:
+    if normal.shape != contact.shape:
         return none
-    return Observations((contact - depth * normal / np.linalg.norm(normal))[None], [policy.inside_label(depth)], [0],
-                        step=step, source="touch")
+    points, labels, _ = policy.behind_contacts(contact[None], normal[None])
+    if not len(points):
+        return none
+    return Observations(points, labels, np.zeros(len(points), np.int64), step=step, source="touch")
 
 
 def touch_model(touch) -> object:

@@ -7,7 +7,7 @@ camera -- is a :class:`World` that supplies
   sensor, the point-cloud source, and the contact controller that turns a planned step into force-guarded motion
   (:class:`torch_gpioius.contact.ContactController` on a robot arm; a geometric one in the 2-D world);
 * where to start: ``start``, ``direction`` (the approach), and the exploration range (``bounds``, eq. 25);
-* :attr:`World.defaults`: the world's own settings (theta, sigma^2, alpha, stop rules, observation policy);
+* :attr:`World.defaults`: the world's own settings (alpha, stop rules, the estimator's settings);
 * :meth:`World.measure`: the ground-truth metrics (eq. 23-24) where the truth is known;
 * :meth:`World.fingerprint`, :meth:`World.snapshot` / :meth:`World.restore`: what logs and resume need;
 * :meth:`World.perturbed`: the same world with a seeded perturbation (start, approach, sensor and camera noise)
@@ -27,9 +27,7 @@ import numpy as np
 
 from .._validation import as_bounds
 from ..contact import ContactController
-from ..kernels import InverseMultiquadricKernel
-from ..models.estimator import EstimatorSettings
-from .observations import ObservationPolicy
+from ..models.estimator import EstimatorSettings, EstimatorView
 from .protocols import Toucher
 from .registry import register_world
 from .stopping import StopRule, TravelBudget
@@ -60,19 +58,16 @@ class Hardware:
     tactile: Any = None
 
 
-_UNSET = object()
-
-
-@dataclass(frozen=True, init=False)
-class ExplorationDefaults:
+@dataclass(frozen=True)
+class ExplorationDefaults(EstimatorView):
     """A world's own exploration settings; every one can be overridden in :func:`torch_gpioius.explore`.
 
     The estimator's part (kernel, sigma^2, labels, what is learned) is one
     :class:`~torch_gpioius.models.estimator.EstimatorSettings`, defined in the model layer: the world only suggests
     which settings its objects run with (the robot study's objects E-H the paper's, a user's mesh the library's
-    default), and ``explore(settings=...)`` gives any other. The properties ``theta``, ``noise``, ``policy``,
-    ``kernel`` and ``learn`` read it, and the constructor still takes them (they then change the estimator's
-    settings), so that code written against the earlier fields keeps working.
+    default), and ``explore(settings=...)`` gives any other. ``kernel``, ``lengthscale``, ``noise``, ``policy`` and
+    ``learn`` read it (:class:`~torch_gpioius.models.estimator.EstimatorView`); :meth:`with_estimator` and
+    :meth:`estimator_changed` change it.
 
     Attributes:
         step: alpha, the planned step [m].
@@ -80,71 +75,31 @@ class ExplorationDefaults:
         stop: the world's stop rules (:mod:`torch_gpioius.exploration.stopping`).
         metrics_every: ground-truth metrics every k steps (and always at the last).
         approach_travel: the approach gives up after this distance [m].
-        estimator: the estimator's settings.
+        estimator: the estimator's settings (default: the paper's 2-D ones).
     """
 
-    step: float
-    max_steps: int
-    stop: tuple[StopRule, ...]
-    metrics_every: int
-    approach_travel: float
-    estimator: EstimatorSettings
+    step: float = 0.01
+    max_steps: int = 400
+    stop: tuple[StopRule, ...] = ()
+    metrics_every: int = 1
+    approach_travel: float = 2.0
+    estimator: EstimatorSettings = field(default_factory=EstimatorSettings.paper_2d)
 
-    def __init__(self, theta=_UNSET, noise=_UNSET, step: float = 0.01, max_steps: int = 400,
-                 stop: tuple[StopRule, ...] = (), policy=_UNSET, metrics_every: int = 1, approach_travel: float = 2.0,
-                 kernel=_UNSET, learn=_UNSET, estimator: EstimatorSettings | None = None) -> None:
-        base = estimator if estimator is not None else EstimatorSettings.paper_2d()
-        changes = {}
-        if kernel is not _UNSET and kernel is not None:
-            changes["kernel"] = kernel
-        elif theta is not _UNSET and theta is not None:
-            changes["kernel"] = InverseMultiquadricKernel(lengthscale=theta)
-        elif kernel is None and estimator is not None:      # kernel=None: the inverse multiquadric (earlier API)
-            changes["kernel"] = InverseMultiquadricKernel(lengthscale=base.lengthscale or 0.1)
-        if noise is not _UNSET and noise is not None:
-            changes["noise"] = noise
-        if policy is not _UNSET and policy is not None:
-            changes["labels"] = policy
-            if estimator is not None and policy.voxel != base.labels.voxel:
-                changes["voxel_rule"] = None               # a voxel given outright replaces the rule
-        if learn is not _UNSET and learn is not None:
-            changes["learn"] = learn
-        # the settings keep their preset's name unchanged; changed, or built from the earlier fields, they are custom
-        settings = base if estimator is not None and not changes else dataclasses.replace(base, **changes,
-                                                                                           name="custom")
-        for name, value in (("step", step), ("max_steps", max_steps), ("stop", tuple(stop)),
-                            ("metrics_every", metrics_every), ("approach_travel", approach_travel),
-                            ("estimator", settings)):
-            object.__setattr__(self, name, value)
-
-    @property
-    def theta(self) -> float | None:
-        """The kernel's length scale [m] (the paper's theta for the inverse multiquadric)."""
-        return self.estimator.lengthscale
-
-    @property
-    def noise(self) -> float:
-        return self.estimator.noise
-
-    @property
-    def policy(self) -> ObservationPolicy:
-        return self.estimator.labels
-
-    @property
-    def kernel(self):
-        """The kernel, or None for the inverse multiquadric (the earlier field's meaning: ``theta`` gives it)."""
-        k = self.estimator.kernel
-        return None if isinstance(k, InverseMultiquadricKernel) else k
-
-    @property
-    def learn(self) -> str:
-        return self.estimator.learn
+    def __post_init__(self) -> None:
+        if not isinstance(self.estimator, EstimatorSettings):
+            raise ValueError(f"estimator: expected EstimatorSettings, got {type(self.estimator).__name__}")
+        object.__setattr__(self, "stop", tuple(self.stop))
 
     def with_estimator(self, estimator: EstimatorSettings) -> "ExplorationDefaults":
         """These defaults with another estimator's settings."""
         if not isinstance(estimator, EstimatorSettings):
             raise ValueError(f"settings: expected EstimatorSettings, got {type(estimator).__name__}")
         return dataclasses.replace(self, estimator=estimator)
+
+    def estimator_changed(self, **changes) -> "ExplorationDefaults":
+        """These defaults with the estimator's settings changed (:meth:`EstimatorSettings.replace`'s fields; a
+        ``labels`` dict changes single labels), or themselves when nothing is given."""
+        return self if not changes else self.with_estimator(self.estimator.replace(**changes))
 
 
 @dataclass

@@ -20,7 +20,7 @@ import math
 import torch
 from torch import Tensor
 
-from ..kernels import ExactKernel, InverseMultiquadricKernel
+from ..kernels import ExactKernel
 from ..tolerances import tol
 
 __all__ = ["DenseExactInference", "JitterWarning", "NotPositiveDefiniteError", "robust_cholesky", "bordered",
@@ -61,7 +61,7 @@ def robust_cholesky(a: Tensor, what: str = "Gram matrix") -> tuple[Tensor, float
     if int(info) == 0 and bool(torch.isfinite(factor.diagonal(dim1=-2, dim2=-1)).all()):
         return factor, 0.0
     if not bool(torch.isfinite(a).all()):
-        raise NotPositiveDefiniteError(f"{what} has NaN or inf entries (overflow: check theta, the noise and K_t)")
+        raise NotPositiveDefiniteError(f"{what} has NaN or inf entries (overflow: check the kernel's length scale, the noise and K_t)")
     n = a.shape[-1]
     jitter = tol.jitter_rounding * n * torch.finfo(a.dtype).eps * float(a.diagonal().abs().max())
     factor, info2 = torch.linalg.cholesky_ex(a + jitter * torch.eye(n, dtype=a.dtype, device=a.device))
@@ -73,16 +73,16 @@ def robust_cholesky(a: Tensor, what: str = "Gram matrix") -> tuple[Tensor, float
         "task covariance")
 
 
-def engine_kernel(kernel, theta: float | None = None) -> ExactKernel:
-    """The kernel object of an engine: an :class:`ExactKernel`, or the inverse multiquadric with ``theta`` [m] (given
-    as ``theta=`` or as a float in the kernel's place)."""
-    if kernel is None and theta is not None:
-        kernel = theta
+def engine_kernel(kernel) -> ExactKernel:
+    """The kernel object of an engine (an :class:`ExactKernel`; the length travels inside it, never beside it).
+
+    Raises:
+        TypeError: anything else (a bare length included: wrap it, ``InverseMultiquadricKernel(0.1)``).
+    """
     if isinstance(kernel, ExactKernel):
         return kernel
-    if isinstance(kernel, bool) or not isinstance(kernel, (int, float)):
-        raise TypeError(f"kernel: expected an ExactKernel or a theta [m], got {type(kernel).__name__}")
-    return InverseMultiquadricKernel(float(kernel))
+    raise TypeError(f"kernel: expected an ExactKernel (e.g. InverseMultiquadricKernel(0.1)), got "
+                    f"{type(kernel).__name__}")
 
 
 def bordered(k: Tensor, k_new_old: Tensor, k_new_new: Tensor) -> Tensor:
@@ -97,15 +97,14 @@ class DenseExactInference:
         x: `(n, d)` training points [m].
         y: `(n,)` labels, 0 on a surface, 1 in free space.
         task: `(n,)` long task ids (0 inner, 1 outer; all 0 for GPIS).
-        kernel: the :class:`~torch_gpioius.kernels.ExactKernel` (or a float: theta [m] of the inverse multiquadric).
+        kernel: the :class:`~torch_gpioius.kernels.ExactKernel`.
         noise: noise variance sigma^2 on the whole diagonal (eq. 12).
         mean: constant prior mean m (eq. 2).
-        theta: the inverse multiquadric's theta [m], when no ``kernel`` is given.
     """
 
-    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel=None, noise: float = 0.006, mean: float = 1.0, *,
-                 theta: float | None = None):
-        self.kernel = engine_kernel(kernel, theta)
+    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel: ExactKernel, noise: float = 0.006,
+                 mean: float = 1.0):
+        self.kernel = engine_kernel(kernel)
         self.noise = float(noise)
         self.mean = float(mean)
         self.x = x.detach()

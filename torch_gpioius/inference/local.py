@@ -79,7 +79,7 @@ class LocalDenseInference:
 
     def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel, noise: float, mean: float,
                  centres: Tensor, tau: float) -> None:
-        self.kernel = engine_kernel(kernel, None)
+        self.kernel = engine_kernel(kernel)
         self.noise, self.mean, self.tau = float(noise), float(mean), float(tau)
         self.x, self.y, self.task = x.detach(), y.detach(), task.detach()
         self.centres = centres.detach().to(self.x)

@@ -47,6 +47,7 @@ import math
 import torch
 from torch import Tensor
 
+from ..kernels import ExactKernel
 from .dense import bordered, engine_kernel, robust_cholesky
 from .lowrank import truncated_basis
 from ..tolerances import tol
@@ -326,14 +327,14 @@ class StructuredExactInference:
         x: `(n, d)` training points [m] (any order of tasks).
         y: `(n,)` labels.
         task: `(n,)` task ids; at least one outer (1) point.
-        kernel: the :class:`~torch_gpioius.kernels.ExactKernel` (or a float: theta [m] of the inverse multiquadric).
+        kernel: the :class:`~torch_gpioius.kernels.ExactKernel`.
         noise: sigma^2 > 0.
         mean: prior mean m.
     """
 
-    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel=None, noise: float = 0.006, mean: float = 1.0, *,
-                 theta: float | None = None, outer_tol: float | None = None):
-        self.kernel = engine_kernel(kernel, theta)
+    def __init__(self, x: Tensor, y: Tensor, task: Tensor, kernel: ExactKernel, noise: float = 0.006,
+                 mean: float = 1.0, *, outer_tol: float | None = None):
+        self.kernel = engine_kernel(kernel)
         self.noise, self.mean = float(noise), float(mean)
         if outer_tol is not None and (not math.isfinite(outer_tol) or outer_tol <= 0):
             raise ValueError(f"outer_tol: must be a finite number > 0 (or None: exact), got {outer_tol}")

@@ -170,12 +170,10 @@ def load_checkpoint(path: str | os.PathLike):
 def _kernel(payload: dict, path: Path):
     """The kernel a checkpoint names (its description), or the inverse multiquadric of its ``theta`` (checkpoints
     written before the kernel carried its description)."""
-    from ..kernels import InverseMultiquadricKernel, from_description
+    from ..kernels import kernel_of_record
 
-    if "kernel" in payload:
-        if not isinstance(payload["kernel"], dict):
-            raise CheckpointError(f"{path}: field 'kernel' must be a kernel's description")
-        return from_description(payload["kernel"])
-    if not isinstance(payload.get("theta"), float):
+    if "kernel" in payload and not isinstance(payload["kernel"], dict):
+        raise CheckpointError(f"{path}: field 'kernel' must be a kernel's description")
+    if "kernel" not in payload and not isinstance(payload.get("theta"), float):
         raise CheckpointError(f"{path}: fields 'kernel' (or 'theta') must describe the kernel")
-    return InverseMultiquadricKernel(lengthscale=payload["theta"])
+    return kernel_of_record(payload)

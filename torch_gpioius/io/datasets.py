@@ -363,16 +363,16 @@ class Dataset:
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
-    def to_model(self, theta: float | None = None, noise: float | None = None, *, settings=None, **kwargs: Any):
+    def to_model(self, noise: float | None = None, *, settings=None, **kwargs: Any):
         """A :class:`torch_gpioius.GPIOIS` on these observations (GPIS if no outer observation), not yet fit.
 
         The kernel and sigma^2 are, in order: ``settings`` (an
         :class:`~torch_gpioius.models.estimator.EstimatorSettings`), else the header's (``estimator``, else its
         ``kernel`` and ``noise``; a log of a run with the Matérn-5/2 names it), else the inverse multiquadric of
-        0.1 m and 0.006; ``kernel``, ``noise`` or ``theta`` given here replace them (``theta``: the inverse
-        multiquadric's length scale, the paper's name).
+        0.1 m and 0.006; ``kernel`` (an :class:`~torch_gpioius.kernels.ExactKernel`) or ``noise`` given here
+        replace them.
         """
-        from ..kernels import InverseMultiquadricKernel, from_description
+        from ..kernels import kernel_of_record
         from ..models.estimator import EstimatorSettings
         from ..models.gpiois import GPIOIS
         from ..models.gpis import GPIS
@@ -384,21 +384,14 @@ class Dataset:
                 settings = EstimatorSettings.from_dict(self.meta["estimator"])
             except ValueError as exc:
                 raise DatasetError(f"the header's estimator settings: {exc}") from None
-        if "kernel" in kwargs and theta is not None:
-            raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's length scale)")
-        if theta is not None:
-            kwargs["kernel"] = InverseMultiquadricKernel(lengthscale=theta)
-        elif "kernel" not in kwargs:
-            desc = self.meta.get("kernel")
+        if kwargs.get("kernel") is None:
             if settings is not None:
                 kwargs["kernel"] = settings.new_kernel()
-            elif isinstance(desc, dict) and desc.get("kernel") is not None:
+            else:
                 try:
-                    kwargs["kernel"] = from_description(desc)
+                    kwargs["kernel"] = kernel_of_record(self.meta)
                 except ValueError as exc:
                     raise DatasetError(f"the header's kernel: {exc}") from None
-            else:
-                kwargs["kernel"] = InverseMultiquadricKernel(lengthscale=float(self.meta.get("theta") or 0.1))
         if noise is None:
             noise = settings.noise if settings is not None else (self.meta.get("noise") or 0.006)
         if (self.task == 1).any():
@@ -461,7 +454,7 @@ def _open_no_link(path: Path, flags: int, mode: str):
     """``open(path, mode)`` that refuses a symbolic link at ``path`` instead of writing into its target."""
     try:
         fd = os.open(path, flags | getattr(os, "O_NOFOLLOW", 0), 0o644)
-    except OSError as e:
+    except OSError:
         if os.path.islink(path):
             raise DatasetError(f"{path}: is a symbolic link; a log is written to a plain file, never through a "
                                "link (resume from the file it points to, or remove the link)") from None

@@ -403,7 +403,7 @@ def _direction(row: dict, columns: tuple, label: float, path: Path, line: int) -
 
 
 def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, units: str = "m", voxel="auto",
-                       settings="default", theta: float | None = None, noise: float | None = None,
+                       settings="default", noise: float | None = None,
                        source: str = "import", camera_origin=None) -> Dataset:
     """A user's contacts (inner, task 0) and camera captures (outer, task 1, step 0) labelled as an exploration with
     the same estimator settings labels them, in one Dataset.
@@ -425,8 +425,6 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             or 0 / None (every point).
         settings: an :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's name ("default",
             "paper").
-        theta: the inverse multiquadric's length scale [m] in place of the settings' kernel (the paper's name;
-            deprecated: give ``settings`` with the kernel).
         noise: sigma^2 in place of the settings'.
         source: the dataset's ``source``.
         camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None; with several clouds,
@@ -442,16 +440,12 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             ``camera_origin``, as many origins as clouds missing, contacts far outside the clouds (each names the
             file or argument).
     """
-    from ..exploration.observations import cover_gap, drop_contradicted_inside, vision_observations
+    from ..exploration.observations import cover_gap, uncontradicted_by_step, vision_observations
     from ..models.estimator import EstimatorSettings
 
     est = EstimatorSettings.preset(settings) if isinstance(settings, str) else settings
     if not isinstance(est, EstimatorSettings):
         raise DatasetError(f"settings: expected EstimatorSettings or a preset's name, got {type(settings).__name__}")
-    if theta is not None:
-        from ..kernels import InverseMultiquadricKernel
-
-        est = est.replace(kernel=InverseMultiquadricKernel(lengthscale=theta))
     if noise is not None:
         est = est.replace(noise=noise)
     x_in, y_in, step_in, normal_in = read_contacts_csv(contacts_csv, units=units)
@@ -484,7 +478,7 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         for f, o, c in zip(files, origins, captures):
             _check_camera(f, c.points, o, units)
     inner, inner_steps = _inner_with_inside_points(x_in, y_in, normal_in, step_in, est.labels)
-    keep = _uncontradicted(inner, inner_steps, est.labels, outer, drop_contradicted_inside)
+    keep = uncontradicted_by_step(inner.x, inner.y, inner_steps, est.labels, outer[0], outer[1])
     inner, inner_steps = inner.subset(keep), inner_steps[keep]
     gap = math.nan
     if captures and est.labels.vision_inside_gap is not None:
@@ -548,39 +542,13 @@ def _inner_with_inside_points(x: np.ndarray, y: np.ndarray, normal: np.ndarray, 
     (as an exploration records a touch), and each row's step."""
     from ..exploration.observations import Observations
 
-    xs, ys, steps = [], [], []
-    depth = labels.touch_inside
-    for p, label, n, k in zip(x, y, normal, step):
-        xs.append(p)
-        ys.append(label)
-        steps.append(k)
-        if depth is not None and label == 0 and np.isfinite(n).all():
-            xs.append(p - depth * n)
-            ys.append(labels.inside_label(depth))
-            steps.append(k)
-    d = x.shape[1]
-    return (Observations(np.asarray(xs, dtype=np.float64).reshape(-1, d), np.asarray(ys, dtype=np.float64),
-                         np.zeros(len(ys), np.int64), source="touch"), np.asarray(steps, dtype=np.int64))
-
-
-def _uncontradicted(inner, steps: np.ndarray, labels, outer, drop) -> np.ndarray:
-    """`(n,)` bool: the inner rows kept once the inside points that other observations contradict are dropped
-    (``drop``: :func:`~torch_gpioius.exploration.observations.drop_contradicted_inside`), each judged as an
-    exploration judged it when it was placed: against the camera's observations and the touches of its step and
-    before (the CSV's ``step`` column; all of them where it has none)."""
-    from ..exploration.observations import Observations
-
-    keep = np.ones(len(inner), dtype=bool)
-    inside = inner.y < 0
-    for step in np.unique(steps[inside]):
-        mine = inside & (steps == step)
-        known = ~inside & (steps <= step)
-        batch = Observations(inner.x[mine], inner.y[mine], inner.task[mine])
-        kept = drop(batch, labels, np.concatenate([inner.x[known], outer[0]]),
-                    np.concatenate([inner.y[known], outer[1]]))
-        survived = {tuple(p) for p in kept.x}
-        keep[np.flatnonzero(mine)] = [tuple(p) in survived for p in inner.x[mine]]
-    return keep
+    surface = np.flatnonzero(y == 0)
+    points, inside, of = labels.behind_contacts(x[surface], normal[surface])
+    rows = np.r_[np.arange(len(y)), surface[of]]                  # each inside point after its contact
+    order = np.argsort(np.r_[np.arange(len(y)) * 2, surface[of] * 2 + 1], kind="stable")
+    xs = np.concatenate([x, points.reshape(-1, x.shape[1])])[order]
+    ys = np.r_[y, inside][order]
+    return Observations(xs, ys, np.zeros(len(ys), np.int64), source="touch"), np.asarray(step)[rows][order]
 
 
 def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts: np.ndarray) -> None:

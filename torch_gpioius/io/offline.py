@@ -93,7 +93,7 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
 
 
 def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None = None, *,
-                theta: float | None = None, noise: float | None = None, resolution: float | None = None,
+                kernel=None, noise: float | None = None, resolution: float | None = None,
                 learn: str | None = None, settings=None, mesh: str | os.PathLike | None = None,
                 outer_mesh: str | os.PathLike | None = None, force: bool = False) -> dict:
     """Learn K_t on a dataset (or the final state of a log); save a checkpoint, a figure and the estimate's meshes.
@@ -102,7 +102,8 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         path: a ``.gpioius`` dataset or log, or a :class:`Dataset` (e.g. from
             :func:`torch_gpioius.io.importers.dataset_from_files`, which labels a user's files by estimator settings).
         out: folder for ``model.pt``, ``fit.png`` and ``fit.json`` (None: write nothing).
-        theta: the inverse multiquadric's length scale [m] (the paper's name) in place of the settings' kernel.
+        kernel: an :class:`~torch_gpioius.kernels.ExactKernel` (it carries its length scale) in place of the
+            settings'.
         noise: sigma^2 in place of the settings'.
         resolution: grid spacing of the estimate [m] (its figure and meshes).
         learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2), by the
@@ -138,7 +139,7 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
     check_distinct(mesh=mesh, outer_mesh=outer_mesh)
     ds = path if isinstance(path, Dataset) else load_dataset(path)
     path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
-    model = ds.to_model(theta=theta, noise=noise, settings=settings).fit()
+    model = ds.to_model(noise=noise, settings=settings, **({} if kernel is None else {"kernel": kernel})).fit()
     used = settings if settings is not None else _file_settings(ds)
     learn = learn if learn is not None else (used.learn if used is not None else "task")
     if learn != "task":

@@ -390,7 +390,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
                camera_transform=None, tool_offset: Sequence[float] = (0.0, 0.0, 0.0), tip_radius: float = 0.0,
                contact_force: float = 1.0, contact_spacing: float = 0.005, max_gap: float = 0.1,
                joint_names: Sequence[str] | None = None, policy=None, crop=None,
-               theta: float | None = None, noise: float | None = None, time_window=None,
+               kernel=None, noise: float | None = None, time_window=None,
                max_joint_speed: float = UR5_MAX_JOINT_SPEED, tactile_calibration=None, tactile_transform=None,
                patch=None, settings=None) -> Dataset:
     """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
@@ -411,7 +411,8 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         policy: :class:`torch_gpioius.exploration.observations.ObservationPolicy` for free space and the voxel
             (default: the exploration's, with the paper's 5 cm voxel).
         crop: `(2, 3)` box `[min; max]` [m] to crop the cloud to (tables and walls are not the object); None keeps all.
-        theta: IMQ length scale [m] stored in the header as the dataset's default for fitting.
+        kernel: an :class:`~torch_gpioius.kernels.ExactKernel` whose description the header stores as the
+            dataset's kernel for fitting (without ``settings``).
         noise: noise variance stored in the header likewise.
         time_window: ``(start, end)`` [s] after the first wrench sample: only wrench samples and clouds stamped
             inside it are imported (joint states and tf are read whole, for interpolation and lookups).
@@ -425,9 +426,10 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         patch: :class:`~torch_gpioius.exploration.patches.PatchSettings` (thinning and free-space margin).
         settings: the estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's
             name), recorded in the dataset for ``fit``; their labels give the free space and the voxel (a voxel rule
-            sized to ``crop``'s largest extent, else the labels' voxel) unless ``policy`` is given. Inside points
-            are not placed from a bag yet (the recorded settings say so). None: the paper's 5 cm voxels, and the
-            fit's kernel from ``theta`` / ``noise``.
+            sized to ``crop``'s largest extent, else the labels' voxel) unless ``policy`` is given; their
+            inside points are placed behind the contacts along the measured forces (``touch_inside``; judged as an
+            exploration judges them), none behind the seen surface (the recorded settings say so). None: the paper's 5 cm voxels, and the
+            fit's kernel from ``kernel`` / ``noise``.
 
     With ``topics.tactile``, every pad frame stamped at a contact (the nearest wrench sample within ``max_gap``
     has ``|F| >= contact_force``) becomes a patch (:func:`~torch_gpioius.exploration.patches.patch_observations`)
@@ -454,7 +456,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
     s = _BagImport.checked(bag, topics=topics, base_frame=base_frame, camera_transform=camera_transform,
                            tool_offset=tool_offset, tip_radius=tip_radius, contact_force=contact_force,
                            contact_spacing=contact_spacing, max_gap=max_gap, joint_names=joint_names, policy=policy,
-                           crop=crop, theta=theta, noise=noise, time_window=time_window,
+                           crop=crop, kernel=kernel, noise=noise, time_window=time_window,
                            max_joint_speed=max_joint_speed, tactile_calibration=tactile_calibration,
                            tactile_transform=tactile_transform, patch=patch, settings=settings)
     reader = _open(s.path)
@@ -491,7 +493,7 @@ class _BagImport:
     names: tuple
     policy: object
     crop: np.ndarray | None
-    theta: float | None
+    kernel: dict | None                 # the kernel's description (it carries its length scale)
     noise: float | None
     window: tuple | None
     max_joint_speed: float
@@ -503,14 +505,21 @@ class _BagImport:
 
     @classmethod
     def checked(cls, bag, *, topics, base_frame, camera_transform, tool_offset, tip_radius, contact_force,
-                contact_spacing, max_gap, joint_names, policy, crop, theta, noise, time_window, max_joint_speed,
+                contact_spacing, max_gap, joint_names, policy, crop, kernel, noise, time_window, max_joint_speed,
                 tactile_calibration, tactile_transform, patch, settings=None) -> "_BagImport":
         from kinematics.dh import UR5_JOINT_NAMES
         from kinematics.ur5 import UR5
 
         from ..exploration.observations import ObservationPolicy
 
+        from ..kernels import as_kernel
+
         topics = topics or BagTopics()
+        if kernel is not None:
+            try:
+                kernel = as_kernel(kernel).describe()
+            except TypeError as exc:
+                raise ValueError(f"import_bag: {exc}") from None
         estimator = _bag_settings(settings, crop, policy)
         policy = policy or (estimator.labels if estimator is not None else ObservationPolicy(voxel=0.05))
         names = tuple(joint_names or UR5_JOINT_NAMES)
@@ -549,7 +558,7 @@ class _BagImport:
                                  f"{time_window!r}")
             window = (w0, w1)
         return cls(Path(bag), topics, base_frame.lstrip("/"), T_fixed, tuple(tool_offset), tip_radius, contact_force,
-                   contact_spacing, max_gap, names, policy, crop, theta, noise, window, max_joint_speed,
+                   contact_spacing, max_gap, names, policy, crop, kernel, noise, window, max_joint_speed,
                    tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset), estimator)
 
     def in_window(self, t: float, t_first: float) -> bool:
@@ -607,10 +616,9 @@ def _inner_from_wrenches(s: _BagImport, wrenches: list, joint_msgs: list) -> dic
     if not touching.any():
         raise BagImportError(f"{path}: topic {topics.wrench}: no sample reaches |F| >= {s.contact_force:g} N "
                              f"(largest {magnitude.max():.3g} N): no contact to learn the inner shape from")
-    contact_pts = tips.copy()
-    if s.tip_radius > 0:
-        direction = np.einsum("nij,nj->ni", T[:, :3, :3], forces) / np.maximum(magnitude, 1e-12)[:, None]
-        contact_pts = tips - s.tip_radius * direction
+    # the measured force in the base frame: the surface pushes the fingertip out along its outward normal
+    direction = np.einsum("nij,nj->ni", T[:, :3, :3], forces) / np.maximum(magnitude, 1e-12)[:, None]
+    contact_pts = tips - s.tip_radius * direction if s.tip_radius > 0 else tips.copy()
     idx_c = np.flatnonzero(touching)
     keep_c = idx_c[thin_indices(contact_pts[idx_c], s.contact_spacing, np.empty((0, 3)), 0.0)] \
         if s.contact_spacing > 0 else idx_c
@@ -623,7 +631,8 @@ def _inner_from_wrenches(s: _BagImport, wrenches: list, joint_msgs: list) -> dic
     keep_f = free_idx[thin_indices(tips[free_idx], s.policy.free_space_spacing, contacts,
                                    s.policy.free_space_margin)]
     return {"t_w": t_w, "t_first": t_first, "forces": forces, "tips": tips, "touching": touching,
-            "step_of": step_of, "t_j": t_j, "q_j": q_j, "contacts": contacts, "free": tips[keep_f],
+            "step_of": step_of, "t_j": t_j, "q_j": q_j, "contacts": contacts, "normals": direction[keep_c],
+            "free": tips[keep_f],
             "free_steps": step_of[keep_f], "n_wrench": len(wrenches), "n_joints": len(joint_msgs)}
 
 
@@ -714,7 +723,9 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
 
 def _bag_settings(settings, crop, policy):
     """The estimator settings a bag import records (None without ``settings``): the voxel rule sized to ``crop``,
-    ``policy`` in place of the labels where given, and no inside points (not placed from a bag yet)."""
+    ``policy`` in place of the labels where given, and no inside points behind the seen surface (a bag's clouds
+    are averaged over a moving camera's poses, which leaves a seen point no single viewpoint to orient its normal
+    by); those behind the contacts are placed, along the measured forces."""
     if settings is None:
         return None
     from ..models.estimator import EstimatorSettings
@@ -727,24 +738,45 @@ def _bag_settings(settings, crop, policy):
         est = est.for_extent(float(np.max(box[1] - box[0])))
     if policy is not None:
         est = est.replace(labels=policy, voxel_rule=None)
-    if est.labels.touch_inside or est.labels.vision_inside:
-        est = est.replace(labels={"touch_inside": None, "vision_inside": None, "vision_inside_gap": None})
+    if est.labels.vision_inside:
+        est = est.replace(labels={"vision_inside": None, "vision_inside_gap": None})
     return est
+
+
+def _inside_points(s: _BagImport, inner: dict, seen: np.ndarray, free_o: np.ndarray):
+    """The inside points behind the contacts (the settings' ``touch_inside`` along each measured force), each
+    judged as an exploration judges it (:func:`~torch_gpioius.exploration.observations.uncontradicted_by_step`):
+    `(k, 3)` points, `(k,)` labels and `(k,)` steps; none without settings that place them."""
+    from ..exploration.observations import uncontradicted_by_step
+
+    labels = s.estimator.labels if s.estimator is not None else None
+    if labels is None or labels.touch_inside is None:
+        return np.empty((0, 3)), np.empty(0), np.empty(0, np.int64)
+    contacts = inner["contacts"]
+    points, y_in, of = labels.behind_contacts(contacts, inner["normals"])
+    steps_in = of + 1                                          # contact j is step j + 1
+    x = np.concatenate([contacts, inner["free"], points])
+    y = np.r_[np.zeros(len(contacts)), np.ones(len(inner["free"])), y_in]
+    steps = np.r_[np.arange(1, len(contacts) + 1), inner["free_steps"], steps_in]
+    keep = uncontradicted_by_step(x, y, steps, labels, np.concatenate([seen, free_o]).reshape(-1, 3),
+                                  np.r_[np.zeros(len(seen)), np.ones(len(free_o))])[len(contacts) + len(inner["free"]):]
+    return points[keep], y_in[keep], steps_in[keep]
 
 
 def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset:
     """The imported observations as a :class:`Dataset`, with the bag's topics, frames, thresholds and counts."""
     contacts, free, free_steps = inner["contacts"], inner["free"], inner["free_steps"]
     seen, free_o = outer["seen"], outer["free"]
+    behind, behind_y, behind_steps = _inside_points(s, inner, seen, free_o)
     p_surf = np.concatenate(pads["surface"]) if pads["surface"] else np.empty((0, 3))
     p_free = np.concatenate(pads["free"]) if pads["free"] else np.empty((0, 3))
-    x = np.concatenate([contacts, p_surf, free, p_free, seen, free_o])
-    y = np.concatenate([np.zeros(len(contacts) + len(p_surf)), np.ones(len(free) + len(p_free)), np.zeros(len(seen)),
-                        np.ones(len(free_o))])
-    n_inner = len(contacts) + len(p_surf) + len(free) + len(p_free)
+    x = np.concatenate([contacts, p_surf, free, p_free, behind, seen, free_o])
+    y = np.concatenate([np.zeros(len(contacts) + len(p_surf)), np.ones(len(free) + len(p_free)), behind_y,
+                        np.zeros(len(seen)), np.ones(len(free_o))])
+    n_inner = len(contacts) + len(p_surf) + len(free) + len(p_free) + len(behind)
     task = np.concatenate([np.zeros(n_inner), np.ones(len(seen) + len(free_o))]).astype(np.int64)
     step = np.concatenate([np.arange(1, len(contacts) + 1), *pads["surface_steps"], np.asarray(free_steps),
-                           *pads["free_steps"], np.zeros(len(seen) + len(free_o))]).astype(np.int64)
+                           *pads["free_steps"], behind_steps, np.zeros(len(seen) + len(free_o))]).astype(np.int64)
     topics = s.topics
     meta = {"source": f"rosbag:{s.path.name}", "frame": s.base, "bag_topics": {"cloud": topics.cloud,
             "wrench": topics.wrench, "joints": topics.joints}, "camera_frames": outer["frames"],
@@ -754,7 +786,7 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
             "counts": {"wrench": inner["n_wrench"], "joint_states": inner["n_joints"], "clouds": outer["n_clouds"],
                        "cloud_points": int(outer["n_raw"]), "contacts": int(len(contacts)),
                        "free_space": int(len(free)), "outer_surface": int(len(seen)),
-                       "outer_free_space": int(len(free_o))}}
+                       "outer_free_space": int(len(free_o)), "inside_points": int(len(behind))}}
     if topics.tactile is not None:
         n_pad, n_pad_used, n_pad_off, n_pad_empty = pads["counts"]
         meta["bag_topics"]["tactile"] = topics.tactile
@@ -763,8 +795,8 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
         meta["counts"].update({"pad_frames": n_pad, "pad_frames_used": n_pad_used,
                                "pad_frames_out_of_contact": n_pad_off, "pad_frames_untouched": n_pad_empty,
                                "patch_surface": int(len(p_surf)), "patch_free_space": int(len(p_free))})
-    if s.theta is not None:
-        meta["theta"] = s.theta
+    if s.kernel is not None:
+        meta["kernel"] = s.kernel
     if s.noise is not None:
         meta["noise"] = s.noise
     if s.estimator is not None:

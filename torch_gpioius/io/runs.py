@@ -87,15 +87,12 @@ class RunHistory:
     def kernel(self):
         """A new copy of the run's kernel as its header describes it (the inverse multiquadric of the header's
         ``theta`` in files that describe none)."""
-        from ..kernels import InverseMultiquadricKernel, from_description
+        from ..kernels import kernel_of_record
 
-        desc = self.meta.get("kernel")
-        if isinstance(desc, dict) and desc.get("kernel") is not None:
-            try:
-                return from_description(desc)
-            except ValueError as exc:
-                raise DatasetError(f"{self.path}: the header's kernel: {exc}") from None
-        return InverseMultiquadricKernel(lengthscale=float(self.meta.get("theta") or 0.1))
+        try:
+            return kernel_of_record(self.meta)
+        except ValueError as exc:
+            raise DatasetError(f"{self.path}: the header's kernel: {exc}") from None
 
     def pad_footprints(self, step: int) -> np.ndarray:
         """`(p, 4, 3)` the corners of the gel pad at every patch up to ``step`` [m], base frame (in order around

@@ -9,12 +9,16 @@ class with :func:`register_kernel` (so logs and checkpoints can name it), and su
 
 from __future__ import annotations
 
+import copy
+import math
+from dataclasses import dataclass
+
 from .base import ExactKernel
 from .inverse_multiquadric import InverseMultiquadricKernel, imq
 from .matern import Matern52
 
 __all__ = ["ExactKernel", "InverseMultiquadricKernel", "Matern52", "imq", "register_kernel", "from_description",
-           "as_kernel", "KERNELS"]
+           "as_kernel", "KERNELS", "KERNEL_ALIASES", "kernel_named", "kernel_of_record", "KernelChoice"]
 
 #: Registered kernels by the name their ``describe()`` gives.
 KERNELS: dict[str, type] = {}
@@ -52,16 +56,111 @@ def from_description(description: dict) -> ExactKernel:
         raise ValueError(f"kernel {description['kernel']}: bad parameters {params} ({exc})") from None
 
 
-def as_kernel(kernel, theta: float | None) -> ExactKernel:
-    """``kernel`` if given (an :class:`ExactKernel`), else the paper's inverse multiquadric with length scale
-    ``theta`` [m] (the paper's name; 0.1 when None).
+def as_kernel(kernel) -> ExactKernel:
+    """``kernel`` if given (an :class:`ExactKernel`), else the paper's inverse multiquadric of length scale 0.1 m.
 
     Raises:
         TypeError: ``kernel`` is not an :class:`ExactKernel`.
     """
     if kernel is None:
-        return InverseMultiquadricKernel(0.1 if theta is None else theta)
+        return InverseMultiquadricKernel(0.1)
     if not isinstance(kernel, ExactKernel):
         raise TypeError(f"kernel: expected a torch_gpioius.kernels.ExactKernel (e.g. Matern52(0.1)), got "
                         f"{type(kernel).__name__}")
     return kernel
+
+
+#: The short names users type for the built-in kernels (the command line's, scene files', studies'); a kernel
+#: registered later is named by its ``kind``.
+KERNEL_ALIASES = {"imq": InverseMultiquadricKernel.kind, "matern52": Matern52.kind}
+
+
+def kernel_kind(name: str) -> str:
+    """The registered kind a name users type stands for ("imq", "matern52", or a kind itself, any case).
+
+    Raises:
+        ValueError: a name no registered kernel has (lists the names).
+    """
+    if not isinstance(name, str):
+        raise ValueError(f"kernel: expected a name, got {name!r}")
+    kinds = {k.lower(): k for k in KERNELS}
+    kind = KERNEL_ALIASES.get(name.lower()) or kinds.get(name.lower())
+    if kind is None:
+        raise ValueError(f"kernel: unknown {name!r}; choose among {sorted({*KERNEL_ALIASES, *KERNELS})}")
+    return kind
+
+
+def _checked_length(lengthscale) -> float:
+    if isinstance(lengthscale, bool) or not isinstance(lengthscale, (int, float)) or not math.isfinite(lengthscale) \
+            or lengthscale <= 0:
+        raise ValueError(f"lengthscale: must be a finite length > 0 [m], got {lengthscale!r}")
+    return float(lengthscale)
+
+
+def kernel_named(name: str, lengthscale: float | None = None) -> ExactKernel:
+    """A registered kernel by a name users type, at length scale ``lengthscale`` [m] (None: the kernel's own default).
+
+    Raises:
+        ValueError: an unknown name or a length that is not a finite positive number.
+    """
+    cls = KERNELS[kernel_kind(name)]
+    return cls() if lengthscale is None else cls(lengthscale=_checked_length(lengthscale))
+
+
+def kernel_of_record(meta: dict, default: ExactKernel | None = None) -> ExactKernel:
+    """The kernel a record names: its ``kernel`` description, else (records written before kernels described
+    themselves) the inverse multiquadric of its ``theta``, else ``default`` (the paper's inverse multiquadric at
+    0.1 m when None). Logs, datasets, checkpoints and run folders all read their kernel here.
+
+    Raises:
+        ValueError: a description of an unknown kernel, or a ``theta`` that is not a positive length.
+    """
+    if isinstance(meta.get("kernel"), dict):
+        return from_description(meta["kernel"])
+    if meta.get("theta") is not None:
+        return InverseMultiquadricKernel(lengthscale=_checked_length(meta["theta"]))
+    return copy.deepcopy(default) if default is not None else InverseMultiquadricKernel(0.1)
+
+
+@dataclass(frozen=True)
+class KernelChoice:
+    """A kernel asked for by the names users type (the command line's ``--kernel`` and ``--lengthscale``, a scene
+    file's ``kernel`` and ``theta``, a study's settings), applied to the kernel settings already hold.
+
+    Attributes:
+        name: "imq", "matern52" or a registered kind; None: the kind the settings hold.
+        lengthscale: the length scale [m]; None: the held kernel's when of the same kind, else the kind's default.
+
+    Raises:
+        ValueError: an unknown name or a length that is not a finite positive number.
+    """
+
+    name: str | None = None
+    lengthscale: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.name is not None:
+            kernel_kind(self.name)
+        if self.lengthscale is not None:
+            object.__setattr__(self, "lengthscale", _checked_length(self.lengthscale))
+
+    def __bool__(self) -> bool:
+        return self.name is not None or self.lengthscale is not None
+
+    def apply(self, current: ExactKernel | None) -> ExactKernel:
+        """The kernel chosen, on top of ``current`` (None: the paper's inverse multiquadric); a new object."""
+        current = as_kernel(current)
+        kind = current.kind if self.name is None else kernel_kind(self.name)
+        if kind == current.kind:
+            chosen = copy.deepcopy(current)
+        else:
+            chosen = KERNELS[kind]()
+        if self.lengthscale is not None:
+            if not getattr(chosen, "learnable_length", False):
+                raise ValueError(f"lengthscale: the {kind} kernel has no length to set")
+            chosen.length = self.lengthscale
+        return chosen
+
+    def to_dict(self) -> dict:
+        """``{"name", "lengthscale"}`` (what a study folder's settings record)."""
+        return {"name": self.name, "lengthscale": self.lengthscale}

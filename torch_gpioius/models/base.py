@@ -53,7 +53,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
                              "carries its own)")
         if kernel is None:
             kernel = InverseMultiquadricKernel(0.1 if theta is None else theta, learn_lengthscale=learn_theta)
-        kernel = as_kernel(kernel, None)
+        kernel = as_kernel(kernel)
         super().__init__(train_inputs, train_y, likelihood)
         self.mean_module = ConstantMean().double()
         self.mean_module.constant.data.fill_(1.0)
@@ -451,3 +451,24 @@ def deprecated_theta(theta, owner: str) -> None:
 
         warnings.warn(f"{owner}(theta=...) is an alias of kernel=InverseMultiquadricKernel(lengthscale=...): the "
                       "kernel carries its length", DeprecationWarning, stacklevel=3)
+
+
+def kernel_for_theta(theta, kernel, owner: str):
+    """``kernel``, or for the deprecated ``theta=`` alias of an entry point users type (``explore``, the command
+    line's ``--theta``) the inverse multiquadric of that length scale [m], checked against ``tol.theta_range``, with a
+    DeprecationWarning; None when neither is given.
+
+    Raises:
+        ValueError: both given, or a ``theta`` out of range (names it).
+    """
+    if theta is None:
+        return kernel
+    if kernel is not None:
+        raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's length scale; a kernel "
+                         "carries its own)")
+    from .._validation import as_float
+    from ..tolerances import tol
+
+    length = as_float(theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+    deprecated_theta(theta, owner)
+    return InverseMultiquadricKernel(lengthscale=length)

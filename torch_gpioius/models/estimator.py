@@ -33,10 +33,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validation import as_float, as_int
-from ..kernels import ExactKernel, InverseMultiquadricKernel, Matern52, as_kernel, from_description
+from ..kernels import ExactKernel, InverseMultiquadricKernel, Matern52, as_kernel, from_description, kernel_named
 from .labels import ObservationPolicy
 
-__all__ = ["EstimatorSettings", "VoxelRule", "PRESETS", "LEARN", "as_learn", "RESTART_EVERY"]
+__all__ = ["EstimatorView", "EstimatorSettings", "VoxelRule", "PRESETS", "LEARN", "as_learn", "RESTART_EVERY"]
 
 #: What an estimator learns besides K_t: "task" (K_t alone, the paper's Sec. IV-A), "length" (the kernel's length
 #: scale and K_t) or "all" (the length, sigma^2 and K_t), by the exact marginal likelihood.
@@ -112,7 +112,7 @@ class EstimatorSettings:
     name: str = "custom"
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "kernel", as_kernel(self.kernel, None))
+        object.__setattr__(self, "kernel", as_kernel(self.kernel))
         object.__setattr__(self, "noise", as_float(self.noise, "noise", lo=1e-8, hi=100.0, positive=True))
         if not isinstance(self.labels, ObservationPolicy):
             raise ValueError(f"labels: expected an ObservationPolicy, got {type(self.labels).__name__}")
@@ -234,7 +234,7 @@ class EstimatorSettings:
         settings = cls.preset(base_name) if base_name is not None else None
         kernel = data.get("kernel")
         if isinstance(kernel, str):
-            kernel = _kernel_by_name(kernel, data.get("lengthscale"))
+            kernel = kernel_named(kernel, data.get("lengthscale"))
         elif isinstance(kernel, dict):
             kernel = from_description(kernel)
         elif kernel is not None:
@@ -312,17 +312,41 @@ def _cm(v) -> str:
     return "none" if v is None else f"{100 * float(v):g} cm"
 
 
-def _kernel_by_name(name: str, lengthscale) -> ExactKernel:
-    """A kernel from the names users type ("imq", "matern52", or a registered kind) and a length scale [m]."""
-    from ..kernels import KERNELS
+class EstimatorView:
+    """Read-through properties of a settings object that holds an ``estimator`` (:class:`EstimatorSettings`): a
+    world's defaults and one exploration's configuration read the estimator's parts by the same names."""
 
-    aliases = {"imq": InverseMultiquadricKernel.kind, "matern52": Matern52.kind}
-    kind = aliases.get(name.lower(), name)
-    cls = KERNELS.get(kind)
-    if cls is None:
-        raise ValueError(f"kernel: unknown {name!r}; choose among {sorted({*aliases, *KERNELS})}")
-    return cls() if lengthscale is None else cls(lengthscale=as_float(lengthscale, "lengthscale", positive=True,
-                                                                       unit="m"))
+    estimator: EstimatorSettings
+
+    @property
+    def kernel(self) -> ExactKernel:
+        """The kernel (it carries its own length scale)."""
+        return self.estimator.kernel
+
+    @property
+    def lengthscale(self) -> float | None:
+        """The kernel's length scale [m] (None for a kernel without one)."""
+        return self.estimator.lengthscale
+
+    @property
+    def noise(self) -> float:
+        """sigma^2."""
+        return self.estimator.noise
+
+    @property
+    def policy(self) -> ObservationPolicy:
+        """The labels (:class:`~torch_gpioius.models.labels.ObservationPolicy`)."""
+        return self.estimator.labels
+
+    @property
+    def learn(self) -> str:
+        """What each re-learning learns: "task", "length" or "all"."""
+        return self.estimator.learn
+
+    @property
+    def restart_every(self) -> int | None:
+        """The K_t fit's restart schedule (contacts between restarts; None: never)."""
+        return self.estimator.restart_every
 
 
 #: Depth [m] of the default inside points behind contacts and seen points.

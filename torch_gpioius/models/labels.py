@@ -93,6 +93,27 @@ class ObservationPolicy:
         continued inside."""
         return -float(depth) / self.ramp
 
+    def behind_contacts(self, contacts, normals) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The inside points :attr:`touch_inside` [m] behind ``contacts`` `(n, d)` [m] along their outward
+        ``normals`` `(n, d)` (any length; a measured force's direction serves), as an exploration places one behind
+        each touch: `(k, d)` points, `(k,)` labels (:meth:`inside_label`) and `(k,)` the indices of their contacts.
+        None without the setting, and none for a contact whose normal is not finite or shorter than 0.5 (unit
+        normals are expected; a zero one says the sensor measured no direction)."""
+        contacts = np.asarray(contacts, dtype=np.float64)
+        d = contacts.shape[-1] if contacts.ndim == 2 else 0
+        none = np.empty((0, d)), np.empty(0), np.empty(0, dtype=np.int64)
+        depth = self.touch_inside
+        if depth is None or contacts.ndim != 2 or not len(contacts):
+            return none
+        normals = np.asarray(normals, dtype=np.float64).reshape(contacts.shape)
+        length = np.linalg.norm(normals, axis=1)
+        ok = np.isfinite(normals).all(axis=1) & (length >= 0.5)
+        if not ok.any():
+            return none
+        index = np.flatnonzero(ok)
+        points = contacts[index] - depth * normals[index] / length[index, None]
+        return points, np.full(len(index), self.inside_label(depth)), index
+
     def inside_depth(self, label) -> np.ndarray:
         """The depth [m] an inside label stands for (the inverse of :meth:`inside_label`), elementwise."""
         return -np.asarray(label, dtype=np.float64) * self.ramp

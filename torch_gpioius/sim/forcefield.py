@@ -12,7 +12,6 @@ Frames: everything is in the UR5 base frame [m] (z up); the objects stand in fro
 
 from __future__ import annotations
 
-import dataclasses
 import math
 
 import numpy as np
@@ -121,39 +120,29 @@ def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDe
     checked = {k: as_float(v, k, lo=0.0, hi=0.1, unit="m (0: none)") or None for k, v in given.items()}
     if offset is not None:
         checked["cover_offset"] = offset
-    return dataclasses.replace(defaults, policy=dataclasses.replace(defaults.policy, **checked))
+    return defaults.estimator_changed(labels=checked)
 
 
-#: The kernels ``Scene3D.from_mesh(kernel=...)`` names: the paper's inverse multiquadric and the Matérn-5/2.
-KERNELS = ("imq", "matern52")
-
-
-def with_kernel(defaults: ExplorationDefaults, kernel, theta) -> ExplorationDefaults:
-    """``defaults`` with the kernel named by ``kernel`` ("imq", "matern52", an ExactKernel or None: as it is) and
-    its length ``theta`` [m] (None: the kernel's own): the inverse multiquadric's theta or the Matérn's length scale.
+def with_kernel(defaults: ExplorationDefaults, kernel) -> ExplorationDefaults:
+    """``defaults`` with the kernel ``kernel``: an :class:`~torch_gpioius.kernels.ExactKernel`, a name users type
+    ("imq", "matern52", a registered kind; at the held kernel's length when of its kind), or a
+    :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length scale); None or an empty choice: as they are
+    (and so keep their name).
 
     Raises:
-        ValueError: an unknown kernel name, a non-positive length, or a length given with a kernel object.
+        ValueError: an unknown kernel name or a bad length (names it).
     """
-    from ..kernels import ExactKernel, Matern52
+    from ..kernels import ExactKernel, KernelChoice
 
-    if theta is not None:
-        theta = as_float(theta, "theta", positive=True, unit="m")
-    if kernel is None and theta is None:            # nothing asked: the settings keep their kernel and their name
-        return defaults
+    if isinstance(kernel, str):
+        kernel = KernelChoice(kernel)
+    if isinstance(kernel, KernelChoice):
+        kernel = kernel.apply(defaults.kernel) if kernel else None
     if kernel is None:
-        kernel = "imq" if defaults.kernel is None else ("matern52" if isinstance(defaults.kernel, Matern52) else
-                                                        defaults.kernel)
-    if isinstance(kernel, ExactKernel):
-        if theta is not None:
-            raise ValueError("theta: give the length in the kernel object itself")
-        return dataclasses.replace(defaults, kernel=kernel)
-    if kernel == "imq":
-        return dataclasses.replace(defaults, kernel=None, theta=defaults.theta if theta is None else theta)
-    if kernel == "matern52":
-        ell = (defaults.kernel.ell if isinstance(defaults.kernel, Matern52) else 0.1) if theta is None else theta
-        return dataclasses.replace(defaults, kernel=Matern52(ell))
-    raise ValueError(f"kernel: must be one of {KERNELS} or an ExactKernel, got {kernel!r}")
+        return defaults
+    if not isinstance(kernel, ExactKernel):
+        raise ValueError(f"kernel: expected a name, a KernelChoice or an ExactKernel, got {type(kernel).__name__}")
+    return defaults.estimator_changed(kernel=kernel)
 
 
 def as_views(views) -> tuple[str, ...]:
@@ -355,8 +344,7 @@ class Scene3D(World):
                   resolution: float | None = None, name: str = "", seed: int = 0,
                   cover_stiffness: float | None = None, sensor_noise: float = 0.02,
                   defaults: ExplorationDefaults | None = None, support: float | str | None = "base",
-                  settings: str = "default", views=None, kernel=None, theta: float | None = None,
-                  noise: float | None = None, voxel: float | None = None, touch_inside: float | None = None,
+                  settings: str = "default", views=None, kernel=None, noise: float | None = None, voxel: float | None = None, touch_inside: float | None = None,
                   vision_inside: float | None = None, vision_inside_gap: float | None = None,
                   learn: str | None = None, cover_offset: bool | None = None) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
@@ -389,10 +377,10 @@ class Scene3D(World):
             settings: "default" (:func:`object_defaults` and all three :data:`VIEWS`) or "paper" (the robot study's
                 :data:`ROBOT_STUDY_DEFAULTS` and the paper's single fixed camera); ``defaults`` replaces either.
             views: the camera's views (see the class; default: by ``settings``).
-            kernel: "imq" (the paper's inverse multiquadric), "matern52", or an
-                :class:`~torch_gpioius.kernels.ExactKernel` (default: by ``settings``, "matern52" or "imq").
-            theta: the kernel's length [m]: the inverse multiquadric's theta_x, or the Matérn's length scale
-                (default: by ``settings``: 0.1 Matérn, 0.15 inverse multiquadric).
+            kernel: "imq" (the paper's inverse multiquadric), "matern52" (each at the settings' length when the
+                settings hold that kind), a :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length scale)
+                or an :class:`~torch_gpioius.kernels.ExactKernel` (default: by ``settings``, a Matérn of 0.1 m or
+                the inverse multiquadric of 0.15 m).
             noise: sigma^2 (default: by ``settings``, 0.08).
             voxel: the camera's voxel edge [m] (0: every point; default: by ``settings``).
             touch_inside: depth [m] of the inside point behind each contact (``ObservationPolicy.touch_inside``; 0:
@@ -403,8 +391,8 @@ class Scene3D(World):
                 (``ObservationPolicy.vision_inside_gap``; 0: never; default: by ``settings``, 3 cm or never).
             cover_offset: beyond that gap, the outer task's prior mean stands for the gap the touches measure
                 (``ObservationPolicy.cover_offset``; default: off).
-            learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from ``theta``) or "all" (the
-                length and sigma^2, from ``theta`` and ``noise``; ``explore(learn=)``); default: by ``settings``.
+            learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from the kernel's) or "all"
+                (the length and sigma^2, from the kernel's and ``noise``; ``explore(learn=)``); default: by ``settings``.
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
@@ -419,16 +407,16 @@ class Scene3D(World):
         mesh = place(load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner"), at)
         chosen = settings_for(settings, mesh)
         views = as_views(chosen["views"] if views is None else views)
-        defaults = with_kernel(chosen["defaults"] if defaults is None else defaults, kernel, theta)
+        defaults = with_kernel(chosen["defaults"] if defaults is None else defaults, kernel)
         if noise is not None:
-            defaults = dataclasses.replace(defaults, noise=as_float(noise, "noise", positive=True))
+            defaults = defaults.estimator_changed(noise=as_float(noise, "noise", positive=True))
         if voxel is not None:
-            defaults = dataclasses.replace(defaults, policy=defaults.policy.with_voxel(voxel))
+            defaults = defaults.with_estimator(defaults.estimator.with_voxel(voxel))
         if learn is not None:
             from ..exploration.config import as_learn
 
             learn = as_learn(learn)
-            defaults = dataclasses.replace(defaults, learn=learn)
+            defaults = defaults.estimator_changed(learn=learn)
         defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside,
                                       vision_inside_gap=vision_inside_gap, cover_offset=cover_offset)
         gap = (0.008 if cover == "tight" else 0.01) if gap is None else gap

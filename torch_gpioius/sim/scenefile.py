@@ -30,8 +30,8 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     bridge = 0.03                     # a loose cover's bridging radius
     settings = "default"              # or "paper": one fixed camera, 5 cm voxels, the inverse multiquadric
     views = ["fixed", "mirrored", "wrist"]   # the simulated camera's views (or a count, or "paper")
-    kernel = "matern52"               # or "imq"; theta: its length [m]; noise: sigma^2; voxel: the camera's [m]
-    theta = 0.1
+    kernel = "matern52"               # or "imq"; lengthscale (theta): its length [m]; noise: sigma^2; voxel [m]
+    lengthscale = 0.1
     noise = 0.08
     voxel = 0.02
     touch_inside = 0.02               # an inside point this deep behind each contact [m] (0: none)
@@ -71,7 +71,8 @@ _TOP = {"name", "world", "object", "cover", "approach", "range", "forcefield", "
 _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
 _COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
           "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
-_SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "theta", "noise",
+_SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "lengthscale",
+                            "theta", "noise",
                             "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "cover_offset",
                             "learn"},
              "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
@@ -249,6 +250,7 @@ def _check_finite(value, path: Path, key: str) -> None:
 #: The scene settings whose values are checked when the file is read, not when the world is built: key ->
 #: (lowest, highest, whether the lowest is allowed) for lengths and numbers [SI units].
 _RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, True), "theta": (1e-3, 10.0, False),
+           "lengthscale": (1e-3, 10.0, False),
            "noise": (1e-6, 10.0, False), "touch_inside": (0.0, 0.2, True), "vision_inside": (0.0, 0.2, True),
            "vision_inside_gap": (0.0, 0.5, True), "bridge": (0.0, 0.2, False), "gap": (0.0, 0.2, False),
            "resolution": (0.0, 0.05, False), "spacing": (0.0, 0.2, False), "timestep": (0.0, 0.1, False),
@@ -274,6 +276,28 @@ def _setting_problem(key: str, value) -> str | None:
         if not (value <= hi and (value >= lo if closed else value > lo)):
             return f"must be in {'[' if closed else '('}{lo:g}, {hi:g}], got {value!r}"
     return None
+
+
+def _kernel_choice(settings: dict) -> dict:
+    """A world section's settings with ``kernel`` and its length (``lengthscale``, or ``theta``, the paper's name)
+    as one :class:`~torch_gpioius.kernels.KernelChoice`.
+
+    Raises:
+        ValueError: both ``lengthscale`` and ``theta`` given, or an unknown kernel name.
+    """
+    from ..kernels import KernelChoice
+
+    settings = dict(settings)
+    if "lengthscale" in settings and "theta" in settings:
+        raise ValueError("lengthscale, theta: the same length under two names; give lengthscale")
+    length = settings.pop("lengthscale", settings.pop("theta", None))
+    name = settings.pop("kernel", None)
+    if name is not None and not isinstance(name, str):
+        raise ValueError(f"kernel: expected a name such as \"matern52\" or \"imq\", got {name!r}")
+    choice = KernelChoice(name, length)
+    if choice:
+        settings["kernel"] = choice
+    return settings
 
 
 def _check_reach(scene, spec: SceneSpec) -> None:
@@ -347,7 +371,7 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
         if world == "forcefield":
             from .forcefield import Scene3D
 
-            scene = Scene3D.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
+            scene = Scene3D.from_mesh(mesh, kind, name=spec.name, **where, **cover, **_kernel_choice(settings))
         else:
             from .mujoco import MujocoScene
 

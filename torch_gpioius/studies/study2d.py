@@ -212,7 +212,7 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
         max_steps: cap on planning steps per run.
         progress: show progress (bars on a terminal, plain lines otherwise).
         smoke: a CI run of a few steps: figures and records as usual, but the claims are not judged.
-        **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, ...).
+        **explore_kwargs: forwarded to ``explore`` (step, kernel, noise, policy, ...).
 
     Returns:
         ``{"traces": ..., "rows": ..., "claims": ..., "seconds": ...}``.

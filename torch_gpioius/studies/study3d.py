@@ -240,7 +240,7 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         voxel: edge of the camera's voxels [m] (0: every camera point; None: each scene's own, 0.05 as the paper).
         outer_tol: the visual-tactile runs with a truncated outer basis (``explore(outer_tol=...)``); the
             tactile-only runs have no camera points. None: exact.
-        **explore_kwargs: forwarded to ``explore`` (step, theta, noise, policy, device, ...).
+        **explore_kwargs: forwarded to ``explore`` (step, kernel, noise, policy, device, ...).
     """
     from ..exploration.registry import world_entry
     from ..io.outputs import StagedFiles

@@ -30,6 +30,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
+from typing import Any
 from pathlib import Path
 
 import numpy as np
@@ -39,7 +40,7 @@ from ..metrics import SHAPE_METRICS
 from .stats import median_interval, paired_difference
 
 __all__ = ["run_sweep", "SweepSettings", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError", "MODES",
-           "WORLDS", "FRACTIONS", "MAX_SEEDS"]
+           "WORLDS", "FRACTIONS", "MAX_SEEDS"]  # noqa: F822 (WORLDS: the module's __getattr__)
 
 #: Modes a sweep can run: the paper's two, and the evidence-seeking and local-similarity variants.
 MODES = ("visual-tactile", "tactile", "visual-tactile+taps", "local", "local+taps", "visual-tactile+reach",
@@ -86,8 +87,7 @@ class RunSpec:
     settings: str | None = None     # 3-D worlds: "default" or "paper" (World.with_settings); None: the world's own
     learn: str | None = None        # "task", "length" or "all" (explore(learn=)); None: the world's own
     views: tuple | None = None      # 3-D worlds: the camera's views (World.with_views); None: the world's own
-    kernel: str | None = None       # "imq" or "matern52"; None: the world's own
-    theta: float | None = None      # the kernel's length [m] (IMQ theta, Matern length scale); None: the world's own
+    kernel: Any = None              # a KernelChoice (a kernel's name and length scale); None: the world's own
     noise: float | None = None      # sigma^2; None: the world's own
     scene_hash: str | None = None   # the scene file's content (scenefile.scene_fingerprint): a run of an edited
     #                                 scene is another run, whatever its name
@@ -153,14 +153,8 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["outer_tol"] = spec.outer_tol
     if spec.learn is not None:
         kw["learn"] = spec.learn
-    if spec.kernel is not None or spec.theta is not None:
-        from ..sim.forcefield import with_kernel
-
-        chosen = with_kernel(world.defaults, spec.kernel, spec.theta)
-        if chosen.kernel is None:
-            kw["theta"] = chosen.theta
-        else:
-            kw["kernel"] = chosen.kernel
+    if spec.kernel:
+        kw["kernel"] = spec.kernel.apply(world.defaults.kernel)
     if spec.noise is not None:
         kw["noise"] = spec.noise
     if spec.device is not None:
@@ -353,8 +347,7 @@ def run_one(spec: RunSpec) -> dict:
     record["learn"] = kw.get("learn") or getattr(world.defaults, "learn", "task")
     if trace is not None:               # the estimator's settings the run used, as its log's header records them
         record["estimator"] = _logged_estimator(out / "logs" / f"{spec.key}.gpioius")
-    kernel = None if "theta" in kw else kw.get("kernel", world.defaults.kernel)
-    record["kernel"] = "InverseMultiquadric" if kernel is None else kernel.kind
+    record["kernel"] = kw.get("kernel", world.defaults.kernel).kind
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions
@@ -877,8 +870,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
               device: str | None = None, settings: str | None = None, learn: str | None = None,
-              views=None, kernel: str | None = None, theta: float | None = None,
-              noise: float | None = None) -> dict:
+              views=None, kernel=None, noise: float | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -921,11 +913,11 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         views: the 3-D worlds' simulated camera views in place of the settings' (names from
             ``torch_gpioius.sim.forcefield.VIEWS``, a count or "paper": the fixed camera alone; ``with_views``);
             None: each world's own. A study folder holds one setting.
-        kernel: "imq" (the paper's inverse multiquadric) or "matern52"; None: each world's own.
-        theta: the kernel's length [m] (the inverse multiquadric's theta, the Matérn's length scale; where ``learn``
-            learns it, where it starts); None: the kernel's own.
-        noise: sigma^2 (where ``learn="all"`` learns it, where it starts); None: each world's own. ``kernel``,
-            ``theta`` and ``noise`` too: one setting per folder.
+        kernel: a kernel's name ("imq", the paper's inverse multiquadric, "matern52", or a registered kind) or a
+            :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length scale [m]; where ``learn`` learns the
+            length, where it starts); None: each world's own.
+        noise: sigma^2 (where ``learn="all"`` learns it, where it starts); None: each world's own. ``kernel`` and
+            ``noise`` too: one setting per folder.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -939,8 +931,30 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
-        settings=settings, learn=learn, views=views, kernel=kernel, theta=theta, noise=noise)
+        settings=settings, learn=learn, views=views, kernel=kernel, noise=noise)
     return sweep.run()
+
+
+def _kernel_choice(kernel):
+    """A study's kernel setting as a :class:`~torch_gpioius.kernels.KernelChoice` (None: each world's own).
+
+    Raises:
+        ValueError: an unknown name or a bad length, or another type.
+    """
+    from ..kernels import KernelChoice
+
+    if kernel is None:
+        return None
+    if isinstance(kernel, str):
+        kernel = KernelChoice(kernel)
+    if not isinstance(kernel, KernelChoice):
+        raise ValueError(f"kernel: expected a kernel's name or a KernelChoice, got {type(kernel).__name__}")
+    from ..tolerances import tol
+
+    if kernel.lengthscale is not None:
+        as_float(kernel.lengthscale, "lengthscale", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True,
+                 unit="m")
+    return kernel or None
 
 
 @dataclass(frozen=True)
@@ -971,15 +985,14 @@ class SweepSettings:
     settings: str | None = None
     learn: str | None = None
     views: tuple | None = None
-    kernel: str | None = None
-    theta: float | None = None
+    kernel: Any = None                                  # a KernelChoice, or None
     noise: float | None = None
     scene_hashes: dict = field(default_factory=dict)    # a scene's name -> scenefile.scene_fingerprint
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
-                learn=None, views=None, kernel=None, theta=None, noise=None) -> "SweepSettings":
+                learn=None, views=None, kernel=None, noise=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry
 
@@ -1035,15 +1048,7 @@ class SweepSettings:
             if world not in ("forcefield", "mujoco"):
                 raise ValueError(f"views: the simulated camera views are the 3-D worlds' (forcefield, mujoco), not "
                                  f"{world}'s")
-        if kernel is not None:
-            from ..sim.forcefield import KERNELS
-
-            if kernel not in KERNELS:
-                raise ValueError(f"kernel: must be one of {KERNELS}, got {kernel!r}")
-        if theta is not None:
-            from ..tolerances import tol
-
-            theta = as_float(theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        kernel = _kernel_choice(kernel)
         if noise is not None:
             from ..tolerances import tol
 
@@ -1053,7 +1058,7 @@ class SweepSettings:
         hashes = {name: scene_fingerprint(path) for name, path in scene_files.items()}
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
-                   kernel, theta, noise, hashes)
+                   kernel, noise, hashes)
 
     def run(self) -> dict:
         """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
@@ -1083,8 +1088,10 @@ class SweepSettings:
         # way (a key left out of the call would not be compared); older folders lack the newer keys, which reads as
         # None, the setting they ran with
         identity = {"outer_tol": self.outer_tol, "settings": self.settings, "learn": self.learn,
-                    "views": None if self.views is None else "+".join(self.views), "kernel": self.kernel,
-                    "theta": self.theta, "noise": self.noise}
+                    "views": None if self.views is None else "+".join(self.views), "noise": self.noise,
+                    # a folder's kernel as the command line names it (the earlier folders' keys)
+                    "kernel": self.kernel.name if self.kernel else None,
+                    "theta": self.kernel.lengthscale if self.kernel else None}
         return claim_folder(self.out, "study", self.force, world=self.world, voxel=self.voxel,
                             touch=None if self.touch == "point" else self.touch, **identity)   # older: point runs
 
@@ -1100,7 +1107,7 @@ class SweepSettings:
     def _specs(self, out: Path) -> list[RunSpec]:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
-                        self.settings, self.learn, self.views, self.kernel, self.theta, self.noise,
+                        self.settings, self.learn, self.views, self.kernel, self.noise,
                         self.scene_hashes.get(o))
                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
 

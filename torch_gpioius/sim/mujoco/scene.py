@@ -22,7 +22,7 @@ from ...exploration.world import (ContactTruth, ExplorationDefaults, Hardware, M
 from ..._validation import as_bounds
 from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
 from .bodies import MeshBody, PrimitiveBody, as_body
-from .primitives import Primitive, as_primitives
+from .primitives import as_primitives
 
 __all__ = ["MujocoScene", "MUJOCO_DEFAULTS", "SCENE_LIMITS", "MAX_PRIMITIVES", "MAX_COVER_VERTICES"]
 
@@ -251,7 +251,6 @@ class MujocoScene(World):
         return cls(body, mesh, start, direction, bounds, name=name, seed=seed, **scene_kw)
 
     def _xml(self) -> str:
-        from .covers import cover_flexcomp
         from .ur5 import ur5_mjcf
 
         body, actuators, sensors = ur5_mjcf(tool_offset=(0.0, 0.0, self.tool_length), tip_radius=self.tip_radius)

@@ -110,7 +110,7 @@ def ur5_mjcf(*, tool_offset=(0.0, 0.0, 0.05), tip_radius: float = 0.004, tip_mas
         closing.append("</body>")
         prev = row
     lines += [f'<body name="flange" pos="{_vec((prev.a, 0.0, prev.d))}" quat="{_quat_rotx(prev.alpha)}" gravcomp="1">',
-              f'<inertial pos="0 0 0.01" mass="0.05" diaginertia="1e-5 1e-5 1e-5"/>',
+              '<inertial pos="0 0 0.01" mass="0.05" diaginertia="1e-5 1e-5 1e-5"/>',
               f'<geom type="cylinder" size="0.012 {max(tool[2] - tip_radius, 0.002) / 2:.6g}" '
               f'pos="{_vec((tool[0], tool[1], max(tool[2] - tip_radius, 0.002) / 2))}" group="{ROBOT_GROUP}" '
               'contype="0" conaffinity="0" rgba=".2 .2 .2 1"/>',
@@ -119,7 +119,7 @@ def ur5_mjcf(*, tool_offset=(0.0, 0.0, 0.05), tip_radius: float = 0.004, tip_mas
               *[f'<joint name="tip_{a}" type="slide" axis="{ax}" stiffness="{tip_stiffness}" damping="{tip_damping}" '
                 'range="-0.012 0.012" limited="true" armature="0.01"/>'
                 for a, ax in (("x", "1 0 0"), ("y", "0 1 0"), ("z", "0 0 1"))],
-              f'<site name="ft_site" pos="0 0 0" size="0.002"/>',
+              '<site name="ft_site" pos="0 0 0" size="0.002"/>',
               f'<geom name="fingertip" type="sphere" size="{tip_radius}" contype="1" conaffinity="1" condim="3" '
               'friction="0.3 0.005 0.0001" solref="0.004 1" rgba=".9 .3 .1 1"/>',
               "</body>", "</body>"]
