@@ -53,7 +53,7 @@ def test_bad_lengthscale_and_the_theta_alias():
     assert old.describe() == k.describe() and repr(old) == "InverseMultiquadricKernel(lengthscale=0.12)"
 
 
-from tests.kernels.contract import KernelContract  # noqa: E402
+from torch_gpioius.testing import KernelContract  # noqa: E402
 
 
 class TestContract(KernelContract):

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 import torch_gpioius as tg
-from tests.kernels.contract import KernelContract
+from torch_gpioius.testing import KernelContract
 from torch_gpioius.kernels import Matern52
 
 

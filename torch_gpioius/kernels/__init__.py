@@ -4,7 +4,7 @@ multiquadric of the paper (eq. 5, the default) and a Matérn-5/2.
 A new kernel is one file: subclass :class:`ExactKernel`, implement its five methods (and, for its length to be
 learned, :attr:`ExactKernel.length` and :meth:`ExactKernel.value_at` with ``learnable_length = True``), decorate the
 class with :func:`register_kernel` (so logs and checkpoints can name it), and subclass the contract tests in
-``tests/kernels/contract.py`` for its test file.
+:class:`torch_gpioius.testing.KernelContract` for its test file.
 """
 
 from __future__ import annotations

@@ -88,8 +88,11 @@ class Matern52(ExactKernel):
         if last_dim_is_batch:
             raise NotImplementedError(f"{type(self).__name__}: last_dim_is_batch is not supported")
         if diag:
-            return self.prior_variance(1.0) * x1.new_ones(x1.shape[:-1])
-        return self.value_at(x1, x2, self.lengthscale.reshape(()))
+            return self.prior_variance(1.0) * x1.new_ones(torch.broadcast_shapes(self.batch_shape, x1.shape[:-2])
+                                                          + x1.shape[-2:-1])
+        # a batch of kernels (GPyTorch's batch_shape) has a length per batch member, `(*batch, 1, 1)`
+        length = self.lengthscale if len(self.batch_shape) else self.lengthscale.reshape(())
+        return self.value_at(x1, x2, length)
 
     def gradient(self, x1: Tensor, x2: Tensor, value: Tensor | None = None) -> Tensor:
         """``dk/da = -sigma^2 (5 / (3 ell^2)) (1 + s) e^(-s) (a - b)``, ``s = sqrt(5) r / ell``: smooth at r = 0."""

@@ -1,6 +1,7 @@
-"""Contract tests every kernel must pass (a new kernel's test file subclasses :class:`KernelContract`).
+"""The kernel contract's tests: every kernel must pass them (a kernel's test file subclasses :class:`KernelContract`,
+the project's own and a user's alike).
 
-What the exact engines rely on (torch_gpioius/kernels/base.py), checked against independent references: ``value``
+What the exact engines rely on (:mod:`torch_gpioius.kernels.base`), checked against independent references: ``value``
 against GPyTorch's ``forward`` and against itself under shifts (stationarity), ``gradient`` against autograd,
 ``prior_variance`` against the diagonal, ``second_derivative_at_zero`` against a Richardson-extrapolated second
 difference of the radial profile, Gram matrices positive definite, and ``describe`` rebuilding the same kernel.
@@ -17,9 +18,20 @@ import torch
 
 import torch_gpioius as tg
 
+from .differences import richardson_derivative
+
+__all__ = ["KernelContract"]
+
 
 class KernelContract:
-    """Subclass with ``make()`` returning the kernel under test (and ``dim`` if not 3)."""
+    """pytest checks of the kernel contract: subclass it in a test file as ``class TestMyKernel(KernelContract)``
+    with ``make()`` returning the kernel under test (and ``dim`` if not 3); pytest runs each ``test_*`` method.
+
+    Example:
+        >>> class TestMatern52(KernelContract):
+        ...     def make(self):
+        ...         return tg.kernels.Matern52(0.1)
+    """
 
     dim = 3
 
@@ -62,8 +74,6 @@ class KernelContract:
         torch.testing.assert_close(g, ref, rtol=1e-10, atol=1e-12 * float(k.prior_variance(1.0)))
 
     def test_second_derivative_at_zero_matches_a_difference(self):
-        from tests.reference import richardson_derivative
-
         k = self.make()
         x = torch.zeros(1, self.dim, dtype=torch.float64)
         e = torch.zeros(1, self.dim, dtype=torch.float64)
@@ -98,8 +108,6 @@ class KernelContract:
         torch.testing.assert_close(k.value_at(a, b, length), k.value(a, b), rtol=1e-15, atol=0.0)
 
     def test_gradient_in_the_length_matches_a_difference(self):
-        from tests.reference import richardson_derivative
-
         k = self._learnable()
         a, b = self._points(5), self._points(4, seed=6)
         b = torch.cat([b, a[:1]])                           # r = 0 too: the derivative of the prior variance
