@@ -1,4 +1,5 @@
-"""Meshing the estimate: the metrics grid with the posterior variance (``predict``) vs the mean alone (``predict_mean``).
+"""Meshing the estimate: the metrics grid with the posterior variance (``predict``) vs the mean alone
+(``predict_mean``).
 
 A study measures the estimate every few steps on a grid over the exploration range (2 cm nodes over the range
 grown by 5 cm: ~20,000-40,000 nodes on the torsos). Marching cubes needs only the mean. With the structured engine

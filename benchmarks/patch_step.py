@@ -64,7 +64,9 @@ def _ellipsoid(rng, n, radii):
 
 def make_outer(n_outer: int, rng):
     """Outer points: half on an ellipsoid (y = 0), half 5 cm outside it (y = 1), as benchmarks/planning_step.py."""
-    xo = np.concatenate([_ellipsoid(rng, n_outer // 2, OUTER_RADII), _ellipsoid(rng, n_outer - n_outer // 2, OUTER_FAR)])
+    xo = np.concatenate(
+        [_ellipsoid(rng, n_outer // 2, OUTER_RADII), _ellipsoid(rng, n_outer - n_outer // 2, OUTER_FAR)]
+    )
     return torch.tensor(xo), torch.tensor(np.r_[np.zeros(n_outer // 2), np.ones(n_outer - n_outer // 2)])
 
 
@@ -104,7 +106,9 @@ def run_side(inference: str, xo, yo, x0, y0, patches, min_gain, device):
     y = torch.cat([y0, yo]).to(device)
     t = torch.cat([torch.zeros(len(x0), dtype=torch.long), torch.ones(n_o, dtype=torch.long)]).to(device)
     t_setup = time.perf_counter()
-    model = tg.GPIOIS(x, y, t, kernel=IMQ(THETA), noise=NOISE, inference="structured" if inference == "dense" else inference)
+    model = tg.GPIOIS(
+        x, y, t, kernel=IMQ(THETA), noise=NOISE, inference="structured" if inference == "dense" else inference
+    )
     model.fit()
     setup = time.perf_counter() - t_setup
     times, relearned, kt_prev = [], 0, model.task_covariance

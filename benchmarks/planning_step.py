@@ -40,7 +40,11 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
-from torch_gpioius.inference.optim import chain_to_cholesky, chol_params_to_task_covariance, task_covariance_to_chol_params
+from torch_gpioius.inference.optim import (
+    chain_to_cholesky,
+    chol_params_to_task_covariance,
+    task_covariance_to_chol_params,
+)
 from torch_gpioius.planning import plan_direction
 from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 

@@ -54,7 +54,6 @@ def main() -> None:
         t_np = _median_ms(lambda: rn @ un)
         print(f"| {n} x {r} | {t_read:.1f} | {t_row:.1f} | {t_col:.1f} | {t_row / t_col:.2f} | {t_np:.1f} |",
               flush=True)
-        del u_row, u_col
 
 
 if __name__ == "__main__":

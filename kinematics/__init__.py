@@ -11,7 +11,6 @@ from .dh import UR5_DH, UR5_JOINT_LIMITS, UR5_JOINT_NAMES, UR5_VELOCITY_LIMITS, 
 from .safety import SafetyGate, SafetyViolation
 from .ur5 import UR5, UnreachablePoseError, pose_error, tool_rotation
 
-__all__ = [
-    "UR5", "UnreachablePoseError", "pose_error", "tool_rotation", "SafetyGate", "SafetyViolation", "RobotBackend", "SimulatedUR5",
-    "RTDEUR5", "UR5_DH", "UR5_JOINT_LIMITS", "UR5_JOINT_NAMES", "UR5_VELOCITY_LIMITS", "ur5_urdf",
-]
+__all__ = ["UR5", "UnreachablePoseError", "pose_error", "tool_rotation", "SafetyGate", "SafetyViolation",
+           "RobotBackend", "SimulatedUR5", "RTDEUR5", "UR5_DH", "UR5_JOINT_LIMITS", "UR5_JOINT_NAMES",
+           "UR5_VELOCITY_LIMITS", "ur5_urdf"]

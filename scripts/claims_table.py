@@ -112,10 +112,13 @@ def main() -> None:
         allowed = no_harm_margin(median_interval(col(t, "final_hausdorff")))      # the sweep's own rule
         onb = [median_interval([_f(runs[s]["contacts_on_body"]) for s in seeds], failed="drop")["median"]
                for runs in (vt, t)]
-        print(f"| {o} | {_cm(early)} | {'yes' if early['hi'] < 0 else '**no**'} | {_cm(final)} "
-              f"(+{100 * allowed:.1f}) | {'yes' if final['hi'] <= allowed else '**no**'} | "
-              f"{final['wins']} / {final['losses']} | {fails[0]} / {fails[1]}{' (' + ', '.join(why) + ')' if why else ''} "
-              f"| {onb[0]:.2f} / {onb[1]:.2f} |")
+        print(
+            f"| {o} | {_cm(early)} | {'yes' if early['hi'] < 0 else '**no**'} | {_cm(final)} "
+            f"(+{100 * allowed:.1f}) | {'yes' if final['hi'] <= allowed else '**no**'} | "
+            f"{final['wins']} / {final['losses']} | {fails[0]} / {fails[1]}"
+            f"{' (' + ', '.join(why) + ')' if why else ''} "
+            f"| {onb[0]:.2f} / {onb[1]:.2f} |"
+        )
     print()
     print("| shape | cover | final correlation tight | final correlation under it | tight above (disjoint intervals) "
           "| lower than tight, by seed |")

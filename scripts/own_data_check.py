@@ -11,9 +11,10 @@ For each body (a 22 cm bottle, objects of the seeded primitive family, pybullet'
   and the free space of each path's approach, as a contacts CSV with ``nx,ny,nz``.
 
 Then ``gpioius fit contacts.csv --cloud ... --camera-origin ... --mesh est.ply`` (the default settings), the same
-contacts alone, and the clouds with ``--settings paper``; the estimate within the studies' range (the body's box grown by 3 cm, from a
-quarter of its height up) against the body: Chamfer distance, F-score at 1 cm, median signed bias (negative: inside), Hausdorff, and the estimate's box
-against the body's (a phantom dome shows as a box far larger than the body).
+contacts alone, and the clouds with ``--settings paper``; the estimate within the studies' range (the body's box grown
+by 3 cm, from a quarter of its height up) against the body: Chamfer distance, F-score at 1 cm, median signed bias
+(negative: inside), Hausdorff, and the estimate's box against the body's (a phantom dome shows as a box far larger than
+the body).
 
     python scripts/own_data_check.py                        # the bottle and primitives 100-104
     python scripts/own_data_check.py --bodies bottle pybullet:duck primitives:120-124 --out outputs/own_data
@@ -147,7 +148,9 @@ def measure(estimate_path: Path, truth: trimesh.Trimesh, spacing: float = 0.003)
     else:
         signed = np.full(len(b), np.nan)
     out = surface_agreement(MeshDistance(truth, signed=False)(a), np.abs(signed), -signed)
-    out["hausdorff"] = float(max(MeshDistance(truth, signed=False)(a).max(), np.abs(signed).max())) if len(a) else math.nan
+    out["hausdorff"] = (
+        float(max(MeshDistance(truth, signed=False)(a).max(), np.abs(signed).max())) if len(a) else math.nan
+    )
     out["box"] = (a.max(axis=0) - a.min(axis=0)).round(3).tolist() if len(a) else [math.nan] * 3
     return out
 

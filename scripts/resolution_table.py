@@ -73,11 +73,14 @@ def main() -> None:
         flagged = sum(1 for s in seeds if _f(runs[s]["final_correlation_lo"]) < 0)   # "unrelated" not excluded
         fails = [sum(1 for s in seeds if rs[s]["failed"]) for rs in (runs, tact)]
         step = [1e3 * statistics.median(_f(rs[s]["median_step_time"]) for s in seeds) for rs in (runs, tact)]
-        print(f"| {obj} | {100 * voxel:g} | {n_outer:.0f} | {_cm(h10[0])} / {_cm(h10[1])} | {_cm(early)} | "
-              f"{'yes' if early['hi'] < 0 else '**no**'} | {_cm(hf[0])} / {_cm(hf[1])} | {_cm(final)} "
-              f"(+{100 * allowed:.1f}) | {'yes' if final['hi'] <= allowed else '**no**'} | "
-              f"{rho['median']:.2f} [{rho['lo']:.2f}, {rho['hi']:.2f}] | [{lo:.2f}, {hi:.2f}] | {flagged} of {len(seeds)} | "
-              f"{fails[0]} / {fails[1]} | {step[0]:.0f} / {step[1]:.0f} |")
+        print(
+            f"| {obj} | {100 * voxel:g} | {n_outer:.0f} | {_cm(h10[0])} / {_cm(h10[1])} | {_cm(early)} | "
+            f"{'yes' if early['hi'] < 0 else '**no**'} | {_cm(hf[0])} / {_cm(hf[1])} | {_cm(final)} "
+            f"(+{100 * allowed:.1f}) | {'yes' if final['hi'] <= allowed else '**no**'} | "
+            f"{rho['median']:.2f} [{rho['lo']:.2f}, {rho['hi']:.2f}] | [{lo:.2f}, {hi:.2f}] | "
+            f"{flagged} of {len(seeds)} | "
+            f"{fails[0]} / {fails[1]} | {step[0]:.0f} / {step[1]:.0f} |"
+        )
     print()
     print("| voxel [cm] | tight | loose | tight above loose (disjoint intervals) |")
     print("|---|---|---|---|")

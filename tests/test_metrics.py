@@ -60,8 +60,12 @@ def test_uncertainty_measure_is_length_normalised():
 
 def test_relative_uncertainty_uses_the_task_prior_variance():
     x = torch.tensor([[0.2, 0.0], [0.0, 0.2], [0.5, 0.5]], dtype=torch.float64)
-    m = tg.GPIOIS(x, torch.zeros(3), torch.tensor([0, 0, 1]), task_covariance=torch.tensor([[0.04, 0.01],
-                                                                                          [0.01, 0.09]], dtype=torch.float64))
+    m = tg.GPIOIS(
+        x,
+        torch.zeros(3),
+        torch.tensor([0, 0, 1]),
+        task_covariance=torch.tensor([[0.04, 0.01], [0.01, 0.09]], dtype=torch.float64),
+    )
     raw = uncertainty_measure(m, [circle(0.2, 400)], relative=False)
     rel = uncertainty_measure(m, [circle(0.2, 400)])
     assert rel == pytest.approx(raw / (0.04 / 0.1), rel=1e-12)
@@ -84,7 +88,9 @@ def test_surface_agreement_on_concentric_spheres():
     est = np.r_[np.full(50, 0.001), np.full(50, 0.03)]
     m = surface_agreement(est, np.full(100, 0.001))
     p, r = 0.5, 1.0
-    assert m["fscore_5mm"] == pytest.approx(2 * p * r / (p + r)) and m["chamfer"] == pytest.approx(0.5 * (0.0155 + 0.001))
+    assert m["fscore_5mm"] == pytest.approx(2 * p * r / (p + r)) and m["chamfer"] == pytest.approx(
+        0.5 * (0.0155 + 0.001)
+    )
     # a part nobody observed: the observed Hausdorff leaves it out, the unseen share counts it
     truth = np.r_[np.full(80, 0.002), np.full(20, 0.05)]
     obs = np.r_[np.ones(80, bool), np.zeros(20, bool)]

@@ -115,6 +115,11 @@ def test_a_step_that_is_no_length_is_refused(step):
     import torch_gpioius as tg
 
     x = torch.tensor([[0.1, 0.0], [0.0, 0.1], [-0.1, 0.0], [0.0, -0.1], [0.2, 0.0]], dtype=torch.float64)
-    model = tg.GPIS(x, torch.tensor([0.0, 0.0, 0.0, 0.0, 1.0], dtype=torch.float64), kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=0.006)
+    model = tg.GPIS(
+        x,
+        torch.tensor([0.0, 0.0, 0.0, 0.0, 1.0], dtype=torch.float64),
+        kernel=tg.kernels.InverseMultiquadricKernel(0.1),
+        noise=0.006,
+    )
     with pytest.raises(ValueError, match="step: "):
         plan_direction(model, x[0], step=step)

@@ -1,8 +1,8 @@
 """torch_gpioius: visuo-tactile inner-shape estimation with Gaussian process inner-outer implicit surfaces.
 
-Conventions (docs/theory.md, "Conventions"): SI units, float64, ``y = 0`` on a surface and ``y = 1`` in free space, prior mean 1,
-``mu < 0`` inside; task 0 is the inner (tactile) shape, task 1 the outer (visual) shape; boxes are ``(2, d)``
-[min corner; max corner].
+Conventions (docs/theory.md, "Conventions"): SI units, float64, ``y = 0`` on a surface and ``y = 1`` in free space,
+prior mean 1, ``mu < 0`` inside; task 0 is the inner (tactile) shape, task 1 the outer (visual) shape; boxes are ``(2,
+d)`` [min corner; max corner].
 
 Layers, each importing only those before it (docs/architecture.md): ``kernels`` -> ``inference`` (exact engines,
 the K_t fit) -> ``models`` (GPIS, GPIOIS, LocalGPIOIS) -> ``geometry`` / ``surfaces`` / ``metrics`` -> ``planning``
@@ -36,18 +36,26 @@ from .settings import exact_arithmetic  # noqa: E402
 from .threads import torch_threads  # noqa: E402
 from .tolerances import tol  # noqa: E402
 
-__all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings", "InverseMultiquadricKernel", "DenseExactInference",
-           "StructuredExactInference", "JitterWarning", "NotPositiveDefiniteError", "UnidentifiedSimilarityWarning",
-           "exact_arithmetic", "tol", "torch_threads", "__version__", "ObservationPolicy", "Trace", "World",
-           "RobotWorld", "Observations", "explore", "kernels", "models", "inference", "exploration", "io", "geometry", "metrics", "planning",
-           "surfaces", "sim", "checkpoints", "datasets", "importers", "offline", "Dataset", "DatasetError",
-           "CheckpointError", "load_dataset", "save_dataset", "load_checkpoint", "save_checkpoint", "import_bag",
-           "BagImportError", "export_run", "load_run", "RunHistory"]
+__all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings", "InverseMultiquadricKernel",
+           "DenseExactInference", "StructuredExactInference", "JitterWarning", "NotPositiveDefiniteError",
+           "UnidentifiedSimilarityWarning", "exact_arithmetic", "tol", "torch_threads", "__version__",
+           "ObservationPolicy", "Trace", "World", "RobotWorld", "Observations", "explore", "kernels", "models",
+           "inference", "exploration", "io", "geometry", "metrics", "planning", "surfaces", "sim", "checkpoints",
+           "datasets", "importers", "offline", "Dataset", "DatasetError", "CheckpointError", "load_dataset",
+           "save_dataset", "load_checkpoint", "save_checkpoint", "import_bag", "BagImportError", "export_run",
+           "load_run", "RunHistory"]
 
 # Module paths of the 0.1 layout keep working with a DeprecationWarning (``from torch_gpioius.gpiois import GPIOIS``):
 # each old path is a stand-in module that warns and forwards every name to the module that holds the code now.
-_MOVED = {"gpiois": "models.gpiois", "gpis": "models.gpis", "_base": "models.base", "structured": "inference.structured",
-          "optim": "inference.optim", "study": "studies.study2d", "study3d": "studies.study3d"}
+_MOVED = {
+    "gpiois": "models.gpiois",
+    "gpis": "models.gpis",
+    "_base": "models.base",
+    "structured": "inference.structured",
+    "optim": "inference.optim",
+    "study": "studies.study2d",
+    "study3d": "studies.study3d",
+}
 
 
 class _MovedModule(_types.ModuleType):

@@ -8,8 +8,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-__all__ = ["as_points", "as_labels", "label_problem", "LABELS", "as_tasks", "as_int", "as_float", "as_bounds", "task_id", "TASK_NAMES", "check_metres",
-           "as_length", "MAX_SCENE_EXTENT", "MAX_COORDINATE", "MAX_LENGTH"]
+__all__ = ["as_points", "as_labels", "label_problem", "LABELS", "as_tasks", "as_int", "as_float", "as_bounds",
+           "task_id", "TASK_NAMES", "check_metres", "as_length", "MAX_SCENE_EXTENT", "MAX_COORDINATE", "MAX_LENGTH"]
 
 #: Largest extent of a scene's data [m]: a robot's tabletop workspace is ~2 m and an uncropped depth camera sees
 #: ~8 m; data larger than this are almost always in millimetres (an object of 15 cm is 150 "m" across then).
@@ -213,7 +213,8 @@ def as_tasks(task, n: int, name: str = "task", device: torch.device | None = Non
 
 
 def as_bounds(bounds, dim: int, name: str = "bounds") -> np.ndarray:
-    """Validate a box (boxes as the ecosystem writes them, like trimesh's ``mesh.bounds``) given as `(2, d)` `[min corner; max corner]` [m] and return it as a float64 array.
+    """Validate a box (boxes as the ecosystem writes them, like trimesh's ``mesh.bounds``) given as `(2, d)`
+    `[min corner; max corner]` [m] and return it as a float64 array.
 
     Raises:
         ValueError: wrong shape (a `(d, 2)` box of [min, max] rows is named as such), NaN/inf, or min >= max.

@@ -491,9 +491,15 @@ def build_parser() -> argparse.ArgumentParser:
                     help="travel budget per run [m] (3-D worlds)")
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
     sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
-    sw.add_argument("--touch", default="point", choices=["point", "patch"],
-                    help="point: the fingertip's contact; patch: a gel pad's depth map (3-D worlds); one per --out folder")
-    sw.add_argument("--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP + "; one setting per --out folder")
+    sw.add_argument(
+        "--touch",
+        default="point",
+        choices=["point", "patch"],
+        help="point: the fingertip's contact; patch: a gel pad's depth map (3-D worlds); one per --out folder",
+    )
+    sw.add_argument(
+        "--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP + "; one setting per --out folder"
+    )
     sw.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     sw.add_argument("--settings", default=None, choices=["default", "paper"],
                     help="the 3-D worlds' settings, for scene files and built-in objects alike: default (three "
@@ -531,9 +537,13 @@ def build_parser() -> argparse.ArgumentParser:
                                      "fit.png and fit.json.")
     fit.add_argument("dataset", help="dataset or exploration log file (.gpioius), or your contacts as a CSV "
                                      "(x,y[,z],label[,step]; docs/tutorials/own-data.md)")
-    fit.add_argument("--cloud", action="append", default=None,
-                     help="with a contacts CSV: the camera's point cloud (PLY, PCD, XYZ, NPZ) in the same frame; repeat "
-                          "it for several captures (each with its own --camera-origin, in the same order)")
+    fit.add_argument(
+        "--cloud",
+        action="append",
+        default=None,
+        help="with a contacts CSV: the camera's point cloud (PLY, PCD, XYZ, NPZ) in the same frame; repeat "
+        "it for several captures (each with its own --camera-origin, in the same order)",
+    )
     fit.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the CSV and the cloud")
     fit.add_argument("--voxel", type=_fit_voxel, default="auto",
                      help="voxel edge of the cloud [m] (0: every point; auto: the settings' rule, a tenth of the "
@@ -571,13 +581,17 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--quiet", action="store_true", help="no progress output")
     _force(rep, "--out holds files that `gpioius replay` did not write")
     rep.set_defaults(func=_replay)
-    bag = sub.add_parser("import-bag", parents=[common], formatter_class=fmt,
-                         help="turn a ROS 2 bag (MCAP or sqlite3) into a .gpioius dataset",
-                         description="Read a ROS 2 bag recorded on a UR5 with a fingertip force sensor and a depth "
-                                     "camera (the 'rosbag' extra, no ROS install needed): fingertip positions by the "
-                                     "UR5's forward kinematics at the interpolated joint states, |F| >= 1 N a contact, "
-                                     "free space below, point clouds into the base frame through tf and voxel-averaged. "
-                                     "Writes a dataset for `gpioius fit` and `gpioius replay` (docs/tutorials/rosbag.md).")
+    bag = sub.add_parser(
+        "import-bag",
+        parents=[common],
+        formatter_class=fmt,
+        help="turn a ROS 2 bag (MCAP or sqlite3) into a .gpioius dataset",
+        description="Read a ROS 2 bag recorded on a UR5 with a fingertip force sensor and a depth "
+        "camera (the 'rosbag' extra, no ROS install needed): fingertip positions by the "
+        "UR5's forward kinematics at the interpolated joint states, |F| >= 1 N a contact, "
+        "free space below, point clouds into the base frame through tf and voxel-averaged. "
+        "Writes a dataset for `gpioius fit` and `gpioius replay` (docs/tutorials/rosbag.md).",
+    )
     bag.add_argument("bag", help="bag folder (with metadata.yaml) or .mcap/.db3 file")
     bag.add_argument("--out", required=True, help="dataset to write (.gpioius)")
     bag.add_argument("--cloud", default="/camera/depth/points", help="sensor_msgs/PointCloud2 topic")
@@ -615,12 +629,16 @@ def build_parser() -> argparse.ArgumentParser:
                      help="T_tool_pad: the pad frame in the fingertip frame, 'x y z qx qy qz qw' (default: identity)")
     _force(bag, "--out exists")
     bag.set_defaults(func=_import_bag)
-    ex = sub.add_parser("export", parents=[common], formatter_class=fmt,
-                        help="write the estimated surfaces of a run as PLY/OBJ/STL/GLB meshes (SVG/DXF curves in 2-D), or the "
-                             "whole run as MCAP for Foxglove",
-                        description="Rebuild the model of a log or dataset at a step with the run's own learned K_t and "
-                                    "write {mu = 0} through trimesh, coloured by the posterior variance (PLY meshes "
-                                    "also carry a 'variance' vertex property).")
+    ex = sub.add_parser(
+        "export",
+        parents=[common],
+        formatter_class=fmt,
+        help="write the estimated surfaces of a run as PLY/OBJ/STL/GLB meshes (SVG/DXF curves in 2-D), or the "
+        "whole run as MCAP for Foxglove",
+        description="Rebuild the model of a log or dataset at a step with the run's own learned K_t and "
+        "write {mu = 0} through trimesh, coloured by the posterior variance (PLY meshes "
+        "also carry a 'variance' vertex property).",
+    )
     ex.add_argument("run", help="exploration log or dataset (.gpioius)")
     ex.add_argument("--mesh", default=None, help="file for the inner estimate (.ply .obj .stl .glb .off; 2-D: .svg "
                                                  ".dxf .ply .obj)")

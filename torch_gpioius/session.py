@@ -113,12 +113,31 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     if not isinstance(world, World):
         raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
                         f"{type(world).__name__}")
-    kernel = kernel_for_theta(theta, kernel, "explore")       # the paper's name, a deprecated alias
-    config = ExploreConfig.from_world(world, mode, evidence=evidence, touch=touch, step=step, kernel=kernel, noise=noise, max_steps=max_steps, max_travel=max_travel,
-                                      stop=stop, policy=policy, penalty=penalty, metrics_every=metrics_every,
-                                      metrics_resolution=metrics_resolution, interval_every=interval_every,
-                                      regions=regions, stall=stall, outer_tol=outer_tol, device=device,
-                                      restart_every=restart_every, learn=learn, settings=settings)
+    kernel = kernel_for_theta(theta, kernel, "explore")  # the paper's name, a deprecated alias
+    config = ExploreConfig.from_world(
+        world,
+        mode,
+        evidence=evidence,
+        touch=touch,
+        step=step,
+        kernel=kernel,
+        noise=noise,
+        max_steps=max_steps,
+        max_travel=max_travel,
+        stop=stop,
+        policy=policy,
+        penalty=penalty,
+        metrics_every=metrics_every,
+        metrics_resolution=metrics_resolution,
+        interval_every=interval_every,
+        regions=regions,
+        stall=stall,
+        outer_tol=outer_tol,
+        device=device,
+        restart_every=restart_every,
+        learn=learn,
+        settings=settings,
+    )
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     if log is not None:

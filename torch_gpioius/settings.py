@@ -20,10 +20,10 @@ def exact_arithmetic() -> Iterator[None]:
 
     GPyTorch silently switches to conjugate gradients and stochastic Lanczos quadrature above
     ``max_cholesky_size`` (800 by default); results then differ by ~1e-3 and variance gradients become noise
-    (docs/theory.md, "Why exact arithmetic"). The models of this library enter this context in ``__call__``, but linear_operator's autograd
-    functions read the settings again during ``backward``: run the backward pass inside the context as well,
-    or gradients above N = 800 silently come from CG (measured: up to 2x off). ``model.predict`` has no such
-    caveat. Wrap your own GPyTorch training loops like this::
+    (docs/theory.md, "Why exact arithmetic"). The models of this library enter this context in ``__call__``, but
+    linear_operator's autograd functions read the settings again during ``backward``: run the backward pass inside the
+    context as well, or gradients above N = 800 silently come from CG (measured: up to 2x off). ``model.predict`` has no
+    such caveat. Wrap your own GPyTorch training loops like this::
 
         with tg.exact_arithmetic():
             loss = -mll(model(*model.train_inputs), model.train_targets)

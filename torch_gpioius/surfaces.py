@@ -145,7 +145,9 @@ def zero_level_mesh(model, bounds, resolution: float = 0.01, task: int = 0,
     f = field if field is not None else evaluate_grid(model, bounds, resolution, task, variance=False)
     if not (f.mean.min() < 0 < f.mean.max()):
         return None
-    verts, faces, _, _ = measure.marching_cubes(f.mean, level=0.0, spacing=f.spacing, gradient_direction="descent")  # mu < 0 inside
+    verts, faces, _, _ = measure.marching_cubes(
+        f.mean, level=0.0, spacing=f.spacing, gradient_direction="descent"
+    )  # mu < 0 inside
     verts = verts + np.array([a[0] for a in f.axes])
     return trimesh.Trimesh(vertices=verts, faces=faces, process=True)
 

@@ -38,7 +38,13 @@ import numpy as np
 __all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "check_hosts", "machine_names",
            "public_bind_warning", "COLOUR_KEY"]
 
-_GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (150, 150, 150), (150, 200, 255), (20, 20, 20), (0, 190, 210), (255, 140, 0)
+_GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (
+    (150, 150, 150),
+    (150, 200, 255),
+    (20, 20, 20),
+    (0, 190, 210),
+    (255, 140, 0),
+)
 _PAD, _PAD_OLD = (200, 30, 120), (230, 170, 200)      # the gel pad's outline: this step's, earlier ones
 _GREEN = (30, 160, 60)
 _PURPLE = (120, 60, 170)                               # points known to lie inside a body (labels below zero)
@@ -523,14 +529,19 @@ class RunViewer:
         if self.run.dim == 2:
             for name, colour in (("inner", _GREEN), ("outer", _GREY)):
                 segs = np.concatenate([_segments(np.vstack([c, c[:1]])) for c in truth[name]])
-                self._handles[f"/truth/{name}"] = scene.add_line_segments(f"/truth/{name}", segs, colour, thickness=2.0, thickness_units="screen")
+                self._handles[f"/truth/{name}"] = scene.add_line_segments(
+                    f"/truth/{name}", segs, colour, thickness=2.0, thickness_units="screen"
+                )
         else:
             m = truth["inner"]
-            self._handles["/truth/inner"] = scene.add_mesh_simple("/truth/inner", m.vertices, m.faces, color=_GREEN, wireframe=True, opacity=0.3)
+            self._handles["/truth/inner"] = scene.add_mesh_simple(
+                "/truth/inner", m.vertices, m.faces, color=_GREEN, wireframe=True, opacity=0.3
+            )
             if truth.get("outer") is not None:
                 o = truth["outer"]
-                self._handles["/truth/outer"] = scene.add_mesh_simple("/truth/outer", o.vertices, o.faces, color=_GREY, opacity=0.15,
-                                      side="double")
+                self._handles["/truth/outer"] = scene.add_mesh_simple(
+                    "/truth/outer", o.vertices, o.faces, color=_GREY, opacity=0.15, side="double"
+                )
 
     # ---------------------------------------------------------------------------------------------------- drawing
     def show(self, step: int) -> None:
@@ -552,8 +563,14 @@ class RunViewer:
                       "/touch/inside": ((ds.task == 0) & (ds.y < 0), _PURPLE, "touches")}
             for name, (mask, colour, layer) in groups.items():
                 pts = _lift(ds.x[mask]) if mask.any() else np.zeros((1, 3))
-                self._handles[name] = scene.add_point_cloud(name, pts, colour, point_size=size * (1.6 if "contacts" in name else 1.0),
-                                      point_shape="circle", visible=bool(on[layer] and mask.any()))
+                self._handles[name] = scene.add_point_cloud(
+                    name,
+                    pts,
+                    colour,
+                    point_size=size * (1.6 if "contacts" in name else 1.0),
+                    point_shape="circle",
+                    visible=bool(on[layer] and mask.any()),
+                )
             pads = run.pad_footprints(k) if run.dim == 3 else np.zeros((0, 4, 3))
             if len(pads) or self._handle("/touch/pads") is not None:
                 # each pad's outline: its four edges, the current one brighter than the earlier ones
@@ -593,7 +610,9 @@ class RunViewer:
                 self._y_range = y
                 self.plot.scales = {"x": uplot.Scale(time=False), "y": uplot.Scale(auto=False, range=y)}
             p = run.params.get(k, {})
-            fmt = (lambda v: "n/a" if v is None or not math.isfinite(v) else f"{v:.3f}")
+            def fmt(v):
+                return "n/a" if v is None or not math.isfinite(v) else f"{v:.3f}"
+
             h = p.get("hausdorff", math.nan)
             surface_pts = int(((ds.task == 0) & (ds.y == 0)).sum())
             if run.meta.get("touch") == "patch":         # pad points are not touches: count both, by name
@@ -670,8 +689,14 @@ class RunViewer:
                 mid = 0.5 * (v[:-1] + v[1:])
                 rgb = (cmap(np.clip(0.35 + 0.65 * mid / prior, 0, 1))[:, :3] * 255).astype(np.uint8)
                 colours.append(np.repeat(rgb[:, None], 2, axis=1))
-            self._handles["/estimate"] = scene.add_line_segments("/estimate", np.concatenate(segs), np.concatenate(colours), thickness=4.0,
-                                    thickness_units="screen", visible=visible)
+            self._handles["/estimate"] = scene.add_line_segments(
+                "/estimate",
+                np.concatenate(segs),
+                np.concatenate(colours),
+                thickness=4.0,
+                thickness_units="screen",
+                visible=visible,
+            )
         else:
             mesh = surface.copy()
             mesh.visual.vertex_colors = (cmap(np.clip(0.3 + 0.7 * var / prior, 0, 1)) * 255).astype(np.uint8)

@@ -92,8 +92,12 @@ def test_lost_contact_falls_back_to_the_last_contact():
     # a circle of radius 10 cm that the model knows; contact lost at (0.2, 0.05); the last contact at (0.1, 0)
     a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     ring = np.stack([np.cos(a), np.sin(a)], -1)
-    model = tg.GPIS(np.concatenate([0.1 * ring, 0.2 * ring]), np.r_[np.zeros(24), np.ones(24)], kernel=tg.kernels.InverseMultiquadricKernel(0.1),
-                    noise=1e-3)
+    model = tg.GPIS(
+        np.concatenate([0.1 * ring, 0.2 * ring]),
+        np.r_[np.zeros(24), np.ones(24)],
+        kernel=tg.kernels.InverseMultiquadricKernel(0.1),
+        noise=1e-3,
+    )
     here, last = np.array([0.2, 0.05]), np.array([0.1, 0.0])
     lost = result(False, [[0.15, 0.0], here])
     for second_hits in (True, False):

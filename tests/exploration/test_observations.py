@@ -19,9 +19,13 @@ def test_labels_below_zero_mean_inside_and_everything_else_is_still_refused():
     ok = [0.0, 1.0, -0.4, -1.0, -3.0]
     assert as_labels(torch.tensor(ok, dtype=torch.float64), 5).tolist() == ok
     Observations(np.zeros((5, 3)), ok, np.zeros(5, int))
-    tg.GPIOIS(torch.rand(5, 3, dtype=torch.float64), torch.tensor(ok, dtype=torch.float64), torch.zeros(5, dtype=torch.long))
+    tg.GPIOIS(
+        torch.rand(5, 3, dtype=torch.float64), torch.tensor(ok, dtype=torch.float64), torch.zeros(5, dtype=torch.long)
+    )
     for bad, shown in ((0.5, "0.5"), (2.0, "2.0"), (float("-inf"), "-inf"), (float("nan"), "nan")):
-        with pytest.raises(ValueError, match=f"labels must be 0 \\(surface\\), 1 \\(free space\\) or negative.*{shown}"):
+        with pytest.raises(
+            ValueError, match=f"labels must be 0 \\(surface\\), 1 \\(free space\\) or negative.*{shown}"
+        ):
             Observations(np.zeros((2, 3)), [0.0, bad], [0, 0])
         with pytest.raises(ValueError, match="labels"):
             as_labels(torch.tensor([0.0, bad]), 2)
@@ -52,7 +56,11 @@ def test_a_point_touch_puts_its_inside_point_behind_the_contact_along_the_measur
     obs = PointTouch().observations(_touch(contact, force, free), contact[None], policy, step=3)
     np.testing.assert_allclose(obs.x[0], contact)
     np.testing.assert_allclose(obs.x[1], contact - 0.02 * np.array([0.0, 0.6, 0.8]), atol=1e-15)
-    assert obs.y.tolist() == pytest.approx([0.0, -0.4, 1.0, 1.0, 1.0, 1.0], abs=1e-15) and (obs.task == 0).all() and obs.step == 3
+    assert (
+        obs.y.tolist() == pytest.approx([0.0, -0.4, 1.0, 1.0, 1.0, 1.0], abs=1e-15)
+        and (obs.task == 0).all()
+        and obs.step == 3
+    )
     # the paper's observations: no inside point; nor without a measured force to give the normal
     assert (PointTouch().observations(_touch(contact, force, free), contact[None], ObservationPolicy(), 3).y >= 0).all()
     silent = PointTouch().observations(_touch(contact, np.zeros(3), free), contact[None], policy, 3)
@@ -191,7 +199,9 @@ def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off
     y = np.r_[np.zeros(len(contacts) + len(seen)), np.full(len(inside), policy.inside_label(0.02))]
     t = np.r_[np.zeros(len(contacts)), np.ones(len(seen) + len(inside))].astype(np.int64)
 
-    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), kernel=tg.kernels.InverseMultiquadricKernel(0.1))
+    m = tg.GPIOIS(
+        torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), kernel=tg.kernels.InverseMultiquadricKernel(0.1)
+    )
     assert len(retract_vision_inside(m, contacts[:GAP_MIN_CONTACTS - 1], policy)) == 0
     assert len(m.train_targets) == len(x)
     assert len(retract_vision_inside(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))) == 0
@@ -205,7 +215,12 @@ def test_the_cameras_inside_points_go_once_the_touches_show_a_cover_standing_off
     np.testing.assert_array_equal(m.train_inputs[0].numpy(), x[y >= 0])
     np.testing.assert_array_equal(m.train_task.numpy(), t[y >= 0])
     # the model after the removal equals one built without them (its engine rebuilt, not patched)
-    ref = tg.GPIOIS(torch.as_tensor(x[y >= 0]), torch.as_tensor(y[y >= 0]), torch.as_tensor(t[y >= 0]), kernel=tg.kernels.InverseMultiquadricKernel(0.1))
+    ref = tg.GPIOIS(
+        torch.as_tensor(x[y >= 0]),
+        torch.as_tensor(y[y >= 0]),
+        torch.as_tensor(t[y >= 0]),
+        kernel=tg.kernels.InverseMultiquadricKernel(0.1),
+    )
     q = torch.as_tensor(_sphere(0.12, 20, seed=6))
     torch.testing.assert_close(m.predict(q)[0], ref.predict(q)[0], rtol=0, atol=1e-10)
     assert len(retract_vision_inside(m, contacts, policy)) == 0               # nothing left to remove
@@ -231,7 +246,9 @@ def test_the_outer_mean_stands_for_the_gap_the_touches_measure(cover):
     contacts = _sphere(0.10, 12, seed=5)
     x, y = np.r_[contacts, seen], np.zeros(len(contacts) + len(seen))
     t = np.r_[np.zeros(len(contacts)), np.ones(len(seen))].astype(np.int64)
-    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), kernel=tg.kernels.InverseMultiquadricKernel(0.1))
+    m = tg.GPIOIS(
+        torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t), kernel=tg.kernels.InverseMultiquadricKernel(0.1)
+    )
     assert not offset_outer_mean(m, contacts[:GAP_MIN_CONTACTS - 1], policy)
     assert not offset_outer_mean(m, contacts, dataclasses.replace(policy, cover_offset=False))
     assert not offset_outer_mean(m, contacts, dataclasses.replace(policy, vision_inside_gap=None))

@@ -30,8 +30,16 @@ def test_every_record_carries_the_bound_and_a_log_resumes_with_it(tmp_path):
     assert np.all(exact.truncation == 0.0) and exact.model.outer_tol is None
 
 
-@pytest.mark.parametrize("kwargs", [dict(mode="tactile"), dict(regions=2), dict(touch="patch"), dict(outer_tol_value=-1.0),
-                                    dict(outer_tol_value=float("nan"))])
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        dict(mode="tactile"),
+        dict(regions=2),
+        dict(touch="patch"),
+        dict(outer_tol_value=-1.0),
+        dict(outer_tol_value=float("nan")),
+    ],
+)
 def test_settings_that_cannot_truncate_are_refused(kwargs):
     scene = paper_objects_2d()["A"]
     value = kwargs.pop("outer_tol_value", 1e-3)

@@ -178,7 +178,9 @@ def test_the_value_alone_then_the_derivatives_at_the_same_k_t_equal_a_fresh_eval
             assert f == pytest.approx(f_ref, rel=1e-12) and f == pytest.approx(f_d, rel=1e-10)
             # the fresh engine may take T from its store where this one, beyond its store's window, took T directly
             # (both exact to the store's 1e-13 of s): the Hessian to the dense reference's tolerance
-            assert float((g - g_ref).abs().max()) < 1e-10 * engine.n and float((h - h_ref).abs().max()) < 1e-9 * engine.n
+            assert (
+                float((g - g_ref).abs().max()) < 1e-10 * engine.n and float((h - h_ref).abs().max()) < 1e-9 * engine.n
+            )
             assert float((g - g_d).abs().max()) < 1e-9 * engine.n and float((h - h_d).abs().max()) < 1e-9 * engine.n
         if cls is BatchedExactInference:
             assert engine._held is held and held["key"] == tuple(KT.flatten().tolist())

@@ -387,7 +387,9 @@ def test_removing_inner_points_keeps_the_eigendecomposition():
         float(fresh.log_marginal_likelihood()))
     m.covar_module.theta = 0.2                               # a stale engine is never reused
     m.remove_observations([int(torch.nonzero(m.train_task == 0)[0])])
-    assert m._inference() is not engine and m._inference().kernel.describe()["lengthscale"] == pytest.approx(0.2, rel=1e-12)
+    assert m._inference() is not engine and m._inference().kernel.describe()["lengthscale"] == pytest.approx(
+        0.2, rel=1e-12
+    )
     engine = m._inference()
     outer_first = int(torch.nonzero(m.train_task == 1)[0])
     m.remove_observations([outer_first])                   # an outer point: the engine is rebuilt

@@ -13,7 +13,13 @@ from torch_gpioius.io.checkpoints import CheckpointError
 def fitted():
     a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
     x = np.r_[np.c_[0.05 * np.cos(a), 0.05 * np.sin(a)], np.c_[0.08 * np.cos(a), 0.08 * np.sin(a)]]
-    return tg.GPIOIS(x, np.zeros(48), np.r_[np.zeros(24), np.ones(24)], kernel=tg.kernels.InverseMultiquadricKernel(0.12), noise=0.004).fit()
+    return tg.GPIOIS(
+        x,
+        np.zeros(48),
+        np.r_[np.zeros(24), np.ones(24)],
+        kernel=tg.kernels.InverseMultiquadricKernel(0.12),
+        noise=0.004,
+    ).fit()
 
 
 def test_round_trip_predicts_identically(tmp_path):

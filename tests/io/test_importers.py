@@ -210,7 +210,9 @@ def test_a_dataset_in_millimetres_is_refused_wherever_it_is_built(tmp_path):
         Dataset(x, np.zeros(3), np.zeros(3, np.int64), np.zeros(3, np.int64))
     with pytest.raises(DatasetError, match="60.1 m from the origin"):     # small, but far out: not metres either
         Dataset(np.array([[60.0, 0.0], [60.1, 0.0]]), np.zeros(2), np.zeros(2, np.int64), np.zeros(2, np.int64))
-    ok = save_dataset(Dataset(x / 1000, np.zeros(3), np.zeros(3, np.int64), np.zeros(3, np.int64)), tmp_path / "m.gpioius")
+    ok = save_dataset(
+        Dataset(x / 1000, np.zeros(3), np.zeros(3, np.int64), np.zeros(3, np.int64)), tmp_path / "m.gpioius"
+    )
     assert len(load_dataset(ok)) == 3
 
 

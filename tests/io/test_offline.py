@@ -100,7 +100,9 @@ def test_a_replay_uses_the_runs_kernel_and_the_length_it_learned(tmp_path):
     from torch_gpioius.sim import Scene2D
 
     a = np.linspace(0, 2 * np.pi, 72, endpoint=False)
-    circle = (lambda r: np.c_[r * np.cos(a), r * np.sin(a)])
+    def circle(r):
+        return np.c_[r * np.cos(a), r * np.sin(a)]
+
     scene = Scene2D(circle(0.10), circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
     log = tmp_path / "run.gpioius"
     trace = tg.explore(scene, kernel=tg.kernels.Matern52(0.1), max_steps=7, restart_every=3, learn="length",

@@ -209,27 +209,42 @@ def _tf(ms, translation=None, rotation=None):
 
 
 FAULTS = {
-    "empty cloud": (lambda m: _with(m, "/camera/depth/points", _empty_cloud),
-                    "topic /camera/depth/points: every cloud is empty"),
-    "x field twice": (lambda m: _with(m, "/camera/depth/points", lambda ms: _cloud_field(ms, rgb={"name": "x"})),
-                      "declares field 'x' 2 times"),
-    "overlapping x/y": (lambda m: _with(m, "/camera/depth/points", lambda ms: _cloud_field(ms, y={"offset": 2})),
-                        "fields 'x' .bytes 0-3. and 'y' .bytes 2-5. overlap"),
+    "empty cloud": (
+        lambda m: _with(m, "/camera/depth/points", _empty_cloud),
+        "topic /camera/depth/points: every cloud is empty",
+    ),
+    "x field twice": (
+        lambda m: _with(m, "/camera/depth/points", lambda ms: _cloud_field(ms, rgb={"name": "x"})),
+        "declares field 'x' 2 times",
+    ),
+    "overlapping x/y": (
+        lambda m: _with(m, "/camera/depth/points", lambda ms: _cloud_field(ms, y={"offset": 2})),
+        "fields 'x' .bytes 0-3. and 'y' .bytes 2-5. overlap",
+    ),
     "wrong byte order": (lambda m: _with(m, "/camera/depth/points", _flip_endian), "is_bigendian=True"),
-    "joint named twice": (lambda m: _with(m, "/joint_states", _joint_named_twice),
-                          "topic /joint_states: the joint state at t = .* names joint 'shoulder_pan_joint' 2 times"),
-    "flipped bit in a joint": (lambda m: _with(m, "/joint_states", _flipped_bit),
-                               "topic /joint_states: joint 'shoulder_lift_joint' moves .* a corrupt joint value"),
-    "NaN tf": (lambda m: _with(m, "/tf_static", lambda ms: _tf(ms, translation={"x": float("nan")})),
-               "topic /tf_static: the transform base -> camera_link at t = .* translation .* is not finite"),
-    "zero quaternion tf": (lambda m: _with(m, "/tf_static", lambda ms: _tf(ms, rotation={"x": 0.0, "y": 0.0,
-                                                                                         "z": 0.0, "w": 0.0})),
-                           "topic /tf_static: the transform base -> camera_link .* is not a rotation"),
-
+    "joint named twice": (
+        lambda m: _with(m, "/joint_states", _joint_named_twice),
+        "topic /joint_states: the joint state at t = .* names joint 'shoulder_pan_joint' 2 times",
+    ),
+    "flipped bit in a joint": (
+        lambda m: _with(m, "/joint_states", _flipped_bit),
+        "topic /joint_states: joint 'shoulder_lift_joint' moves .* a corrupt joint value",
+    ),
+    "NaN tf": (
+        lambda m: _with(m, "/tf_static", lambda ms: _tf(ms, translation={"x": float("nan")})),
+        "topic /tf_static: the transform base -> camera_link at t = .* translation .* is not finite",
+    ),
+    "zero quaternion tf": (
+        lambda m: _with(m, "/tf_static", lambda ms: _tf(ms, rotation={"x": 0.0, "y": 0.0, "z": 0.0, "w": 0.0})),
+        "topic /tf_static: the transform base -> camera_link .* is not a rotation",
+    ),
     "missing topic": (lambda m: [x for x in m if x.topic != "/wrench"], "topic /wrench is not in the bag"),
     "empty topic": (lambda m: _with(m, "/joint_states", lambda ms: []), "topic /joint_states is not in the bag"),
     "time gap": (lambda m: _with(m, "/joint_states", _gap), "topic /joint_states: a gap of 0.5"),
-    "all-NaN cloud": (lambda m: _with(m, "/camera/depth/points", _nan_cloud), "topic /camera/depth/points: every point"),
+    "all-NaN cloud": (
+        lambda m: _with(m, "/camera/depth/points", _nan_cloud),
+        "topic /camera/depth/points: every point",
+    ),
     "no x/y/z": (lambda m: _with(m, "/camera/depth/points", _rename_fields), "has no x/y/z field"),
     "clock backwards": (lambda m: _with(m, "/wrench", _backwards), "topic /wrench: the clock runs backwards"),
     "no camera pose": (lambda m: [x for x in m if x.topic != "/tf_static"], "no transform from"),

@@ -88,9 +88,15 @@ def test_gpytorch_gradients_exact_only_inside_context():
     ref.assert_close_to_reference(grad_inside[0].numpy(), fd, err, what="d var / dx of model(x) in the context")
 
 
-@pytest.mark.parametrize("args, match", [((None, [0.0]), "train_x: missing"), (([[0.0, 0.0]], None), "train_y: missing"),
-                                         (([[0.0, 0.0]], "0"), "train_y"), ((torch.zeros(1, 2, dtype=torch.complex128),
-                                                                              [0.0]), "real")])
+@pytest.mark.parametrize(
+    "args, match",
+    [
+        ((None, [0.0]), "train_x: missing"),
+        (([[0.0, 0.0]], None), "train_y: missing"),
+        (([[0.0, 0.0]], "0"), "train_y"),
+        ((torch.zeros(1, 2, dtype=torch.complex128), [0.0]), "real"),
+    ],
+)
 def test_missing_or_malformed_data_are_named(args, match):
     with pytest.raises(ValueError, match=match):
         tg.GPIS(*args)

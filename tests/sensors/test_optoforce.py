@@ -9,8 +9,17 @@ import tty
 import pytest
 import torch
 
-from torch_gpioius.sensors import (ChecksumStorm, FrameParser, OptoForceDAQ, SensorDisconnected, SensorStale, SensorTimeout,
-                                   decode_status, encode_config, encode_frame)
+from torch_gpioius.sensors import (
+    ChecksumStorm,
+    FrameParser,
+    OptoForceDAQ,
+    SensorDisconnected,
+    SensorStale,
+    SensorTimeout,
+    decode_status,
+    encode_config,
+    encode_frame,
+)
 
 serial = pytest.importorskip("serial")
 
@@ -41,7 +50,9 @@ def test_parser_handles_splits_garbage_and_bad_checksums():
     frames = [frame(i, 0, i, -i, 2 * i) for i in range(5)]
     corrupt = bytearray(frame(99, 0, 1, 1, 1))
     corrupt[10] ^= 0xFF
-    stream = b"\x00\xAA\x07garbage" + frames[0] + frames[1] + bytes(corrupt) + b"\xAA" + frames[2] + frames[3] + frames[4]
+    stream = (
+        b"\x00\xaa\x07garbage" + frames[0] + frames[1] + bytes(corrupt) + b"\xaa" + frames[2] + frames[3] + frames[4]
+    )
     p = FrameParser()
     out = []
     for i in range(len(stream)):                      # one byte at a time: every split point

@@ -249,7 +249,9 @@ def test_a_multi_view_source_draws_each_views_noise_from_the_seed():
 
     mesh = trimesh.creation.icosphere(subdivisions=5, radius=R)
     mesh.apply_translation(C)
-    cams = [SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.25), look_at(e, C), noise_a=0.002) for e in (EYE, EYE2)]
+    cams = [
+        SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.25), look_at(e, C), noise_a=0.002) for e in (EYE, EYE2)
+    ]
     src = MultiViewSource(cams, ("left", "right"))
     one, two, again = src.reseeded(1).capture(), src.reseeded(2).capture(), src.reseeded(1).capture()
     np.testing.assert_array_equal(one.points, again.points)

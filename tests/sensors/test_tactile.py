@@ -83,7 +83,9 @@ def test_a_patch_does_not_depend_on_rounding_of_its_depths():
 def test_a_patch_feeds_the_model_and_its_estimate_passes_through_the_sphere():
     reading, centre = _sphere_reading(0.03, press=1.5e-3, shape=(200, 200))
     obs = patch_observations(reading, PatchSettings(spacing=0.002, free_spacing=0.003, free_margin=0.003))
-    model = tg.GPIS(torch.tensor(obs.x), torch.tensor(obs.y), kernel=tg.kernels.InverseMultiquadricKernel(0.05), noise=1e-3).fit()
+    model = tg.GPIS(
+        torch.tensor(obs.x), torch.tensor(obs.y), kernel=tg.kernels.InverseMultiquadricKernel(0.05), noise=1e-3
+    ).fit()
     mu, _ = model.predict(torch.tensor(obs.x[obs.y == 0]))
     assert float(mu.abs().max()) < 0.2
 
@@ -107,7 +109,9 @@ def test_bad_poses_are_refused(pose, match):
 
 
 def test_an_all_nan_map_is_a_fault_and_the_model_is_left_alone():
-    model = tg.GPIS(torch.zeros(1, 3, dtype=torch.float64), torch.zeros(1), kernel=tg.kernels.InverseMultiquadricKernel(0.05))
+    model = tg.GPIS(
+        torch.zeros(1, 3, dtype=torch.float64), torch.zeros(1), kernel=tg.kernels.InverseMultiquadricKernel(0.05)
+    )
     n = model.train_targets.numel()
     reading = TactileReading(np.full((8, 8), np.nan), np.eye(4), CAL)
     with pytest.raises(ValueError, match="all NaN"):
@@ -136,7 +140,9 @@ def test_settings_are_checked():
 
 
 def test_depth_map_adapter_checks_each_frame():
-    frames = iter([(np.zeros((6, 8)), np.eye(4)), (np.zeros((8, 6)), np.eye(4)), (np.zeros((6, 8)), np.full((4, 4), np.nan))])
+    frames = iter(
+        [(np.zeros((6, 8)), np.eye(4)), (np.zeros((8, 6)), np.eye(4)), (np.zeros((6, 8)), np.full((4, 4), np.nan))]
+    )
     sensor = DepthMapTactileSensor(lambda: next(frames), CAL, shape=(6, 8), clock=lambda: 1.5)
     assert isinstance(sensor, tg.sensors.tactile.TactileSensor)
     reading = sensor.read()

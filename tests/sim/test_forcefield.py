@@ -164,7 +164,10 @@ def test_the_default_kernel_makes_no_phantom_surface_away_from_the_body():
     body = MeshDistance(s.inner, signed=False)
     box = np.stack([s.range[0] - 0.05, s.range[1] + 0.05])
     far = {}
-    for name, kw in (("default", dict(kernel=defaults.kernel)), ("imq", dict(kernel=tg.kernels.InverseMultiquadricKernel(0.15)))):
+    for name, kw in (
+        ("default", dict(kernel=defaults.kernel)),
+        ("imq", dict(kernel=tg.kernels.InverseMultiquadricKernel(0.15))),
+    ):
         model = tg.GPIOIS(x, y, task, noise=defaults.noise, **kw).fit()
         mesh = zero_level_mesh(model, None, field=evaluate_grid(model, box, 0.01, 0, variance=False))
         far[name] = float((np.asarray(body(mesh.vertices)) > 0.04).mean())

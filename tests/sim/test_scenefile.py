@@ -155,7 +155,11 @@ def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     assert plain.policy.touch_inside is None and plain.policy.vision_inside == 0.01
     assert plain.policy.vision_inside_gap is None and not plain.policy.cover_offset
     paper = load_scene(_write(tmp_path, GOOD + "[forcefield]\nsettings = \"paper\"\n"))
-    assert paper.views == ("fixed",) and paper.defaults.policy.voxel == 0.05 and paper.defaults.kernel.kind == "InverseMultiquadric"
+    assert (
+        paper.views == ("fixed",)
+        and paper.defaults.policy.voxel == 0.05
+        and paper.defaults.kernel.kind == "InverseMultiquadric"
+    )
     assert paper.defaults.policy.vision_free_far is None and paper.defaults.lengthscale == 0.15
     assert paper.defaults.policy.touch_inside is None and paper.defaults.policy.vision_inside is None
     assert paper.defaults.policy.vision_inside_gap is None and not paper.defaults.policy.cover_offset
@@ -187,7 +191,9 @@ def test_a_scene_file_names_its_repairs(tmp_path):
         read_scene(path) and load_scene(path)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", MeshRepairWarning)
-        path.write_text(GOOD.replace("bottle.stl", "scan.stl").replace("scale = 0.001", "scale = 0.001\nrepair = false"))
+        path.write_text(
+            GOOD.replace("bottle.stl", "scan.stl").replace("scale = 0.001", "scale = 0.001\nrepair = false")
+        )
         with pytest.raises(ValueError, match="not closed"):
             load_scene(path)
 

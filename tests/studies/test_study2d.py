@@ -12,7 +12,17 @@ from torch_gpioius.studies.study2d import FRACTIONS, check_claims, run_study
 
 def test_cli_smoke_writes_figures_records_and_summary(tmp_path, capsys):
     assert main(["simulate", "--object", "all", "--smoke", "--quiet", "--out", str(tmp_path)]) == 0
-    for name in ("fig4_A.png", "fig4_B.png", "fig4_C.png", "fig4_D.png", "fig5_similarity.png", "records.csv", "records.json", "summary.md", "summary.json"):
+    for name in (
+        "fig4_A.png",
+        "fig4_B.png",
+        "fig4_C.png",
+        "fig4_D.png",
+        "fig5_similarity.png",
+        "records.csv",
+        "records.json",
+        "summary.md",
+        "summary.json",
+    ):
         assert (tmp_path / name).stat().st_size > 0
     records = json.loads((tmp_path / "records.json").read_text())
     modes = {r["mode"] for r in records}

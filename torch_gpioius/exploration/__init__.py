@@ -29,11 +29,12 @@ from .world import ExplorationDefaults, Hardware, Measurement, RobotWorld, World
 #: Evidence policies by shorthand: None (the paper's exploration) and the registered names.
 EVIDENCE = (None, *EVIDENCE_POLICIES)
 
-__all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations",
-           "ObservationPolicy", "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel",
-           "EvidencePolicy", "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder", "Evidence",
-           "TapPolicy", "ReachPolicy", "ReachPlan", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch", "TOUCH_MODELS", "touch_model",
-           "StopRule", "OnceAround", "TravelBudget", "gone_around", "largest_uncovered_gap", "World", "Hardware",
-           "ExplorationDefaults", "Measurement", "RobotWorld", "geometry_hash", "register_world", "world_entry",
-           "world_names", "make_world", "WorldEntry", "free_space_along", "retract_free_space", "thin_points",
-           "vision_observations", "PatchSettings", "patch_observations"]
+__all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations", "ObservationPolicy",
+           "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel", "EvidencePolicy",
+           "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder", "Evidence",
+           "TapPolicy", "ReachPolicy", "ReachPlan", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch",
+           "TOUCH_MODELS", "touch_model", "StopRule", "OnceAround", "TravelBudget", "gone_around",
+           "largest_uncovered_gap", "World", "Hardware", "ExplorationDefaults", "Measurement", "RobotWorld",
+           "geometry_hash", "register_world", "world_entry", "world_names", "make_world", "WorldEntry",
+           "free_space_along", "retract_free_space", "thin_points", "vision_observations", "PatchSettings",
+           "patch_observations"]

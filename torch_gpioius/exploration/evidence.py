@@ -5,7 +5,8 @@ evidence that the cover is not the body is gathered at the start; the learned co
 pulls the estimate onto the cover, and the planner (which follows the inner variance) has no reason to go where
 the estimate is wrong (docs/results-3d.md, object H). A *tap* gathers that evidence on purpose: lift the fingertip
 along the measured force direction until the cover's force on it vanishes and it is beyond the outer surface the
-camera saw (``mu_out >= 0``; plus a margin), then come back down to the body. The readings below the contact threshold are inner free space, the re-approach ends on the body again.
+camera saw (``mu_out >= 0``; plus a margin), then come back down to the body. The readings below the contact threshold
+are inner free space, the re-approach ends on the body again.
 
 **When to tap** (:meth:`TapPolicy.due`), from the exploration's state, at most every ``min_steps`` steps:
 

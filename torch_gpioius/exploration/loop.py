@@ -282,7 +282,12 @@ def _moved(state: ExplorationState, touch: ContactResult) -> None:
 def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: float) -> None:
     """The record's motion, its contact's ground truth where the world knows it, and the model's values."""
     m = state.model
-    record.travel, record.taps, record.retracted, record.step_time = state.travel, state.taps, state.retracted, step_time
+    record.travel, record.taps, record.retracted, record.step_time = (
+        state.travel,
+        state.taps,
+        state.retracted,
+        step_time,
+    )
     record.recoveries = state.recoveries
     record.reapproaches, record.reapproach_travel = state.reapproaches, state.reapproach_travel
     record.robot_time = float(getattr(ctx.hardware.robot, "time", math.nan))

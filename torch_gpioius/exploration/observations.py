@@ -23,10 +23,10 @@ from ..models.gpiois import INNER, OUTER
 from ..models.labels import MAX_VOXEL, ObservationPolicy, check_voxel
 from ..voxels import voxel_average
 
-__all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices", "free_space_along",
-           "retract_free_space", "vision_observations", "drop_contradicted_inside", "uncontradicted",
-           "uncontradicted_by_step", "INSIDE_CLEARANCE",
-           "retract_vision_inside", "offset_outer_mean", "cover_gap", "CoverGap", "GAP_MIN_CONTACTS", "INNER", "OUTER"]
+__all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices",
+           "free_space_along", "retract_free_space", "vision_observations", "drop_contradicted_inside",
+           "uncontradicted", "uncontradicted_by_step", "INSIDE_CLEARANCE", "retract_vision_inside", "offset_outer_mean",
+           "cover_gap", "CoverGap", "GAP_MIN_CONTACTS", "INNER", "OUTER"]
 
 @dataclass
 class Observations:

@@ -1,7 +1,8 @@
 """The world behind the exploration loop: a robot, a force sensor and a point-cloud source, one interface each.
 
-The loop plans, moves, senses and records through these and never asks which world it runs in. Every world -- the 2-D polygon world, the 3-D force-field world, MuJoCo, a real UR5 with an OptoForce and a
-camera -- is a :class:`World` that supplies
+The loop plans, moves, senses and records through these and never asks which world it runs in. Every world -- the 2-D
+polygon world, the 3-D force-field world, MuJoCo, a real UR5 with an OptoForce and a camera -- is a :class:`World` that
+supplies
 
 * :meth:`World.hardware`: a :class:`Hardware` with the robot (Cartesian moves behind a safety gate), the force
   sensor, the point-cloud source, and the contact controller that turns a planned step into force-guarded motion

@@ -6,5 +6,5 @@ from .optim import FitResult, maximize_mll
 from .structured import StructuredExactInference
 from .batched import BatchedExactInference
 
-__all__ = ["DenseExactInference", "StructuredExactInference", "BatchedExactInference", "JitterWarning", "NotPositiveDefiniteError",
-           "robust_cholesky", "bordered", "FitResult", "maximize_mll"]
+__all__ = ["DenseExactInference", "StructuredExactInference", "BatchedExactInference", "JitterWarning",
+           "NotPositiveDefiniteError", "robust_cholesky", "bordered", "FitResult", "maximize_mll"]

@@ -61,7 +61,9 @@ def robust_cholesky(a: Tensor, what: str = "Gram matrix") -> tuple[Tensor, float
     if int(info) == 0 and bool(torch.isfinite(factor.diagonal(dim1=-2, dim2=-1)).all()):
         return factor, 0.0
     if not bool(torch.isfinite(a).all()):
-        raise NotPositiveDefiniteError(f"{what} has NaN or inf entries (overflow: check the kernel's length scale, the noise and K_t)")
+        raise NotPositiveDefiniteError(
+            f"{what} has NaN or inf entries (overflow: check the kernel's length scale, the noise and K_t)"
+        )
     n = a.shape[-1]
     jitter = tol.jitter_rounding * n * torch.finfo(a.dtype).eps * float(a.diagonal().abs().max())
     factor, info2 = torch.linalg.cholesky_ex(a + jitter * torch.eye(n, dtype=a.dtype, device=a.device))

@@ -9,7 +9,7 @@ from .runs import RunHistory, load_run
 from .checkpoints import CheckpointError, load_checkpoint, save_checkpoint
 from .datasets import Dataset, DatasetError, LogWriter, TornLogWarning, load_dataset, read_records, replay, save_dataset
 
-__all__ = ["FilePointCloud", "checkpoints", "datasets", "export", "importers", "offline", "outputs", "rosbag", "runs", "export_run", "import_bag",
-           "BagImportError", "RunHistory", "load_run", "CheckpointError", "load_checkpoint",
-           "save_checkpoint", "Dataset", "DatasetError", "LogWriter", "TornLogWarning", "load_dataset",
-           "read_records", "replay", "save_dataset"]
+__all__ = ["FilePointCloud", "checkpoints", "datasets", "export", "importers", "offline", "outputs", "rosbag", "runs",
+           "export_run", "import_bag", "BagImportError", "RunHistory", "load_run", "CheckpointError", "load_checkpoint",
+           "save_checkpoint", "Dataset", "DatasetError", "LogWriter", "TornLogWarning", "load_dataset", "read_records",
+           "replay", "save_dataset"]

@@ -34,8 +34,9 @@ import numpy as np
 
 from .._validation import check_metres, label_problem
 
-__all__ = ["FORMAT_VERSION", "FILE_KINDS", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter", "read_records",
-           "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta", "step_number"]
+__all__ = ["FORMAT_VERSION", "FILE_KINDS", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter",
+           "read_records", "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta",
+           "step_number"]
 
 MAGIC = b"GPIOIUS\x00"
 FORMAT_VERSION = 1

@@ -13,7 +13,8 @@ from ..surfaces import data_bounds, grid_resolution  # noqa: F401  (grid_resolut
 from .datasets import DatasetError
 from .outputs import atomic_write, check_distinct, check_new_file
 
-__all__ = ["export_run", "export_model", "write_estimate", "write_surface", "curves_svg", "grid_resolution", "MESH_FORMATS", "CURVE_FORMATS"]
+__all__ = ["export_run", "export_model", "write_estimate", "write_surface", "curves_svg", "grid_resolution",
+           "MESH_FORMATS", "CURVE_FORMATS"]
 
 #: File endings trimesh writes meshes to.
 MESH_FORMATS = (".ply", ".obj", ".stl", ".glb", ".off")

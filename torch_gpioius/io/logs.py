@@ -144,7 +144,7 @@ class LogRecorder(Recorder):
                 "fit_gap": record.fit_gap, "length": record.length, "noise": record.noise}
         if hasattr(state.model, "outer_mean"):      # the cover's offset (ObservationPolicy.cover_offset)
             meta["outer_mean"] = state.model.outer_mean
-        if run.config.learn != "task":              # learned length and noise, raw, so that resume restores them exactly
+        if run.config.learn != "task":  # learned length and noise, raw, so that resume restores them exactly
             meta["hyperparameters"] = state.model.hyperparameter_state()
         fit_state = getattr(state.model, "fit_state", None)
         fit_hessian = np.full((3, 3), np.nan)
@@ -254,16 +254,32 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
             raise DatasetError(f"{where}: steps out of order (found step {r.meta['step']})")
         state.contacts.append(np.asarray(r.arrays["contact"], dtype=np.float64))
         v = step_values(r.meta, f"{path}: step record ending at byte {r.end}")
-        rec = StepRecord(step=i, travel=v["travel"], hausdorff=v["hausdorff"],
-                         hausdorff_touched=v["hausdorff_touched"], uncertainty=v["uncertainty"],
-                         estimate=v["estimate"], **{name: v[name] for name in SHAPE_METRICS},
-                         similarity=v["similarity"], correlation=v["correlation"],
-                         correlation_interval=v["correlation_interval"],
-                         task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64), step_time=v["step_time"],
-                         robot_time=v["robot_time"], taps=v["taps"], recoveries=v["recoveries"], retracted=v["retracted"],
-                         reapproaches=v["reapproaches"], reapproach_travel=v["reapproach_travel"],
-                         contact_distance=v["contact_distance"], contact_on_body=v["contact_on_body"],
-                         truncation=v["truncation"], fit_gap=v["fit_gap"], length=v["length"], noise=v["noise"])
+        rec = StepRecord(
+            step=i,
+            travel=v["travel"],
+            hausdorff=v["hausdorff"],
+            hausdorff_touched=v["hausdorff_touched"],
+            uncertainty=v["uncertainty"],
+            estimate=v["estimate"],
+            **{name: v[name] for name in SHAPE_METRICS},
+            similarity=v["similarity"],
+            correlation=v["correlation"],
+            correlation_interval=v["correlation_interval"],
+            task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64),
+            step_time=v["step_time"],
+            robot_time=v["robot_time"],
+            taps=v["taps"],
+            recoveries=v["recoveries"],
+            retracted=v["retracted"],
+            reapproaches=v["reapproaches"],
+            reapproach_travel=v["reapproach_travel"],
+            contact_distance=v["contact_distance"],
+            contact_on_body=v["contact_on_body"],
+            truncation=v["truncation"],
+            fit_gap=v["fit_gap"],
+            length=v["length"],
+            noise=v["noise"],
+        )
         state.records.append(rec)
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
@@ -282,7 +298,12 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
             model.restore_fit_state(last.arrays["fit_hessian"], last.meta.get("fit_relearned", True),
                                     last.meta.get("held_fits", 0))
     state.model = model
-    state.travel, state.retracted, state.taps, state.recoveries = v["travel"], v["retracted"], v["taps"], v["recoveries"]
+    state.travel, state.retracted, state.taps, state.recoveries = (
+        v["travel"],
+        v["retracted"],
+        v["taps"],
+        v["recoveries"],
+    )
     state.reapproaches, state.reapproach_travel = v["reapproaches"], v["reapproach_travel"]
     state.steps = step_number(last.meta, f"{path}: last step")
     for name in ("previous", "normal"):

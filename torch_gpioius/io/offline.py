@@ -285,8 +285,8 @@ def _replay_steps(path: Path, out: Path, states: dict, learned: dict, chosen: li
 
 
 def _plot_replay(rows: list[dict], snapshots: dict, truth, path: Path, name: str, why: dict[str, str]) -> None:
-    """The replay's transitions (uncertainty, Hausdorff, correlation and the paper's similarity over the steps) and, for 2-D logs, the
-    estimate at a few steps."""
+    """The replay's transitions (uncertainty, Hausdorff, correlation and the paper's similarity over the steps) and,
+    for 2-D logs, the estimate at a few steps."""
     import matplotlib
 
     matplotlib.use("Agg")

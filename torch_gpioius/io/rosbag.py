@@ -34,8 +34,8 @@ import torch
 from .._validation import as_bounds
 from .datasets import Dataset, DatasetError
 
-__all__ = ["BagImportError", "BagTopics", "BagMessage", "import_bag", "decode_point_cloud2", "parse_transform", "write_bag",
-           "example_bag_messages"]
+__all__ = ["BagImportError", "BagTopics", "BagMessage", "import_bag", "decode_point_cloud2", "parse_transform",
+           "write_bag", "example_bag_messages"]
 
 #: ``sensor_msgs/PointField`` datatype codes -> numpy scalar types.
 _POINTFIELD_DTYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -237,8 +237,10 @@ class _TfBuffer:
         src, tgt = to_root(chain(source.lstrip("/"))), to_root(chain(target.lstrip("/")))
         common = [f for f in src if f in tgt]
         if not common:
-            raise LookupError(f"no transform from {source!r} to {target!r} at t = {t:.3f} s in the bag's tf "
-                              f"(known frames: {', '.join(sorted(set(self.links) | {p for p, _ in self.links.values()})) or 'none'})")
+            raise LookupError(
+                f"no transform from {source!r} to {target!r} at t = {t:.3f} s in the bag's tf "
+                f"(known frames: {', '.join(sorted(set(self.links) | {p for p, _ in self.links.values()})) or 'none'})"
+            )
         f = common[0]
         return np.linalg.inv(tgt[f]) @ src[f]
 
@@ -428,8 +430,8 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             name), recorded in the dataset for ``fit``; their labels give the free space and the voxel (a voxel rule
             sized to ``crop``'s largest extent, else the labels' voxel) unless ``policy`` is given; their
             inside points are placed behind the contacts along the measured forces (``touch_inside``; judged as an
-            exploration judges them), none behind the seen surface (the recorded settings say so). None: the paper's 5 cm voxels, and the
-            fit's kernel from ``kernel`` / ``noise``.
+            exploration judges them), none behind the seen surface (the recorded settings say so). None: the paper's 5
+            cm voxels, and the fit's kernel from ``kernel`` / ``noise``.
 
     With ``topics.tactile``, every pad frame stamped at a contact (the nearest wrench sample within ``max_gap``
     has ``|F| >= contact_force``) becomes a patch (:func:`~torch_gpioius.exploration.patches.patch_observations`)

@@ -24,8 +24,8 @@ A kernel without them stays usable everywhere with its length fixed; learning it
 Stationarity is part of the contract: ``k(a, b)`` depends on ``a - b`` only (isotropic kernels on ``|a - b|``).
 :meth:`ExactKernel.describe` names the kernel and its parameters for logs, checkpoints and resume, and
 :func:`torch_gpioius.kernels.from_description` rebuilds it. :class:`torch_gpioius.testing.KernelContract` holds the
-checks every kernel must pass (values against ``forward``, gradients against autograd, the second derivative against finite
-differences, positive definite Gram matrices); a new kernel's test file subclasses it.
+checks every kernel must pass (values against ``forward``, gradients against autograd, the second derivative against
+finite differences, positive definite Gram matrices); a new kernel's test file subclasses it.
 """
 
 from __future__ import annotations

@@ -361,7 +361,9 @@ class GPIOIS(ImplicitSurfaceGP):
         _check_outer_mean(self.outer_mean)
         kt = self.task_covariance
         if float(kt.abs().max()) > tol.task_covariance_max:
-            raise ValueError(f"task_covariance: entries above {tol.task_covariance_max:g} are outside the supported range")
+            raise ValueError(
+                f"task_covariance: entries above {tol.task_covariance_max:g} are outside the supported range"
+            )
 
     def similarity_interval(self, level: float = 0.95, kind: str = "correlation") -> tuple[float, float]:
         """Profile-likelihood interval of the similarity between the shapes at ``level`` (docs/theory.md).
@@ -490,10 +492,10 @@ class GPIOIS(ImplicitSurfaceGP):
                 re-learning too. The K_t kept is the best of those on the full likelihood (an optimum of it, or a
                 held one within the rule's predicted gain). A basin that the thinned copy does not have is missed.
                 Also, a re-learning from a K_t with a
-                correlation of 1 (a restart's warm start too) first runs on the copy; where the copy's run leaves the bound, the full data's
-                run starts where it ended (the walk from the bound, a dozen or more evaluations, then costs
-                ``scout^3`` each) and is kept if it ends above the warm start's MLL; otherwise the full data's run
-                starts from the warm K_t. None: everything runs on all the data.
+                correlation of 1 (a restart's warm start too) first runs on the copy; where the copy's run leaves the
+                bound, the full data's run starts where it ended (the walk from the bound, a dozen or more evaluations,
+                then costs ``scout^3`` each) and is kept if it ends above the warm start's MLL; otherwise the full
+                data's run starts from the warm K_t. None: everything runs on all the data.
 
         Returns:
             self, with ``fit_result`` describing the optimisation (``relearned``, ``predicted_gain``, ``tracked``,

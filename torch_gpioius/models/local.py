@@ -98,7 +98,9 @@ class LocalGPIOIS(ImplicitSurfaceGP):
             tau = auto_tau if tau is None else tau
         centres = torch.as_tensor(np.asarray(centres, dtype=np.float64))
         if centres.shape != (regions, x.shape[1]) or not bool(torch.isfinite(centres).all()):
-            raise ValueError(f"centres: expected a finite ({regions}, {x.shape[1]}) array [m], got {tuple(centres.shape)}")
+            raise ValueError(
+                f"centres: expected a finite ({regions}, {x.shape[1]}) array [m], got {tuple(centres.shape)}"
+            )
         tau = 1.0 if tau is None else float(tau)
         if not (math.isfinite(tau) and tau > 0):
             raise ValueError(f"tau: must be a positive length [m], got {tau!r}")

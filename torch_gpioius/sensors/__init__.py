@@ -1,24 +1,33 @@
 """Sensors behind one interface each: force sensors (the OptoForce USB DAQ over pyserial, a simulated fingertip
-sensor), tactile pads (DIGIT/GelSight depth maps, :mod:`.tactile`) and point-cloud sources (a simulated depth camera; recorded PLY/PCD/XYZ/NPZ files are read by
-:class:`torch_gpioius.io.FilePointCloud`).
+sensor), tactile pads (DIGIT/GelSight depth maps, :mod:`.tactile`) and point-cloud sources (a simulated depth camera;
+recorded PLY/PCD/XYZ/NPZ files are read by :class:`torch_gpioius.io.FilePointCloud`).
 
 ``import torch_gpioius.sensors`` works without pyserial; constructing :class:`OptoForceDAQ` on a real port
 then raises an ImportError naming the ``sensors`` extra.
 """
 
-from .base import (ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorError, SensorStale, SensorTimeout,
-                   decode_status)
+from .base import (
+    ChecksumStorm,
+    ForceReading,
+    ForceSensor,
+    SensorDisconnected,
+    SensorError,
+    SensorStale,
+    SensorTimeout,
+    decode_status,
+)
 from .pointcloud import MultiViewSource, PinholeCamera, PointCloud, PointCloudSource, SimulatedDepthCamera, look_at
 from .optoforce import FrameParser, OptoForceDAQ, encode_config, encode_frame
 from .simulated import FAULTS, ForceFieldContact, SimulatedForceSensor, SphereSDF
 from .tactile import (DIGIT_CALIBRATION, DepthMapTactileSensor, DigitTactileSensor, TactileCalibration, TactileReading,
                       TactileSensor, depth_from_image_message)
 
-__all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm", "SensorStale",
-           "decode_status", "OptoForceDAQ", "FrameParser", "encode_config", "encode_frame", "SimulatedForceSensor",
-           "ForceFieldContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource", "MultiViewSource",
-           "PinholeCamera", "SimulatedDepthCamera", "look_at", "TactileCalibration", "TactileReading", "TactileSensor",
-           "DepthMapTactileSensor", "DigitTactileSensor", "depth_from_image_message", "DIGIT_CALIBRATION"]
+__all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm",
+           "SensorStale", "decode_status", "OptoForceDAQ", "FrameParser", "encode_config", "encode_frame",
+           "SimulatedForceSensor", "ForceFieldContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource",
+           "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "look_at", "TactileCalibration",
+           "TactileReading", "TactileSensor", "DepthMapTactileSensor", "DigitTactileSensor", "depth_from_image_message",
+           "DIGIT_CALIBRATION"]
 
 
 def __getattr__(name):

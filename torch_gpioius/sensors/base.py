@@ -7,8 +7,8 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm", "SensorStale",
-           "decode_status", "STATUS_OVERLOAD_MASK", "STATUS_ERROR_MASK"]
+__all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm",
+           "SensorStale", "decode_status", "STATUS_OVERLOAD_MASK", "STATUS_ERROR_MASK"]
 
 # OptoForce DAQ status word (16 bits), as documented for the DAQ: bits 15-13 DAQ error code (1 DAQ error,
 # 2 communication error), bits 12-10 sensor error code (1 not detected, 2 failure, 4 temperature), bits 9-4

@@ -1,8 +1,9 @@
 """A simulated fingertip force sensor for the simulated worlds.
 
-Contact is a force field (a spring law, the penalty method of contact mechanics): pressing ``delta`` metres into the inner (rigid-ish) object pushes back with
-``k_inner · delta`` along its outward normal; the soft cover adds ``k_cover · depth`` along the cover's
-outward normal, small enough that the cover alone stays below the 1 N contact threshold over centimetres.
+Contact is a force field (a spring law, the penalty method of contact mechanics): pressing ``delta`` metres into the
+inner (rigid-ish) object pushes back with ``k_inner · delta`` along its outward normal; the soft cover adds ``k_cover ·
+depth`` along the cover's outward normal, small enough that the cover alone stays below the 1 N contact threshold over
+centimetres.
 """
 
 from __future__ import annotations

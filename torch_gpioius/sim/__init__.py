@@ -4,7 +4,14 @@
 fingertip force sensor on MuJoCo's contact physics with cloth and foam covers (the optional extra ``mujoco``)."""
 
 from .._validation import as_bounds
-from .forcefield import ROBOT_STUDY_DEFAULTS, Scene3D, estimate_metrics_3d, paper_objects_3d, simulated_ur5, sphere_scene
+from .forcefield import (
+    ROBOT_STUDY_DEFAULTS,
+    Scene3D,
+    estimate_metrics_3d,
+    paper_objects_3d,
+    simulated_ur5,
+    sphere_scene,
+)
 from .plane import (PlanarCamera, PlanarContact, PlanarForceSensor, PlanarGate, PlanarRobot, PlanarView, Scene2D,
                     paper_objects_2d, rectangle)
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union

@@ -339,14 +339,38 @@ class Scene3D(World):
     dim = 3
 
     @classmethod
-    def from_mesh(cls, inner, cover: str = "tight", *, start=None, direction=None, bounds=None, pose=None,
-                  at=None, scale: float = 1.0, repair: bool = True, gap: float | None = None, bridge: float = 0.03,
-                  resolution: float | None = None, name: str = "", seed: int = 0,
-                  cover_stiffness: float | None = None, sensor_noise: float = 0.02,
-                  defaults: ExplorationDefaults | None = None, support: float | str | None = "base",
-                  settings: str = "default", views=None, kernel=None, noise: float | None = None, voxel: float | None = None, touch_inside: float | None = None,
-                  vision_inside: float | None = None, vision_inside_gap: float | None = None,
-                  learn: str | None = None, cover_offset: bool | None = None) -> "Scene3D":
+    def from_mesh(
+        cls,
+        inner,
+        cover: str = "tight",
+        *,
+        start=None,
+        direction=None,
+        bounds=None,
+        pose=None,
+        at=None,
+        scale: float = 1.0,
+        repair: bool = True,
+        gap: float | None = None,
+        bridge: float = 0.03,
+        resolution: float | None = None,
+        name: str = "",
+        seed: int = 0,
+        cover_stiffness: float | None = None,
+        sensor_noise: float = 0.02,
+        defaults: ExplorationDefaults | None = None,
+        support: float | str | None = "base",
+        settings: str = "default",
+        views=None,
+        kernel=None,
+        noise: float | None = None,
+        voxel: float | None = None,
+        touch_inside: float | None = None,
+        vision_inside: float | None = None,
+        vision_inside_gap: float | None = None,
+        learn: str | None = None,
+        cover_offset: bool | None = None,
+    ) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
         The mesh is loaded, checked and repaired if need be (:func:`torch_gpioius.sim.meshes.load_mesh`, which warns
@@ -392,7 +416,8 @@ class Scene3D(World):
             cover_offset: beyond that gap, the outer task's prior mean stands for the gap the touches measure
                 (``ObservationPolicy.cover_offset``; default: off).
             learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from the kernel's) or "all"
-                (the length and sigma^2, from the kernel's and ``noise``; ``explore(learn=)``); default: by ``settings``.
+                (the length and sigma^2, from the kernel's and ``noise``; ``explore(learn=)``); default: by
+                ``settings``.
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
@@ -563,7 +588,8 @@ class Scene3D(World):
             return self
         for start, direction in perturbed_approaches(self.start, self.direction, np.random.default_rng([seed, 3])):
             # a given camera keeps its poses and draws its noise from the seed (PointCloudSource.reseeded); the
-            # default views are rebuilt with the seed's noise: the tripods where they stood, the wrist on the new approach
+            # default views are rebuilt with the seed's noise: the tripods where they stood, the wrist on the new
+            # approach
             camera = None if self._given_camera is None else self._given_camera.reseeded(seed)
             try:
                 return self._copy(start=start, direction=direction, seed=seed, camera=camera)

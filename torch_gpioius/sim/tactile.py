@@ -19,10 +19,10 @@ to the pad plane) is found by sphere tracing on the body's exact signed distance
 the cloth's current state), the cloth is where the simulation put it instead of everywhere:
 
 * where the body, at the pixel where it comes nearest the pad, is bare or lies within ``pinch`` behind the cover's
-  face (the simulated cloth's pinched layer, as the world's own contact check counts it), the pad presses the cloth onto the body: a pixel reads the body plus the cloth where the cloth
-  is between pad and body along its ray, and the bare body where the cloth has slid away (a flat pad flattens the
-  fabric it presses; the simulated fingertip is a small sphere, so the cloth's shape around it is not what a pad
-  would leave);
+  face (the simulated cloth's pinched layer, as the world's own contact check counts it), the pad presses the cloth onto
+  the body: a pixel reads the body plus the cloth where the cloth is between pad and body along its ray, and the bare
+  body where the cloth has slid away (a flat pad flattens the fabric it presses; the simulated fingertip is a small
+  sphere, so the cloth's shape around it is not what a pad would leave);
 * otherwise the cover alone carries the force (a cloth stretched like a trampoline, a fold, foam thicker than the
   gel): the pad reads the cover's surface, which is what a gel would report; the exploration then learns the cover
   as the inner surface there, as a real pad would make it.

@@ -134,7 +134,9 @@ def _transitions(ax_u, ax_h, pair: dict, reference: str = "tactile") -> None:
                 i = ok[0]
                 ax_h.plot(tr.travel[i], 100 * tr.hausdorff[i], "o", color=st["color"], ms=5, mfc="white", zorder=4)
     # the markers' legend entry in neutral grey (each mode draws them in its own colour)
-    ax_h.plot([], [], "o", color="0.35", ms=5, mfc="white", label="H at 10 / 25 / 50 % of the travel (the maps' moments)")
+    ax_h.plot(
+        [], [], "o", color="0.35", ms=5, mfc="white", label="H at 10 / 25 / 50 % of the travel (the maps' moments)"
+    )
     for f in FRACTION_MARKS:
         for ax in (ax_u, ax_h):
             ax.axvline(f * total, color="0.75", lw=0.6, zorder=0)

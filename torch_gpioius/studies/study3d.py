@@ -69,7 +69,9 @@ def summarize_3d(traces: dict[str, dict[str, Trace]], hausdorff_io: dict[str, fl
             row[f"steps_{tag}"] = tr.n_steps - 1
             row[f"terminated_{tag}"] = tr.terminated
             row[f"median_plan_ms_{tag}"] = 1e3 * float(np.median(tr.step_time[1:])) if tr.n_steps > 1 else float("nan")
-            row[f"robot_time_s_{tag}"] = float(tr.robot_time[-1] - tr.robot_time[0]) if len(tr.robot_time) else float("nan")
+            row[f"robot_time_s_{tag}"] = (
+                float(tr.robot_time[-1] - tr.robot_time[0]) if len(tr.robot_time) else float("nan")
+            )
         if "visual-tactile" in pair:
             s = pair["visual-tactile"].similarity[1:]
             row["S_mean"] = float(np.nanmean(s)) if len(s) else float("nan")
@@ -138,22 +140,25 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
     def valid(r, tag):
         return f"{r[f'valid_{tag}']} of {r[f'measured_{tag}']}" if f"valid_{tag}" in r else "-"
 
-    lines = ["Columns: H is the Hausdorff distance (eq. 24) from the estimated inner surface to the true one at 10, 50 "
-             "and 100 % of the run's travel ('none': the estimate had no surface inside the range there); U the "
-             "uncertainty (eq. 23, relative to the prior variance); similarity the paper's K_t[0,1] / K_t[0,0]; "
-             "'with estimate' how many of the run's metric samples had a surface to judge; steps, with what ended the "
-             "run in brackets (travel: its budget; lost-contact, stalled, refused: the world or the robot stopped "
-             "it before); travel the fingertip's "
-             "travel and, in brackets, how many re-approaches after lost contact it held and how far they went; plan "
-             "ms the median planning step; robot time the simulated clock. At the end: Chamfer, the mean "
-             "surface-to-surface distance; F 5 mm, the F-score at 5 mm; bias, the median signed distance of the true "
-             "surface from the estimate (negative: the estimate lies inside); unseen, the share of the true surface "
-             "more than 2 cm from every observation.", "",
-             "| object | d_H inner-outer [cm] | H VT 10 / 50 / 100 % [cm] | H tactile 10 / 50 / 100 % [cm] | "
-             "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps (ended by) VT / T | travel VT / T [m] "
-             "(re-approaches) | plan ms VT / T | robot time VT / T [s] | Chamfer VT / T [cm] | F 5 mm VT / T | "
-             "bias VT / T [cm] | unseen VT / T |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        "Columns: H is the Hausdorff distance (eq. 24) from the estimated inner surface to the true one at 10, 50 "
+        "and 100 % of the run's travel ('none': the estimate had no surface inside the range there); U the "
+        "uncertainty (eq. 23, relative to the prior variance); similarity the paper's K_t[0,1] / K_t[0,0]; "
+        "'with estimate' how many of the run's metric samples had a surface to judge; steps, with what ended the "
+        "run in brackets (travel: its budget; lost-contact, stalled, refused: the world or the robot stopped "
+        "it before); travel the fingertip's "
+        "travel and, in brackets, how many re-approaches after lost contact it held and how far they went; plan "
+        "ms the median planning step; robot time the simulated clock. At the end: Chamfer, the mean "
+        "surface-to-surface distance; F 5 mm, the F-score at 5 mm; bias, the median signed distance of the true "
+        "surface from the estimate (negative: the estimate lies inside); unseen, the share of the true surface "
+        "more than 2 cm from every observation.",
+        "",
+        "| object | d_H inner-outer [cm] | H VT 10 / 50 / 100 % [cm] | H tactile 10 / 50 / 100 % [cm] | "
+        "with estimate VT / T | U VT / T final | similarity 10 / 100 % | steps (ended by) VT / T | travel VT / T [m] "
+        "(re-approaches) | plan ms VT / T | robot time VT / T [s] | Chamfer VT / T [cm] | F 5 mm VT / T | "
+        "bias VT / T [cm] | unseen VT / T |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
 
     def pair(r, k, scale, fmt):
         vals = [r.get(f"{k}_{tag}_100") for tag in ("vt", "t")]

@@ -16,8 +16,8 @@ __all__ = ["richardson_derivative", "assert_close_to_reference"]
 def richardson_derivative(f, x, h, directions=None):
     """Derivatives of ``f`` at ``x`` by Richardson-extrapolated central differences, with an error estimate.
 
-    A reference has an error of its own (docs/architecture.md, "Tests"): a central difference D(h) errs by ~h^2 f''' (truncation)
-    plus ~r / h, where r is the rounding noise of one evaluation of f, which for a linear solve is
+    A reference has an error of its own (docs/architecture.md, "Tests"): a central difference D(h) errs by ~h^2 f'''
+    (truncation) plus ~r / h, where r is the rounding noise of one evaluation of f, which for a linear solve is
     cond * eps * |f|, not eps * |f|, and moves with the BLAS blocking (thread count, CPU). The estimate here is
     R(h/2) with R(h) = (4 D(h/2) - D(h)) / 3 (fourth order); its error is estimated as |R(h) - R(h/2)| (the
     truncation of R(h) is 16x that of R(h/2), and both carry rounding of the same size), plus a floor of

@@ -128,7 +128,11 @@ class MujocoScene(World):
         self.range = as_bounds(bounds, 3)
         self.name, self.seed = name, int(seed)
         self.sensor_noise, self.timestep, self.settle_time = float(sensor_noise), float(timestep), float(settle_time)
-        self.camera_scale, self.tool_length, self.tip_radius = float(camera_scale), float(tool_length), float(tip_radius)
+        self.camera_scale, self.tool_length, self.tip_radius = (
+            float(camera_scale),
+            float(tool_length),
+            float(tip_radius),
+        )
         self._defaults = defaults or MUJOCO_DEFAULTS
         self._samples: dict[float, np.ndarray] = {}
         # the cover must start outside the body (its elements' radius included)
@@ -260,7 +264,8 @@ class MujocoScene(World):
 
         return f"""<mujoco model={quoteattr(self.name or 'covered object')}>
 <compiler angle="radian" autolimits="true"/>
-<option timestep="{self.timestep}" solver="CG" cone="elliptic" tolerance="1e-6" integrator="discrete"><flag energy="enable" autoreset="disable"/></option>
+<option timestep="{self.timestep}" solver="CG" cone="elliptic" tolerance="1e-6" integrator="discrete">
+<flag energy="enable" autoreset="disable"/></option>
 <size memory="64M"/>
 {f"<asset>{assets}</asset>" if assets else ""}
 <worldbody>
@@ -438,7 +443,7 @@ class MujocoScene(World):
         thicker than the gel, is read as foam."""
         from ..tactile import SimulatedGelPad
 
-        lift = self.cover.radius                 # mj_rayFlex meets the faces' mid-surface; the cloth's face is this in front
+        lift = self.cover.radius  # mj_rayFlex meets the faces' mid-surface; the cloth's face is this in front
 
         def cover_rays(origins: np.ndarray, axis: np.ndarray, far: float) -> np.ndarray:
             hits = (self._flex_ray(physics, o, axis) for o in origins)
@@ -501,8 +506,15 @@ class MujocoScene(World):
         return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
 
     def fingerprint(self) -> str:
-        return geometry_hash(*self.body.fingerprint(), self.cover.vertices, self.cover.elements, self.start, self.direction, self.range,
-                             [self.seed, self.sensor_noise, self.timestep, self.settle_time])
+        return geometry_hash(
+            *self.body.fingerprint(),
+            self.cover.vertices,
+            self.cover.elements,
+            self.start,
+            self.direction,
+            self.range,
+            [self.seed, self.sensor_noise, self.timestep, self.settle_time],
+        )
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
         return {**{f"robot_{k}": v for k, v in hw.robot.get_state().items()},

@@ -12,8 +12,9 @@ uniform cylinder of its length and a radius of the real link's size, about its c
 The fingertip: a sphere of radius ``tip_radius`` at ``tool_offset`` in the flange frame, on a body mounted on the
 flange by three spring-loaded slide joints (``tip_stiffness`` per axis, the compliance of the OptoForce's silicone
 dome: a rigid fingertip on a stiff arm would turn each millimetre of pressing into ~200 N); the force sensor reads
-the mount's deflection (``MujocoForceSensor``), in the tool frame (the OptoForce's frame). Joints are position-controlled servos (``kp``, ``kv``), with gravity compensation and rotor
-inertia (armature), as the UR's own joint controllers hold the arm.
+the mount's deflection (``MujocoForceSensor``), in the tool frame (the OptoForce's frame). Joints are
+position-controlled servos (``kp``, ``kv``), with gravity compensation and rotor inertia (armature), as the UR's own
+joint controllers hold the arm.
 """
 
 from __future__ import annotations
