@@ -14,9 +14,6 @@ the K_t fit) -> ``models`` (GPIS, GPIOIS, LocalGPIOIS) -> ``geometry`` / ``surfa
 from __future__ import annotations
 
 import sys as _sys
-import types as _types
-import warnings as _warnings
-from importlib import import_module as _import_module
 
 from ._version import __version__  # noqa: E402
 
@@ -45,34 +42,7 @@ __all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings
            "save_dataset", "load_checkpoint", "save_checkpoint", "import_bag", "BagImportError", "export_run",
            "load_run", "RunHistory"]
 
-# Module paths of the 0.1 layout keep working with a DeprecationWarning (``from torch_gpioius.gpiois import GPIOIS``):
-# each old path is a stand-in module that warns and forwards every name to the module that holds the code now.
-_MOVED = {
-    "gpiois": "models.gpiois",
-    "gpis": "models.gpis",
-    "_base": "models.base",
-    "structured": "inference.structured",
-    "optim": "inference.optim",
-    "study": "studies.study2d",
-    "study3d": "studies.study3d",
-}
-
-
-class _MovedModule(_types.ModuleType):
-    def __init__(self, old: str, new: str) -> None:
-        super().__init__(old)
-        self._new = new
-
-    def __getattr__(self, name: str):
-        if name.startswith("__"):
-            raise AttributeError(name)
-        _warnings.warn(f"{self.__name__} is {self._new} now", DeprecationWarning, stacklevel=2)
-        return getattr(_import_module(self._new), name)
-
-
-for _old, _new in _MOVED.items():
-    _sys.modules.setdefault(f"{__name__}.{_old}", _MovedModule(f"{__name__}.{_old}", f"{__name__}.{_new}"))
 # the io modules of 0.1 are also attributes of the package (tg.datasets, ...): their module paths stay the real ones
 for _old in ("datasets", "checkpoints", "importers", "offline"):
     _sys.modules.setdefault(f"{__name__}.{_old}", getattr(io, _old))
-del _old, _new
+del _old

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import math
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -157,12 +156,6 @@ class Trace:
         if not len(t):
             return {"median": math.nan, "p95": math.nan, "max": math.nan}
         return {"median": float(np.median(t)), "p95": float(np.percentile(t, 95)), "max": float(t.max())}
-
-    @property
-    def sim_time(self) -> np.ndarray:
-        """Deprecated name of :attr:`robot_time`."""
-        warnings.warn("Trace.sim_time is robot_time now", DeprecationWarning, stacklevel=2)
-        return self.robot_time
 
     def records(self) -> list[dict]:
         """Per-step records as dicts (JSON/CSV friendly), in the vocabulary of the logs and ``runs.csv``."""

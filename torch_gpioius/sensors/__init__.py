@@ -34,9 +34,4 @@ def __getattr__(name):
     if name == "FilePointCloud":          # forwarded to io until 0.3; reading files is io's business
         raise AttributeError("torch_gpioius.sensors.FilePointCloud moved to torch_gpioius.io.FilePointCloud (the "
                              "forward from sensors is gone: sensors no longer imports io)")
-    if name == "PenaltyContact":          # "penalty" names only the planner's range cost C(x) now
-        import warnings
-
-        warnings.warn("torch_gpioius.sensors.PenaltyContact is ForceFieldContact now", DeprecationWarning, stacklevel=2)
-        return ForceFieldContact
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -16,8 +16,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-import torch_gpioius as tg
-
+from ..kernels import from_description
 from .differences import richardson_derivative
 
 __all__ = ["KernelContract"]
@@ -30,7 +29,7 @@ class KernelContract:
     Example:
         >>> class TestMatern52(KernelContract):
         ...     def make(self):
-        ...         return tg.kernels.Matern52(0.1)
+        ...         return torch_gpioius.kernels.Matern52(0.1)
     """
 
     dim = 3
@@ -127,7 +126,7 @@ class KernelContract:
         k.length = 0.0731          # through the parameter's constraint and back: to rounding (a softplus is not exact)
         assert abs(k.length - 0.0731) <= 4e-16 * 0.0731
         assert k.describe() != before
-        again = tg.kernels.from_description(k.describe())
+        again = from_description(k.describe())
         assert abs(again.length - k.length) <= 4e-16 * k.length
         for bad in (0.0, -0.1, float("nan"), float("inf")):
             with pytest.raises(ValueError):
@@ -151,6 +150,6 @@ class KernelContract:
 
     def test_describe_rebuilds_the_same_kernel(self):
         k = self.make()
-        again = tg.kernels.from_description(k.describe())
+        again = from_description(k.describe())
         a, b = self._points(5), self._points(3, seed=4)
         torch.testing.assert_close(again.value(a, b), k.value(a, b), rtol=0.0, atol=0.0)
