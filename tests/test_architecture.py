@@ -13,7 +13,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "torch_gpioius"
 LAYERS = [
     {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines", "_extras"},
     {"kernels"}, {"testing"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"},
-    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"io"}, {"session"}, {"studies"}, {"viewer"}, {"cli"}, {"(root)"},
+    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"io"}, {"session"}, {"studies"}, {"viewer"}, {"cli"},
+    {"(root)"},
 ]
 LAYER = {name: i for i, layer in enumerate(LAYERS) for name in layer}
 #: Imports inside a function that go up on purpose: a deprecated name forwarded to its new home (``__getattr__``)
