@@ -385,7 +385,7 @@ class Dataset:
                 settings = EstimatorSettings.from_dict(self.meta["estimator"])
             except ValueError as exc:
                 raise DatasetError(f"the header's estimator settings: {exc}") from None
-        if kwargs.get("kernel") is None:
+        if kwargs.get("kernel") is None and kwargs.get("theta") is None:    # theta=: the models' deprecated alias
             if settings is not None:
                 kwargs["kernel"] = settings.new_kernel()
             else:
