@@ -265,3 +265,44 @@ def test_a_kernel_registered_outside_the_package_is_used_by_name_from_a_scene_fi
     assert record["kernel"] == "TestMatern32" and record["estimator"]["kernel"]["kernel"] == "TestMatern32"
     with pytest.raises(SystemExit):
         build_parser().parse_args(["study", "--kernel", "NoSuchKernel"])
+
+
+def test_a_touch_model_declares_its_contract_by_subclassing_the_base():
+    """Issue 53: the loop asked ``getattr(touch, "bind" / "select" / "retraction_margin")``. A touch now subclasses
+    TouchModelBase and the loop calls every method of the contract; an object with ``observations`` alone gets the
+    defaults, and one that writes more of the contract without the base is refused by name (its methods would have
+    been passed over)."""
+    from torch_gpioius.exploration import PointTouch, TouchModelBase, touch_model
+
+    calls = []
+
+    class Counting(TouchModelBase):
+        name = "counting"
+
+        def observations(self, result, contacts, policy, step):
+            return PointTouch().observations(result, contacts, policy, step)
+
+        def bind(self, hardware):
+            calls.append("bind")
+
+        def select(self, model, obs):
+            calls.append("select")
+            return obs
+
+    trace = tg.explore(BallWorld(), touch=Counting(), max_steps=3, metrics_every=100)
+    assert calls[0] == "bind" and calls.count("select") >= 3 and trace.touch == "counting"
+
+    class Bare:
+        def observations(self, result, contacts, policy, step):
+            return PointTouch().observations(result, contacts, policy, step)
+
+    wrapped = touch_model(Bare())
+    assert isinstance(wrapped, TouchModelBase) and wrapped.name == "Bare" and wrapped.fit_options() == {}
+    assert tg.explore(BallWorld(), touch=Bare(), max_steps=2, metrics_every=100).touch == "Bare"
+
+    class HalfDeclared(Bare):
+        def select(self, model, obs):
+            return obs
+
+    with pytest.raises(ValueError, match="HalfDeclared has select: subclass torch_gpioius.exploration.TouchModelBase"):
+        touch_model(HalfDeclared())

@@ -15,7 +15,7 @@ from .observations import (Observations, ObservationPolicy, free_space_along, re
                            vision_observations)
 from .patches import PatchSettings, patch_observations
 from .policies import EVIDENCE_POLICIES, evidence_policy
-from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel
+from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel, TouchModelBase
 from .reach import ReachPlan, ReachPolicy
 from .recorders import IntervalRecorder, MetricsRecorder, NoEstimateWarning, ProgressRecorder
 from .recovery import NoProgress
@@ -30,10 +30,10 @@ from .world import ExplorationDefaults, Hardware, Measurement, RobotWorld, World
 EVIDENCE = (None, *EVIDENCE_POLICIES)
 
 __all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations", "ObservationPolicy",
-           "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel", "EvidencePolicy",
-           "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder", "Evidence",
-           "TapPolicy", "ReachPolicy", "ReachPlan", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy", "PointTouch",
-           "TOUCH_MODELS", "touch_model", "StopRule", "OnceAround", "TravelBudget", "gone_around",
+           "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel", "TouchModelBase",
+           "EvidencePolicy", "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder",
+           "Evidence", "TapPolicy", "ReachPolicy", "ReachPlan", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy",
+           "PointTouch", "TOUCH_MODELS", "touch_model", "StopRule", "OnceAround", "TravelBudget", "gone_around",
            "largest_uncovered_gap", "World", "Hardware", "ExplorationDefaults", "Measurement", "RobotWorld",
            "geometry_hash", "register_world", "world_entry", "world_names", "make_world", "WorldEntry",
            "free_space_along", "retract_free_space", "thin_points", "vision_observations", "PatchSettings",

@@ -107,9 +107,9 @@ class ExploreConfig(EstimatorView):
             if mode != "visual-tactile" or regions is not None:
                 raise ValueError("outer_tol: the truncated outer basis is GPIOIS's; it needs mode='visual-tactile' "
                                  "and no regions")
-            inference = getattr(touch, "inference", "auto")
+            inference = touch.inference
             if inference != "auto":
-                raise ValueError(f"outer_tol: the {getattr(touch, 'name', 'touch')} touch uses the {inference} "
+                raise ValueError(f"outer_tol: the {touch.name} touch uses the {inference} "
                                  "engine, which has no truncated outer basis")
         d = world.defaults
         step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
@@ -184,7 +184,7 @@ class ExploreConfig(EstimatorView):
             model = LocalGPIOIS(x, y, task, regions=self.regions, noise=self.noise, kernel=kernel)
         else:
             model = GPIOIS(x, y, task, noise=self.noise, kernel=kernel,
-                           inference=getattr(self.touch, "inference", "auto"), outer_tol=self.outer_tol)
+                           inference=self.touch.inference, outer_tol=self.outer_tol)
         return model.to_device(self.device)
 
     def _policy_record(self) -> dict:
@@ -204,7 +204,7 @@ class ExploreConfig(EstimatorView):
         kernel = self.estimator.kernel.describe()
         theta = self.lengthscale if isinstance(self.kernel, InverseMultiquadricKernel) else None  # earlier logs' key
         evidence = None if self.evidence is None else getattr(self.evidence, "name", type(self.evidence).__name__)
-        out = {"mode": self.mode, "evidence": evidence, "touch": getattr(self.touch, "name", type(self.touch).__name__),
+        out = {"mode": self.mode, "evidence": evidence, "touch": self.touch.name,
                "step_length": self.step, "theta": theta, "kernel": kernel,
                "noise": float(self.noise), "max_steps": self.max_steps,
                "stop": [r.describe() for r in self.stop], "metrics_every": self.metrics_every,

@@ -13,7 +13,6 @@ crash-safe log of :mod:`torch_gpioius.io.logs`).
 
 from __future__ import annotations
 
-import inspect
 import math
 import time
 import warnings
@@ -59,8 +58,7 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
         the :class:`~torch_gpioius.exploration.trace.Trace` of the run.
     """
     ctx = Run(world, hardware or world.hardware(), config, resumed=state is not None)
-    if callable(getattr(config.touch, "bind", None)):        # a patch touch reads the world's pad
-        config.touch.bind(ctx.hardware)
+    config.touch.bind(ctx.hardware)                          # a patch touch reads the world's pad
     observers = [MetricsRecorder(), IntervalRecorder(), *recorders, ProgressRecorder(progress)]
     state = state if state is not None else begin(ctx)
     for r in observers:
@@ -224,7 +222,7 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
            contact: np.ndarray) -> tuple[np.ndarray, Observations]:
     """Retract free space the new contact shows to be too close, keep what a touch model's ``select`` keeps of the
     batch (a patch's informative points), then add it; the retracted indices and the batch added."""
-    margin = getattr(cfg.touch, "retraction_margin", None) or cfg.policy.free_space_margin
+    margin = cfg.touch.retraction_margin or cfg.policy.free_space_margin
     before = int(state.model.train_targets.shape[0])
     removed = retract_free_space(state.model, contact, margin)
     state.retracted += len(removed)
@@ -232,9 +230,7 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     if len(camera):                      # indices into the data before this step, as the log and replays read them
         removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
     offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
-    select = getattr(cfg.touch, "select", None)
-    if callable(select):
-        obs = select(state.model, obs)
+    obs = cfg.touch.select(state.model, obs)
     if (obs.y < 0).any():                # the model's data leave the device only when there is something to check
         obs = drop_contradicted_inside(obs, cfg.policy, state.model.train_inputs[0].cpu().numpy(),
                                        state.model.train_targets.cpu().numpy())
@@ -251,15 +247,14 @@ def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
     learns nothing else)."""
     from ..models.gpiois import FitNotConvergedWarning
 
-    options = cfg.touch.fit_options() if callable(getattr(cfg.touch, "fit_options", None)) else {}
-    accepted = inspect.signature(model.fit).parameters
+    options = {k: v for k, v in cfg.touch.fit_options().items() if k in model.FIT_OPTIONS}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", FitNotConvergedWarning)
         restart = cfg.restart_every is not None and state.steps > 0 and state.steps % cfg.restart_every == 0
         if restart and cfg.learn != "task":
             model.learn_hyperparameters(*LEARN_SIZE, start=cfg.initial_hyperparameters,
                                         learn_noise=cfg.learn == "all")
-        model.fit(multi_start=restart, **{k: v for k, v in options.items() if k in accepted})
+        model.fit(multi_start=restart, **options)
     for w in caught:                     # counted, and said once at the end of the run; others passed on
         if issubclass(w.category, FitNotConvergedWarning):
             state.unconverged_fits += 1
@@ -268,10 +263,7 @@ def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:
 
 
 def _add(model, obs: Observations) -> None:
-    if getattr(model, "num_tasks", 1) > 1:
-        model.add_observations(obs.x, obs.y, obs.task)
-    else:
-        model.add_observations(obs.x, obs.y)
+    model.add_observations(obs.x, obs.y, obs.task)
 
 
 def _moved(state: ExplorationState, touch: ContactResult) -> None:
@@ -295,19 +287,17 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     if truth is not None:
         record.contact_distance = float(truth.distance)
         record.contact_on_body = math.nan if truth.on_body is None else float(bool(truth.on_body))
-    record.similarity = float(getattr(m, "similarity", math.nan))
-    record.correlation = float(getattr(m, "correlation", math.nan))
-    if hasattr(m, "task_covariance"):
-        record.task_covariance = m.task_covariance.detach().cpu().numpy()
-    record.truncation = float(getattr(m, "truncation", 0.0))
-    fit = getattr(m, "fit_result", None)
-    if fit is not None and not fit.relearned and math.isfinite(fit.predicted_gain):
-        record.fit_gap = float(fit.predicted_gain)
-    record.noise = float(m.noise)
-    if getattr(m.kernel, "learnable_length", False):
-        record.length = float(m.kernel.length)
-    if hasattr(m, "region_correlations"):
-        record.region_correlation = m.region_correlations().detach().cpu().numpy()
+    summary = m.step_summary()                               # the model's contract: no probing its kind
+    record.similarity, record.correlation = summary["similarity"], summary["correlation"]
+    if summary["task_covariance"] is not None:
+        record.task_covariance = summary["task_covariance"]
+    record.truncation, record.noise = summary["truncation"], summary["noise"]
+    if math.isfinite(summary["fit_gap"]):
+        record.fit_gap = summary["fit_gap"]
+    if math.isfinite(summary["length"]):
+        record.length = summary["length"]
+    if summary["region_correlation"] is not None:
+        record.region_correlation = summary["region_correlation"]
 
 
 class _TimedToucher:

@@ -10,7 +10,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["Toucher", "TouchModel", "EvidencePolicy", "Recorder"]
+__all__ = ["Toucher", "TouchModel", "TouchModelBase", "EvidencePolicy", "Recorder"]
 
 
 @runtime_checkable
@@ -42,6 +42,46 @@ class TouchModel(Protocol):
     name: str
 
     def observations(self, result, contacts: np.ndarray, policy, step: int) -> Any: ...
+
+
+class TouchModelBase:
+    """The touch-model contract with its defaults: subclass it and write :meth:`observations`; override the rest where
+    a touch needs it (the exploration calls each, and never asks whether a touch has it).
+
+    Attributes:
+        name: the touch's name in logs and records.
+        inference: the engine a visual-tactile model uses with this touch ("auto"; a patch's: "batched").
+        retraction_margin: free space closer than this to a new contact is retracted [m]; None: the labels'
+            ``free_space_margin``.
+    """
+
+    name: str = "custom"
+    inference: str = "auto"
+    retraction_margin: float | None = None
+
+    def observations(self, result, contacts: np.ndarray, policy, step: int) -> Any:
+        """The :class:`~torch_gpioius.exploration.observations.Observations` batch of one touch (see
+        :class:`TouchModel`)."""
+        raise NotImplementedError(f"{type(self).__name__}.observations")
+
+    def bind(self, hardware) -> None:
+        """Take what the touch reads from a run's hardware (a pad) before the run starts; nothing by default."""
+
+    def select(self, model, obs):
+        """The rows of a batch worth adding to ``model`` (a patch's informative points); all by default."""
+        return obs
+
+    def fit_options(self) -> dict:
+        """Options for K_t's fit after this touch (the model takes those its ``FIT_OPTIONS`` names); none by
+        default."""
+        return {}
+
+    def footprint(self) -> dict:
+        """Arrays a log keeps of the last touch (a pad's pose and size); none by default."""
+        return {}
+
+    def describe(self) -> dict:
+        return {"touch": self.name}
 
 
 @runtime_checkable

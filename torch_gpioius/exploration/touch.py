@@ -12,12 +12,13 @@ import torch
 from .._validation import as_int
 from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchSettings, patch_observations
+from .protocols import TouchModelBase
 
 __all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "touch_model", "inside_observation"]
 
 
 @dataclass(frozen=True)
-class PointTouch:
+class PointTouch(TouchModelBase):
     """A fingertip with a force sensor (Sec. VI): the settled contact point (y = 0) and the free space it crossed
     with ``|F|`` below the contact threshold (y = 1), thinned to ``policy.free_space_spacing`` and kept
     ``policy.free_space_margin`` from every contact (docs/method-notes.md); with ``policy.touch_inside``, also a
@@ -40,7 +41,7 @@ class PointTouch:
 
 
 @dataclass
-class PatchTouch:
+class PatchTouch(TouchModelBase):
     """A tactile pad at the fingertip (DIGIT, GelSight): each touch's patch, read at the contact
     (:func:`~torch_gpioius.exploration.patches.patch_observations`: surface points with normals, free space on the
     untouched gel), and the free space the fingertip crossed, as :class:`PointTouch` records it (kept the free-space
@@ -221,11 +222,15 @@ def inside_observation(contact: np.ndarray, result, policy: ObservationPolicy, s
     return Observations(points, labels, np.zeros(len(points), np.int64), step=step, source="touch")
 
 
-def touch_model(touch) -> object:
-    """A touch model from its name or itself (any object with ``observations(result, contacts, policy, step)``).
+def touch_model(touch) -> TouchModelBase:
+    """A touch model from its name or itself: a :class:`~torch_gpioius.exploration.protocols.TouchModelBase`, or any
+    object with ``observations(result, contacts, policy, step)`` alone, which gets the base's defaults (the one
+    place that looks at what an object has: the exploration then calls the contract's methods).
 
     Raises:
-        ValueError: an unknown name.
+        ValueError: an unknown name, an object without ``observations``, or one that writes more of the contract
+            (``bind``, ``select``, ``fit_options``, ...) without subclassing the base (its methods would be passed
+            over).
     """
     if touch is None:
         return PointTouch()
@@ -233,7 +238,29 @@ def touch_model(touch) -> object:
         if touch not in TOUCH_MODELS:
             raise ValueError(f"touch: must be one of {sorted(TOUCH_MODELS)} or a touch model, got {touch!r}")
         return TOUCH_MODELS[touch]()
+    if isinstance(touch, TouchModelBase):
+        return touch
     if not callable(getattr(touch, "observations", None)):
         raise ValueError(f"touch: expected a name or an object with observations(result, contacts, policy, step), "
                          f"got {type(touch).__name__}")
-    return touch
+    more = [m for m in ("bind", "select", "fit_options", "footprint", "retraction_margin", "inference")
+            if hasattr(touch, m)]
+    if more:
+        raise ValueError(f"touch: {type(touch).__name__} has {', '.join(more)}: subclass "
+                         "torch_gpioius.exploration.TouchModelBase so that the exploration calls them")
+    return _ObservationsOnly(touch)
+
+
+class _ObservationsOnly(TouchModelBase):
+    """A touch given as an object with ``observations`` alone, with the base's defaults for the rest."""
+
+    def __init__(self, touch) -> None:
+        self.touch = touch
+        self.name = str(getattr(touch, "name", type(touch).__name__))
+
+    def observations(self, result, contacts, policy, step):
+        return self.touch.observations(result, contacts, policy, step)
+
+    def describe(self) -> dict:
+        describe = getattr(self.touch, "describe", None)
+        return describe() if callable(describe) else {"touch": self.name}

@@ -120,7 +120,7 @@ class Trace:
                    evidence=None if config.evidence is None else getattr(config.evidence, "name", "custom"),
                    region_correlation=(np.stack([np.pad(r, (0, width - len(r)), constant_values=np.nan)
                                                  for r in regions]) if width else np.zeros((len(recs), 0))),
-                   touch=getattr(config.touch, "name", "custom"), contact_distance=col("contact_distance"),
+                   touch=config.touch.name, contact_distance=col("contact_distance"),
                    contact_on_body=col("contact_on_body"),
                    recoveries=np.array([r.recoveries for r in recs], dtype=np.int64), truncation=col("truncation"),
                    fit_gap=col("fit_gap"), length=col("length"), noise=col("noise"), estimate=col("estimate"),

@@ -160,9 +160,7 @@ class LogRecorder(Recorder):
                   "timestamps": np.full(len(path), record.robot_time), "fit_hessian": fit_hessian}
         if obs.normal is not None:
             arrays["normals"] = obs.normal
-        footprint = getattr(run.config.touch, "footprint", None)
-        if callable(footprint):              # the pad of this step's patch (the viewer draws it)
-            arrays.update(footprint())
+        arrays.update(run.config.touch.footprint())       # a patch's pad at this step (the viewer draws it)
         if hasattr(state.model, "region_correlations"):
             arrays["local_params"] = state.model.params.detach().cpu().numpy()
         self.writer.append("step", meta, {**arrays, **world})

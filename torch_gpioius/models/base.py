@@ -44,6 +44,9 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
 
     #: Number of tasks of the model (1 for GPIS, 2 for GPIOIS).
     num_tasks: int = 1
+    #: The options of K_t's fit that :meth:`fit` takes beyond ``multi_start`` (a touch model's ``fit_options`` pass
+    #: only these): none for a model without K_t.
+    FIT_OPTIONS: frozenset = frozenset()
 
     def __init__(self, train_inputs: tuple[Tensor, ...], train_y: Tensor, theta: float | None, noise: float,
                  learn_theta: bool = False, kernel: ExactKernel | None = None):
@@ -63,6 +66,18 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         self._engine_key: tuple | None = None
         #: Outcome of the last ``learn_hyperparameters()`` (None before the first).
         self.hyper_result: HyperparameterResult | None = None
+
+    # ------------------------------------------------------------------ what an exploration step records
+    def step_summary(self) -> dict:
+        """What an exploration records of the model after a step (the loop reads this, and never asks what kind of
+        model it holds): ``similarity``, ``correlation`` (NaN without two tasks), ``task_covariance`` (`(2, 2)`
+        array, or None), ``truncation`` (a truncated outer basis's bound; 0 when exact), ``fit_gap`` (how far a held
+        K_t was from its optimum [nats]; NaN when re-learned), ``noise``, ``length`` (the kernel's learnable
+        length [m]; NaN without one) and ``region_correlation`` (`(R,)` array of a local model, or None)."""
+        kernel = self.covar_module
+        return {"similarity": math.nan, "correlation": math.nan, "task_covariance": None, "truncation": 0.0,
+                "fit_gap": math.nan, "noise": float(self.noise),
+                "length": float(kernel.length) if kernel.learnable_length else math.nan, "region_correlation": None}
 
     # ------------------------------------------------------------------ properties
     @property

@@ -433,6 +433,17 @@ class GPIOIS(ImplicitSurfaceGP):
     def _key(self, n: int) -> tuple:
         return super()._key(n) + (getattr(self, "outer_tol", None), self._outer_shift())
 
+    def step_summary(self) -> dict:
+        """:meth:`ImplicitSurfaceGP.step_summary` with the similarity, the correlation, K_t, the truncation's bound
+        and, for a held K_t, the Newton decrement that decided to hold it."""
+        out = super().step_summary()
+        fit = self.fit_result
+        out.update(similarity=float(self.similarity), correlation=float(self.correlation),
+                   task_covariance=self.task_covariance.detach().cpu().numpy(), truncation=float(self.truncation))
+        if fit is not None and not fit.relearned and math.isfinite(fit.predicted_gain):
+            out["fit_gap"] = float(fit.predicted_gain)
+        return out
+
     @property
     def truncation(self) -> float:
         """Bound on the truncated outer basis' change of the Gram matrix, relative to sigma^2: ``K_t[1,1] tr(E) /
@@ -454,6 +465,8 @@ class GPIOIS(ImplicitSurfaceGP):
         return self._train_task()
 
     # ------------------------------------------------------------------ learning and prediction
+    FIT_OPTIONS = frozenset({"min_gain", "max_hold", "track", "scout"})
+
     def fit(self, multi_start: bool | None = None, min_gain: float | None = None,
             max_hold: int = 20, track: bool = False, scout: int | None = None) -> "GPIOIS":
         """Learn K_t (and only K_t) by maximising the exact log marginal likelihood, eq. (15)-(16).

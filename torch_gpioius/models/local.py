@@ -206,6 +206,15 @@ class LocalGPIOIS(ImplicitSurfaceGP):
         return torch.tensor([[float(beta * beta * c + a1), float(beta * c)], [float(beta * c), float(c)]],
                             dtype=torch.float64)
 
+    def step_summary(self) -> dict:
+        """:meth:`ImplicitSurfaceGP.step_summary` with the weighted similarity, correlation and K_t, and each
+        region's correlation."""
+        out = super().step_summary()
+        out.update(similarity=float(self.similarity), correlation=float(self.correlation),
+                   task_covariance=self.task_covariance.detach().cpu().numpy(),
+                   region_correlation=self.region_correlations().detach().cpu().numpy())
+        return out
+
     @property
     def correlation(self) -> float:
         """Outer-point-weighted mean of the regions' correlations (NaN when unidentified)."""
