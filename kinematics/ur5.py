@@ -8,6 +8,7 @@ homogeneous `(4, 4)` matrices named ``T_<to>_<from>``, float64, metres and radia
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from importlib import resources
 from typing import Sequence
 
@@ -155,6 +156,9 @@ class UR5:
         self.max_joint_step = float(max_joint_step)
         self.limit_margin = float(limit_margin)
         self.newton_iterations = int(newton_iterations)
+        # the poses of the last few single joint vectors: a guarded move reads the pose of the joints it stands at
+        # several times (the step's start, the realised displacement, the force sensor, the next step's start)
+        self._fk_cache: OrderedDict = OrderedDict()
         T = torch.eye(4, dtype=self.dtype, device=self.device)
         T[:3, 3] = offset
         self.T_flange_tool = T
@@ -185,12 +189,25 @@ class UR5:
             `(..., 4, 4)` ``T_base_tool`` (or ``T_base_flange``); differentiable w.r.t. ``q``.
         """
         q = self._q(q)
+        if frame not in ("tool", "flange"):
+            raise ValueError(f"frame must be 'tool' or 'flange', got {frame!r}")
         batch = q.shape[:-1]
+        # one joint vector outside autograd: the same joints give the same pose to the bit, so the last few are kept
+        # (why by hand: pytorch_kinematics has no cache; a slide's small moves asked ~11 poses each, half repeats)
+        key = None
+        if q.numel() == 6 and not (q.requires_grad and torch.is_grad_enabled()):
+            key = (frame, id(self.T_flange_tool), q.device, q.dtype, q.detach().cpu().numpy().tobytes())
+            hit = self._fk_cache.get(key)
+            if hit is not None:
+                self._fk_cache.move_to_end(key)
+                return hit.clone().reshape(*batch, 4, 4)
         T = self.chain.forward_kinematics(q.reshape(-1, 6)).get_matrix()
         if frame == "tool":
             T = T @ self.T_flange_tool
-        elif frame != "flange":
-            raise ValueError(f"frame must be 'tool' or 'flange', got {frame!r}")
+        if key is not None:
+            self._fk_cache[key] = T.detach().clone()
+            if len(self._fk_cache) > 8:
+                self._fk_cache.popitem(last=False)
         return T.reshape(*batch, 4, 4)
 
     def position(self, q: torch.Tensor | Sequence[float]) -> torch.Tensor:

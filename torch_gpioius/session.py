@@ -21,7 +21,7 @@ __all__ = ["explore"]
 def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=None, step: float | None = None,
             theta: float | None = None, kernel=None, noise: float | None = None, max_steps: int | None = None,
             max_travel: float | None = None, stop=None, policy=None, penalty=None,
-            metrics_every: int | None = None, metrics_resolution: float | None = None,
+            metrics_every: int | str | None = None, metrics_resolution: float | None = None,
             interval_every: int | None = None, regions: int | None = None, stall="default",
             outer_tol: float | None = None, device=None, restart_every="default", learn: str | None = None,
             settings=None, recorders=(),
@@ -68,7 +68,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         stop: stop rules replacing the world's.
         policy: the observation policy.
         penalty: C(x) replacing the world's.
-        metrics_every: ground-truth metrics every k steps (and always at the last).
+        metrics_every: ground-truth metrics every k steps (and always at the last), or "schedule": only at 10, 25 and
+            50 % of the travel budget, at a stop and at the end (a long run measured at every step spent a third
+            of its time measuring).
         metrics_resolution: grid of the metrics [m] (default: the world's).
         interval_every: compute the profile-likelihood interval of the task correlation every k steps
             (visual-tactile; default: never, it costs a few fits).

@@ -185,3 +185,28 @@ def test_bad_inputs_are_rejected(ur5):
         ur5.cartesian_step(q, torch.tensor([0.0, float("inf"), 0.0]))
     with pytest.raises(ValueError, match="tool_offset"):
         UR5(tool_offset=(0.0, 0.1))
+
+
+def test_the_pose_cache_gives_the_computed_pose_to_the_bit_and_keeps_autograd():
+    """The last few joint vectors' poses are kept (a guarded move asked ~11 poses a move, half of them repeats): a
+    cached pose is the computed one bit for bit, a later change of the returned tensor does not reach the cache, and
+    joints that require a gradient are always computed, so the pose stays differentiable."""
+    import torch
+
+    from kinematics.ur5 import UR5
+
+    ur5 = UR5(tool_offset=(0.0, 0.0, 0.05))
+    q = torch.tensor([0.1, -1.2, 1.4, -1.7, -1.5, 0.2], dtype=torch.float64)
+    fresh = UR5(tool_offset=(0.0, 0.0, 0.05)).forward_kinematics(q)
+    first = ur5.forward_kinematics(q)
+    first[0, 0] = 123.0                                   # the caller's copy, not the cache
+    again = ur5.forward_kinematics(q.clone())
+    assert torch.equal(again, fresh) and torch.equal(ur5.forward_kinematics(q, frame="flange"),
+                                                     UR5(tool_offset=(0.0, 0.0, 0.05)).forward_kinematics(
+                                                         q, frame="flange"))
+    qg = q.clone().requires_grad_(True)
+    ur5.position(qg).sum().backward()
+    assert qg.grad is not None and bool(torch.isfinite(qg.grad).all()) and float(qg.grad.abs().sum()) > 0
+    for k in range(20):                                   # bounded: the oldest are dropped
+        ur5.forward_kinematics(q + 0.01 * k)
+    assert len(ur5._fk_cache) <= 8

@@ -45,7 +45,8 @@ class ExploreConfig(EstimatorView):
         max_steps: cap on planning steps (evidence actions count as steps).
         stop: the stop rules.
         penalty: C(x) of eq. (19) / (25).
-        metrics_every: ground-truth metrics every k steps (and at the last).
+        metrics_every: ground-truth metrics every k steps (and at the last); None: on the schedule alone (10, 25
+            and 50 % of the travel budget, a stop, the end).
         metrics_resolution: grid of the metrics [m] (None: the world's).
         interval_every: the correlation's profile interval every k steps (None: never).
         regions: a similarity per region (``LocalGPIOIS`` with this many regions) or None.
@@ -71,7 +72,7 @@ class ExploreConfig(EstimatorView):
     max_steps: int
     stop: tuple
     penalty: object
-    metrics_every: int
+    metrics_every: int | None
     metrics_resolution: float | None
     interval_every: int | None
     regions: int | None
@@ -116,8 +117,14 @@ class ExploreConfig(EstimatorView):
         estimator = _estimator(world, settings, kernel=kernel, noise=noise, policy=policy, learn=learn,
                                restart_every=restart_every)
         max_steps = as_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
-        metrics_every = as_int(d.metrics_every if metrics_every is None else metrics_every, "metrics_every", 1,
-                                   1_000_000)
+        metrics_every = d.metrics_every if metrics_every is None else metrics_every
+        if isinstance(metrics_every, str) and metrics_every == "schedule":
+            if not any(isinstance(r, TravelBudget) for r in (d.stop if stop is None else stop)) and max_travel is None:
+                raise ValueError("metrics_every='schedule': measures at fractions of a travel budget; this run has "
+                                 "none (give max_travel, or a number of steps)")
+            metrics_every = None                            # the schedule alone: REPORT_FRACTIONS, a stop, the end
+        else:
+            metrics_every = as_int(metrics_every, "metrics_every", 1, 1_000_000)
         if interval_every is not None:
             interval_every = as_int(interval_every, "interval_every", 1, 1_000_000)
         if metrics_resolution is not None:

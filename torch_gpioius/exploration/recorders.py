@@ -29,10 +29,10 @@ REPORT_FRACTIONS = (0.10, 0.25, 0.50)
 
 
 class MetricsRecorder(Recorder):
-    """Ground-truth metrics (eq. 23-24) where the world knows the truth, every ``config.metrics_every`` steps, at the
-    first step that reaches each of :data:`REPORT_FRACTIONS` of a travel budget, at a step a stop rule ended, and at
-    the end if the last record has none. Sets ``state.centre`` and ``state.surface`` from each measurement (a stop
-    rule may read the centre)."""
+    """Ground-truth metrics (eq. 23-24) where the world knows the truth, every ``config.metrics_every`` steps (None:
+    none between the others), at the first step that reaches each of :data:`REPORT_FRACTIONS` of a travel budget, at
+    a step a stop rule ended, and at the end if the last record has none. Sets ``state.centre`` and ``state.surface``
+    from each measurement (a stop rule may read the centre)."""
 
     def _measure(self, run, state, record) -> None:
         m = run.world.measure(state.model, state.contacts_array(), run.config.metrics_resolution)
@@ -49,7 +49,8 @@ class MetricsRecorder(Recorder):
             self._measure(run, state, state.records[0])
 
     def step(self, run, state, record) -> None:
-        if record.step % run.config.metrics_every == 0 or record.final or self._milestone(run, state, record):
+        every = run.config.metrics_every                    # None: the schedule alone
+        if (every is not None and record.step % every == 0) or record.final or self._milestone(run, state, record):
             self._measure(run, state, record)
 
     @staticmethod
