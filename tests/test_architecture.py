@@ -12,8 +12,9 @@ PACKAGE = Path(__file__).resolve().parents[1] / "torch_gpioius"
 #: The layers, lowest first (docs/architecture.md). A module may import its own layer and those before it.
 LAYERS = [
     {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines", "_extras"},
-    {"kernels"}, {"testing"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"},
-    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"io"}, {"session"}, {"studies"}, {"viewer"}, {"cli"},
+    {"kernels"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"},
+    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"io"}, {"testing"}, {"session"}, {"studies"}, {"viewer"},
+    {"cli"},
     {"(root)"},
 ]
 LAYER = {name: i for i, layer in enumerate(LAYERS) for name in layer}

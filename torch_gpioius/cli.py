@@ -415,18 +415,8 @@ def _force(p: argparse.ArgumentParser, what: str) -> None:
     p.add_argument("--force", action="store_true", help=f"write even if {what} (files of the same names are replaced)")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The ``gpioius`` argument parser (every help text shows its default once)."""
-    from ._version import __version__
-
-    fmt = _Formatter
-    parser = argparse.ArgumentParser(prog="gpioius", formatter_class=fmt,
-                                     description="Visuo-tactile inner-shape estimation (GPIOIS).")
-    parser.add_argument("--version", action="version", version=f"gpioius {__version__}")
-    common = argparse.ArgumentParser(add_help=False, formatter_class=fmt)
-    common.add_argument("--threads", type=_positive_int, default=1,
-                        help="torch threads for the GP arithmetic (1 is fastest on 2 cores under load)")
-    sub = parser.add_subparsers(dest="command", required=True)
+def _add_simulate(sub, common, fmt) -> None:
+    """The ``simulate`` sub-command."""
     sim = sub.add_parser("simulate", parents=[common], formatter_class=fmt,
                          help="run the paper's 2-D study (objects A-D, both modes) and write figures",
                          description="Reproduce the paper's 2-D study: sliding exploration of objects A-D with "
@@ -439,6 +429,10 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sim, "--out holds files that `gpioius simulate` did not write")
     sim.set_defaults(func=_simulate)
+
+
+def _add_simulate3d(sub, common, fmt) -> None:
+    """The ``simulate3d`` sub-command."""
     s3 = sub.add_parser("simulate3d", parents=[common], formatter_class=fmt,
                         help="run the robot study in simulation (objects E-H, both modes)",
                         description="Sec. VI in simulation: objects E-H (arm and torso under tight and loose "
@@ -466,6 +460,10 @@ def build_parser() -> argparse.ArgumentParser:
     s3.add_argument("--quiet", action="store_true", help="no progress output")
     _force(s3, "--out holds files that `gpioius simulate3d` (of this world) did not write")
     s3.set_defaults(func=_simulate3d)
+
+
+def _add_study(sub, common, fmt) -> None:
+    """The ``study`` sub-command."""
     sw = sub.add_parser("study", parents=[common], formatter_class=fmt,
                         help="objects x modes x seeds, on Ray when installed; statistics, paired tests, figures",
                         description="Run every (object, mode, seed) as one task (a Ray task when the 'ray' extra is "
@@ -529,6 +527,10 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")
     sw.set_defaults(func=_study)
+
+
+def _add_fit(sub, common, fmt) -> None:
+    """The ``fit`` sub-command."""
     fit = sub.add_parser("fit", parents=[common], formatter_class=fmt,
                          help="learn K_t on a dataset or log; save a checkpoint and a figure",
                          description="Fit GPIOIS (GPIS if there are no outer observations) on a torch_gpioius "
@@ -570,6 +572,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "(by the exact marginal likelihood, from the settings' values); default: the settings'")
     _force(fit, "--out holds files that `gpioius fit` did not write")
     fit.set_defaults(func=_fit)
+
+
+def _add_replay(sub, common, fmt) -> None:
+    """The ``replay`` sub-command."""
     rep = sub.add_parser("replay", parents=[common], formatter_class=fmt,
                          help="re-run the estimation of an exploration log step by step",
                          description="Rebuild the model after each logged step, re-learn K_t, and write per-step "
@@ -581,6 +587,10 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--quiet", action="store_true", help="no progress output")
     _force(rep, "--out holds files that `gpioius replay` did not write")
     rep.set_defaults(func=_replay)
+
+
+def _add_import_bag(sub, common, fmt) -> None:
+    """The ``import-bag`` sub-command."""
     bag = sub.add_parser(
         "import-bag",
         parents=[common],
@@ -629,6 +639,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="T_tool_pad: the pad frame in the fingertip frame, 'x y z qx qy qz qw' (default: identity)")
     _force(bag, "--out exists")
     bag.set_defaults(func=_import_bag)
+
+
+def _add_export(sub, common, fmt) -> None:
+    """The ``export`` sub-command."""
     ex = sub.add_parser(
         "export",
         parents=[common],
@@ -649,6 +663,10 @@ def build_parser() -> argparse.ArgumentParser:
     ex.add_argument("--resolution", type=float, default=None, help="grid spacing [m] (default 5 mm 2-D, 1 cm 3-D)")
     _force(ex, "an output file exists (a link there is replaced, never followed)")
     ex.set_defaults(func=_export)
+
+
+def _add_view(sub, common, fmt) -> None:
+    """The ``view`` sub-command."""
     vw = sub.add_parser("view", parents=[common], formatter_class=fmt,
                         help="serve an interactive 3-D page of a run (viser): steps, contacts, path, estimate",
                         description="Serve a local web page (the 'viewer' extra) showing a log, a dataset or every log "
@@ -666,6 +684,28 @@ def build_parser() -> argparse.ArgumentParser:
     vw.add_argument("--no-browser", action="store_true", help="do not open a browser")
     vw.add_argument("--resolution", type=float, default=None, help="grid spacing of the estimate [m]")
     vw.set_defaults(func=_view)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``gpioius`` argument parser (every help text shows its default once)."""
+    from ._version import __version__
+
+    fmt = _Formatter
+    parser = argparse.ArgumentParser(prog="gpioius", formatter_class=fmt,
+                                     description="Visuo-tactile inner-shape estimation (GPIOIS).")
+    parser.add_argument("--version", action="version", version=f"gpioius {__version__}")
+    common = argparse.ArgumentParser(add_help=False, formatter_class=fmt)
+    common.add_argument("--threads", type=_positive_int, default=1,
+                        help="torch threads for the GP arithmetic (1 is fastest on 2 cores under load)")
+    sub = parser.add_subparsers(dest="command", required=True)
+    _add_simulate(sub, common, fmt)
+    _add_simulate3d(sub, common, fmt)
+    _add_study(sub, common, fmt)
+    _add_fit(sub, common, fmt)
+    _add_replay(sub, common, fmt)
+    _add_import_bag(sub, common, fmt)
+    _add_export(sub, common, fmt)
+    _add_view(sub, common, fmt)
     return parser
 
 

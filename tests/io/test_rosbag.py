@@ -10,8 +10,9 @@ pytest.importorskip("rosbags")
 
 from torch_gpioius.cli import main  # noqa: E402
 from torch_gpioius.io.datasets import load_dataset  # noqa: E402
-from torch_gpioius.io.rosbag import (BagImportError, BagTopics, decode_point_cloud2, example_bag_messages,  # noqa: E402
-                                     import_bag, parse_transform, write_bag)
+from torch_gpioius.io.rosbag import (BagImportError, BagTopics, decode_point_cloud2, import_bag,  # noqa: E402
+                                     parse_transform, write_bag)
+from torch_gpioius.testing.bags import example_bag_messages  # noqa: E402
 
 
 @pytest.fixture(scope="module")
