@@ -100,10 +100,6 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
     from foxglove import messages as fm
     from matplotlib import colormaps
 
-    from ..metrics import prior_variance
-    from ..surfaces import data_bounds
-    from .runs import estimate_surface
-
     steps = history.steps
     frame = str(history.meta.get("frame", "base"))
     cmap = colormaps["Purples"]
@@ -165,25 +161,10 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
                 pad_ch.log(fm.SceneUpdate(entities=[fm.SceneEntity(timestamp=fm.Timestamp(k, 0), frame_id=frame,
                                                                      id="pad", lines=[loop])]), log_time=t_ns)
                 n_messages += 1
-            if ((ds.task == 0) & (ds.y == 0)).any():
-                model = history.model_at(k)
-                surface, var = estimate_surface(model, data_bounds(ds.x), res, 0)
-                prior = prior_variance(model, 0)
-                entity = None
-                if history.dim == 3 and surface is not None:
-                    tri = fm.TriangleListPrimitive(points=pts(surface.vertices),
-                                                   colors=[colour(v, prior) for v in var],
-                                                   indices=[int(i) for i in surface.faces.reshape(-1)])
-                    entity = fm.SceneEntity(timestamp=fm.Timestamp(k, 0), frame_id=frame, id="estimate",
-                                            triangles=[tri])
-                elif history.dim == 2 and surface:
-                    lines = [fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, thickness=3.0,
-                                              scale_invariant=True, points=pts(c),
-                                              colors=[colour(x, prior) for x in v]) for c, v in zip(surface, var)]
-                    entity = fm.SceneEntity(timestamp=fm.Timestamp(k, 0), frame_id=frame, id="estimate", lines=lines)
-                if entity is not None:
-                    estimate.log(fm.SceneUpdate(entities=[entity]), log_time=t_ns)
-                    n_messages += 1
+            entity = _estimate_entity(history, k, ds, res, frame, colour, pts)
+            if entity is not None:
+                estimate.log(fm.SceneUpdate(entities=[entity]), log_time=t_ns)
+                n_messages += 1
             p = history.params.get(k, {})
             row = {"step": int(k)}
             for key in ("similarity", "correlation", "hausdorff"):
@@ -192,3 +173,28 @@ def _write_mcap(file: Path, history, chosen: list[int], res: float) -> int:
             metrics.log(row, log_time=t_ns)
             n_messages += 1
     return n_messages
+
+
+def _estimate_entity(history, k: int, ds, res: float, frame: str, colour, pts):
+    """The estimate at step ``k`` as a Foxglove scene entity coloured by its variance (a triangle list in 3-D, line
+    strips in 2-D), or None before the first contact or where the estimate has no surface."""
+    from foxglove import messages as fm
+
+    from ..metrics import prior_variance
+    from ..surfaces import data_bounds
+    from .runs import estimate_surface
+
+    if not ((ds.task == 0) & (ds.y == 0)).any():
+        return None
+    model = history.model_at(k)
+    surface, var = estimate_surface(model, data_bounds(ds.x), res, 0)
+    prior = prior_variance(model, 0)
+    if history.dim == 3 and surface is not None:
+        tri = fm.TriangleListPrimitive(points=pts(surface.vertices), colors=[colour(v, prior) for v in var],
+                                       indices=[int(i) for i in surface.faces.reshape(-1)])
+        return fm.SceneEntity(timestamp=fm.Timestamp(k, 0), frame_id=frame, id="estimate", triangles=[tri])
+    if history.dim == 2 and surface:
+        lines = [fm.LinePrimitive(type=fm.LinePrimitiveLineType.LineStrip, thickness=3.0, scale_invariant=True,
+                                  points=pts(c), colors=[colour(x, prior) for x in v]) for c, v in zip(surface, var)]
+        return fm.SceneEntity(timestamp=fm.Timestamp(k, 0), frame_id=frame, id="estimate", lines=lines)
+    return None

@@ -205,6 +205,36 @@ def _same(have, want) -> bool:
     return have == want
 
 
+def _check_header(path, records: list, world, config) -> None:
+    """Refuse a log whose header names another world (its geometry) or other settings than this run's.
+
+    Raises:
+        DatasetError: no header; ValueError: a setting differs (names it).
+    """
+    if not records or records[0].kind != "header":
+        raise DatasetError(f"{path}: no header record; not an exploration log")
+    header = records[0].meta
+    want = {**world.describe(), **config.describe()}
+    for key, value in want.items():
+        if key in _NOT_COMPARED or (key in _ADDED and key not in header):
+            continue
+        have = _kernel_now(header.get(key)) if key == "kernel" else header.get(key)
+        if not _same(have, value):
+            what = "world geometry" if key == "scene_fingerprint" else key
+            raise ValueError(f"{path}: cannot resume: the log was written with {key}={have!r}, this call asks "
+                             f"{key}={value!r} (different {what})")
+
+
+def _step_record(i: int, v: dict, arrays: dict) -> StepRecord:
+    """The :class:`StepRecord` of step ``i`` from its logged values ``v`` (:func:`step_values`) and arrays."""
+    names = ("travel", "hausdorff", "hausdorff_touched", "uncertainty", "estimate", *SHAPE_METRICS, "similarity",
+             "correlation", "correlation_interval", "step_time", "robot_time", "taps", "recoveries", "retracted",
+             "reapproaches", "reapproach_travel", "contact_distance", "contact_on_body", "truncation", "fit_gap",
+             "length", "noise")
+    return StepRecord(step=i, task_covariance=np.asarray(arrays["kt"], dtype=np.float64),
+                      **{name: v[name] for name in names})
+
+
 def restore_run(path: str | os.PathLike, world, hardware, config) -> ExplorationState:
     """The state of a run after the last complete step of its log (written by ``torch_gpioius.explore(log=...)``).
 
@@ -225,18 +255,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         warnings.simplefilter("ignore", TornLogWarning)
         records = list(read_records(path))
         states = [ds for rec, ds in replay(path) if rec.kind in ("step", "tap", "recovery")]
-    if not records or records[0].kind != "header":
-        raise DatasetError(f"{path}: no header record; not an exploration log")
-    header = records[0].meta
-    want = {**world.describe(), **config.describe()}
-    for key, value in want.items():
-        if key in _NOT_COMPARED or (key in _ADDED and key not in header):
-            continue
-        have = _kernel_now(header.get(key)) if key == "kernel" else header.get(key)
-        if not _same(have, value):
-            what = "world geometry" if key == "scene_fingerprint" else key
-            raise ValueError(f"{path}: cannot resume: the log was written with {key}={have!r}, this call asks "
-                             f"{key}={value!r} (different {what})")
+    _check_header(path, records, world, config)
     steps = [r for r in records[1:] if r.kind == "step"]
     if not steps:
         raise DatasetError(f"{path}: the log has no complete step to resume from")
@@ -252,32 +271,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
             raise DatasetError(f"{where}: steps out of order (found step {r.meta['step']})")
         state.contacts.append(np.asarray(r.arrays["contact"], dtype=np.float64))
         v = step_values(r.meta, f"{path}: step record ending at byte {r.end}")
-        rec = StepRecord(
-            step=i,
-            travel=v["travel"],
-            hausdorff=v["hausdorff"],
-            hausdorff_touched=v["hausdorff_touched"],
-            uncertainty=v["uncertainty"],
-            estimate=v["estimate"],
-            **{name: v[name] for name in SHAPE_METRICS},
-            similarity=v["similarity"],
-            correlation=v["correlation"],
-            correlation_interval=v["correlation_interval"],
-            task_covariance=np.asarray(r.arrays["kt"], dtype=np.float64),
-            step_time=v["step_time"],
-            robot_time=v["robot_time"],
-            taps=v["taps"],
-            recoveries=v["recoveries"],
-            retracted=v["retracted"],
-            reapproaches=v["reapproaches"],
-            reapproach_travel=v["reapproach_travel"],
-            contact_distance=v["contact_distance"],
-            contact_on_body=v["contact_on_body"],
-            truncation=v["truncation"],
-            fit_gap=v["fit_gap"],
-            length=v["length"],
-            noise=v["noise"],
-        )
+        rec = _step_record(i, v, r.arrays)
         state.records.append(rec)
     last, data = steps[-1], states[-1]    # the training set after the last step or tap (everything replayed)
     model = config.model_for(data.x, data.y, data.task)           # in the log's order, as the run built it
@@ -296,12 +290,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
             model.restore_fit_state(last.arrays["fit_hessian"], last.meta.get("fit_relearned", True),
                                     last.meta.get("held_fits", 0))
     state.model = model
-    state.travel, state.retracted, state.taps, state.recoveries = (
-        v["travel"],
-        v["retracted"],
-        v["taps"],
-        v["recoveries"],
-    )
+    state.travel, state.retracted, state.taps, state.recoveries = (v["travel"], v["retracted"], v["taps"],
+                                                                   v["recoveries"])
     state.reapproaches, state.reapproach_travel = v["reapproaches"], v["reapproach_travel"]
     state.steps = step_number(last.meta, f"{path}: last step")
     for name in ("previous", "normal"):
