@@ -63,14 +63,16 @@ def _simulate3d(args: argparse.Namespace) -> int:
 def _study(args: argparse.Namespace) -> int:
     from .studies.sweep import run_sweep
 
-    objects = None if args.objects is None else args.objects.split(",")
+    # an object set (a name with a colon) is one value, commas included (pybullet:duck,teddy; primitives:0-9,20)
+    objects = None if args.objects is None else ([args.objects] if ":" in args.objects else args.objects.split(","))
     scenes = [] if args.scenes is None else args.scenes.split(",")
     result = run_sweep(world=args.world, objects=objects, scenes=scenes, modes=args.modes.split(","),
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
                        touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
-                       learn=args.learn, views=args.views, kernel=_kernel_choice(args), noise=args.noise)
+                       learn=args.learn, views=args.views, kernel=_kernel_choice(args), noise=args.noise,
+                       cover=args.cover)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -473,7 +475,12 @@ def _add_study(sub, common, fmt) -> None:
     sw.add_argument("--world", default="planar", type=_world_name, choices=_study_worlds(),
                     help="which world (planar: 2-D objects A-D; forcefield, mujoco: 3-D objects E-H)")
     sw.add_argument("--objects", default=None,
-                    help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D)")
+                    help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D), or "
+                         "an object set in the forcefield world: primitives:0-49, pybullet-random:0-49, "
+                         "pybullet:duck,teddy or folder:PATH (each object sized 8-25 cm, standing on the table)")
+    sw.add_argument("--cover", default=None, choices=["tight", "wide"],
+                    help="the cover of an object set's objects: tight (8 mm) or wide (4 cm); default tight; one per "
+                         "--out folder")
     sw.add_argument("--scenes", default=None,
                     help="comma-separated scene files (TOML; docs/tutorials/your-object.md) run as objects; with "
                          "--scenes and no --objects only the scenes run (3-D worlds)")

@@ -34,3 +34,25 @@ def test_set_names_by_family_and_range():
             parse_object_set(bad)
     with pytest.raises(ValueError, match="index"):
         primitive_mesh(-1)
+
+
+def test_a_set_object_stands_on_the_table_at_its_size_under_its_cover():
+    """Issue 54: each object of a set is scaled to its seeded size, stands in its most probable stable pose (the
+    lowest point on z = 0 before it is placed), and is explored under a tight (8 mm) or wide (4 cm) cover; pybullet's
+    blobs, metres across in their files, load at their size."""
+    import warnings
+
+    from torch_gpioius.sim.objectsets import COVERS, STAND_AT, object_set, set_mesh, set_scene
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")                   # the blob's repair says what it did
+        for obj in object_set("primitives:7") + object_set("pybullet-random:3"):
+            mesh = set_mesh(obj)
+            assert mesh.is_watertight and abs(float(np.max(mesh.extents)) - obj.size) < 1e-9 * obj.size
+            assert abs(float(mesh.bounds[0, 2])) < 1e-12
+            np.testing.assert_allclose((mesh.bounds[0, :2] + mesh.bounds[1, :2]) / 2, 0.0, atol=1e-12)
+        scene = set_scene(object_set("primitives:7")[0], "wide")
+    assert scene.name == "primitives-007" and COVERS["wide"] == ("loose", 0.04)
+    assert abs(float(scene.inner.bounds[0, 2]) - STAND_AT[2]) < 1e-9
+    with pytest.raises(ValueError, match="cover: must be one of"):
+        set_scene(object_set("primitives:7")[0], "snug")

@@ -472,3 +472,28 @@ def test_a_local_study_runs_in_process_when_ray_cannot_start(tmp_path, monkeypat
     assert out["runs"] == 2 and out["backend"] == "in-process (sequential)"
     assert "study: Ray could not start (Exception: The current node timed out" in capsys.readouterr().err
     assert len(list(csv.DictReader(open(tmp_path / "s" / "runs.csv")))) == 2
+
+
+def test_an_object_set_runs_as_objects_with_its_cover_and_a_bad_set_is_refused_before_anything_runs(tmp_path):
+    """Issue 54: ``gpioius study --objects primitives:A-B`` runs each object of the set (sized, standing on the
+    table, under the chosen cover) in the force-field world; the runs' identity is the object's source, size and
+    cover, so a second call skips them; a set in another world, a bad range and a cover without a set are refused
+    before anything runs."""
+    from torch_gpioius.cli import main
+
+    out = tmp_path / "set"
+    assert main(["study", "--world", "forcefield", "--objects", "primitives:3", "--cover", "wide", "--modes",
+                 "tactile", "--seeds", "1", "--smoke", "--quiet", "--out", str(out)]) == 0
+    record = json.loads((out / "runs" / "primitives-003_tactile_0.json").read_text())
+    assert not record.get("failed") and record["scene_hash"].startswith("set:primitives:3:")
+    assert record["scene_hash"].endswith(":wide") and record["estimator"]["name"] == "default"
+    again = run_sweep("forcefield", objects=["primitives:3"], cover="wide", modes=["tactile"], seeds=1, out=out,
+                      smoke=True, backend="local", progress=False)
+    assert again["skipped"] == 1
+    for kw, match in ((dict(world="planar", objects=["primitives:0-2"]), "built in the forcefield world"),
+                      (dict(world="forcefield", objects=["primitives:5-2"]), "first <= last"),
+                      (dict(world="forcefield", objects=["E"], cover="wide"), "applies to the objects of an object"),
+                      (dict(world="forcefield", objects=["primitives:1"], cover="snug"), "cover: must be one of")):
+        with pytest.raises(ValueError, match=match):
+            run_sweep(seeds=1, out=tmp_path / "bad", smoke=True, backend="local", progress=False, **kw)
+    assert not (tmp_path / "bad").exists()

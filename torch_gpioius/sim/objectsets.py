@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-__all__ = ["PRIMITIVE_KINDS", "SetObject", "primitive_mesh", "parse_object_set", "object_set", "SIZE_RANGE"]
+__all__ = ["PRIMITIVE_KINDS", "SetObject", "primitive_mesh", "parse_object_set", "object_set", "SIZE_RANGE",
+           "COVERS", "set_mesh", "set_scene"]
 
 #: The kinds of primitive, in the order object ``i`` cycles through them (``i % 5``).
 PRIMITIVE_KINDS = ("rounded-box", "gabled-carton", "cylinder", "capsule", "loaf")
@@ -196,3 +197,58 @@ def _indices(rest: str, largest: int, text: str) -> list[int]:
 def object_set(text: str) -> list[SetObject]:
     """:func:`parse_object_set` (the name a study and the CLI use)."""
     return parse_object_set(text)
+
+
+#: The covers a set's objects are explored under: tight (the body grown by 8 mm) and wide (4 cm off, draped over
+#: concavities narrower than 6 cm, as the real shapes' wide covers): ``(cover kind, gap [m])``.
+COVERS = {"tight": ("tight", 0.008), "wide": ("loose", 0.04)}
+#: Where a set's object stands: the bottom centre of its box, on a table in front of the UR5 [m].
+STAND_AT = (0.5, 0.0, 0.1)
+
+
+def set_mesh(obj: SetObject) -> trimesh.Trimesh:
+    """The closed mesh [m] of a set's object, in its most probable stable pose on the table (trimesh's
+    ``compute_stable_poses``; a primitive stands as it was built), z = 0 at its lowest point, centred on the z axis,
+    scaled so that its largest extent is ``obj.size``.
+
+    Raises:
+        ValueError: a mesh that cannot be loaded or closed (:func:`~torch_gpioius.sim.meshes.load_mesh`).
+    """
+    if obj.source.startswith("primitives:"):
+        return primitive_mesh(obj.index)[0]
+    from .meshes import load_mesh
+    from .scenefile import resolve_mesh
+
+    path = resolve_mesh(obj.source, Path.cwd())
+    raw = trimesh.load(path, force="mesh")                  # its size first: pybullet's blobs are metres across
+    extent = float(np.max(raw.extents)) if len(getattr(raw, "vertices", ())) else 0.0
+    if not extent > 0:
+        raise ValueError(f"{obj.name}: {path} holds no mesh")
+    mesh = load_mesh(path, scale=obj.size / extent, name=obj.name).copy()
+    poses, probabilities = mesh.compute_stable_poses(n_samples=1)
+    if len(poses):
+        mesh.apply_transform(poses[int(np.argmax(probabilities))])
+    mesh.apply_scale(obj.size / float(np.max(mesh.extents)))      # in the pose it stands in (the repair and the
+    return _standing(mesh)                                        # turn move the box a little)
+
+
+def set_scene(obj: SetObject, cover: str = "tight", *, settings: str = "default", seed: int = 0, **kwargs):
+    """The force-field world of one set object: the object on the table at :data:`STAND_AT` under a cover of
+    :data:`COVERS`, the robot coming from above, the library's ``settings``; ``seed`` perturbs the start and the
+    noise as every world's seed does (0: unperturbed). ``kwargs`` go to
+    :meth:`~torch_gpioius.sim.forcefield.Scene3D.from_mesh` (``resolution`` for a coarser cover, ...).
+
+    Raises:
+        ValueError: an unknown cover, or a scene that cannot be built (names the object).
+    """
+    from .forcefield import Scene3D
+
+    if cover not in COVERS:
+        raise ValueError(f"cover: must be one of {sorted(COVERS)}, got {cover!r}")
+    kind, gap = COVERS[cover]
+    try:
+        scene = Scene3D.from_mesh(set_mesh(obj), kind, gap=gap, at=STAND_AT, name=obj.name, settings=settings,
+                                  **kwargs)
+    except ValueError as exc:
+        raise ValueError(f"{obj.name} ({obj.source}): {exc}") from None
+    return scene if seed == 0 else scene.perturbed(seed)

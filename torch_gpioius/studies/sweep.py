@@ -91,6 +91,8 @@ class RunSpec:
     noise: float | None = None      # sigma^2; None: the world's own
     scene_hash: str | None = None   # the scene file's content (scenefile.scene_fingerprint): a run of an edited
     #                                 scene is another run, whatever its name
+    set_object: Any = None          # an object of a set (sim.objectsets.SetObject) instead of a built-in object
+    cover: str | None = None        # a set object's cover: "tight" or "wide" (sim.objectsets.COVERS)
 
     @property
     def key(self) -> str:
@@ -98,11 +100,18 @@ class RunSpec:
 
 
 def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None,
-               settings: str | None = None, views=None):
+               settings: str | None = None, views=None, set_object=None, cover: str | None = None):
     """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
     unperturbed object), under ``settings`` in place of its own (3-D worlds: "default" or "paper"), seen by
-    ``views`` in place of the settings' (3-D worlds: ``with_views``)."""
-    if scene is not None:
+    ``views`` in place of the settings' (3-D worlds: ``with_views``); or an object of a set
+    (:mod:`torch_gpioius.sim.objectsets`) under ``cover``, in the force-field world, the library's default settings
+    unless told."""
+    if set_object is not None:
+        from ..sim.objectsets import set_scene
+
+        made = set_scene(set_object, cover or "tight", settings=settings or "default", seed=seed,
+                         **({"resolution": 0.006} if smoke else {}))
+    elif scene is not None:
         from ..sim.scenefile import load_scene
 
         made = load_scene(scene, world=world, seed=seed, smoke=smoke, settings=settings)
@@ -300,7 +309,8 @@ def run_one(spec: RunSpec) -> dict:
     t0 = time.perf_counter()
     with torch_threads(spec.threads):
         try:
-            world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings, spec.views)
+            world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings, spec.views,
+                               spec.set_object, spec.cover)
         except (ValueError, RuntimeError, OSError) as exc:
             # a scene that cannot be built (a cover that does not close, a mesh that will not load) is a failed
             # row with its cause; the study goes on and writes its tables
@@ -870,7 +880,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
               device: str | None = None, settings: str | None = None, learn: str | None = None,
-              views=None, kernel=None, noise: float | None = None) -> dict:
+              views=None, kernel=None, noise: float | None = None, cover: str | None = None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -880,7 +890,10 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
     Args:
         world: a registered world: "planar" (2-D), "forcefield" or "mujoco" (3-D), or one registered later (older
             names, "2d", "3d" and "penalty", are accepted with a warning).
-        objects: names (default: the world's paper objects); repeated names count once.
+        objects: names (default: the world's paper objects); repeated names count once. A name with a colon is an
+            object set of :mod:`torch_gpioius.sim.objectsets` (``primitives:0-49``, ``pybullet-random:0-49``,
+            ``pybullet:duck,teddy``, ``folder:PATH``): each of its objects, sized and standing on the table, is run
+            in the force-field world under ``cover``.
         modes: among :data:`MODES`; repeated modes count once.
         seeds: seeds 0 .. seeds-1 per object and mode (at most :data:`MAX_SEEDS`).
         out: output folder.
@@ -918,6 +931,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             length, where it starts); None: each world's own.
         noise: sigma^2 (where ``learn="all"`` learns it, where it starts); None: each world's own. ``kernel`` and
             ``noise`` too: one setting per folder.
+        cover: the cover of the object sets' objects, "tight" (8 mm) or "wide" (4 cm); default tight; one per
+            folder.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -931,7 +946,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
-        settings=settings, learn=learn, views=views, kernel=kernel, noise=noise)
+        settings=settings, learn=learn, views=views, kernel=kernel, noise=noise, cover=cover)
     return sweep.run()
 
 
@@ -988,11 +1003,13 @@ class SweepSettings:
     kernel: Any = None                                  # a KernelChoice, or None
     noise: float | None = None
     scene_hashes: dict = field(default_factory=dict)    # a scene's name -> scenefile.scene_fingerprint
+    set_objects: dict = field(default_factory=dict)     # an object set's object's name -> its SetObject
+    cover: str | None = None                            # the set objects' cover
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
-                learn=None, views=None, kernel=None, noise=None) -> "SweepSettings":
+                learn=None, views=None, kernel=None, noise=None, cover=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry
 
@@ -1001,8 +1018,9 @@ class SweepSettings:
             raise ValueError(f"world: must be one of {_worlds()}, got {world!r}")
         entry = world_entry(world)
         scene_files = _scene_files(scenes, world)
-        objects = tuple(dict.fromkeys(objects or ([] if scene_files else entry.object_names)))
-        clash = sorted(set(objects) & set(scene_files))
+        set_objects, objects = _set_objects(objects, world, cover)
+        objects = tuple(dict.fromkeys(objects or ([] if scene_files or set_objects else entry.object_names)))
+        clash = sorted(set(objects) & (set(scene_files) | set(set_objects)))
         if clash:
             raise ValueError(f"scenes: {clash} are also the names of objects; rename the scene (its name key)")
         modes = _checked_modes(modes)
@@ -1058,7 +1076,7 @@ class SweepSettings:
         hashes = {name: scene_fingerprint(path) for name, path in scene_files.items()}
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
-                   kernel, noise, hashes)
+                   kernel, noise, hashes, set_objects, (cover or "tight") if set_objects else None)
 
     def run(self) -> dict:
         """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
@@ -1089,6 +1107,7 @@ class SweepSettings:
         # None, the setting they ran with
         identity = {"outer_tol": self.outer_tol, "settings": self.settings, "learn": self.learn,
                     "views": None if self.views is None else "+".join(self.views), "noise": self.noise,
+                    "cover": self.cover,
                     # a folder's kernel as the command line names it (the earlier folders' keys)
                     "kernel": self.kernel.name if self.kernel else None,
                     "theta": self.kernel.lengthscale if self.kernel else None}
@@ -1105,11 +1124,17 @@ class SweepSettings:
         return running
 
     def _specs(self, out: Path) -> list[RunSpec]:
-        return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
-                        self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
-                        self.settings, self.learn, self.views, self.kernel, self.noise,
-                        self.scene_hashes.get(o))
-                for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
+        specs = [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
+                         self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
+                         self.settings, self.learn, self.views, self.kernel, self.noise, self.scene_hashes.get(o))
+                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
+        for name, obj in self.set_objects.items():      # a set's object: its source, size and cover are its identity
+            identity = f"set:{obj.source}:{obj.size!r}:{self.cover}"
+            specs += [RunSpec(self.world, name, m, s, str(out), self.smoke, self.max_travel, self.max_steps,
+                              self.threads, None, self.voxel, self.touch, self.outer_tol, self.device, self.settings,
+                              self.learn, self.views, self.kernel, self.noise, identity, obj, self.cover)
+                      for m in self.modes for s in range(self.seeds)]
+        return specs
 
     def _built_first(self, todo: list[RunSpec]) -> list[RunSpec]:
         """Build each scene file that has runs to do once, before the first run: a scene that cannot be built (a
@@ -1187,6 +1212,30 @@ def _checked_modes(modes) -> tuple:
     if not modes:
         raise ValueError("modes: at least one mode is needed")
     return modes
+
+
+def _set_objects(objects, world: str, cover) -> tuple[dict, list]:
+    """``({name: SetObject}, the other names)``: the object sets among ``objects`` (names with a colon) expanded,
+    checked before anything runs (force-field world only, a known cover).
+
+    Raises:
+        ValueError: a set in another world, a bad set name or range, an unknown cover, or a cover without a set.
+    """
+    from ..sim.objectsets import COVERS, object_set
+
+    sets, plain = {}, []
+    for name in objects or ():
+        if isinstance(name, str) and ":" in name:
+            if world != "forcefield":
+                raise ValueError(f"objects: the object sets ({name!r}) are built in the forcefield world, not {world}")
+            sets.update((o.name, o) for o in object_set(name))
+        else:
+            plain.append(name)
+    if cover is not None and cover not in COVERS:
+        raise ValueError(f"cover: must be one of {sorted(COVERS)}, got {cover!r}")
+    if cover is not None and not sets:
+        raise ValueError("cover: applies to the objects of an object set (e.g. --objects primitives:0-49)")
+    return sets, plain
 
 
 def _scene_files(scenes, world: str) -> dict[str, str]:
