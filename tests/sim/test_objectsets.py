@@ -56,3 +56,14 @@ def test_a_set_object_stands_on_the_table_at_its_size_under_its_cover():
     assert abs(float(scene.inner.bounds[0, 2]) - STAND_AT[2]) < 1e-9
     with pytest.raises(ValueError, match="cover: must be one of"):
         set_scene(object_set("primitives:7")[0], "snug")
+
+
+def test_a_corrupt_file_in_a_users_folder_is_named_not_a_crash(tmp_path):
+    """A folder set's file is read once (its size first, then checked and repaired at that size); a corrupt one is a
+    ValueError naming the object and the file (a study's failed row), never a parser's own exception."""
+    from torch_gpioius.sim.objectsets import object_set, set_scene
+
+    (tmp_path / "broken.stl").write_text("solid nothing\nthis is not a mesh\n")
+    (obj,) = object_set(f"folder:{tmp_path}")
+    with pytest.raises(ValueError, match=r"broken .*broken\.stl"):
+        set_scene(obj)

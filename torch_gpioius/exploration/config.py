@@ -234,14 +234,7 @@ def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) 
     """The estimator's settings of one exploration: ``settings`` (an :class:`EstimatorSettings` or a preset's name;
     a preset's voxel rule sized to the world's object) or the world's own, with the single settings given beside
     it in their place."""
-    if settings is None:
-        est = world.defaults.estimator
-    elif isinstance(settings, EstimatorSettings):
-        est = settings
-    elif isinstance(settings, str):
-        est = EstimatorSettings.preset(settings)
-    else:
-        raise ValueError(f"settings: expected EstimatorSettings or a preset's name, got {type(settings).__name__}")
+    est = world.defaults.estimator if settings is None else EstimatorSettings.of(settings)
     if est.voxel_rule is not None and est is not world.defaults.estimator:
         extent = getattr(world, "object_extent", None)
         if extent is not None:

@@ -182,10 +182,7 @@ def drop_contradicted_inside(obs: Observations, policy: ObservationPolicy, x_kno
     An inside point says the body is thicker than its depth there; a robot cannot measure that, so each is checked
     against what was seen and felt around it."""
     keep = uncontradicted(obs.x, obs.y, policy, x_known, y_known)
-    if keep.all():
-        return obs
-    return Observations(obs.x[keep], obs.y[keep], obs.task[keep], None if obs.normal is None else obs.normal[keep],
-                        obs.step, obs.source)
+    return obs if keep.all() else obs.subset(keep)
 
 
 def uncontradicted(x: np.ndarray, y: np.ndarray, policy: ObservationPolicy, x_known: np.ndarray | None = None,

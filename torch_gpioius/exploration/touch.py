@@ -163,8 +163,7 @@ class PatchTouch(TouchModelBase):
         keep[chosen] = True
         dropped = ~keep[:n_patch]
         self.last_dropped = (int(dropped.sum()), float(0.5 * np.log1p(var[dropped] / model.noise).sum()))
-        normal = None if obs.normal is None else obs.normal[keep]
-        return Observations(obs.x[keep], obs.y[keep], obs.task[keep], normal, obs.step, obs.source)
+        return obs.subset(keep)
 
     @property
     def retraction_margin(self) -> float:

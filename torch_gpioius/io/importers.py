@@ -443,9 +443,10 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     from ..exploration.observations import cover_gap, uncontradicted_by_step, vision_observations
     from ..models.estimator import EstimatorSettings
 
-    est = EstimatorSettings.preset(settings) if isinstance(settings, str) else settings
-    if not isinstance(est, EstimatorSettings):
-        raise DatasetError(f"settings: expected EstimatorSettings or a preset's name, got {type(settings).__name__}")
+    try:
+        est = EstimatorSettings.of(settings)
+    except ValueError as exc:
+        raise DatasetError(str(exc)) from None
     if noise is not None:
         est = est.replace(noise=noise)
     x_in, y_in, step_in, normal_in = read_contacts_csv(contacts_csv, units=units)

@@ -131,8 +131,8 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
 
     if learn is not None:
         as_learn(learn)
-    if isinstance(settings, str):
-        settings = EstimatorSettings.preset(settings)
+    if settings is not None:
+        settings = EstimatorSettings.of(settings)
     for option, target in (("--mesh", mesh), ("--outer-mesh", outer_mesh)):
         if target is not None:
             check_new_file(target, force, option)      # before the fit: a refused file costs nothing

@@ -732,9 +732,10 @@ def _bag_settings(settings, crop, policy):
         return None
     from ..models.estimator import EstimatorSettings
 
-    est = EstimatorSettings.preset(settings) if isinstance(settings, str) else settings
-    if not isinstance(est, EstimatorSettings):
-        raise ValueError(f"import_bag: settings must be EstimatorSettings or a preset's name, got {settings!r}")
+    try:
+        est = EstimatorSettings.of(settings)
+    except ValueError as exc:
+        raise ValueError(f"import_bag: {exc}") from None
     if crop is not None and est.voxel_rule is not None:
         box = np.asarray(crop, dtype=np.float64)
         est = est.for_extent(float(np.max(box[1] - box[0])))

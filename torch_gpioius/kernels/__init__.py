@@ -10,9 +10,9 @@ class with :func:`register_kernel` (so logs and checkpoints can name it), and su
 from __future__ import annotations
 
 import copy
-import math
 from dataclasses import dataclass
 
+from .._validation import as_float
 from .base import ExactKernel
 from .inverse_multiquadric import InverseMultiquadricKernel, imq
 from .matern import Matern52
@@ -91,10 +91,7 @@ def kernel_kind(name: str) -> str:
 
 
 def _checked_length(lengthscale) -> float:
-    if isinstance(lengthscale, bool) or not isinstance(lengthscale, (int, float)) or not math.isfinite(lengthscale) \
-            or lengthscale <= 0:
-        raise ValueError(f"lengthscale: must be a finite length > 0 [m], got {lengthscale!r}")
-    return float(lengthscale)
+    return as_float(lengthscale, "lengthscale", positive=True, unit="m")
 
 
 def kernel_named(name: str, lengthscale: float | None = None) -> ExactKernel:
@@ -160,7 +157,3 @@ class KernelChoice:
                 raise ValueError(f"lengthscale: the {kind} kernel has no length to set")
             chosen.length = self.lengthscale
         return chosen
-
-    def to_dict(self) -> dict:
-        """``{"name", "lengthscale"}`` (what a study folder's settings record)."""
-        return {"name": self.name, "lengthscale": self.lengthscale}

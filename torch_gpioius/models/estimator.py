@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .._validation import as_float, as_int
-from ..kernels import ExactKernel, InverseMultiquadricKernel, Matern52, as_kernel, from_description, kernel_named
+from ..kernels import (ExactKernel, InverseMultiquadricKernel, KernelChoice, Matern52, as_kernel, from_description,
+                       kernel_named)
 from .labels import ObservationPolicy
 
 __all__ = ["EstimatorView", "EstimatorSettings", "VoxelRule", "PRESETS", "LEARN", "as_learn", "RESTART_EVERY"]
@@ -139,6 +140,19 @@ class EstimatorSettings:
         return PRESETS[name]()
 
     @classmethod
+    def of(cls, settings) -> "EstimatorSettings":
+        """``settings`` itself, or the preset it names (what every path that takes settings accepts).
+
+        Raises:
+            ValueError: an unknown preset, or anything else (names its type).
+        """
+        if isinstance(settings, EstimatorSettings):
+            return settings
+        if isinstance(settings, str):
+            return cls.preset(settings)
+        raise ValueError(f"settings: expected EstimatorSettings or a preset's name, got {type(settings).__name__}")
+
+    @classmethod
     def default(cls) -> "EstimatorSettings":
         """This library's settings for a user's object (see the module docstring)."""
         labels = ObservationPolicy(crop_margin=0.15, vision_free_far=0.10, touch_inside=INSIDE_DEPTH,
@@ -242,8 +256,7 @@ class EstimatorSettings:
         if kernel is None and data.get("lengthscale") is not None:
             if settings is None:
                 raise ValueError("lengthscale: give the kernel (or a preset) it belongs to")
-            kernel = copy.deepcopy(settings.kernel)
-            kernel.length = as_float(data["lengthscale"], "lengthscale", positive=True, unit="m")
+            kernel = KernelChoice(lengthscale=data["lengthscale"]).apply(settings.kernel)
         labels = data.get("labels")
         if labels is not None and not isinstance(labels, dict):
             raise ValueError(f"labels: expected a table of ObservationPolicy fields, got {labels!r}")

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-__all__ = ["load_mesh", "inspect_mesh", "repair_mesh", "MeshReport", "MeshRepairWarning", "MeshDistance",
+__all__ = ["load_mesh", "read_mesh", "inspect_mesh", "repair_mesh", "MeshReport", "MeshRepairWarning", "MeshDistance",
            "MESH_SUFFIXES", "as_pose", "overlapping_components"]
 
 #: Most faces a watertight remesh keeps (finer ones are decimated).
@@ -373,6 +373,30 @@ def as_pose(pose) -> np.ndarray | None:
     return T
 
 
+def read_mesh(path, name: str = "inner") -> trimesh.Trimesh:
+    """The triangles of a mesh file as they are (several bodies merged; nothing checked, repaired or scaled: that is
+    :func:`load_mesh`'s), for a caller that needs the file's own size first.
+
+    Raises:
+        ValueError: an unknown file type, no such file, or a file that does not read as a mesh (names the file).
+    """
+    path = Path(path)
+    label = f"{name} ({path})"
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise ValueError(f"{label}: unknown mesh file type {path.suffix!r}; use one of {MESH_SUFFIXES}")
+    if not path.is_file():
+        raise ValueError(f"{label}: no such file")
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:                     # trimesh raises many types for a corrupt file
+        raise ValueError(f"{label}: not a readable {path.suffix.lower()[1:].upper()} mesh "
+                         f"({type(exc).__name__}: {exc})") from None
+    if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        raise ValueError(f"{label}: not a {path.suffix.lower()[1:].upper()} mesh: no triangle could be read "
+                         "from it (a corrupt or empty file, or another format under this name)")
+    return mesh
+
+
 def load_mesh(source, *, scale: float = 1.0, pose=None, repair: bool = True, resolution: float | None = None,
               max_repair_distance: float | None = None, name: str = "inner") -> trimesh.Trimesh:
     """A user's object as a closed mesh in metres, in the robot's base frame.
@@ -402,20 +426,8 @@ def load_mesh(source, *, scale: float = 1.0, pose=None, repair: bool = True, res
     if isinstance(source, trimesh.Trimesh):
         mesh, label = source, name
     else:
-        path = Path(source)
-        label = f"{name} ({path})"
-        if path.suffix.lower() not in MESH_SUFFIXES:
-            raise ValueError(f"{label}: unknown mesh file type {path.suffix!r}; use one of {MESH_SUFFIXES}")
-        if not path.is_file():
-            raise ValueError(f"{label}: no such file")
-        try:
-            mesh = trimesh.load(path, force="mesh", process=False)
-        except Exception as exc:                     # trimesh raises many types for a corrupt file
-            raise ValueError(f"{label}: not a readable {path.suffix.lower()[1:].upper()} mesh "
-                             f"({type(exc).__name__}: {exc})") from None
-        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
-            raise ValueError(f"{label}: not a {path.suffix.lower()[1:].upper()} mesh: no triangle could be read "
-                             "from it (a corrupt or empty file, or another format under this name)")
+        label = f"{name} ({Path(source)})"
+        mesh = read_mesh(source, name)
     if len(mesh.faces) == 0 or len(mesh.vertices) == 0:
         raise ValueError(f"{label}: the mesh has no faces")
     if not isinstance(repair, bool):           # repair = "false" in a scene file used to repair

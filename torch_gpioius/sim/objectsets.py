@@ -216,15 +216,15 @@ def set_mesh(obj: SetObject) -> trimesh.Trimesh:
     """
     if obj.source.startswith("primitives:"):
         return primitive_mesh(obj.index)[0]
-    from .meshes import load_mesh
+    from .meshes import load_mesh, read_mesh
     from .scenefile import resolve_mesh
 
     path = resolve_mesh(obj.source, Path.cwd())
-    raw = trimesh.load(path, force="mesh")                  # its size first: pybullet's blobs are metres across
-    extent = float(np.max(raw.extents)) if len(getattr(raw, "vertices", ())) else 0.0
+    raw = read_mesh(path, obj.name)                         # its size first: pybullet's blobs are metres across
+    extent = float(np.max(raw.extents))
     if not extent > 0:
-        raise ValueError(f"{obj.name}: {path} holds no mesh")
-    mesh = load_mesh(path, scale=obj.size / extent, name=obj.name).copy()
+        raise ValueError(f"{obj.name} ({path}): the mesh has no extent")
+    mesh = load_mesh(raw, scale=obj.size / extent, name=f"{obj.name} ({path})").copy()
     poses, probabilities = mesh.compute_stable_poses(n_samples=1)
     if len(poses):
         mesh.apply_transform(poses[int(np.argmax(probabilities))])

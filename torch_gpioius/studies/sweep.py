@@ -1124,17 +1124,16 @@ class SweepSettings:
         return running
 
     def _specs(self, out: Path) -> list[RunSpec]:
-        specs = [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
-                         self.scene_files.get(o), self.voxel, self.touch, self.outer_tol, self.device,
-                         self.settings, self.learn, self.views, self.kernel, self.noise, self.scene_hashes.get(o))
-                 for o in (*self.objects, *self.scene_files) for m in self.modes for s in range(self.seeds)]
-        for name, obj in self.set_objects.items():      # a set's object: its source, size and cover are its identity
-            identity = f"set:{obj.source}:{obj.size!r}:{self.cover}"
-            specs += [RunSpec(self.world, name, m, s, str(out), self.smoke, self.max_travel, self.max_steps,
-                              self.threads, None, self.voxel, self.touch, self.outer_tol, self.device, self.settings,
-                              self.learn, self.views, self.kernel, self.noise, identity, obj, self.cover)
-                      for m in self.modes for s in range(self.seeds)]
-        return specs
+        # (name, scene file, identity, set object) of every object: a set's object is identified by its source,
+        # size and cover, a scene file's by its content
+        objects = [(o, None, None, None) for o in self.objects]
+        objects += [(o, path, self.scene_hashes.get(o), None) for o, path in self.scene_files.items()]
+        objects += [(o, None, f"set:{obj.source}:{obj.size!r}:{self.cover}", obj)
+                    for o, obj in self.set_objects.items()]
+        return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
+                        scene, self.voxel, self.touch, self.outer_tol, self.device, self.settings, self.learn,
+                        self.views, self.kernel, self.noise, identity, obj, self.cover if obj is not None else None)
+                for o, scene, identity, obj in objects for m in self.modes for s in range(self.seeds)]
 
     def _built_first(self, todo: list[RunSpec]) -> list[RunSpec]:
         """Build each scene file that has runs to do once, before the first run: a scene that cannot be built (a
