@@ -18,6 +18,7 @@ the body).
 
     python scripts/own_data_check.py                        # the bottle and primitives 100-104
     python scripts/own_data_check.py --bodies bottle pybullet:duck primitives:120-124 --out outputs/own_data
+    python scripts/own_data_check.py --bodies pybullet:duck --arm learned "--learn length"   # a further arm
 """
 
 from __future__ import annotations
@@ -162,7 +163,11 @@ def main() -> None:
     parser.add_argument("--bodies", nargs="+", default=["bottle", "primitives:100-104"])
     parser.add_argument("--out", type=Path, default=Path("outputs/own_data"))
     parser.add_argument("--resolution", type=float, default=0.005)
+    parser.add_argument("--arm", nargs=2, action="append", default=[], metavar=("NAME", "ARGS"),
+                        help="a further arm: the clouds and these fit arguments, e.g. --arm learned '--learn length'")
     args = parser.parse_args()
+    arms = [("with clouds", []), ("contacts alone", None), ("paper, with clouds", ["--settings", "paper"])]
+    arms += [(name, extra.split()) for name, extra in args.arm]
     rows = []
     for name, body in bodies(args.bodies):
         folder = args.out / name
@@ -170,8 +175,8 @@ def main() -> None:
         truth = trimesh.load(folder / "truth.stl")
         csv = str(folder / "contacts.csv")
         result = {"body": name, "extent": (truth.bounds[1] - truth.bounds[0]).round(3).tolist()}
-        for arm, extra in (("with clouds", clouds), ("contacts alone", []), ("paper, with clouds",
-                                                                              clouds + ["--settings", "paper"])):
+        for arm, extra in arms:
+            extra = [] if extra is None else clouds + extra
             mesh = folder / f"estimate_{arm.replace(' ', '_').replace(',', '')}.ply"
             code = gpioius(["fit", csv, *extra, "--mesh", str(mesh), "--resolution", str(args.resolution),
                             "--force"])
@@ -182,7 +187,7 @@ def main() -> None:
     print("| body | extent [cm] | arm | Chamfer [cm] | F 1 cm | bias [mm] | Hausdorff [cm] | estimate's box [cm] |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
-        for arm in ("with clouds", "contacts alone", "paper, with clouds"):
+        for arm, _ in arms:
             m = r[arm]
             if "failed" in m:
                 print(f"| {r['body']} | | {arm} | failed ({m['failed']}) | | | | |")

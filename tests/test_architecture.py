@@ -11,7 +11,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "torch_gpioius"
 
 #: The layers, lowest first (docs/architecture.md). A module may import its own layer and those before it.
 LAYERS = [
-    {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines", "_extras"},
+    {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines", "_extras",
+     "registry"},
     {"kernels"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"},
     {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"io"}, {"testing"}, {"session"}, {"studies"}, {"viewer"},
     {"cli"},

@@ -200,3 +200,14 @@ def test_the_readme_says_what_a_second_run_into_its_own_folder_does():
     text = (ROOT / "README.md").read_text()
     assert "No command replaces existing files" not in text
     assert "into its own folder replaces that folder's results" in text
+
+
+def test_the_architecture_page_lists_what_is_registered():
+    """Issue 53: the docs' tables of kernels, worlds, touch models, evidence policies and sensors are the
+    registries' own (``gpioius registered``); an entry added or renamed without the docs fails here."""
+    from torch_gpioius.exploration.registry import registered_tables
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "architecture.md").read_text()
+    for kind, table in registered_tables(builtin_only=True).items():   # not the test files' own (test_extension)
+        for row in table.splitlines()[2:]:
+            assert row in page, f"docs/architecture.md lacks the {kind} row {row!r}"

@@ -22,7 +22,7 @@ def _simulate(args: argparse.Namespace) -> int:
     from .io.outputs import FolderLock, claim_folder
     from .studies.study2d import run_study
 
-    objects = ["A", "B", "C", "D"] if args.object == "all" else [args.object]
+    objects = list(_objects_of("planar")) if args.object == "all" else [args.object]
     # the folder's summary, records and figures describe one set of objects: another set is another run
     claim_folder(args.out, "simulate", args.force, objects=",".join(objects), added=("objects",))
     max_steps = 12 if args.smoke else args.max_steps
@@ -42,9 +42,9 @@ def _simulate3d(args: argparse.Namespace) -> int:
                          "outer basis")
     scenes = [] if args.scene is None else args.scene.split(",")
     if args.object is None:
-        objects = [] if scenes else ["E", "F", "G", "H"]
+        objects = [] if scenes else list(_robot_study_objects())
     else:
-        objects = ["E", "F", "G", "H"] if args.object == "all" else [args.object]
+        objects = list(_robot_study_objects()) if args.object == "all" else [args.object]
     identity = {} if args.outer_tol is None else {"outer_tol": args.outer_tol}   # older folders: exact
     claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
                  touch=None if args.touch == "point" else args.touch,   # older folders: point
@@ -289,6 +289,63 @@ def _world_name(text: str) -> str:
     return name
 
 
+def _world_of(**capabilities):
+    """An argparse type for a registered world's name whose entry has ``capabilities`` (``simulated=True``): only
+    the named world's module is imported to ask (MuJoCo's takes a second), all of them when the name is refused."""
+    from .exploration.registry import world_entry, world_names
+
+    def parse(text: str) -> str:
+        entry = _argument(world_entry, _world_name(text))
+        if any(getattr(entry, k) != v for k, v in capabilities.items()):
+            raise argparse.ArgumentTypeError(f"the {entry.name} world does not apply here; choose among "
+                                             f"{world_names(**capabilities)}")
+        return entry.name
+
+    parse.__name__ = "world"
+    return parse
+
+
+def _objects_of(world: str) -> tuple:
+    """The built-in objects of a registered world."""
+    from .exploration.registry import world_entry
+
+    return world_entry(world).object_names
+
+
+def _robot_study_objects() -> tuple:
+    """The objects of the robot study in 3-D (Sec. VI: E-H), those ``simulate3d`` runs."""
+    from .studies.study3d import OBJECTS
+
+    return tuple(OBJECTS)
+
+
+def _presets(dimension: int | None = None) -> list[str]:
+    """The estimator's presets by name (``EstimatorSettings``: default, paper, paper-2d); with ``dimension=3``,
+    those of the 3-D worlds and data (default, paper)."""
+    from .models.estimator import PRESETS
+    from .sim.forcefield import SETTINGS
+
+    return list(PRESETS) if dimension is None else list(SETTINGS)
+
+
+def _learns() -> list[str]:
+    """What a fit can learn (K_t; also the length; also the noise)."""
+    from .models.estimator import LEARN
+
+    return list(LEARN)
+
+
+def _sweep_modes() -> tuple:
+    from .studies.sweep import sweep_modes
+
+    return sweep_modes()
+
+
+def _names(registry) -> str:
+    """What users can type for a registry's entries, for a help text."""
+    return ", ".join(registry.choices())
+
+
 VOXEL_HELP = ("edge of the camera's voxels [m] (default: the world's, 0.05 as in the paper; 0 keeps every camera "
               "point; docs/results-resolution.md)")
 
@@ -350,10 +407,17 @@ def _length(option: str):
 
 
 def _kernel_names() -> str:
-    """The kernel names the command line takes, from the kernel registry (aliases and registered kinds)."""
-    from .kernels import KERNEL_ALIASES, KERNELS
+    """The kernel names the command line takes, from the kernel registry (registered kinds and their aliases)."""
+    from .kernels import KERNELS
 
-    return ", ".join([*KERNEL_ALIASES, *(k for k in KERNELS if k not in KERNEL_ALIASES.values())])
+    return _names(KERNELS)
+
+
+def _touch_name(text: str) -> str:
+    """An argparse type for a touch model's name (checked against the registry; its registered name returned)."""
+    from .exploration.touch import TOUCH_MODELS
+
+    return _argument(TOUCH_MODELS.resolve, text)
 
 
 def _kernel_name(text: str) -> str:
@@ -387,12 +451,6 @@ def _views(text: str):
                      if "," in text else text)
 
 
-def _study_worlds() -> list[str]:
-    from .exploration.registry import world_names
-
-    return [w for w in world_names() if w != "robot"]
-
-
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -424,7 +482,7 @@ def _add_simulate(sub, common, fmt) -> None:
                          description="Reproduce the paper's 2-D study: sliding exploration of objects A-D with "
                                      "visual-tactile GPIOIS and tactile-only GPIS; writes Fig. 4/5-like figures, "
                                      "per-step records (CSV/JSON) and a summary table.")
-    sim.add_argument("--object", default="all", choices=["all", "A", "B", "C", "D"], help="object(s) to explore")
+    sim.add_argument("--object", default="all", choices=["all", *_objects_of("planar")], help="object(s) to explore")
     sim.add_argument("--out", default="outputs/study2d", help="output folder")
     sim.add_argument("--max-steps", type=int, default=400, help="cap on planning steps per run")
     sim.add_argument("--smoke", action="store_true", help="12 steps per run, claims not judged (CI)")
@@ -442,20 +500,22 @@ def _add_simulate3d(sub, common, fmt) -> None:
                                     "capture of a simulated depth camera; visual-tactile GPIOIS vs tactile-only "
                                     "GPIS until 1.5 m of travel. Writes Fig. 9/10-like figures, records, logs and "
                                     "a summary table with the Sec. VI-B claims as measured.")
-    s3.add_argument("--object", default=None, choices=["all", "E", "F", "G", "H"],
+    s3.add_argument("--object", default=None, choices=["all", *_robot_study_objects()],
                     help="object(s) to explore (default: all, or none when --scene is given)")
     s3.add_argument("--scene", default=None,
                     help="comma-separated scene files (TOML: your own mesh, cover, approach; "
                          "docs/tutorials/your-object.md)")
-    s3.add_argument("--world", default="forcefield", type=_world_name, choices=["forcefield", "mujoco"],
-                    help="forcefield: a static force-field cover; mujoco: cloth and foam on MuJoCo's contact physics")
+    s3.add_argument("--world", default="forcefield", type=_world_of(simulated=True, dimension=3),
+                    help="a simulated 3-D world: forcefield (a static force-field cover), mujoco (cloth and foam on "
+                         "MuJoCo's contact physics), or one registered with register_world (docs/extending.md)")
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
     s3.add_argument("--max-travel", type=_length("max-travel"), default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
     s3.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP)
-    s3.add_argument("--touch", default="point", choices=["point", "patch"],
-                    help="point: the fingertip's contact (the paper); patch: a DIGIT-like gel pad's depth map at each "
-                         "contact (both 3-D worlds)")
+    s3.add_argument("--touch", default="point", type=_touch_name,
+                    help="a registered touch model: point (the fingertip's contact, the paper), patch (a DIGIT-like "
+                         "gel pad's depth map at each contact, both 3-D worlds), or one registered with "
+                         "register_touch_model")
     s3.add_argument("--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP)
     s3.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
@@ -472,8 +532,9 @@ def _add_study(sub, common, fmt) -> None:
                                     "installed, else in-process), skip runs already on disk, and write runs.csv, "
                                     "summary.json/md (medians, 95 % intervals, paired VT - T with Wilcoxon p-values, "
                                     "the paper's claims judged with stated rules) and figures with bands.")
-    sw.add_argument("--world", default="planar", type=_world_name, choices=_study_worlds(),
-                    help="which world (planar: 2-D objects A-D; forcefield, mujoco: 3-D objects E-H)")
+    sw.add_argument("--world", default="planar", type=_world_of(simulated=True),
+                    help="a simulated world: planar (2-D objects A-D), forcefield or mujoco (3-D objects E-H), or one "
+                         "registered with register_world (docs/extending.md)")
     sw.add_argument("--objects", default=None,
                     help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D), or "
                          "an object set in the forcefield world: primitives:0-49, pybullet-random:0-49, "
@@ -485,8 +546,8 @@ def _add_study(sub, common, fmt) -> None:
                     help="comma-separated scene files (TOML; docs/tutorials/your-object.md) run as objects; with "
                          "--scenes and no --objects only the scenes run (3-D worlds)")
     sw.add_argument("--modes", default="visual-tactile,tactile",
-                    help="comma-separated: visual-tactile, tactile, visual-tactile+taps, local, local+taps, "
-                         "visual-tactile+reach, tactile+reach")
+                    help=f"comma-separated: {', '.join(_sweep_modes())} (a mode, or a mode with a registered "
+                         "evidence policy that serves it)")
     sw.add_argument("--seeds", type=_positive_int, default=10,
                     help="seeds per object and mode (seed 0 = unperturbed; at most 10000)")
     sw.add_argument("--out", default="outputs/study", help="output folder")
@@ -496,22 +557,19 @@ def _add_study(sub, common, fmt) -> None:
                     help="travel budget per run [m] (3-D worlds)")
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
     sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
-    sw.add_argument(
-        "--touch",
-        default="point",
-        choices=["point", "patch"],
-        help="point: the fingertip's contact; patch: a gel pad's depth map (3-D worlds); one per --out folder",
-    )
+    sw.add_argument("--touch", default="point", type=_touch_name,
+                    help="a registered touch model: point (the fingertip's contact), patch (a gel pad's depth map, "
+                         "3-D worlds) or one registered with register_touch_model; one per --out folder")
     sw.add_argument(
         "--outer-tol", type=_outer_tol, default=None, help=OUTER_TOL_HELP + "; one setting per --out folder"
     )
     sw.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
-    sw.add_argument("--settings", default=None, choices=["default", "paper"],
+    sw.add_argument("--settings", default=None, choices=_presets(3),
                     help="the 3-D worlds' settings, for scene files and built-in objects alike: default (three "
                          "camera views, voxels a tenth of the body, a Matern-5/2, inside points) or paper (one fixed "
                          "camera, 5 cm voxels, the inverse multiquadric); default: each file's own, the paper's for "
                          "the built-in objects; one per --out folder")
-    sw.add_argument("--learn", default=None, choices=["task", "length", "all"],
+    sw.add_argument("--learn", default=None, choices=_learns(),
                     help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
                          "all (the length and the noise too), by the marginal likelihood on restart steps; default: "
                          "each world's own; one per --out folder")
@@ -562,7 +620,7 @@ def _add_fit(sub, common, fmt) -> None:
                           "of the seen surface (without it the model knows where the cover is, not which side is "
                           "empty); one per --cloud")
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
-    fit.add_argument("--settings", default=None, choices=["default", "paper"],
+    fit.add_argument("--settings", default=None, choices=_presets(),
                      help="the estimator's settings (kernel, sigma^2, labels, voxels): default (this library's, "
                           "measured best on shapes nobody tuned to) or paper (the robot experiment's); default: "
                           "'default' for a contacts CSV, the file's own for a .gpioius file")
@@ -574,7 +632,7 @@ def _add_fit(sub, common, fmt) -> None:
     fit.add_argument("--theta", type=float, default=None,
                      help="deprecated: the inverse multiquadric's length scale [m] in place of the settings' kernel")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 in place of the settings'")
-    fit.add_argument("--learn", default=None, choices=["task", "length", "all"],
+    fit.add_argument("--learn", default=None, choices=_learns(),
                      help="learn K_t alone (the paper's), also the kernel's length, or the length and the noise too "
                           "(by the exact marginal likelihood, from the settings' values); default: the settings'")
     _force(fit, "--out holds files that `gpioius fit` did not write")
@@ -626,7 +684,7 @@ def _add_import_bag(sub, common, fmt) -> None:
     bag.add_argument("--voxel", type=float, default=None,
                      help="voxel edge for the cloud [m] (default: the settings': a tenth of the --crop box, 2-5 cm, "
                           "by default; 5 cm without a crop box)")
-    bag.add_argument("--settings", default="default", choices=["default", "paper"],
+    bag.add_argument("--settings", default="default", choices=_presets(3),
                      help="the estimator's settings the dataset records for fit (kernel, sigma^2, free space, voxels) "
                           "and its labels: inside points behind the contacts, along the measured forces (none behind "
                           "the seen surface: a bag's clouds come from a moving camera)")
@@ -672,6 +730,27 @@ def _add_export(sub, common, fmt) -> None:
     ex.set_defaults(func=_export)
 
 
+def _registered(args: argparse.Namespace) -> int:
+    from .exploration.registry import registered_tables
+
+    tables = registered_tables()
+    for kind in ([args.kind] if args.kind else tables):
+        print(f"## {kind}\n\n{tables[kind]}\n")
+    return 0
+
+
+def _add_registered(sub, fmt) -> None:
+    """The ``registered`` sub-command."""
+    reg = sub.add_parser("registered", formatter_class=fmt,
+                         help="list the kernels, worlds, touch models, evidence policies and sensors by name",
+                         description="Print each registry as a Markdown table: the names (and aliases) the command "
+                                     "line, scene files and studies take, with each entry's capabilities; those "
+                                     "registered by code imported before (a plugin) are listed too.")
+    reg.add_argument("kind", nargs="?", default=None, choices=["kernels", "worlds", "touch", "evidence", "sensors"],
+                     help="one registry (default: all)")
+    reg.set_defaults(func=_registered)
+
+
 def _add_view(sub, common, fmt) -> None:
     """The ``view`` sub-command."""
     vw = sub.add_parser("view", parents=[common], formatter_class=fmt,
@@ -713,6 +792,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_import_bag(sub, common, fmt)
     _add_export(sub, common, fmt)
     _add_view(sub, common, fmt)
+    _add_registered(sub, fmt)
     return parser
 
 

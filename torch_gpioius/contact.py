@@ -278,6 +278,11 @@ class ContactController:
             contact = contact - (cfg.tip_radius - deflection) * n
         return ContactResult(in_contact, contact, free, path, forces, travel)
 
+    @property
+    def max_approach(self) -> float:
+        """The longest approach :meth:`approach` accepts [m] (``config.max_approach``)."""
+        return float(self.config.max_approach)
+
     def approach(self, direction: torch.Tensor, max_travel: float = 0.3) -> ContactResult:
         """Move along ``direction`` until contact, then settle into the contact band.
 

@@ -7,7 +7,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.cli import main as cli_main
-from torch_gpioius.studies.sweep import RunSpec, _explore_kwargs
+from torch_gpioius.studies.sweep_runs import RunSpec, _explore_kwargs
 
 
 def _run(device, mode="visual-tactile", steps=6):

@@ -1,6 +1,8 @@
 """Extending the library from outside: every part below is defined in this file, through public contracts only,
 and run with ``explore``: a toy world (a ball under a soft cover, a gantry robot, a camera), a toy force sensor, a
-Matérn-3/2 kernel used through GPIOIS, a custom evidence policy and a custom recorder."""
+Matérn-3/2 kernel used through GPIOIS, a custom evidence policy, a touch model and a custom recorder. Each is
+registered by name, and the names then reach scene files, the command line and studies with no package file
+edited."""
 
 import math
 
@@ -9,10 +11,11 @@ import pytest
 import torch
 
 import torch_gpioius as tg
-from torch_gpioius.testing import KernelContract
+from torch_gpioius.testing import KernelContract, WorldContract
 from torch_gpioius.contact import ContactConfig, ContactController
 from torch_gpioius.exploration import (Evidence, ExplorationDefaults, Hardware, Measurement, ObservationPolicy,
-                                       Recorder, TravelBudget, World, register_world, world_entry)
+                                       PointTouch, Recorder, SceneSupport, TouchModelBase, TravelBudget, World,
+                                       register_evidence_policy, register_touch_model, register_world, world_entry)
 from torch_gpioius.kernels import ExactKernel
 from torch_gpioius.sensors import ForceReading, ForceSensor, PointCloud, PointCloudSource
 
@@ -118,8 +121,8 @@ class BallWorld(World):
 
     dim = 3
 
-    def __init__(self, name="ball"):
-        self.name = name
+    def __init__(self, name="ball", step=0.01):
+        self.name, self.step = name, step
         self.start = CENTRE + [0.004, 0.003, 0.15]
         self.direction = np.array([0.0, 0.0, -1.0])
         self.range = np.stack([CENTRE - 0.12, CENTRE + 0.12])
@@ -127,7 +130,7 @@ class BallWorld(World):
     @property
     def defaults(self):
         settings = tg.EstimatorSettings(tg.kernels.InverseMultiquadricKernel(0.1), 0.006, ObservationPolicy(voxel=0.02))
-        return ExplorationDefaults(step=0.01, max_steps=40, stop=(TravelBudget(0.15),), approach_travel=0.3,
+        return ExplorationDefaults(step=self.step, max_steps=40, stop=(TravelBudget(0.15),), approach_travel=0.3,
                                    estimator=settings)
 
     def hardware(self):
@@ -144,8 +147,21 @@ class BallWorld(World):
         return Measurement(hausdorff=float(off.max()), surface=mesh)     # the estimate's side of eq. 24
 
 
+class TestBallWorldContract(WorldContract):
+    def make(self):
+        return BallWorld()
+
+
+def ball_from_scene_file(mesh, kind, *, name, where, cover, settings, preset, smoke):
+    """A scene file's ball: its name, and the step its own ``[toyball]`` section gives (the mesh is the ball's)."""
+    assert kind == "tight" and abs(float(np.max(mesh.extents)) - 2 * RADIUS) < 1e-3
+    return BallWorld(name, step=settings.get("step", 0.01))
+
+
 register_world("toyball", BallWorld, objects=lambda names, smoke: {n: BallWorld(n) for n in names},
-               object_names=("ball",), description="a ball under a soft cover (a test's world)")
+               object_names=("ball",), description="a ball under a soft cover (a test's world)",
+               scene=SceneSupport(cover_keys=frozenset({"gap"}), cover_kinds=("tight",),
+                                  settings_keys=frozenset({"step"}), build=ball_from_scene_file, ur5=False))
 
 
 # ------------------------------------------------------------------------------------------------ evidence, recorder
@@ -165,6 +181,23 @@ class Poke:
 
     def describe(self):
         return {"name": self.name}
+
+
+register_evidence_policy("poke", Poke, modes=("visual-tactile",), description="lift 3 cm every 3 steps")
+
+
+class Counting(TouchModelBase):
+    """The fingertip's point contact, counting the contacts it turns into observations."""
+
+    name = "counting"
+    seen = 0
+
+    def observations(self, result, contacts, policy, step):
+        Counting.seen += 1
+        return PointTouch().observations(result, contacts, policy, step)
+
+
+register_touch_model("counting", Counting, description="a point contact that counts")
 
 
 class Diary(Recorder):
@@ -272,7 +305,7 @@ def test_a_touch_model_declares_its_contract_by_subclassing_the_base():
     TouchModelBase and the loop calls every method of the contract; an object with ``observations`` alone gets the
     defaults, and one that writes more of the contract without the base is refused by name (its methods would have
     been passed over)."""
-    from torch_gpioius.exploration import PointTouch, TouchModelBase, touch_model
+    from torch_gpioius.exploration import touch_model
 
     calls = []
 
@@ -306,3 +339,38 @@ def test_a_touch_model_declares_its_contract_by_subclassing_the_base():
 
     with pytest.raises(ValueError, match="HalfDeclared has select: subclass torch_gpioius.exploration.TouchModelBase"):
         touch_model(HalfDeclared())
+
+
+def test_a_world_policy_and_touch_registered_outside_the_package_run_from_a_scene_file_and_a_study(tmp_path):
+    """Issue 53: the command line, scene files and studies matched world, touch and mode names by hand
+    (``["forcefield", "mujoco"]``, ``("point", "patch")``, ``world not in ("forcefield", "mujoco")``). Now they read
+    the registries: this file's world (with its scene-file section), touch model and evidence policy are chosen by
+    name from a scene file and from ``gpioius study``, and the run records them."""
+    import json
+
+    from tests.scenes import ball_scene
+    from torch_gpioius.cli import build_parser
+    from torch_gpioius.exploration import world_names
+    from torch_gpioius.sim.scenefile import load_scene, scene_worlds
+    from torch_gpioius.studies.sweep import run_sweep, sweep_modes
+
+    assert "toyball" in scene_worlds() and "toyball" in world_names(simulated=True)
+    assert "visual-tactile+poke" in sweep_modes() and "tactile+poke" not in sweep_modes()
+    path = ball_scene(tmp_path, extra="[toyball]\nstep = 0.008\n")
+    path.write_text('world = "toyball"\n' + path.read_text())
+    world = load_scene(path)
+    assert isinstance(world, BallWorld) and world.name == "ball" and world.defaults.step == 0.008
+    with pytest.raises(ValueError, match=r"\[toyball\]: unknown key\(s\) \['stride'\]"):
+        load_scene(ball_scene(tmp_path, name="bad", extra="[toyball]\nstride = 0.01\n"), world="toyball")
+    args = build_parser().parse_args(["study", "--world", "toyball", "--scenes", str(path), "--modes",
+                                      "visual-tactile+poke", "--touch", "counting", "--out", str(tmp_path / "s")])
+    assert (args.world, args.touch) == ("toyball", "counting")
+    before = Counting.seen
+    run_sweep(args.world, scenes=[path], modes=args.modes.split(","), touch=args.touch, seeds=1, out=tmp_path / "s",
+              smoke=True, backend="local", progress=False, max_steps=7)
+    record = json.loads((tmp_path / "s" / "runs" / "ball_visual-tactile+poke_0.json").read_text())
+    assert (record["world"], record["mode"], record["touch"]) == ("toyball", "visual-tactile+poke", "counting")
+    assert record["taps"] >= 1 and Counting.seen > before
+    for argv in (["study", "--world", "robot"], ["study", "--touch", "nope"], ["simulate3d", "--world", "planar"]):
+        with pytest.raises(SystemExit):
+            build_parser().parse_args(argv)

@@ -6,7 +6,7 @@ import pytest
 import torch_gpioius as tg
 from torch_gpioius.io.datasets import read_records
 from torch_gpioius.sim import paper_objects_2d
-from torch_gpioius.studies.sweep import RunSpec, _explore_kwargs
+from torch_gpioius.studies.sweep_runs import RunSpec, _explore_kwargs
 
 
 def test_every_record_carries_the_bound_and_a_log_resumes_with_it(tmp_path):

@@ -350,7 +350,7 @@ def test_on_the_ridge_of_a_correlation_of_1_w_is_held_and_its_gain_bounded():
     its very bound and the gradient points back inside, no tracking step is taken (a Hessian taken at a bound says
     nothing of the interior)."""
     from torch_gpioius.inference.optim import cholesky_bounds, chol_params_to_task_covariance
-    from torch_gpioius.models.gpiois import _on_ridge, _ridge
+    from torch_gpioius.inference.task_fit import on_ridge as _on_ridge, ridge as _ridge
     from torch_gpioius.inference.optim import task_covariance_to_chol_params
 
     rng = np.random.default_rng(7)
@@ -361,7 +361,7 @@ def test_on_the_ridge_of_a_correlation_of_1_w_is_held_and_its_gain_bounded():
         model.add_observations(*_patch(rng, 24), 0)
         kt = model._task_matrix()
         phi = task_covariance_to_chol_params(model.task_covariance)
-        mll, grad, free = model._chol_gradient(model._inference(), kt)
+        mll, grad, free = model._task_fitter().chol_gradient(kt)
         held, bound = _ridge(model.task_covariance, grad, free)
         if bound == math.inf:                   # the gradient points off the ridge: no bound, the rule re-learns
             seen.add("off")
@@ -483,7 +483,7 @@ def test_a_restart_under_the_min_gain_rule_holds_its_warm_start_and_still_finds_
 
 
 @pytest.mark.filterwarnings("ignore:GPIOIS.fit. K_t's fit stopped")     # Newton's stalls on the flat ridge
-def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_all_the_data():
+def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_all_the_data(monkeypatch):
     """Concentric shapes put K_t's correlation at 1; patches of another shape then move the optimum inside (a
     correlation near 0.3). From the warm K_t the full data's Newton run walks off the ridge in many evaluations; with
     ``scout`` the thinned copy walks and the full data polish in a few, to the same optimum."""
@@ -519,7 +519,10 @@ def test_a_relearning_off_a_correlation_of_1_walks_on_the_scout_and_polishes_on_
     restart = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=IMQ(THETA), noise=NOISE,
                         task_covariance=base.task_covariance, inference="batched")
     restart.fit_result = base.fit_result
-    restart._fixed_starts = lambda: []          # no fixed start to find it: the copy's run from the warm K_t must
+    from torch_gpioius.inference.task_fit import TaskCovarianceFitter
+
+    # no fixed start to find it: the copy's run from the warm K_t must find the other basin
+    monkeypatch.setattr(TaskCovarianceFitter, "fixed_starts", lambda self: [])
     engine = restart._inference()
     calls = []
     original = engine.mll_derivatives
@@ -553,7 +556,7 @@ def test_a_relearning_on_the_ridge_whose_optimum_stays_there_polishes_the_copys_
                               task_covariance=chol_params_to_task_covariance(phi), inference="batched")
             model.fit_result = base.fit_result
             engine = model._inference()
-            assert model._chol_gradient(engine, model._task_matrix())[1][2] > 0     # pointing off the ridge
+            assert model._task_fitter().chol_gradient(model._task_matrix())[1][2] > 0     # pointing off the ridge
             calls = []
             original = engine.mll_derivatives
             engine.mll_derivatives = lambda kt, original=original, calls=calls: calls.append(1) or original(kt)
@@ -579,10 +582,9 @@ def test_a_fit_judging_trials_by_their_value_reaches_the_same_optimum_with_fewer
         model = tg.GPIOIS(base.train_inputs[0], base.train_targets, base.train_task, kernel=IMQ(THETA), noise=NOISE,
                           task_covariance=ridge, inference="batched")
         model.fit_result = ridge_fit                          # a later fit, warm-started on the ridge
-        if not judged:
-            likelihood = model._likelihood
-            model._likelihood = lambda engine: (likelihood(engine)[0], None)
         engine = model._inference()
+        if not judged:                      # as an engine whose value alone costs its derivatives declares
+            engine.value_alone = False
         hessians, values = [], []
         derivatives, value = engine.mll_derivatives, engine.mll_value
         engine.mll_derivatives = lambda kt: hessians.append(1) or derivatives(kt)

@@ -123,7 +123,7 @@ def test_restarts_scout_copy_uses_the_direct_engine():
 
         DirectStructuredInference.__init__ = spy
         try:
-            evaluate = m._scout_copy(40)           # (evaluate, level)
+            evaluate = m._task_fitter().likelihood(m._scout_engine(40))           # (evaluate, level)
         finally:
             DirectStructuredInference.__init__ = original
         assert len(built) == 1 and built[0].n_inner == 40

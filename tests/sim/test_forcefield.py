@@ -6,6 +6,7 @@ import torch
 
 from torch_gpioius.contact import ContactConfig, ContactController
 from torch_gpioius.sim.forcefield import Scene3D, sphere_scene
+from torch_gpioius.testing import WorldContract
 
 
 def _beside_and_down(scene):
@@ -321,3 +322,12 @@ def test_the_cover_of_a_remeshed_teddy_closes_and_its_far_corners_lie_outside():
     assert (MeshDistance(body)(corners) > 0).all()
     cover = cover_around(body, "tight", gap=0.008)
     assert cover.is_watertight and cover.volume > body.volume
+
+
+class TestForceFieldWorldContract(WorldContract):
+    """The force-field world keeps the contract users' worlds are tested against (torch_gpioius.testing)."""
+
+    def make(self):
+        from torch_gpioius.exploration import make_world
+
+        return make_world("forcefield", "E", smoke=True)

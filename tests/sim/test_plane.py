@@ -4,6 +4,7 @@ import shapely
 from shapely.geometry import Polygon
 
 from torch_gpioius.sim import Scene2D, paper_objects_2d, rectangle
+from torch_gpioius.testing import WorldContract
 
 TABLE_I_CM = {"A": 6.4, "B": 12.0, "C": 26.9, "D": 37.5}
 
@@ -36,3 +37,12 @@ def test_bad_scenes():
         Scene2D(rectangle(-0.1, 0.1, -0.1, 0.1), rectangle(-0.2, 0.2, -0.2, 0.2), (-0.15, 0.0), (1, 0))
     with pytest.raises(ValueError, match="vertices"):
         Scene2D([[0, 0], [1, 1]], rectangle(-0.2, 0.2, -0.2, 0.2), (-0.3, 0.0), (1, 0))
+
+
+class TestPlanarWorldContract(WorldContract):
+    """The 2-D world keeps the contract users' worlds are tested against (torch_gpioius.testing)."""
+
+    def make(self):
+        from torch_gpioius.exploration import make_world
+
+        return make_world("planar", "A")

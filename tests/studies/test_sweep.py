@@ -81,7 +81,7 @@ def test_bad_sweep_arguments(tmp_path):
         run_sweep("planar", objects=["Q"], out=tmp_path)
     with pytest.raises(ValueError, match="seeds"):
         run_sweep("planar", seeds=0, out=tmp_path)
-    with pytest.raises(ValueError, match="settings: applies to the 3-D worlds"):
+    with pytest.raises(ValueError, match=r"settings: applies to the worlds that take presets \(forcefield, mujoco"):
         run_sweep("planar", settings="default", out=tmp_path)
     with pytest.raises(ValueError, match="settings"):
         run_sweep("forcefield", objects=["E"], settings="mine", out=tmp_path)
@@ -91,7 +91,7 @@ def test_bad_sweep_arguments(tmp_path):
 
 def test_workers_are_capped_at_the_cores_of_a_local_run():
     """Issue 51, item 17: `study --workers 1000` started one Ray process per run."""
-    from torch_gpioius.studies.sweep import _checked_workers
+    from torch_gpioius.studies.sweep_settings import _checked_workers
 
     cores = os.cpu_count()
     with pytest.warns(UserWarning, match=f"workers: 1000 parallel runs on {cores} cores .* running {cores} at a time"):
@@ -228,20 +228,20 @@ def test_scene_files_run_as_objects_and_a_run_that_never_touches_is_a_counted_fa
     from torch_gpioius.studies.sweep import RunSpec, failure, read_run_file, run_one
 
     spec = RunSpec("forcefield", "ball", "tactile", 0, str(tmp_path / "s"), True, None, None, 1, str(ball))
-    import torch_gpioius.studies.sweep as sweep
+    import torch_gpioius.studies.sweep_runs as sweep_runs
 
-    real = sweep.make_world
+    real = sweep_runs.make_world
 
     def missing(*args, **kw):
         world = real(*args, **kw)
         world.start = world.start + np.array([0.08, 0.0, 0.0])      # 2 cm past the ball's side
         return world
 
-    sweep.make_world = missing
+    sweep_runs.make_world = missing                                  # the runs' module builds the world
     try:
         record = run_one(spec)
     finally:
-        sweep.make_world = real
+        sweep_runs.make_world = real
     assert record["terminated"].startswith("refused: approach")
     assert failure(read_run_file(tmp_path / "s" / "runs" / f"{spec.key}.json")).startswith("approach")
     with pytest.raises(ValueError, match="also the names of objects"):
@@ -307,7 +307,7 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
     for kw, match in bad:
         with pytest.raises(ValueError, match=match):
             run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", **kw)
-    with pytest.raises(ValueError, match="views: the simulated camera views are the 3-D worlds'"):
+    with pytest.raises(ValueError, match="views: the simulated camera views are those of forcefield, mujoco"):
         run_sweep("planar", seeds=1, out=tmp_path / "planar", views=1)
     assert not (tmp_path / "bad").exists() and not (tmp_path / "planar").exists()
 
@@ -361,7 +361,7 @@ def _run(hausdorff, estimate=None, terminated="travel"):
 
 def test_a_run_whose_final_estimate_vanished_is_failed_with_no_stale_value():
     """Issue 33, item 5: runs.csv gave an earlier step's Hausdorff (0.0515) as final_hausdorff, `failed` empty."""
-    from torch_gpioius.studies.sweep import _row, failure
+    from torch_gpioius.studies.sweep_aggregate import _row, failure
 
     nan = math.nan
     lost = _run([0.08, nan, 0.0515, nan], [1.0, nan, 1.0, 0.0])
@@ -384,7 +384,7 @@ def test_run_files_with_a_bad_estimate_series_are_refused(tmp_path):
 
 
 def test_a_fraction_whose_estimate_vanished_is_not_filled_by_a_later_one():
-    from torch_gpioius.studies.sweep import _at_travel
+    from torch_gpioius.studies.sweep_aggregate import _at_travel
 
     nan = math.nan
     series = {"travel": [0.0, 0.05, 0.1, 0.2], "hausdorff": [0.09, nan, nan, 0.03], "estimate": [1.0, nan, 0.0, 1.0]}
@@ -433,7 +433,7 @@ def test_an_edited_scene_file_is_run_again_and_a_scene_that_cannot_be_built_is_a
 def test_claims_are_not_judged_on_too_few_seeds():
     """Issue 51, item 13: `study --seeds 2` judged the paper's claims "holds: yes" beside its own table's 50 %
     coverage and Wilcoxon p = 0.5."""
-    from torch_gpioius.studies.sweep import METRICS, MIN_SEEDS_TO_JUDGE, _claims, _summarize
+    from torch_gpioius.studies.sweep_aggregate import METRICS, MIN_SEEDS_TO_JUDGE, _claims, _summarize
 
     def rows(seeds):
         out = []

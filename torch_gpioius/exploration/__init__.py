@@ -4,7 +4,8 @@
   :class:`Run`, :class:`Trace`;
 * contracts (:mod:`~torch_gpioius.exploration.protocols`): :class:`Toucher`, :class:`TouchModel`,
   :class:`EvidencePolicy`, :class:`Recorder`; stop rules (:class:`StopRule`); worlds (:class:`World`,
-  :class:`Hardware`) and their registry (:func:`register_world`);
+  :class:`Hardware`); the registries of worlds, touch models and evidence policies (:func:`register_world`,
+  :func:`register_touch_model`, :func:`register_evidence_policy`; :mod:`torch_gpioius.registry`);
 * the loop: :func:`explore` / :func:`run` (``torch_gpioius.explore`` adds the crash-safe log and resume).
 """
 
@@ -14,25 +15,23 @@ from .loop import begin, explore, run
 from .observations import (Observations, ObservationPolicy, free_space_along, retract_free_space, thin_points,
                            vision_observations)
 from .patches import PatchSettings, patch_observations
-from .policies import EVIDENCE_POLICIES, evidence_policy
+from .policies import EVIDENCE_POLICIES, evidence_policy, register_evidence_policy
 from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel, TouchModelBase
 from .reach import ReachPlan, ReachPolicy
 from .recorders import IntervalRecorder, MetricsRecorder, NoEstimateWarning, ProgressRecorder
 from .recovery import NoProgress
-from .registry import WorldEntry, make_world, register_world, world_entry, world_names
+from .registry import WORLDS, SceneSupport, WorldEntry, make_world, register_world, world_entry, world_names
 from .state import RECORD_FIELDS, ExplorationState, StepRecord
 from .stopping import OnceAround, StopRule, TravelBudget, gone_around, largest_uncovered_gap
-from .touch import TOUCH_MODELS, PointTouch, touch_model
+from .touch import TOUCH_MODELS, PointTouch, register_touch_model, touch_model
 from .trace import Trace
 from .world import ExplorationDefaults, Hardware, Measurement, RobotWorld, World, geometry_hash
 
-#: Evidence policies by shorthand: None (the paper's exploration) and the registered names.
-EVIDENCE = (None, *EVIDENCE_POLICIES)
-
-__all__ = ["explore", "run", "begin", "MODES", "EVIDENCE", "ExploreConfig", "Run", "Observations", "ObservationPolicy",
+__all__ = ["explore", "run", "begin", "MODES", "ExploreConfig", "Run", "Observations", "ObservationPolicy",
            "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel", "TouchModelBase",
            "EvidencePolicy", "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder",
            "Evidence", "TapPolicy", "ReachPolicy", "ReachPlan", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy",
+           "register_evidence_policy", "register_touch_model", "WORLDS", "SceneSupport",
            "PointTouch", "TOUCH_MODELS", "touch_model", "StopRule", "OnceAround", "TravelBudget", "gone_around",
            "largest_uncovered_gap", "World", "Hardware", "ExplorationDefaults", "Measurement", "RobotWorld",
            "geometry_hash", "register_world", "world_entry", "world_names", "make_world", "WorldEntry",

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 
 from .._validation import as_device, as_float, as_int
+from ..planning import RangePenalty
 from ..kernels import InverseMultiquadricKernel, as_kernel
 from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, EstimatorView, as_learn  # noqa: F401
 from ..models.gpiois import GPIOIS, INNER, OUTER
@@ -95,9 +96,9 @@ class ExploreConfig(EstimatorView):
         if mode not in MODES:
             raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
         evidence = evidence_policy(evidence)
-        if evidence is not None and mode != "visual-tactile" and getattr(evidence, "needs_vision", True):
-            raise ValueError(f"evidence: the {getattr(evidence, 'name', type(evidence).__name__)} policy is about the "
-                             "similarity; it needs mode='visual-tactile'")
+        if evidence is not None and mode != "visual-tactile" and evidence.needs_vision:
+            raise ValueError(f"evidence: the {evidence.name} policy is about the similarity; it needs "
+                             "mode='visual-tactile'")
         if regions is not None:
             regions = as_int(regions, "regions", 1, 64)
             if mode != "visual-tactile":
@@ -150,9 +151,9 @@ class ExploreConfig(EstimatorView):
         config = cls(mode, evidence, touch, step, estimator, max_steps, rules, penalty, metrics_every,
                      metrics_resolution, interval_every, regions, float(d.approach_travel), stall, outer_tol,
                      as_device(device))
-        if evidence is not None and callable(getattr(evidence, "for_run", None)):   # a reach: the range and budget
-            box = (None if getattr(penalty, "lower", None) is None
-                   else np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()]))
+        if evidence is not None:                  # a reach: the range and budget
+            box = (np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()])
+                   if isinstance(penalty, RangePenalty) else None)
             config = dataclasses.replace(config, evidence=evidence.for_run(dim=world.dim, bounds=box,
                                                                            budget=config.budget))
         return config
@@ -210,7 +211,7 @@ class ExploreConfig(EstimatorView):
         settings whole (:meth:`~torch_gpioius.models.estimator.EstimatorSettings.to_dict`)."""
         kernel = self.estimator.kernel.describe()
         theta = self.lengthscale if isinstance(self.kernel, InverseMultiquadricKernel) else None  # earlier logs' key
-        evidence = None if self.evidence is None else getattr(self.evidence, "name", type(self.evidence).__name__)
+        evidence = None if self.evidence is None else self.evidence.name
         out = {"mode": self.mode, "evidence": evidence, "touch": self.touch.name,
                "step_length": self.step, "theta": theta, "kernel": kernel,
                "noise": float(self.noise), "max_steps": self.max_steps,
@@ -224,7 +225,7 @@ class ExploreConfig(EstimatorView):
         out["restart_every"] = self.restart_every
         if self.learn != "task":                  # only when set: logs written before it existed still resume
             out["learn"] = self.learn
-        if self.evidence is not None and callable(getattr(self.evidence, "describe", None)):
+        if self.evidence is not None:
             out["evidence_policy"] = self.evidence.describe()
         out["estimator"] = self.estimator.to_dict()
         return out
@@ -236,7 +237,7 @@ def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) 
     it in their place."""
     est = world.defaults.estimator if settings is None else EstimatorSettings.of(settings)
     if est.voxel_rule is not None and est is not world.defaults.estimator:
-        extent = getattr(world, "object_extent", None)
+        extent = world.object_extent
         if extent is not None:
             est = est.for_extent(extent)
     changes = {}
@@ -255,7 +256,7 @@ def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) 
         changes["restart_every"] = restart_every
     if changes.get("learn", est.learn) != "task":
         k = changes.get("kernel", est.kernel)
-        if not getattr(k, "learnable_length", False):
+        if not k.learnable_length:
             raise ValueError(f"learn={changes.get('learn', est.learn)!r}: the {type(k).__name__} kernel has no "
                              "learnable length (ExactKernel.length and value_at)")
     return est.replace(**changes) if changes else est

@@ -31,6 +31,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 import torch
 
+from .protocols import EvidencePolicyBase
+
 __all__ = ["Evidence", "TapPolicy"]
 
 
@@ -57,7 +59,7 @@ class Evidence:
 
 
 @dataclass(frozen=True)
-class TapPolicy:
+class TapPolicy(EvidencePolicyBase):
     """When and how to tap (see the module docstring).
 
     Attributes:

@@ -282,7 +282,7 @@ def _describe(record: StepRecord, state: ExplorationState, ctx: Run, step_time: 
     )
     record.recoveries = state.recoveries
     record.reapproaches, record.reapproach_travel = state.reapproaches, state.reapproach_travel
-    record.robot_time = float(getattr(ctx.hardware.robot, "time", math.nan))
+    record.robot_time = ctx.hardware.robot_time()
     truth = ctx.world.contact_truth(ctx.hardware, state.contact)
     if truth is not None:
         record.contact_distance = float(truth.distance)
@@ -373,7 +373,7 @@ def recover(state: ExplorationState, hw, lost: ContactResult, budget_left: float
     dist = float(to_last.norm())
     if not dist > 1e-6:
         return None
-    limit = getattr(getattr(hw.controller, "config", None), "max_approach", None)
+    limit = hw.approach_limit()
     back = approach(to_last / dist, min(dist + 0.05, limit) if limit else dist + 0.05)
     if back is None or not back.in_contact:
         return None

@@ -105,6 +105,40 @@ class EvidencePolicy(Protocol):
     def describe(self) -> dict: ...
 
 
+class EvidencePolicyBase:
+    """A base for evidence policies that declares the whole contract the exploration calls, with defaults:
+
+    * ``name``: the policy's name in logs and run files (default: the class name);
+    * ``needs_vision``: whether it reads the outer task (a camera's): True refuses it in touch-only modes;
+    * ``due(state)`` and ``gather(state, toucher)``: see :class:`EvidencePolicy` (no default);
+    * ``for_run(dim=, bounds=, budget=)``: the policy fitted to one run's range and travel budget (default: itself);
+    * ``describe()``: JSON-able settings for the log header (default: its name).
+
+    ``explore(evidence=obj)`` takes any object with ``due`` and ``gather``; one that does not subclass this base gets
+    these defaults (:func:`~torch_gpioius.exploration.policies.evidence_policy`).
+    """
+
+    name: str = "EvidencePolicyBase"
+    needs_vision: bool = True
+
+    def __init_subclass__(cls, **kwargs) -> None:
+        super().__init_subclass__(**kwargs)
+        if "name" not in cls.__dict__:          # a subclass without its own name is named by its class
+            cls.name = cls.__name__
+
+    def due(self, state) -> bool:
+        raise NotImplementedError
+
+    def gather(self, state, toucher) -> Any:
+        raise NotImplementedError
+
+    def for_run(self, *, dim: int, bounds=None, budget: float | None = None) -> "EvidencePolicyBase":
+        return self
+
+    def describe(self) -> dict:
+        return {"name": self.name}
+
+
 class Recorder:
     """Base class of the exploration's observers: crash-safe logs, ground-truth metrics, intervals, progress, or a
     user's own. Every hook is optional; recorders run in order, so one that measures (and fills the record) comes

@@ -46,6 +46,7 @@ import numpy as np
 import torch
 
 from .evidence import Evidence
+from .protocols import EvidencePolicyBase
 
 __all__ = ["ReachPolicy", "ReachPlan"]
 
@@ -81,7 +82,7 @@ class ReachPlan:
 
 
 @dataclass(frozen=True)
-class ReachPolicy:
+class ReachPolicy(EvidencePolicyBase):
     """When and where to reach for unseen surface (see the module docstring).
 
     Attributes:

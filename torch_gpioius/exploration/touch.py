@@ -10,11 +10,12 @@ import numpy as np
 import torch
 
 from .._validation import as_int
+from ..registry import Registry
 from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchSettings, patch_observations
 from .protocols import TouchModelBase
 
-__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "touch_model", "inside_observation"]
+__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "register_touch_model", "touch_model", "inside_observation"]
 
 
 @dataclass(frozen=True)
@@ -201,8 +202,26 @@ class PatchTouch(TouchModelBase):
         return out
 
 
-#: Touch models by name (``explore(..., touch="point")``).
-TOUCH_MODELS: dict[str, type] = {"point": PointTouch, "patch": PatchTouch}
+#: Touch models by name (``explore(..., touch="point")``, ``gpioius study --touch``).
+TOUCH_MODELS: Registry[type] = Registry("touch model")
+
+
+def register_touch_model(name: str, cls: type, *, aliases=(), description: str = "") -> type:
+    """Register a touch model class (a :class:`~torch_gpioius.exploration.protocols.TouchModelBase` built without
+    arguments) under ``name``: ``explore(..., touch=name)``, ``gpioius simulate3d --touch``, ``gpioius study --touch``
+    and a study's run files then know it. Returns ``cls``.
+
+    Raises:
+        ValueError: ``cls`` does not subclass the base, or the name is taken by another class.
+    """
+    if not (isinstance(cls, type) and issubclass(cls, TouchModelBase)):
+        raise ValueError(f"register_touch_model: {cls!r} is not a TouchModelBase subclass")
+    TOUCH_MODELS.register(name, cls, aliases=aliases, description=description)
+    return cls
+
+
+register_touch_model("point", PointTouch, description="the paper's fingertip contact: a point and its force")
+register_touch_model("patch", PatchTouch, description="a gel pad's depth map: a patch of surface at each contact")
 
 
 def inside_observation(contact: np.ndarray, result, policy: ObservationPolicy, step: int) -> Observations:
@@ -235,8 +254,8 @@ def touch_model(touch) -> TouchModelBase:
         return PointTouch()
     if isinstance(touch, str):
         if touch not in TOUCH_MODELS:
-            raise ValueError(f"touch: must be one of {sorted(TOUCH_MODELS)} or a touch model, got {touch!r}")
-        return TOUCH_MODELS[touch]()
+            raise ValueError(f"touch: must be one of {TOUCH_MODELS.choices()} or a touch model, got {touch!r}")
+        return TOUCH_MODELS.make(touch)
     if isinstance(touch, TouchModelBase):
         return touch
     if not callable(getattr(touch, "observations", None)):

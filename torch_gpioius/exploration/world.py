@@ -58,6 +58,16 @@ class Hardware:
     controller: Toucher
     tactile: Any = None
 
+    def robot_time(self) -> float:
+        """The robot's clock [s] (its ``time``: every backend of the project keeps one), NaN for a robot that keeps
+        none: what a step's record says of the motion's time."""
+        return float(getattr(self.robot, "time", math.nan))
+
+    def approach_limit(self) -> float | None:
+        """The longest approach the controller accepts [m] (its ``max_approach``), or None: no limit of its own."""
+        limit = getattr(self.controller, "max_approach", None)
+        return None if limit is None else float(limit)
+
 
 @dataclass(frozen=True)
 class ExplorationDefaults(EstimatorView):
@@ -332,4 +342,5 @@ class RobotWorld(World):
         return geometry_hash(self.direction, self.range)
 
 
-register_world("robot", RobotWorld, description="a real UR5 with a fingertip force sensor and a depth camera")
+register_world("robot", RobotWorld, simulated=False,
+               description="a real UR5 with a fingertip force sensor and a depth camera")

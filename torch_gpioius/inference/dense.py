@@ -21,6 +21,7 @@ import torch
 from torch import Tensor
 
 from ..kernels import ExactKernel
+from .engine import ExactEngine
 from ..tolerances import tol
 
 __all__ = ["DenseExactInference", "JitterWarning", "NotPositiveDefiniteError", "robust_cholesky", "bordered",
@@ -92,7 +93,7 @@ def bordered(k: Tensor, k_new_old: Tensor, k_new_new: Tensor) -> Tensor:
     return torch.cat([torch.cat([k, k_new_old.T], dim=1), torch.cat([k_new_old, k_new_new], dim=1)], dim=0)
 
 
-class DenseExactInference:
+class DenseExactInference(ExactEngine):
     """Exact posterior, marginal likelihood and its K_t derivatives from one dense Cholesky factor.
 
     Args:

@@ -34,12 +34,14 @@ would make the outer block ``K_oo o C``, which has no fixed eigenbasis: every ev
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
 from torch import Tensor
 
 from .dense import engine_kernel, robust_cholesky
+from .engine import ExactEngine
 from .structured import StructuredExactInference
 
 __all__ = ["region_weights", "loadings", "LocalDenseInference", "LocalStructuredInference"]
@@ -68,7 +70,7 @@ def query_loadings(xq: Tensor, task: int, p: Tensor, centres: Tensor, tau: float
     return torch.ones(xq.shape[0], dtype=xq.dtype, device=xq.device), 0.0
 
 
-class LocalDenseInference:
+class LocalDenseInference(ExactEngine):
     """The dense reference engine of the local model: one Cholesky of the full Gram matrix (see the module docs).
 
     Args:
@@ -90,6 +92,10 @@ class LocalDenseInference:
     @property
     def n(self) -> int:
         return self.x.shape[0]
+
+    def scout_engine(self):
+        """A copy of the data with the same regions."""
+        return functools.partial(type(self), centres=self.centres, tau=self.tau)
 
     def append(self, x: Tensor, y: Tensor, task: Tensor) -> None:
         from .dense import bordered
@@ -213,7 +219,19 @@ class LocalStructuredInference(StructuredExactInference):
             self.wi = self.wi[keep_i]
         return done
 
-    def predict_with_gradients(self, *args, **kwargs):   # the closed form is the 2-task one: not for this model
+    #: the structured engine's closed form is the 2-task one: the local model differentiates predict() by autograd;
+    #: its value alone is its factorisation's (no trial factorisation of the 2-task engine)
+    closed_form_gradients = False
+    value_alone = False
+
+    def mll_value(self, p: Tensor) -> float:
+        return float(self.mll(p))
+
+    def scout_engine(self):
+        """A copy of the data with the same regions (the store's window as the structured engine's)."""
+        return functools.partial(type(self), centres=self.centres, tau=self.tau)
+
+    def predict_with_gradients(self, *args, **kwargs):
         raise NotImplementedError("the local model differentiates predict() by autograd (LocalGPIOIS returns None "
                                   "from _predict_with_gradients)")
 

@@ -42,6 +42,7 @@ the log marginal likelihood in ``p = (a, b, c)`` cost O(N_i^2 J + N_i^3) per New
 
 from __future__ import annotations
 
+import functools
 import math
 
 import torch
@@ -49,6 +50,7 @@ from torch import Tensor
 
 from ..kernels import ExactKernel
 from .dense import bordered, engine_kernel, robust_cholesky
+from .engine import ExactEngine
 from .lowrank import truncated_basis
 from ..tolerances import tol
 
@@ -318,10 +320,11 @@ class _ChebyshevStore:
         return (out[0], out[1], out[2]) if derivatives else (out[0], None, None)
 
 
-class StructuredExactInference:
+class StructuredExactInference(ExactEngine):
     """Exact GPIOIS engine: rotated outer block + inner Schur complement (see the module docstring).
 
-    Same interface as ``DenseExactInference`` (``append``, ``factor``, ``predict``, ``mll``, ``mll_derivatives``).
+    The :class:`~torch_gpioius.inference.engine.ExactEngine` contract, with the likelihood's value alone cheaper than
+    its derivatives and the posterior's x-gradients in closed form.
 
     Args:
         x: `(n, d)` training points [m] (any order of tasks).
@@ -394,6 +397,15 @@ class StructuredExactInference:
     def rank(self) -> int:
         """Number of outer modes kept (N_o when exact)."""
         return int(self.lam.shape[0])
+
+    value_alone = True
+    closed_form_gradients = True
+
+    def scout_engine(self):
+        """A thinned copy of the data is factorised without a held factorisation or a Chebyshev store:
+        :class:`DirectStructuredInference`, with this engine's ``outer_tol`` (its fixed starts spread K_t over more
+        than one Chebyshev window: T(c) by direct products)."""
+        return functools.partial(DirectStructuredInference, outer_tol=self.outer_tol)
 
     def truncation(self, c: float) -> float:
         """``c tr(E) / s``: bound on the truncated basis' perturbation of the Gram matrix ``G >= s I``, relative

@@ -13,27 +13,40 @@ import copy
 from dataclasses import dataclass
 
 from .._validation import as_float
+from ..registry import Registry
 from .base import ExactKernel
 from .inverse_multiquadric import InverseMultiquadricKernel, imq
 from .matern import Matern52
 
 __all__ = ["ExactKernel", "InverseMultiquadricKernel", "Matern52", "imq", "register_kernel", "from_description",
-           "as_kernel", "KERNELS", "KERNEL_ALIASES", "kernel_named", "kernel_of_record", "KernelChoice"]
+           "as_kernel", "KERNELS", "kernel_kind", "kernel_named", "kernel_of_record", "KernelChoice"]
 
-#: Registered kernels by the name their ``describe()`` gives.
-KERNELS: dict[str, type] = {}
+#: Registered kernels by the name their ``describe()`` gives (its ``kind``), with the short names users type
+#: (``"imq"``, ``"matern52"``); names match in any case.
+KERNELS: Registry[type] = Registry("kernel", case_sensitive=False)
 
 
-def register_kernel(cls: type) -> type:
-    """Class decorator: make ``cls`` (an :class:`ExactKernel` with a ``kind`` name) rebuildable from its description."""
+def register_kernel(cls: type | None = None, *, aliases=(), description: str = ""):
+    """Make ``cls`` (an :class:`ExactKernel` with a ``kind`` name) rebuildable from its description, and usable by
+    its kind or an alias from the command line (``--kernel``), scene files (``kernel = ...``) and studies. A class
+    decorator, bare or with arguments (``@register_kernel(aliases=("m32",))``); returns ``cls``.
+
+    Raises:
+        TypeError: ``cls`` is not an :class:`ExactKernel` subclass.
+        ValueError: its kind or an alias is taken by another kernel.
+    """
+    if cls is None:
+        return lambda c: register_kernel(c, aliases=aliases, description=description)
     if not (isinstance(cls, type) and issubclass(cls, ExactKernel)):
         raise TypeError(f"register_kernel: {cls!r} is not an ExactKernel subclass")
-    KERNELS[cls.kind] = cls
+    doc = (cls.__doc__ or "").strip().splitlines()
+    KERNELS.register(cls.kind, cls, aliases=aliases, description=description or (doc[0] if doc else ""),
+                     replace=True)
     return cls
 
 
-register_kernel(InverseMultiquadricKernel)
-register_kernel(Matern52)
+register_kernel(InverseMultiquadricKernel, aliases=("imq",), description="the paper's inverse multiquadric (eq. 5)")
+register_kernel(Matern52, aliases=("matern52",), description="Matérn-5/2 (the default settings')")
 
 
 def from_description(description: dict) -> ExactKernel:
@@ -47,9 +60,7 @@ def from_description(description: dict) -> ExactKernel:
     params = {k: v for k, v in description.items() if k != "kernel"}
     if description["kernel"] == InverseMultiquadricKernel.kind and "theta" in params:
         params["lengthscale"] = params.pop("theta")          # descriptions written before lengthscale was its name
-    cls = KERNELS.get(description["kernel"])
-    if cls is None:
-        raise ValueError(f"kernel: unknown {description['kernel']!r}; registered: {sorted(KERNELS)}")
+    cls = KERNELS[kernel_kind(description["kernel"])]
     try:
         return cls(**params)
     except TypeError as exc:
@@ -70,24 +81,13 @@ def as_kernel(kernel) -> ExactKernel:
     return kernel
 
 
-#: The short names users type for the built-in kernels (the command line's, scene files', studies'); a kernel
-#: registered later is named by its ``kind``.
-KERNEL_ALIASES = {"imq": InverseMultiquadricKernel.kind, "matern52": Matern52.kind}
-
-
 def kernel_kind(name: str) -> str:
     """The registered kind a name users type stands for ("imq", "matern52", or a kind itself, any case).
 
     Raises:
         ValueError: a name no registered kernel has (lists the names).
     """
-    if not isinstance(name, str):
-        raise ValueError(f"kernel: expected a name, got {name!r}")
-    kinds = {k.lower(): k for k in KERNELS}
-    kind = KERNEL_ALIASES.get(name.lower()) or kinds.get(name.lower())
-    if kind is None:
-        raise ValueError(f"kernel: unknown {name!r}; choose among {sorted({*KERNEL_ALIASES, *KERNELS})}")
-    return kind
+    return KERNELS.resolve(name)
 
 
 def _checked_length(lengthscale) -> float:
@@ -153,7 +153,7 @@ class KernelChoice:
         else:
             chosen = KERNELS[kind]()
         if self.lengthscale is not None:
-            if not getattr(chosen, "learnable_length", False):
+            if not chosen.learnable_length:
                 raise ValueError(f"lengthscale: the {kind} kernel has no length to set")
             chosen.length = self.lengthscale
         return chosen

@@ -7,13 +7,14 @@ import dataclasses
 import math
 
 import gpytorch
+import numpy as np
 import torch
 from gpytorch.constraints import GreaterThan
 from gpytorch.likelihoods import GaussianLikelihood
 from gpytorch.means import ConstantMean
 from torch import Tensor
 
-from .._validation import as_device, as_float, as_int, as_points, task_id
+from .._validation import as_device, as_float, as_int, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.hyperparameters import (LENGTH_BOUNDS, NOISE_BOUNDS, HyperparameterResult,
                                          maximize_hyperparameters)
@@ -243,7 +244,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
                 raise ValueError(f"{name}: contains NaN or inf")
         if self.theta is not None:
             as_float(self.theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
-        elif getattr(self.covar_module, "learnable_length", False):      # e.g. the Matern length scale
+        elif self.covar_module.learnable_length:      # e.g. the Matern length scale
             as_float(self.covar_module.length, "kernel length", lo=tol.theta_range[0], hi=tol.theta_range[1],
                      positive=True, unit="m")
         as_float(self.noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
@@ -271,6 +272,45 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         self._engine = None
         return super().set_train_data(inputs, targets, strict)
 
+    def add_observations(self, x, y, task=None) -> "ImplicitSurfaceGP":
+        """Append observations; the posterior updates exactly (the engine extends its factorisation by the new rows),
+        the hyperparameters (K_t) are re-learned by ``fit()``.
+
+        Args:
+            x: `(k, d)` points [m].
+            y: `(k,)` labels: 0 on a surface, 1 in free space, below 0 inside.
+            task: `(k,)` task ids (0 inner, 1 outer), or one id or name ("inner" / "outer") for all; a one-task model
+                (GPIS) takes None or zeros, the same signature, so that the exploration adds a batch to any model
+                alike.
+
+        Raises:
+            ValueError: on bad input (an outer observation for a one-task model too); the model is left unchanged.
+        """
+        x0 = self.train_inputs[0]
+        x = as_points(x, "x", dim=self.dim, dtype=x0.dtype, device=x0.device)
+        y = as_labels(y, x.shape[0], "y", dtype=x0.dtype, device=x0.device)
+        t = self._new_tasks(task, x.shape[0])
+        inputs = (torch.cat([x0, x]),)
+        if self.num_tasks > 1:
+            inputs += (torch.cat([self.train_inputs[1], t.unsqueeze(-1)]),)
+        engine = self._engine
+        self.set_train_data(inputs, torch.cat([self.train_targets, y]), strict=False)
+        self._engine = engine
+        self._append_to_engine(x, y, t)
+        return self
+
+    def _new_tasks(self, task, k: int) -> Tensor:
+        """The task ids `(k,)` of ``k`` new observations (see :meth:`add_observations`)."""
+        device = self.train_inputs[0].device
+        if self.num_tasks > 1:
+            return as_tasks(task, k, "task", device=device)
+        if task is not None:
+            t = np.asarray(task.cpu() if isinstance(task, torch.Tensor) else task).reshape(-1)
+            if t.shape != (k,) or (t != 0).any():
+                raise ValueError(f"task: a GPIS models the inner task alone; expected {k} zeros, got "
+                                 f"{t.tolist()[:8]}")
+        return torch.zeros(k, dtype=torch.long, device=device)
+
     def __call__(self, *args, **kwargs):
         with exact_arithmetic():
             return super().__call__(*args, **kwargs)
@@ -293,7 +333,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         if task not in range(self.num_tasks):
             raise ValueError(f"task: must be in 0..{self.num_tasks - 1}, got {task!r}")
         engine = self._inference()
-        if not hasattr(engine, "predict_with_gradients"):
+        if not engine.closed_form_gradients:
             return None
         return engine.predict_with_gradients(self._check_query(x).detach(), task, self._task_matrix())
 
@@ -396,7 +436,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             TypeError: the kernel has no learnable length (``ExactKernel.learnable_length``).
             ValueError: bad sizes or bounds (the model is unchanged).
         """
-        if not getattr(self.covar_module, "learnable_length", False):
+        if not self.covar_module.learnable_length:
             raise TypeError(f"learn_hyperparameters: the {type(self.covar_module).__name__} kernel has no learnable "
                             "length (ExactKernel.length and value_at)")
         size = as_int(size, "size", 2, allow_none=True)

@@ -120,7 +120,7 @@ class EstimatorSettings:
         if self.voxel_rule is not None and not isinstance(self.voxel_rule, VoxelRule):
             raise ValueError(f"voxel_rule: expected a VoxelRule or None, got {type(self.voxel_rule).__name__}")
         as_learn(self.learn)
-        if self.learn != "task" and not getattr(self.kernel, "learnable_length", False):
+        if self.learn != "task" and not self.kernel.learnable_length:
             raise ValueError(f"learn={self.learn!r}: the {type(self.kernel).__name__} kernel has no learnable length")
         if self.restart_every is not None:
             object.__setattr__(self, "restart_every", as_int(self.restart_every, "restart_every", 1, 1_000_000))

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 import warnings
-from typing import Callable
 
 import numpy as np
 import torch
@@ -20,10 +18,9 @@ from .._validation import as_float, as_int, as_labels, as_points, as_tasks, task
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
 from ..inference.hyperparameters import HyperparameterResult
-from ..inference.optim import (FitResult, chain_to_cholesky, chol_params_to_task_covariance, cholesky_bounds,
-                               free_coordinates, held_newton_step, maximize_mll, predicted_gain,
-                               task_covariance_to_chol_params)
-from ..inference.structured import DirectStructuredInference, StructuredExactInference
+from ..inference.optim import FitResult
+from ..inference.structured import StructuredExactInference
+from ..inference.task_fit import TaskCovarianceFitter
 from ..tolerances import tol
 
 __all__ = ["GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
@@ -32,43 +29,6 @@ def _check_outer_mean(value) -> float:
     """``value`` as the outer task's prior mean: a finite number within ``1 +- tol.outer_mean_span``, else a
     ValueError naming ``outer_mean``."""
     return as_float(value, "outer_mean", lo=1.0 - tol.outer_mean_span, hi=1.0 + tol.outer_mean_span)
-
-
-def _on_ridge(kt: Tensor) -> bool:
-    """Whether K_t's correlation is 1 to within ``1 - rho^2 <= 1e-6`` (the shapes' relation at its bound)."""
-    a, b, c = float(kt[0, 0]), float(kt[0, 1]), float(kt[1, 1])
-    return a > 0 and c > 0 and 1.0 - b * b / (a * c) <= 1e-6
-
-
-def _ridge(kt: Tensor, grad: np.ndarray, free: np.ndarray) -> tuple[np.ndarray, float]:
-    """On the ridge of a correlation of 1 (:func:`_on_ridge`) with the gradient pushing ``w = log L[1,1]`` further
-    down, hold ``w`` as if at its bound and bound its gain by ``|g_w| / 2``: the MLL depends on ``w`` through
-    ``z = e^(2w)`` only, so all that ``w -> -inf`` can still bring is ``(dMLL/dz) z = g_w / 2`` to first order in the
-    tiny ``z``, where the quadratic model's ``g_w^2 / (2 |H_ww|)`` grows without bound as ``H_ww -> 0`` (a correlation
-    of 1 then asked for a re-learning at every step, each stalling on the flat ridge).
-
-    With the gradient pointing off the ridge (``g_w > 0``) the gain is unbounded for the rule: the likelihood is
-    convex in ``w`` there and a Hessian from any K_t says nothing of where it turns (24 nats off on
-    tests/inference/test_batched.py's data), so the rule never holds K_t there: it re-learns, which steps off the
-    ridge (``optim.newton_maximize``), or tracks where a held-Hessian step raises the MLL.
-
-    Returns:
-        the free coordinates with ``w`` held where that applies, and the gain bound for ``w`` [nats].
-    """
-    if not (free[2] and grad[2] != 0 and _on_ridge(kt)):
-        return free, 0.0
-    if grad[2] > 0:
-        return free, math.inf
-    held = free.copy()
-    held[2] = False
-    return held, 0.5 * abs(float(grad[2]))
-
-
-def _held_gain(kt: Tensor, grad: np.ndarray, free: np.ndarray, hessian: np.ndarray) -> tuple[float, np.ndarray]:
-    """The re-learning gain [nats] predicted at ``kt`` with a held Hessian (the Newton decrement, ``w`` treated by
-    :func:`_ridge`), and the coordinates it leaves free."""
-    free, ridge_gain = _ridge(kt, grad, free)
-    return predicted_gain(grad, hessian, free) + ridge_gain, free
 
 
 #: Task id of the inner (tactile) shape.
@@ -335,8 +295,8 @@ class GPIOIS(ImplicitSurfaceGP):
 
     def _outer_shift(self) -> float:
         """How far the engines' labels of the outer task lie above the labels (``1 - outer_mean``): the engines
-        subtract one mean, 1, from every label. 0 while the constructor has not made the mean yet."""
-        return 1.0 - self.outer_mean if hasattr(self, "outer_mean_module") else 0.0
+        subtract one mean, 1, from every label."""
+        return 1.0 - self.outer_mean
 
     def _engine_targets(self, y: Tensor, task: Tensor) -> Tensor:
         shift = self._outer_shift()
@@ -431,7 +391,7 @@ class GPIOIS(ImplicitSurfaceGP):
         return StructuredExactInference if has_outer and self.noise >= 1e-8 else DenseExactInference
 
     def _key(self, n: int) -> tuple:
-        return super()._key(n) + (getattr(self, "outer_tol", None), self._outer_shift())
+        return super()._key(n) + (self.outer_tol, self._outer_shift())
 
     def step_summary(self) -> dict:
         """:meth:`ImplicitSurfaceGP.step_summary` with the similarity, the correlation, K_t, the truncation's bound
@@ -522,38 +482,14 @@ class GPIOIS(ImplicitSurfaceGP):
         if max_hold < 1:
             raise ValueError(f"max_hold: must be >= 1, got {max_hold!r}")
         scout = as_int(scout, "scout", 2, allow_none=True)
-        engine = self._inference()
         if multi_start is None:
             multi_start = self.fit_result is None
-        if (min_gain is not None and not multi_start
-                and self._hold_task_covariance(engine, min_gain, max_hold, track)):
+        fitter = self._task_fitter()
+        held = fitter.fit(multi_start, min_gain, max_hold, track, scout)
+        self._held_fits = fitter.held_fits
+        best = self.fit_result = fitter.result
+        if held:
             return self
-        evaluate, level = self._likelihood(engine)
-        # the thinned copy serves a later fit with more inner points than it keeps (a first fit has no warm start)
-        scouting = (scout is not None and self.fit_result is not None
-                    and int((self._train_task() == INNER).sum()) > scout)
-        best = None
-        if scouting and multi_start and min_gain is not None and self._hold_task_covariance(engine, min_gain,
-                                                                                            max_hold, track):
-            # a restart's warm start by the min_gain rule too: held or tracked where the exact gradient allows (the
-            # Hessian is refreshed by the next full re-learning, at the latest after max_hold fits), instead of a
-            # Newton run on all the data at O(N_i^3) an evaluation on every restart
-            best = self.fit_result
-        elif scouting:
-            best = self._scouted_escape(engine, evaluate, level, scout)
-        if best is None:
-            best = maximize_mll(evaluate, self.task_covariance, level=level)
-        starts, scouted = 1, 0
-        if multi_start:
-            fixed = self._fixed_starts()
-            # a restart's fixed starts on a thinned copy: scout^3, not N_i^3, per evaluation; the full data re-learn
-            # once more per other basin found there
-            candidates = self._scout_starts(fixed, scout, best.task_covariance) if scouting else fixed
-            starts, scouted = 1 + len(fixed), (scout if scouting else 0)
-            for kt0 in candidates:
-                result = maximize_mll(evaluate, kt0, level=level)
-                if result.mll > best.mll + 1e-9 * max(1.0, abs(best.mll)):
-                    best = result
         if not self.identified:
             present = "outer" if bool((self._train_task() == OUTER).any()) else "inner"
             warnings.warn(f"GPIOIS.fit: only {present} (task {int(present == 'outer')}) observations: the similarity "
@@ -566,85 +502,27 @@ class GPIOIS(ImplicitSurfaceGP):
             warnings.warn(f"GPIOIS.fit: K_t's fit stopped {why}, short of the gradient tolerance (projected gradient "
                           f"{best.grad_norm:.3g}); the best K_t found is used (fit_result has the details)",
                           FitNotConvergedWarning, stacklevel=2)
-        self.task_covariance = best.task_covariance
-        self.fit_result = dataclasses.replace(best, starts=starts, scout=scouted)
         return self
 
-    def _fixed_starts(self) -> list[Tensor]:
-        """The restarts' K_t: fixed, data-independent values, and the current variances with no relation (a warm
-        start near a correlation of 1 can sit in a local optimum that these leave: tests/models/test_gpiois.py)."""
-        return [torch.eye(2, dtype=torch.float64),
-                0.1 * torch.tensor([[1.0, 0.9], [0.9, 1.0]], dtype=torch.float64),
-                torch.diag(self.task_covariance.diagonal().clamp_min(1e-6))]
+    def _task_fitter(self) -> TaskCovarianceFitter:
+        """K_t's fitter on this model's engine, from its current K_t and the memory of its last fits."""
+        return TaskCovarianceFitter(self._inference(), self.task_covariance, self.fit_result, self._held_fits,
+                                    like=self.train_inputs[0], scout_engine=self._scout_engine,
+                                    n_inner=int((self._train_task() == INNER).sum()), settle=self._settled)
 
-    def _likelihood(self, engine) -> tuple[Callable, Callable | None]:
-        """``evaluate(K_t) -> (mll, grad, hess)`` and ``level(K_t) -> mll`` (None where the engine has no cheaper
-        way to the value alone than with its derivatives) on ``engine``, for ``maximize_mll``."""
-        x0 = self.train_inputs[0]
+    def _settled(self, kt: Tensor) -> Tensor:
+        """Store ``kt`` as K_t and return it as stored (its Cholesky factor's product)."""
+        self.task_covariance = kt
+        return self.task_covariance
 
-        def evaluate(kt: Tensor):
-            return engine.mll_derivatives(kt.to(dtype=x0.dtype, device=x0.device))
-
-        if not hasattr(engine, "mll_value"):
-            return evaluate, None
-
-        def level(kt: Tensor) -> float:
-            return engine.mll_value(kt.to(dtype=x0.dtype, device=x0.device))
-
-        return evaluate, level
-
-    def _scout_copy(self, size: int) -> tuple[Callable, Callable | None]:
-        """:meth:`_likelihood` on a copy of the data with ``size`` inner points (evenly spaced in arrival order, so a
-        path's whole length is kept) and every outer point: the restarts' and the escapes' cheap likelihood."""
+    def _scout_engine(self, size: int):
+        """An engine on a copy of the data with ``size`` inner points (evenly spaced in arrival order, so a path's
+        whole length is kept) and every outer point: the restarts' and the escapes' cheap likelihood."""
         task = self._train_task()
         keep = self._thinned(size)
-        cls = self._engine_class()
-        if cls in (BatchedExactInference, StructuredExactInference):
-            # nothing is appended to the copy (no held factorisation needed), and its fixed starts spread K_t over
-            # more than one Chebyshev window: T(c) by direct products
-            cls = DirectStructuredInference
-        elif isinstance(cls, functools.partial) and cls.func is StructuredExactInference:      # outer_tol
-            cls = functools.partial(DirectStructuredInference, *cls.args, **cls.keywords)
-        copy = cls(self.train_inputs[0][keep], self._engine_targets(self.train_targets, task)[keep], task[keep],
+        cls = self._inference().scout_engine()
+        return cls(self.train_inputs[0][keep], self._engine_targets(self.train_targets, task)[keep], task[keep],
                    self.covar_module, self.noise, self.prior_mean)
-        return self._likelihood(copy)
-
-    def _scouted_escape(self, engine, evaluate, level, size: int) -> FitResult | None:
-        """When the current K_t has a correlation of 1 (to within ``1 - rho^2 <= 1e-6``: the optimiser stops on that
-        flat ridge before the bound of ``w``), the copy's Newton run from it; the full data's run starts where it
-        ended and is kept when it ends above the current K_t's MLL. None otherwise (the caller runs the full data
-        from the current K_t)."""
-        if not _on_ridge(self.task_covariance):
-            return None
-        # from the copy's result even where it stays at a correlation of 1: its u and v are close to the full data's
-        # there, and from the warm K_t (the gradient pointing off the ridge) the full run made the copy's detour again,
-        # up to w's trust-region edge and back down to its bound: 17 evaluations at 1,600 inner points (13.6 s)
-        copy, copy_level = self._scout_copy(size)
-        guess = maximize_mll(copy, self.task_covariance, level=copy_level).task_covariance
-        mll = float(engine.mll(self._task_matrix()))
-        result = maximize_mll(evaluate, guess, level=level)
-        return result if result.mll >= mll else None
-
-    def _scout_starts(self, fixed: list[Tensor], size: int, warm: Tensor) -> list[Tensor]:
-        """Run the warm and the fixed starts on :meth:`_scout_copy`; return the copy's optima that lie in other basins
-        than the warm start's (K_t more than 1 % apart, relative to its largest entry), one per basin. Which of two
-        near-equal optima is the higher can change with the thinning, so every other basin found is returned for
-        the full data to judge, not only a better one.
-
-        A fixed start's run ends as soon as it comes within 1 % of an optimum already found: it is heading into that
-        basin, which is all the copy is asked (the runs that end on the ridge of a correlation of 1 creep along it
-        for a dozen steps or more)."""
-        evaluate, level = self._scout_copy(size)
-        found = [maximize_mll(evaluate, warm, level=level).task_covariance]
-
-        def known(kt: Tensor) -> bool:
-            return any(float((kt - other).abs().max()) <= 0.01 * float(other.abs().max()) for other in found)
-
-        for kt0 in fixed:
-            kt = maximize_mll(evaluate, kt0, until=known, level=level).task_covariance
-            if not known(kt):
-                found.append(kt)
-        return found[1:]
 
     def _learned_task_covariance(self) -> Tensor | None:
         return self.task_covariance
@@ -675,65 +553,6 @@ class GPIOIS(ImplicitSurfaceGP):
                                     relearned=bool(relearned))
         self._held_fits = int(held_fits)
 
-    def _hold_task_covariance(self, engine, min_gain: float, max_hold: int, track: bool = False) -> bool:
-        """Keep K_t if the exact gradient predicts a re-learning gain below ``min_gain``, or (``track``) move it by
-        one held-Hessian Newton step that raises the MLL (see ``fit``). False: re-learn in full."""
-        last = self.fit_result
-        if last is None or last.hessian is None or (not last.relearned and self._held_fits >= max_hold):
-            return False
-        mll, grad, free = self._chol_gradient(engine, self._task_matrix())
-        gain, free = _held_gain(self.task_covariance, grad, free, last.hessian)
-        if gain > min_gain:
-            return track and self._track_task_covariance(engine, mll, grad, gain, free, last)
-        self._held_fits = self._held_fits + 1 if not last.relearned else 1
-        self.fit_result = FitResult(self.task_covariance, mll, float(np.abs(np.where(free, grad, 0.0)).max()), 0,
-                                    last.converged, hessian=last.hessian, relearned=False, predicted_gain=gain)
-        return True
-
-    def _chol_gradient(self, engine, kt: Tensor) -> tuple[float, np.ndarray, np.ndarray]:
-        """Exact MLL at ``kt`` with its gradient in the Cholesky parameters and the coordinates free to move
-        (O(N_i^2) at the batched engine's held K_t, one factorisation at a new one)."""
-        if hasattr(engine, "mll_gradient"):
-            mll, g = engine.mll_gradient(kt)
-        else:
-            mll, g, _ = engine.mll_derivatives(kt)
-        phi = task_covariance_to_chol_params(kt)
-        grad, _ = chain_to_cholesky(phi, g, torch.zeros(3, 3, dtype=kt.dtype, device=kt.device))
-        return mll, grad, free_coordinates(phi, grad, *cholesky_bounds())
-
-    def _track_task_covariance(self, engine, mll: float, grad: np.ndarray, gain: float, free: np.ndarray,
-                               last: FitResult) -> bool:
-        """One Newton step with the last re-learning's Hessian from the current K_t, kept if the exact MLL rises and
-        the predicted gain that remains is below ``gain``, the one before the step (the held Hessian still contracts
-        towards the optimum; near a bound of K_t it can stop doing so while the MLL still creeps up). Not taken
-        where a coordinate at its bound is free to leave it: K_t at a correlation of 1 (``w`` at its lower bound)
-        whose gradient now points inside, where the held Hessian, taken at the bound, says nothing of the
-        interior (the optimum there can be nats away: tests/inference/test_batched.py)."""
-        x0 = self.train_inputs[0]
-        phi = task_covariance_to_chol_params(self.task_covariance)
-        lower, upper = cholesky_bounds()
-        if (((phi <= lower) | (phi >= upper)) & free).any():
-            return False
-        candidate = held_newton_step(phi, grad, last.hessian, free)
-        if candidate is None:
-            return False
-        kt = chol_params_to_task_covariance(candidate)
-        try:
-            mll_new, grad_new, free = self._chol_gradient(engine, kt.to(dtype=x0.dtype, device=x0.device))
-        except (torch.linalg.LinAlgError, ArithmeticError):
-            return False
-        if not (math.isfinite(mll_new) and np.isfinite(grad_new).all()) or mll_new < mll:
-            return False
-        remaining, free = _held_gain(kt, grad_new, free, last.hessian)
-        if not remaining < gain:
-            return False
-        self.task_covariance = kt
-        self._held_fits = self._held_fits + 1 if not last.relearned else 1
-        self.fit_result = FitResult(self.task_covariance, mll_new, float(np.abs(np.where(free, grad_new, 0.0)).max()),
-                                    1, last.converged, hessian=last.hessian, relearned=False,
-                                    predicted_gain=remaining, tracked=True)
-        return True
-
     def predict(self, x, task: int | str = INNER) -> tuple[Tensor, Tensor]:
         """Latent posterior mean and variance of F_task, eq. (12)-(13). Differentiable with respect to ``x``.
 
@@ -761,28 +580,6 @@ class GPIOIS(ImplicitSurfaceGP):
             `(m,)` posterior mean (``< 0`` inside, ``0`` on the estimated surface).
         """
         return self._predict_mean(x, task_id(task))
-
-    def add_observations(self, x, y, task) -> "GPIOIS":
-        """Append observations; the posterior updates exactly, ``K_t`` is re-learned by ``fit()``.
-
-        Args:
-            x: `(k, d)` points [m].
-            y: `(k,)` labels in {0, 1}.
-            task: `(k,)` task ids in {0, 1}, or one id or name ("inner" / "outer") for all.
-
-        Raises:
-            ValueError: on bad input; the model is left unchanged.
-        """
-        x0 = self.train_inputs[0]
-        x = as_points(x, "x", dim=self.dim, dtype=x0.dtype, device=x0.device)
-        y = as_labels(y, x.shape[0], "y", dtype=x0.dtype, device=x0.device)
-        t = as_tasks(task, x.shape[0], "task", device=x0.device)
-        engine = self._engine
-        super().set_train_data((torch.cat([x0, x]), torch.cat([self.train_inputs[1], t.unsqueeze(-1)])),
-                               torch.cat([self.train_targets, y]), strict=False)
-        self._engine = engine
-        self._append_to_engine(x, y, t)
-        return self
 
     def __repr__(self) -> str:
         kt = self.task_covariance

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import numpy as np
 import torch
 from gpytorch.distributions import MultivariateNormal
 from torch import Tensor
@@ -96,33 +95,6 @@ class GPIS(ImplicitSurfaceGP):
             `(m,)` mean, equal to ``predict(x)[0]``.
         """
         return self._predict_mean(x, _inner_only(task))
-
-    def add_observations(self, x, y, task=None) -> "GPIS":
-        """Append observations; the posterior updates (exactly) at the next query.
-
-        Args:
-            x: `(k, d)` points [m].
-            y: `(k,)` labels in {0, 1}.
-            task: `(k,)` task ids, all 0 (the inner task, the one a GPIS models), or None: the same signature as
-                the two-task models', so that the exploration adds a batch to any model alike.
-
-        Raises:
-            ValueError: on bad input, or an outer (task 1) observation; the model is left unchanged.
-        """
-        x0 = self.train_inputs[0]
-        x = as_points(x, "x", dim=self.dim, dtype=x0.dtype, device=x0.device)
-        y = as_labels(y, x.shape[0], "y", dtype=x0.dtype, device=x0.device)
-        if task is not None:
-            t = np.asarray(task.cpu() if isinstance(task, torch.Tensor) else task).reshape(-1)
-            if t.shape != (x.shape[0],) or (t != 0).any():
-                raise ValueError(f"task: a GPIS models the inner task alone; expected {x.shape[0]} zeros, got "
-                                 f"{t.tolist()[:8]}")
-        task = torch.zeros(x.shape[0], dtype=torch.long, device=x0.device)
-        engine = self._engine
-        super().set_train_data((torch.cat([x0, x]),), torch.cat([self.train_targets, y]), strict=False)
-        self._engine = engine
-        self._append_to_engine(x, y, task)
-        return self
 
 
 def _inner_only(task) -> int:

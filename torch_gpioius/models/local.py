@@ -326,19 +326,6 @@ class LocalGPIOIS(ImplicitSurfaceGP):
     def log_marginal_likelihood(self) -> Tensor:
         return self._inference().mll(self.params)
 
-    def add_observations(self, x, y, task) -> "LocalGPIOIS":
-        """Append observations (validated first; bad input leaves the model unchanged)."""
-        x0 = self.train_inputs[0]
-        x = as_points(x, "x", dim=self.dim, dtype=x0.dtype, device=x0.device)
-        y = as_labels(y, x.shape[0], "y", dtype=x0.dtype, device=x0.device)
-        t = as_tasks(task, x.shape[0], "task", device=x0.device)
-        engine = self._engine
-        super().set_train_data((torch.cat([x0, x]), torch.cat([self.train_inputs[1], t.unsqueeze(-1)])),
-                               torch.cat([self.train_targets, y]), strict=False)
-        self._engine = engine
-        self._append_to_engine(x, y, t)
-        return self
-
     def check_state(self) -> None:
         super().check_state()
         p = self.params

@@ -1,10 +1,8 @@
-"""Sensors behind one interface each: force sensors (the OptoForce USB DAQ over pyserial, a simulated fingertip
-sensor), tactile pads (DIGIT/GelSight depth maps, :mod:`.tactile`) and point-cloud sources (a simulated depth camera;
-recorded PLY/PCD/XYZ/NPZ files are read by :class:`torch_gpioius.io.FilePointCloud`).
-
-``import torch_gpioius.sensors`` works without pyserial; constructing :class:`OptoForceDAQ` on a real port
-then raises an ImportError naming the ``sensors`` extra.
-"""
+"""Sensors behind one interface each, registered by name (:data:`SENSORS`, :func:`register_sensor`): force sensors (the
+OptoForce USB DAQ over pyserial, a simulated fingertip sensor), tactile pads (DIGIT/GelSight depth maps,
+:mod:`.tactile`) and point-cloud sources (a simulated depth camera; recorded PLY/PCD/XYZ/NPZ files are read by
+:class:`torch_gpioius.io.FilePointCloud`). ``import torch_gpioius.sensors`` works without pyserial; constructing
+:class:`OptoForceDAQ` on a real port then raises an ImportError naming the ``sensors`` extra."""
 
 from .base import (
     ChecksumStorm,
@@ -19,6 +17,7 @@ from .base import (
 from .pointcloud import MultiViewSource, PinholeCamera, PointCloud, PointCloudSource, SimulatedDepthCamera, look_at
 from .optoforce import FrameParser, OptoForceDAQ, encode_config, encode_frame
 from .simulated import FAULTS, ForceFieldContact, SimulatedForceSensor, SphereSDF
+from .registry import SENSORS, SensorEntry, register_sensor
 from .tactile import (DIGIT_CALIBRATION, DepthMapTactileSensor, DigitTactileSensor, TactileCalibration, TactileReading,
                       TactileSensor, depth_from_image_message)
 
@@ -27,7 +26,7 @@ __all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "Senso
            "SimulatedForceSensor", "ForceFieldContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource",
            "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "look_at", "TactileCalibration",
            "TactileReading", "TactileSensor", "DepthMapTactileSensor", "DigitTactileSensor", "depth_from_image_message",
-           "DIGIT_CALIBRATION"]
+           "DIGIT_CALIBRATION", "SENSORS", "SensorEntry", "register_sensor"]
 
 
 def __getattr__(name):

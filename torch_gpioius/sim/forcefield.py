@@ -21,8 +21,8 @@ import torch
 
 from ..models.estimator import COVER_GAP_LIMIT, INSIDE_DEPTH, EstimatorSettings  # noqa: F401
 from ..exploration.stopping import TravelBudget
-from ..exploration.registry import register_world
-from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash,
+from ..exploration.registry import SceneSupport, register_world
+from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, geometry_hash,
                                  perturbed_approaches)
 from ..metrics import hausdorff_distance
 from ..planning import RangePenalty
@@ -30,6 +30,7 @@ from ..sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
 from ..sensors.simulated import ForceFieldContact
 from ..surfaces import surface_samples
 from .._validation import as_bounds, as_float
+from .ranged import RangedScene
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
 __all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d",
@@ -257,7 +258,7 @@ def _mesh(m, name: str) -> trimesh.Trimesh:
     return m
 
 
-class Scene3D(World):
+class Scene3D(RangedScene):
     """A covered object in 3-D, seen by a depth camera and touched by the UR5's fingertip (the force-field world,
     registered as ``forcefield``).
 
@@ -631,26 +632,9 @@ class Scene3D(World):
                                  f"at most; at least {self.MIN_APPROACH_DEPTH * 1e3:.0f} mm is needed to feel it)")
         return self.start + t[0] * self.direction
 
-    def bounds(self, margin: float = 0.05) -> np.ndarray:
-        """`(2, 3)` grid box [min; max] for surfaces and metrics: the exploration range grown by ``margin`` [m]."""
-        return self.range + np.array([[-margin], [margin]])
-
-    def in_range(self, points: np.ndarray) -> np.ndarray:
-        """`(n,)` bool: points `(n, 3)` inside the exploration range."""
-        p = np.asarray(points, dtype=np.float64)
-        return ((p >= self.range[0]) & (p <= self.range[1])).all(axis=1)
-
-    def inner_samples_in_range(self, spacing: float = 0.003) -> np.ndarray:
-        """`(n, 3)` samples of the true inner surface inside the exploration range, about one per ``spacing``^2
-        (the reference of the Hausdorff metric; computed once per spacing)."""
-        if spacing not in self._inner_samples:
-            pts = surface_samples(self.inner, spacing)
-            self._inner_samples[spacing] = pts[self.in_range(pts)]
-        return self._inner_samples[spacing]
-
-    def range_penalty(self, beta: float = 100.0) -> RangePenalty:
-        """The paper's C(x) (eq. 25, beta = 100) for this scene's exploration range."""
-        return RangePenalty(self.range[0], self.range[1], beta=beta)
+    def true_surface_samples(self, spacing: float) -> np.ndarray:
+        """`(n, 3)` samples of the whole inner mesh, about one per ``spacing``^2 [m]."""
+        return surface_samples(self.inner, spacing)
 
     def inner_outer_hausdorff(self, spacing: float = 0.003) -> float:
         """Hausdorff distance between the inner and outer surfaces [m] (the whole meshes).
@@ -901,6 +885,23 @@ def paper_objects_3d(resolution: float = 0.006) -> dict[str, Scene3D]:
     }
 
 
+def _scene_from_file(mesh, kind: str, *, name: str, where: dict, cover: dict, settings: dict, preset: str | None,
+                     smoke: bool) -> Scene3D:
+    """A scene file's world (:mod:`torch_gpioius.sim.scenefile`): :meth:`Scene3D.from_mesh` with the file's values;
+    ``preset`` replaces the file's ``settings``; ``smoke`` changes nothing here (the cover is static)."""
+    if preset is not None:
+        settings = dict(settings, settings=preset)
+    return Scene3D.from_mesh(mesh, kind, name=name, **where, **cover, **settings)
+
+
+#: What a scene file's ``[cover]`` and ``[forcefield]`` sections may hold in this world.
+SCENE_SUPPORT = SceneSupport(
+    cover_keys=frozenset({"gap", "bridge", "resolution"}), cover_kinds=("tight", "loose"),
+    settings_keys=frozenset({"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "lengthscale", "theta",
+                             "noise", "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "cover_offset",
+                             "learn"}),
+    build=_scene_from_file)
+
 register_world("forcefield", Scene3D, objects=lambda names, smoke: paper_objects_3d(0.01 if smoke else 0.006),
-               object_names=("E", "F", "G", "H"),
+               object_names=("E", "F", "G", "H"), dimension=3, scene=SCENE_SUPPORT, presets=True,
                description="Sec. VI in 3-D: a kinematic UR5, a force-field cover that does not move (objects E-H)")

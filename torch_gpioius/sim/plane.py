@@ -527,4 +527,5 @@ def paper_objects_2d() -> dict[str, Scene2D]:
 
 
 register_world("planar", Scene2D, objects=lambda names, smoke: paper_objects_2d(), object_names=("A", "B", "C", "D"),
+               dimension=2,
                description="the paper's 2-D study (Sec. V): polygons and a point fingertip (objects A-D)")

@@ -1,5 +1,6 @@
 """Scene files: a user's object, its cover, the approach and the exploration range in one TOML file, buildable in
-either 3-D world (``forcefield`` or ``mujoco``), for ``gpioius simulate3d --scene`` and ``gpioius study --scenes``.
+every world registered with a :class:`~torch_gpioius.exploration.registry.SceneSupport` (``forcefield``, ``mujoco``,
+and a world registered from outside the package), for ``gpioius simulate3d --scene`` and ``gpioius study --scenes``.
 
 A scene file, every length in metres in the UR5's base frame (z up)::
 
@@ -44,8 +45,9 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     slack = 0.03                      # a loose cloth's distance from the body before it settles
     vision_inside = 0                 # as in [forcefield]: e.g. none behind a cloth that hangs 3 cm off
 
-``[cover]`` holds what both worlds read (``kind``, ``gap``); an option only one world knows goes in that world's
-section, so one file builds both. Every key is checked: a misspelt one, or a ``[cover]`` option the chosen world
+``[cover]`` holds what every world reads (``kind``, ``gap``); an option only one world knows goes in that world's
+section (its name), so one file builds several. The keys each world takes are its registry entry's (``scene``).
+Every key is checked: a misspelt one, or a ``[cover]`` option the chosen world
 does not use, is an error that names the file and the key, never ignored.
 """
 
@@ -63,24 +65,36 @@ else:  # pragma: no cover - Python 3.10
     import tomli as tomllib
 
 __all__ = ["SceneSpec", "read_scene", "load_scene", "resolve_mesh", "scene_fingerprint", "truth_of_scene_file",
-           "SCENE_WORLDS"]
+           "scene_worlds"]
 
-#: The worlds a scene file can be built in.
-SCENE_WORLDS = ("forcefield", "mujoco")
-_TOP = {"name", "world", "object", "cover", "approach", "range", "forcefield", "mujoco"}
+#: The keys of a scene file besides the sections of the worlds that build scene files (``[forcefield]``).
+_TOP = {"name", "world", "object", "cover", "approach", "range"}
 _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
-_COVER = {"forcefield": {"kind", "gap", "bridge", "resolution"},
-          "mujoco": {"kind", "gap", "slack", "young", "poisson", "thickness", "pin", "damping", "density", "radius"}}
-_SETTINGS = {"forcefield": {"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "lengthscale",
-                            "theta", "noise",
-                            "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "cover_offset",
-                            "learn"},
-             "mujoco": {"spacing", "base", "half_angle", "facing", "centre", "collision", "threshold", "max_parts",
-                        "sensor_noise", "timestep", "settle_time", "camera_scale", "touch_inside", "vision_inside",
-                        "vision_inside_gap", "cover_offset"}}
-#: What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in the
-#: force-field world, its ``slack`` in MuJoCo), so that one file serves both worlds.
-_WORLD = {w: _SETTINGS[w] | (_COVER[w] - {"kind"}) for w in _SETTINGS}
+
+
+def scene_worlds() -> list[str]:
+    """The registered worlds that build scene files (``forcefield``, ``mujoco`` where it is installed, and those
+    registered with a :class:`~torch_gpioius.exploration.registry.SceneSupport`)."""
+    from ..exploration.registry import world_names
+
+    return world_names(builds_scenes=True)
+
+
+def _support(world: str):
+    """The scene support of ``world``, or None: no such world, or one that builds no scene files (or whose optional
+    extra is not installed)."""
+    from ..exploration.registry import world_entry
+
+    try:
+        return world_entry(world).scene
+    except (ValueError, ImportError):
+        return None
+
+
+def _section_keys(support) -> set:
+    """What a world's own section may hold: its scene settings and its cover options (a loose cover's ``bridge`` in
+    the force-field world, its ``slack`` in MuJoCo), so that one file serves several worlds."""
+    return set(support.settings_keys) | set(support.cover_keys)
 
 
 @dataclass
@@ -174,15 +188,17 @@ def read_scene(path) -> SceneSpec:
     def bad(key: str, why: str) -> ValueError:
         return ValueError(f"{path}: {key}: {why}")
 
-    unknown = set(data) - _TOP
+    sections = {k: _support(k) for k in set(data) - _TOP}
+    unknown = sorted(k for k, v in sections.items() if v is None)
     if unknown:
-        raise bad(", ".join(sorted(unknown)), f"unknown key(s); a scene file has {sorted(_TOP)}")
+        raise bad(", ".join(unknown), f"unknown key(s); a scene file has {sorted(_TOP)} and a section per world that "
+                                      f"builds scene files {scene_worlds()}")
     name = data.get("name", path.stem)
     if not isinstance(name, str) or not name or not all(c.isalnum() or c in "-_." for c in name):
         raise bad("name", f"must be letters, digits, '-', '_' or '.', got {name!r}")
     world = data.get("world", "forcefield")
-    if world not in SCENE_WORLDS:
-        raise bad("world", f"must be one of {SCENE_WORLDS}, got {world!r}")
+    if not isinstance(world, str) or _support(world) is None:
+        raise bad("world", f"must be one of {scene_worlds()}, got {world!r}")
     obj, cover = data.get("object"), data.get("cover")
     if not isinstance(obj, dict) or "mesh" not in obj:
         raise bad("[object]", "missing, or without mesh = \"<file>\"")
@@ -190,12 +206,14 @@ def read_scene(path) -> SceneSpec:
         raise bad("object", f"unknown key(s) {sorted(set(obj) - _OBJECT)}; allowed {sorted(_OBJECT)}")
     if not isinstance(obj["mesh"], str):
         raise bad("object.mesh", f"must be a file name, got {obj['mesh']!r}")
-    if not isinstance(cover, dict) or cover.get("kind") not in ("tight", "loose", "foam"):
-        raise bad("[cover]", "missing, or its kind is not \"tight\", \"loose\" or \"foam\"")
-    every_cover = set().union(*_COVER.values())
+    supports = {w: _support(w) for w in dict.fromkeys([*scene_worlds(), world])}
+    kinds = sorted({k for sup in supports.values() for k in sup.cover_kinds})
+    if not isinstance(cover, dict) or cover.get("kind") not in kinds:
+        raise bad("[cover]", f"missing, or its kind is not one of {kinds}")
+    every_cover = set().union(*(sup.cover_keys for sup in supports.values())) | {"kind"}
     if set(cover) - every_cover:
-        both = sorted(set.intersection(*_COVER.values()))
-        own = "; ".join(f"{w}: {sorted(_COVER[w] - set(both))}" for w in SCENE_WORLDS)
+        both = sorted(set.intersection(*(set(sup.cover_keys) for sup in supports.values())) | {"kind"})
+        own = "; ".join(f"{w}: {sorted(set(sup.cover_keys) - set(both))}" for w, sup in supports.items())
         raise bad("cover", f"unknown key(s) {sorted(set(cover) - every_cover)}; [cover] takes {both} in every world, "
                            f"and a world's own options ({own})")
     if "pose" in obj:
@@ -221,11 +239,11 @@ def read_scene(path) -> SceneSpec:
         if not (bounds[0] < bounds[1]).all():
             raise bad("range", "min must be below max on every axis")
     settings = {}
-    for w in SCENE_WORLDS:
-        s = data.get(w, {})
-        if not isinstance(s, dict) or set(s) - _WORLD[w]:
-            raise bad(f"[{w}]", f"unknown key(s) {sorted(set(s) - _WORLD[w]) if isinstance(s, dict) else s!r}; "
-                                f"allowed {sorted(_WORLD[w])}")
+    for w, support in sections.items():
+        s, allowed = data[w], _section_keys(support)
+        if not isinstance(s, dict) or set(s) - allowed:
+            raise bad(f"[{w}]", f"unknown key(s) {sorted(set(s) - allowed) if isinstance(s, dict) else s!r}; "
+                                f"allowed {sorted(allowed)}")
         settings[w] = dict(s)
         for key, value in s.items():
             problem = _setting_problem(key, value)
@@ -319,12 +337,13 @@ def _check_reach(scene, spec: SceneSpec) -> None:
                          "metres)") from None
 
 
-def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = False, settings: str | None = None):
+def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = False,
+               settings: str | None = None):
     """Build the world a scene file describes.
 
     Args:
         path: the TOML file.
-        world: "forcefield" or "mujoco" (default: the file's ``world``).
+        world: a world that builds scene files (:func:`scene_worlds`; default: the file's ``world``).
         seed: the seeded perturbation of the approach and the noise (0: as written; ``World.perturbed``).
         smoke: a coarse MuJoCo cover (4 cm spacing) for quick checks; the force-field world ignores it.
         settings: "default" or "paper" in place of the file's ``settings`` (force-field world; see
@@ -332,19 +351,21 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
             views: :meth:`~torch_gpioius.sim.mujoco.MujocoScene.with_settings`); the file's other settings still apply.
 
     Returns:
-        A :class:`~torch_gpioius.sim.forcefield.Scene3D` or :class:`~torch_gpioius.sim.mujoco.MujocoScene`.
+        The world its :class:`~torch_gpioius.exploration.registry.SceneSupport` builds (a
+        :class:`~torch_gpioius.sim.forcefield.Scene3D`, a :class:`~torch_gpioius.sim.mujoco.MujocoScene`).
 
     Raises:
         ValueError: everything :func:`read_scene`, :func:`torch_gpioius.sim.meshes.load_mesh` and the world's
             constructor refuse, each prefixed with the file's name.
     """
-    from .forcefield import approach_from_above, place
+    from .forcefield import place
     from .meshes import load_mesh
 
-    spec = read_scene(path)
+    spec, preset = read_scene(path), settings
     world = spec.world if world is None else world
-    if world not in SCENE_WORLDS:
-        raise ValueError(f"world: a scene file builds {SCENE_WORLDS}, got {world!r}")
+    support = _support(world) if isinstance(world, str) else None
+    if support is None:
+        raise ValueError(f"world: a scene file builds {scene_worlds()}, got {world!r}")
     try:
         o = spec.object
         mesh = load_mesh(resolve_mesh(o["mesh"], spec.path.parent), scale=o.get("scale", 1.0), pose=o.get("pose"),
@@ -352,48 +373,28 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
         mesh = place(mesh, o.get("at"))
         cover = dict(spec.cover)
         kind = cover.pop("kind")
-        unused = set(cover) - _COVER[world]
+        if kind not in support.cover_kinds:
+            raise ValueError(f"cover: the {world} world builds {list(support.cover_kinds)} covers, not {kind!r}")
+        unused = set(cover) - support.cover_keys
         if unused:
+            others = [w for w in spec.settings if w != world] or [w for w in scene_worlds() if w != world]
             raise ValueError(f"cover: {sorted(unused)} do not apply in the {world} world (it takes "
-                             f"{sorted(_COVER[world] - {'kind'})}); options of one world go in its own section, "
-                             f"[{'mujoco' if world == 'forcefield' else 'forcefield'}]")
-        own = spec.settings[world]
-        cover.update({k: v for k, v in own.items() if k in _COVER[world]})
-        settings_given = settings
-        settings = {k: v for k, v in own.items() if k not in _COVER[world]}
-        if settings_given is not None and world == "forcefield":
-            settings["settings"] = settings_given
+                             f"{sorted(support.cover_keys)}); options of one world go in its own section"
+                             f"{', ' if others else ''}{', '.join(f'[{w}]' for w in others)}")
+        own = spec.settings.get(world, {})
+        cover.update({k: v for k, v in own.items() if k in support.cover_keys})
+        settings = _kernel_choice({k: v for k, v in own.items() if k not in support.cover_keys})
         where = {}
         if spec.approach is not None:
             where.update(start=spec.approach["start"], direction=spec.approach["direction"])
         if spec.range is not None:
             where["bounds"] = spec.range
-        if world == "forcefield":
-            from .forcefield import Scene3D
-
-            scene = Scene3D.from_mesh(mesh, kind, name=spec.name, **where, **cover, **_kernel_choice(settings))
-        else:
-            from .mujoco import MujocoScene
-
-            if "start" not in where or "bounds" not in where:
-                s, d, b = approach_from_above(mesh, mesh, clearance=0.12)     # above a cover of up to 4 cm
-                where.setdefault("start", s)
-                where.setdefault("direction", d)
-                where.setdefault("bounds", b + np.array([[-0.03], [0.03]]) * np.array([1, 1, 0]))
-            if smoke:
-                settings["spacing"] = max(settings.get("spacing", 0.025), 0.04)
-            from .forcefield import INSIDE_SETTINGS, settings_for, with_inside_depths
-            from .mujoco.scene import MUJOCO_DEFAULTS
-
-            if settings_given is not None:          # the settings' defaults and views for this body
-                settings.update(settings_for(settings_given, mesh, MUJOCO_DEFAULTS))
-            depths = {k: settings.pop(k) for k in INSIDE_SETTINGS if k in settings}
-            if depths:                              # the inside points' depths on the world's (or settings') policy
-                settings["defaults"] = with_inside_depths(settings.get("defaults", MUJOCO_DEFAULTS), **depths)
-            scene = MujocoScene.from_mesh(mesh, kind, name=spec.name, **where, **cover, **settings)
+        scene = support.build(mesh, kind, name=spec.name, where=where, cover=cover, settings=settings,
+                              preset=preset, smoke=smoke)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{spec.path}: {exc}") from None
-    _check_reach(scene, spec)
+    if support.ur5:
+        _check_reach(scene, spec)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise ValueError(f"seed: must be a non-negative integer, got {seed!r}")
     made = scene.perturbed(seed)
@@ -412,6 +413,7 @@ def truth_of_scene_file(meta: dict) -> dict | None:
     try:
         if not path.is_file() or scene_fingerprint(path) != info.get("hash"):
             return None
-        return load_scene(path, world=meta.get("world") if meta.get("world") in SCENE_WORLDS else None).truth()
+        world = meta.get("world")
+        return load_scene(path, world=world if isinstance(world, str) and _support(world) else None).truth()
     except (ValueError, ImportError, OSError):
         return None

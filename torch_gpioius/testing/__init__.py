@@ -1,5 +1,6 @@
 """What users need to test their own extensions as the project tests its own: :class:`KernelContract` (the checks
-every kernel the exact engines use must pass) and the finite-difference references it checks against.
+every kernel the exact engines use must pass), :class:`WorldContract` (what the exploration, the studies and the logs
+rely on of a world) and the finite-difference references they check against.
 
 A kernel of one's own is tested by subclassing the contract in a pytest file::
 
@@ -15,5 +16,6 @@ The project's kernels also pass GPyTorch's own ``gpytorch.test.base_kernel_test_
 
 from .differences import assert_close_to_reference, richardson_derivative
 from .kernels import KernelContract
+from .worlds import WorldContract
 
-__all__ = ["KernelContract", "richardson_derivative", "assert_close_to_reference"]
+__all__ = ["KernelContract", "WorldContract", "richardson_derivative", "assert_close_to_reference"]

@@ -17,12 +17,13 @@ import torch
 
 from ...models.estimator import EstimatorSettings
 from ...exploration.stopping import TravelBudget
-from ...exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash,
+from ...exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, geometry_hash,
                                   perturbed_approaches)
 from ..._validation import as_bounds
 from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
 from .bodies import MeshBody, PrimitiveBody, as_body
 from .primitives import as_primitives
+from ..ranged import RangedScene
 
 __all__ = ["MujocoScene", "MUJOCO_DEFAULTS", "SCENE_LIMITS", "MAX_PRIMITIVES", "MAX_COVER_VERTICES"]
 
@@ -58,7 +59,7 @@ def _require_mujoco():
         raise ImportError(f"the MuJoCo world needs the 'mujoco' package: {install_hint('mujoco')}") from exc
 
 
-class MujocoScene(World):
+class MujocoScene(RangedScene):
     """A covered object on MuJoCo's physics, explored by a simulated UR5 with a fingertip force sensor.
 
     Build it with :meth:`from_primitives` or :meth:`from_mesh`. On construction the model is compiled, the arm placed
@@ -134,7 +135,7 @@ class MujocoScene(World):
             float(tip_radius),
         )
         self._defaults = defaults or MUJOCO_DEFAULTS
-        self._samples: dict[float, np.ndarray] = {}
+        self._inner_samples: dict[float, np.ndarray] = {}
         # the cover must start outside the body (its elements' radius included)
         depth = self.body.collision_sdf(cover.vertices) - cover.radius
         if depth.min() < -1e-9:
@@ -456,27 +457,14 @@ class MujocoScene(World):
                                clock=lambda: physics.time, cover=cover_rays, pinch=2 * self.cover.radius + 1e-3)
 
     def penalty(self):
-        from ...planning import RangePenalty
-
-        return RangePenalty(self.range[0], self.range[1], beta=100.0)
+        return self.range_penalty()
 
     def crop_box(self) -> np.ndarray:
         return self.range
 
-    def bounds(self, margin: float = 0.05) -> np.ndarray:
-        """`(2, 3)` grid box [min; max] for surfaces and metrics: the exploration range grown by ``margin`` [m]."""
-        return self.range + np.array([[-margin], [margin]])
-
-    def in_range(self, points: np.ndarray) -> np.ndarray:
-        p = np.asarray(points, dtype=np.float64)
-        return ((p >= self.range[0]) & (p <= self.range[1])).all(axis=1)
-
-    def inner_samples_in_range(self, spacing: float = 0.003) -> np.ndarray:
-        """`(n, 3)` samples of the true inner surface (the body's) inside the exploration range."""
-        if spacing not in self._samples:
-            pts = self.body.surface_samples(spacing)
-            self._samples[spacing] = pts[self.in_range(pts)]
-        return self._samples[spacing]
+    def true_surface_samples(self, spacing: float) -> np.ndarray:
+        """`(n, 3)` samples of the body's whole surface, about one per ``spacing``^2 [m]."""
+        return self.body.surface_samples(spacing)
 
     @property
     def inner(self):
