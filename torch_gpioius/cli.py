@@ -854,8 +854,14 @@ def _unquoted_vector(argv: list[str], extra: list[str]) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .registry import load_plugins
     from .threads import torch_threads
 
+    try:
+        load_plugins()                       # before the choices are read from the registries
+    except ImportError as exc:
+        print(f"gpioius: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
     args = _parse(build_parser(), argv)
     try:
         with torch_threads(getattr(args, "threads", 1)), warnings.catch_warnings():

@@ -10,19 +10,28 @@ package is usable by name everywhere without a file of the package edited::
     register_kernel(MyKernel, aliases=("mine",))        # then: gpioius study --kernel mine, kernel = "mine"
 
 Built-in entries whose modules are heavy or optional (MuJoCo) are imported when their name is first asked for, as
-entry points are.
+entry points are. A plugin (a module of one's own that registers) reaches the command line and a study's workers by
+:func:`load_plugins`: an installed package names it as an entry point of the group ``torch_gpioius.plugins``, or the
+environment variable ``GPIOIUS_PLUGINS`` lists it (``GPIOIUS_PLUGINS=my_lab.gpioius_kernels gpioius registered``).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
+import os
 import warnings
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any, Generic, TypeVar
 
-__all__ = ["Registry", "Entry"]
+__all__ = ["Registry", "Entry", "load_plugins", "PLUGIN_GROUP", "PLUGIN_ENV"]
+
+#: The entry-point group of plugins (``[project.entry-points."torch_gpioius.plugins"] mine = "my_pkg.plugin"``).
+PLUGIN_GROUP = "torch_gpioius.plugins"
+#: The environment variable that lists plugin modules, comma-separated.
+PLUGIN_ENV = "GPIOIUS_PLUGINS"
+_LOADED: set[str] = set()
 
 T = TypeVar("T")
 
@@ -218,3 +227,31 @@ class Registry(Mapping, Generic[T]):
 def _label(obj) -> str:
     return getattr(obj, "__qualname__", None) or type(obj).__name__
 
+
+def load_plugins() -> list[str]:
+    """Import every plugin module once: the entry points of :data:`PLUGIN_GROUP` and the modules named in
+    :data:`PLUGIN_ENV`. A plugin registers what it brings when imported (``register_kernel``, ``register_world``,
+    ...). The command line calls this before it reads its choices, and each study run before it builds its world.
+
+    Returns:
+        the modules imported by this call (none on later calls).
+
+    Raises:
+        ImportError: a plugin that cannot be imported (names it and where it was listed).
+    """
+    from importlib.metadata import entry_points
+
+    wanted = [(ep.value.split(":")[0], f"entry point {ep.name!r} of {PLUGIN_GROUP}")
+              for ep in entry_points(group=PLUGIN_GROUP)]
+    wanted += [(m.strip(), PLUGIN_ENV) for m in os.environ.get(PLUGIN_ENV, "").split(",") if m.strip()]
+    done = []
+    for module, where in wanted:
+        if module in _LOADED:
+            continue
+        try:
+            importlib.import_module(module)
+        except Exception as exc:                # a plugin's own error, whatever it is, is named with the plugin
+            raise ImportError(f"plugin {module!r} ({where}) cannot be imported: {type(exc).__name__}: {exc}") from exc
+        _LOADED.add(module)
+        done.append(module)
+    return done

@@ -282,6 +282,9 @@ def read_run_file(path: str | Path) -> dict:
 
 def run_one(spec: RunSpec) -> dict:
     """Run one (object, mode, seed) and write its result file; returns the result (also when already on disk)."""
+    from ..registry import load_plugins
+
+    load_plugins()                  # a Ray worker's process: the plugins' worlds, kernels and policies by name
     from ..session import explore
     from ..threads import torch_threads
 
