@@ -72,7 +72,7 @@ def _study(args: argparse.Namespace) -> int:
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
                        touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
                        learn=args.learn, views=args.views, kernel=_kernel_choice(args), noise=args.noise,
-                       cover=args.cover)
+                       cover=args.cover, metrics_every=args.metrics_every)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -451,6 +451,13 @@ def _views(text: str):
                      if "," in text else text)
 
 
+def _metrics_every(text: str):
+    """An argparse type for ``--metrics-every``: a number of steps or "schedule"."""
+    from .studies.sweep_settings import checked_metrics_every
+
+    return _argument(checked_metrics_every, text.strip())
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -539,6 +546,11 @@ def _add_study(sub, common, fmt) -> None:
                     help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D), or "
                          "an object set in the forcefield world: primitives:0-49, pybullet-random:0-49, "
                          "pybullet:duck,teddy or folder:PATH (each object sized 8-25 cm, standing on the table)")
+    sw.add_argument("--metrics-every", default=None, type=_metrics_every,
+                    help="measure the estimate every K steps, or 'schedule': at 10, 25 and 50 %% of the travel, a "
+                         "stop and the end only (3-D worlds; the fractions the summary reports, at a fraction of "
+                         "the cost); default: every 5 steps in the 3-D worlds, every step in 2-D; one per --out "
+                         "folder")
     sw.add_argument("--cover", default=None, choices=["tight", "wide"],
                     help="the cover of an object set's objects: tight (8 mm) or wide (4 cm); default tight; one per "
                          "--out folder")

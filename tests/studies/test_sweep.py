@@ -497,3 +497,24 @@ def test_an_object_set_runs_as_objects_with_its_cover_and_a_bad_set_is_refused_b
         with pytest.raises(ValueError, match=match):
             run_sweep(seeds=1, out=tmp_path / "bad", smoke=True, backend="local", progress=False, **kw)
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_study_measures_on_the_schedule_when_asked(tmp_path):
+    """Issue 54: `study --metrics-every schedule` measures the estimate at 10, 25 and 50 % of the travel and at the
+    end (the fractions the summary reports), not every 5 steps; the setting is one per folder and checked first."""
+    ball = ball_scene(tmp_path)
+    run_sweep("forcefield", scenes=[ball], modes=["tactile"], seeds=1, out=tmp_path / "s", smoke=True,
+              backend="local", progress=False, metrics_every="schedule")
+    run = json.loads((tmp_path / "s" / "runs" / "ball_tactile_0.json").read_text())
+    travel, h = np.asarray(run["series"]["travel"]), np.asarray(run["series"]["hausdorff"], dtype=float)
+    budget = run["budget"]
+    due = {0, len(travel) - 1} | {int(np.argmax(travel >= f * budget)) for f in (0.10, 0.25, 0.50)
+                                  if (travel >= f * budget).any()}
+    measured = set(np.flatnonzero(np.isfinite(h)).tolist())
+    assert len(travel) - 1 in measured and measured <= due, (sorted(measured), sorted(due))
+    with pytest.raises(FileExistsError, match="metrics_every"):
+        run_sweep("forcefield", scenes=[ball], modes=["tactile"], seeds=1, out=tmp_path / "s", smoke=True,
+                  backend="local", progress=False)
+    for bad in (0, -2, "weekly", 1.5, True):
+        with pytest.raises(ValueError, match="metrics_every: must be a number of steps >= 1 or 'schedule'"):
+            run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", metrics_every=bad)

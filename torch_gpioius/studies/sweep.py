@@ -60,7 +60,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
               device: str | None = None, settings: str | None = None, learn: str | None = None,
-              views=None, kernel=None, noise: float | None = None, cover: str | None = None) -> dict:
+              views=None, kernel=None, noise: float | None = None, cover: str | None = None,
+              metrics_every=None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -113,6 +114,10 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             ``noise`` too: one setting per folder.
         cover: the cover of the object sets' objects, "tight" (8 mm) or "wide" (4 cm); default tight; one per
             folder.
+        metrics_every: the estimate measured every k steps, or "schedule": at 10, 25 and 50 % of the travel, a stop
+            and the end only (worlds with a travel budget; the fractions the summary reports, at a fraction of the
+            cost: docs/performance.md); None: every 5 steps under a travel budget, every step elsewhere. One per
+            folder.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -126,7 +131,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
-        settings=settings, learn=learn, views=views, kernel=kernel, noise=noise, cover=cover)
+        settings=settings, learn=learn, views=views, kernel=kernel, noise=noise, cover=cover,
+        metrics_every=metrics_every)
     return _run(sweep)
 
 
@@ -160,7 +166,7 @@ def _claim(sweep: SweepSettings) -> Path:
     # None, the setting they ran with
     identity = {"outer_tol": sweep.outer_tol, "settings": sweep.settings, "learn": sweep.learn,
                 "views": None if sweep.views is None else "+".join(sweep.views), "noise": sweep.noise,
-                "cover": sweep.cover,
+                "cover": sweep.cover, "metrics_every": sweep.metrics_every,
                 # a folder's kernel as the command line names it (the earlier folders' keys)
                 "kernel": sweep.kernel.name if sweep.kernel else None,
                 "theta": sweep.kernel.lengthscale if sweep.kernel else None}

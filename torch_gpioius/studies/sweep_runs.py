@@ -82,6 +82,8 @@ class RunSpec:
     #                                 scene is another run, whatever its name
     set_object: Any = None          # an object of a set (sim.objectsets.SetObject) instead of a built-in object
     cover: str | None = None        # a set object's cover: "tight" or "wide" (sim.objectsets.COVERS)
+    metrics_every: Any = None       # k steps or "schedule" (explore(metrics_every=)); None: every 5 steps under a
+    #                                 travel budget, every step elsewhere
 
     @property
     def key(self) -> str:
@@ -133,6 +135,8 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
     budget = _world_budget(world)
     if budget is not None:
         kw["metrics_every"] = BUDGET_METRICS_EVERY
+    if spec.metrics_every is not None:
+        kw["metrics_every"] = spec.metrics_every
         kw["max_travel"] = spec.max_travel if spec.max_travel is not None else (0.06 if spec.smoke else budget)
     if spec.max_steps is not None:
         kw["max_steps"] = spec.max_steps

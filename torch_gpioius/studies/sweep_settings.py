@@ -11,7 +11,7 @@ from pathlib import Path
 from .._validation import as_device, as_float
 from .sweep_runs import RunSpec, study_worlds, sweep_modes
 
-__all__ = ["SweepSettings", "MAX_SEEDS"]
+__all__ = ["SweepSettings", "MAX_SEEDS", "checked_metrics_every"]
 
 #: Most seeds a sweep accepts per object and mode (a study over more is a mistake, not a request).
 MAX_SEEDS = 10_000
@@ -71,11 +71,13 @@ class SweepSettings:
     scene_hashes: dict = field(default_factory=dict)    # a scene's name -> scenefile.scene_fingerprint
     set_objects: dict = field(default_factory=dict)     # an object set's object's name -> its SetObject
     cover: str | None = None                            # the set objects' cover
+    metrics_every: Any = None                           # k steps or "schedule"; None: the sweep's own
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
-                learn=None, views=None, kernel=None, noise=None, cover=None) -> "SweepSettings":
+                learn=None, views=None, kernel=None, noise=None, cover=None,
+                metrics_every=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry, world_names
 
@@ -136,6 +138,7 @@ class SweepSettings:
                 raise ValueError(f"views: the simulated camera views are those of "
                                  f"{', '.join(world_names(presets=True))}, not {world}'s")
         kernel = _kernel_choice(kernel)
+        metrics_every = checked_metrics_every(metrics_every)
         if noise is not None:
             from ..tolerances import tol
 
@@ -145,7 +148,7 @@ class SweepSettings:
         hashes = {name: scene_fingerprint(path) for name, path in scene_files.items()}
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
-                   kernel, noise, hashes, set_objects, (cover or "tight") if set_objects else None)
+                   kernel, noise, hashes, set_objects, (cover or "tight") if set_objects else None, metrics_every)
 
     def _specs(self, out: Path) -> list[RunSpec]:
         # (name, scene file, identity, set object) of every object: a set's object is identified by its source,
@@ -156,8 +159,21 @@ class SweepSettings:
                     for o, obj in self.set_objects.items()]
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         scene, self.voxel, self.touch, self.outer_tol, self.device, self.settings, self.learn,
-                        self.views, self.kernel, self.noise, identity, obj, self.cover if obj is not None else None)
+                        self.views, self.kernel, self.noise, identity, obj, self.cover if obj is not None else None,
+                        self.metrics_every)
                 for o, scene, identity, obj in objects for m in self.modes for s in range(self.seeds)]
+
+
+def checked_metrics_every(value):
+    """``metrics_every`` of a study: None (the sweep's own), a number of steps >= 1, or "schedule" (10, 25 and 50 %
+    of the travel, a stop and the end: the runs' cost set by the method, docs/performance.md)."""
+    if value is None or (isinstance(value, str) and value == "schedule"):
+        return value
+    if isinstance(value, str) and value.isdigit():
+        value = int(value)
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise ValueError(f"metrics_every: must be a number of steps >= 1 or 'schedule', got {value!r}")
+    return value
 
 
 def _checked_workers(workers, address: str | None) -> int | None:
