@@ -3,15 +3,18 @@ much the repair moved the surface), refuse what cannot, and measure exact signed
 
 Real scans are rarely closed: a bottle STL from a scanner has holes where the scanner could not see and
 non-manifold edges where patches meet. Inside and outside, and therefore the signed distance every world needs, are
-undefined on such a mesh. :func:`load_mesh` handles it in three stages:
+undefined on such a mesh. :func:`load_mesh` handles it in these stages:
 
 1. **Clean**: merge duplicate vertices, drop degenerate and duplicate faces and unreferenced vertices (losslessly).
 2. **Hole filling** when every edge is manifold: each hole is closed by a fan of new triangles around the
    centroid of its rim; the rest of the surface is untouched.
-3. **Watertight remesh** otherwise: the generalized winding number of the input (libigl; Jacobson et al. 2013) is
-   evaluated on a grid and its 1/2 level set is meshed by marching cubes. The winding number is defined for open and
-   non-manifold meshes and is ~1 inside and ~0 outside wherever the input nearly encloses a volume, so the remesh
-   is closed by construction; its error is about the grid spacing.
+3. **Exact union** of a closed mesh made of overlapping closed pieces (pybullet's convex decompositions, procedural
+   objects): a mesh boolean (manifold3d, the ``shapes`` extra) removes the faces inside another piece and keeps the
+   outer surface where it was (:func:`exact_union`).
+4. **Watertight remesh** otherwise (or without manifold3d): the generalized winding number of the input (libigl;
+   Jacobson et al. 2013) is evaluated on a grid and its 1/2 level set is meshed by marching cubes. The winding number
+   is defined for open and non-manifold meshes and is ~1 inside and ~0 outside wherever the input nearly encloses a
+   volume, so the remesh is closed by construction; its error is about the grid spacing.
 
 Every repair is reported as a :class:`MeshRepairWarning` naming the defects found, how far the input's surface lies
 from the repaired one, and how far the new surface reaches from the input (a filled hole's patch reaches about the
@@ -36,7 +39,7 @@ import numpy as np
 import trimesh
 
 __all__ = ["load_mesh", "read_mesh", "inspect_mesh", "repair_mesh", "MeshReport", "MeshRepairWarning", "MeshDistance",
-           "MESH_SUFFIXES", "as_pose", "overlapping_components"]
+           "MESH_SUFFIXES", "as_pose", "overlapping_components", "exact_union"]
 
 #: Most faces a watertight remesh keeps (finer ones are decimated).
 MAX_REMESH_FACES = 20_000
@@ -181,6 +184,34 @@ def _fill_holes(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     with np.errstate(invalid="ignore", divide="ignore"):     # a flat sheet, filled, has zero volume (refused later)
         trimesh.repair.fix_normals(m)
     return m
+
+
+def exact_union(mesh: trimesh.Trimesh) -> trimesh.Trimesh | None:
+    """The union of a closed mesh's overlapping closed pieces by an exact mesh boolean (manifold3d, trimesh's
+    ``manifold`` engine), or None where it cannot be had: manifold3d not installed (``pip install
+    'torch_gpioius[shapes]'``; the caller then remeshes the union by its winding number), or a result that is not
+    closed or encloses less than the largest piece (a boolean that failed quietly).
+
+    The union removes the faces that lie inside another piece and keeps every other face where it was: its surface is
+    the input's outer surface (to manifold3d's single precision, ~1e-7 of the size), where the remesh moves it by up
+    to a grid cell (9.2 mm on pybullet's ``random_urdfs/990``: 85 pieces)."""
+    try:
+        import manifold3d  # noqa: F401  (trimesh's "manifold" engine)
+    except ImportError:
+        return None
+    parts = mesh.split(only_watertight=False)
+    try:
+        united = trimesh.boolean.union(parts, engine="manifold")
+    except (ValueError, RuntimeError):
+        return None
+    if not isinstance(united, trimesh.Trimesh) or len(united.faces) == 0 or not inspect_mesh(united).closed:
+        return None
+    with np.errstate(invalid="ignore", divide="ignore"):
+        if not united.volume >= (1 - 1e-9) * max(abs(p.volume) for p in parts):
+            return None
+    if united.volume < 0:
+        united.invert()
+    return united
 
 
 def overlapping_components(mesh: trimesh.Trimesh) -> int:
@@ -458,6 +489,13 @@ def load_mesh(source, *, scale: float = 1.0, pose=None, repair: bool = True, res
     overlaps = overlapping_components(mesh) if report.closed else 0
     if overlaps:
         report.overlapping_vertices = overlaps
+    if report.closed and overlaps and repair:
+        united = exact_union(mesh)
+        if united is not None:                   # the pieces' union, exactly: the outer surface is unchanged
+            warnings.warn(f"{label}: united {report.components} overlapping closed pieces exactly (manifold3d's "
+                          f"boolean union, {overlaps} vertices were inside another piece); the outer surface is the "
+                          "input's", MeshRepairWarning, stacklevel=2)
+            return united
     if not report.closed or overlaps:
         if not repair:
             raise ValueError(f"{label}: not closed: {report.defects()}; inside and outside are undefined "
