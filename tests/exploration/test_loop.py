@@ -139,7 +139,7 @@ def test_lost_contact_falls_back_to_the_last_contact():
     (dict(max_steps=-1), "max_steps"),
     (dict(max_travel=float("inf")), "max_travel"),
     (dict(regions=0), "regions"),
-    (dict(evidence="poke"), "evidence"),
+    (dict(evidence="no_such_policy"), "evidence"),
     (dict(learn="everything"), "learn: must be one of"),
     (dict(learn="all", restart_every=None), "restart_every=None has none"),
     (dict(learn="length", regions=2), "regions has one per region"),
