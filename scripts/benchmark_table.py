@@ -1,0 +1,180 @@
+"""The object-set benchmark's tables and figures (docs/results-benchmark.md): accuracy as a distribution over objects.
+
+Each arm is a label and one or more study folders (``gpioius study --objects SET``), e.g. the tight covers of both
+families under the default settings. For every arm and mode it prints the distribution over the objects' runs of the
+final Chamfer distance, the F-scores at 5 mm and 1 cm, the signed bias, the Hausdorff distance at 25 % of the travel
+and at the end, the correlation, the travel and the wall time (median, interquartile range, 90th percentile), the
+failures by cause; then visual-tactile against touch alone paired per object (and seed), the goals of the benchmark
+judged, the five worst objects by Chamfer distance, and a leaderboard (``--summary``); with ``--figures`` the
+distributions' CDFs.
+
+    python scripts/benchmark_table.py "tight=outputs/benchmark/primitives-tight,outputs/benchmark/random-tight" \\
+        --summary outputs/benchmark/summary.md --figures outputs/benchmark
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+
+#: (column of runs.csv, heading, scale to the printed unit, format)
+METRICS = [("final_chamfer", "Chamfer [cm]", 100, ".2f"), ("final_fscore_5mm", "F 5 mm", 1, ".2f"),
+           ("final_fscore_10mm", "F 1 cm", 1, ".2f"), ("final_bias", "bias [mm]", 1000, ".1f"),
+           ("hausdorff_25", "H 25 % [cm]", 100, ".1f"), ("final_hausdorff", "H final [cm]", 100, ".1f"),
+           ("final_correlation", "rho final", 1, ".2f"), ("travel", "travel [m]", 1, ".2f"),
+           ("wall_time", "wall [s]", 1, ".0f")]
+
+
+def read_arm(spec: str) -> tuple[str, list[dict]]:
+    """``label=folder[,folder...]`` -> (label, the rows of every folder's runs.csv)."""
+    label, _, folders = spec.partition("=")
+    rows = []
+    for folder in folders.split(","):
+        with open(Path(folder) / "runs.csv", newline="") as f:
+            rows += list(csv.DictReader(f))
+    return label, rows
+
+
+def number(row: dict, key: str) -> float:
+    try:
+        return float(row.get(key, "nan"))
+    except ValueError:
+        return math.nan
+
+
+def spread(values: np.ndarray, fmt: str) -> str:
+    """median [q25, q75] p90 of the finite values (a failed run's inf counts as the worst)."""
+    v = values[~np.isnan(values)]
+    if not len(v):
+        return "-"
+    q = np.percentile(v, [50, 25, 75, 90], method="linear")
+    return f"{q[0]:{fmt}} [{q[1]:{fmt}}, {q[2]:{fmt}}] {q[3]:{fmt}}"
+
+
+def distribution_table(arms: dict[str, list[dict]]) -> str:
+    head = ["arm", "mode", "runs", "failed (why)"] + [m[1] for m in METRICS]
+    out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for label, rows in arms.items():
+        for mode in sorted({r["mode"] for r in rows}):
+            sel = [r for r in rows if r["mode"] == mode]
+            failed = Counter(r["terminated"].split(":")[0] for r in sel if r["failed"] not in ("", "0", "False"))
+            why = ", ".join(f"{n} {k}" for k, n in failed.most_common()) or "0"
+            cells = [spread(np.array([number(r, k) * s for r in sel]), f) for k, _, s, f in METRICS]
+            out.append(f"| {label} | {mode} | {len(sel)} | {why} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
+def paired(rows: list[dict], key: str) -> dict:
+    """Visual-tactile against touch alone on the same object and seed: the share of pairs where vision is ahead
+    (strictly lower ``key``), the median difference and the pairs."""
+    by = {(r["object"], r["seed"], r["mode"]): number(r, key) for r in rows}
+    diffs = [by[(o, s, "visual-tactile")] - by[(o, s, "tactile")] for (o, s, m) in by
+             if m == "visual-tactile" and (o, s, "tactile") in by]
+    d = np.array([x for x in diffs if not math.isnan(x)])
+    return {"n": len(d), "ahead": float((d < 0).mean()) if len(d) else math.nan,
+            "median": float(np.median(d)) if len(d) else math.nan}
+
+
+def goals(label: str, rows: list[dict], wide: bool) -> list[str]:
+    vt = [r for r in rows if r["mode"] == "visual-tactile"]
+    ch = np.array([number(r, "final_chamfer") for r in vt]) * 100
+    f1 = np.array([number(r, "final_fscore_10mm") for r in vt])
+    p25 = paired(rows, "hausdorff_25")
+    pfinal = paired(rows, "final_chamfer")
+    out = []
+    if wide:
+        out.append(f"{label}: no harm at the median (VT - T final Chamfer): {100 * pfinal['median']:+.2f} cm over "
+                   f"{pfinal['n']} pairs -> {'holds' if pfinal['median'] <= 0.001 else 'fails'}")
+        return out
+    med, p90 = float(np.nanmedian(ch)), float(np.nanpercentile(ch, 90))
+    out.append(f"{label}: median Chamfer {med:.2f} cm (goal <= 0.6), 90th percentile {p90:.2f} cm (goal <= 1.2) -> "
+               f"{'holds' if med <= 0.6 and p90 <= 1.2 else 'fails'}")
+    out.append(f"{label}: median F-score at 1 cm {np.nanmedian(f1):.2f} (goal >= 0.9) -> "
+               f"{'holds' if np.nanmedian(f1) >= 0.9 else 'fails'}")
+    out.append(f"{label}: visual-tactile ahead of touch alone at 25 % of the travel on {100 * p25['ahead']:.0f} % of "
+               f"{p25['n']} pairs (goal >= 80 %; median VT - T {100 * p25['median']:+.1f} cm) -> "
+               f"{'holds' if p25['ahead'] >= 0.8 else 'fails'}")
+    return out
+
+
+def worst(rows: list[dict], k: int = 5) -> list[str]:
+    vt = sorted((r for r in rows if r["mode"] == "visual-tactile"), key=lambda r: -number(r, "final_chamfer"))
+    return [f"{r['object']} (seed {r['seed']}): Chamfer {100 * number(r, 'final_chamfer'):.2f} cm, F 1 cm "
+            f"{number(r, 'final_fscore_10mm'):.2f}, bias {1000 * number(r, 'final_bias'):.1f} mm, "
+            f"H final {100 * number(r, 'final_hausdorff'):.1f} cm, {r['terminated']}" for r in vt[:k]]
+
+
+def leaderboard(arms: dict[str, list[dict]]) -> str:
+    out = ["| arm | mode | objects | Chamfer median [cm] | Chamfer p90 [cm] | F 1 cm median | bias median [mm] |",
+           "|---|---|---|---|---|---|---|"]
+    board = []
+    for label, rows in arms.items():
+        for mode in sorted({r["mode"] for r in rows}):
+            sel = [r for r in rows if r["mode"] == mode]
+            ch = np.array([number(r, "final_chamfer") for r in sel]) * 100
+            board.append((float(np.nanmedian(ch)), label, mode, len(sel), float(np.nanpercentile(ch, 90)),
+                          float(np.nanmedian([number(r, "final_fscore_10mm") for r in sel])),
+                          1000 * float(np.nanmedian([number(r, "final_bias") for r in sel]))))
+    for med, label, mode, n, p90, f1, bias in sorted(board):
+        out.append(f"| {label} | {mode} | {n} | {med:.2f} | {p90:.2f} | {f1:.2f} | {bias:.1f} |")
+    return "\n".join(out)
+
+
+def figures(arms: dict[str, list[dict]], folder: Path) -> list[Path]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    written = []
+    for key, title, scale, _ in METRICS[:5]:
+        fig, ax = plt.subplots(figsize=(5, 3.5))
+        for label, rows in arms.items():
+            for mode, ls in (("visual-tactile", "-"), ("tactile", "--")):
+                v = np.sort(np.array([number(r, key) * scale for r in rows if r["mode"] == mode]))
+                v = v[~np.isnan(v)]
+                if len(v):
+                    ax.step(v, np.arange(1, len(v) + 1) / len(v), ls=ls, where="post", label=f"{label}, {mode}")
+        ax.set_xlabel(title)
+        ax.set_ylabel("share of objects")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=7)
+        fig.tight_layout()
+        path = folder / f"cdf_{key}.png"
+        fig.savefig(path, dpi=120)
+        plt.close(fig)
+        written.append(path)
+    return written
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("arms", nargs="+", help='label=folder[,folder...] (e.g. "tight=outputs/benchmark/p-tight")')
+    parser.add_argument("--wide", nargs="*", default=[], help="labels of arms under wide covers (no-harm goal)")
+    parser.add_argument("--summary", type=Path, default=None, help="write the leaderboard and goals there")
+    parser.add_argument("--figures", type=Path, default=None, help="write CDF figures into this folder")
+    args = parser.parse_args()
+    arms = dict(read_arm(a) for a in args.arms)
+    table = distribution_table(arms)
+    print(table, "\n")
+    lines = [g for label, rows in arms.items() for g in goals(label, rows, label in args.wide)]
+    print("\n".join(lines), "\n")
+    for label, rows in arms.items():
+        print(f"five worst of {label}:\n  " + "\n  ".join(worst(rows)))
+    board = leaderboard(arms)
+    print("\n" + board)
+    if args.summary is not None:
+        args.summary.write_text("# Benchmark leaderboard\n\n" + board + "\n\n## Goals\n\n" +
+                                "\n".join(f"- {g}" for g in lines) + "\n\n## Distributions\n\n" + table + "\n")
+    if args.figures is not None:
+        args.figures.mkdir(parents=True, exist_ok=True)
+        print("wrote", ", ".join(str(p) for p in figures(arms, args.figures)))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,57 @@
+"""scripts/benchmark_table.py on runs.csv files written here: the distributions (median, quartiles, 90th
+percentile), the pairing of visual-tactile and touch alone per object and seed, the goals judged and the worst
+objects, recomputed by hand."""
+
+import csv
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _load():
+    spec = importlib.util.spec_from_file_location("benchmark_table", ROOT / "scripts" / "benchmark_table.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _study(folder: Path, chamfers_vt, chamfers_t, h25_vt, h25_t):
+    folder.mkdir()
+    keys = ["world", "object", "mode", "seed", "failed", "terminated", "final_chamfer", "final_fscore_5mm",
+            "final_fscore_10mm", "final_bias", "hausdorff_25", "final_hausdorff", "final_correlation", "travel",
+            "wall_time"]
+    with open(folder / "runs.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, keys)
+        w.writeheader()
+        for i, (cv, ct, hv, ht) in enumerate(zip(chamfers_vt, chamfers_t, h25_vt, h25_t)):
+            for mode, c, h in (("visual-tactile", cv, hv), ("tactile", ct, ht)):
+                w.writerow(dict(world="forcefield", object=f"obj-{i}", mode=mode, seed=0, failed=0,
+                                terminated="travel", final_chamfer=c, final_fscore_5mm=0.5,
+                                final_fscore_10mm=0.95 if c < 0.006 else 0.7, final_bias=-0.001,
+                                hausdorff_25=h, final_hausdorff=2 * c, final_correlation=0.9, travel=0.6,
+                                wall_time=20.0))
+
+
+def test_distributions_pairs_goals_and_the_worst_are_the_runs_own(tmp_path):
+    bt = _load()
+    vt = [0.003, 0.004, 0.005, 0.006, 0.020]
+    t = [0.004, 0.006, 0.004, 0.009, 0.030]
+    _study(tmp_path / "a", vt, t, h25_vt=[0.02, 0.02, 0.03, 0.02, 0.05], h25_t=[0.03, 0.03, 0.02, 0.03, 0.06])
+    label, rows = bt.read_arm(f"tight={tmp_path / 'a'}")
+    assert label == "tight" and len(rows) == 10
+    table = bt.distribution_table({label: rows})
+    q = np.percentile(np.array(vt) * 100, [50, 25, 75, 90])
+    assert f"| tight | visual-tactile | 5 | 0 | {q[0]:.2f} [{q[1]:.2f}, {q[2]:.2f}] {q[3]:.2f} |" in table
+    pair = bt.paired(rows, "hausdorff_25")
+    assert pair["n"] == 5 and pair["ahead"] == 0.8 and abs(pair["median"] - (-0.01)) < 1e-12
+    goals = bt.goals(label, rows, wide=False)
+    assert "median Chamfer 0.50 cm" in goals[0] and "holds" not in goals[0]       # p90 1.44 cm > 1.2
+    assert "on 80 % of 5 pairs" in goals[2] and goals[2].endswith("holds")
+    assert bt.worst(rows, 1)[0].startswith("obj-4 (seed 0): Chamfer 2.00 cm")
+    wide = bt.goals(label, rows, wide=True)[0]
+    assert "-0.20 cm over 5 pairs" in wide and wide.endswith("holds")       # the median of -0.1, -0.2, 0.1, -0.3, -1
+    board = bt.leaderboard({label: rows})
+    assert board.splitlines()[2].startswith("| tight | visual-tactile | 5 | 0.50 |")
