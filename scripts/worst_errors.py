@@ -18,6 +18,7 @@ inside points near the far samples, the outer mean below zero). The world must b
 is needed): a study of built-in objects, or of scene files in ``--scenes``.
 
     python scripts/worst_errors.py outputs/real_ff_tight_judged/logs/*visual-tactile*.gpioius
+    python scripts/worst_errors.py outputs/benchmark/primitives-tight/logs/primitives-006_visual-tactile_0.gpioius
 """
 
 from __future__ import annotations
@@ -44,6 +45,14 @@ NEAR = 0.03         # "observed near a far sample" [m]
 def world_of(log: Path, scenes: Path):
     """The world a study log ran in, from the study's record beside it (``../runs/<name>.json``)."""
     record = json.loads((log.parent.parent / "runs" / f"{log.stem}.json").read_text())
+    if str(record.get("scene_hash", "")).startswith("set:"):         # an object of a set (gpioius study --objects)
+        from torch_gpioius.sim.objectsets import object_set
+
+        cover = record["scene_hash"].rsplit(":", 1)[1]
+        family, _, index = record["object"].rpartition("-")
+        obj = object_set(f"{family}:{int(index)}")[0]
+        return make_world(record["world"], record["object"], int(record["seed"]), settings=record.get("settings"),
+                          set_object=obj, cover=cover)
     scene = scenes / f"{record['object']}.toml"
     return make_world(record["world"], record["object"], int(record["seed"]),
                       scene=str(scene) if scene.exists() else None, settings=record.get("settings"))
