@@ -40,19 +40,41 @@ def read_arm(spec: str) -> tuple[str, list[dict]]:
     return label, rows
 
 
+#: What a run without an estimate scores (the studies' rule: it stays in every statistic, worse than any other).
+NO_ESTIMATE = {"final_fscore_5mm": 0.0, "final_fscore_10mm": 0.0}
+
+
 def number(row: dict, key: str) -> float:
+    """``row[key]`` as a number; a run without a final estimate (a scene that could not be built, an estimate that
+    vanished) counts as the worst: an infinite distance, an F-score of 0, no bias or correlation."""
+    if row.get("has_estimate") not in (None, "True") and (key.startswith(("final_", "hausdorff_"))):
+        return NO_ESTIMATE.get(key, math.nan if key in ("final_bias", "final_correlation") else math.inf)
     try:
         return float(row.get(key, "nan"))
     except ValueError:
         return math.nan
 
 
+def cause(row: dict) -> str:
+    """Why a run failed, in a few words ("" if it did not; the study's ``failed`` column)."""
+    why = row.get("failed", "")
+    if why in ("", "0", "False"):
+        return ""
+    return "scene cannot be built" if why.startswith("scene:") else why
+
+
+def pct(values, p: float) -> float:
+    """The ``p``-th percentile as an order statistic (the smallest value with at least p % at or below it): the
+    failed runs' infinite distances count as the worst values, never interpolated into a finite one."""
+    v = np.sort(np.asarray(values, dtype=float)[~np.isnan(np.asarray(values, dtype=float))])
+    return float(v[max(0, int(math.ceil(p / 100 * len(v))) - 1)]) if len(v) else math.nan
+
+
 def spread(values: np.ndarray, fmt: str) -> str:
-    """median [q25, q75] p90 of the finite values (a failed run's inf counts as the worst)."""
-    v = values[~np.isnan(values)]
-    if not len(v):
+    """median [q25, q75] p90 (:func:`pct`; a failed run's inf counts as the worst)."""
+    if np.isnan(values).all():
         return "-"
-    q = np.percentile(v, [50, 25, 75, 90], method="linear")
+    q = [pct(values, p) for p in (50, 25, 75, 90)]
     return f"{q[0]:{fmt}} [{q[1]:{fmt}}, {q[2]:{fmt}}] {q[3]:{fmt}}"
 
 
@@ -62,7 +84,7 @@ def distribution_table(arms: dict[str, list[dict]]) -> str:
     for label, rows in arms.items():
         for mode in sorted({r["mode"] for r in rows}):
             sel = [r for r in rows if r["mode"] == mode]
-            failed = Counter(r["terminated"].split(":")[0] for r in sel if r["failed"] not in ("", "0", "False"))
+            failed = Counter(cause(r) for r in sel if cause(r))
             why = ", ".join(f"{n} {k}" for k, n in failed.most_common()) or "0"
             cells = [spread(np.array([number(r, k) * s for r in sel]), f) for k, _, s, f in METRICS]
             out.append(f"| {label} | {mode} | {len(sel)} | {why} | " + " | ".join(cells) + " |")
@@ -91,11 +113,11 @@ def goals(label: str, rows: list[dict], wide: bool) -> list[str]:
         out.append(f"{label}: no harm at the median (VT - T final Chamfer): {100 * pfinal['median']:+.2f} cm over "
                    f"{pfinal['n']} pairs -> {'holds' if pfinal['median'] <= 0.001 else 'fails'}")
         return out
-    med, p90 = float(np.nanmedian(ch)), float(np.nanpercentile(ch, 90))
+    med, p90 = pct(ch, 50), pct(ch, 90)
     out.append(f"{label}: median Chamfer {med:.2f} cm (goal <= 0.6), 90th percentile {p90:.2f} cm (goal <= 1.2) -> "
                f"{'holds' if med <= 0.6 and p90 <= 1.2 else 'fails'}")
-    out.append(f"{label}: median F-score at 1 cm {np.nanmedian(f1):.2f} (goal >= 0.9) -> "
-               f"{'holds' if np.nanmedian(f1) >= 0.9 else 'fails'}")
+    out.append(f"{label}: median F-score at 1 cm {pct(f1, 50):.2f} (goal >= 0.9) -> "
+               f"{'holds' if pct(f1, 50) >= 0.9 else 'fails'}")
     out.append(f"{label}: visual-tactile ahead of touch alone at 25 % of the travel on {100 * p25['ahead']:.0f} % of "
                f"{p25['n']} pairs (goal >= 80 %; median VT - T {100 * p25['median']:+.1f} cm) -> "
                f"{'holds' if p25['ahead'] >= 0.8 else 'fails'}")
@@ -103,10 +125,14 @@ def goals(label: str, rows: list[dict], wide: bool) -> list[str]:
 
 
 def worst(rows: list[dict], k: int = 5) -> list[str]:
-    vt = sorted((r for r in rows if r["mode"] == "visual-tactile"), key=lambda r: -number(r, "final_chamfer"))
+    def badness(r: dict) -> float:
+        v = number(r, "final_chamfer")
+        return -(math.inf if math.isnan(v) else v)
+
+    vt = sorted((r for r in rows if r["mode"] == "visual-tactile"), key=badness)
     return [f"{r['object']} (seed {r['seed']}): Chamfer {100 * number(r, 'final_chamfer'):.2f} cm, F 1 cm "
             f"{number(r, 'final_fscore_10mm'):.2f}, bias {1000 * number(r, 'final_bias'):.1f} mm, "
-            f"H final {100 * number(r, 'final_hausdorff'):.1f} cm, {r['terminated']}" for r in vt[:k]]
+            f"H final {100 * number(r, 'final_hausdorff'):.1f} cm, {cause(r) or r['terminated']}" for r in vt[:k]]
 
 
 def leaderboard(arms: dict[str, list[dict]]) -> str:
@@ -117,9 +143,9 @@ def leaderboard(arms: dict[str, list[dict]]) -> str:
         for mode in sorted({r["mode"] for r in rows}):
             sel = [r for r in rows if r["mode"] == mode]
             ch = np.array([number(r, "final_chamfer") for r in sel]) * 100
-            board.append((float(np.nanmedian(ch)), label, mode, len(sel), float(np.nanpercentile(ch, 90)),
-                          float(np.nanmedian([number(r, "final_fscore_10mm") for r in sel])),
-                          1000 * float(np.nanmedian([number(r, "final_bias") for r in sel]))))
+            board.append((pct(ch, 50), label, mode, len(sel), pct(ch, 90),
+                          pct([number(r, "final_fscore_10mm") for r in sel], 50),
+                          1000 * pct([number(r, "final_bias") for r in sel], 50)))
     for med, label, mode, n, p90, f1, bias in sorted(board):
         out.append(f"| {label} | {mode} | {n} | {med:.2f} | {p90:.2f} | {f1:.2f} | {bias:.1f} |")
     return "\n".join(out)
