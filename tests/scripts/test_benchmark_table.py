@@ -6,7 +6,6 @@ import csv
 import importlib.util
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[2]
 
