@@ -328,6 +328,13 @@ def _presets(dimension: int | None = None) -> list[str]:
     return list(PRESETS) if dimension is None else list(SETTINGS)
 
 
+def _covers() -> list[str]:
+    """The covers of an object set's objects (``sim.objectsets.COVERS``: tight, wide)."""
+    from .sim.objectsets import COVERS
+
+    return list(COVERS)
+
+
 def _learns() -> list[str]:
     """What a fit can learn (K_t; also the length; also the noise)."""
     from .models.estimator import LEARN
@@ -514,7 +521,7 @@ def _add_simulate3d(sub, common, fmt) -> None:
                          "docs/tutorials/your-object.md)")
     s3.add_argument("--world", default="forcefield", type=_world_of(simulated=True, dimension=3),
                     help="a simulated 3-D world: forcefield (a static force-field cover), mujoco (cloth and foam on "
-                         "MuJoCo's contact physics), or one registered with register_world (docs/extending.md)")
+                         "MuJoCo's contact physics), or one registered with register_world (docs/architecture.md)")
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
     s3.add_argument("--max-travel", type=_length("max-travel"), default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
@@ -541,7 +548,7 @@ def _add_study(sub, common, fmt) -> None:
                                     "the paper's claims judged with stated rules) and figures with bands.")
     sw.add_argument("--world", default="planar", type=_world_of(simulated=True),
                     help="a simulated world: planar (2-D objects A-D), forcefield or mujoco (3-D objects E-H), or one "
-                         "registered with register_world (docs/extending.md)")
+                         "registered with register_world (docs/architecture.md)")
     sw.add_argument("--objects", default=None,
                     help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D), or "
                          "an object set in the forcefield world: primitives:0-49, pybullet-random:0-49, "
@@ -551,7 +558,7 @@ def _add_study(sub, common, fmt) -> None:
                          "stop and the end only (3-D worlds; the fractions the summary reports, at a fraction of "
                          "the cost); default: every 5 steps in the 3-D worlds, every step in 2-D; one per --out "
                          "folder")
-    sw.add_argument("--cover", default=None, choices=["tight", "wide"],
+    sw.add_argument("--cover", default=None, choices=_covers(),
                     help="the cover of an object set's objects: tight (8 mm) or wide (4 cm); default tight; one per "
                          "--out folder")
     sw.add_argument("--scenes", default=None,

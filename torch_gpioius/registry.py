@@ -126,11 +126,7 @@ class Registry(Mapping, Generic[T]):
         """
         if not isinstance(name, str):
             raise ValueError(f"{self.what}: expected a name, got {name!r}")
-        if name in self._old:
-            if warn:
-                warnings.warn(f"{self.what} {name!r} is called {self._old[name]!r} now", DeprecationWarning,
-                              stacklevel=3)
-            name = self._old[name]
+        name = self.current_name(name, warn=warn, stacklevel=4)
         entry = self._owner(name)
         if entry is None and name in self._builtin:
             importlib.import_module(self._builtin[name])
@@ -138,6 +134,17 @@ class Registry(Mapping, Generic[T]):
         if entry is None:
             raise ValueError(f"{self.what}: unknown {name!r}; choose among {self.choices()}")
         return entry.name
+
+    def current_name(self, name: str, *, warn: bool = False, stacklevel: int = 3) -> str:
+        """``name`` itself, or the current name of an old one (``"3d"`` -> ``"forcefield"``), with a
+        DeprecationWarning when ``warn`` (``stacklevel`` as :func:`warnings.warn`'s, from this call); not checked to
+        be registered (:meth:`resolve` does)."""
+        if name in self._old:
+            if warn:
+                warnings.warn(f"{self.what} {name!r} is called {self._old[name]!r} now", DeprecationWarning,
+                              stacklevel=stacklevel)
+            return self._old[name]
+        return name
 
     def entry(self, name: str) -> Entry:
         """The entry ``name`` (or an alias, or an old name) stands for; see :meth:`resolve`."""

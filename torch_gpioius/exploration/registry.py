@@ -18,7 +18,6 @@ Older names are read where they appear in files (``2d``, ``3d``, ``penalty``, an
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -143,11 +142,7 @@ def register_world(name: str, cls: type, *, objects: Callable | None = None, obj
 
 def canonical_world_name(name: str, *, warn: bool = False) -> str:
     """The current name of a world given by any name it has had (``"3d"`` -> ``"forcefield"``)."""
-    if name in _OLD_NAMES:
-        if warn:
-            warnings.warn(f"world {name!r} is called {_OLD_NAMES[name]!r} now", DeprecationWarning, stacklevel=3)
-        return _OLD_NAMES[name]
-    return name
+    return WORLDS.current_name(name, warn=warn, stacklevel=4)
 
 
 def world_entry(name: str) -> WorldEntry:

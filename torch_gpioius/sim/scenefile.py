@@ -206,16 +206,7 @@ def read_scene(path) -> SceneSpec:
         raise bad("object", f"unknown key(s) {sorted(set(obj) - _OBJECT)}; allowed {sorted(_OBJECT)}")
     if not isinstance(obj["mesh"], str):
         raise bad("object.mesh", f"must be a file name, got {obj['mesh']!r}")
-    supports = {w: _support(w) for w in dict.fromkeys([*scene_worlds(), world])}
-    kinds = sorted({k for sup in supports.values() for k in sup.cover_kinds})
-    if not isinstance(cover, dict) or cover.get("kind") not in kinds:
-        raise bad("[cover]", f"missing, or its kind is not one of {kinds}")
-    every_cover = set().union(*(sup.cover_keys for sup in supports.values())) | {"kind"}
-    if set(cover) - every_cover:
-        both = sorted(set.intersection(*(set(sup.cover_keys) for sup in supports.values())) | {"kind"})
-        own = "; ".join(f"{w}: {sorted(set(sup.cover_keys) - set(both))}" for w, sup in supports.items())
-        raise bad("cover", f"unknown key(s) {sorted(set(cover) - every_cover)}; [cover] takes {both} in every world, "
-                           f"and a world's own options ({own})")
+    _check_cover(cover, world, bad)
     if "pose" in obj:
         from .meshes import as_pose
 
@@ -250,6 +241,25 @@ def read_scene(path) -> SceneSpec:
             if problem:
                 raise bad(f"[{w}] {key}", problem)
     return SceneSpec(path, name, world, dict(obj), dict(cover), approach, bounds, settings)
+
+
+def _check_cover(cover, world: str, bad) -> None:
+    """Refuse a ``[cover]`` that is missing, or whose kind or keys no world that builds scene files takes (a file
+    serves several worlds: an option of another world's cover is kept for that world). The file's own world is asked
+    first; the others (MuJoCo's module takes a second to import) only for a kind or key it does not take."""
+    own = _support(world)
+    if isinstance(cover, dict) and cover.get("kind") in own.cover_kinds and set(cover) - {"kind"} <= own.cover_keys:
+        return
+    supports = {w: _support(w) for w in dict.fromkeys([*scene_worlds(), world])}
+    kinds = sorted({k for sup in supports.values() for k in sup.cover_kinds})
+    if not isinstance(cover, dict) or cover.get("kind") not in kinds:
+        raise bad("[cover]", f"missing, or its kind is not one of {kinds}")
+    every_cover = set().union(*(sup.cover_keys for sup in supports.values())) | {"kind"}
+    if set(cover) - every_cover:
+        both = sorted(set.intersection(*(set(sup.cover_keys) for sup in supports.values())) | {"kind"})
+        others = "; ".join(f"{w}: {sorted(set(sup.cover_keys) - set(both))}" for w, sup in supports.items())
+        raise bad("cover", f"unknown key(s) {sorted(set(cover) - every_cover)}; [cover] takes {both} in every world, "
+                           f"and a world's own options ({others})")
 
 
 def _check_finite(value, path: Path, key: str) -> None:
