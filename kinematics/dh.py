@@ -19,8 +19,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import torch
+
 __all__ = ["DHRow", "UR5_DH", "UR5_JOINT_NAMES", "UR5_JOINT_LIMITS", "UR5_VELOCITY_LIMITS", "UR5_EFFORT_LIMITS",
-           "UR5_LINK_MASSES", "UR5_LINK_COMS", "ur5_urdf"]
+           "UR5_LINK_MASSES", "UR5_LINK_COMS", "ur5_urdf", "dh_forward", "dh_jacobian"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,70 @@ UR5_LINK_COMS: tuple[tuple[float, float, float], ...] = (
     (0.0, 0.0018, 0.01634),
     (0.0, 0.0, -0.001159),
 )
+
+
+def dh_forward(q: torch.Tensor, dh: tuple[DHRow, ...] = UR5_DH) -> torch.Tensor:
+    """The DH frames of a serial arm in closed form: frame ``i`` = ``A_1(q_1) ... A_i(q_i)`` in the base frame.
+
+    The same transforms as the chain pytorch-kinematics builds from :func:`ur5_urdf` (a test holds them equal to
+    1e-12), written out because a guarded motion asks for one pose and one Jacobian per millimetre: the chain's
+    general frame tree costs ~0.4 ms a pose and ~1.3 ms a Jacobian on one joint vector, these few batched tensor
+    operations a tenth of it. Differentiable w.r.t. ``q``.
+
+    Args:
+        q: `(B, n)` joint positions [rad], ``n = len(dh)``.
+        dh: the standard-DH rows.
+
+    Returns:
+        `(B, n, 4, 4)` ``T_base_frame_i`` for ``i = 1..n`` (the last is the flange).
+    """
+    n = len(dh)
+    if q.dim() != 2 or q.shape[-1] != n:
+        raise ValueError(f"q must have shape (B, {n}), got {tuple(q.shape)}")
+    d, a, ca, sa = _dh_constants(dh, q.dtype, q.device)
+    c, s = torch.cos(q), torch.sin(q)
+    zero, one = torch.zeros_like(q), torch.ones_like(q)
+    A = torch.stack([c, -s * ca, s * sa, a * c,
+                     s, c * ca, -c * sa, a * s,
+                     zero, sa.expand_as(q), ca.expand_as(q), d.expand_as(q),
+                     zero, zero, zero, one], -1).reshape(*q.shape, 4, 4)       # (B, n, 4, 4)
+    frames = [A[:, 0]]
+    for i in range(1, n):
+        frames.append(frames[-1] @ A[:, i])
+    return torch.stack(frames, 1)
+
+
+_CONSTANTS: dict = {}
+
+
+def _dh_constants(dh: tuple[DHRow, ...], dtype: torch.dtype, device: torch.device) -> tuple[torch.Tensor, ...]:
+    """``d, a, cos(alpha), sin(alpha)`` as `(n,)` tensors, made once per table, dtype and device."""
+    key = (dh, dtype, device)
+    if key not in _CONSTANTS:
+        _CONSTANTS[key] = tuple(torch.tensor(v, dtype=dtype, device=device) for v in (
+            [r.d for r in dh], [r.a for r in dh], [math.cos(r.alpha) for r in dh], [math.sin(r.alpha) for r in dh]))
+    return _CONSTANTS[key]
+
+
+def dh_jacobian(frames: torch.Tensor, point: torch.Tensor) -> torch.Tensor:
+    """Geometric Jacobian of a point on the last link, from the frames of :func:`dh_forward`.
+
+    Joint ``i`` turns about the z axis of frame ``i-1`` (the base frame for ``i = 1``): its column is
+    ``[z × (p - o); z]``.
+
+    Args:
+        frames: `(B, n, 4, 4)` from :func:`dh_forward`.
+        point: `(B, 3)` the point's position in the base frame [m].
+
+    Returns:
+        `(B, 6, n)`: rows 0-2 linear [m/rad], rows 3-5 angular [rad/rad], base frame.
+    """
+    B = frames.shape[0]
+    base = torch.eye(4, dtype=frames.dtype, device=frames.device).expand(B, 1, 4, 4)
+    before = torch.cat([base, frames[:, :-1]], 1)                # frame i-1 of joint i
+    z, o = before[..., :3, 2], before[..., :3, 3]                # (B, n, 3)
+    linear = torch.linalg.cross(z, point[:, None, :] - o, dim=-1)
+    return torch.cat([linear, z], -1).transpose(-1, -2)
 
 
 def _fmt(v: float) -> str:

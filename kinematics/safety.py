@@ -227,15 +227,21 @@ class SafetyGate:
                 j = over[0]
                 raise SafetyViolation(f"joint {j} speed {float(per_joint[j]):.4f} rad/s exceeds the limit "
                                       f"{float(self._max_joint_speed[j]):.4f} rad/s")
-        self._check_path(q_from, dq)
+        self._check_path(q_from, q_to)
 
-    def _check_path(self, q_from: torch.Tensor, dq: torch.Tensor) -> None:
-        """Fingertip box along ``q_from + s dq``, s in [0, 1]: samples every ``path_resolution`` (max norm), each
-        checked against the box shrunk by the chord bound of its segment, so the whole path is covered."""
+    def _check_path(self, q_from: torch.Tensor, q_to: torch.Tensor) -> None:
+        """Fingertip box along ``q_from + s (q_to - q_from)``, s in [0, 1]: samples every ``path_resolution`` (max
+        norm), each checked against the box shrunk by the chord bound of its segment, so the whole path is covered.
+        A move shorter than ``path_resolution`` (a guarded motion's millimetre) is its two ends: their poses are the
+        ones the robot has just computed (the arm's pose cache), not a new batch."""
+        dq = q_to - q_from
         biggest = float(dq.abs().max())
         n = max(2, int(math.ceil(biggest / self.path_resolution)) + 1)
-        s = torch.linspace(0.0, 1.0, n, dtype=dq.dtype, device=dq.device)[:, None]
-        path = self.ur5.position(q_from + s * dq)
+        if n == 2:
+            path = torch.stack([self.ur5.position(q_from), self.ur5.position(q_to)])
+        else:
+            s = torch.linspace(0.0, 1.0, n, dtype=dq.dtype, device=dq.device)[:, None]
+            path = self.ur5.position(q_from + s * dq)
         seg = float(dq.abs().sum()) / (n - 1)
         slack = self._chord * seg * seg / 8.0          # largest distance of the path from a segment's chord
         inside = self.in_workspace(path, slack)

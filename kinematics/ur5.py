@@ -12,13 +12,19 @@ from collections import OrderedDict
 from importlib import resources
 from typing import Sequence
 
+import numpy as np
 import pytorch_kinematics as pk
 import torch
 
-from .dh import UR5_JOINT_LIMITS, UR5_VELOCITY_LIMITS
+from . import single
+from .dh import UR5_DH, UR5_JOINT_LIMITS, UR5_VELOCITY_LIMITS, dh_forward, dh_jacobian
 from .ik import dls_step
 
-__all__ = ["UR5", "UnreachablePoseError", "pose_error", "load_chain", "tool_rotation"]
+__all__ = ["UR5", "UnreachablePoseError", "pose_error", "load_chain", "tool_rotation", "NEWTON_TOLERANCE"]
+
+#: A Cartesian step's Newton iterations stop once the pose error is below this [m, rad]: far below any joint
+#: encoder's resolution (~1e-5 rad), and reached after two iterations by a millimetre step.
+NEWTON_TOLERANCE = 1e-10
 
 
 def tool_rotation(direction) -> torch.Tensor:
@@ -70,6 +76,10 @@ class UnreachablePoseError(ValueError):
     """Raised when inverse kinematics finds no configuration within tolerance and the joint limits."""
 
 
+# the entries (2, 1), (0, 2), (1, 0) of a matrix: vee(R - R^T) = R[rows, cols] - R[cols, rows]
+_VEE_ROWS, _VEE_COLS = [2, 0, 1], [1, 2, 0]
+
+
 def _so3_log(R: torch.Tensor) -> torch.Tensor:
     """Rotation vector (axis · angle) of `(..., 3, 3)` rotation matrices, with finite gradients at identity.
 
@@ -78,12 +88,12 @@ def _so3_log(R: torch.Tensor) -> torch.Tensor:
     ``theta / sin(theta) · vee(R - R^T) / 2`` with ``theta = atan2(|s|, c)`` and its series near 0, large
     ones pytorch-kinematics' robust formula.
     """
-    s = 0.5 * torch.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-                          dim=-1)
-    c = 0.5 * (R[..., 0, 0] + R[..., 1, 1] + R[..., 2, 2] - 1.0)
+    # (few operations: a guarded motion takes this log several times a millimetre)
+    s = 0.5 * (R[..., _VEE_ROWS, _VEE_COLS] - R[..., _VEE_COLS, _VEE_ROWS])
+    c = 0.5 * (torch.diagonal(R, dim1=-2, dim2=-1).sum(-1) - 1.0)
     s2 = (s * s).sum(-1)
     small = s2 < 1e-12
-    sn = torch.sqrt(torch.where(small, torch.ones_like(s2), s2))
+    sn = torch.sqrt(torch.where(small, 1.0, s2))
     factor = torch.where(small, 1.0 + s2 / 6.0, torch.atan2(sn, c) / sn)
     near = s * factor[..., None]
     if bool((c > 0).all()):
@@ -159,9 +169,13 @@ class UR5:
         # the poses of the last few single joint vectors: a guarded move reads the pose of the joints it stands at
         # several times (the step's start, the realised displacement, the force sensor, the next step's start)
         self._fk_cache: OrderedDict = OrderedDict()
+        # the last single Cartesian step outside autograd: (its key, its joint step), a warm start for the next
+        self._last_step: tuple = (None, None)
         T = torch.eye(4, dtype=self.dtype, device=self.device)
         T[:3, 3] = offset
         self.T_flange_tool = T
+        self._T_flange_tool_np = T.cpu().numpy()
+        self._limits_np = (self.lower.cpu().numpy(), self.upper.cpu().numpy())
 
     # ------------------------------------------------------------------------------------------ helpers
     def _q(self, q: torch.Tensor | Sequence[float]) -> torch.Tensor:
@@ -196,19 +210,31 @@ class UR5:
         # (why by hand: pytorch_kinematics has no cache; a slide's small moves asked ~11 poses each, half repeats)
         key = None
         if q.numel() == 6 and not (q.requires_grad and torch.is_grad_enabled()):
-            key = (frame, id(self.T_flange_tool), q.device, q.dtype, q.detach().cpu().numpy().tobytes())
+            key = self._pose_key(q, frame)
             hit = self._fk_cache.get(key)
             if hit is not None:
                 self._fk_cache.move_to_end(key)
                 return hit.clone().reshape(*batch, 4, 4)
-        T = self.chain.forward_kinematics(q.reshape(-1, 6)).get_matrix()
+        if key is not None:                        # one joint vector, no gradient: NumPy (kinematics.single)
+            T_np = single.frames(q.detach().cpu().numpy().reshape(6).astype(np.float64), UR5_DH)[-1]
+            if frame == "tool":
+                T_np = T_np @ self._T_flange_tool_np
+            T = torch.as_tensor(T_np, dtype=self.dtype, device=self.device)
+            self._keep_pose(key, T)
+            return T.clone().reshape(*batch, 4, 4)
+        T = dh_forward(q.reshape(-1, 6), UR5_DH)[:, -1]
         if frame == "tool":
             T = T @ self.T_flange_tool
-        if key is not None:
-            self._fk_cache[key] = T.detach().clone()
-            if len(self._fk_cache) > 8:
-                self._fk_cache.popitem(last=False)
         return T.reshape(*batch, 4, 4)
+
+    def _pose_key(self, q: torch.Tensor, frame: str) -> tuple:
+        return (frame, id(self.T_flange_tool), q.device, q.dtype, q.detach().cpu().numpy().tobytes())
+
+    def _keep_pose(self, key: tuple, T: torch.Tensor) -> None:
+        self._fk_cache[key] = T.detach().clone().reshape(4, 4)
+        if len(self._fk_cache) > 8:
+            self._fk_cache.popitem(last=False)
+
 
     def position(self, q: torch.Tensor | Sequence[float]) -> torch.Tensor:
         """`(..., 3)` fingertip position in the base frame [m] for `(..., 6)` joints ``q``."""
@@ -226,8 +252,15 @@ class UR5:
         """
         q = self._q(q)
         batch = q.shape[:-1]
-        J = self.chain.jacobian(q.reshape(-1, 6), locations=self.tool_offset)
+        _, J = self._pose_and_jacobian(q.reshape(-1, 6))
         return J.reshape(*batch, 6, 6)
+
+    def _pose_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """`(B, 4, 4)` fingertip poses and `(B, 6, 6)` their Jacobians at `(B, 6)` joints, from one pass over the
+        DH frames (:func:`kinematics.dh.dh_forward`)."""
+        frames = dh_forward(q, UR5_DH)
+        T = frames[:, -1] @ self.T_flange_tool
+        return T, dh_jacobian(frames, T[:, :3, 3])
 
     def inverse_kinematics(
         self,
@@ -331,6 +364,51 @@ class UR5:
         ok = ep <= 1e-5 and er <= 1e-5 and bool(((q >= lim[0]) & (q <= lim[1])).all())
         return (q if ok else None), (ep, er)
 
+    def _step_single(self, q: torch.Tensor, dx: torch.Tensor, hold_orientation: bool) -> torch.Tensor | None:
+        """:meth:`cartesian_step` of one joint vector `(6,)` outside autograd, in NumPy (:mod:`kinematics.single`);
+        None where it does not apply (a rotation error over 90 degrees: the torch path's robust log takes it).
+
+        A guarded motion repeats one small step many times (an approach, a press, a slide's sub-steps): the last
+        joint step of the same Cartesian step starts the Newton iterations (one iteration then converges where two
+        were needed), unless it starts further from the goal than the joints themselves."""
+        q0 = q.detach().cpu().numpy().astype(np.float64)
+        d = dx.detach().cpu().numpy().astype(np.float64)
+        goal = self.forward_kinematics(q).detach().cpu().numpy().copy()
+        goal[:3, 3] += d
+        key = (hold_orientation, d.tobytes())
+        warm = self._last_step[1] if self._last_step[0] == key else None
+        lower, upper = self._limits_np
+        q_k, T_k, converged = (q0 if warm is None else q0 + warm), None, False
+        for i in range(self.newton_iterations + (warm is not None)):
+            fr = single.frames(q_k, UR5_DH)
+            T_k = fr[-1] @ self._T_flange_tool_np
+            e = single.pose_error(goal, T_k)
+            if e is None:
+                return None
+            if not hold_orientation:
+                e = e[:3]
+            if i == 0 and warm is not None and np.abs(e).max() > 0.5 * np.abs(d).max():
+                q_k = q0                                          # a poor guess: start from the joints
+                continue
+            if np.abs(e).max() <= NEWTON_TOLERANCE:
+                converged = True
+                break
+            J = single.jacobian(fr, T_k[:3, 3])
+            if not hold_orientation:
+                J = J[:3]
+            q_k = q_k + single.dls_step(J, e, q_k, lower, upper, max_damping=self.max_damping,
+                                        threshold=self.singular_threshold, limit_margin=self.limit_margin)
+        dq = q_k - q0
+        self._last_step = (key, dq)
+        biggest = float(np.abs(dq).max())
+        if converged and biggest <= self.max_joint_step:
+            out = torch.as_tensor(q_k, dtype=self.dtype, device=self.device)
+            # the last iteration's pose is the pose of the joints returned: the robot asks for it next
+            self._keep_pose(self._pose_key(out, "tool"), torch.as_tensor(T_k, dtype=self.dtype, device=self.device))
+            return out
+        scale = self.max_joint_step / biggest if biggest > self.max_joint_step else 1.0
+        return torch.as_tensor(q0 + dq * scale, dtype=self.dtype, device=self.device)
+
     def cartesian_step(
         self,
         q: torch.Tensor,
@@ -343,8 +421,9 @@ class UR5:
 
         ``q_next = q + dq`` with ``dq`` from :func:`kinematics.ik.dls_step` on the fingertip Jacobian: adaptive
         damping near singularities, joints locked at their limits, and one uniform scale so that
-        ``max |dq| <= max_joint_step``. The DLS step is repeated ``newton_iterations`` times towards the goal
-        pose (``p(q) + dx``, orientation held), so the realised displacement matches ``dx`` to ~1e-9 m for
+        ``max |dq| <= max_joint_step``. The DLS step is repeated up to ``newton_iterations`` times towards the
+        goal pose (``p(q) + dx``, orientation held), stopping once the pose error is below
+        :data:`NEWTON_TOLERANCE`, so the realised displacement matches ``dx`` to ~1e-9 m for
         centimetre steps away from singularities and limits; near them the step is bounded but may fall
         short: callers that need exactness check ``position(q_next)`` (the robot backends do and refuse).
 
@@ -370,6 +449,17 @@ class UR5:
         qb, dxb = qb.expand(B, 6), dxb.expand(B, 3)
         if drot is not None and not hold_orientation:
             raise ValueError("drot needs hold_orientation=True")
+        if B == 1 and drot is None and not (torch.is_grad_enabled() and (q.requires_grad or dx.requires_grad)):
+            q_single = self._step_single(qb[0], dxb[0], hold_orientation)
+            if q_single is not None:
+                return q_single if single and dx.dim() == 1 else q_single[None]
+        q_next = self._step_batch(qb, dxb, drot, hold_orientation)
+        return q_next[0] if single and dx.dim() == 1 else q_next
+
+    def _step_batch(self, qb: torch.Tensor, dxb: torch.Tensor, drot: torch.Tensor | None,
+                    hold_orientation: bool) -> torch.Tensor:
+        """:meth:`cartesian_step` of `(B, 6)` joints and `(B, 3)` steps in torch (batched, differentiable)."""
+        B = qb.shape[0]
         T0 = self.forward_kinematics(qb)
         T_goal = T0.clone()
         T_goal[:, :3, 3] = T0[:, :3, 3] + dxb
@@ -378,16 +468,24 @@ class UR5:
             T_goal[:, :3, :3] = pk.axis_angle_to_matrix(w) @ T0[:, :3, :3]
         q_k = qb
         for _ in range(self.newton_iterations):
-            e = pose_error(T_goal, self.forward_kinematics(q_k))
-            J = self.chain.jacobian(q_k, locations=self.tool_offset)
+            frames = dh_forward(q_k, UR5_DH)
+            T_k = frames[:, -1] @ self.T_flange_tool
+            e = pose_error(T_goal, T_k)
             if not hold_orientation:
-                J, e = J[:, :3, :], e[:, :3]
-            q_k = q_k + dls_step(J, e, q_k, self.lower, self.upper, max_damping=self.max_damping,
-                                 threshold=self.singular_threshold, max_joint_step=math.inf,
-                                 limit_margin=self.limit_margin)
+                e = e[:, :3]
+            # each joint vector stops once converged (a 1 mm step: after two iterations), so a batch gives each
+            # member what it would get alone
+            going = e.abs().amax(dim=-1, keepdim=True) > NEWTON_TOLERANCE
+            if not bool(going.any()):
+                break
+            J = dh_jacobian(frames, T_k[:, :3, 3])
+            if not hold_orientation:
+                J = J[:, :3, :]
+            dq = dls_step(J, e, q_k, self.lower, self.upper, max_damping=self.max_damping,
+                          threshold=self.singular_threshold, max_joint_step=math.inf, limit_margin=self.limit_margin)
+            q_k = q_k + torch.where(going, dq, torch.zeros_like(dq))
         dq = q_k - qb
         biggest = dq.abs().amax(dim=-1, keepdim=True)
         scale = torch.where(biggest > self.max_joint_step, self.max_joint_step / biggest.clamp_min(1e-300),
                             torch.ones_like(biggest))
-        q_next = qb + dq * scale
-        return q_next[0] if single and dx.dim() == 1 else q_next
+        return qb + dq * scale

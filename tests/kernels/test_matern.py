@@ -36,6 +36,22 @@ def test_values_in_closed_form():
         Matern52(outputscale=float("nan"))
 
 
+def test_values_without_a_graph_are_the_graph_values_to_the_bit():
+    """Outside autograd the values are computed in place on row blocks (for grids against many observations);
+    they are the differentiable expression's values exactly, over more rows than one block."""
+    k = Matern52(lengthscale=0.07, outputscale=1.3)
+    g = torch.Generator().manual_seed(0)
+    a = torch.rand(3 * Matern52._BLOCK + 17, 3, generator=g, dtype=torch.float64)
+    b = torch.rand(300, 3, generator=g, dtype=torch.float64)
+    with torch.no_grad():
+        fast = k.value(a, b)
+    graph = k.value(a.clone().requires_grad_(True), b)
+    assert graph.requires_grad and not fast.requires_grad
+    assert torch.equal(fast, graph.detach())
+    s = math.sqrt(5) * torch.cdist(a, b).numpy() / 0.07
+    np.testing.assert_allclose(fast.numpy(), 1.3 * (1 + s + s * s / 3) * np.exp(-s), rtol=1e-12, atol=1e-15)
+
+
 def test_gpiois_with_matern_is_exact_on_both_engines(two_shape_data):
     """The structured engine stays exact for a kernel that is not the inverse multiquadric: the same marginal
     likelihood, gradient, Hessian, posterior and closed-form gradients as one dense Cholesky, after appends too."""

@@ -210,3 +210,88 @@ def test_the_pose_cache_gives_the_computed_pose_to_the_bit_and_keeps_autograd():
     for k in range(20):                                   # bounded: the oldest are dropped
         ur5.forward_kinematics(q + 0.01 * k)
     assert len(ur5._fk_cache) <= 8
+
+
+def test_closed_form_frames_equal_the_pytorch_kinematics_chain(ur5):
+    """The DH fast path (kinematics.dh.dh_forward / dh_jacobian) against the chain pytorch-kinematics builds from
+    the bundled URDF: poses and Jacobians of the fingertip (tool offset off the flange axis), batched."""
+    q = random_q(64, seed=11, span=2 * math.pi)
+    T_chain = ur5.chain.forward_kinematics(q).get_matrix() @ ur5.T_flange_tool
+    J_chain = ur5.chain.jacobian(q, locations=ur5.tool_offset)
+    assert torch.allclose(ur5.forward_kinematics(q), T_chain, rtol=0, atol=1e-12)
+    assert torch.allclose(ur5.jacobian(q), J_chain, rtol=0, atol=1e-12)
+    flange = ur5.chain.forward_kinematics(q).get_matrix()
+    assert torch.allclose(ur5.forward_kinematics(q, frame="flange"), flange, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("length", [1e-3, 2e-3, 1e-2])
+def test_cartesian_step_stops_iterating_once_converged(length):
+    """A millimetre step converges in two Newton iterations; more allowed iterations change nothing, and the
+    realised step still matches dx far below a micrometre."""
+    q = regular_configs()[1]
+    dx = torch.tensor([0.6, -0.48, 0.64], dtype=torch.float64) * length
+    steps = {}
+    for iterations in (3, 6):
+        arm = UR5(tool_offset=(0.01, -0.02, 0.05), newton_iterations=iterations)
+        steps[iterations] = arm.cartesian_step(q, dx)
+        assert torch.allclose(arm.position(steps[iterations]) - arm.position(q), dx, rtol=0, atol=1e-10)
+    assert torch.equal(steps[3], steps[6])
+
+
+def test_repeated_steps_start_from_the_last_joint_step_and_land_where_a_cold_start_does():
+    """An approach's repeated 1 mm step is warm-started from the previous joint step (outside autograd): every
+    step lands where a fresh arm's cold start lands (both stop within NEWTON_TOLERANCE of the goal: 1e-9 rad apart)
+    and moves the fingertip by dx; a warm start from far away (the same dx asked at other joints) is started cold."""
+    warm = UR5(tool_offset=(0.01, -0.02, 0.05))
+    dx = torch.tensor([0.0006, -0.0003, -0.0007], dtype=torch.float64)
+    q = regular_configs()[0]
+    with torch.no_grad():
+        for _ in range(20):
+            cold = UR5(tool_offset=(0.01, -0.02, 0.05)).cartesian_step(q, dx)
+            q_next = warm.cartesian_step(q, dx)
+            assert torch.allclose(q_next, cold, rtol=0, atol=1e-9)
+            assert torch.allclose(warm.position(q_next) - warm.position(q), dx, rtol=0, atol=1e-10)
+            q = q_next
+        elsewhere = regular_configs()[2]
+        q_far = warm.cartesian_step(elsewhere, dx)
+        assert torch.allclose(warm.position(q_far) - warm.position(elsewhere), dx, rtol=0, atol=1e-10)
+        assert float((q_far - elsewhere).abs().max()) < 0.05
+
+
+def test_one_joint_vector_in_numpy_equals_the_batched_torch_path(ur5):
+    """kinematics.single (one joint vector, no gradient) against the torch functions of a batch: poses, Jacobians,
+    pose errors and damped steps, the last near a singularity and with joints locked at their limits."""
+    from kinematics import single
+    from kinematics.dh import UR5_DH, dh_forward, dh_jacobian
+    from kinematics.ik import dls_step
+    from kinematics.ur5 import pose_error
+
+    qs = random_q(16, seed=5, span=2 * math.pi)
+    batch = ur5.forward_kinematics(qs)
+    frames = dh_forward(qs, UR5_DH)
+    J_batch = dh_jacobian(frames, frames[:, -1, :3, 3])
+    for i, q in enumerate(qs):
+        assert torch.allclose(ur5.forward_kinematics(q), batch[i], rtol=0, atol=1e-12)
+        fr = single.frames(q.numpy(), UR5_DH)
+        np.testing.assert_allclose(fr, frames[i].numpy(), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(single.jacobian(fr, fr[-1, :3, 3]), J_batch[i].numpy(), rtol=0, atol=1e-12)
+        other = batch[(i + 1) % len(qs)]
+        ref = pose_error(other[None], batch[i][None])[0]
+        if float(torch.trace(other[:3, :3] @ batch[i][:3, :3].T)) > 1.0:      # under 90 degrees apart
+            np.testing.assert_allclose(single.pose_error(other.numpy(), batch[i].numpy()), ref.numpy(), atol=1e-12)
+        else:
+            assert single.pose_error(other.numpy(), batch[i].numpy()) is None
+    g = torch.Generator().manual_seed(2)
+    lower, upper = ur5.lower, ur5.upper
+    for k in range(12):
+        J = torch.randn(6, 6, generator=g, dtype=torch.float64)
+        if k % 3 == 1:
+            J[:, 5] = J[:, 4] * (1 + 1e-4)                   # near-singular: damped
+        v = torch.randn(6, generator=g, dtype=torch.float64) * 0.01
+        q = torch.zeros(6, dtype=torch.float64)
+        if k % 3 == 2:
+            q[1] = float(upper[1]) - 2e-3                      # a joint at its limit: locked when it moves out
+        kw = dict(max_damping=0.05, threshold=0.05, limit_margin=1e-3)
+        ref = dls_step(J[None], v[None], q[None], lower, upper, max_joint_step=math.inf, **kw)[0]
+        got = single.dls_step(J.numpy(), v.numpy(), q.numpy(), lower.numpy(), upper.numpy(), **kw)
+        np.testing.assert_allclose(got, ref.numpy(), rtol=0, atol=1e-12)

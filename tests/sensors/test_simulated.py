@@ -63,3 +63,32 @@ def test_dropouts_repeat_the_previous_sample_and_disconnect_persists():
             s2.read()
     with pytest.raises(ValueError, match="unknown fault"):
         SimulatedForceSensor(world, lambda: pose_at([1.0, 0.0, 0.0]), faults={0: "melt"})
+
+
+def test_bounding_boxes_skip_only_forces_that_are_zero():
+    """With each surface's box given, a fingertip outside it is not looked up; every force is the one computed
+    without the boxes, to the bit (points inside, between the surfaces, beside and far from the body)."""
+    import trimesh
+
+    from torch_gpioius.sim.shapes3d import MeshSDF
+
+    inner = trimesh.creation.icosphere(subdivisions=2, radius=0.05)
+    outer = trimesh.creation.icosphere(subdivisions=2, radius=0.06)
+    plain = ForceFieldContact(MeshSDF(inner), MeshSDF(outer))
+    boxed = ForceFieldContact(MeshSDF(inner), MeshSDF(outer), inner_bounds=inner.bounds, outer_bounds=outer.bounds)
+    g = torch.Generator().manual_seed(0)
+    points = (torch.rand(300, 3, generator=g, dtype=torch.float64) - 0.5) * 0.2
+    nonzero = 0
+    for p in points:
+        a, b = plain(p), boxed(p)
+        assert torch.equal(a, b)
+        nonzero += int(float(a.norm()) > 0)
+    assert nonzero > 5                           # some points do press into a surface
+
+
+def test_bad_bounding_boxes_are_refused():
+    sphere = SphereSDF(torch.zeros(3, dtype=torch.float64), 0.1)
+    with pytest.raises(ValueError, match="inner_bounds"):
+        ForceFieldContact(sphere, inner_bounds=[[0.0, 0.0, 0.0]])
+    with pytest.raises(ValueError, match="outer_bounds"):
+        ForceFieldContact(sphere, sphere, outer_bounds=[[1.0, 0.0, 0.0], [0.0, 1.0, 1.0]])

@@ -48,22 +48,44 @@ class ForceFieldContact:
         outer: signed distance of the cover's outer surface (None: no cover).
         k_inner: stiffness of the inner object [N/m] (1000 N/m: 1 N at 1 mm, 5 N at 5 mm).
         k_cover: stiffness of the cover [N/m] (10 N/m: 0.1 N per cm of cover).
+        inner_bounds, outer_bounds: optional `(2, 3)` axis-aligned boxes [m] holding each surface: a fingertip
+            outside a box is outside that surface, so its spring pushes with exactly zero force and its signed
+            distance is not evaluated (a mesh's distance is a k-d tree search; most of an approach is in free space).
     """
 
     def __init__(self, inner: SignedDistance, outer: SignedDistance | None = None, *, k_inner: float = 1000.0,
-                 k_cover: float = 10.0) -> None:
+                 k_cover: float = 10.0, inner_bounds=None, outer_bounds=None) -> None:
         self.inner, self.outer = inner, outer
         self.k_inner, self.k_cover = float(k_inner), float(k_cover)
+        self._boxes = [_box(inner_bounds, "inner_bounds"), _box(outer_bounds, "outer_bounds")]
+
+    def _spring(self, sdf: SignedDistance, box: np.ndarray | None, k: float, p: torch.Tensor) -> torch.Tensor | None:
+        if box is not None:
+            x = p[0].detach().cpu().numpy()
+            if (x < box[0]).any() or (x > box[1]).any():
+                return None
+        d, n = sdf(p)
+        return k * torch.clamp(-d[0], min=0.0) * n[0]
 
     def __call__(self, p: torch.Tensor) -> torch.Tensor:
         """`(3,)` force on the fingertip at `(3,)` position ``p``, base frame [N]."""
         p = torch.as_tensor(p, dtype=torch.float64).reshape(1, 3)
-        d, n = self.inner(p)
-        f = self.k_inner * torch.clamp(-d[0], min=0.0) * n[0]
-        if self.outer is not None:
-            d_o, n_o = self.outer(p)
-            f = f + self.k_cover * torch.clamp(-d_o[0], min=0.0) * n_o[0]
+        f = torch.zeros(3, dtype=torch.float64)
+        for sdf, box, k in ((self.inner, self._boxes[0], self.k_inner), (self.outer, self._boxes[1], self.k_cover)):
+            if sdf is not None:
+                push = self._spring(sdf, box, k, p)
+                if push is not None:
+                    f = f + push
         return f
+
+
+def _box(bounds, name: str) -> np.ndarray | None:
+    if bounds is None:
+        return None
+    b = np.asarray(bounds, dtype=np.float64)
+    if b.shape != (2, 3) or not np.isfinite(b).all() or (b[0] > b[1]).any():
+        raise ValueError(f"{name}: expected a finite (2, 3) box [lower; upper] [m], got {bounds!r}")
+    return b
 
 
 class SimulatedForceSensor(ForceSensor):

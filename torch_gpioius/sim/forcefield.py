@@ -646,8 +646,8 @@ class Scene3D(RangedScene):
 
     def contact_model(self, k_inner: float = 1000.0) -> ForceFieldContact:
         """Force on a point fingertip: the rigid inner mesh and the soft cover (``cover_stiffness``)."""
-        return ForceFieldContact(self.inner_sdf, self.outer_sdf, k_inner=k_inner,
-                              k_cover=self.cover_stiffness)
+        return ForceFieldContact(self.inner_sdf, self.outer_sdf, k_inner=k_inner, k_cover=self.cover_stiffness,
+                                 inner_bounds=self.inner.bounds, outer_bounds=self.outer.bounds)
 
     def default_camera(self, scale: float = 0.5, seed=None, side: float = 1.0) -> SimulatedDepthCamera:
         """A Kinect v2 (half resolution; depth noise 1.5 mm + 1.5 mm/m^2 * z^2) looking at the centre of the
