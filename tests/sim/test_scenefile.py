@@ -60,6 +60,29 @@ def test_the_default_approach_hits_the_body_from_above():
     assert (bounds[0] < mug.bounds[1]).all() and bounds[1, 2] >= start[2] - 0.01
 
 
+def test_the_default_approach_passes_a_thin_lip_by_for_a_ray_that_is_felt():
+    """A thin fin (2 mm) standing above the middle of a box: the ray through the centre passes along the fin without
+    ever being 3 mm inside it, so the approach takes the nearest ray whose first passage is deep enough (the box's
+    top), and the scene's first contact is felt."""
+    from torch_gpioius.sim.forcefield import first_passage
+    from torch_gpioius.sim.meshes import MeshDistance
+
+    box = trimesh.creation.box((0.12, 0.10, 0.06))
+    fin = trimesh.creation.box((0.002, 0.08, 0.03))
+    fin.apply_translation((0.0, 0.0, 0.03 + 0.005 + 0.015))
+    body = place(trimesh.util.concatenate([box, fin]), (0.5, 0.0, 0.1))
+    assert body.is_watertight
+    distance = MeshDistance(body)
+    centre = np.r_[body.bounds.mean(axis=0)[:2], body.bounds[1, 2] + 0.1]
+    down = np.array([0.0, 0.0, -1.0])
+    assert first_passage(body, distance, centre, down)[1] < Scene3D.MIN_APPROACH_DEPTH     # the centre grazes
+    start, direction, bounds = approach_from_above(body, body)
+    t, depth = first_passage(body, distance, start, direction)
+    assert depth >= Scene3D.MIN_APPROACH_DEPTH and abs(start[0] - centre[0]) > 0.001
+    assert first_passage(body, distance, centre + [0, 0, 1.0], down) is not None
+    assert first_passage(body, distance, centre + [1.0, 0, 0], down) is None              # beside the body: a miss
+
+
 def _write(tmp_path, text: str, name: str = "scene.toml"):
     (tmp_path / "bottle.stl").write_bytes(trimesh.creation.revolve(PROFILE, sections=48).export(file_type="stl"))
     path = tmp_path / name

@@ -34,7 +34,7 @@ from .ranged import RangedScene
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
 __all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d",
-           "ROBOT_STUDY_DEFAULTS", "cover_around", "approach_from_above", "place"]
+           "ROBOT_STUDY_DEFAULTS", "cover_around", "approach_from_above", "first_passage", "place"]
 
 #: The robot study's settings (Sec. VI-A): theta 0.15, sigma^2 0.08, alpha 1 cm, 1.5 m of travel, the range
 #: penalty of eq. (25), the camera averaged in 5 cm voxels and cropped to 15 cm around the range.
@@ -620,17 +620,14 @@ class Scene3D(RangedScene):
             ValueError: the approach ray misses the inner mesh, or only grazes it (its first passage through the body
                 is never :attr:`MIN_APPROACH_DEPTH` deep).
         """
-        hits, _, _ = self.inner.ray.intersects_location(self.start[None], self.direction[None], multiple_hits=True)
-        if len(hits) == 0:
+        passage = first_passage(self.inner, self.true_distance, self.start, self.direction)
+        if passage is None:
             raise ValueError("direction: the approach ray from start misses the inner mesh")
-        t = np.sort(np.linalg.norm(hits - self.start, axis=1))
-        if len(t) >= 2:
-            chord = self.start + np.linspace(t[0], t[1], 41)[:, None] * self.direction
-            depth = -float(self.true_distance(chord).min())
-            if depth < self.MIN_APPROACH_DEPTH:
-                raise ValueError(f"direction: the approach ray only grazes the inner mesh ({depth * 1e3:.1f} mm deep "
-                                 f"at most; at least {self.MIN_APPROACH_DEPTH * 1e3:.0f} mm is needed to feel it)")
-        return self.start + t[0] * self.direction
+        t, depth = passage
+        if depth < self.MIN_APPROACH_DEPTH:
+            raise ValueError(f"direction: the approach ray only grazes the inner mesh ({depth * 1e3:.1f} mm deep "
+                             f"at most; at least {self.MIN_APPROACH_DEPTH * 1e3:.0f} mm is needed to feel it)")
+        return self.start + t * self.direction
 
     def true_surface_samples(self, spacing: float) -> np.ndarray:
         """`(n, 3)` samples of the whole inner mesh, about one per ``spacing``^2 [m]."""
@@ -782,11 +779,37 @@ def _cover_on_grid(mesh: trimesh.Trimesh, kind: str, gap: float, bridge: float, 
     return out
 
 
+def first_passage(inner: trimesh.Trimesh, distance, start, direction) -> tuple[float, float] | None:
+    """Where the ray from ``start`` `(3,)` along the unit ``direction`` `(3,)` first enters the closed ``inner`` mesh,
+    and how deep its first passage through it goes.
+
+    Args:
+        inner: the closed body mesh [m].
+        distance: its signed distance, `(n, 3)` points -> `(n,)` [m], negative inside.
+        start, direction: the ray [m].
+
+    Returns:
+        ``(t, depth)``: the distance [m] along the ray to the entry, and the deepest point of the chord to the next
+        crossing [m] (41 samples; ``inf`` when the ray crosses the surface once, e.g. from inside); None when the
+        ray misses.
+    """
+    start, direction = np.asarray(start, dtype=np.float64), np.asarray(direction, dtype=np.float64)
+    hits, _, _ = inner.ray.intersects_location(start[None], direction[None], multiple_hits=True)
+    if len(hits) == 0:
+        return None
+    t = np.sort(np.linalg.norm(hits - start, axis=1))
+    if len(t) < 2:
+        return float(t[0]), math.inf
+    chord = start + np.linspace(t[0], t[1], 41)[:, None] * direction
+    return float(t[0]), -float(np.min(distance(chord)))
+
+
 def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearance: float = 0.08,
                         margin: float = 0.03) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A default approach and range for an object on a table: straight down onto the body point nearest the centre
     of its top view (rays cast on a grid, so a ring's hole, where a ray meets nothing, is never aimed at; a cup's
-    opening is: its ray meets the inside bottom, so give a cup a side approach), starting
+    opening is: its ray meets the inside bottom, so give a cup a side approach) whose first passage through the body
+    is at least ``Scene3D.MIN_APPROACH_DEPTH`` deep (:func:`first_passage`; not a thin lip), starting
     ``clearance`` above the cover; the range is the cover's bounding box grown by ``margin`` [m], from a quarter of
     the body's height up (the part a camera and a fingertip reach on a table).
 
@@ -796,6 +819,8 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
     Raises:
         ValueError: no downward ray hits the body.
     """
+    from .meshes import MeshDistance
+
     lo, hi = inner.bounds
     centre = (lo + hi) / 2
     u = np.linspace(-0.4, 0.4, 9)
@@ -807,7 +832,16 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
     hit = inner.ray.intersects_any(origins, np.broadcast_to(down, origins.shape))
     if not hit.any():
         raise ValueError("no downward ray hits the body: give start and direction")
+    # the ray nearest the centre whose first passage through the body is deep enough to be felt (a ray through a
+    # thin lip or the sliver where two pieces of a blob meet passes through without a contact); if none is, the
+    # nearest that hits, and the scene says that its approach grazes
+    distance = MeshDistance(inner)
     start = origins[int(np.argmax(hit))]
+    for i in np.flatnonzero(hit):
+        passage = first_passage(inner, distance, origins[i], down)
+        if passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH:
+            start = origins[i]
+            break
     b_lo, b_hi = outer.bounds[0] - margin, outer.bounds[1] + margin
     b_lo[2] = lo[2] + 0.25 * (hi[2] - lo[2])
     b_hi[2] = max(b_hi[2], start[2] - 0.01)
