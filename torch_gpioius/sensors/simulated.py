@@ -48,9 +48,10 @@ class ForceFieldContact:
         outer: signed distance of the cover's outer surface (None: no cover).
         k_inner: stiffness of the inner object [N/m] (1000 N/m: 1 N at 1 mm, 5 N at 5 mm).
         k_cover: stiffness of the cover [N/m] (10 N/m: 0.1 N per cm of cover).
-        inner_bounds, outer_bounds: optional `(2, 3)` axis-aligned boxes [m] holding each surface: a fingertip
-            outside a box is outside that surface, so its spring pushes with exactly zero force and its signed
-            distance is not evaluated (a mesh's distance is a k-d tree search; most of an approach is in free space).
+        inner_bounds: optional `(2, 3)` axis-aligned box [m] holding the inner surface: a fingertip outside it is
+            outside that surface, so its spring pushes with exactly zero force and its signed distance is not
+            evaluated (a mesh's distance is a tree search; most of an approach is in free space).
+        outer_bounds: the same for the cover's outer surface.
     """
 
     def __init__(self, inner: SignedDistance, outer: SignedDistance | None = None, *, k_inner: float = 1000.0,

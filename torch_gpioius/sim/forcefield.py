@@ -786,7 +786,8 @@ def first_passage(inner: trimesh.Trimesh, distance, start, direction) -> tuple[f
     Args:
         inner: the closed body mesh [m].
         distance: its signed distance, `(n, 3)` points -> `(n,)` [m], negative inside.
-        start, direction: the ray [m].
+        start: `(3,)` the ray's origin [m].
+        direction: `(3,)` its unit direction.
 
     Returns:
         ``(t, depth)``: the distance [m] along the ray to the entry, and the deepest point of the chord to the next
