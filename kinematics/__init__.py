@@ -1,7 +1,8 @@
 """UR5 (CB3) kinematics and robot backends for torch_gpioius.
 
-``UR5`` loads the bundled URDF (written from the published DH table) with pytorch-kinematics: forward
-kinematics, inverse kinematics and a differentiable damped-least-squares Cartesian step. The backends
+``UR5``: forward kinematics and Jacobians from the published DH table in closed form (``dh.dh_forward``, torch,
+batched and differentiable; ``single``, NumPy for one joint vector), inverse kinematics on the bundled URDF (written
+from the same table) with pytorch-kinematics, and a differentiable damped-least-squares Cartesian step. The backends
 (``SimulatedUR5``, ``RTDEUR5``) execute motions behind one interface, every command through one
 ``SafetyGate``. See docs/robot.md.
 """
