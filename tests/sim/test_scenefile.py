@@ -81,6 +81,10 @@ def test_the_default_approach_passes_a_thin_lip_by_for_a_ray_that_is_felt():
     assert depth >= Scene3D.MIN_APPROACH_DEPTH and abs(start[0] - centre[0]) > 0.001
     assert first_passage(body, distance, centre + [0, 0, 1.0], down) is not None
     assert first_passage(body, distance, centre + [1.0, 0, 0], down) is None              # beside the body: a miss
+    assert first_passage(body, distance, centre, 3 * down) == first_passage(body, distance, centre, down)
+    for bad in ([0.0, 0.0, 0.0], [0.0, np.nan, -1.0], [0.0, -1.0]):
+        with pytest.raises(ValueError, match="first_passage"):
+            first_passage(body, distance, centre, bad)
 
 
 def _write(tmp_path, text: str, name: str = "scene.toml"):

@@ -780,21 +780,33 @@ def _cover_on_grid(mesh: trimesh.Trimesh, kind: str, gap: float, bridge: float, 
 
 
 def first_passage(inner: trimesh.Trimesh, distance, start, direction) -> tuple[float, float] | None:
-    """Where the ray from ``start`` `(3,)` along the unit ``direction`` `(3,)` first enters the closed ``inner`` mesh,
+    """Where the ray from ``start`` `(3,)` along ``direction`` `(3,)` first enters the closed ``inner`` mesh,
     and how deep its first passage through it goes.
 
     Args:
         inner: the closed body mesh [m].
         distance: its signed distance, `(n, 3)` points -> `(n,)` [m], negative inside.
         start: `(3,)` the ray's origin [m].
-        direction: `(3,)` its unit direction.
+        direction: `(3,)` its direction (normalised here).
 
     Returns:
         ``(t, depth)``: the distance [m] along the ray to the entry, and the deepest point of the chord to the next
         crossing [m] (41 samples; ``inf`` when the ray crosses the surface once, e.g. from inside); None when the
         ray misses.
+
+    Raises:
+        ValueError: a start or direction that is not a finite 3-vector, or a zero direction.
     """
     start, direction = np.asarray(start, dtype=np.float64), np.asarray(direction, dtype=np.float64)
+    finite = np.isfinite(start).all() and np.isfinite(direction).all()
+    if start.shape != (3,) or direction.shape != (3,) or not finite:
+        raise ValueError(f"first_passage: start and direction must be finite (3,) vectors, got {start!r}, "
+                         f"{direction!r}")
+    length = float(np.linalg.norm(direction))
+    if length == 0.0:
+        raise ValueError("first_passage: direction is the zero vector")
+    if abs(length - 1.0) > 1e-12:
+        direction = direction / length
     hits, _, _ = inner.ray.intersects_location(start[None], direction[None], multiple_hits=True)
     if len(hits) == 0:
         return None
