@@ -235,7 +235,6 @@ class UR5:
         if len(self._fk_cache) > 8:
             self._fk_cache.popitem(last=False)
 
-
     def position(self, q: torch.Tensor | Sequence[float]) -> torch.Tensor:
         """`(..., 3)` fingertip position in the base frame [m] for `(..., 6)` joints ``q``."""
         return self.forward_kinematics(q)[..., :3, 3]
@@ -252,15 +251,14 @@ class UR5:
         """
         q = self._q(q)
         batch = q.shape[:-1]
-        _, J = self._pose_and_jacobian(q.reshape(-1, 6))
-        return J.reshape(*batch, 6, 6)
+        frames, T = self._frames_and_tool(q.reshape(-1, 6))
+        return dh_jacobian(frames, T[:, :3, 3]).reshape(*batch, 6, 6)
 
-    def _pose_and_jacobian(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """`(B, 4, 4)` fingertip poses and `(B, 6, 6)` their Jacobians at `(B, 6)` joints, from one pass over the
-        DH frames (:func:`kinematics.dh.dh_forward`)."""
+    def _frames_and_tool(self, q: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The DH frames `(B, 6, 4, 4)` (:func:`kinematics.dh.dh_forward`) and the fingertip poses `(B, 4, 4)` at
+        `(B, 6)` joints: what a Jacobian and a pose error are both made from."""
         frames = dh_forward(q, UR5_DH)
-        T = frames[:, -1] @ self.T_flange_tool
-        return T, dh_jacobian(frames, T[:, :3, 3])
+        return frames, frames[:, -1] @ self.T_flange_tool
 
     def inverse_kinematics(
         self,
@@ -468,8 +466,7 @@ class UR5:
             T_goal[:, :3, :3] = pk.axis_angle_to_matrix(w) @ T0[:, :3, :3]
         q_k = qb
         for _ in range(self.newton_iterations):
-            frames = dh_forward(q_k, UR5_DH)
-            T_k = frames[:, -1] @ self.T_flange_tool
+            frames, T_k = self._frames_and_tool(q_k)
             e = pose_error(T_goal, T_k)
             if not hold_orientation:
                 e = e[:, :3]

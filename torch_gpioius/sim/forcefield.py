@@ -522,13 +522,10 @@ class Scene3D(RangedScene):
     def tactile_pad(self, robot, field=None):
         """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
         contact force of the field, sees the body through 0.5 mm of pinched cloth."""
-        from .meshes import MeshDistance
         from .tactile import SimulatedGelPad
 
-        if getattr(self, "_body_distance", None) is None:
-            self._body_distance = MeshDistance(self.inner)
         field = field or self.contact_model()
-        return SimulatedGelPad(self._body_distance, lambda: robot.tool_position().detach().numpy(),
+        return SimulatedGelPad(self.inner_sdf.distance, lambda: robot.tool_position().detach().numpy(),
                                lambda: field(robot.tool_position().detach()).numpy(), clock=lambda: robot.time)
 
     def penalty(self) -> RangePenalty:
@@ -661,7 +658,7 @@ class Scene3D(RangedScene):
 
     def true_distance(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` exact signed distance of `(n, 3)` points from the inner mesh [m] (negative inside)."""
-        return self.inner_sdf(np.asarray(points, dtype=np.float64).reshape(-1, 3))[0].numpy()
+        return self.inner_sdf.distance(np.asarray(points, dtype=np.float64).reshape(-1, 3))
 
     def contact_truth(self, hw, contact):
         """The contact's distance from the inner mesh, and whether the fingertip presses into the body itself (the

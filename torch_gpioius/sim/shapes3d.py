@@ -127,6 +127,10 @@ class MeshSDF:
     Args:
         mesh: a closed (watertight) ``trimesh.Trimesh`` [m].
 
+    Attributes:
+        distance: the mesh's :class:`~torch_gpioius.sim.meshes.MeshDistance` (NumPy in, NumPy out; no normals), for
+            callers that need the distance alone.
+
     Raises:
         ValueError: the mesh is not watertight (inside/outside would be undefined).
     """
@@ -139,14 +143,14 @@ class MeshSDF:
         if not mesh.is_watertight:
             raise ValueError("MeshSDF: the mesh is not watertight; inside/outside is undefined")
         self.mesh = mesh
-        self._distance = MeshDistance(mesh)
+        self.distance = MeshDistance(mesh)
         self._face_normals = np.array(mesh.face_normals)
 
     def __call__(self, points: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """`(m, 3)` points [m] -> `(m,)` signed distances [m] (negative inside), `(m, 3)` outward normals."""
         p = torch.as_tensor(points, dtype=torch.float64)
         q = p.detach().cpu().numpy().reshape(-1, 3)
-        dist, closest, face = self._distance.closest(q)
+        dist, closest, face = self.distance.closest(q)
         normal = self._face_normals[face].copy()
         off = np.abs(dist) > 1e-9
         normal[off] = (q[off] - closest[off]) / dist[off, None]        # outward on both sides: d < 0 inside
