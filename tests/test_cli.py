@@ -494,3 +494,44 @@ def test_fit_on_one_contact_and_one_seen_point_says_it_cannot_tell(tmp_path, cap
     assert support["inner"] == 1 and support["outer"] == 1 and support["enough"] is False
     assert main(["fit", str(EXAMPLE)]) == 0                      # the example: enough (4 and 10 patches)
     assert "too few" not in capsys.readouterr().out
+
+
+def test_fit_sizes_the_kernel_to_the_clouds_and_takes_a_kernel_or_length_in_its_place(tmp_path, capsys):
+    """The default settings' length is a fifth of the clouds' largest extent (4-10 cm); ``--lengthscale`` fixes it
+    (the rule dropped), ``--kernel`` alone changes the kind and keeps the rule, on a user's files and on a dataset
+    file alike; ``--theta`` beside them is refused by name."""
+    import json
+
+    import trimesh
+
+    import torch_gpioius as tg
+
+    c = np.array([0.5, 0.0, 0.25])
+    shell = trimesh.creation.icosphere(2, radius=0.2).vertices + c          # a 40 cm body: 8 cm
+    rows = ["x,y,z,label"] + [f"{x},{y},{z},contact" for x, y, z in shell[shell[:, 2] > c[2] + 0.15][:12]]
+    (tmp_path / "touch.csv").write_text("\n".join(rows) + "\n")
+    trimesh.PointCloud(shell + 0.01 * (shell - c) / 0.2).export(tmp_path / "cover.ply")
+    files = [str(tmp_path / "touch.csv"), "--cloud", str(tmp_path / "cover.ply"), "--camera-origin", "0.5 -1 0.25"]
+
+    def fitted(*extra):
+        out = tmp_path / f"fit{len(list(tmp_path.glob('fit*')))}"
+        assert main(["fit", *files, *extra, "--out", str(out)]) == 0
+        capsys.readouterr()
+        return json.loads((out / "fit.json").read_text())
+
+    rule = fitted()
+    assert rule["kernel"]["kernel"] == "Matern52" and rule["lengthscale"] == pytest.approx(0.084, abs=1e-12)
+    assert rule["settings"]["length_rule"] == {"fraction": 0.2, "lo": 0.04, "hi": 0.1}
+    fixed = fitted("--lengthscale", "0.06")
+    assert fixed["lengthscale"] == pytest.approx(0.06) and fixed["settings"]["length_rule"] is None
+    imq = fitted("--kernel", "imq")
+    assert imq["kernel"]["kernel"] == "InverseMultiquadric" and imq["lengthscale"] == pytest.approx(0.084)
+    # a dataset file: the choice on top of the kernel it was labelled with
+    ds = tg.io.importers.dataset_from_files(tmp_path / "touch.csv", tmp_path / "cover.ply",
+                                            camera_origin=[0.5, -1, 0.25])
+    tg.save_dataset(ds, tmp_path / "mine.gpioius")
+    assert main(["fit", str(tmp_path / "mine.gpioius"), "--lengthscale", "0.05", "--out", str(tmp_path / "d")]) == 0
+    info = json.loads((tmp_path / "d" / "fit.json").read_text())
+    assert info["kernel"]["kernel"] == "Matern52" and info["lengthscale"] == pytest.approx(0.05)
+    assert main(["fit", *files, "--lengthscale", "0.05", "--theta", "0.1"]) == 2
+    assert "--theta (deprecated)" in capsys.readouterr().err

@@ -97,9 +97,15 @@ def _fit(args: argparse.Namespace) -> int:
     if origins and len(origins) != len(clouds):
         raise ValueError(f"--camera-origin: {len(origins)} given for {len(clouds)} --cloud file(s); give one per "
                          "cloud, in the same order")
+    from .kernels import KernelChoice
     from .models.base import kernel_for_theta
 
+    choice = KernelChoice(args.kernel, args.lengthscale)
+    if choice and args.theta is not None:
+        raise ValueError("fit: --theta (deprecated) names a kernel and its length; give --kernel and --lengthscale "
+                         "instead, not both")
     kernel = kernel_for_theta(args.theta, None, "gpioius fit --theta; fit_dataset")   # deprecated: the kernel's own
+    kernel = choice if choice else kernel
     if args.out:                             # arguments checked first: a refused call leaves no folder behind
         from .io.outputs import claim_folder
 
@@ -110,6 +116,11 @@ def _fit(args: argparse.Namespace) -> int:
 
         cloud = None if not clouds else (clouds[0] if len(clouds) == 1 else clouds)
         origin = None if not origins else (origins[0] if len(origins) == 1 else origins)
+        if choice:                               # the files are labelled, and the length sized, with the choice
+            from .models.estimator import EstimatorSettings
+
+            settings = EstimatorSettings.of(settings).with_kernel(choice)
+            kernel = None
         ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel, camera_origin=origin,
                                 settings=settings)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
@@ -648,6 +659,12 @@ def _add_fit(sub, common, fmt) -> None:
     fit.add_argument("--outer-mesh", default=None, metavar="OUT.ply", help="write the outer estimate there")
     fit.add_argument("--resolution", type=_length("resolution"), default=None,
                      help="grid of the estimate [m] (default 5 mm in 2-D, 2 cm in 3-D)")
+    fit.add_argument("--kernel", default=None, type=_kernel_name,
+                     help=f"the kernel in place of the settings': {_kernel_names()} (at the settings' length, or "
+                          "the settings' length rule, when --lengthscale is not given)")
+    fit.add_argument("--lengthscale", type=_length("lengthscale"), default=None,
+                     help="the kernel's length scale [m] in place of the settings' (whose default is a fifth of the "
+                          "object's largest extent, 4-10 cm); with --learn length or all, where the learning starts")
     fit.add_argument("--theta", type=float, default=None,
                      help="deprecated: the inverse multiquadric's length scale [m] in place of the settings' kernel")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 in place of the settings'")

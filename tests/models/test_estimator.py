@@ -1,5 +1,6 @@
 """The estimator's settings object: presets, its dict (what logs, datasets, checkpoints and scene files store) and
-back, partial dicts on a preset, the voxel rule, and the models it makes, against values written out here."""
+back, partial dicts on a preset, the voxel and length rules, and the models it makes, against values written out
+here."""
 
 import json
 
@@ -7,8 +8,8 @@ import numpy as np
 import pytest
 
 import torch_gpioius as tg
-from torch_gpioius.kernels import InverseMultiquadricKernel, Matern52
-from torch_gpioius.models.estimator import PRESETS, EstimatorSettings, VoxelRule
+from torch_gpioius.kernels import InverseMultiquadricKernel, KernelChoice, Matern52
+from torch_gpioius.models.estimator import PRESETS, EstimatorSettings, LengthRule, VoxelRule
 
 
 @pytest.mark.parametrize("name", sorted(PRESETS))
@@ -35,6 +36,7 @@ def test_the_presets_hold_what_they_name():
     assert isinstance(default.kernel, Matern52) and default.lengthscale == pytest.approx(0.1)
     assert default.labels.touch_inside == 0.02 and default.labels.vision_inside == 0.02
     assert default.labels.vision_inside_gap == 0.03 and default.voxel_rule == VoxelRule(0.1, 0.02, 0.05)
+    assert default.length_rule == LengthRule(0.2, 0.04, 0.10) and paper.length_rule is None
 
 
 def test_a_partial_dict_changes_its_keys_on_the_preset_and_is_named_custom():
@@ -71,8 +73,39 @@ def test_the_voxel_rule_sizes_the_voxels_to_the_object_and_a_fixed_voxel_drops_i
     for extent, voxel in ((0.30, 0.03), (1.0, 0.05), (0.1, 0.02), (0.2345, 0.0234)):
         assert default.for_extent(extent).labels.voxel == pytest.approx(voxel, abs=1e-12)
     fixed = default.with_voxel(0.01)
-    assert fixed.voxel_rule is None and fixed.labels.voxel == 0.01 and fixed.for_extent(0.3) is fixed
+    assert fixed.voxel_rule is None and fixed.labels.voxel == 0.01 and fixed.for_extent(0.3).labels.voxel == 0.01
     assert default.with_voxel(0).labels.voxel is None
+
+
+def test_the_length_rule_sizes_the_kernel_to_the_object_and_a_kernel_given_drops_it():
+    default = EstimatorSettings.preset("default")
+    # a fifth of the largest extent, within 4-10 cm, to 0.1 mm; the voxels follow their own rule beside it
+    for extent, length in ((0.15, 0.04), (0.30, 0.06), (0.7, 0.10), (0.2345, 0.0469)):
+        sized = default.for_extent(extent)
+        assert sized.lengthscale == pytest.approx(length, abs=1e-12) and isinstance(sized.kernel, Matern52)
+        assert sized.length_rule == default.length_rule and sized.for_extent(extent) is sized
+        assert EstimatorSettings.from_dict(json.loads(json.dumps(sized.to_dict()))) == sized
+    assert default.lengthscale == pytest.approx(0.1)      # the object's size unknown: the rule's longest
+    assert "a fifth of the object, 4 cm-10 cm" in default.summary()
+    # a kernel given carries the length asked for
+    mine = default.replace(kernel=Matern52(0.07))
+    assert mine.length_rule is None and mine.for_extent(0.3).lengthscale == pytest.approx(0.07)
+    named = default.with_kernel(KernelChoice("imq"))                  # a kind alone keeps the rule
+    assert isinstance(named.kernel, InverseMultiquadricKernel) and named.length_rule == default.length_rule
+    assert named.for_extent(0.3).lengthscale == pytest.approx(0.06) and default.with_kernel(KernelChoice()) is default
+    assert default.with_kernel(KernelChoice(lengthscale=0.05)).for_extent(0.3).lengthscale == pytest.approx(0.05)
+    asked = EstimatorSettings.from_dict({"preset": "default", "lengthscale": 0.07})
+    assert asked.length_rule is None and asked.for_extent(0.15).lengthscale == pytest.approx(0.07)
+    # a rule of one's own, and none
+    own = EstimatorSettings.from_dict({"preset": "default", "length_rule": {"fraction": 0.25, "lo": 0.03, "hi": 0.12}})
+    assert own.name == "custom" and own.for_extent(0.2).lengthscale == pytest.approx(0.05)
+    assert EstimatorSettings.from_dict({"preset": "default", "length_rule": None}).for_extent(0.15).lengthscale == 0.1
+    for bad, match in (({"fraction": 0}, "length_rule.fraction"), ({"lo": 0.2, "hi": 0.1}, "must not exceed"),
+                       ({"fraction": 0.2, "step": 1}, "expected fraction, lo and hi")):
+        with pytest.raises(ValueError, match=match):
+            EstimatorSettings.from_dict({"preset": "default", "length_rule": bad})
+    with pytest.raises(ValueError, match="extent"):
+        default.for_extent(float("nan"))
 
 
 def test_of_takes_settings_or_a_presets_name_and_names_anything_else():

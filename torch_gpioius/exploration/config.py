@@ -233,10 +233,10 @@ class ExploreConfig(EstimatorView):
 
 def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) -> EstimatorSettings:
     """The estimator's settings of one exploration: ``settings`` (an :class:`EstimatorSettings` or a preset's name;
-    a preset's voxel rule sized to the world's object) or the world's own, with the single settings given beside
-    it in their place."""
+    a preset's voxel and length rules sized to the world's object) or the world's own, with the single settings given
+    beside it in their place."""
     est = world.defaults.estimator if settings is None else EstimatorSettings.of(settings)
-    if est.voxel_rule is not None and est is not world.defaults.estimator:
+    if est.sized_to_object and est is not world.defaults.estimator:
         extent = world.object_extent
         if extent is not None:
             est = est.for_extent(extent)

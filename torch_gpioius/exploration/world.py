@@ -270,7 +270,7 @@ class World(abc.ABC):
     @property
     def object_extent(self) -> float | None:
         """The largest extent [m] of the body, where the world knows it (its ``inner`` mesh): what the estimator
-        settings' voxel rule sizes the camera's voxels to; None elsewhere."""
+        settings' voxel and length rules size the camera's voxels and the kernel to; None elsewhere."""
         inner = getattr(self, "inner", None)
         extents = getattr(inner, "extents", None)
         return None if extents is None else float(np.max(extents))
@@ -326,6 +326,14 @@ class RobotWorld(World):
 
     def crop_box(self):
         return self.range
+
+    @property
+    def object_extent(self) -> float:
+        """The largest extent [m] of the reference world's body where one is given, else of the exploration range
+        (the box the object is known to lie in, as a bag import sizes the settings to its crop box): what the
+        estimator settings' voxel and length rules size to."""
+        known = None if self.reference is None else self.reference.object_extent
+        return float(np.max(self.range[1] - self.range[0])) if known is None else known
 
     def measure(self, model, contacts, resolution=None):
         if self.reference is not None:

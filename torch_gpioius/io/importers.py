@@ -414,7 +414,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     the cloud's normals (estimated from the points and turned towards the capture's camera) and behind each contact
     along its normal or force (:func:`read_contacts_csv`), every inside point that other observations contradict
     dropped, and the camera's inside points retracted when the contacts show the cover standing off the body by
-    more than ``vision_inside_gap``. The voxel follows the settings' rule from the clouds' extent.
+    more than ``vision_inside_gap``. The voxel and the kernel's length follow the settings' rules from the clouds'
+    largest extent (the contacts' without a cloud).
 
     Args:
         contacts_csv: the contacts (:func:`read_contacts_csv`).
@@ -466,6 +467,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     if captures:
         everything = np.concatenate([c.points for c in captures])
         est = _resolved_voxel(est, voxel, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
+    elif len(x_in) > 1 and np.ptp(x_in, axis=0).max() > 0:       # contacts alone: the length from their extent
+        est = est.for_extent(float(np.ptp(x_in, axis=0).max()))
     outer = np.zeros((0, dim)), np.zeros(0)
     if captures:
         from ..sensors.pointcloud import PointCloud
@@ -526,12 +529,13 @@ def _capture(path, origin, units: str, dim: int):
 
 
 def _resolved_voxel(est, voxel, extent: float):
-    """The settings with the voxel asked for: "auto" (their rule from ``extent`` [m], or their fixed voxel), an edge
-    [m], or 0 / None (every point)."""
+    """The settings sized to an object of largest extent ``extent`` [m] (their length rule), with the voxel asked
+    for: "auto" (their voxel rule from ``extent``, or their fixed voxel), an edge [m], or 0 / None (every point)."""
+    if isinstance(voxel, str) and voxel != "auto":
+        raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
+    est = est.for_extent(extent)
     if isinstance(voxel, str):
-        if voxel != "auto":
-            raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
-        return est.for_extent(extent)
+        return est
     try:
         return est.with_voxel(0.0 if voxel is None else voxel)
     except ValueError as exc:

@@ -103,7 +103,8 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
             :func:`torch_gpioius.io.importers.dataset_from_files`, which labels a user's files by estimator settings).
         out: folder for ``model.pt``, ``fit.png`` and ``fit.json`` (None: write nothing).
         kernel: an :class:`~torch_gpioius.kernels.ExactKernel` (it carries its length scale) in place of the
-            settings'.
+            settings', or a :class:`~torch_gpioius.kernels.KernelChoice` (a name and/or a length) applied to the
+            settings' kernel (the file's own without ``settings``).
         noise: sigma^2 in place of the settings'.
         resolution: grid spacing of the estimate [m] (its figure and meshes).
         learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2), by the
@@ -125,6 +126,7 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         profile-likelihood interval of the correlation (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
     from ..exploration.config import LEARN_SIZE
+    from ..kernels import KernelChoice, kernel_of_record
     from ..models.estimator import EstimatorSettings, as_learn
     from .export import write_estimate
     from .outputs import check_distinct, check_new_file
@@ -139,6 +141,9 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
     check_distinct(mesh=mesh, outer_mesh=outer_mesh)
     ds = path if isinstance(path, Dataset) else load_dataset(path)
     path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
+    if isinstance(kernel, KernelChoice):             # a name and/or a length on the kernel the data were made with
+        base = settings if settings is not None else _file_settings(ds)
+        kernel = kernel.apply(base.kernel if base is not None else kernel_of_record(ds.meta)) if kernel else None
     model = ds.to_model(noise=noise, settings=settings, **({} if kernel is None else {"kernel": kernel})).fit()
     used = settings if settings is not None else _file_settings(ds)
     learn = learn if learn is not None else (used.learn if used is not None else "task")

@@ -736,7 +736,7 @@ def _bag_settings(settings, crop, policy):
         est = EstimatorSettings.of(settings)
     except ValueError as exc:
         raise ValueError(f"import_bag: {exc}") from None
-    if crop is not None and est.voxel_rule is not None:
+    if crop is not None and est.sized_to_object:
         box = np.asarray(crop, dtype=np.float64)
         est = est.for_extent(float(np.max(box[1] - box[0])))
     if policy is not None:

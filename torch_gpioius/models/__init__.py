@@ -7,11 +7,11 @@ Both are ``gpytorch.models.ExactGP`` subclasses whose arithmetic runs in the exa
 """
 
 from .base import ImplicitSurfaceGP
-from .estimator import EstimatorSettings, VoxelRule
+from .estimator import EstimatorSettings, LengthRule, VoxelRule
 from .gpiois import GPIOIS, INNER, OUTER, UnidentifiedSimilarityWarning
 from .labels import ObservationPolicy
 from .gpis import GPIS
 from .local import LocalGPIOIS, kmeans_regions
 
 __all__ = ["ImplicitSurfaceGP", "GPIS", "GPIOIS", "LocalGPIOIS", "kmeans_regions", "INNER", "OUTER",
-           "UnidentifiedSimilarityWarning", "EstimatorSettings", "VoxelRule", "ObservationPolicy"]
+           "UnidentifiedSimilarityWarning", "EstimatorSettings", "LengthRule", "VoxelRule", "ObservationPolicy"]

@@ -2,17 +2,18 @@
 
 :class:`EstimatorSettings` holds the kernel (which carries its own length scale), the noise ``sigma^2``, the labelling
 policy (:class:`~torch_gpioius.models.labels.ObservationPolicy`: free space near and far, the inside points behind
-touches and behind the seen surface with their depth, the cover-gap retraction, the camera's voxels), the rule that
-sizes the voxels to the object, what is learned and the restart schedule of K_t's fit. Every path that makes a model
-takes one: an exploration in any world, ``gpioius fit`` on a user's files, a bag import, ``replay``, ``export`` and
-the studies. A world suggests one for its objects (the robot study's objects E-H ran the paper's; a user's mesh gets
-the default), but the object lives here, in the model layer, so that a user's own data meets the same settings as a
-simulated run.
+touches and behind the seen surface with their depth, the cover-gap retraction, the camera's voxels), the rules that
+size the voxels and the kernel's length to the object, what is learned and the restart schedule of K_t's fit. Every
+path that makes a model takes one: an exploration in any world, ``gpioius fit`` on a user's files, a bag import,
+``replay``, ``export`` and the studies. A world suggests one for its objects (the robot study's objects E-H ran the
+paper's; a user's mesh gets the default), but the object lives here, in the model layer, so that a user's own data
+meets the same settings as a simulated run.
 
 Presets (:func:`EstimatorSettings.preset`):
 
 * ``"default"``: what measured best on shapes nobody tuned to (docs/method-notes.md sections 12-15): a Matérn-5/2 of
-  length scale 0.1 m, sigma^2 = 0.08, the camera's points averaged in voxels a tenth of the object's largest extent
+  length scale a fifth of the object's largest extent (4-10 cm; :class:`LengthRule`; 10 cm where the object's size
+  is unknown), sigma^2 = 0.08, the camera's points averaged in voxels a tenth of the object's largest extent
   (2-5 cm), a second free-space point 10 cm in front of each seen point, inside points 2 cm behind every contact and
   every seen point, and those behind the seen surface retracted once the touches show the cover standing more than
   3 cm off the body;
@@ -37,7 +38,8 @@ from ..kernels import (ExactKernel, InverseMultiquadricKernel, KernelChoice, Mat
                        kernel_named)
 from .labels import ObservationPolicy
 
-__all__ = ["EstimatorView", "EstimatorSettings", "VoxelRule", "PRESETS", "LEARN", "as_learn", "RESTART_EVERY"]
+__all__ = ["EstimatorView", "EstimatorSettings", "VoxelRule", "LengthRule", "PRESETS", "LEARN", "as_learn",
+           "RESTART_EVERY"]
 
 #: What an estimator learns besides K_t: "task" (K_t alone, the paper's Sec. IV-A), "length" (the kernel's length
 #: scale and K_t) or "all" (the length, sigma^2 and K_t), by the exact marginal likelihood.
@@ -89,6 +91,39 @@ class VoxelRule:
         return round(float(np.clip(extent * self.fraction, self.lo, self.hi)), 4)
 
 
+@dataclass(frozen=True)
+class LengthRule:
+    """The kernel's length scale from the object's size: ``fraction`` of its largest extent, clipped to ``[lo, hi]``
+    [m], rounded to 0.1 mm. With the default rule it is two voxels of :class:`VoxelRule`'s (4 cm up to a 20 cm body,
+    10 cm from a half-metre torso on, the length the robot study's torsos ran with): a fixed 10 cm smooths a 15-25 cm
+    body's corners, limbs and necks into the estimate and lets the camera's inside points bulge it where no touch
+    reaches; 4 cm on such bodies lowered the median Chamfer distance by 1-3 mm and raised the F-score at 1 cm to
+    0.8 on bodies where 10 cm left it at 0.66-0.79 (docs/results-own-data.md, docs/results-benchmark.md "The kernel's
+    length"). A length shorter than the voxels would leave the outer task's points uncorrelated, hence the tie.
+
+    Raises:
+        ValueError: a fraction outside (0, 1], or bounds not ordered within the kernels' lengths.
+    """
+
+    fraction: float = 0.2
+    lo: float = 0.04
+    hi: float = 0.10
+
+    def __post_init__(self) -> None:
+        from ..tolerances import tol
+
+        as_float(self.fraction, "length_rule.fraction", lo=1e-3, hi=1.0, positive=True)
+        as_float(self.lo, "length_rule.lo", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        as_float(self.hi, "length_rule.hi", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+        if not self.lo <= self.hi:
+            raise ValueError(f"length_rule: lo ({self.lo:g} m) must not exceed hi ({self.hi:g} m)")
+
+    def length(self, extent: float) -> float:
+        """The kernel's length scale [m] for an object whose largest extent is ``extent`` [m]."""
+        extent = as_float(extent, "extent", positive=True, unit="m")
+        return round(float(np.clip(extent * self.fraction, self.lo, self.hi)), 4)
+
+
 @dataclass(frozen=True, eq=False)
 class EstimatorSettings:
     """Everything that turns observations into a model and labels (see the module docstring).
@@ -98,6 +133,8 @@ class EstimatorSettings:
         noise: sigma^2 on the Gram matrix's diagonal (eq. 12).
         labels: the labelling policy (free space, inside points, cover-gap retraction, voxels, crop).
         voxel_rule: sizes ``labels.voxel`` to the object (:meth:`for_extent`), or None: ``labels.voxel`` as it is.
+        length_rule: sizes the kernel's length scale to the object (:meth:`for_extent`), or None: the kernel's as it
+            is. Giving another kernel (:meth:`replace`) drops it: the kernel then carries the length asked for.
         learn: "task", "length" or "all" (:data:`LEARN`).
         restart_every: K_t's fit also starts from fixed values every this many steps of an exploration (None: warm
             starts only; a fit on files always does).
@@ -108,6 +145,7 @@ class EstimatorSettings:
     noise: float
     labels: ObservationPolicy = dataclasses.field(default_factory=ObservationPolicy)
     voxel_rule: VoxelRule | None = None
+    length_rule: LengthRule | None = None
     learn: str = "task"
     restart_every: int | None = RESTART_EVERY
     name: str = "custom"
@@ -119,6 +157,11 @@ class EstimatorSettings:
             raise ValueError(f"labels: expected an ObservationPolicy, got {type(self.labels).__name__}")
         if self.voxel_rule is not None and not isinstance(self.voxel_rule, VoxelRule):
             raise ValueError(f"voxel_rule: expected a VoxelRule or None, got {type(self.voxel_rule).__name__}")
+        if self.length_rule is not None:
+            if not isinstance(self.length_rule, LengthRule):
+                raise ValueError(f"length_rule: expected a LengthRule or None, got {type(self.length_rule).__name__}")
+            if not self.kernel.learnable_length:
+                raise ValueError(f"length_rule: the {type(self.kernel).__name__} kernel has no length to size")
         as_learn(self.learn)
         if self.learn != "task" and not self.kernel.learnable_length:
             raise ValueError(f"learn={self.learn!r}: the {type(self.kernel).__name__} kernel has no learnable length")
@@ -157,7 +200,7 @@ class EstimatorSettings:
         """This library's settings for a user's object (see the module docstring)."""
         labels = ObservationPolicy(crop_margin=0.15, vision_free_far=0.10, touch_inside=INSIDE_DEPTH,
                                    vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT, voxel=0.05)
-        return cls(Matern52(lengthscale=0.1), 0.08, labels, VoxelRule(), name="default")
+        return cls(Matern52(lengthscale=0.1), 0.08, labels, VoxelRule(), LengthRule(), name="default")
 
     @classmethod
     def paper(cls) -> "EstimatorSettings":
@@ -181,21 +224,55 @@ class EstimatorSettings:
 
     def replace(self, **changes) -> "EstimatorSettings":
         """A copy with ``changes`` (field names; ``labels`` may also be given as a dict of policy fields to change).
-        It is named "custom" unless ``name`` is among the changes."""
+        It is named "custom" unless ``name`` is among the changes. A new ``kernel`` drops the length rule unless
+        ``length_rule`` is among the changes: the kernel given carries the length asked for."""
+        if "kernel" in changes:
+            changes.setdefault("length_rule", None)
         if isinstance(changes.get("labels"), dict):
             changes["labels"] = dataclasses.replace(self.labels, **changes["labels"])
         changes.setdefault("name", "custom")
         return dataclasses.replace(self, **changes)
 
+    @property
+    def sized_to_object(self) -> bool:
+        """Whether :meth:`for_extent` changes anything: a voxel rule or a length rule is held."""
+        return self.voxel_rule is not None or self.length_rule is not None
+
     def for_extent(self, extent: float) -> "EstimatorSettings":
-        """These settings with the voxel rule applied to an object whose largest extent is ``extent`` [m] (the
-        body's in a simulated world, the camera's cloud for a user's files); unchanged without a rule."""
-        if self.voxel_rule is None:
+        """These settings with the voxel rule and the length rule applied to an object whose largest extent is
+        ``extent`` [m] (the body's in a simulated world, the camera's clouds, or the contacts without a cloud, for a
+        user's files); unchanged without a rule. The rules stay held (a record shows how the values came), and
+        applying them again to the same extent changes nothing.
+
+        Raises:
+            ValueError: an extent that is not a finite positive number.
+        """
+        changes = {}
+        if self.voxel_rule is not None:
+            voxel = self.voxel_rule.voxel(extent)
+            if voxel != self.labels.voxel:
+                changes["labels"] = dataclasses.replace(self.labels, voxel=voxel)
+        if self.length_rule is not None:
+            length = self.length_rule.length(extent)
+            if length != self.lengthscale:
+                changes["kernel"] = KernelChoice(lengthscale=length).apply(self.kernel)
+        return dataclasses.replace(self, **changes) if changes else self
+
+    def with_kernel(self, choice) -> "EstimatorSettings":
+        """These settings with a kernel asked for by name and length (a
+        :class:`~torch_gpioius.kernels.KernelChoice`; an empty one: themselves): a length given replaces the length
+        rule, a name alone keeps it (the new kernel then gets the rule's length from :meth:`for_extent`).
+
+        Raises:
+            ValueError: an unknown kernel or a bad length (names it); a name alone for a kernel without a length while
+                a length rule is held.
+        """
+        if not isinstance(choice, KernelChoice):
+            raise ValueError(f"kernel: expected a KernelChoice, got {type(choice).__name__}")
+        if not choice:
             return self
-        voxel = self.voxel_rule.voxel(extent)
-        if voxel == self.labels.voxel:
-            return self
-        return dataclasses.replace(self, labels=dataclasses.replace(self.labels, voxel=voxel))
+        rule = self.length_rule if choice.lengthscale is None else None
+        return self.replace(kernel=choice.apply(self.kernel), length_rule=rule)
 
     def with_voxel(self, voxel: float) -> "EstimatorSettings":
         """These settings with a fixed voxel edge [m] (0: every camera point), the rule dropped."""
@@ -226,6 +303,7 @@ class EstimatorSettings:
         return {"name": self.name, "kernel": self.kernel.describe(), "noise": float(self.noise),
                 "labels": dataclasses.asdict(self.labels),
                 "voxel_rule": None if self.voxel_rule is None else dataclasses.asdict(self.voxel_rule),
+                "length_rule": None if self.length_rule is None else dataclasses.asdict(self.length_rule),
                 "learn": self.learn, "restart_every": self.restart_every}
 
     @classmethod
@@ -239,7 +317,8 @@ class EstimatorSettings:
         """
         if not isinstance(data, dict):
             raise ValueError(f"estimator settings: expected a table of settings, got {type(data).__name__}")
-        known = {"name", "preset", "kernel", "lengthscale", "noise", "labels", "voxel_rule", "learn", "restart_every"}
+        known = {"name", "preset", "kernel", "lengthscale", "noise", "labels", "voxel_rule", "length_rule", "learn",
+                 "restart_every"}
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"estimator settings: unknown key(s) {unknown}; allowed {sorted(known)}")
@@ -263,22 +342,23 @@ class EstimatorSettings:
         fields = {f.name for f in dataclasses.fields(ObservationPolicy)}
         if labels is not None and set(labels) - fields:
             raise ValueError(f"labels: unknown field(s) {sorted(set(labels) - fields)}; allowed {sorted(fields)}")
-        rule = data.get("voxel_rule", ...)
-        if rule is not ... and rule is not None:
-            if not isinstance(rule, dict) or set(rule) - {"fraction", "lo", "hi"}:
-                raise ValueError(f"voxel_rule: expected fraction, lo and hi, got {rule!r}")
-            rule = VoxelRule(**rule)
+        rule = _rule(data, "voxel_rule", VoxelRule)
+        length_rule = _rule(data, "length_rule", LengthRule)
         try:
             if settings is None:
                 if kernel is None or "noise" not in data:
                     raise ValueError("estimator settings: without a preset, give kernel and noise")
                 return cls(kernel, data["noise"], ObservationPolicy(**(labels or {})),
-                           None if rule is ... else rule, data.get("learn", "task"),
-                           data.get("restart_every", RESTART_EVERY), data.get("name") or "custom")
+                           voxel_rule=None if rule is ... else rule,
+                           length_rule=None if length_rule is ... else length_rule, learn=data.get("learn", "task"),
+                           restart_every=data.get("restart_every", RESTART_EVERY), name=data.get("name") or "custom")
             # a preset with changes: its own name only when nothing changed
             changes = {}
             if kernel is not None:
                 changes["kernel"] = kernel
+                changes["length_rule"] = None         # the length given, not the preset's rule
+            if length_rule is not ...:
+                changes["length_rule"] = length_rule
             for key in ("noise", "learn", "restart_every"):
                 if key in data:
                     changes[key] = data[key]
@@ -307,18 +387,39 @@ class EstimatorSettings:
                   f"inside points {_cm(p.touch_inside)} behind contacts, {_cm(p.vision_inside)} behind the seen "
                   f"surface" + (f" (retracted past a {_cm(p.vision_inside_gap)} cover gap)" if p.vision_inside_gap
                                 else ""))
-        voxel = ("voxels a tenth of the object (" + f"{_cm(self.voxel_rule.lo)}-{_cm(self.voxel_rule.hi)})"
-                 if self.voxel_rule is not None else f"{_cm(p.voxel)} voxels" if p.voxel else "every camera point")
+        rule = self.voxel_rule
+        voxel = (f"voxels a {_fraction(rule.fraction)} of the object ({_cm(rule.lo)}-{_cm(rule.hi)})"
+                 if rule is not None else f"{_cm(p.voxel)} voxels" if p.voxel else "every camera point")
         free = f"free space {_cm(p.vision_free_offset)}" + (f" and {_cm(p.vision_free_far)}" if p.vision_free_far
                                                                else "") + " in front of the seen surface"
-        return (f"settings {self.name}: {self.kernel!r}, sigma^2 = {self.noise:g}, {voxel}, {free}, {inside}; "
+        length = ("" if self.length_rule is None else f" (a {_fraction(self.length_rule.fraction)} of the object, "
+                  f"{_cm(self.length_rule.lo)}-{_cm(self.length_rule.hi)})")
+        return (f"settings {self.name}: {self.kernel!r}{length}, sigma^2 = {self.noise:g}, {voxel}, {free}, {inside}; "
                 f"learns {_LEARNS[self.learn]}")
 
     def __repr__(self) -> str:
         return f"EstimatorSettings({self.summary()})"
 
 
+def _rule(data: dict, key: str, cls):
+    """``data[key]`` as a ``cls`` rule (fraction, lo, hi), None, or ``...`` when absent.
+
+    Raises:
+        ValueError: anything but such a table or None (names the key).
+    """
+    rule = data.get(key, ...)
+    if rule is ... or rule is None:
+        return rule
+    if not isinstance(rule, dict) or set(rule) - {"fraction", "lo", "hi"}:
+        raise ValueError(f"{key}: expected fraction, lo and hi, got {rule!r}")
+    return cls(**rule)
+
+
 _LEARNS = {"task": "K_t", "length": "K_t and the kernel's length scale", "all": "K_t, the length scale and sigma^2"}
+
+
+def _fraction(f: float) -> str:
+    return {0.1: "tenth", 0.2: "fifth", 0.25: "quarter", 0.5: "half"}.get(f, f"{f:g}")
 
 
 def _cm(v) -> str:

@@ -60,9 +60,11 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
     - the camera's voxels a tenth of the body's largest extent, 2-5 cm (the paper's 5 cm voxels were sized for a
       torso, and leave a 15 cm body a handful of outer points);
     - a second free-space point 10 cm in front of each seen point (``ObservationPolicy.vision_free_far``);
-    - a Matérn-5/2 kernel of length scale 0.1 m in place of the inverse multiquadric: with the denser camera data the
-      inverse multiquadric's heavy tails (``k ~ 1/r``) swing the mean below zero 5-10 cm away from all data, a
-      phantom surface that a light-tailed kernel does not make;
+    - a Matérn-5/2 kernel in place of the inverse multiquadric: with the denser camera data the inverse
+      multiquadric's heavy tails (``k ~ 1/r``) swing the mean below zero 5-10 cm away from all data, a phantom
+      surface that a light-tailed kernel does not make; its length a fifth of the body's largest extent, 4-10 cm
+      (:class:`~torch_gpioius.models.estimator.LengthRule`; a fixed 10 cm rounded off a 20 cm body's ears and
+      corners, docs/results-benchmark.md "The kernel's length");
     - points known to lie inside: 2 cm behind each contact along the measured force and 2 cm behind each seen point
       along the cloud's normal, labelled -0.4 (``ObservationPolicy.touch_inside``, ``vision_inside``; the free-space
       ramp continued inside). With the paper's labels alone the estimate lay 0.6-0.9 cm inside the body on tight
