@@ -164,14 +164,14 @@ def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
 
 def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     """The default settings for a user's object (three views, voxels a tenth of the body, a second free-space point,
-    the Matérn-5/2), the paper's in one word, and each setting by its own key (issue 34, item 6)."""
+    the Matérn-5/2 of a fifth of the body), the paper's in one word, and each setting by its own key (issue 34, item 6)."""
     from torch_gpioius.kernels import Matern52
 
     world = load_scene(_write(tmp_path, GOOD))
     d = world.defaults
     assert world.views == ("fixed", "mirrored", "wrist")
     assert d.policy.voxel == 0.02 and d.policy.vision_free_far == 0.1          # the bottle: 16 cm -> 2 cm (floor)
-    assert isinstance(d.kernel, Matern52) and d.kernel.ell == 0.1 and d.noise == 0.08
+    assert isinstance(d.kernel, Matern52) and d.kernel.ell == 0.04 and d.noise == 0.08   # 16 cm -> 4 cm (floor)
     assert d.policy.touch_inside == 0.02 and d.policy.vision_inside == 0.02               # inside points
     assert d.policy.vision_inside_gap == 0.03                       # retracted behind a cover standing 3 cm off
     assert not d.policy.cover_offset                                # the outer mean is an option, off

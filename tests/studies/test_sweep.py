@@ -293,7 +293,8 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
                   backend="local", progress=False, **kw)
         rows[name] = json.loads((tmp_path / name / "runs" / "ball_visual-tactile_0.json").read_text())
     own, one = rows["own"], rows["one"]
-    assert own["views"] == "fixed+mirrored+wrist" and own["kernel"] == "Matern52" and own["length"] == 0.1
+    assert own["views"] == "fixed+mirrored+wrist" and own["kernel"] == "Matern52"
+    assert own["length"] == 0.04                                     # a 12 cm ball: a fifth, floored at 4 cm
     assert one["views"] == "fixed" and one["kernel"] == "InverseMultiquadric"
     assert one["length"] == pytest.approx(0.12, rel=1e-12) and one["noise"] == pytest.approx(0.05, rel=1e-12)
     assert 0 < one["n_outer"] < own["n_outer"]

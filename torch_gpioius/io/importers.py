@@ -533,7 +533,8 @@ def _resolved_voxel(est, voxel, extent: float):
     for: "auto" (their voxel rule from ``extent``, or their fixed voxel), an edge [m], or 0 / None (every point)."""
     if isinstance(voxel, str) and voxel != "auto":
         raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
-    est = est.for_extent(extent)
+    if extent > 0:                                  # a single point has no size: the settings' own values stay
+        est = est.for_extent(extent)
     if isinstance(voxel, str):
         return est
     try:
