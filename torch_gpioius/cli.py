@@ -596,9 +596,9 @@ def _add_study(sub, common, fmt) -> None:
     sw.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     sw.add_argument("--settings", default=None, choices=_presets(3),
                     help="the 3-D worlds' settings, for scene files and built-in objects alike: default (three "
-                         "camera views, voxels a tenth of the body, a Matern-5/2, inside points) or paper (one fixed "
-                         "camera, 5 cm voxels, the inverse multiquadric); default: each file's own, the paper's for "
-                         "the built-in objects; one per --out folder")
+                         "camera views, voxels a tenth of the body, a Matern-5/2 a fifth of it long, inside points) "
+                         "or paper (one fixed camera, 5 cm voxels, the inverse multiquadric); default: each file's "
+                         "own, the paper's for the built-in objects; one per --out folder")
     sw.add_argument("--learn", default=None, choices=_learns(),
                     help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
                          "all (the length and the noise too), by the marginal likelihood on restart steps; default: "

@@ -164,7 +164,8 @@ def test_bad_scene_files_are_refused_by_name(tmp_path, text, match):
 
 def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     """The default settings for a user's object (three views, voxels a tenth of the body, a second free-space point,
-    the Matérn-5/2 of a fifth of the body), the paper's in one word, and each setting by its own key (issue 34, item 6)."""
+    the Matérn-5/2 of a fifth of the body), the paper's in one word, and each setting by its own key (issue 34,
+    item 6)."""
     from torch_gpioius.kernels import Matern52
 
     world = load_scene(_write(tmp_path, GOOD))

@@ -32,7 +32,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     settings = "default"              # or "paper": one fixed camera, 5 cm voxels, the inverse multiquadric
     views = ["fixed", "mirrored", "wrist"]   # the simulated camera's views (or a count, or "paper")
     kernel = "matern52"               # or "imq"; lengthscale (theta): its length [m]; noise: sigma^2; voxel [m]
-    lengthscale = 0.1
+    lengthscale = 0.1                 # (default: a fifth of the body, 4-10 cm; a length given fixes it)
     noise = 0.08
     voxel = 0.02
     touch_inside = 0.02               # an inside point this deep behind each contact [m] (0: none)
