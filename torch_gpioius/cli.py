@@ -104,8 +104,8 @@ def _fit(args: argparse.Namespace) -> int:
     if choice and args.theta is not None:
         raise ValueError("fit: --theta (deprecated) names a kernel and its length; give --kernel and --lengthscale "
                          "instead, not both")
-    kernel = kernel_for_theta(args.theta, None, "gpioius fit --theta; fit_dataset")   # deprecated: the kernel's own
-    kernel = choice if choice else kernel
+    # the deprecated --theta: the inverse multiquadric of that length
+    kernel = choice if choice else kernel_for_theta(args.theta, None, "gpioius fit --theta; fit_dataset")
     if args.out:                             # arguments checked first: a refused call leaves no folder behind
         from .io.outputs import claim_folder
 

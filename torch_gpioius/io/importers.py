@@ -467,8 +467,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     if captures:
         everything = np.concatenate([c.points for c in captures])
         est = _resolved_voxel(est, voxel, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
-    elif len(x_in) > 1 and np.ptp(x_in, axis=0).max() > 0:       # contacts alone: the length from their extent
-        est = est.for_extent(float(np.ptp(x_in, axis=0).max()))
+    else:                                           # contacts alone: the length from their extent
+        est = _sized(est, float(np.max(x_in.max(axis=0) - x_in.min(axis=0))))
     outer = np.zeros((0, dim)), np.zeros(0)
     if captures:
         from ..sensors.pointcloud import PointCloud
@@ -528,13 +528,18 @@ def _capture(path, origin, units: str, dim: int):
     return PointCloud(pts, o)
 
 
+def _sized(est, extent: float):
+    """The settings' rules applied to an object of largest extent ``extent`` [m]; a single point has no size, and
+    leaves the settings' own values."""
+    return est.for_extent(extent) if extent > 0 else est
+
+
 def _resolved_voxel(est, voxel, extent: float):
     """The settings sized to an object of largest extent ``extent`` [m] (their length rule), with the voxel asked
     for: "auto" (their voxel rule from ``extent``, or their fixed voxel), an edge [m], or 0 / None (every point)."""
     if isinstance(voxel, str) and voxel != "auto":
         raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
-    if extent > 0:                                  # a single point has no size: the settings' own values stay
-        est = est.for_extent(extent)
+    est = _sized(est, extent)
     if isinstance(voxel, str):
         return est
     try:

@@ -141,11 +141,10 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
     check_distinct(mesh=mesh, outer_mesh=outer_mesh)
     ds = path if isinstance(path, Dataset) else load_dataset(path)
     path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
-    if isinstance(kernel, KernelChoice):             # a name and/or a length on the kernel the data were made with
-        base = settings if settings is not None else _file_settings(ds)
-        kernel = kernel.apply(base.kernel if base is not None else kernel_of_record(ds.meta)) if kernel else None
-    model = ds.to_model(noise=noise, settings=settings, **({} if kernel is None else {"kernel": kernel})).fit()
     used = settings if settings is not None else _file_settings(ds)
+    if isinstance(kernel, KernelChoice):             # a name and/or a length on the kernel the data were made with
+        kernel = kernel.apply(used.kernel if used is not None else kernel_of_record(ds.meta)) if kernel else None
+    model = ds.to_model(noise=noise, settings=settings, **({} if kernel is None else {"kernel": kernel})).fit()
     learn = learn if learn is not None else (used.learn if used is not None else "task")
     if learn != "task":
         model.learn_hyperparameters(*LEARN_SIZE, learn_noise=learn == "all")
