@@ -80,9 +80,6 @@ def _study(args: argparse.Namespace) -> int:
 
 
 def _fit(args: argparse.Namespace) -> int:
-    from .io.offline import fit_dataset
-
-    source = args.dataset
     own = Path(args.dataset).suffix.lower() == ".csv"
     if not own and (args.cloud or args.camera_origin or args.units != "m"):
         raise ValueError("fit: --cloud, --units and --camera-origin go with a contacts CSV (a .gpioius file holds "
@@ -106,10 +103,25 @@ def _fit(args: argparse.Namespace) -> int:
                          "instead, not both")
     # the deprecated --theta: the inverse multiquadric of that length
     kernel = choice if choice else kernel_for_theta(args.theta, None, "gpioius fit --theta; fit_dataset")
-    if args.out:                             # arguments checked first: a refused call leaves no folder behind
-        from .io.outputs import claim_folder
+    from contextlib import nullcontext
 
-        claim_folder(args.out, "fit", args.force)
+    from .io.offline import fit_outputs
+    from .io.outputs import check_not_inputs, claimed_folder
+
+    # --force replaces results, never the data: checked before the import
+    check_not_inputs(fit_outputs(args.out, args.mesh, args.outer_mesh), [args.dataset, *clouds])
+    # arguments checked first; a fit refused or failed leaves no folder behind
+    with claimed_folder(args.out, "fit", args.force) if args.out else nullcontext():
+        info = _fit_files(args, own, clouds, origins, choice, kernel)
+    _fit_report(args, info)
+    return 0
+
+
+def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list, choice, kernel) -> dict:
+    """`gpioius fit`'s import (a contacts CSV and clouds) and fit."""
+    from .io.offline import fit_dataset
+
+    source = args.dataset
     settings = args.settings if args.settings is not None else ("default" if own else None)
     if own:
         from .io.importers import dataset_from_files
@@ -125,8 +137,12 @@ def _fit(args: argparse.Namespace) -> int:
                                 settings=settings)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         source, settings = ds, None                  # the dataset holds the settings it was labelled with
-    info = fit_dataset(source, args.out, kernel=kernel, noise=args.noise, learn=args.learn, settings=settings,
+    return fit_dataset(source, args.out, kernel=kernel, noise=args.noise, learn=args.learn, settings=settings,
                        mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution, force=args.force)
+
+
+def _fit_report(args: argparse.Namespace, info: dict) -> None:
+    """What `gpioius fit` prints of a fit."""
     if info["settings"] is not None:
         from .models.estimator import EstimatorSettings
 
@@ -159,8 +175,7 @@ def _fit(args: argparse.Namespace) -> int:
         if info.get(key):
             print(f"wrote {what} to {info[key]}")
     if args.out:
-        print(f"wrote {info['checkpoint']}, {info['figure']} and fit.json")
-    return 0
+        print(f"wrote {info['checkpoint']}, {info['figure']} and {Path(args.out) / 'fit.json'}")
 
 
 def _interval_reading(lo: float, hi: float) -> str:

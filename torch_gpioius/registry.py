@@ -107,6 +107,11 @@ class Registry(Mapping, Generic[T]):
         self._entries[name] = entry
         return entry
 
+    def owner(self, name: str) -> Entry | None:
+        """The registered entry that has ``name`` as its name or an alias (any case where names match so), or None;
+        a built-in entry not imported yet is not looked up."""
+        return self._owner(name)
+
     def _owner(self, name: str) -> Entry | None:
         key = self._key(name)
         for e in self._entries.values():
@@ -257,6 +262,9 @@ def load_plugins() -> list[str]:
             continue
         try:
             importlib.import_module(module)
+        except SystemExit as exc:               # sys.exit(3) at import ended gpioius with status 3 and no word
+            raise ImportError(f"plugin {module!r} ({where}) called sys.exit({exc.code!r}) while being imported; a "
+                              "plugin registers what it brings and returns") from None
         except Exception as exc:                # a plugin's own error, whatever it is, is named with the plugin
             raise ImportError(f"plugin {module!r} ({where}) cannot be imported: {type(exc).__name__}: {exc}") from exc
         _LOADED.add(module)

@@ -519,3 +519,28 @@ def test_a_study_measures_on_the_schedule_when_asked(tmp_path):
     for bad in (0, -2, "weekly", 1.5, True):
         with pytest.raises(ValueError, match="metrics_every: must be a number of steps >= 1 or 'schedule'"):
             run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", metrics_every=bad)
+
+
+def test_a_study_keeps_to_the_travel_asked_for_with_or_without_a_measuring_schedule(tmp_path):
+    """Issue 60, item 1: `study --max-travel 0.05` ran the world's own 1.5 m unless --metrics-every was given too (and
+    a smoke run its 40 steps rather than 6 cm). The travel now stops each run whatever the schedule, the record says
+    what was asked, and a run file of another travel (or of the releases that recorded none) is done again."""
+    ball = ball_scene(tmp_path)
+    for name, kw in (("plain", {}), ("schedule", {"metrics_every": "schedule"})):
+        run_sweep("forcefield", scenes=[ball], modes=["tactile"], seeds=1, out=tmp_path / name, backend="local",
+                  progress=False, max_travel=0.03, **kw)
+        run = json.loads((tmp_path / name / "runs" / "ball_tactile_0.json").read_text())
+        assert run["budget"] == 0.03
+        # a step slides at most a few centimetres past the budget: the run stops at the first step beyond it
+        assert 0.03 <= run["travel"] < 0.03 + 0.05 and run["steps"] < 40, (name, run["travel"], run["steps"])
+    smoke = run_sweep("forcefield", scenes=[ball], modes=["tactile"], seeds=1, out=tmp_path / "smoke", smoke=True,
+                      backend="local", progress=False)
+    assert smoke["rows"][0]["budget"] == pytest.approx(0.06) and smoke["rows"][0]["travel"] < 0.06 + 0.05
+    # a run file recorded without its budget (the releases that ignored --max-travel) is set aside and done again
+    path = tmp_path / "plain" / "runs" / "ball_tactile_0.json"
+    run = json.loads(path.read_text())
+    path.write_text(json.dumps({**run, "budget": None}))
+    with pytest.warns(RuntimeWarning, match="another travel budget"):
+        again = run_sweep("forcefield", scenes=[ball], modes=["tactile"], seeds=1, out=tmp_path / "plain",
+                          backend="local", progress=False, max_travel=0.03)
+    assert again["skipped"] == 0 and (path.parent / (path.name + ".stale")).exists()

@@ -11,9 +11,10 @@ import numpy as np
 from .._validation import as_bounds
 from ..surfaces import data_bounds, grid_resolution  # noqa: F401  (grid_resolution: re-exported, its 0.3 home)
 from .datasets import DatasetError
-from .outputs import atomic_write, check_distinct, check_new_file
+from .outputs import FileClaim, atomic_write, check_distinct
 
-__all__ = ["export_run", "export_model", "write_estimate", "write_surface", "curves_svg", "grid_resolution",
+__all__ = ["export_run", "export_model", "write_estimate", "write_surface", "surface_bytes", "curves_svg",
+           "grid_resolution", "check_format",
            "MESH_FORMATS", "CURVE_FORMATS"]
 
 #: File endings trimesh writes meshes to.
@@ -29,13 +30,14 @@ def _colours(variance: np.ndarray, prior: float) -> np.ndarray:
     return (colormaps["Purples"](np.clip(variance / prior, 0.0, 1.0)) * 255).round().astype(np.uint8)
 
 
-def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> Path:
+def write_surface(surface, variance, path: str | os.PathLike | FileClaim, prior: float) -> Path:
     """Write one estimated surface (atomically: a link at ``path`` is replaced, never followed).
 
     Args:
         surface: a :class:`trimesh.Trimesh` (3-D) or a list of `(m, 2)` closed polylines [m] (2-D).
         variance: `(V,)` posterior variance at the mesh vertices, or a list of `(m,)` per polyline.
-        path: output file; the ending picks the format (:data:`MESH_FORMATS` / :data:`CURVE_FORMATS`).
+        path: output file, or a :class:`~torch_gpioius.io.outputs.FileClaim` held on it (written through the claim);
+            the ending picks the format (:data:`MESH_FORMATS` / :data:`CURVE_FORMATS`).
         prior: prior variance, to which the colours are scaled.
 
     Units: meshes and PLY/OBJ line sets are in metres (the base frame, as everything here); SVG and DXF drawings
@@ -48,6 +50,17 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
     Raises:
         ValueError: a format that does not suit the surface.
     """
+    claim = path if isinstance(path, FileClaim) else None
+    path = claim.target if claim is not None else Path(path)
+    data = surface_bytes(surface, variance, path, prior)
+    if claim is not None:
+        return claim.write(data)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return atomic_write(path, data)
+
+
+def surface_bytes(surface, variance, path: str | os.PathLike, prior: float) -> bytes | str:
+    """What :func:`write_surface` writes to ``path`` (its ending picks the format), without writing it."""
     import trimesh
 
     path = Path(path)
@@ -58,16 +71,14 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
         mesh = surface.copy()
         mesh.visual.vertex_colors = _colours(np.asarray(variance), prior)
         mesh.vertex_attributes["variance"] = np.asarray(variance, dtype=np.float64)
-        path.parent.mkdir(parents=True, exist_ok=True)
         if ext == ".ply":
-            return atomic_write(path, trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=True))
-        return atomic_write(path, mesh.export(file_type=ext[1:]))
+            return trimesh.exchange.ply.export_ply(mesh, encoding="binary", include_attributes=True)
+        return mesh.export(file_type=ext[1:])
     if ext not in CURVE_FORMATS:
         raise ValueError(f"{path}: a 2-D estimate is a set of closed curves; write one of {', '.join(CURVE_FORMATS)}")
     curves = [np.asarray(c, dtype=np.float64) for c in surface]
-    path.parent.mkdir(parents=True, exist_ok=True)
     if ext == ".svg":
-        return atomic_write(path, curves_svg(curves))
+        return curves_svg(curves)
     if ext == ".dxf":
         # drawings are in millimetres, the unit CAD and drawing programs expect (metres made an SVG 0.3 units wide)
         flip = np.array([1000.0, 1000.0])
@@ -77,7 +88,7 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
             vertices.append(c * flip)
             entities.append(trimesh.path.entities.Line(np.arange(start, start + len(c))))
         p = trimesh.path.Path2D(entities=entities, vertices=np.concatenate(vertices))
-        return atomic_write(path, p.export(file_type="dxf"))
+        return p.export(file_type="dxf")
     # PLY / OBJ: a line set in the z = 0 plane with the variance as colours
     vertices = np.concatenate([np.column_stack([c, np.zeros(len(c))]) for c in curves])
     offsets = np.cumsum([0] + [len(c) for c in curves])
@@ -91,11 +102,11 @@ def write_surface(surface, variance, path: str | os.PathLike, prior: float) -> P
                  f"element edge {len(edges)}", "property int vertex1", "property int vertex2", "end_header"]
         lines += [f"{x!r} {y!r} {z!r} {r} {g} {b}" for (x, y, z), (r, g, b, _) in zip(vertices.tolist(), colours)]
         lines += [f"{a} {b}" for a, b in edges]
-        return atomic_write(path, "\n".join(lines) + "\n")
+        return "\n".join(lines) + "\n"
     lines = [f"v {x!r} {y!r} {z!r}" for x, y, z in vertices.tolist()]
     for a, b in zip(offsets[:-1], offsets[1:]):
         lines.append("l " + " ".join(str(i + 1) for i in range(a, b)))
-    return atomic_write(path, "\n".join(lines) + "\n")
+    return "\n".join(lines) + "\n"
 
 
 def curves_svg(curves: list[np.ndarray], colour: str = "#d62728") -> str:
@@ -178,17 +189,27 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
             export of a run without outer observations, both outputs naming one file, a bad resolution.
         FileExistsError: an output exists and ``force`` is False.
     """
-    from ..metrics import prior_variance
-    from .runs import estimate_surface, load_run
+    from contextlib import ExitStack
+
+    from .outputs import check_not_inputs
 
     if mesh is None and outer is None:
         raise ValueError("export: nothing to write (give a mesh and/or an outer file)")
     check_distinct(**{"--mesh": mesh, "--outer": outer})
-    for target in (mesh, outer):
-        if target is not None:
-            check_new_file(target, force, "export")
-    if Path(run).is_dir():
-        return _export_fit(Path(run), mesh, outer, step, resolution, bounds)
+    check_not_inputs({"--mesh": mesh, "--outer": outer}, [run])
+    with ExitStack() as held:
+        # each output claimed until written: a second export of the same file is refused at once
+        claims = [None if t is None else held.enter_context(FileClaim(t, force, "export")) for t in (mesh, outer)]
+        if Path(run).is_dir():
+            return _export_fit(Path(run), *claims, step, resolution, bounds)
+        return _export_log(run, *claims, step, resolution, bounds)
+
+
+def _export_log(run, mesh: FileClaim | None, outer: FileClaim | None, step, resolution, bounds) -> dict:
+    """:func:`export_run` of a log or dataset, its outputs claimed."""
+    from ..metrics import prior_variance
+    from .runs import estimate_surface, load_run
+
     history = load_run(run)
     if step is not None and (isinstance(step, bool) or not isinstance(step, (int, np.integer))):
         raise ValueError(f"export: step must be a step number, got {step!r}")
@@ -204,13 +225,9 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
     res = grid_resolution(resolution, dim)
     out = {"step": k, "inner": None, "outer": None}
     # every check before anything is written: a refused export leaves no partial output
-    for target in (mesh, outer):
-        if target is not None:
-            ext = Path(target).suffix.lower()
-            allowed = MESH_FORMATS if dim == 3 else CURVE_FORMATS
-            if ext not in allowed:
-                kind = "a mesh" if dim == 3 else "a set of closed curves"
-                raise ValueError(f"{target}: a {dim}-D estimate is {kind}; write one of {', '.join(allowed)}")
+    for claim in (mesh, outer):
+        if claim is not None:
+            check_format(claim.target, dim)
     if outer is not None and getattr(model, "num_tasks", 1) < 2:
         raise ValueError(f"export: {history.path.name} has no outer model at step {k} (a tactile-only run); "
                          "drop --outer")
@@ -246,7 +263,20 @@ def export_model(model, path: str | os.PathLike, bounds, resolution: float, task
     return write_surface(surface, var, path, prior_variance(model, task))
 
 
-def write_estimate(model, bounds, path: str | os.PathLike, resolution: float, task: int = 0) -> str:
+def check_format(path: str | os.PathLike, dim: int) -> None:
+    """Refuse a file ending that does not suit a ``dim``-D estimate (:data:`MESH_FORMATS` in 3-D,
+    :data:`CURVE_FORMATS` in 2-D), before any work.
+
+    Raises:
+        ValueError: naming the file and the endings that suit.
+    """
+    allowed = MESH_FORMATS if dim == 3 else CURVE_FORMATS
+    if Path(path).suffix.lower() not in allowed:
+        raise ValueError(f"{path}: a {dim}-D estimate is {'a mesh' if dim == 3 else 'a set of closed curves'}; write "
+                         f"one of {', '.join(allowed)}")
+
+
+def write_estimate(model, bounds, path: str | os.PathLike | FileClaim, resolution: float, task: int = 0) -> str:
     """:func:`export_model`, refusing what it cannot write: a format that does not suit the model's dimension, or an
     estimate that does not cross ``bounds`` `(2, d)` [m].
 
@@ -258,11 +288,7 @@ def write_estimate(model, bounds, path: str | os.PathLike, resolution: float, ta
         DatasetError: no surface in the box.
     """
     bounds = np.asarray(bounds, dtype=np.float64)
-    dim = bounds.shape[1]
-    allowed = MESH_FORMATS if dim == 3 else CURVE_FORMATS
-    if Path(path).suffix.lower() not in allowed:
-        raise ValueError(f"{path}: a {dim}-D estimate is {'a mesh' if dim == 3 else 'a set of closed curves'}; write "
-                         f"one of {', '.join(allowed)}")
+    check_format(path.target if isinstance(path, FileClaim) else path, bounds.shape[1])
     written = export_model(model, path, bounds, resolution, task)
     if written is None:
         raise DatasetError(f"{path}: the {'inner' if task == 0 else 'outer'} estimate does not cross the box of the "
@@ -284,6 +310,9 @@ def _export_fit(folder: Path, mesh, outer, step, resolution, bounds) -> dict:
     dim = x.shape[1]
     box = data_bounds(x, pad=0.05) if bounds is None else as_bounds(bounds, dim)
     res = grid_resolution(resolution, dim)
+    for claim in (mesh, outer):
+        if claim is not None:
+            check_format(claim.target, dim)
     if outer is not None and getattr(model, "num_tasks", 1) < 2:
         raise ValueError(f"export: {folder} holds a tactile-only model; drop --outer")
     out = {"step": None, "inner": None, "outer": None}

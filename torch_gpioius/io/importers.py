@@ -496,7 +496,9 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     y = np.concatenate([inner.y, outer[1]])
     task = np.r_[np.zeros(len(inner), np.int64), np.ones(len(outer[1]), np.int64)]
     meta = {"source": source, "voxel_size": est.labels.voxel if captures else None, "estimator": est.to_dict(),
-            "cover_gap": None if not math.isfinite(gap) else float(gap)}
+            "cover_gap": None if not math.isfinite(gap) else float(gap),
+            # the files read: what a command writing the estimate must never overwrite
+            "inputs": [str(p) for p in (contacts_csv, *files)]}
     meta["kernel"], meta["noise"] = est.kernel.describe(), float(est.noise)
 
     def metres(o):

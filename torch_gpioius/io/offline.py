@@ -17,9 +17,11 @@ from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
 from .logs import load_logged_hyperparameters
 from ..models.gpiois import GPIOIS, INNER
 from ..metrics import hausdorff_distance, uncertainty_measure
+from ..models.estimator import EstimatorSettings, as_learn
 from ..surfaces import closed_curves, data_bounds, evaluate_grid, grid_resolution, zero_level_curves, zero_level_mesh
+from .export import check_format
 
-__all__ = ["fit_dataset", "replay_log", "data_bounds"]
+__all__ = ["fit_dataset", "fit_outputs", "replay_log", "data_bounds"]
 
 
 def _markers(ax, ds: Dataset, dim: int) -> None:
@@ -125,22 +127,42 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         has a surface in the data's box (on the figure's grid); ``correlation_interval`` is the 95 %
         profile-likelihood interval of the correlation (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
     """
-    from ..exploration.config import LEARN_SIZE
-    from ..kernels import KernelChoice, kernel_of_record
-    from ..models.estimator import EstimatorSettings, as_learn
-    from .export import write_estimate
-    from .outputs import check_distinct, check_new_file
+    from contextlib import ExitStack
+
+    from .outputs import FileClaim, check_distinct, check_not_inputs
 
     if learn is not None:
         as_learn(learn)
     if settings is not None:
         settings = EstimatorSettings.of(settings)
-    for option, target in (("--mesh", mesh), ("--outer-mesh", outer_mesh)):
-        if target is not None:
-            check_new_file(target, force, option)      # before the fit: a refused file costs nothing
     check_distinct(mesh=mesh, outer_mesh=outer_mesh)
-    ds = path if isinstance(path, Dataset) else load_dataset(path)
-    path = ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path
+    inputs = list(path.meta.get("inputs") or []) if isinstance(path, Dataset) else [path]
+    check_not_inputs(fit_outputs(out, mesh, outer_mesh), inputs)
+    with ExitStack() as held:
+        # the meshes claimed before the fit: an existing file, a folder that cannot be written or a second fit of
+        # the same file is refused at once, not after the fit
+        claims = {option: held.enter_context(FileClaim(target, force, option))
+                  for option, target in (("--mesh", mesh), ("--outer-mesh", outer_mesh)) if target is not None}
+        ds = path if isinstance(path, Dataset) else load_dataset(path)
+        for claim in claims.values():
+            check_format(claim.target, ds.x.shape[1])
+        return _fit(ds, ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path, out, kernel, noise,
+                    resolution, learn, settings, claims.get("--mesh"), claims.get("--outer-mesh"))
+
+
+def fit_outputs(out, mesh, outer_mesh) -> dict:
+    """``{option: path}`` of every file :func:`fit_dataset` writes (what
+    :func:`~torch_gpioius.io.outputs.check_not_inputs` compares with the inputs)."""
+    folder = {} if out is None else {f"--out ({n})": Path(out) / n for n in ("model.pt", "fit.png", "fit.json")}
+    return {"--mesh": mesh, "--outer-mesh": outer_mesh, **folder}
+
+
+def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mesh, outer_mesh) -> dict:
+    """:func:`fit_dataset` on a loaded dataset, its meshes claimed (:class:`~torch_gpioius.io.outputs.FileClaim`)."""
+    from ..exploration.config import LEARN_SIZE
+    from ..kernels import KernelChoice, kernel_of_record
+    from .export import write_estimate
+
     used = settings if settings is not None else _file_settings(ds)
     if isinstance(kernel, KernelChoice):             # a name and/or a length on the kernel the data were made with
         kernel = kernel.apply(used.kernel if used is not None else kernel_of_record(ds.meta)) if kernel else None
@@ -171,6 +193,7 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
             if task == 1 and not isinstance(model, GPIOIS):
                 raise ValueError("--outer-mesh: the data have no outer (camera) observations, so no outer estimate")
             info[key] = write_estimate(model, data_bounds(ds.x, pad=max(0.05, 2 * res)), target, res, task)
+            info[key + "_resolution"] = res
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)

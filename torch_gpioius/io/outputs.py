@@ -20,7 +20,18 @@ written (:class:`StagedFiles`): a failure leaves the earlier result whole, never
 
 **The lock.** :class:`FolderLock` holds an exclusive ``flock`` on a file in an output folder for as long as a
 writer works there; a second writer is refused at once with the holder's process id. The kernel releases the lock
-when its holder dies, so a killed run never leaves a stale lock behind.
+when its holder dies, so a killed run never leaves a stale lock behind, and a writer that ends removes the lock's
+file (a lock whose file was removed or replaced after it was opened is taken again on the file now there, so two
+writers never hold locks on two files of one name).
+
+**Output files are claimed.** :class:`FileClaim` checks a single output file when a command starts (it does not
+exist, unless ``force``; its folder exists and can be written) and holds a lock beside it (``.<name>.lock``) until
+the file is written: a second command writing the same file is refused at once rather than both reporting success
+and one result lost, and a file that cannot be written is refused before a long fit, not after it.
+
+**Inputs are never outputs.** :func:`check_not_inputs` refuses an output that is one of the command's inputs
+(``fit --cloud a.ply --mesh a.ply``), with or without ``--force``: ``--force`` replaces earlier results, never the
+data they came from.
 """
 
 from __future__ import annotations
@@ -30,8 +41,8 @@ import os
 import secrets
 from pathlib import Path
 
-__all__ = ["MARKER", "atomic_write", "check_new_file", "check_distinct", "claim_folder", "FolderLock", "StagedFiles",
-           "remove_stale_staging", "STAGING_PREFIX"]
+__all__ = ["MARKER", "atomic_write", "check_new_file", "check_distinct", "check_not_inputs", "claim_folder",
+           "claimed_folder", "FolderLock", "FileClaim", "StagedFiles", "remove_stale_staging", "STAGING_PREFIX"]
 
 #: The file by which a command marks an output folder as its own (JSON: command, version, and e.g. the world).
 MARKER = ".gpioius-output.json"
@@ -171,61 +182,226 @@ def _shown(key: str, value):
     return _DEFAULT_NAMES.get(key, value) if value is None else value
 
 
-class FolderLock:
-    """An exclusive, non-blocking ``flock`` on ``folder/.lock`` (see the module docstring); a context manager.
+class _Lock:
+    """An exclusive, non-blocking ``flock`` on the file ``path`` (created if missing, never through a link), removed
+    when released (see the module docstring); a context manager.
+
+    Args:
+        path: the lock's file.
+        busy: the message when another process holds it (``{pid}`` is replaced by the holder's process id).
+
+    Raises:
+        RuntimeError: another process holds the lock, or the lock's file cannot be opened (names the path).
+    """
+
+    def __init__(self, path: str | os.PathLike, busy: str) -> None:
+        self.path = Path(path)
+        self.busy = busy
+        self._fd: int | None = None
+
+    def acquire(self):
+        import fcntl
+
+        while True:
+            fd = self._open()
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                try:
+                    holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "unknown"
+                finally:
+                    os.close(fd)
+                raise RuntimeError(self.busy.format(pid=holder)) from None
+            try:
+                same = os.fstat(fd).st_ino == os.lstat(self.path).st_ino
+            except FileNotFoundError:
+                same = False
+            if same:
+                break
+            # the holder before us removed (or someone replaced) the file after we opened it: lock the one there now
+            fcntl.flock(fd, fcntl.LOCK_UN)
+            os.close(fd)
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, str(os.getpid()).encode(), 0)
+        self._fd = fd
+        return self
+
+    def _open(self) -> int:
+        # never through a link: a link planted at the lock would have its target truncated and overwritten with a pid
+        try:
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
+        except OSError as e:
+            if os.path.islink(self.path):
+                raise RuntimeError(f"{self.path}: is a symbolic link; the lock must be a plain file (remove the link "
+                                   "or choose another output)") from None
+            raise RuntimeError(f"{self.path.parent}: cannot write there ({e.strerror}: cannot create the lock "
+                               f"{self.path.name})") from None
+        if not os.path.isfile(self.path) or os.path.islink(self.path):
+            os.close(fd)
+            raise RuntimeError(f"{self.path}: is not a plain file; the lock must be one (remove it or choose another "
+                               "output)")
+        return fd
+
+    def release(self) -> None:
+        if self._fd is not None:
+            import fcntl
+
+            try:
+                if os.fstat(self._fd).st_ino == os.lstat(self.path).st_ino:
+                    os.unlink(self.path)            # while held: a waiter that opened it sees it gone and retries
+            except OSError:
+                pass
+            fcntl.flock(self._fd, fcntl.LOCK_UN)
+            os.close(self._fd)
+            self._fd = None
+
+    def __enter__(self):
+        return self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+class FolderLock(_Lock):
+    """An exclusive, non-blocking ``flock`` on ``folder/.lock`` while a writer works in ``folder`` (see the module
+    docstring); a context manager. The folder is created if missing; the lock's file is removed at release.
 
     Raises:
         RuntimeError: another process holds the lock (names its pid and the folder).
     """
 
     def __init__(self, folder: str | os.PathLike, what: str = "writer") -> None:
-        self.path = Path(folder) / ".lock"
+        super().__init__(Path(folder) / ".lock", f"{Path(folder)}: another {what} (pid {{pid}}) is writing there; wait "
+                                                 "for it to finish or choose another --out")
         self.what = what
-        self._fd: int | None = None
 
     def acquire(self) -> "FolderLock":
-        import fcntl
-
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        # never through a link: a link planted at .lock would have its target truncated and overwritten with our pid
+        return super().acquire()
+
+
+class FileClaim(_Lock):
+    """A single output file claimed from the start of a command to its write (see the module docstring): checked as
+    :func:`check_new_file` checks it, its folder shown writable and locked for it by ``.<name>.lock`` beside it.
+    Write through :meth:`write` while the claim is held; the lock's file is removed at release.
+
+    Args:
+        path: the output file.
+        force: replace an existing file.
+        what: the option or kind of output, for messages (``"--mesh"``).
+
+    Raises:
+        FileExistsError, FileNotFoundError, IsADirectoryError: as :func:`check_new_file`.
+        RuntimeError: another command is writing the same file (names its pid), or the folder cannot be written.
+    """
+
+    def __init__(self, path: str | os.PathLike, force: bool = False, what: str = "output") -> None:
+        self.target = check_new_file(path, force, what)
+        self.force, self.what = force, what
+        super().__init__(self.target.parent / f".{self.target.name}.lock",
+                         f"{self.target}: another command (pid {{pid}}) is writing this {what} file; wait for it to "
+                         "finish or choose another file")
+
+    def acquire(self) -> "FileClaim":
+        super().acquire()
         try:
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
-        except OSError as e:
-            if os.path.islink(self.path):
-                raise RuntimeError(f"{self.path}: is a symbolic link; the lock must be a plain file (remove the link "
-                                   "or choose another --out)") from None
-            raise RuntimeError(f"{self.path}: cannot open the folder's lock ({e.strerror})") from None
-        if not os.path.isfile(self.path) or os.path.islink(self.path):
-            os.close(fd)
-            raise RuntimeError(f"{self.path}: is not a plain file; the lock must be one (remove it or choose another "
-                               "--out)")
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            try:
-                holder = os.pread(fd, 64, 0).decode(errors="replace").strip() or "unknown"
-            finally:
-                os.close(fd)
-            raise RuntimeError(f"{self.path.parent}: another {self.what} (pid {holder}) is writing there; wait for it "
-                               "to finish or choose another --out") from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, str(os.getpid()).encode(), 0)
-        self._fd = fd
+            check_new_file(self.target, self.force, self.what)   # written by someone while we waited for the lock
+        except BaseException:
+            self.release()
+            raise
         return self
 
-    def release(self) -> None:
-        if self._fd is not None:
-            import fcntl
+    def write(self, data: bytes | str) -> Path:
+        """Write ``data`` to the claimed file atomically; without ``force``, never over a file that appeared since
+        the claim (another program wrote it meanwhile).
 
-            fcntl.flock(self._fd, fcntl.LOCK_UN)
-            os.close(self._fd)
-            self._fd = None
+        Raises:
+            FileExistsError: the file appeared meanwhile and ``force`` is False.
+        """
+        if self.force:
+            return atomic_write(self.target, data)
+        return _write_new(self.target, data, self.what)
 
-    def __enter__(self) -> "FolderLock":
-        return self.acquire()
 
-    def __exit__(self, *exc: object) -> None:
-        self.release()
+def _write_new(path: Path, data: bytes | str, what: str) -> Path:
+    """:func:`atomic_write` that never replaces: the data are written beside ``path`` and linked into place, which
+    fails where ``path`` exists (no window between a check and the write)."""
+    blob = data.encode() if isinstance(data, str) else data
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
+    try:
+        with open(tmp, "wb") as f:
+            f.write(blob)
+            f.flush()
+            os.fsync(f.fileno())
+        try:
+            os.link(tmp, path)
+        except FileExistsError:
+            raise FileExistsError(f"{path}: was written by another program while this command ran; pass --force to "
+                                  f"replace it (or choose another {what} file)") from None
+    finally:
+        try:
+            tmp.unlink()
+        except OSError:
+            pass
+    _fsync_dir(path)
+    return path
+
+
+def check_not_inputs(outputs, inputs) -> None:
+    """Refuse an output that is one of the inputs (the same file by its real path, links and ``..`` resolved), or a
+    file inside an input folder (a bag's).
+
+    Args:
+        outputs: ``{option: path}`` of what a command will write (None entries are skipped).
+        inputs: paths a command reads (None entries are skipped).
+
+    Raises:
+        ValueError: naming the option, the output and the input; ``--force`` does not lift it.
+    """
+    reads = [(p, os.path.realpath(p)) for p in inputs if p is not None]
+    for option, target in outputs.items():
+        if target is None:
+            continue
+        dst = os.path.realpath(target)
+        for src_given, src in reads:
+            inside = os.path.isdir(src) and dst.startswith(src.rstrip(os.sep) + os.sep)
+            if dst == src or inside:
+                raise ValueError(f"{option}: {target} is {'the input' if dst == src else 'inside the input'} "
+                                 f"{src_given}; write the output elsewhere (--force never replaces an input)")
+
+
+class claimed_folder:
+    """:func:`claim_folder` as a context manager that undoes itself: a command refused before it wrote anything (a
+    scene that cannot be built) leaves no folder behind where there was none, and no marker in an empty folder.
+
+    Args and raises: as :func:`claim_folder`.
+    """
+
+    def __init__(self, path: str | os.PathLike, command: str, force: bool = False, *, added: tuple[str, ...] = (),
+                 **identity) -> None:
+        self.path = Path(path)
+        self._existed = self.path.exists()
+        self._empty = self._existed and self.path.is_dir() and not any(self.path.iterdir())
+        self.folder = claim_folder(path, command, force, added=added, **identity)
+
+    def __enter__(self) -> Path:
+        return self.folder
+
+    def __exit__(self, exc_type, *exc: object) -> None:
+        if exc_type is None or (self._existed and not self._empty):
+            return
+        left = {c.name for c in self.path.iterdir()} if self.path.is_dir() else set()
+        if left <= {MARKER, *_HOUSEKEEPING}:
+            for name in left:
+                try:
+                    (self.path / name).unlink()
+                except OSError:
+                    pass
+            if not self._existed:
+                try:
+                    self.path.rmdir()
+                except OSError:
+                    pass
 
 
 class StagedFiles:

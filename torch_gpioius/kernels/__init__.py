@@ -14,11 +14,12 @@ from dataclasses import dataclass
 
 from .._validation import as_float
 from ..registry import Registry
-from .base import ExactKernel
+from .base import ExactKernel, check_kernel
 from .inverse_multiquadric import InverseMultiquadricKernel, imq
 from .matern import Matern52
 
-__all__ = ["ExactKernel", "InverseMultiquadricKernel", "Matern52", "imq", "register_kernel", "from_description",
+__all__ = ["ExactKernel", "InverseMultiquadricKernel", "Matern52", "imq", "register_kernel", "check_kernel",
+           "from_description",
            "as_kernel", "KERNELS", "kernel_kind", "kernel_named", "kernel_of_record", "KernelChoice"]
 
 #: Registered kernels by the name their ``describe()`` gives (its ``kind``), with the short names users type
@@ -31,18 +32,61 @@ def register_kernel(cls: type | None = None, *, aliases=(), description: str = "
     its kind or an alias from the command line (``--kernel``), scene files (``kernel = ...``) and studies. A class
     decorator, bare or with arguments (``@register_kernel(aliases=("m32",))``); returns ``cls``.
 
+    The contract's cheap checks (:func:`~torch_gpioius.kernels.base.check_kernel`: finite, symmetric, positive
+    definite) run on ``cls()`` here, or, for a class that needs arguments, on its first instance built by name.
+
     Raises:
         TypeError: ``cls`` is not an :class:`ExactKernel` subclass.
-        ValueError: its kind or an alias is taken by another kernel.
+        ValueError: its kind or an alias is taken by another kernel (a built-in's above all: a plugin never replaces
+            ``Matern52``), or the kernel fails the contract's cheap checks (names the check).
     """
     if cls is None:
         return lambda c: register_kernel(c, aliases=aliases, description=description)
     if not (isinstance(cls, type) and issubclass(cls, ExactKernel)):
         raise TypeError(f"register_kernel: {cls!r} is not an ExactKernel subclass")
+    for name in (cls.kind, *aliases):
+        owner = KERNELS.owner(name)
+        if owner is not None and not _same_definition(owner.obj, cls):
+            raise ValueError(f"register_kernel: {name!r} is already the kernel {_where(owner.obj)}; a kernel of its "
+                             f"own needs a kind of its own (class {cls.__name__}: kind = {cls.kind!r})")
+    try:
+        instance = cls()
+    except TypeError:                       # arguments required: checked on its first instance built by name
+        instance = None
+    if instance is not None:
+        try:
+            check_kernel(instance)
+        except ValueError as exc:
+            raise ValueError(f"register_kernel: {exc}") from None
+        _CHECKED.add(cls)
     doc = (cls.__doc__ or "").strip().splitlines()
     KERNELS.register(cls.kind, cls, aliases=aliases, description=description or (doc[0] if doc else ""),
-                     replace=True)
+                     replace=True)          # the same definition again (a module reloaded): its entry renewed
     return cls
+
+
+#: Kernel classes whose cheap contract checks have passed.
+_CHECKED: set = set()
+
+
+def _same_definition(a, b) -> bool:
+    """Whether two classes are one definition: the same object, or a module's class reloaded."""
+    return a is b or (getattr(a, "__module__", None), getattr(a, "__qualname__", None)) == \
+        (getattr(b, "__module__", None), getattr(b, "__qualname__", None))
+
+
+def _where(cls) -> str:
+    return f"{getattr(cls, '__module__', '?')}.{getattr(cls, '__qualname__', cls)}"
+
+
+def _built(cls: type, **params) -> ExactKernel:
+    """``cls(**params)``, the contract's cheap checks run on the first instance of a class not checked when it was
+    registered."""
+    kernel = cls(**params)
+    if cls not in _CHECKED:
+        check_kernel(kernel)
+        _CHECKED.add(cls)
+    return kernel
 
 
 register_kernel(InverseMultiquadricKernel, aliases=("imq",), description="the paper's inverse multiquadric (eq. 5)")
@@ -62,7 +106,7 @@ def from_description(description: dict) -> ExactKernel:
         params["lengthscale"] = params.pop("theta")          # descriptions written before lengthscale was its name
     cls = KERNELS[kernel_kind(description["kernel"])]
     try:
-        return cls(**params)
+        return _built(cls, **params)
     except TypeError as exc:
         raise ValueError(f"kernel {description['kernel']}: bad parameters {params} ({exc})") from None
 
@@ -101,7 +145,7 @@ def kernel_named(name: str, lengthscale: float | None = None) -> ExactKernel:
         ValueError: an unknown name or a length that is not a finite positive number.
     """
     cls = KERNELS[kernel_kind(name)]
-    return cls() if lengthscale is None else cls(lengthscale=_checked_length(lengthscale))
+    return _built(cls) if lengthscale is None else _built(cls, lengthscale=_checked_length(lengthscale))
 
 
 def kernel_of_record(meta: dict, default: ExactKernel | None = None) -> ExactKernel:

@@ -35,7 +35,7 @@ import abc
 from gpytorch.kernels import Kernel
 from torch import Tensor
 
-__all__ = ["ExactKernel"]
+__all__ = ["ExactKernel", "check_kernel"]
 
 
 class ExactKernel(Kernel, abc.ABC):
@@ -94,3 +94,48 @@ class ExactKernel(Kernel, abc.ABC):
         if diag:
             return self.prior_variance(1.0) * x1.new_ones(x1.shape[:-1])
         return self.value(x1, x2)
+
+
+def check_kernel(kernel: ExactKernel, dim: int = 3, points: int = 40, scale: float = 0.2) -> None:
+    """The contract's cheap checks on one kernel object, run when a kernel is registered or first built by name (a
+    kernel that fails them made every run of a study fail with a Cholesky error, and the study exit 0).
+
+    Values are checked on ``points`` seeded points in a cube of half-edge ``scale`` [m]: their shape and dtype,
+    finiteness, symmetry, the diagonal against :meth:`ExactKernel.prior_variance`, a positive semi-definite Gram
+    matrix (smallest eigenvalue above ``-1e-9`` of the largest) and the gradient's shape. The full contract (gradients
+    against autograd, the second derivative) is :class:`torch_gpioius.testing.KernelContract`'s, for a test file.
+
+    Raises:
+        ValueError: naming the kernel and the first check it fails.
+    """
+    import torch
+
+    name = type(kernel).__name__
+    gen = torch.Generator().manual_seed(0)
+    a = (torch.rand(points, dim, generator=gen, dtype=torch.float64) * 2 - 1) * scale
+    try:
+        with torch.no_grad():
+            v = kernel.value(a, a)
+            g = kernel.gradient(a[:3], a[:5])
+            prior = float(kernel.prior_variance(1.0))
+    except Exception as exc:                  # a kernel's own error, whatever it is, is named with the kernel
+        raise ValueError(f"kernel {name}: its value, gradient or prior variance fails on {points} points "
+                         f"({type(exc).__name__}: {exc})") from exc
+    if tuple(v.shape) != (points, points) or v.dtype != torch.float64:
+        raise ValueError(f"kernel {name}: value(x, x) of {points} points must be a ({points}, {points}) float64 "
+                         f"tensor, got {tuple(v.shape)} {v.dtype}")
+    if not torch.isfinite(v).all() or not (prior > 0 and prior < float("inf")):
+        raise ValueError(f"kernel {name}: values must be finite and the prior variance positive (got "
+                         f"{prior!r})")
+    if not torch.allclose(v, v.T, rtol=1e-12, atol=1e-14 * prior):
+        raise ValueError(f"kernel {name}: value(x, x) is not symmetric")
+    if not torch.allclose(torch.diagonal(v), torch.full((points,), prior, dtype=v.dtype), rtol=1e-10, atol=0.0):
+        raise ValueError(f"kernel {name}: the diagonal of value(x, x) is not prior_variance(1) = {prior:g}")
+    eig = torch.linalg.eigvalsh(v)
+    if float(eig.min()) < -1e-9 * float(eig.max()):
+        raise ValueError(f"kernel {name}: not positive definite: the Gram matrix of {points} points has the "
+                         f"eigenvalue {float(eig.min()):.3g} (largest {float(eig.max()):.3g}); a GP needs a "
+                         "positive definite kernel")
+    if tuple(g.shape) != (dim, 3, 5):
+        raise ValueError(f"kernel {name}: gradient(x1, x2) of (3, {dim}) and (5, {dim}) points must be "
+                         f"({dim}, 3, 5), got {tuple(g.shape)}")

@@ -141,6 +141,8 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            # older run files have the median alone
            "p95_step_time": run.get("p95_step_time", math.nan), "max_step_time": run.get("max_step_time", math.nan),
            "reference_travel": ref,
+           # the travel budget the run was asked for [m] (empty: none, the 2-D world's once around)
+           "budget": run.get("budget") if run.get("budget") is not None else math.nan,
            "voxel": run.get("voxel", math.nan), "n_outer": run.get("n_outer", math.nan),
            "touch_inside": run.get("touch_inside", 0.0), "vision_inside": run.get("vision_inside", 0.0),
            "vision_inside_gap": run.get("vision_inside_gap", 0.0),

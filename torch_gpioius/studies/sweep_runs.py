@@ -18,7 +18,7 @@ from ..metrics import SHAPE_METRICS
 
 __all__ = ["BASE_MODES", "FRACTIONS", "CONTACT_WITHIN", "BUDGET_METRICS_EVERY", "sweep_modes", "RunSpec", "make_world",
            "run_one", "read_run_file", "RunFileError", "scene_failure_record", "atomic_json", "finished",
-           "study_worlds"]
+           "study_worlds", "asked_travel", "SMOKE_TRAVEL"]
 
 
 #: The modes of exploration a sweep runs: the paper's two and the local similarity (``regions``); each also with an
@@ -30,6 +30,8 @@ FRACTIONS = (0.10, 0.25, 0.50, 1.00)
 CONTACT_WITHIN = 0.01
 #: Metrics every k steps in worlds with a travel budget (the robot study's 150 steps; every step in 2-D).
 BUDGET_METRICS_EVERY = 5
+#: The travel of a smoke run in a world with a travel budget [m].
+SMOKE_TRAVEL = 0.06
 
 
 def sweep_modes() -> tuple:
@@ -137,7 +139,13 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["metrics_every"] = BUDGET_METRICS_EVERY
     if spec.metrics_every is not None:
         kw["metrics_every"] = spec.metrics_every
-        kw["max_travel"] = spec.max_travel if spec.max_travel is not None else (0.06 if spec.smoke else budget)
+    # the travel asked for (a smoke run's 6 cm), whatever the measuring schedule: under --metrics-every alone this was
+    # set, and `--max-travel 0.05` ran the world's own 1.5 m
+    travel = asked_travel(spec)
+    if travel is None and budget is not None:
+        travel = SMOKE_TRAVEL if spec.smoke else budget
+    if travel is not None:
+        kw["max_travel"] = travel
     if spec.max_steps is not None:
         kw["max_steps"] = spec.max_steps
     elif spec.smoke:
@@ -455,4 +463,20 @@ def finished(path: Path, spec: RunSpec | None = None) -> bool:
         _set_aside(path, "stale", f"a run of the scene file as it was before it changed (scene_hash "
                                   f"{run.get('scene_hash')}, now {spec.scene_hash})")
         return False
+    travel = asked_travel(spec) if spec is not None else None
+    if travel is not None and not _same_travel(run.get("budget"), travel):
+        # a run of another travel budget, or one of the releases that ran the world's own 1.5 m whatever was asked
+        # (budget null): its figures answer another question
+        _set_aside(path, "stale", f"a run of another travel budget ({run.get('budget')} m, asked {travel:g} m)")
+        return False
     return True
+
+
+def asked_travel(spec: RunSpec) -> float | None:
+    """The travel budget [m] a run was asked for (``--max-travel``), or None: the world's own (a smoke run's 6 cm in a
+    world with a budget)."""
+    return None if spec.max_travel is None else float(spec.max_travel)
+
+
+def _same_travel(recorded, asked: float) -> bool:
+    return _number(recorded, allow_nan=False) and abs(float(recorded) - asked) <= 1e-9 * max(1.0, asked)
