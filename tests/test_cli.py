@@ -535,3 +535,17 @@ def test_fit_sizes_the_kernel_to_the_clouds_and_takes_a_kernel_or_length_in_its_
     assert info["kernel"]["kernel"] == "Matern52" and info["lengthscale"] == pytest.approx(0.05)
     assert main(["fit", *files, "--lengthscale", "0.05", "--theta", "0.1"]) == 2
     assert "--theta (deprecated)" in capsys.readouterr().err
+
+
+def test_a_refused_scene_leaves_no_folder_and_a_fit_no_lock(tmp_path, capsys):
+    """Issue 60, item 19: a refused `simulate3d` scene left its output folder (`.gpioius-output.json`, `.lock`), and a
+    successful `fit` its `.lock`."""
+    scene = tmp_path / "broken.toml"
+    scene.write_text('name = "broken"\n[object]\nmesh = "no-such-mesh.stl"\n[cover]\nkind = "tight"\ngap = 0.008\n')
+    out = tmp_path / "sim"
+    assert main(["simulate3d", "--scene", str(scene), "--smoke", "--quiet", "--out", str(out)]) == 2
+    assert "no-such-mesh.stl" in capsys.readouterr().err and not out.exists()
+    fit = tmp_path / "fit"
+    assert main(["fit", str(EXAMPLE), "--out", str(fit)]) == 0
+    assert sorted(p.name for p in fit.iterdir()) == [".gpioius-output.json", "fit.json", "fit.png", "model.pt"]
+    assert f"wrote {fit / 'model.pt'}, {fit / 'fit.png'} and {fit / 'fit.json'}" in capsys.readouterr().out

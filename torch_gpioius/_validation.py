@@ -99,20 +99,34 @@ def as_float(value, name: str, *, lo: float | None = None, hi: float | None = No
 
 
 def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) for a file in millimetres",
-                 error: type[ValueError] = ValueError) -> None:
+                 error: type[ValueError] = ValueError, lines=None) -> None:
     """Refuse `(n, d)` positions that cannot be metres: an extent above :data:`MAX_SCENE_EXTENT` or a coordinate
     beyond :data:`MAX_COORDINATE` (a dataset in millimetres is 1000x too large, and every later step -- the kernel,
     the grid, the correlation -- goes wrong without a word).
 
+    With ``lines`` (`(n,)` the file's line of each position), a few positions far from all the others (a typing
+    mistake: one row of 1e300 among rows in metres) are named by their lines instead of blaming the units.
+
     Raises:
         ValueError: (``error``, a subclass of it such as a reader's ``DatasetError``) naming ``where``, the measured
-            size and the likely units.
+            size and the likely units, or the lines of the stray positions.
     """
     a = np.asarray(x, dtype=np.float64)
     if a.ndim != 2 or not len(a):
         return
     extent = float((a.max(0) - a.min(0)).max())
     reach = float(np.abs(a).max())
+    if (extent > MAX_SCENE_EXTENT or reach > MAX_COORDINATE) and lines is not None and len(a) > 2:
+        far = np.abs(a - np.median(a, axis=0)).max(axis=1) > MAX_SCENE_EXTENT / 2
+        rest = a[~far]
+        fits = len(rest) and float((rest.max(0) - rest.min(0)).max()) <= MAX_SCENE_EXTENT and \
+            float(np.abs(rest).max()) <= MAX_COORDINATE
+        if far.sum() <= max(3, len(a) // 20) and fits:
+            stray = np.flatnonzero(far)
+            named = ", ".join(f"line {int(lines[i])} ({', '.join(f'{v:.4g}' for v in a[i])})" for i in stray)
+            raise error(f"{where}: {named} lie{'s' if len(stray) == 1 else ''} far from every other point (the others "
+                        f"fit in {float((rest.max(0) - rest.min(0)).max()):.3g} m): a typing mistake in "
+                        f"{'that row' if len(stray) == 1 else 'those rows'}?")
     if extent > MAX_SCENE_EXTENT or reach > MAX_COORDINATE:
         size = f"{extent:.4g} m across" if extent > MAX_SCENE_EXTENT else f"{reach:.4g} m from the origin"
         likely = "millimetres" if extent > 100 * MAX_SCENE_EXTENT or reach > 100 * MAX_COORDINATE else \

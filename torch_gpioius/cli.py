@@ -19,14 +19,14 @@ __all__ = ["main"]
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    from .io.outputs import FolderLock, claim_folder
+    from .io.outputs import FolderLock, claimed_folder
     from .studies.study2d import run_study
 
     objects = list(_objects_of("planar")) if args.object == "all" else [args.object]
-    # the folder's summary, records and figures describe one set of objects: another set is another run
-    claim_folder(args.out, "simulate", args.force, objects=",".join(objects), added=("objects",))
     max_steps = 12 if args.smoke else args.max_steps
-    with FolderLock(args.out, "gpioius simulate"):
+    # the folder's summary, records and figures describe one set of objects: another set is another run
+    with claimed_folder(args.out, "simulate", args.force, objects=",".join(objects), added=("objects",)), \
+            FolderLock(args.out, "gpioius simulate"):
         result = run_study(objects, out=args.out, max_steps=max_steps, progress=not args.quiet, smoke=args.smoke)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json and summary.md to {args.out} in {result['seconds']:.0f} s")
@@ -34,7 +34,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 
 def _simulate3d(args: argparse.Namespace) -> int:
-    from .io.outputs import FolderLock, claim_folder
+    from .io.outputs import FolderLock, claimed_folder
     from .studies.study3d import run_study_3d
 
     if args.outer_tol is not None and args.touch == "patch":
@@ -46,12 +46,12 @@ def _simulate3d(args: argparse.Namespace) -> int:
     else:
         objects = list(_robot_study_objects()) if args.object == "all" else [args.object]
     identity = {} if args.outer_tol is None else {"outer_tol": args.outer_tol}   # older folders: exact
-    claim_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
-                 touch=None if args.touch == "point" else args.touch,   # older folders: point
-                 objects=",".join([*objects, *(str(Path(s).resolve()) for s in scenes)]), added=("objects",),
-                 **identity)
     travel = 0.06 if args.smoke else args.max_travel
-    with FolderLock(args.out, "gpioius simulate3d"):
+    # a scene refused when it is built leaves no folder behind
+    with claimed_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
+                        touch=None if args.touch == "point" else args.touch,   # older folders: point
+                        objects=",".join([*objects, *(str(Path(s).resolve()) for s in scenes)]), added=("objects",),
+                        **identity), FolderLock(args.out, "gpioius simulate3d"):
         result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
                               progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes,
                               voxel=args.voxel, touch=args.touch, outer_tol=args.outer_tol, device=args.device)
@@ -192,10 +192,10 @@ def _interval_reading(lo: float, hi: float) -> str:
 
 def _replay(args: argparse.Namespace) -> int:
     from .io.offline import replay_log
-    from .io.outputs import claim_folder
+    from .io.outputs import claimed_folder
 
-    claim_folder(args.out, "replay", args.force)
-    rows = replay_log(args.log, args.out, every=args.every, progress=not args.quiet)
+    with claimed_folder(args.out, "replay", args.force):
+        rows = replay_log(args.log, args.out, every=args.every, progress=not args.quiet)
     last = rows[-1]
     print(f"replayed {len(rows)} steps of {args.log}; last step {last['step']}: similarity {last['similarity']:.3f}, "
           f"uncertainty {last['uncertainty']:.4g}, Hausdorff {last['hausdorff'] * 100:.2f} cm")

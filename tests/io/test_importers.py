@@ -1,11 +1,13 @@
 """Importers: point clouds (PLY, XYZ, PCD ascii/binary, NPZ), contact CSVs, voxel averaging."""
 
+import warnings
+
 import numpy as np
 import pytest
 import trimesh
 
 from torch_gpioius.io.datasets import DatasetError
-from torch_gpioius.io.importers import dataset_from_files, load_contacts_csv, load_point_cloud
+from torch_gpioius.io.importers import dataset_from_files, load_contacts_csv, load_point_cloud, read_contacts_csv
 from torch_gpioius.voxels import voxel_average
 
 PTS = np.array([[0.01, 0.02, 0.03], [0.04, -0.05, 0.06], [0.2, 0.1, -0.3], [0.021, 0.022, 0.023]])
@@ -393,3 +395,115 @@ def test_a_capture_that_sees_only_the_top_is_not_taken_for_another_frame(tmp_pat
     ds = dataset_from_files(csv_path, [cloud, tmp_path / "top.ply"], voxel=0.02,
                             camera_origin=[c + [-1.0, 0.0, 0.3], c + [0.0, 0.0, 0.5]])
     assert (ds.task == 1).sum() > 50
+
+
+def _fitted(ds):
+    """Final Chamfer [cm] of a dataset's inner estimate against the 6 cm sphere of tests.userfiles."""
+    from tests.userfiles import CENTRE
+    from torch_gpioius.surfaces import zero_level_mesh
+
+    model = ds.to_model().fit()
+    mesh = zero_level_mesh(model, [CENTRE - 0.12, CENTRE + 0.12], 0.01)
+    r = np.linalg.norm(np.asarray(mesh.vertices) - CENTRE, axis=1)
+    return float(np.mean(np.abs(r - 0.06)) * 100), model
+
+
+def test_camera_origins_their_captures_face_away_from_are_named(tmp_path):
+    """Issue 60, item 5: two origins in the wrong order, or in metres beside millimetre files, took the correlation
+    from 1.00 to 0.09 without a word. A camera sees the near side of a body: the capture whose points face away from
+    its origin is named."""
+    from tests.userfiles import EYES, sphere_files
+
+    csv, clouds = sphere_files(tmp_path, contacts=20, cover=800)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")                          # the right order: not a word
+        dataset_from_files(csv, clouds, camera_origin=list(EYES))
+    with pytest.warns(UserWarning) as seen:
+        dataset_from_files(csv, clouds, camera_origin=list(EYES[::-1]))
+    said = [str(w.message) for w in seen if "face its camera origin" in str(w.message)]
+    assert len(said) == 2 and said[0].startswith("capture 1 of 2") and said[1].startswith("capture 2 of 2")
+    # millimetre files beside origins typed in metres (the origin lands by the base frame's origin)
+    mm = tmp_path / "mm"
+    mm.mkdir()
+    rows = (tmp_path / "contacts.csv").read_text().splitlines()
+    (mm / "c.csv").write_text("\n".join([rows[0]] + [",".join([f"{float(v) * 1000:.3f}" for v in r.split(",")[:3]]
+                                                              + r.split(",")[3:]) for r in rows[1:]]) + "\n")
+    for k, cloud in enumerate(clouds):
+        trimesh.PointCloud(np.asarray(trimesh.load(cloud).vertices) * 1000).export(mm / f"{k}.ply")
+    with pytest.warns(UserWarning, match=r"capture 1 of 2 .* only \d+ % of its points face its camera origin"):
+        dataset_from_files(mm / "c.csv", [mm / "0.ply", mm / "1.ply"], units="mm", camera_origin=list(EYES))
+
+
+def test_normals_that_point_into_the_body_are_turned_round_and_said(tmp_path):
+    """Issue 60, item 6: normals (or forces) of the wrong sign put every inside point outside the body: contacts alone
+    1.76 cm against 0.27 cm, silently. The file's own free rows, the seen surface and the contacts' middle say which
+    way is out; the estimate from inward normals is then the estimate from outward ones."""
+    from tests.userfiles import EYES, sphere_files
+
+    right, _ = sphere_files(tmp_path, contacts=30, cover=600)
+    wrong, clouds = sphere_files(tmp_path, contacts=30, cover=600, normal_sign=-1.0, name="inward.csv")
+    good = dataset_from_files(right, settings="default")
+    with pytest.warns(UserWarning, match=r"point into the body by the data's own account \(inward by free rows 15 of "
+                                         r"15, the contacts' middle 30 of 30\): turned round"):
+        turned = dataset_from_files(wrong, settings="default")
+    assert np.array_equal(turned.x, good.x) and np.array_equal(turned.y, good.y)
+    with pytest.warns(UserWarning, match="the seen surface 30 of 30"):
+        with_clouds = dataset_from_files(wrong, clouds, camera_origin=list(EYES))
+    assert int((with_clouds.y[with_clouds.task == 0] < 0).sum()) == 30      # every inside point kept
+    import torch_gpioius.io.importers as importers
+
+    unturned = importers._outward
+    importers._outward = lambda csv, x, y, normal, seen: normal        # the releases that took the sign as given
+    try:
+        silent = dataset_from_files(wrong, settings="default")
+    finally:
+        importers._outward = unturned
+    right_cm, wrong_cm = _fitted(turned)[0], _fitted(silent)[0]
+    assert right_cm < 0.7 and wrong_cm > right_cm + 0.3, (right_cm, wrong_cm)
+
+
+def test_repeated_rows_count_once_and_stray_rows_separators_and_underscores_are_named(tmp_path):
+    """Issue 60, items 7 and 17: a CSV whose rows repeat counted as three times the evidence; a single row of 1e300
+    was blamed on millimetres without its line; ';' or tab separated files got no hint (now read); `0.5_0` was read
+    as 0.5."""
+    from tests.userfiles import sphere_files
+
+    once, _ = sphere_files(tmp_path, contacts=10, cover=100, name="once.csv")
+    thrice, _ = sphere_files(tmp_path, contacts=10, cover=100, repeat=3, name="thrice.csv")
+    with pytest.warns(UserWarning, match=r"50 of 75 rows repeat an earlier row .* merged, each observation counted once"):
+        x3, y3, s3, n3 = read_contacts_csv(thrice)
+    x1, y1, s1, n1 = read_contacts_csv(once)
+    assert np.array_equal(x1, x3) and np.array_equal(y1, y3) and np.array_equal(n1, n3, equal_nan=True)
+    text = once.read_text().splitlines()
+    for sep in (";", "\t"):
+        (tmp_path / "sep.csv").write_text("\n".join(r.replace(",", sep) for r in text) + "\n")
+        xs, ys, _, ns = read_contacts_csv(tmp_path / "sep.csv")
+        assert np.array_equal(xs, x1) and np.array_equal(ns, n1, equal_nan=True)
+    stray = text[:4] + ["1e300,0,0.2,contact,,,"] + text[4:]
+    (tmp_path / "stray.csv").write_text("\n".join(stray) + "\n")
+    with pytest.raises(DatasetError, match=r"stray.csv: line 5 \(1e\+300, 0, 0.2\) lies far from every other point"):
+        read_contacts_csv(tmp_path / "stray.csv")
+    for bad, match in (("0.5_0,0,0.2,contact,,,", r"coordinates \['0.5_0', '0', '0.2'\] are not numbers"),
+                       ("0.5,0,0.2,contact,0_1,0,1", r"nx, ny, nz \['0_1', '0', '1'\] are not numbers")):
+        (tmp_path / "bad.csv").write_text(text[0] + "\n" + bad + "\n")
+        with pytest.raises(DatasetError, match=match):
+            read_contacts_csv(tmp_path / "bad.csv")
+    (tmp_path / "euro.csv").write_text("x;y;z;label\n0,5;0;0,2;contact\n")
+    with pytest.raises(DatasetError, match="decimal commas"):
+        read_contacts_csv(tmp_path / "euro.csv")
+
+
+def test_free_rows_alone_and_a_mesh_given_as_a_cloud_are_said_for_what_they_are(tmp_path):
+    """Issue 60, items 17 and 18: a file of free rows alone was refused as "the contacts lie 7 cm outside"; a PLY
+    mesh given as a cloud had its vertices used without a word."""
+    from tests.userfiles import EYES, sphere_files
+
+    csv, clouds = sphere_files(tmp_path, contacts=10, cover=400)
+    free = [r for r in csv.read_text().splitlines() if "free" in r or r.startswith("x,")]
+    (tmp_path / "free.csv").write_text("\n".join(free) + "\n")
+    with pytest.warns(UserWarning, match="no contact rows"):
+        ds = dataset_from_files(tmp_path / "free.csv", clouds, camera_origin=list(EYES))
+    assert int((ds.task == 0).sum()) == 15
+    trimesh.creation.icosphere(2, 0.07).apply_translation([0.5, 0.0, 0.2]).export(tmp_path / "mesh.ply")
+    with pytest.warns(UserWarning, match=r"mesh.ply: holds a mesh \(320 faces\), not a point cloud: its 162 vertices"):
+        assert len(load_point_cloud(tmp_path / "mesh.ply")) == 162

@@ -222,6 +222,13 @@ def load_point_cloud(path: str | os.PathLike, *, units: str = "m", voxel: float 
             declared = _ply_vertex_count(path) if ext == ".ply" else None
             geom = trimesh.load(path, process=False)
             pts = np.asarray(getattr(geom, "vertices", np.zeros((0, 3))), dtype=np.float64)
+            faces = len(getattr(geom, "faces", ()))
+            if faces:
+                import warnings
+
+                warnings.warn(f"{path}: holds a mesh ({faces} faces), not a point cloud: its {len(pts)} vertices are "
+                              "used as the camera's points (a depth camera's capture has no faces; a scan's mesh "
+                              "samples the surface unevenly)", UserWarning, stacklevel=2)
             if declared is not None and declared != len(pts):
                 raise DatasetError(f"{path}: PLY header declares {declared} vertices, the file holds {len(pts)}")
         else:
@@ -256,6 +263,18 @@ _LABELS = {"0": 0.0, "1": 1.0, "contact": 0.0, "surface": 0.0, "free": 1.0, "fre
 _RAMP = 0.05
 
 
+def _number(text: str) -> float:
+    """``float(text)``, refusing what Python's float takes but a file's number never is: ``0.5_0`` (digits grouped
+    by underscores) was read as 0.5.
+
+    Raises:
+        ValueError: not a plain decimal number.
+    """
+    if "_" in text:
+        raise ValueError(f"not a number: {text!r}")
+    return float(text)
+
+
 def _label(row: dict, path, line: int, scale: float) -> float:
     """A row's label: a kind's (``contact``, ``free``, ...), ``inside`` with its ``depth`` [CSV units] behind the
     surface (``-depth / 5 cm``, the free-space ramp continued inside, as the exploration labels its inside points),
@@ -263,7 +282,7 @@ def _label(row: dict, path, line: int, scale: float) -> float:
     label, depth = row.get("label", "").lower(), row.get("depth", "")
     if label == "inside":
         try:
-            d = float(depth) * scale
+            d = _number(depth) * scale
         except ValueError:
             raise DatasetError(f"{path}:{line}: an inside point needs its depth behind the surface in the depth "
                                f"column (a positive number in the file's units), got {depth!r}") from None
@@ -280,7 +299,7 @@ def _label(row: dict, path, line: int, scale: float) -> float:
     if label in _LABELS:
         return _LABELS[label]
     try:
-        value = float(label)
+        value = _number(label)
     except ValueError:
         value = math.nan
     if np.isfinite(value) and MIN_LABEL <= value < 0:
@@ -335,7 +354,9 @@ def read_contacts_csv(path: str | os.PathLike, *, units: str = "m"):
         # utf-8-sig: a spreadsheet's "CSV UTF-8" starts with a byte-order mark, which read as part of the first
         # column's name ('\ufeffx')
         with open(path, newline="", encoding="utf-8-sig") as f:
-            reader = csv.DictReader(f)
+            delimiter = _delimiter(f.readline())
+            f.seek(0)
+            reader = csv.DictReader(f, delimiter=delimiter)
             rows = list(reader)
             header = [c.strip().lower() for c in reader.fieldnames or [] if c is not None]
     except (OSError, UnicodeDecodeError, csv.Error) as exc:
@@ -363,9 +384,11 @@ def read_contacts_csv(path: str | os.PathLike, *, units: str = "m"):
             raise DatasetError(f"{path}:{i}: the row has fewer fields than the header ({len(cols)} columns: {cols})")
         row = {k.strip().lower(): v.strip() for k, v in row.items()}
         try:
-            p = [float(row[d]) for d in dims]
+            p = [_number(row[d]) for d in dims]
         except (KeyError, ValueError):
-            raise DatasetError(f"{path}:{i}: coordinates {[row.get(d) for d in dims]} are not numbers") from None
+            comma = delimiter != "," and any("," in (row.get(d) or "") for d in dims)
+            raise DatasetError(f"{path}:{i}: coordinates {[row.get(d) for d in dims]} are not numbers"
+                               + (" (decimal commas? write a point: 0.5, not 0,5)" if comma else "")) from None
         if not np.isfinite(p).all():
             raise DatasetError(f"{path}:{i}: coordinates contain NaN or inf")
         y = _label(row, path, i, scale)
@@ -380,8 +403,36 @@ def read_contacts_csv(path: str | os.PathLike, *, units: str = "m"):
         steps.append(st)
         normals.append(_direction(row, direction, y, path, i) if direction else np.full(len(dims), np.nan))
     xs = np.asarray(xs) * scale
-    check_metres(xs, str(path), hint=_units_hint(units), error=DatasetError)
-    return xs, np.asarray(ys), np.asarray(steps, dtype=np.int64), np.asarray(normals, dtype=np.float64)
+    check_metres(xs, str(path), hint=_units_hint(units), error=DatasetError, lines=np.arange(2, len(xs) + 2))
+    ys, steps, normals = np.asarray(ys), np.asarray(steps, dtype=np.int64), np.asarray(normals, dtype=np.float64)
+    first = _first_occurrences(xs, ys, normals)
+    if len(first) < len(xs):
+        # a row recorded twice is one observation: counted three times it weighed three times in the fit
+        import warnings
+
+        warnings.warn(f"{path}: {len(xs) - len(first)} of {len(xs)} rows repeat an earlier row (the same point, label "
+                      "and direction); merged, each observation counted once", UserWarning, stacklevel=2)
+        xs, ys, steps, normals = xs[first], ys[first], steps[first], normals[first]
+    return xs, ys, steps, normals
+
+
+def _delimiter(header: str) -> str:
+    """The separator of a contacts CSV from its header line: ``,``, or ``;`` or a tab where the header is one column
+    of names so separated (a spreadsheet's export in a locale with decimal commas)."""
+    line = header.lstrip("\ufeff")
+    if "," in line:
+        return ","
+    for sep in (";", "\t"):
+        if sep in line:
+            return sep
+    return ","
+
+
+def _first_occurrences(x: np.ndarray, y: np.ndarray, normals: np.ndarray) -> np.ndarray:
+    """`(k,)` sorted indices of the rows that do not repeat an earlier row exactly (point, label and direction)."""
+    key = np.column_stack([x, y[:, None], np.nan_to_num(normals, nan=np.inf)])
+    _, first = np.unique(key, axis=0, return_index=True)
+    return np.sort(first)
 
 
 def _direction(row: dict, columns: tuple, label: float, path: Path, line: int) -> np.ndarray:
@@ -393,7 +444,7 @@ def _direction(row: dict, columns: tuple, label: float, path: Path, line: int) -
         raise DatasetError(f"{path}:{line}: {', '.join(columns)} belong to contact rows (label contact), not to a "
                            f"row labelled {row.get('label')!r}")
     try:
-        v = np.array([float(c) for c in raw])
+        v = np.array([_number(c) for c in raw])
     except ValueError:
         raise DatasetError(f"{path}:{line}: {', '.join(columns)} {raw} are not numbers") from None
     n = float(np.linalg.norm(v))
@@ -452,6 +503,11 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         est = est.replace(noise=noise)
     x_in, y_in, step_in, normal_in = read_contacts_csv(contacts_csv, units=units)
     dim = x_in.shape[1]
+    if not (y_in == 0).any():
+        import warnings
+
+        warnings.warn(f"{contacts_csv}: no contact rows (label contact): nothing touched the inner shape, so its "
+                      "estimate is what the camera's observations carry over", UserWarning, stacklevel=2)
     if camera_origin is not None and point_cloud is None:
         raise DatasetError("camera_origin: gives the free space in front of a point cloud; pass point_cloud too")
     several = isinstance(point_cloud, (list, tuple))
@@ -479,10 +535,24 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             raise DatasetError(f"{', '.join(map(str, files))}: {exc}") from None
         # the box of every capture together: one view may see only the top of the body, away from the contacts
         _check_together(contacts_csv, x_in, y_in, " + ".join(map(str, files)), everything)
-        for f, o, c in zip(files, origins, captures):
+        # the middle of the box of everything observed: inside the body, and less pulled to the seen side than a mean
+        every = np.concatenate([everything, x_in[y_in == 0]])
+        centre = (every.min(axis=0) + every.max(axis=0)) / 2
+        for k, (f, o, c) in enumerate(zip(files, origins, captures)):
             _check_camera(f, c.points, o, units)
+            _check_facing(f, k, len(files), c.points, c.origin, centre)
+    normal_in = _outward(contacts_csv, x_in, y_in, normal_in,
+                         np.concatenate([c.points for c in captures]) if captures else None)
     inner, inner_steps = _inner_with_inside_points(x_in, y_in, normal_in, step_in, est.labels)
     keep = uncontradicted_by_step(inner.x, inner.y, inner_steps, est.labels, outer[0], outer[1])
+    behind = inner.y < 0
+    if behind.sum() >= 5 and (~keep[behind]).mean() > 0.25:
+        import warnings
+
+        warnings.warn(f"{contacts_csv}: {int((~keep[behind]).sum())} of {int(behind.sum())} inside points behind the "
+                      "contacts lie where other observations show free space or the seen surface, and were dropped; "
+                      "do the contacts' normals or forces point out of the body, and are the files in one frame?",
+                      UserWarning, stacklevel=2)
     inner, inner_steps = inner.subset(keep), inner_steps[keep]
     gap = math.nan
     if captures and est.labels.vision_inside_gap is not None:
@@ -571,20 +641,24 @@ def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts
 
     The contacts touch the body under the cover the camera saw, so they lie inside the box of every capture together
     or near it: the median contact may lie at most ``max(5 cm, a quarter of the box's diagonal)`` outside it (one
-    capture alone may see only the body's top). ``pts`` `(m, d)` [m] are the captures' points.
+    capture alone may see only the body's top). A file of free-space rows alone is held to the free space's reach,
+    ``max(15 cm, the box's diagonal)``: the fingertip moves through the air around the body, not on it. ``pts``
+    `(m, d)` [m] are the captures' points.
 
     Raises:
         DatasetError: naming both files and the distance.
     """
-    touched = x_in[y_in == 0] if (y_in == 0).any() else x_in
+    contacts = (y_in == 0).any()
+    touched = x_in[y_in == 0] if contacts else x_in
     seen = pts
     lo, hi = seen.min(axis=0), seen.max(axis=0)
     diagonal = float(np.linalg.norm(hi - lo))
     outside = np.linalg.norm(np.maximum(lo - touched, 0.0) + np.maximum(touched - hi, 0.0), axis=1)
-    allowed = max(0.05, 0.25 * diagonal)
+    allowed = max(0.05, 0.25 * diagonal) if contacts else max(0.15, diagonal)
     if float(np.median(outside)) > allowed:
+        what = "contacts" if contacts else "free-space rows (the file has no contacts)"
         raise DatasetError(
-            f"{contacts_csv} and {cloud}: the contacts lie {np.median(outside) * 100:.1f} cm (median) outside the "
+            f"{contacts_csv} and {cloud}: the {what} lie {np.median(outside) * 100:.1f} cm (median) outside the "
             f"cloud's box [{_fmt(lo)} .. {_fmt(hi)}] m, more than {allowed * 100:.1f} cm: the files are not in one "
             "frame or not in one unit (--units applies to both; a cloud in another frame needs transforming first)")
 
@@ -607,6 +681,66 @@ def _check_camera(cloud, seen: np.ndarray, origin, units: str) -> None:
         warnings.warn(f"{cloud}: the camera origin {_fmt(o)} m lies inside the cloud's convex hull; a camera sees a "
                       "surface from outside it, so its free space would lie inside the body. Is the origin in the "
                       "cloud's frame and units?", UserWarning, stacklevel=3)
+
+
+#: Below this share of a capture's points facing its camera origin, the origin is named as doubtful.
+FACING_SHARE = 0.5
+
+
+def _check_facing(cloud, k: int, n: int, seen: np.ndarray, origin, centre: np.ndarray) -> None:
+    """Warn of a camera origin that its own capture's points face away from: a camera sees the near side of a body,
+    so the body's inside (``centre``, the middle of every observation) lies behind each seen point as the camera looks
+    at it, ``(centre - p) . (p - origin) > 0``. Swapped origins (two clouds, two ``--camera-origin`` in the wrong
+    order) or an origin in other units than its cloud put most points facing away: the correlation fell from 1.00 to
+    0.09 without a word. Points at a capture's rim, seen at grazing angles, may face either way: below
+    :data:`FACING_SHARE` of them facing the origin is what is named."""
+    if origin is None or len(seen) < 10:
+        return
+    facing = float(np.mean(np.einsum("ij,ij->i", centre - seen, seen - np.asarray(origin)) > 0))
+    if facing < FACING_SHARE:
+        import warnings
+
+        which = f"capture {k + 1} of {n} ({cloud})" if n > 1 else str(cloud)
+        warnings.warn(f"{which}: only {100 * facing:.0f} % of its points face its camera origin {_fmt(origin)} m "
+                      "(a camera sees the near side of a body): is the origin that capture's own (several origins in "
+                      "the order of the clouds), in the cloud's frame and units?", UserWarning, stacklevel=3)
+
+
+def _outward(contacts_csv, x: np.ndarray, y: np.ndarray, normal: np.ndarray, seen: np.ndarray | None) -> np.ndarray:
+    """The contacts' directions turned out of the body where the data say they point into it (all flipped together,
+    with a warning): a file's normals or forces of the wrong sign put every inside point outside (contacts alone:
+    1.76 cm against 0.27 cm, silently).
+
+    The data vote on the sign: each free-space row against the direction of its nearest contact (free space lies
+    outside), each contact against the direction to its nearest seen point (the cover lies outside the body), and
+    each contact against the direction from the contacts' middle (a body's surface faces away from its inside)."""
+    surface = (y == 0) & np.isfinite(normal).all(axis=1)
+    if surface.sum() < 3:
+        return normal
+    c, n = x[surface], normal[surface]
+    from scipy.spatial import cKDTree
+
+    votes = {}
+    free = x[y == 1]
+    if len(free):
+        _, j = cKDTree(c).query(free)
+        votes["free rows"] = np.einsum("ij,ij->i", free - c[j], n[j])
+    if seen is not None and len(seen):
+        _, j = cKDTree(seen).query(c)
+        votes["the seen surface"] = np.einsum("ij,ij->i", seen[j] - c, n)
+    votes["the contacts' middle"] = np.einsum("ij,ij->i", c - c.mean(axis=0), n)
+    signs = np.concatenate([np.sign(v) for v in votes.values()])
+    if signs.sum() >= 0:
+        return normal
+    import warnings
+
+    said = ", ".join(f"{k} {int((v < 0).sum())} of {len(v)}" for k, v in votes.items())
+    warnings.warn(f"{contacts_csv}: the contacts' normals (or forces) point into the body by the data's own account "
+                  f"(inward by {said}): turned round. A contact's direction is the surface's outward normal, or the "
+                  "force the surface exerted on the fingertip", UserWarning, stacklevel=3)
+    out = normal.copy()
+    out[surface] = -n
+    return out
 
 
 def _fmt(v) -> str:

@@ -162,6 +162,14 @@ def parse_object_set(text: str) -> list[SetObject]:
         if not names:
             raise ValueError(f"objects: {text!r} names no pybullet mesh")
         known = {"duck": "duck.obj", "teddy": "teddy2_VHACD_CHs.obj", "bunny": "bunny.obj", "mug": "objects/mug.obj"}
+        from .scenefile import resolve_mesh
+
+        for n in names:                 # each named mesh found before a study runs (a typo gave two failed runs)
+            try:
+                resolve_mesh("pybullet:" + known.get(n, n), Path.cwd())
+            except ValueError as exc:
+                raise ValueError(f"objects: {text!r}: {n!r} is no mesh in pybullet's data ({exc}); the names "
+                                 f"{sorted(known)} or a path inside pybullet_data") from None
         return [SetObject(n.replace("/", "-").rsplit(".", 1)[0], "pybullet:" + known.get(n, n),
                           _size(np.random.default_rng(_SALT + 900_000 + i)), i) for i, n in enumerate(names)]
     if family == "folder":
