@@ -322,7 +322,8 @@ def test_an_exploration_says_once_how_many_fits_stopped_short(monkeypatch):
         w.simplefilter("always")
         tg.explore(tg.sim.paper_objects_2d()["A"], max_steps=4)
     mine = [str(c.message) for c in caught if issubclass(c.category, FitNotConvergedWarning)]
-    assert mine[-1].startswith("explore: K_t's fit stopped at its iteration cap") and "at 4 of 4 steps" in mine[-1]
+    assert mine[-1].startswith("explore: K_t's fit stopped short of the gradient tolerance")
+    assert "at 4 of 4 steps" in mine[-1]
     assert len(mine) <= 2          # the first fit (before exploring) may warn itself; the steps' are counted
 
 
@@ -409,9 +410,30 @@ def test_fit_says_when_there_is_no_estimate(tmp_path, capsys):
     free_only = save_dataset(Dataset(x, np.ones(30), np.zeros(30, np.int64), np.zeros(30, np.int64)),
                              tmp_path / "free.gpioius")                # free space only: mu > 0 everywhere
     assert main(["fit", str(free_only)]) == 0
-    assert "no estimate: the inner zero level {mu_in = 0} has no surface" in capsys.readouterr().out
+    assert "no estimate: no surface to show or export; only 0 contact(s): too few" in capsys.readouterr().out
     assert main(["fit", str(EXAMPLE)]) == 0
     assert "no estimate" not in capsys.readouterr().out
+
+
+def test_kernel_lengths_have_one_range_at_every_door_and_a_short_one_is_named_as_the_cause(tmp_path, capsys):
+    """Issue 60, item 13: `fit --theta 500` was accepted, `--lengthscale 25` refused, scene files took (0.001, 10]; a
+    length of 0.1 mm ended in "no estimate ... (too few contacts, or units other than metres?)"."""
+    from torch_gpioius.io.datasets import load_dataset
+    from torch_gpioius.io.offline import why_no_estimate
+    from torch_gpioius.kernels import KernelChoice
+
+    for option in ("--theta", "--lengthscale"):
+        for bad in ("500", "25", "0.0001"):
+            for command in (["fit", str(EXAMPLE)], ["study", "--world", "planar", "--out", str(tmp_path / "s")]):
+                with pytest.raises(SystemExit):
+                    main([*command, option, bad])
+                err = capsys.readouterr().err
+                assert f"{option}: {float(bad):g} m is" in err and ("below 1 mm" in err or "above 10 m" in err), err
+    for bad in (25.0, 1e-4):
+        with pytest.raises(ValueError, match="lengthscale: .* m is (below 1 mm|above 10 m)"):
+            KernelChoice("matern52", bad)
+    ds = load_dataset(EXAMPLE)
+    assert "the kernel's length (0.05 mm) is far below the spacing" in why_no_estimate(ds, 5e-5)
 
 
 def test_replay_locks_its_folder(tmp_path, capsys):

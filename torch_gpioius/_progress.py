@@ -8,7 +8,7 @@ import time
 
 from tqdm.auto import tqdm
 
-__all__ = ["progress"]
+__all__ = ["progress", "Heartbeat", "status"]
 
 
 class _Lines:
@@ -75,3 +75,48 @@ def progress(total: float, desc: str, enabled: bool = True, *, leave: bool = Fal
     if sys.stderr.isatty():
         return tqdm(total=total, desc=desc, leave=leave)
     return _Lines(total, desc) if lines else _Nothing()
+
+
+#: What a long computation is doing now (:func:`status`), read by a running :class:`Heartbeat`.
+_STATUS = {"text": ""}
+
+
+def status(text: str) -> None:
+    """Say what a long computation is doing now (``"fitting K_t on 2,870 observations"``); a running
+    :class:`Heartbeat` prints it. Cheap, and nothing is printed without a heartbeat."""
+    _STATUS["text"] = text
+
+
+class Heartbeat:
+    """A context manager that prints, on stderr, what a long computation is doing (:func:`status`) and for how long,
+    every ``every`` seconds once it has run that long: a fit of minutes is never silent (``gpioius fit``).
+
+    Args:
+        desc: the line's start (``"gpioius fit"``).
+        every: seconds between lines [s].
+        stream: where to print (stderr).
+    """
+
+    def __init__(self, desc: str, every: float = 15.0, stream=None) -> None:
+        import threading
+
+        self.desc, self.every, self.stream = desc, float(every), stream
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._beat, daemon=True)
+
+    def _beat(self) -> None:
+        t0 = time.perf_counter()
+        while not self._stop.wait(self.every):
+            text = _STATUS["text"] or "working"
+            print(f"{self.desc}: {text}, {time.perf_counter() - t0:.0f} s so far", file=self.stream or sys.stderr,
+                  flush=True)
+
+    def __enter__(self) -> "Heartbeat":
+        status("")
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
+        status("")

@@ -136,6 +136,30 @@ def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) 
                          "origin are accepted)")
 
 
+#: The kernel lengths a user may set [m], at every door (the command line's --lengthscale and --theta, scene files,
+#: ``KernelChoice``, ``theta=``): below a millimetre each observation stands alone (no touch spacing is that fine)
+#: and the estimate has no surface; above 10 m one length spans any robot's workspace many times over.
+KERNEL_LENGTH = (1e-3, 10.0)
+
+
+def as_kernel_length(value, name: str = "lengthscale") -> float:
+    """A kernel's length set by a user [m], in :data:`KERNEL_LENGTH`.
+
+    Raises:
+        ValueError: naming ``name``, the value and what is wrong with it.
+    """
+    v = as_float(value, name, positive=True, unit="m")
+    lo, hi = KERNEL_LENGTH
+    if v < lo:
+        raise ValueError(f"{name}: {v:g} m is below {lo * 1000:g} mm; a kernel's length is in metres and spans several "
+                         "touches (a fifth of the object by default): shorter, each observation stands alone and the "
+                         "estimate has no surface")
+    if v > hi:
+        raise ValueError(f"{name}: {v:g} m is above {hi:g} m; a kernel's length is in metres (was it given in "
+                         "millimetres or centimetres?)")
+    return v
+
+
 def as_length(value, name: str, *, hi: float = MAX_LENGTH, positive: bool = True) -> float:
     """A length setting [m]: finite, positive, at most ``hi`` (a larger one is a units mistake, named as such).
 

@@ -81,9 +81,9 @@ def _study(args: argparse.Namespace) -> int:
 
 def _fit(args: argparse.Namespace) -> int:
     own = Path(args.dataset).suffix.lower() == ".csv"
-    if not own and (args.cloud or args.camera_origin or args.units != "m"):
-        raise ValueError("fit: --cloud, --units and --camera-origin go with a contacts CSV (a .gpioius file holds "
-                         "its own cloud, in metres)")
+    if not own and (args.cloud or args.camera_origin or args.units != "m" or args.contact_spacing is not None):
+        raise ValueError("fit: --cloud, --units, --camera-origin and --contact-spacing go with a contacts CSV (a "
+                         ".gpioius file holds its own cloud, in metres)")
     origins = []
     for text in args.camera_origin or []:
         try:
@@ -110,8 +110,11 @@ def _fit(args: argparse.Namespace) -> int:
 
     # --force replaces results, never the data: checked before the import
     check_not_inputs(fit_outputs(args.out, args.mesh, args.outer_mesh), [args.dataset, *clouds])
-    # arguments checked first; a fit refused or failed leaves no folder behind
-    with claimed_folder(args.out, "fit", args.force) if args.out else nullcontext():
+    from ._progress import Heartbeat
+
+    # arguments checked first; a fit refused or failed leaves no folder behind; a long one says what it does
+    with claimed_folder(args.out, "fit", args.force) if args.out else nullcontext(), \
+            Heartbeat("gpioius fit") if not args.quiet else nullcontext():
         info = _fit_files(args, own, clouds, origins, choice, kernel)
     _fit_report(args, info)
     return 0
@@ -134,7 +137,7 @@ def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list,
             settings = EstimatorSettings.of(settings).with_kernel(choice)
             kernel = None
         ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel, camera_origin=origin,
-                                settings=settings)
+                                settings=settings, contact_spacing=args.contact_spacing)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         source, settings = ds, None                  # the dataset holds the settings it was labelled with
     return fit_dataset(source, args.out, kernel=kernel, noise=args.noise, learn=args.learn, settings=settings,
@@ -167,10 +170,9 @@ def _fit_report(args: argparse.Namespace, info: dict) -> None:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")
     if info.get("converged") is False:
-        print("  (K_t's fit stopped at its iteration cap, short of the optimum: this is the best K_t found)")
+        print(f"  ({info['fit_note']})")
     if not info["estimate"]:
-        print("no estimate: the inner zero level {mu_in = 0} has no surface in the data's box, so there is no shape to "
-              "show or export (too few contacts, or units other than metres?)")
+        print(f"no estimate: no surface to show or export; {info['no_estimate']}")
     for key, what in (("mesh", "the inner estimate"), ("outer_mesh", "the outer estimate")):
         if info.get(key):
             print(f"wrote {what} to {info[key]}")
@@ -439,6 +441,17 @@ def _length(option: str):
     return parse
 
 
+def _kernel_length(option: str):
+    """An argparse type for a kernel's length [m], in the one range every door takes (1 mm to 10 m)."""
+    from ._validation import as_kernel_length
+
+    def parse(text: str) -> float:
+        return _argument(lambda v: as_kernel_length(v, f"--{option}"), _number(text, option, "a number of metres"))
+
+    parse.__name__ = option
+    return parse
+
+
 def _kernel_names() -> str:
     """The kernel names the command line takes, from the kernel registry (registered kinds and their aliases)."""
     from .kernels import KERNELS
@@ -625,10 +638,10 @@ def _add_study(sub, common, fmt) -> None:
     sw.add_argument("--kernel", default=None, type=_kernel_name,
                     help=f"the kernel: {_kernel_names()} (imq: the paper's inverse multiquadric; a kernel registered "
                          "with register_kernel by its kind); default: each world's own; one per --out folder")
-    sw.add_argument("--lengthscale", type=_length("lengthscale"), default=None,
+    sw.add_argument("--lengthscale", type=_kernel_length("lengthscale"), default=None,
                     help="the kernel's length scale [m] (the paper's theta for the inverse multiquadric; with --learn "
                          "length or all, where the learning starts); default: the kernel's own; one per --out folder")
-    sw.add_argument("--theta", type=_length("theta"), default=None,
+    sw.add_argument("--theta", type=_kernel_length("theta"), default=None,
                     help="deprecated: --lengthscale under the paper's name")
     sw.add_argument("--noise", type=float, default=None,
                     help="sigma^2 (with --learn all, where the learning starts); default: each world's own; one per "
@@ -657,6 +670,11 @@ def _add_fit(sub, common, fmt) -> None:
         "it for several captures (each with its own --camera-origin, in the same order)",
     )
     fit.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the CSV and the cloud")
+    fit.add_argument("--contact-spacing", type=_length("contact-spacing"), default=None,
+                     help="with a contacts CSV: drop rows within this distance [m] of an earlier row of their kind "
+                          "(contacts, free space, inside points); an exact fit's memory grows with the square of the "
+                          "observations (default: every row)")
+    fit.add_argument("--quiet", action="store_true", help="no progress lines during a long fit")
     fit.add_argument("--voxel", type=_fit_voxel, default="auto",
                      help="voxel edge of the cloud [m] (0: every point; auto: the settings' rule, a tenth of the "
                           "clouds' largest extent within 2-5 cm by default)")
@@ -677,10 +695,10 @@ def _add_fit(sub, common, fmt) -> None:
     fit.add_argument("--kernel", default=None, type=_kernel_name,
                      help=f"the kernel in place of the settings': {_kernel_names()} (at the settings' length, or "
                           "the settings' length rule, when --lengthscale is not given)")
-    fit.add_argument("--lengthscale", type=_length("lengthscale"), default=None,
+    fit.add_argument("--lengthscale", type=_kernel_length("lengthscale"), default=None,
                      help="the kernel's length scale [m] in place of the settings' (whose default is a fifth of the "
                           "object's largest extent, 4-10 cm); with --learn length or all, where the learning starts")
-    fit.add_argument("--theta", type=float, default=None,
+    fit.add_argument("--theta", type=_kernel_length("theta"), default=None,
                      help="deprecated: the inverse multiquadric's length scale [m] in place of the settings' kernel")
     fit.add_argument("--noise", type=float, default=None, help="sigma^2 in place of the settings'")
     fit.add_argument("--learn", default=None, choices=_learns(),
@@ -923,7 +941,7 @@ def main(argv: list[str] | None = None) -> int:
             # quiet about it (nothing for a user to act on)
             warnings.simplefilter("ignore", FitNotConvergedWarning)
             return args.func(args)
-    except (ValueError, OSError, RuntimeError, ImportError) as exc:
+    except (ValueError, OSError, RuntimeError, ImportError, MemoryError) as exc:
         message = " ".join(str(exc).split())
         print(f"gpioius: error: {message}", file=sys.stderr)
         return 2

@@ -470,7 +470,7 @@ def test_repeated_rows_count_once_and_stray_rows_separators_and_underscores_are_
 
     once, _ = sphere_files(tmp_path, contacts=10, cover=100, name="once.csv")
     thrice, _ = sphere_files(tmp_path, contacts=10, cover=100, repeat=3, name="thrice.csv")
-    with pytest.warns(UserWarning, match=r"50 of 75 rows repeat an earlier row .* merged, each observation counted once"):
+    with pytest.warns(UserWarning, match=r"50 of 75 rows repeat an earlier row .* merged, each observation counted"):
         x3, y3, s3, n3 = read_contacts_csv(thrice)
     x1, y1, s1, n1 = read_contacts_csv(once)
     assert np.array_equal(x1, x3) and np.array_equal(y1, y3) and np.array_equal(n1, n3, equal_nan=True)

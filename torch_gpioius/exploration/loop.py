@@ -70,9 +70,10 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
     if state.unconverged_fits:
         from ..models.gpiois import FitNotConvergedWarning
 
-        warnings.warn(f"explore: K_t's fit stopped at its iteration cap, short of the optimum, at "
-                      f"{state.unconverged_fits} of {state.steps} steps; each used the best K_t found (usually within "
-                      "rounding of the optimum on a flat likelihood)", FitNotConvergedWarning, stacklevel=3)
+        warnings.warn(f"explore: K_t's fit stopped short of the gradient tolerance (at its iteration cap, or its last "
+                      "steps gaining less than the likelihood's rounding) at "
+                      f"{state.unconverged_fits} of {state.steps} steps; the best K_t found is used, within rounding "
+                      "of the optimum where the likelihood is flat", FitNotConvergedWarning, stacklevel=3)
     return Trace.from_state(state, world, config)
 
 

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
+from .._progress import status
 from .checkpoints import save_checkpoint
 from .outputs import FolderLock, StagedFiles, atomic_write
 from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
@@ -21,7 +22,12 @@ from ..models.estimator import EstimatorSettings, as_learn
 from ..surfaces import closed_curves, data_bounds, evaluate_grid, grid_resolution, zero_level_curves, zero_level_mesh
 from .export import check_format
 
-__all__ = ["fit_dataset", "fit_outputs", "replay_log", "data_bounds"]
+__all__ = ["fit_dataset", "fit_outputs", "replay_log", "data_bounds", "FIT_SCOUT", "fit_memory", "check_fit_memory",
+           "available_memory", "why_no_estimate"]
+
+#: Inner points above which a fit on a file scouts K_t's starts on a copy thinned to this many
+#: (``GPIOIS.fit(scout=)``): below it every start runs on all the data, as a simulated run's first fit does.
+FIT_SCOUT = 512
 
 
 def _markers(ax, ds: Dataset, dim: int) -> None:
@@ -150,6 +156,66 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
                     resolution, learn, settings, claims.get("--mesh"), claims.get("--outer-mesh"))
 
 
+#: What an exact fit of n observations holds at its peak, in float64 matrices of n x n (measured on users' files of
+#: 1,467 to 2,870 observations: 14-21 of them) and the bytes the process holds besides (torch, the clouds).
+FIT_MATRICES, FIT_BASE_BYTES = 24, 0.5e9
+
+
+def fit_memory(n: int) -> float:
+    """The bytes an exact fit of ``n`` observations is expected to need at its peak (K_t's Newton steps hold several
+    `(n, n)` matrices): 1,000 contacts with their inside and free points, 2,870 observations, took 1.45 GB."""
+    return FIT_BASE_BYTES + FIT_MATRICES * 8.0 * float(n) ** 2
+
+
+def available_memory() -> float | None:
+    """The bytes this machine can give a process now (Linux's MemAvailable), or None where it is not known."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024.0
+    except OSError:
+        pass
+    return None
+
+
+def check_fit_memory(ds: Dataset) -> None:
+    """Refuse a fit that would run out of memory, before it starts (3,000 contacts took 7.5 GB and over five minutes
+    before failing).
+
+    Raises:
+        MemoryError: naming the observations, the memory needed and available, and the remedy.
+    """
+    need, have = fit_memory(len(ds)), available_memory()
+    if have is None or need <= 0.9 * have:
+        return
+    inner = int((ds.task == 0).sum())
+    raise MemoryError(f"fit: {len(ds):,} observations ({inner:,} inner, {len(ds) - inner:,} outer) need about "
+                      f"{need / 1e9:.1f} GB for the exact fit, more than the {have / 1e9:.1f} GB free on this machine; "
+                      "thin the contacts (gpioius fit --contact-spacing 0.005, dataset_from_files(contact_spacing=)), "
+                      "average the clouds in larger voxels (--voxel), or fit on a machine with more memory")
+
+
+def why_no_estimate(ds: Dataset, length: float) -> str:
+    """Why a fit's inner estimate has no surface in the data's box, as far as the data tell: too few contacts, or a
+    kernel's length [m] far below the spacing of the inner observations (each then stands alone, the mean falls back
+    to its prior of 1 between them); else that the zero level does not cross the box."""
+    contacts = ds.x[(ds.task == 0) & (ds.y == 0)]
+    if len(contacts) < 3:
+        return f"only {len(contacts)} contact(s): too few to enclose a surface"
+    inner = ds.x[ds.task == 0]
+    from scipy.spatial import cKDTree
+
+    spacing = float(np.median(cKDTree(inner).query(inner, k=2)[0][:, 1]))
+    if length < 0.5 * spacing:
+        return (f"the kernel's length ({length * 1000:.3g} mm) is far below the spacing of the inner observations "
+                f"({spacing * 1000:.3g} mm, the median to the nearest): each stands alone and the mean returns to "
+                "its prior between them; leave the length to the settings' rule (a fifth of the object) or give a "
+                "longer one")
+    return ("the inner zero level {mu_in = 0} does not cross the data's box: too few contacts around the object, or "
+            "contacts that do not enclose it")
+
+
 def fit_outputs(out, mesh, outer_mesh) -> dict:
     """``{option: path}`` of every file :func:`fit_dataset` writes (what
     :func:`~torch_gpioius.io.outputs.check_not_inputs` compares with the inputs)."""
@@ -166,7 +232,11 @@ def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mes
     used = settings if settings is not None else _file_settings(ds)
     if isinstance(kernel, KernelChoice):             # a name and/or a length on the kernel the data were made with
         kernel = kernel.apply(used.kernel if used is not None else kernel_of_record(ds.meta)) if kernel else None
-    model = ds.to_model(noise=noise, settings=settings, **({} if kernel is None else {"kernel": kernel})).fit()
+    check_fit_memory(ds)
+    status(f"fitting K_t on {len(ds):,} observations ({int((ds.task == 0).sum()):,} inner)")
+    model = ds.to_model(noise=noise, settings=settings, **({} if kernel is None else {"kernel": kernel}))
+    # a large file's first K_t: its starts scouted on a thinned copy, the full data re-learned from the basins found
+    model = model.fit(scout=FIT_SCOUT) if isinstance(model, GPIOIS) else model.fit()
     learn = learn if learn is not None else (used.learn if used is not None else "task")
     if learn != "task":
         model.learn_hyperparameters(*LEARN_SIZE, learn_noise=learn == "all")
@@ -181,12 +251,20 @@ def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mes
         info["learned"] = {"length": r.length, "noise": r.noise, "kept": r.kept, "mll_before": r.mll_full_before,
                            "evaluations": r.evaluations, "points": r.points}
     if isinstance(model, GPIOIS):
+        status("the correlation's profile-likelihood interval")
         info["converged"] = bool(getattr(model.fit_result, "converged", True))
+        if not info["converged"]:
+            from ..models.gpiois import fit_stop_reason
+
+            info["fit_note"] = fit_stop_reason(model.fit_result)
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
                     correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)),
                     similarity_support=model.similarity_support())
     res = grid_resolution(resolution, ds.x.shape[1], 0.005, 0.02)
+    status("the estimate's surface")
     info["estimate"] = has_surface(model, ds.x, res)
+    if not info["estimate"]:
+        info["no_estimate"] = why_no_estimate(ds, model.lengthscale)
     info["mesh"] = info["outer_mesh"] = None
     for key, target, task in (("mesh", mesh, INNER), ("outer_mesh", outer_mesh, 1)):
         if target is not None:

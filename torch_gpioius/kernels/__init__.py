@@ -12,7 +12,7 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 
-from .._validation import as_float
+from .._validation import as_float, as_kernel_length
 from ..registry import Registry
 from .base import ExactKernel, check_kernel
 from .inverse_multiquadric import InverseMultiquadricKernel, imq
@@ -135,6 +135,11 @@ def kernel_kind(name: str) -> str:
 
 
 def _checked_length(lengthscale) -> float:
+    return as_kernel_length(lengthscale, "lengthscale")
+
+
+def _recorded_length(lengthscale) -> float:
+    """A length a file records (read as it was written, within the kernels' numerical support)."""
     return as_float(lengthscale, "lengthscale", positive=True, unit="m")
 
 
@@ -159,7 +164,7 @@ def kernel_of_record(meta: dict, default: ExactKernel | None = None) -> ExactKer
     if isinstance(meta.get("kernel"), dict):
         return from_description(meta["kernel"])
     if meta.get("theta") is not None:
-        return InverseMultiquadricKernel(lengthscale=_checked_length(meta["theta"]))
+        return InverseMultiquadricKernel(lengthscale=_recorded_length(meta["theta"]))
     return copy.deepcopy(default) if default is not None else InverseMultiquadricKernel(0.1)
 
 

@@ -510,7 +510,7 @@ def deprecated_theta(theta, owner: str) -> None:
 
 def kernel_for_theta(theta, kernel, owner: str):
     """``kernel``, or for the deprecated ``theta=`` alias of an entry point users type (``explore``, the command
-    line's ``--theta``) the inverse multiquadric of that length scale [m], checked against ``tol.theta_range``, with a
+    line's ``--theta``) the inverse multiquadric of that length scale [m], in the users' range of kernel lengths, with a
     DeprecationWarning; None when neither is given.
 
     Raises:
@@ -521,9 +521,8 @@ def kernel_for_theta(theta, kernel, owner: str):
     if kernel is not None:
         raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's length scale; a kernel "
                          "carries its own)")
-    from .._validation import as_float
-    from ..tolerances import tol
+    from .._validation import as_kernel_length
 
-    length = as_float(theta, "theta", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True, unit="m")
+    length = as_kernel_length(theta, "theta")
     deprecated_theta(theta, owner)
     return InverseMultiquadricKernel(lengthscale=length)

@@ -23,7 +23,7 @@ from ..inference.structured import StructuredExactInference
 from ..inference.task_fit import TaskCovarianceFitter
 from ..tolerances import tol
 
-__all__ = ["GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
+__all__ = ["fit_stop_reason", "GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
 
 def _check_outer_mean(value) -> float:
     """``value`` as the outer task's prior mean: a finite number within ``1 +- tol.outer_mean_span``, else a
@@ -41,6 +41,16 @@ class FitNotConvergedWarning(RuntimeWarning):
     best K_t found; on a flat likelihood (few contacts) that is within rounding of the optimum in the marginal
     likelihood, and ``fit_result`` says how far the gradient was from zero. Nothing for a user to do unless K_t
     itself is the result they report; an exploration counts these fits and says so once at the end."""
+
+
+def fit_stop_reason(result) -> str:
+    """Why K_t's fit stopped short of its gradient tolerance, in the one wording the warning, ``gpioius fit`` and
+    ``fit.json`` use (``result``: a ``fit_result`` that did not converge)."""
+    why = (f"at its cap of {result.iterations} iterations" if result.iterations >= tol.fit_max_iter else
+           f"after {result.iterations} iterations, its last steps gaining less than the likelihood's rounding "
+           "(tol.fit_ftol)")
+    return (f"K_t's fit stopped {why}, short of the gradient tolerance (projected gradient {result.grad_norm:.3g}); "
+            "the best K_t found is used, within rounding of the optimum where the likelihood is flat")
 
 
 def _patches(points: np.ndarray, spacing: float) -> int:
@@ -468,7 +478,9 @@ class GPIOIS(ImplicitSurfaceGP):
                 correlation of 1 (a restart's warm start too) first runs on the copy; where the copy's run leaves the
                 bound, the full data's run starts where it ended (the walk from the bound, a dozen or more evaluations,
                 then costs ``scout^3`` each) and is kept if it ends above the warm start's MLL; otherwise the full
-                data's run starts from the warm K_t. None: everything runs on all the data.
+                data's run starts from the warm K_t. On a first fit with more inner points than ``scout`` (a user's
+                file of a thousand contacts), the first K_t and the fixed starts run on the copy, and the full data
+                re-learn from each basin's optimum found there. None: everything runs on all the data.
 
         Returns:
             self, with ``fit_result`` describing the optimisation (``relearned``, ``predicted_gain``, ``tracked``,
@@ -496,12 +508,7 @@ class GPIOIS(ImplicitSurfaceGP):
                           "K_t[0,1] is unidentified (reported as NaN); only the observed task's variance was learned",
                           UnidentifiedSimilarityWarning, stacklevel=2)
         if not best.converged:
-            why = (f"at its cap of {best.iterations} iterations" if best.iterations >= tol.fit_max_iter else
-                   f"after {best.iterations} iterations, its last steps gaining less than the likelihood's rounding "
-                   "(tol.fit_ftol)")
-            warnings.warn(f"GPIOIS.fit: K_t's fit stopped {why}, short of the gradient tolerance (projected gradient "
-                          f"{best.grad_norm:.3g}); the best K_t found is used (fit_result has the details)",
-                          FitNotConvergedWarning, stacklevel=2)
+            warnings.warn(f"GPIOIS.fit: {fit_stop_reason(best)}", FitNotConvergedWarning, stacklevel=2)
         return self
 
     def _task_fitter(self) -> TaskCovarianceFitter:

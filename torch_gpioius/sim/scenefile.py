@@ -59,6 +59,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .._validation import KERNEL_LENGTH
+
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover - Python 3.10
@@ -277,8 +279,8 @@ def _check_finite(value, path: Path, key: str) -> None:
 
 #: The scene settings whose values are checked when the file is read, not when the world is built: key ->
 #: (lowest, highest, whether the lowest is allowed) for lengths and numbers [SI units].
-_RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, True), "theta": (1e-3, 10.0, False),
-           "lengthscale": (1e-3, 10.0, False),
+_RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, True), "theta": (*KERNEL_LENGTH, False),
+           "lengthscale": (*KERNEL_LENGTH, False),
            "noise": (1e-6, 10.0, False), "touch_inside": (0.0, 0.2, True), "vision_inside": (0.0, 0.2, True),
            "vision_inside_gap": (0.0, 0.5, True), "bridge": (0.0, 0.2, False), "gap": (0.0, 0.2, False),
            "resolution": (0.0, 0.05, False), "spacing": (0.0, 0.2, False), "timestep": (0.0, 0.1, False),
