@@ -191,7 +191,7 @@ def test_a_public_bind_keeps_the_host_check_and_warns(log_2d, capsys):
     from torch_gpioius.viewer import check_hosts, public_bind_warning
 
     assert public_bind_warning("127.0.0.1") is None and public_bind_warning("::1") is None
-    assert "every interface" in public_bind_warning("0.0.0.0") and "10.0.0.5" in public_bind_warning("10.0.0.5")
+    assert "every IPv4 interface" in public_bind_warning("0.0.0.0") and "10.0.0.5" in public_bind_warning("10.0.0.5")
     for bad in ("http://x.org", "x.org:8080", "", "a b"):
         with pytest.raises(ValueError, match="allow_hosts"):
             check_hosts([bad])
@@ -300,6 +300,28 @@ def test_bad_ports_and_unreadable_runs_fail_fast_and_are_named(log_2d, tmp_path,
     from torch_gpioius.io.datasets import DatasetError
     with pytest.raises(DatasetError, match="no readable run: .*bad.gpioius"):
         RunViewer(study, port=_free_port())
+
+
+def test_hosts_that_cannot_be_served_are_refused_before_anything_starts(log_2d, capsys):
+    """Issue 60, items 8 and 16: `view --host "not a host"` (or 256.1.1.1, example.com, an address of another machine,
+    a URL) printed "(viser) Server stopped" and never exited; `--host '*'` served a URL of http://*; `--host ::` was
+    called "every interface" but serves IPv6 only."""
+    from torch_gpioius.cli import main
+    from torch_gpioius.viewer import check_host, public_bind_warning
+
+    for host, match in (("not a host", "neither an IP address nor a host name"), ("256.1.1.1", "does not resolve"),
+                        ("no-such-host.invalid", "does not resolve"), ("192.0.2.1", "not an address of this machine"),
+                        ("http://127.0.0.1:8080/", "is a URL or path"), ("*", "0.0.0.0 serves every IPv4 interface"),
+                        ("", "expected an interface")):
+        with pytest.raises(ValueError, match=match):
+            check_host(host)
+        t0 = time.time()
+        assert main(["view", str(log_2d), "--host", host, "--no-browser", "--port", "0"]) == 2
+        assert match in capsys.readouterr().err and time.time() - t0 < 30
+    assert check_host("127.0.0.1") == "127.0.0.1" and check_host("0.0.0.0") == "0.0.0.0"
+    assert check_host("localhost") == "localhost"
+    assert "every IPv4 interface" in public_bind_warning("0.0.0.0")
+    assert "every IPv6 interface (IPv4 clients cannot connect" in public_bind_warning("::")
 
 
 def test_the_initial_view_holds_the_whole_object():

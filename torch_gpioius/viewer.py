@@ -35,7 +35,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "check_hosts", "machine_names",
+__all__ = ["RunViewer", "serve", "run_files", "origin_allowed", "check_port", "check_host", "check_hosts",
+           "machine_names",
            "public_bind_warning", "COLOUR_KEY"]
 
 _GREY, _LIGHT_BLUE, _BLACK, _CYAN, _ORANGE = (
@@ -213,11 +214,61 @@ def check_hosts(hosts) -> tuple[str, ...]:
     return tuple(out)
 
 
+def check_host(host) -> str:
+    """The interface to serve on, checked before anything starts: an address of this machine (IPv4 or IPv6, in
+    brackets or not), ``0.0.0.0`` (every IPv4 interface), ``::`` (every IPv6 one), or a host name that resolves to an
+    address of this machine.
+
+    A name that does not resolve, an address that is not this machine's, a URL or a wildcard used to stop viser's
+    server thread ("(viser) Server stopped") while the command waited forever; ``*`` served a URL of ``http://*``.
+
+    Returns:
+        the host as viser takes it (an IPv6 address without brackets).
+
+    Raises:
+        ValueError: naming the host and what is wrong with it.
+    """
+    import ipaddress
+    import socket
+
+    if not isinstance(host, str) or not host.strip():
+        raise ValueError(f"--host: expected an interface's address or name, got {host!r}")
+    text = host.strip()
+    if text in ("*", "any", "all"):
+        raise ValueError(f"--host: {text!r} is not an interface; 0.0.0.0 serves every IPv4 interface, :: every IPv6 "
+                         "one (other machines can then connect)")
+    if "/" in text or "://" in text:
+        raise ValueError(f"--host: {text!r} is a URL or path; give an interface's address or name without scheme, "
+                         "port or path (127.0.0.1, 0.0.0.0, lab-pc)")
+    bare = text[1:-1] if text.startswith("[") and text.endswith("]") else text
+    try:
+        addresses = [str(ipaddress.ip_address(bare))]
+    except ValueError:
+        if not all(c.isalnum() or c in "-._" for c in bare) or bare.startswith(("-", ".")):
+            raise ValueError(f"--host: {text!r} is neither an IP address nor a host name") from None
+        try:
+            addresses = sorted({info[4][0] for info in socket.getaddrinfo(bare, None, type=socket.SOCK_STREAM)})
+        except OSError as exc:
+            raise ValueError(f"--host: {text!r} does not resolve to an address ({exc.strerror or exc}); give one of "
+                             "this machine's addresses or names") from None
+    for address in addresses:
+        family = socket.AF_INET6 if ":" in address else socket.AF_INET
+        try:
+            with socket.socket(family, socket.SOCK_STREAM) as probe:
+                probe.bind((address, 0))
+            return bare
+        except OSError:
+            continue
+    raise ValueError(f"--host: {text!r} ({', '.join(addresses)}) is not an address of this machine, so nothing can be "
+                     "served there; give one of its interfaces' addresses, 127.0.0.1 or 0.0.0.0")
+
+
 def public_bind_warning(host: str) -> str | None:
     """A warning for a bind that other machines can reach (None for loopback)."""
     if host.strip("[]").lower() in _LOOPBACK:
         return None
-    where = "every interface" if _all_interfaces(host) else host
+    where = {"0.0.0.0": "every IPv4 interface", "::": "every IPv6 interface (IPv4 clients cannot connect there; "
+             "0.0.0.0 serves IPv4)", "": "every interface"}.get(host.strip("[]"), host)
     return (f"gpioius view: warning: serving on {where}: anyone who can reach this machine on the network can open "
             "the run and drive the page (there is no password); serve on 127.0.0.1 and use an SSH tunnel where you "
             "can. Pages are accepted only under this machine's names and --allow-host names.")
@@ -349,8 +400,7 @@ class RunViewer:
         from .io.runs import load_run
 
         check_port(port)
-        if not isinstance(host, str) or not host:
-            raise ValueError(f"host: expected an interface name or address, got {host!r}")
+        host = check_host(host)
         allow_hosts = check_hosts(allow_hosts)
         if resolution is not None:
             from ._validation import as_float
@@ -752,6 +802,7 @@ def serve(source: str | os.PathLike, *, port: int = 8080, open_browser: bool = T
         ValueError: a bad port, host or resolution.
         DatasetError: no run of the source could be read.
     """
+    host = check_host(host)
     viewer = RunViewer(source, host=host, port=port, resolution=resolution, progress=True, allow_hosts=allow_hosts)
     warning = public_bind_warning(host)
     if warning:
