@@ -544,3 +544,37 @@ def test_a_study_keeps_to_the_travel_asked_for_with_or_without_a_measuring_sched
         again = run_sweep("forcefield", scenes=[ball], modes=["tactile"], seeds=1, out=tmp_path / "plain",
                           backend="local", progress=False, max_travel=0.03)
     assert again["skipped"] == 0 and (path.parent / (path.name + ".stale")).exists()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the watcher reads /proc")
+def test_a_study_killed_with_sigkill_leaves_no_ray_process_behind(tmp_path):
+    """Issue 60, item 10: `kill -9` of a study left Ray's DashboardAgent and RuntimeEnvAgent running (they ignore
+    SIGTERM). The study's watcher ends every process Ray started for it once the study is gone."""
+    pytest.importorskip("ray")
+    from torch_gpioius.studies._reaper import _stat, descendants
+
+    cmd = [sys.executable, "-m", "torch_gpioius.cli", "study", "--world", "planar", "--objects", "A,B", "--seeds", "3",
+           "--max-steps", "60", "--workers", "2", "--out", str(tmp_path / "s"), "--quiet"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT,
+                            env=dict(os.environ, OMP_NUM_THREADS="1"))
+    seen: dict[int, int] = {}
+    deadline = time.monotonic() + 240
+    try:
+        while time.monotonic() < deadline and proc.poll() is None:
+            seen.update(descendants(proc.pid))
+            names = {Path(f"/proc/{p}/cmdline").read_bytes() for p in seen if _stat(p)}
+            if any(b"DashboardAgent" in n or b"RuntimeEnvAgent" in n for n in names):
+                break
+            time.sleep(0.2)
+        assert proc.poll() is None, "the study ended before Ray's agents were seen"
+        seen.update(descendants(proc.pid))
+    finally:
+        proc.kill()
+        proc.wait()
+    alive = seen
+    for _ in range(100):                          # the watcher polls every half second
+        alive = {p: s for p, s in alive.items() if (_stat(p) or (0, -1))[1] == s}
+        if not alive:
+            break
+        time.sleep(0.2)
+    assert not alive, {p: Path(f"/proc/{p}/cmdline").read_bytes()[:60] for p in alive}

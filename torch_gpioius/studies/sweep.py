@@ -263,7 +263,20 @@ class RayStartError(RuntimeError):
 def _run_on_ray(specs: list[RunSpec], workers: int | None, address: str | None, bar) -> None:
     import ray
 
-    started_here = not ray.is_initialized()
+    from ._reaper import RayReaper
+
+    if ray.is_initialized():
+        return _run_tasks(specs, bar, started_here=False)
+    # a study killed with SIGKILL cannot shut Ray down: its watcher ends the processes Ray left (its agents)
+    with RayReaper():
+        _run_tasks(specs, bar, started_here=True, workers=workers, address=address)
+
+
+def _run_tasks(specs: list[RunSpec], bar, *, started_here: bool, workers: int | None = None,
+               address: str | None = None) -> None:
+    """The runs as Ray tasks, on a Ray started here (and shut down at the end) or on the one already running."""
+    import ray
+
     _quiet_ray_auth_banner()
     if started_here:
         kw = dict(include_dashboard=False, log_to_driver=False, configure_logging=False,
