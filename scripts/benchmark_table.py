@@ -30,14 +30,44 @@ METRICS = [("final_chamfer", "Chamfer [cm]", 100, ".2f"), ("final_fscore_5mm", "
            ("wall_time", "wall [s]", 1, ".0f")]
 
 
+class ArmError(ValueError):
+    """An arm that cannot be read: the message names the argument, the folder or the file."""
+
+
+#: The columns every arm's runs.csv must hold.
+NEEDED = ("object", "mode", "seed")
+
+
 def read_arm(spec: str) -> tuple[str, list[dict]]:
-    """``label=folder[,folder...]`` -> (label, the rows of every folder's runs.csv)."""
-    label, _, folders = spec.partition("=")
+    """``label=folder[,folder...]`` -> (label, the rows of every folder's runs.csv).
+
+    Raises:
+        ArmError: an argument without a label or a folder, a folder that does not exist or holds no runs.csv (a study
+            still running, or another folder), or a runs.csv without the columns a study writes.
+    """
+    label, eq, folders = spec.partition("=")
+    if not eq or not label.strip() or not folders.strip():
+        raise ArmError(f"{spec!r}: an arm is LABEL=FOLDER[,FOLDER...] (e.g. \"tight=outputs/benchmark/p-tight\")")
     rows = []
-    for folder in folders.split(","):
-        with open(Path(folder) / "runs.csv", newline="") as f:
-            rows += list(csv.DictReader(f))
-    return label, rows
+    for folder in (f.strip() for f in folders.split(",") if f.strip()):
+        path = Path(folder) / "runs.csv"
+        if not Path(folder).is_dir():
+            raise ArmError(f"{label}: {folder} is not a folder")
+        if not path.is_file():
+            raise ArmError(f"{label}: {folder} holds no runs.csv (is it a study folder? a study writes runs.csv "
+                           "when its runs have ended)")
+        try:
+            with open(path, newline="") as f:
+                found = list(csv.DictReader(f))
+        except (OSError, UnicodeDecodeError, csv.Error) as exc:
+            raise ArmError(f"{label}: {path} cannot be read ({exc})") from None
+        missing = [k for k in NEEDED if found and k not in found[0]]
+        if missing:
+            raise ArmError(f"{label}: {path} has no column {missing}; is it a study's runs.csv?")
+        rows += found
+    if not rows:
+        raise ArmError(f"{label}: no runs in {folders}")
+    return label.strip(), rows
 
 
 #: What a run without an estimate scores (the studies' rule: it stays in every statistic, worse than any other).
@@ -104,6 +134,9 @@ def paired(rows: list[dict], key: str) -> dict:
 
 def goals(label: str, rows: list[dict], wide: bool) -> list[str]:
     vt = [r for r in rows if r["mode"] == "visual-tactile"]
+    if not vt:
+        return [f"{label}: no visual-tactile runs, so no goal of the benchmark is judged (modes: "
+                f"{', '.join(sorted({r['mode'] for r in rows}))})"]
     ch = np.array([number(r, "final_chamfer") for r in vt]) * 100
     f1 = np.array([number(r, "final_fscore_10mm") for r in vt])
     p25 = paired(rows, "hausdorff_25")
@@ -132,7 +165,21 @@ def worst(rows: list[dict], k: int = 5) -> list[str]:
     vt = sorted((r for r in rows if r["mode"] == "visual-tactile"), key=badness)
     return [f"{r['object']} (seed {r['seed']}): Chamfer {100 * number(r, 'final_chamfer'):.2f} cm, F 1 cm "
             f"{number(r, 'final_fscore_10mm'):.2f}, bias {1000 * number(r, 'final_bias'):.1f} mm, "
-            f"H final {100 * number(r, 'final_hausdorff'):.1f} cm, {cause(r) or r['terminated']}" for r in vt[:k]]
+            f"H final {100 * number(r, 'final_hausdorff'):.1f} cm, {ended(r)}" for r in vt[:k]]
+
+
+#: How a run's ``terminated`` reads in a sentence.
+ENDINGS = {"travel": "ended at its travel budget", "max_steps": "ended at its step cap",
+           "stalled": "stopped: no progress", "lost-contact": "lost contact", "no-contact": "found no contact"}
+
+
+def ended(row: dict) -> str:
+    """How a run ended, in words: its failure's whole reason where it failed (the ``reason`` column of studies that
+    record it, never cut), else its stop rule."""
+    t = row.get("reason") or row.get("terminated", "")
+    if cause(row):
+        return f"failed: {t}" if t else f"failed: {cause(row)}"
+    return ENDINGS.get(t, f"ended: {t}" if t else "ended")
 
 
 def leaderboard(arms: dict[str, list[dict]]) -> str:
@@ -185,7 +232,13 @@ def main() -> None:
     parser.add_argument("--summary", type=Path, default=None, help="write the leaderboard and goals there")
     parser.add_argument("--figures", type=Path, default=None, help="write CDF figures into this folder")
     args = parser.parse_args()
-    arms = dict(read_arm(a) for a in args.arms)
+    try:
+        arms = dict(read_arm(a) for a in args.arms)
+    except ArmError as exc:
+        parser.error(str(exc))
+    unknown = [w for w in args.wide if w not in arms]
+    if unknown:
+        parser.error(f"--wide: {unknown} name no arm; the arms are {sorted(arms)}")
     table = distribution_table(arms)
     print(table, "\n")
     lines = [g for label, rows in arms.items() for g in goals(label, rows, label in args.wide)]

@@ -76,6 +76,11 @@ def _study(args: argparse.Namespace) -> int:
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
+    if result["rows"] and all(r["failed"] for r in result["rows"]):
+        # a study none of whose runs gave a result answers nothing: a script that runs it must be able to tell
+        print(f"gpioius study: every run failed ({len(result['rows'])}); the reasons are listed above",
+              file=sys.stderr)
+        return 1
     return 0
 
 

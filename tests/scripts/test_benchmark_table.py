@@ -54,3 +54,33 @@ def test_distributions_pairs_goals_and_the_worst_are_the_runs_own(tmp_path):
     assert "-0.20 cm over 5 pairs" in wide and wide.endswith("holds")       # the median of -0.1, -0.2, 0.1, -0.3, -1
     board = bt.leaderboard({label: rows})
     assert board.splitlines()[2].startswith("| tight | visual-tactile | 5 | 0.50 |")
+
+
+def test_bad_arms_are_named_and_an_arm_without_vision_is_not_judged(tmp_path):
+    """Issue 60, items 11 and 21: a missing folder, an arm without a label or a folder without runs.csv crashed with
+    a traceback; an arm without visual-tactile runs printed "median Chamfer nan cm -> fails"; an unknown --wide label
+    was ignored; the worst objects' lines ended in a bare "travel"."""
+    import subprocess
+    import sys
+
+    import pytest
+
+    bt = _load()
+    _study(tmp_path / "a", [0.003, 0.004], [0.004, 0.006], h25_vt=[0.02, 0.02], h25_t=[0.03, 0.03])
+    (tmp_path / "empty").mkdir()
+    for spec, match in ((str(tmp_path / "a"), "an arm is LABEL=FOLDER"), ("=" + str(tmp_path / "a"), "LABEL=FOLDER"),
+                        (f"x={tmp_path / 'nowhere'}", "is not a folder"),
+                        (f"x={tmp_path / 'empty'}", "holds no runs.csv")):
+        with pytest.raises(bt.ArmError, match=match):
+            bt.read_arm(spec)
+    script = str(ROOT / "scripts" / "benchmark_table.py")
+    done = subprocess.run([sys.executable, script, f"x={tmp_path / 'nowhere'}"], capture_output=True, text=True)
+    assert done.returncode == 2 and "is not a folder" in done.stderr and "Traceback" not in done.stderr
+    done = subprocess.run([sys.executable, script, f"tight={tmp_path / 'a'}", "--wide", "wdie"], capture_output=True,
+                          text=True)
+    assert done.returncode == 2 and "--wide: ['wdie'] name no arm" in done.stderr
+    _, rows = bt.read_arm(f"tight={tmp_path / 'a'}")
+    touch = [r for r in rows if r["mode"] == "tactile"]
+    assert bt.goals("touch", touch, wide=False) == ["touch: no visual-tactile runs, so no goal of the benchmark is "
+                                                    "judged (modes: tactile)"]
+    assert bt.worst(rows, 1)[0].endswith("ended at its travel budget")

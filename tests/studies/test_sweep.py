@@ -301,9 +301,10 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
     with pytest.raises(FileExistsError, match="views"):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "one",
                   smoke=True, backend="local", progress=False, kernel=KernelChoice("imq", 0.12), noise=0.05)
+    with pytest.raises(ValueError, match="lengthscale: 2000 m is above 10 m"):
+        KernelChoice(lengthscale=2e3)
     bad = [(dict(views="side"), "views"), (dict(views=4), "views"), (dict(kernel="rbf"), "kernel"),
-           (dict(kernel=0.1), "kernel"), (dict(kernel=KernelChoice(lengthscale=2e3)), "lengthscale"),
-           (dict(noise=0.0), "noise"),
+           (dict(kernel=0.1), "kernel"), (dict(noise=0.0), "noise"),
            (dict(noise=math.inf), "noise")]
     for kw, match in bad:
         with pytest.raises(ValueError, match=match):
@@ -578,3 +579,24 @@ def test_a_study_killed_with_sigkill_leaves_no_ray_process_behind(tmp_path):
             break
         time.sleep(0.2)
     assert not alive, {p: Path(f"/proc/{p}/cmdline").read_bytes()[:60] for p in alive}
+
+
+def test_a_study_whose_every_run_failed_names_each_reason_whole_and_exits_1(tmp_path, capsys):
+    """Issue 60, item 14: every run of a study failed with a reason cut to "... is not po" and the study exited 0."""
+    from torch_gpioius.cli import main
+
+    (tmp_path / "garbage.stl").write_bytes(b"solid nothing to see here\n")
+    scene = tmp_path / "gone.toml"
+    scene.write_text('name = "gone"\n[object]\nmesh = "garbage.stl"\n[cover]\nkind = "tight"\ngap = 0.008\n')
+    out = tmp_path / "s"
+    assert main(["study", "--world", "forcefield", "--scenes", str(scene), "--modes", "tactile", "--seeds", "2",
+                 "--smoke", "--quiet", "--out", str(out)]) == 1
+    captured = capsys.readouterr()
+    assert "every run failed (2)" in captured.err
+    summary = (out / "summary.md").read_text()
+    line = next(x for x in summary.splitlines() if x.startswith("- 2 run(s)"))
+    rows = list(csv.DictReader(open(out / "runs.csv")))
+    reason = rows[0]["reason"]
+    assert reason.startswith("refused: scene: ") and "garbage.stl" in reason and len(reason) > 60
+    assert "gone_tactile_0, gone_tactile_1" in line and line.endswith(" ".join(reason.split()))
+    assert rows[1]["reason"] == reason

@@ -15,8 +15,8 @@ from ..metrics import SHAPE_METRICS
 from .stats import median_interval, paired_difference
 from .sweep_runs import FRACTIONS, RunSpec, read_run_file
 
-__all__ = ["aggregate", "failure", "failures_text", "no_harm_margin", "METRICS", "NOT_APPLICABLE_METRICS",
-           "MIN_SEEDS_TO_JUDGE"]
+__all__ = ["aggregate", "failure", "failures_text", "failed_runs", "no_harm_margin", "METRICS",
+           "NOT_APPLICABLE_METRICS", "MIN_SEEDS_TO_JUDGE"]
 
 def _last_finite(v) -> float:
     v = np.asarray(v, dtype=float)
@@ -120,6 +120,8 @@ def _row(run: dict, runs_by_key: dict) -> dict:
     ref = _reference_travel(run, runs_by_key)
     row = {"world": run["world"], "object": run["object"], "mode": run["mode"], "seed": run["seed"],
            "failed": failure(run),
+           # how the run ended, whole (the failed column is its cause in a few words, for counting)
+           "reason": run["terminated"],
            "final_hausdorff": _final(run, "hausdorff"),
            "final_hausdorff_touched": _final(run, "hausdorff_touched"),
            "final_uncertainty": _final(run, "uncertainty"),
@@ -182,6 +184,7 @@ def aggregate(out: str | Path, specs: list[RunSpec] | None = None, smoke: bool =
         w.writeheader()
         w.writerows(rows)
     summary = _summarize(rows)
+    summary["failed_runs"] = failed_runs(rows)
     claims = None if smoke else _claims(summary)
     (out / "summary.json").write_text(json.dumps({**summary, "claims": claims}, indent=1, allow_nan=True))
     (out / "summary.md").write_text(_markdown(rows[0]["world"], summary, claims, len(rows)))
@@ -360,6 +363,16 @@ def _equal(summary: dict, obj: str) -> tuple[bool | None, str]:
         f"paired VT - T {_cm(pair['median'])} [{_cm(pair['lo'])}, {_cm(pair['hi'])}] cm (allowed +-{_cm(allowed)} cm)")
 
 
+def failed_runs(rows: list[dict]) -> list[dict]:
+    """The failed runs grouped by their whole reason: ``[{"reason", "runs": [key, ...]}]``, the most frequent first (a
+    summary never cuts a reason short: "... is not po" left a plugin's broken kernel unnamed)."""
+    groups: dict[str, list[str]] = {}
+    for r in rows:
+        if r["failed"]:
+            groups.setdefault(r.get("reason") or r["failed"], []).append(f"{r['object']}_{r['mode']}_{r['seed']}")
+    return [{"reason": why, "runs": keys} for why, keys in sorted(groups.items(), key=lambda kv: -len(kv[1]))]
+
+
 def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int) -> str:
     lines = [f"{n_runs} runs ({world} world). Medians over seeds with distribution-free 95 % intervals "
              "(order statistics; the coverage is stated where fewer seeds make it lower). H: Hausdorff distance of the "
@@ -406,6 +419,12 @@ def _markdown(world: str, summary: dict, claims: list[dict] | None, n_runs: int)
             p = d["final_hausdorff"]
             lines.append(f"| {obj} | {mode} | {p['n']} | {p['failed']} | {cell(p)} | {p['wins']} / {p['losses']} | "
                          f"{p['p_wilcoxon']:.3g} |")
+    if summary.get("failed_runs"):
+        lines += ["", "Failed runs, by their whole reason:", ""]
+        for group in summary["failed_runs"]:
+            shown = ", ".join(group["runs"][:8]) + (f" and {len(group['runs']) - 8} more" if len(group["runs"]) > 8
+                                                     else "")
+            lines.append(f"- {len(group['runs'])} run(s) ({shown}): {' '.join(str(group['reason']).split())}")
     if claims is None:
         lines += ["", "Smoke sweep: the paper's claims are not judged on it."]
     else:
