@@ -696,7 +696,8 @@ def _add_fit(sub, common, fmt) -> None:
                      help="write the inner estimate {mu_in = 0} there (PLY, OBJ, STL, OFF, GLB; SVG, DXF in 2-D)")
     fit.add_argument("--outer-mesh", default=None, metavar="OUT.ply", help="write the outer estimate there")
     fit.add_argument("--resolution", type=_length("resolution"), default=None,
-                     help="grid of the estimate [m] (default 5 mm in 2-D, 2 cm in 3-D)")
+                     help="grid of the estimate [m] (default: its figure 5 mm in 2-D and 2 cm in 3-D, its meshes "
+                          "5 mm and 1 cm, as export's)")
     fit.add_argument("--kernel", default=None, type=_kernel_name,
                      help=f"the kernel in place of the settings': {_kernel_names()} (at the settings' length, or "
                           "the settings' length rule, when --lengthscale is not given)")

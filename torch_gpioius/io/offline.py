@@ -266,12 +266,14 @@ def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mes
     if not info["estimate"]:
         info["no_estimate"] = why_no_estimate(ds, model.lengthscale)
     info["mesh"] = info["outer_mesh"] = None
+    # the meshes on export's grid (1 cm in 3-D): `fit --mesh` and `export --mesh` of the same data give one mesh
+    mesh_res = grid_resolution(resolution, ds.x.shape[1])
     for key, target, task in (("mesh", mesh, INNER), ("outer_mesh", outer_mesh, 1)):
         if target is not None:
             if task == 1 and not isinstance(model, GPIOIS):
                 raise ValueError("--outer-mesh: the data have no outer (camera) observations, so no outer estimate")
-            info[key] = write_estimate(model, data_bounds(ds.x, pad=max(0.05, 2 * res)), target, res, task)
-            info[key + "_resolution"] = res
+            info[key] = write_estimate(model, data_bounds(ds.x, pad=max(0.05, 2 * res)), target, mesh_res, task)
+            info[key + "_resolution"] = mesh_res
     if out is not None:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
