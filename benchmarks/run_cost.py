@@ -2,14 +2,15 @@
 
 A visual-tactile run in the force-field world (a scene file; by default the tight bunny of
 ``examples/scenes/real/bunny-tight.toml``, the library's default settings, one torch thread) is timed whole, and
-four parts of it are timed inside the same run by wrapping the functions that do them:
+four parts of it are timed inside the same run by the exploration's own clock
+(:class:`torch_gpioius.exploration.timing.PartClock`, which every study run records as its ``time_*`` columns):
 
 * **camera**: the simulated depth camera's captures (``PointCloudSource.capture`` of every view; ray casting, with
   Embree where ``embreex`` is installed);
 * **contact**: the fingertip's guarded motions (``ContactController.approach`` / ``slide`` / ``lift``: the force
   field, the UR5's forward and inverse kinematics, the sensor);
-* **measuring**: the ground-truth metrics of the estimate against the body (``World.measure``: the zero level set
-  on a grid, Chamfer, F-score, Hausdorff);
+* **measuring**: the ground-truth metrics of the estimate against the body (``World.measure``: the converged ruler's
+  mesh, its vertices moved onto mu = 0 and its facets split to 5 mm, then Chamfer, F-score, bias, Hausdorff);
 * **method**: the rest, what the paper's method itself does (planning steps, labelling, the model's updates and
   K_t's re-learning, the similarity's interval, the log).
 
@@ -26,74 +27,23 @@ from __future__ import annotations
 
 import argparse
 import platform
-import time
-from collections import defaultdict
-from contextlib import contextmanager
 from pathlib import Path
 
 import torch
 
 import torch_gpioius as tg
-from torch_gpioius.contact import ContactController
-from torch_gpioius.sensors.pointcloud import PointCloudSource
 from torch_gpioius.sim.scenefile import load_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-@contextmanager
-def timed_parts(world_cls):
-    """Wrap the functions of each part with a timer (outermost calls only: a part calling itself is counted once);
-    yields the ``{part: seconds}`` it fills, and unwraps them after."""
-    spent: dict[str, float] = defaultdict(float)
-    depth: dict[str, int] = defaultdict(int)
-    targets = [("camera", cls, "capture") for cls in {c for c in _subclasses(PointCloudSource)} if "capture" in
-               vars(cls)]
-    targets += [("contact", ContactController, name) for name in ("approach", "slide", "lift")]
-    targets += [("measuring", world_cls, "measure")]
-    originals = []
-    for part, cls, name in targets:
-        original = vars(cls)[name]
-        originals.append((cls, name, original))
-
-        def wrapper(*args, __original=original, __part=part, **kwargs):
-            depth[__part] += 1
-            t0 = time.perf_counter()
-            try:
-                return __original(*args, **kwargs)
-            finally:
-                depth[__part] -= 1
-                if depth[__part] == 0:
-                    spent[__part] += time.perf_counter() - t0
-
-        setattr(cls, name, wrapper)
-    try:
-        yield spent
-    finally:
-        for cls, name, original in originals:
-            setattr(cls, name, original)
-
-
-def _subclasses(cls):
-    out = {cls}
-    for sub in cls.__subclasses__():
-        out |= _subclasses(sub)
-    return out
 
 
 def one_run(scene_file: Path, travel: float, metrics_every) -> dict:
     """One visual-tactile run timed whole and by part: ``{"total", "camera", "contact", "measuring", "method",
     "steps", "measured"}``."""
     world = load_scene(scene_file)
-    with timed_parts(type(world)) as spent:
-        t0 = time.perf_counter()
-        trace = tg.explore(world, "visual-tactile", max_travel=travel, metrics_every=metrics_every,
-                           interval_every=10)
-        total = time.perf_counter() - t0
-    parts = {k: spent.get(k, 0.0) for k in ("camera", "contact", "measuring")}
-    parts["method"] = total - sum(parts.values())
+    trace = tg.explore(world, "visual-tactile", max_travel=travel, metrics_every=metrics_every, interval_every=10)
     measured = int(sum(1 for h in trace.hausdorff if h == h))
-    return {"total": total, **parts, "steps": len(trace.hausdorff) - 1, "measured": measured}
+    return {**trace.time_split, "steps": len(trace.hausdorff) - 1, "measured": measured}
 
 
 def main() -> None:

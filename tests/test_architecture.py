@@ -14,7 +14,8 @@ LAYERS = [
     {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines", "_extras",
      "registry"},
     {"kernels"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"},
-    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"io"}, {"testing"}, {"session"}, {"studies"}, {"viewer"},
+    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"baselines"}, {"io"}, {"testing"}, {"session"}, {"studies"},
+    {"viewer"},
     {"cli"},
     {"(root)"},
 ]

@@ -13,7 +13,7 @@ from .polylines import distance_to_segments, resample_polyline, segments
 
 __all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff",
            "Shape", "surface_agreement", "curve_shape_metrics", "observed_samples", "FSCORE_THRESHOLDS",
-           "OBSERVED_WITHIN", "SHAPE_METRICS"]
+           "OBSERVED_WITHIN", "SHAPE_METRICS", "mesh_quadrature", "vertex_quadrature"]
 
 #: A shape for the metrics: an `(n, d)` point set, a list of `(k, d)` polylines, or a triangle mesh.
 Shape = Union[np.ndarray, Sequence[np.ndarray], trimesh.Trimesh]
@@ -35,8 +35,9 @@ def uncertainty_measure(model, surface: Shape, task: int = 0, spacing: float = 0
 
     Args:
         model: ``GPIS`` or ``GPIOIS``.
-        surface: the estimated surface: list of `(k, d)` polylines (2-D), a ``trimesh.Trimesh`` (3-D), or an
-            `(n, d)` point set (plain mean).
+        surface: the estimated surface: list of `(k, d)` polylines (2-D), a ``trimesh.Trimesh`` (3-D, its facets'
+            centroids weighted by area), a quadrature ``(points (n, d), weights (n,))`` (:func:`vertex_quadrature`),
+            or an `(n, d)` point set (plain mean).
         task: task whose variance is averaged (0: inner).
         spacing: resampling step for polylines [m].
         relative: divide by the prior variance (dimensionless result) instead of returning units of V.
@@ -62,6 +63,8 @@ def prior_variance(model, task: int = 0) -> float:
 
 
 def _weighted_points(surface: Shape, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(surface, tuple):                          # a quadrature: (points (n, d), weights (n,))
+        return np.asarray(surface[0], dtype=np.float64), np.asarray(surface[1], dtype=np.float64)
     if isinstance(surface, trimesh.Trimesh):
         return np.array(surface.triangles_center), np.array(surface.area_faces)
     if isinstance(surface, np.ndarray):
@@ -139,7 +142,8 @@ SHAPE_METRICS = ("chamfer", "fscore_1mm", "fscore_5mm", "fscore_10mm", "fscore_2
 
 
 def surface_agreement(est_to_truth: np.ndarray, truth_to_est: np.ndarray, truth_signed: np.ndarray | None = None,
-                      observed: np.ndarray | None = None, est_near_observed: np.ndarray | None = None) -> dict:
+                      observed: np.ndarray | None = None, est_near_observed: np.ndarray | None = None,
+                      est_weights: np.ndarray | None = None, truth_weights: np.ndarray | None = None) -> dict:
     """The field's shape metrics from the two directed distances between an estimated and a true surface.
 
     Args:
@@ -151,6 +155,10 @@ def surface_agreement(est_to_truth: np.ndarray, truth_to_est: np.ndarray, truth_
             sample counts as observed.
         est_near_observed: `(n,)` bool, the estimate's samples near the observed true surface (they enter the
             observed Hausdorff distance); None: all.
+        est_weights: `(n,)` the area each estimate sample stands for [m^2] (a quadrature of the surface: facets'
+            centroids weighted by their areas); None: equal weights (uniform samples). Means, shares and the median
+            are then integrals over the surfaces, whatever their facets' sizes.
+        truth_weights: `(m,)` the same for the true surface's samples.
 
     Returns:
         ``{"chamfer", "fscore_1mm", "fscore_5mm", "fscore_10mm", "fscore_20mm", "bias", "hausdorff_observed",
@@ -165,17 +173,64 @@ def surface_agreement(est_to_truth: np.ndarray, truth_to_est: np.ndarray, truth_
     if not len(a) or not len(b):
         return {"chamfer": nan, **{f"fscore_{round(t * 1e3)}mm": nan for t in FSCORE_THRESHOLDS}, "bias": nan,
                 "hausdorff_observed": nan, "unseen": nan}
-    out = {"chamfer": 0.5 * (float(a.mean()) + float(b.mean()))}
+    wa = np.ones(len(a)) if est_weights is None else np.asarray(est_weights, dtype=float)
+    wb = np.ones(len(b)) if truth_weights is None else np.asarray(truth_weights, dtype=float)
+    out = {"chamfer": 0.5 * (_mean(a, wa) + _mean(b, wb))}
     for t in FSCORE_THRESHOLDS:
-        p, r = float((a <= t).mean()), float((b <= t).mean())
+        p, r = _mean(a <= t, wa), _mean(b <= t, wb)
         out[f"fscore_{round(t * 1e3)}mm"] = 0.0 if p + r == 0 else 2 * p * r / (p + r)
-    out["bias"] = nan if truth_signed is None else float(np.median(truth_signed))
+    if truth_signed is None:
+        out["bias"] = nan
+    else:
+        out["bias"] = float(np.median(truth_signed)) if truth_weights is None else _median(truth_signed, wb)
     obs = np.ones(len(b), dtype=bool) if observed is None else np.asarray(observed, dtype=bool)
     near = np.ones(len(a), dtype=bool) if est_near_observed is None else np.asarray(est_near_observed, dtype=bool)
-    out["unseen"] = float(1.0 - obs.mean())
+    out["unseen"] = float(max(0.0, 1.0 - _mean(obs, wb)))
     out["hausdorff_observed"] = (max(float(b[obs].max()), float(a[near].max()) if near.any() else 0.0)
                                  if obs.any() else nan)
     return out
+
+
+def _mean(values, weights: np.ndarray) -> float:
+    return float(np.dot(np.asarray(values, dtype=float), weights) / weights.sum())
+
+
+def _median(values, weights: np.ndarray) -> float:
+    """The weighted median: the value at which half the weight lies at or below (the midpoint between two values
+    where the half falls exactly between them, as ``np.median`` of equal weights)."""
+    v = np.asarray(values, dtype=float)
+    order = np.argsort(v, kind="stable")
+    cum = np.cumsum(weights[order])
+    half = 0.5 * cum[-1]
+    i = int(np.searchsorted(cum, half))
+    if np.isclose(cum[i], half, rtol=1e-12, atol=0.0) and i + 1 < len(v):
+        return float(0.5 * (v[order[i]] + v[order[i + 1]]))
+    return float(v[order[i]])
+
+
+def vertex_quadrature(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
+    """A quadrature on a mesh's vertices: ``(vertices (n, 3), weights (n,))``, each vertex weighted by a third of its
+    facets' areas [m^2]. For a mesh whose vertices lie on a curved surface (:func:`~torch_gpioius.surfaces.
+    converged_level_mesh`), the points are on it, where facets' centroids lie a sagitta off it."""
+    weights = np.zeros(len(mesh.vertices))
+    np.add.at(weights, np.asarray(mesh.faces).ravel(), np.repeat(np.asarray(mesh.area_faces) / 3.0, 3))
+    return np.asarray(mesh.vertices, dtype=np.float64), weights
+
+
+def mesh_quadrature(mesh: trimesh.Trimesh, edge: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A quadrature of a surface for the shape metrics: its facets split until no edge exceeds ``edge`` [m], then
+    each facet's centroid and area.
+
+    Returns:
+        ``(centroids (k, 3), areas (k,), vertices (v, 3))``: the refined facets' centroids [m] and areas [m^2], and
+        the refined mesh's vertices (what a Hausdorff distance also takes: the extremes of the surface).
+    """
+    verts, faces = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
+    if len(faces) and float(np.linalg.norm(verts[faces[:, [1, 2, 0]]] - verts[faces], axis=-1).max()) > edge:
+        verts, faces = trimesh.remesh.subdivide_to_size(verts, faces, max_edge=edge, max_iter=20)
+    tri = verts[faces]
+    areas = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    return tri.mean(axis=1), areas, verts
 
 
 def curve_shape_metrics(model, curves: Sequence[np.ndarray], truth: Sequence[np.ndarray], spacing: float = 5e-3,

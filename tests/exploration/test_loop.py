@@ -253,15 +253,16 @@ def test_a_run_learns_its_length_and_noise_on_the_restart_steps():
 
 def test_the_measuring_schedule_measures_at_its_fractions_of_the_travel_and_the_end_only():
     """Issue 54: measuring the estimate at every step took a third of a run. ``metrics_every="schedule"`` measures
-    at the start, at the first step that reaches 10, 25 and 50 % of the travel budget, and at the end; recomputed
-    here from the run's own travel. A run without a travel budget has no schedule, and says so."""
+    at the first step that reaches 10, 25 and 50 % of the travel budget, and at the end (issue 61: not before
+    exploring, which no table reports, since the converged ruler costs more); recomputed here from the run's own
+    travel. A run without a travel budget has no schedule, and says so."""
     from torch_gpioius.exploration.recorders import REPORT_FRACTIONS
 
     scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
     budget = 0.12
     trace = tg.explore(scene, max_travel=budget, metrics_every="schedule")
     travel, measured = np.asarray(trace.travel), ~np.isnan(np.asarray(trace.hausdorff))
-    want = {0, len(travel) - 1}
+    want = {len(travel) - 1}
     for f in REPORT_FRACTIONS:
         first = np.flatnonzero(travel >= f * budget)
         if len(first):

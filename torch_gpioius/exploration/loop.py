@@ -28,6 +28,7 @@ from .observations import (Observations, drop_contradicted_inside, offset_outer_
                            retract_vision_inside, thin_points, vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .state import ExplorationState, StepRecord
+from .timing import PartClock
 from .trace import Trace
 from .world import World
 
@@ -60,13 +61,14 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
     ctx = Run(world, hardware or world.hardware(), config, resumed=state is not None)
     config.touch.bind(ctx.hardware)                          # a patch touch reads the world's pad
     observers = [MetricsRecorder(), IntervalRecorder(), *recorders, ProgressRecorder(progress)]
-    state = state if state is not None else begin(ctx)
-    for r in observers:
-        r.start(ctx, state)
-    while state.terminated is None:
-        state.terminated = step(ctx, state, observers)
-    for r in observers:
-        r.end(ctx, state)
+    with PartClock(world, ctx.hardware) as clock:            # where the run's time goes (Trace.time_split)
+        state = state if state is not None else begin(ctx)
+        for r in observers:
+            r.start(ctx, state)
+        while state.terminated is None:
+            state.terminated = step(ctx, state, observers)
+        for r in observers:
+            r.end(ctx, state)
     if state.unconverged_fits:
         from ..models.gpiois import FitNotConvergedWarning
 
@@ -74,7 +76,9 @@ def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = F
                       "steps gaining less than the likelihood's rounding) at "
                       f"{state.unconverged_fits} of {state.steps} steps; the best K_t found is used, within rounding "
                       "of the optimum where the likelihood is flat", FitNotConvergedWarning, stacklevel=3)
-    return Trace.from_state(state, world, config)
+    trace = Trace.from_state(state, world, config)
+    trace.time_split = clock.split()
+    return trace
 
 
 def step(ctx: Run, state: ExplorationState, observers) -> str | None:

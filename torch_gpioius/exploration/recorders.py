@@ -29,9 +29,10 @@ REPORT_FRACTIONS = (0.10, 0.25, 0.50)
 
 
 class MetricsRecorder(Recorder):
-    """Ground-truth metrics (eq. 23-24) where the world knows the truth, every ``config.metrics_every`` steps (None:
-    none between the others), at the first step that reaches each of :data:`REPORT_FRACTIONS` of a travel budget, at
-    a step a stop rule ended, and at the end if the last record has none. Sets ``state.centre`` and ``state.surface``
+    """Ground-truth metrics (eq. 23-24) where the world knows the truth, every ``config.metrics_every`` steps and
+    before exploring (None: neither, the schedule alone), at the first step that reaches each of
+    :data:`REPORT_FRACTIONS` of a travel budget, at a step a stop rule ended, and at the end if the last record has
+    none. Sets ``state.centre`` and ``state.surface``
     from each measurement (a stop rule may read the centre)."""
 
     def _measure(self, run, state, record) -> None:
@@ -45,7 +46,9 @@ class MetricsRecorder(Recorder):
             setattr(record, name, float(m.shape.get(name, math.nan)))
 
     def start(self, run, state) -> None:
-        if not run.resumed:
+        # the schedule alone (metrics_every None) measures what studies report, the fractions and the end: the state
+        # before exploring is not one of them
+        if not run.resumed and run.config.metrics_every is not None:
             self._measure(run, state, state.records[0])
 
     def step(self, run, state, record) -> None:

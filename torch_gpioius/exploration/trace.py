@@ -59,6 +59,8 @@ class Trace:
             re-learning; a held or tracked K_t's, ``PatchTouch.track``).
         length: `(n,)` the kernel's length in use [m] (NaN for a kernel without one; changes where learned).
         noise: `(n,)` sigma^2 in use.
+        time_split: where the run's wall time went [s]: ``{"method", "camera", "contact", "measuring", "total"}``
+            (:class:`torch_gpioius.exploration.timing.PartClock`; a resumed run's: since it resumed).
     """
 
     mode: str
@@ -95,6 +97,7 @@ class Trace:
     reapproaches: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     reapproach_travel: np.ndarray = field(default_factory=lambda: np.zeros(0))
     shape: dict = field(default_factory=dict)
+    time_split: dict = field(default_factory=dict)
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":

@@ -191,6 +191,9 @@ class World(abc.ABC):
 
     #: The registry name of the world's kind ("planar", "forcefield", "mujoco", "robot", or a user's).
     kind: str = ""
+    #: What measures this world's estimates (:meth:`measure`): records and study files carry it, and a study's run
+    #: measured by another ruler is done again rather than mixed with the others; None where nothing is measured.
+    ruler: str | None = None
     name: str = ""
     dim: int = 3
     #: The scene file the world was built from, ``{"path": absolute path, "hash": its content's digest}``

@@ -33,7 +33,8 @@ from .._validation import as_bounds, as_float
 from .ranged import RangedScene
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
-__all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d",
+__all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d", "score_surface",
+           "METRICS_GRID", "METRICS_EDGE",
            "ROBOT_STUDY_DEFAULTS", "cover_around", "approach_from_above", "first_passage", "place"]
 
 #: The robot study's settings (Sec. VI-A): theta 0.15, sigma^2 0.08, alpha 1 cm, 1.5 m of travel, the range
@@ -190,64 +191,174 @@ def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
     return SimulatedUR5(ur5, q0, SafetyGate(ur5, lo.tolist(), hi.tolist()))
 
 
-def estimate_metrics_3d(model, scene, resolution: float = 0.02, spacing: float = 0.003, contacts=None) -> Measurement:
-    """Uncertainty (eq. 23) and Hausdorff distance (eq. 24) of the estimated inner surface, in the range.
+#: The grid of the estimate's marching cubes for the metrics [m]: coarse, since every vertex is then moved onto the
+#: level set and the facets split to :data:`METRICS_EDGE` (:func:`torch_gpioius.surfaces.converged_level_mesh`);
+#: halving it moves no figure by more than 2 % (docs/results-benchmark.md, "The ruler").
+METRICS_GRID = 0.02
+#: The longest facet edge of the estimate and of the truth for the metrics [m]. A facet's chord lies e^2 / (8 R) off a
+#: surface of curvature radius R (0.4 mm at 1 cm over 3 cm); :func:`score_surface` moves its quadrature points and each
+#: true point's closest point onto the level set, which leaves the figures within 0.7 % of 2.5 mm facets' on the runs
+#: measured (docs/results-benchmark.md, "The ruler").
+METRICS_EDGE = 0.01
 
-    The estimate {mu_in = 0} is meshed by marching cubes on a grid over the exploration range grown by 5 cm,
-    then both it and the true inner mesh are restricted to the exploration range (the robot can neither
-    touch nor be judged on what lies outside it, e.g. under the arm). The Hausdorff distance is computed
-    between dense surface samples (``spacing``) with k-d trees, so it is within about ``spacing`` of the
-    exact surface-to-surface value. With ``contacts``, also the distance of the touched pieces only
-    (:func:`torch_gpioius.surfaces.touched_pieces`).
+
+def estimate_metrics_3d(model, scene, resolution: float = METRICS_GRID, spacing: float = METRICS_EDGE,
+                        contacts=None) -> Measurement:
+    """Uncertainty (eq. 23), Hausdorff distance (eq. 24) and the field's shape metrics of the estimated inner surface,
+    in the range, measured with the converged ruler.
+
+    The estimate ``{mu_in = 0}`` is meshed by marching cubes on a grid of ``resolution`` over the exploration range
+    grown by 5 cm, every vertex moved onto the level set and every facet split to edges of at most ``spacing``
+    (:func:`~torch_gpioius.surfaces.converged_level_mesh`), then scored by :func:`score_surface` (inside: mu < 0).
+    Halving ``resolution`` moves every figure by under 2 % (tests/sim/test_forcefield.py; docs/results-benchmark.md,
+    "The ruler"). With ``contacts``, also the Hausdorff distance of the touched pieces only
+    (:func:`torch_gpioius.surfaces.touched_pieces`). The uncertainty averages the variance over the vertices.
 
     Returns:
         :class:`Measurement` (``surface``: the estimated mesh in the range, or None); NaN metrics when the estimate
         has no surface in the range.
     """
-    from ..metrics import uncertainty_measure
-    from ..surfaces import clip_mesh, evaluate_grid, touched_pieces, zero_level_mesh
+    from ..metrics import uncertainty_measure, vertex_quadrature
+    from ..surfaces import clip_mesh, converged_level_mesh, evaluate_grid, touched_pieces
 
-    truth = scene.inner_samples_in_range(spacing)
     field = evaluate_grid(model, scene.bounds(0.05), resolution, 0, variance=False)
-    mesh = clip_mesh(zero_level_mesh(model, None, field=field), scene.range[0], scene.range[1])
+    whole = converged_level_mesh(model, None, field=field, edge=spacing, keep=scene.range)
+    if whole is None:
+        return Measurement(estimate=False)
+
+    def mean(points: np.ndarray) -> np.ndarray:
+        from ..geometry import predict_mean_task
+
+        with torch.no_grad():
+            return predict_mean_task(model, torch.as_tensor(points, dtype=torch.float64), 0).detach().cpu().numpy()
+
+    scored = score_surface(scene, whole, None, model.train_inputs[0].detach().cpu().numpy()[
+        model.train_targets.detach().cpu().numpy() == 0], spacing, mean=mean)
+    if scored is None:
+        return Measurement(estimate=False)
+    _, h, shape = scored
+    mesh = clip_mesh(whole, scene.range[0], scene.range[1])         # the estimate in the range (the run's surface)
     if mesh is None:
         return Measurement(estimate=False)
-    est = surface_samples(mesh, spacing)
-    est = est[scene.in_range(est)]
-    if not len(est):
-        return Measurement(estimate=False)
-    h = hausdorff_distance(est, truth)
+    mesh.metadata["ruler"] = whole.metadata["ruler"]
     ht = float("nan")
     if contacts is not None and len(contacts):
         touched = touched_pieces(mesh, contacts)
         if touched is not None:
-            t = surface_samples(touched, spacing)
+            from .meshes import MeshDistance
+
+            t = np.concatenate([touched.vertices, touched.triangles_center])
             t = t[scene.in_range(t)]
-            ht = hausdorff_distance(t, truth) if len(t) else float("nan")
-    return Measurement(h, ht, uncertainty_measure(model, mesh, 0), None, mesh, estimate=True,
-                       shape=shape_metrics_3d(model, scene, mesh, est, truth))
+            if len(t):
+                ht = max(float(np.max(scene._inner_unsigned(t))),
+                         float(np.max(MeshDistance(touched, signed=False)(_truth_points(scene, spacing)))))
+    # the uncertainty, an average of a smooth field whose every query costs O(N_o r), on the vertices (they lie on the
+    # surface; half as many as the facets)
+    return Measurement(h, ht, uncertainty_measure(model, vertex_quadrature(mesh), 0), None, mesh, estimate=True,
+                       shape=shape)
 
 
-def shape_metrics_3d(model, scene, mesh: trimesh.Trimesh, est: np.ndarray, truth: np.ndarray) -> dict:
-    """The field's shape metrics of an estimate (:func:`torch_gpioius.metrics.surface_agreement`) from samples of the
-    estimated surface ``est`` `(n, 3)` and of the true one ``truth`` `(m, 3)` in the range, with exact
-    point-to-triangle distances in both directions; the sign of each true-surface sample from the model's mean
-    there (mu > 0: outside the estimate); "observed": within 2 cm of a surface observation of either task."""
-    from ..geometry import predict_mean_task
-    from ..metrics import observed_samples, surface_agreement
+def _truth_points(scene, spacing: float) -> np.ndarray:
+    """The true surface's quadrature points and vertices in the range (a Hausdorff distance's samples)."""
+    c, _, v = scene.inner_quadrature(spacing)
+    return np.concatenate([v, c])
+
+
+def score_surface(scene, surface: trimesh.Trimesh | None, inside, observations: np.ndarray,
+                  spacing: float = METRICS_EDGE, mean=None) -> tuple[trimesh.Trimesh, float, dict] | None:
+    """Score an estimated inner surface against a ranged world's true body: the converged ruler's metrics for any
+    surface (the method's estimate, or a baseline's: :mod:`torch_gpioius.baselines`).
+
+    The surface and the true inner mesh, each split to facets of edges at most ``spacing``
+    (:func:`~torch_gpioius.metrics.mesh_quadrature`,
+    :meth:`~torch_gpioius.sim.ranged.RangedScene.inner_quadrature`), are restricted to the exploration range (the
+    robot can neither touch nor be judged on what lies outside it, e.g. under the arm). Means, shares and the median
+    are integrals over the surfaces (each facet's centroid weighted by its area), with exact point-to-triangle
+    distances both ways, so they do not depend on how the facets happen to be sized; the Hausdorff distance is the
+    largest exact distance of either surface's facet vertices and centroids from the other surface (within a
+    facet's size of the exact supremum).
+
+    Args:
+        scene: a :class:`~torch_gpioius.sim.ranged.RangedScene`.
+        surface: the estimate (a mesh on it, e.g. :func:`~torch_gpioius.surfaces.converged_level_mesh`), or None.
+        inside: ``inside(points (m, 3)) -> (m,) bool``, whether points lie inside the estimate (the bias' sign); None:
+            the side of the closest facet of ``surface``, whose normals point out.
+        observations: `(k, 3)` the surface observations [m] ("unseen": true surface more than 2 cm from all).
+        spacing: the facets' longest edge [m].
+        mean: ``mean(points (m, 3)) -> (m,)``, the field whose zero level ``surface`` lies on (its vertices'
+            gradients in ``surface.metadata["gradients"]``, :func:`~torch_gpioius.surfaces.converged_level_mesh`);
+            with it the facets' chords are corrected to second order: each centroid is moved onto the level set, and
+            each true point's distance is taken to the level set near its closest facet point (one Newton step
+            along the gradient interpolated there), so that facets twice as long measure as finely. None: the facets
+            as they are.
+
+    Returns:
+        ``(the surface in the range, Hausdorff distance [m], shape metrics)``
+        (:func:`~torch_gpioius.metrics.surface_agreement`), or None when the surface has nothing in the range.
+    """
+    from ..metrics import OBSERVED_WITHIN, mesh_quadrature, surface_agreement
+    from ..surfaces import clip_mesh
     from .meshes import MeshDistance
 
-    # the unsigned distance to the true body by libigl's AABB tree, built once per scene (the signed field took 6 s
-    # for 18,000 samples of a torso's estimate, every measurement)
+    grads = None if surface is None or mean is None else surface.metadata.get("gradients")
+    if grads is not None:               # the refined mesh as it is (its vertices aligned with their gradients)
+        mesh = surface
+        tri = np.asarray(mesh.vertices)[mesh.faces]
+        est_c = tri.mean(axis=1)
+        est_w = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        est_c = _onto_level(est_c, np.asarray(grads)[mesh.faces].mean(axis=1), mean, spacing)
+        est_v = np.asarray(mesh.vertices)
+    else:
+        mesh = clip_mesh(surface, scene.range[0], scene.range[1])
+        if mesh is None:
+            return None
+        est_c, est_w, est_v = mesh_quadrature(mesh, spacing)
+    keep = scene.in_range(est_c)
+    est_c, est_w = est_c[keep], est_w[keep]
+    if not len(est_c):
+        return None
+    truth_c, truth_w, truth_v = scene.inner_quadrature(spacing)
+    # exact point-to-triangle distances by libigl's AABB trees (the true body's built once per scene), of the facets'
+    # centroids (the integrals) and vertices (with them, the Hausdorff distance's extremes)
     inner = getattr(scene, "_inner_unsigned", None)
     if inner is None:
         inner = scene._inner_unsigned = MeshDistance(scene.inner, signed=False)
-    est_to_truth = np.asarray(inner(est), dtype=float)
-    truth_to_est = np.asarray(MeshDistance(mesh, signed=False)(truth), dtype=float)
-    with torch.no_grad():
-        mu = predict_mean_task(model, torch.as_tensor(truth, dtype=torch.float64), 0).detach().cpu().numpy()
-    signed = np.where(mu > 0, -truth_to_est, truth_to_est)
-    return surface_agreement(est_to_truth, truth_to_est, signed, *observed_samples(model, truth, est))
+    est_v = est_v[scene.in_range(est_v)]
+    est_all = np.asarray(inner(np.concatenate([est_c, est_v])), dtype=float)
+    est_to_truth = est_all[:len(est_c)]
+    distance, closest, face = MeshDistance(mesh, signed=False).closest(np.concatenate([truth_c, truth_v]))
+    if grads is not None:
+        # from the closest facet point onto the level set there (one Newton step along the interpolated gradient)
+        bary = trimesh.triangles.points_to_barycentric(np.asarray(mesh.vertices)[mesh.faces[face]], closest)
+        g = np.einsum("ij,ijk->ik", bary, np.asarray(grads)[mesh.faces[face]])
+        closest = _onto_level(closest, g, mean, spacing)
+        distance = np.linalg.norm(np.concatenate([truth_c, truth_v]) - closest, axis=1)
+    truth_to_est, closest, face = distance[:len(truth_c)], closest[:len(truth_c)], face[:len(truth_c)]
+    h = max(float(est_all.max()), float(distance.max()))
+    if inside is None:
+        # the side of the estimate's closest facet (its normals point out): the model's mean need not be evaluated
+        within = np.einsum("ij,ij->i", truth_c - closest, np.asarray(mesh.face_normals)[face]) < 0
+    else:
+        within = np.asarray(inside(truth_c), dtype=bool)
+    signed = np.where(within, truth_to_est, -truth_to_est)
+    from scipy.spatial import cKDTree
+
+    obs = np.asarray(observations, dtype=float).reshape(-1, 3)
+    observed = cKDTree(obs).query(truth_c)[0] <= OBSERVED_WITHIN if len(obs) else np.zeros(len(truth_c), bool)
+    near = cKDTree(truth_c[observed]).query(est_c)[0] <= OBSERVED_WITHIN if observed.any() else \
+        np.zeros(len(est_c), bool)
+    return mesh, h, surface_agreement(est_to_truth, truth_to_est, signed, observed, near, est_weights=est_w,
+                                      truth_weights=truth_w)
+
+
+def _onto_level(points: np.ndarray, grads: np.ndarray, mean, limit: float) -> np.ndarray:
+    """Points on or near facets moved onto the level set of ``mean`` by one Newton step along ``grads`` `(n, 3)`,
+    each step at most ``limit`` [m] long (a facet's sagitta is far shorter)."""
+    mu = np.asarray(mean(points), dtype=float)
+    norm2 = np.maximum((grads * grads).sum(axis=1), 1e-300)
+    step = -(mu / norm2)[:, None] * grads
+    length = np.linalg.norm(step, axis=1, keepdims=True)
+    return points + step * np.minimum(1.0, limit / np.maximum(length, 1e-300))
 
 
 def _mesh(m, name: str) -> trimesh.Trimesh:
@@ -537,7 +648,7 @@ class Scene3D(RangedScene):
         return self.range
 
     def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
-        return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
+        return estimate_metrics_3d(model, self, METRICS_GRID if resolution is None else resolution, contacts=contacts)
 
     def fingerprint(self) -> str:
         return geometry_hash(self.inner.vertices, self.inner.faces, self.outer.vertices, self.outer.faces,

@@ -22,6 +22,10 @@ class RangedScene(World):
     """
 
     range: np.ndarray
+    #: The converged ruler (:func:`torch_gpioius.sim.forcefield.estimate_metrics_3d`): marching cubes on a 2 cm grid,
+    #: the vertices moved onto mu = 0, the facets split to 1 cm on it and their chords corrected. Runs measured before
+    #: carry none (marching cubes on a 2 cm grid alone).
+    ruler = "projected: 2 cm grid, vertices on mu = 0, 1 cm facets corrected to the level set"
 
     @abc.abstractmethod
     def true_surface_samples(self, spacing: float) -> np.ndarray:
@@ -43,6 +47,20 @@ class RangedScene(World):
             pts = self.true_surface_samples(spacing)
             self._inner_samples[spacing] = pts[self.in_range(pts)]
         return self._inner_samples[spacing]
+
+    def inner_quadrature(self, edge: float = 0.003) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A quadrature of the true inner surface inside the exploration range (the shape metrics' reference;
+        computed once per edge and world): ``(centroids (k, 3), areas (k,), vertices (v, 3))`` of the inner mesh's
+        facets split to edges of at most ``edge`` [m] (:func:`torch_gpioius.metrics.mesh_quadrature`), those whose
+        centroid (vertex) lies in the range."""
+        from ..metrics import mesh_quadrature
+
+        cache = self.__dict__.setdefault("_inner_quadrature", {})
+        if edge not in cache:
+            c, w, v = mesh_quadrature(self.inner, edge)
+            keep = self.in_range(c)
+            cache[edge] = (c[keep], w[keep], v[self.in_range(v)])
+        return cache[edge]
 
     def range_penalty(self, beta: float = 100.0) -> RangePenalty:
         """The paper's C(x) (eq. 25, beta = 100) for this world's exploration range."""

@@ -313,6 +313,7 @@ def run_one(spec: RunSpec) -> dict:
         try:
             world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings, spec.views,
                                spec.set_object, spec.cover)
+            scene_time = time.perf_counter() - t0
         except (ValueError, RuntimeError, OSError) as exc:
             # a scene that cannot be built (a cover that does not close, a mesh that will not load) is a failed
             # row with its cause; the study goes on and writes its tables
@@ -331,6 +332,13 @@ def run_one(spec: RunSpec) -> dict:
             record = _no_start_record(spec, kw, exc, time.perf_counter() - t0)
     if trace is not None:
         record = _record(spec, kw, trace, time.perf_counter() - t0)
+        # where the run's time went [s]: building its scene, then the exploration's parts (PartClock)
+        record["time"] = {"scene": scene_time, **trace.time_split}
+        record["ruler"] = world.ruler
+        if kw["mode"] == "visual-tactile" and "regions" not in kw and hasattr(world, "inner_quadrature"):
+            t1 = time.perf_counter()
+            record["baselines"] = run_baselines(world, trace, out / "logs" / f"{spec.key}.gpioius")
+            record["time"]["baselines"] = time.perf_counter() - t1
         record["n_outer"] = _n_outer(trace.model)
         record["n_vision_inside"] = _n_outer(trace.model, inside=True)
         # the outer task's prior mean at the end (1: the paper's; 1 - gap / ramp once the touches set it)
@@ -373,6 +381,33 @@ def run_one(spec: RunSpec) -> dict:
     except OSError:
         pass
     return record
+
+
+def run_baselines(world, trace, log: Path) -> dict:
+    """The simple baselines (:mod:`torch_gpioius.baselines`) of a visual-tactile run, scored by the converged ruler:
+    from the camera's observations as its log's first record holds them (before any retraction of their inside
+    points), the run's contacts in order and its kernel and sigma^2."""
+    import torch
+
+    from ..baselines import BASELINE_EDGE, BaselineData, score_baselines
+    from ..io.datasets import replay
+    from ..sim.forcefield import METRICS_GRID
+
+    first = None
+    for _, ds in replay(log):
+        first = ds
+        if (ds.task == 1).any():
+            break
+    if first is None:
+        return {}
+    outer = first.task == 1
+    model = trace.model
+    # facets of 5 mm, as they are: a shrunk surface has no field of its own to correct its chords by
+    data = BaselineData(first.x[outer], first.y[outer], np.asarray(trace.contacts, dtype=float), model.kernel,
+                        float(model.noise), world.bounds(0.05), METRICS_GRID, BASELINE_EDGE)
+    with torch.no_grad():
+        surface = model.train_targets.cpu().numpy() == 0
+    return score_baselines(world, data, model.train_inputs[0].detach().cpu().numpy()[surface])
 
 
 def _no_start_record(spec: RunSpec, kw: dict, exc: Exception, wall_time: float) -> dict:
@@ -463,6 +498,14 @@ def finished(path: Path, spec: RunSpec | None = None) -> bool:
         _set_aside(path, "stale", f"a run of the scene file as it was before it changed (scene_hash "
                                   f"{run.get('scene_hash')}, now {spec.scene_hash})")
         return False
+    ruler = _current_ruler(spec.world) if spec is not None else None
+    measured = any(_number(v) and math.isfinite(v) for v in run["series"].get("hausdorff", []))
+    if ruler is not None and run.get("ruler") != ruler and measured:
+        # measured by another ruler (the 2 cm marching cubes of earlier releases moved a Chamfer by -15 to +89 %):
+        # its figures are not comparable with this folder's others
+        _set_aside(path, "stale", f"measured by another ruler ({run.get('ruler') or 'marching cubes on a 2 cm grid'}"
+                                  f"; now {ruler})")
+        return False
     travel = asked_travel(spec) if spec is not None else None
     if travel is not None and not _same_travel(run.get("budget"), travel):
         # a run of another travel budget, or one of the releases that ran the world's own 1.5 m whatever was asked
@@ -470,6 +513,16 @@ def finished(path: Path, spec: RunSpec | None = None) -> bool:
         _set_aside(path, "stale", f"a run of another travel budget ({run.get('budget')} m, asked {travel:g} m)")
         return False
     return True
+
+
+def _current_ruler(world: str) -> str | None:
+    """The ruler a world's runs are measured with now (:attr:`World.ruler` of its registered class), or None."""
+    from ..exploration.registry import world_entry
+
+    try:
+        return getattr(world_entry(world).obj, "ruler", None)
+    except (ValueError, ImportError):
+        return None
 
 
 def asked_travel(spec: RunSpec) -> float | None:

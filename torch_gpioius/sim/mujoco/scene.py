@@ -489,9 +489,9 @@ class MujocoScene(RangedScene):
         return hausdorff_distance(self.inner_samples_in_range(spacing), verts[self.in_range(verts)])
 
     def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
-        from ..forcefield import estimate_metrics_3d
+        from ..forcefield import METRICS_GRID, estimate_metrics_3d
 
-        return estimate_metrics_3d(model, self, 0.02 if resolution is None else resolution, contacts=contacts)
+        return estimate_metrics_3d(model, self, METRICS_GRID if resolution is None else resolution, contacts=contacts)
 
     def fingerprint(self) -> str:
         return geometry_hash(

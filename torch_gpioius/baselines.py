@@ -1,0 +1,212 @@
+"""Simple baselines scored beside the method, from the very observations of a visual-tactile run.
+
+Is the fusion better than the simple thing an engineer would do instead? Each baseline builds an estimate of the
+inner surface from the run's own data, and the same converged ruler scores it (:func:`score_baselines`):
+
+* ``vision``: a GPIS on the camera's observations alone (as captured, before any retraction of its inside points),
+  with the run's kernel and sigma^2, its surface taken for the inner one;
+* ``vision-shrunk-5``: that surface moved inward along its normals by the gap the first five contacts measure (the
+  median depth of a contact under it);
+* ``vision-shrunk-all``: the same with the gap of every contact of the run.
+
+Touch alone, the fourth, is the study's own ``tactile`` mode run on the same object and seed (paired in the tables).
+
+A baseline is an entry of :data:`BASELINES`: a function ``baseline(data: BaselineData) -> BaselineEstimate | None``
+registered with :func:`register_baseline`; a user's own is one function and one registration, and every study run
+scores it (``gpioius study`` imports plugins first; docs/architecture.md).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import torch
+import trimesh
+
+from .registry import Entry, Registry
+
+__all__ = ["BaselineData", "BaselineEstimate", "BASELINES", "register_baseline", "score_baselines",
+           "vision_surface", "contact_depths", "shrunk", "BASELINE_METRICS", "BASELINE_EDGE"]
+
+#: The metrics a baseline's score carries (records, runs.csv's ``baseline_<name>_<metric>`` columns).
+BASELINE_METRICS = ("chamfer", "fscore_5mm", "fscore_10mm", "bias", "hausdorff", "gap")
+#: The facets' longest edge of a baseline's surface [m]: 5 mm, scored as they are (within 0.5 % of 2.5 mm facets on
+#: the runs measured; a shrunk surface has no field whose level set would correct its chords).
+BASELINE_EDGE = 0.005
+
+
+@dataclass
+class BaselineData:
+    """The observations of one run that a baseline may use.
+
+    Attributes:
+        outer_x: `(n, 3)` the camera's observations as captured [m], base frame.
+        outer_y: `(n,)` their labels (0 on the seen surface, 1 in free space, < 0 inside).
+        contacts: `(k, 3)` the run's contacts in the order they were made [m].
+        kernel: the run's kernel (an :class:`~torch_gpioius.kernels.ExactKernel`; copied before use).
+        noise: the run's sigma^2.
+        bounds: `(2, 3)` the box to mesh estimates in [m].
+        resolution: the marching grid [m] (the converged ruler's).
+        edge: the facets' longest edge [m].
+    """
+
+    outer_x: np.ndarray
+    outer_y: np.ndarray
+    contacts: np.ndarray
+    kernel: object
+    noise: float
+    bounds: np.ndarray
+    resolution: float = 0.02
+    edge: float = BASELINE_EDGE
+    _cache: dict = field(default_factory=dict, repr=False)
+
+
+@dataclass
+class BaselineEstimate:
+    """A baseline's estimate of the inner surface.
+
+    Attributes:
+        surface: a mesh on it [m] (closed where the estimate closes in the box).
+        inside: ``inside(points (m, 3)) -> (m,) bool``: whether points lie inside the estimate.
+        gap: the gap it was shrunk by [m] (NaN where none).
+    """
+
+    surface: trimesh.Trimesh
+    inside: Callable[[np.ndarray], np.ndarray]
+    gap: float = math.nan
+
+
+@dataclass
+class BaselineEntry(Entry):
+    """A registered baseline (its ``obj``: ``baseline(data) -> BaselineEstimate | None``)."""
+
+
+#: The baselines every visual-tactile study run is scored beside, by name.
+BASELINES: Registry = Registry("baseline", entry_type=BaselineEntry)
+
+
+def register_baseline(name: str, function: Callable, *, description: str = "") -> Callable:
+    """Score ``function`` (``function(data: BaselineData) -> BaselineEstimate | None``) beside every visual-tactile
+    study run under ``name`` (an identifier; hyphens allowed).
+
+    Raises:
+        ValueError: the name is taken by another baseline.
+    """
+    BASELINES.register(name, function, description=description)
+    return function
+
+
+def vision_surface(data: BaselineData) -> tuple[object, trimesh.Trimesh] | None:
+    """The GPIS of the camera's observations alone and its converged surface (cached on ``data``), or None where the
+    camera saw nothing or its estimate does not cross the box."""
+    if "vision" in data._cache:
+        return data._cache["vision"]
+    import copy
+
+    from .models.gpis import GPIS
+    from .surfaces import converged_level_mesh
+
+    out = None
+    if len(data.outer_y) and (data.outer_y == 0).any():
+        x = torch.as_tensor(data.outer_x, dtype=torch.float64)
+        y = torch.as_tensor(data.outer_y, dtype=torch.float64)
+        model = GPIS(x, y, kernel=copy.deepcopy(data.kernel), noise=data.noise)
+        mesh = converged_level_mesh(model, data.bounds, data.resolution, edge=data.edge)
+        out = None if mesh is None else (model, mesh)
+    data._cache["vision"] = out
+    return out
+
+
+def _mean(model, points: np.ndarray) -> np.ndarray:
+    with torch.no_grad():
+        return model.predict_mean(torch.as_tensor(np.asarray(points, dtype=np.float64))).detach().cpu().numpy()
+
+
+def contact_depths(model, mesh: trimesh.Trimesh, contacts: np.ndarray) -> np.ndarray:
+    """`(k,)` how deep each contact lies under the vision surface [m]: its distance from ``mesh``, positive where the
+    vision GPIS ``model`` has it inside (mu < 0), negative outside."""
+    from .sim.meshes import MeshDistance
+
+    if not len(contacts):
+        return np.zeros(0)
+    d = np.asarray(MeshDistance(mesh, signed=False)(contacts), dtype=float)
+    return np.where(_mean(model, contacts) < 0, d, -d)
+
+
+def shrunk(model, mesh: trimesh.Trimesh, gap: float) -> BaselineEstimate:
+    """The vision surface moved inward along its normals (the GPIS's gradient, outward) by ``gap`` [m]; a point lies
+    inside it where it lies inside the vision surface deeper than ``gap``."""
+    from .geometry import surface_geometry
+    from .sim.meshes import MeshDistance
+
+    normals = surface_geometry(model, torch.as_tensor(np.asarray(mesh.vertices)), 0).normal.cpu().numpy()
+    moved = trimesh.Trimesh(vertices=np.asarray(mesh.vertices) - gap * normals, faces=np.asarray(mesh.faces),
+                            process=False)
+    vision = MeshDistance(mesh, signed=False)
+
+    def inside(points: np.ndarray) -> np.ndarray:
+        depth = np.where(_mean(model, points) < 0, 1.0, -1.0) * np.asarray(vision(points), dtype=float)
+        return depth > gap
+
+    return BaselineEstimate(moved, inside, float(gap))
+
+
+def _vision(data: BaselineData) -> BaselineEstimate | None:
+    found = vision_surface(data)
+    if found is None:
+        return None
+    model, mesh = found
+    return BaselineEstimate(mesh, lambda p: _mean(model, p) < 0)
+
+
+def _shrunk_by(first: int | None):
+    def baseline(data: BaselineData) -> BaselineEstimate | None:
+        found = vision_surface(data)
+        contacts = data.contacts if first is None else data.contacts[:first]
+        if found is None or not len(contacts):
+            return None
+        model, mesh = found
+        return shrunk(model, mesh, float(np.median(contact_depths(model, mesh, contacts))))
+    return baseline
+
+
+register_baseline("vision", _vision, description="a GPIS of the camera's observations alone, taken for the inner "
+                                                 "surface")
+register_baseline("vision-shrunk-5", _shrunk_by(5), description="the vision surface moved inward by the median depth "
+                                                                "of the first five contacts under it")
+register_baseline("vision-shrunk-all", _shrunk_by(None), description="the vision surface moved inward by the median "
+                                                                     "depth of every contact under it")
+
+
+def score_baselines(scene, data: BaselineData, observations: np.ndarray, names=None) -> dict[str, dict]:
+    """Each baseline's estimate scored by the converged ruler against ``scene``'s true body
+    (:func:`torch_gpioius.sim.forcefield.score_surface`).
+
+    Args:
+        scene: a ranged 3-D world with a known truth.
+        data: the run's observations.
+        observations: `(k, 3)` the run's surface observations [m] (the "unseen" share, as the method's).
+        names: the baselines to score (default: every registered one).
+
+    Returns:
+        ``{name: {"chamfer", "fscore_5mm", "fscore_10mm", "bias", "hausdorff", "gap"}}``; NaN metrics (F-scores 0)
+        where a baseline gives no estimate in the range.
+    """
+    from .sim.forcefield import score_surface
+
+    out = {}
+    for name in names if names is not None else BASELINES.names():
+        estimate = BASELINES[name](data)
+        scored = None if estimate is None else score_surface(scene, estimate.surface, estimate.inside, observations,
+                                                            data.edge)
+        if scored is None:
+            out[name] = {"chamfer": math.inf, "fscore_5mm": 0.0, "fscore_10mm": 0.0, "bias": math.nan,
+                         "hausdorff": math.inf, "gap": math.nan if estimate is None else estimate.gap}
+            continue
+        _, h, shape = scored
+        out[name] = {"chamfer": shape["chamfer"], "fscore_5mm": shape["fscore_5mm"],
+                     "fscore_10mm": shape["fscore_10mm"], "bias": shape["bias"], "hausdorff": h, "gap": estimate.gap}
+    return out
