@@ -4,9 +4,11 @@ Each arm is a label and one or more study folders (``gpioius study --objects SET
 families under the default settings. For every arm and mode it prints the distribution over the objects' runs of the
 final Chamfer distance, the F-scores at 5 mm and 1 cm, the signed bias, the Hausdorff distance at 25 % of the travel
 and at the end, the correlation, the travel and the wall time (median, interquartile range, 90th percentile), the
-failures by cause; then visual-tactile against touch alone paired per object (and seed), the goals of the benchmark
-judged, the five worst objects by Chamfer distance, and a leaderboard (``--summary``); with ``--figures`` the
-distributions' CDFs.
+failures by cause; the simple baselines every visual-tactile run scored from its own observations (vision alone,
+vision shrunk by the touches' gap; rows ``baseline:<name>``) beside the method in every table; then visual-tactile
+against touch alone paired per object (and seed), the goals of the benchmark judged, GPIOIS against each baseline and
+against the best of them paired per object, the five worst objects by Chamfer distance, and a leaderboard
+(``--summary``); with ``--figures`` the distributions' CDFs.
 
     python scripts/benchmark_table.py "tight=outputs/benchmark/primitives-tight,outputs/benchmark/random-tight" \\
         --summary outputs/benchmark/summary.md --figures outputs/benchmark
@@ -74,6 +76,57 @@ def read_arm(spec: str) -> tuple[str, list[dict]]:
 NO_ESTIMATE = {"final_fscore_5mm": 0.0, "final_fscore_10mm": 0.0}
 
 
+#: The baselines' columns of runs.csv (``baseline_<name>_<metric>``) and the run columns they stand for.
+BASELINE_KEYS = {"chamfer": "final_chamfer", "fscore_5mm": "final_fscore_5mm", "fscore_10mm": "final_fscore_10mm",
+                 "bias": "final_bias", "hausdorff": "final_hausdorff"}
+
+
+def with_baselines(rows: list[dict]) -> list[dict]:
+    """``rows`` and, for each visual-tactile run that scored them, one row per simple baseline (mode
+    ``baseline:<name>``: vision alone, vision shrunk by the touches' gap; the studies' ``baseline_*`` columns) with
+    the run's object and seed, so that every table and figure sets them beside the method. Touch alone is the study's
+    own ``tactile`` mode."""
+    out = list(rows)
+    for r in rows:
+        if r["mode"] != "visual-tactile":
+            continue
+        names = sorted({k[len("baseline_"):-len("_chamfer")] for k in r if k.startswith("baseline_")
+                        and k.endswith("_chamfer") and r[k] not in ("", "nan")})
+        for name in names:
+            b = {"object": r["object"], "seed": r["seed"], "mode": f"baseline:{name}", "failed": "",
+                 "terminated": "baseline", "travel": r.get("travel", "nan"), "wall_time": "nan"}
+            for short, key in BASELINE_KEYS.items():
+                b[key] = r.get(f"baseline_{name}_{short}", "nan")
+            b["has_estimate"] = str(math.isfinite(float(b["final_chamfer"])))
+            if b["has_estimate"] == "False":
+                b["failed"] = "no estimate"
+            out.append(b)
+    return out
+
+
+def best_baseline(rows: list[dict], key: str = "final_chamfer") -> dict:
+    """Visual-tactile against the best of the baselines on the same object and seed (the lowest ``key`` of touch
+    alone and every ``baseline:<name>`` row there): the share of pairs where the method is strictly ahead, the median
+    difference and how often each baseline was the best one."""
+    by: dict = {}
+    for r in rows:
+        by.setdefault((r["object"], r["seed"]), {})[r["mode"]] = number(r, key)
+    diffs, best = [], Counter()
+    for modes in by.values():
+        if "visual-tactile" not in modes:
+            continue
+        others = {m: v for m, v in modes.items() if m == "tactile" or m.startswith("baseline:")}
+        others = {m: v for m, v in others.items() if not math.isnan(v)}
+        if not others:
+            continue
+        winner = min(others, key=others.get)
+        best[winner] += 1
+        diffs.append(modes["visual-tactile"] - others[winner])
+    d = np.array([x for x in diffs if not math.isnan(x)])
+    return {"n": len(d), "ahead": float((d < 0).mean()) if len(d) else math.nan,
+            "median": float(np.median(d)) if len(d) else math.nan, "best": dict(best.most_common())}
+
+
 def number(row: dict, key: str) -> float:
     """``row[key]`` as a number; a run without a final estimate (a scene that could not be built, an estimate that
     vanished) counts as the worst: an infinite distance, an F-score of 0, no bias or correlation."""
@@ -121,12 +174,12 @@ def distribution_table(arms: dict[str, list[dict]]) -> str:
     return "\n".join(out)
 
 
-def paired(rows: list[dict], key: str) -> dict:
-    """Visual-tactile against touch alone on the same object and seed: the share of pairs where vision is ahead
-    (strictly lower ``key``), the median difference and the pairs."""
+def paired(rows: list[dict], key: str, against: str = "tactile") -> dict:
+    """Visual-tactile against another mode (touch alone, or a ``baseline:<name>``) on the same object and seed: the
+    share of pairs where the method is ahead (strictly lower ``key``), the median difference and the pairs."""
     by = {(r["object"], r["seed"], r["mode"]): number(r, key) for r in rows}
-    diffs = [by[(o, s, "visual-tactile")] - by[(o, s, "tactile")] for (o, s, m) in by
-             if m == "visual-tactile" and (o, s, "tactile") in by]
+    diffs = [by[(o, s, "visual-tactile")] - by[(o, s, against)] for (o, s, m) in by
+             if m == "visual-tactile" and (o, s, against) in by]
     d = np.array([x for x in diffs if not math.isnan(x)])
     return {"n": len(d), "ahead": float((d < 0).mean()) if len(d) else math.nan,
             "median": float(np.median(d)) if len(d) else math.nan}
@@ -154,6 +207,22 @@ def goals(label: str, rows: list[dict], wide: bool) -> list[str]:
     out.append(f"{label}: visual-tactile ahead of touch alone at 25 % of the travel on {100 * p25['ahead']:.0f} % of "
                f"{p25['n']} pairs (goal >= 80 %; median VT - T {100 * p25['median']:+.1f} cm) -> "
                f"{'holds' if p25['ahead'] >= 0.8 else 'fails'}")
+    return out
+
+
+def baseline_lines(label: str, rows: list[dict]) -> list[str]:
+    """The method against each baseline and against the best of them, paired per object and seed (final Chamfer)."""
+    out = []
+    best = best_baseline(rows)
+    if best["n"]:
+        names = ", ".join(f"{m.removeprefix('baseline:')} {n}" for m, n in best["best"].items())
+        out.append(f"{label}: GPIOIS ahead of the best baseline on {100 * best['ahead']:.0f} % of {best['n']} objects, "
+                   f"paired (final Chamfer; median VT - best {100 * best['median']:+.2f} cm; the best was: {names})")
+    for mode in sorted({r["mode"] for r in rows if r["mode"] == "tactile" or r["mode"].startswith("baseline:")}):
+        p = paired(rows, "final_chamfer", mode)
+        if p["n"]:
+            out.append(f"{label}: GPIOIS against {mode.removeprefix('baseline:')}: ahead on {100 * p['ahead']:.0f} % "
+                       f"of {p['n']} pairs, median VT - it {100 * p['median']:+.2f} cm")
     return out
 
 
@@ -208,7 +277,9 @@ def figures(arms: dict[str, list[dict]], folder: Path) -> list[Path]:
     for key, title, scale, _ in METRICS[:5]:
         fig, ax = plt.subplots(figsize=(5, 3.5))
         for label, rows in arms.items():
-            for mode, ls in (("visual-tactile", "-"), ("tactile", "--")):
+            modes = [("visual-tactile", "-"), ("tactile", "--")]
+            modes += [(m, ":") for m in sorted({r["mode"] for r in rows if r["mode"].startswith("baseline:")})]
+            for mode, ls in modes:
                 v = np.sort(np.array([number(r, key) * scale for r in rows if r["mode"] == mode]))
                 v = v[~np.isnan(v)]
                 if len(v):
@@ -233,7 +304,7 @@ def main() -> None:
     parser.add_argument("--figures", type=Path, default=None, help="write CDF figures into this folder")
     args = parser.parse_args()
     try:
-        arms = dict(read_arm(a) for a in args.arms)
+        arms = {label: with_baselines(rows) for label, rows in (read_arm(a) for a in args.arms)}
     except ArmError as exc:
         parser.error(str(exc))
     unknown = [w for w in args.wide if w not in arms]
@@ -242,6 +313,7 @@ def main() -> None:
     table = distribution_table(arms)
     print(table, "\n")
     lines = [g for label, rows in arms.items() for g in goals(label, rows, label in args.wide)]
+    lines += [g for label, rows in arms.items() for g in baseline_lines(label, rows)]
     print("\n".join(lines), "\n")
     for label, rows in arms.items():
         print(f"five worst of {label}:\n  " + "\n  ".join(worst(rows)))

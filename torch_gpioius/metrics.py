@@ -13,7 +13,7 @@ from .polylines import distance_to_segments, resample_polyline, segments
 
 __all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff",
            "Shape", "surface_agreement", "curve_shape_metrics", "observed_samples", "FSCORE_THRESHOLDS",
-           "OBSERVED_WITHIN", "SHAPE_METRICS", "mesh_quadrature", "vertex_quadrature"]
+           "OBSERVED_WITHIN", "SHAPE_METRICS", "mesh_quadrature", "vertex_quadrature", "cell_quadrature"]
 
 #: A shape for the metrics: an `(n, d)` point set, a list of `(k, d)` polylines, or a triangle mesh.
 Shape = Union[np.ndarray, Sequence[np.ndarray], trimesh.Trimesh]
@@ -215,6 +215,29 @@ def vertex_quadrature(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     weights = np.zeros(len(mesh.vertices))
     np.add.at(weights, np.asarray(mesh.faces).ravel(), np.repeat(np.asarray(mesh.area_faces) / 3.0, 3))
     return np.asarray(mesh.vertices, dtype=np.float64), weights
+
+
+def cell_quadrature(points: np.ndarray, weights: np.ndarray, cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """A coarser quadrature of the same surface for a field smooth on the scale of ``cell`` [m]: the points gathered
+    in cubic cells of that edge, each cell standing for its total weight at its point nearest the cell's weighted
+    mean (a point of the surface, as all of ``points`` are).
+
+    Returns:
+        ``(points (k, d), weights (k,))``, k at most the count of occupied cells.
+    """
+    points, weights = np.asarray(points, dtype=np.float64), np.asarray(weights, dtype=np.float64)
+    if not len(points):
+        return points, weights
+    _, cell_of = np.unique(np.floor(points / cell).astype(np.int64), axis=0, return_inverse=True)
+    cell_of = cell_of.reshape(-1)
+    k = int(cell_of.max()) + 1
+    total = np.bincount(cell_of, weights, minlength=k)
+    centre = np.stack([np.bincount(cell_of, weights * points[:, j], minlength=k) for j in range(points.shape[1])],
+                      axis=1) / np.maximum(total, 1e-300)[:, None]
+    d2 = ((points - centre[cell_of]) ** 2).sum(axis=1)
+    order = np.lexsort((d2, cell_of))                       # by cell, the nearest to its mean first
+    first = order[np.r_[True, cell_of[order][1:] != cell_of[order][:-1]]]
+    return points[first], total[cell_of[first]]
 
 
 def mesh_quadrature(mesh: trimesh.Trimesh, edge: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

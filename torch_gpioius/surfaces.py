@@ -212,6 +212,16 @@ def project_to_level(model, points, task: int = 0, *, max_step: float, iteration
     return (pts, residual, grads) if gradients else (pts, residual)
 
 
+def _grid_gradient(field: GridField, points: np.ndarray) -> np.ndarray:
+    """`(n, d)` the gradient of a grid's mean at ``points`` [1/m]: central differences on the grid, interpolated
+    linearly."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    parts = np.gradient(field.mean, *field.axes, edge_order=2)
+    return np.stack([RegularGridInterpolator(field.axes, g, bounds_error=False, fill_value=None)(points)
+                     for g in parts], axis=-1)
+
+
 #: A midpoint moved farther than this share of the grid's spacing by :func:`_settle` is projected by Newton's method
 #: with its exact gradient (its ends' gradients did not describe the surface between them).
 _SETTLE_FAR = 0.1
@@ -266,7 +276,9 @@ def converged_level_mesh(model, bounds, resolution: float = 0.01, task: int = 0,
 
     Returns:
         ``trimesh.Trimesh`` [m] with outward normals, or None where mu does not change sign on the grid. Its
-        ``metadata["ruler"]`` holds the grid, the edge and the largest residual ``|mu| / |grad mu|`` [m] of a vertex;
+        ``metadata["ruler"]`` holds the grid, the edge, ``last_step``: the largest ``|mu| / |grad mu|`` [m] of a grid
+        vertex before its last Newton step (after it, that step's quadratic remainder) and ``settled``: the farthest
+        a midpoint moved;
         ``metadata["grid_mesh"]`` the marching-cubes facets with their vertices on the level set, before the split;
         ``metadata["coarser_mesh"]`` the facets before the last split (edges twice as long: for averages of smooth
         fields over the surface, such as the uncertainty of eq. 23, at a quarter of the facets);
@@ -286,9 +298,21 @@ def converged_level_mesh(model, bounds, resolution: float = 0.01, task: int = 0,
         if not len(faces):
             return None
         coarse = coarse.submesh([faces], append=True)
-    # the coarse vertices by Newton's method with the exact gradient; then each level of midpoints, which lie within a
-    # sagitta of the surface, by one step along the gradient interpolated from their ends (_settle)
-    verts, residual, grads = project_to_level(model, coarse.vertices, task, max_step=0.5 * h, gradients=True)
+    # the grid's vertices by Newton steps along the gradient of the grid's own field (central differences, linearly
+    # interpolated: no derivative of the model is taken), those that stay far by Newton's method with the exact
+    # gradient; then each level of midpoints, which lie within a sagitta of the surface, by one step along the
+    # gradient interpolated from their ends (_settle)
+    verts = np.asarray(coarse.vertices, dtype=np.float64)
+    if field is not None:
+        grads = _grid_gradient(field, verts)
+        verts, moved = _settle(model, verts, grads, task, 0.5 * h)
+        verts, residual = _settle(model, verts, grads, task, 0.5 * h)
+        far = np.flatnonzero(residual > _SETTLE_FAR * h * 1e-2)
+        if len(far):
+            verts[far], residual[far], grads[far] = project_to_level(model, verts[far], task, max_step=0.5 * h,
+                                                                     gradients=True)
+    else:
+        verts, residual, grads = project_to_level(model, verts, task, max_step=0.5 * h, gradients=True)
     faces = np.asarray(coarse.faces)
     grid_mesh = trimesh.Trimesh(vertices=verts.copy(), faces=faces, process=False)
     settled = 0.0
@@ -310,8 +334,10 @@ def converged_level_mesh(model, bounds, resolution: float = 0.01, task: int = 0,
             verts[n_old + far], grads[n_old + far] = fixed, fixed_g
         settled = max(settled, float(moved.max(initial=0.0)))
     out = trimesh.Trimesh(vertices=verts, faces=faces, process=False)
+    # how far the grid's vertices were from the level set before their last step [m] (after it, the step's quadratic
+    # remainder), and the farthest a midpoint was moved
     out.metadata["ruler"] = {"name": RULER, "grid": h, "edge": edge,
-                             "residual": float(np.max(residual[np.isfinite(residual)], initial=0.0)),
+                             "last_step": float(np.max(residual[np.isfinite(residual)], initial=0.0)),
                              "settled": settled}
     out.metadata["grid_mesh"] = grid_mesh       # the grid's facets, their vertices on the level set
     out.metadata["coarser_mesh"] = coarser      # the facets before the last split (averages of smooth fields)

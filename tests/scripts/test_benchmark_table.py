@@ -84,3 +84,36 @@ def test_bad_arms_are_named_and_an_arm_without_vision_is_not_judged(tmp_path):
     assert bt.goals("touch", touch, wide=False) == ["touch: no visual-tactile runs, so no goal of the benchmark is "
                                                     "judged (modes: tactile)"]
     assert bt.worst(rows, 1)[0].endswith("ended at its travel budget")
+
+
+def test_the_baselines_stand_beside_the_method_and_the_best_of_them_is_paired_per_object(tmp_path):
+    """Issue 61: every visual-tactile run's baseline columns become rows of their own (``baseline:<name>``), and the
+    method is paired per object against each and against the best of them (touch alone included), recomputed here."""
+    import csv
+
+    bt = _load()
+    rows = []
+    for i, (vt, t, vision, shrunk) in enumerate(((0.3, 0.8, 1.0, 0.4), (0.5, 0.9, 1.2, 0.35), (0.4, 0.3, 1.1, 0.6))):
+        rows.append({"object": f"o{i}", "seed": "0", "mode": "visual-tactile", "failed": "", "final_chamfer": vt / 100,
+                     "baseline_vision_chamfer": vision / 100, "baseline_vision-shrunk-5_chamfer": shrunk / 100,
+                     "baseline_vision_bias": 0.005, "baseline_vision-shrunk-5_bias": -0.001})
+        rows.append({"object": f"o{i}", "seed": "0", "mode": "tactile", "failed": "", "final_chamfer": t / 100})
+    path = tmp_path / "runs.csv"
+    keys = sorted({k for r in rows for k in r})
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, keys)
+        w.writeheader()
+        w.writerows(rows)
+    _, read = bt.read_arm(f"a={tmp_path}")
+    full = bt.with_baselines(read)
+    assert sorted({r["mode"] for r in full}) == ["baseline:vision", "baseline:vision-shrunk-5", "tactile",
+                                                 "visual-tactile"]
+    best = bt.best_baseline(full)
+    # the best per object: shrunk 0.4 (o0, VT ahead), shrunk 0.35 (o1, VT behind), touch 0.3 (o2, VT behind)
+    assert best["n"] == 3 and abs(best["ahead"] - 1 / 3) < 1e-12
+    assert best["best"] == {"baseline:vision-shrunk-5": 2, "tactile": 1}
+    assert abs(best["median"] - 0.001) < 1e-12                              # -0.1, +0.15, +0.1 cm
+    vision = bt.paired(full, "final_chamfer", "baseline:vision")
+    assert vision["n"] == 3 and vision["ahead"] == 1.0
+    lines = bt.baseline_lines("a", full)
+    assert lines[0].startswith("a: GPIOIS ahead of the best baseline on 33 % of 3 objects, paired")

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import trimesh
 import torch
 
 from .datasets import Dataset, DatasetError, load_dataset, replay
@@ -199,24 +200,27 @@ def known_truth(meta: dict) -> dict | None:
 
 
 def estimate_surface(model, bounds: np.ndarray, resolution: float, task: int = 0):
-    """The estimated surface ``{mu = 0}`` of ``task`` and its posterior variance.
+    """The estimated surface ``{mu = 0}`` of ``task`` and its posterior variance, its vertices on the level set (the
+    converged ruler's meshes and curves, :func:`~torch_gpioius.surfaces.converged_level_mesh`, without a further split:
+    a mesh of ``resolution`` whose every vertex lies on the estimate, not interpolated on the grid's edges).
 
     Returns:
         2-D: ``(curves, variances)`` lists of `(m, 2)` polylines [m] and `(m,)` variances at their vertices;
         3-D: ``(mesh, variance)``, a :class:`trimesh.Trimesh` and `(V,)` variances at its vertices; ``(None, None)``
         (3-D) or ``([], [])`` (2-D) when the level set does not cross the box.
     """
-    from ..surfaces import zero_level_curves, zero_level_mesh
+    from ..surfaces import converged_level_curves, converged_level_mesh
 
     if bounds.shape[1] == 2:
-        curves = zero_level_curves(model, bounds, resolution, task)
+        curves = converged_level_curves(model, bounds, resolution, task, edge=resolution)
         var = []
         for c in curves:
             var.append(_variance(model, np.asarray(c), task))
         return curves, var
-    mesh = zero_level_mesh(model, bounds, resolution, task)
+    mesh = converged_level_mesh(model, bounds, resolution, task, edge=resolution)
     if mesh is None:
         return None, None
+    mesh = trimesh.Trimesh(vertices=mesh.vertices, faces=mesh.faces, process=False)     # without the ruler's notes
     return mesh, _variance(model, np.asarray(mesh.vertices), task)
 
 

@@ -191,15 +191,21 @@ def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
     return SimulatedUR5(ur5, q0, SafetyGate(ur5, lo.tolist(), hi.tolist()))
 
 
-#: The grid of the estimate's marching cubes for the metrics [m]: coarse, since every vertex is then moved onto the
-#: level set and the facets split to :data:`METRICS_EDGE` (:func:`torch_gpioius.surfaces.converged_level_mesh`);
-#: halving it moves no figure by more than 2 % (docs/results-benchmark.md, "The ruler").
-METRICS_GRID = 0.02
+#: The grid of the estimate's marching cubes for the metrics [m]. Every vertex is then moved onto the level set and
+#: the facets split to :data:`METRICS_EDGE` (:func:`torch_gpioius.surfaces.converged_level_mesh`), so the grid sets only
+#: which pieces of the estimate are found: a 2 cm grid missed a bunny estimate's thin ridge (its Hausdorff distance
+#: 8 % off, against 2 % on this grid). Halving it moves no figure by more than 2 % (docs/results-benchmark.md).
+METRICS_GRID = 0.01
 #: The longest facet edge of the estimate and of the truth for the metrics [m]. A facet's chord lies e^2 / (8 R) off a
 #: surface of curvature radius R (0.4 mm at 1 cm over 3 cm); :func:`score_surface` moves its quadrature points and each
 #: true point's closest point onto the level set, which leaves the figures within 0.7 % of 2.5 mm facets' on the runs
 #: measured (docs/results-benchmark.md, "The ruler").
 METRICS_EDGE = 0.01
+
+
+#: The cells [m] in which the uncertainty's quadrature gathers the estimate's vertices (the variance is smooth on the
+#: kernel's length, 4-10 cm).
+U_CELL = 0.015
 
 
 def estimate_metrics_3d(model, scene, resolution: float = METRICS_GRID, spacing: float = METRICS_EDGE,
@@ -208,20 +214,22 @@ def estimate_metrics_3d(model, scene, resolution: float = METRICS_GRID, spacing:
     in the range, measured with the converged ruler.
 
     The estimate ``{mu_in = 0}`` is meshed by marching cubes on a grid of ``resolution`` over the exploration range
-    grown by 5 cm, every vertex moved onto the level set and every facet split to edges of at most ``spacing``
+    grown by a cell, every vertex moved onto the level set and every facet split to edges of at most ``spacing``
     (:func:`~torch_gpioius.surfaces.converged_level_mesh`), then scored by :func:`score_surface` (inside: mu < 0).
     Halving ``resolution`` moves every figure by under 2 % (tests/sim/test_forcefield.py; docs/results-benchmark.md,
     "The ruler"). With ``contacts``, also the Hausdorff distance of the touched pieces only
-    (:func:`torch_gpioius.surfaces.touched_pieces`). The uncertainty averages the variance over the vertices.
+    (:func:`torch_gpioius.surfaces.touched_pieces`). The uncertainty averages the variance over the vertices,
+    gathered in cells of :data:`U_CELL` (:func:`torch_gpioius.metrics.cell_quadrature`).
 
     Returns:
         :class:`Measurement` (``surface``: the estimated mesh in the range, or None); NaN metrics when the estimate
         has no surface in the range.
     """
-    from ..metrics import uncertainty_measure, vertex_quadrature
+    from ..metrics import cell_quadrature, uncertainty_measure, vertex_quadrature
     from ..surfaces import clip_mesh, converged_level_mesh, evaluate_grid, touched_pieces
 
-    field = evaluate_grid(model, scene.bounds(0.05), resolution, 0, variance=False)
+    # the grid over the range and a cell around it: the estimate is judged in the range alone
+    field = evaluate_grid(model, scene.bounds(resolution), resolution, 0, variance=False)
     whole = converged_level_mesh(model, None, field=field, edge=spacing, keep=scene.range)
     if whole is None:
         return Measurement(estimate=False)
@@ -252,10 +260,11 @@ def estimate_metrics_3d(model, scene, resolution: float = METRICS_GRID, spacing:
             if len(t):
                 ht = max(float(np.max(scene._inner_unsigned(t))),
                          float(np.max(MeshDistance(touched, signed=False)(_truth_points(scene, spacing)))))
-    # the uncertainty, an average of a smooth field whose every query costs O(N_o r), on the vertices (they lie on the
-    # surface; half as many as the facets)
-    return Measurement(h, ht, uncertainty_measure(model, vertex_quadrature(mesh), 0), None, mesh, estimate=True,
-                       shape=shape)
+    # the uncertainty, an average of the variance (smooth on the kernel's length, every query O(N_o r)), on the
+    # vertices (on the surface) gathered in cells of 1.5 cm: within 0.7 % of every vertex on the runs measured, at a
+    # tenth of the queries
+    return Measurement(h, ht, uncertainty_measure(model, cell_quadrature(*vertex_quadrature(mesh), U_CELL), 0), None,
+                       mesh, estimate=True, shape=shape)
 
 
 def _truth_points(scene, spacing: float) -> np.ndarray:
@@ -345,10 +354,59 @@ def score_surface(scene, surface: trimesh.Trimesh | None, inside, observations: 
 
     obs = np.asarray(observations, dtype=float).reshape(-1, 3)
     observed = cKDTree(obs).query(truth_c)[0] <= OBSERVED_WITHIN if len(obs) else np.zeros(len(truth_c), bool)
-    near = cKDTree(truth_c[observed]).query(est_c)[0] <= OBSERVED_WITHIN if observed.any() else \
-        np.zeros(len(est_c), bool)
-    return mesh, h, surface_agreement(est_to_truth, truth_to_est, signed, observed, near, est_weights=est_w,
+    observed_tree = cKDTree(truth_c[observed]) if observed.any() else None
+
+    def near_observed(points: np.ndarray) -> np.ndarray:
+        if observed_tree is None:
+            return np.zeros(len(points), bool)
+        return observed_tree.query(points)[0] <= OBSERVED_WITHIN
+
+    near = near_observed(est_c)
+    weights = est_w
+    if grads is not None:
+        # the suprema over the estimate (the Hausdorff distances) at facets as fine as where they are attained: the
+        # facets at or near the largest distances, over the whole estimate and near the observed body, split twice
+        # and their points moved onto the level set, weightless (the integrals keep their quadrature)
+        extra = _sup_points(mesh, grads, mean, spacing, keep, est_to_truth, near)
+        if len(extra):
+            extra = extra[scene.in_range(extra)]
+            d = np.asarray(inner(extra), dtype=float)
+            h = max(h, float(d.max(initial=0.0)))
+            est_to_truth = np.r_[est_to_truth, d]
+            near = np.r_[near, near_observed(extra)]
+            weights = np.r_[est_w, np.zeros(len(d))]
+    return mesh, h, surface_agreement(est_to_truth, truth_to_est, signed, observed, near, est_weights=weights,
                                       truth_weights=truth_w)
+
+
+#: How many facets :func:`score_surface` splits near each supremum of the estimate's distance from the body.
+SUP_FACETS = 64
+
+
+def _sup_points(mesh: trimesh.Trimesh, grads, mean, spacing: float, keep: np.ndarray, values: np.ndarray,
+                near: np.ndarray) -> np.ndarray:
+    """Points of the facets where the estimate's distance from the body is largest (over all of it, and over the part
+    near the observed body), each facet split twice and the new points moved onto the level set: `(k, 3)`."""
+    kept = np.flatnonzero(keep)
+    chosen: set[int] = set()
+    for mask in (np.ones(len(values), bool), near):
+        if not mask.any():
+            continue
+        v = np.where(mask, values, -np.inf)
+        top = np.argsort(v)[::-1][:SUP_FACETS]
+        chosen |= {int(kept[i]) for i in top if np.isfinite(v[i]) and v[i] >= v[top[0]] - spacing}
+    if not chosen:
+        return np.zeros((0, 3))
+    faces = np.asarray(mesh.faces)[sorted(chosen)]
+    verts, g = np.asarray(mesh.vertices), np.asarray(grads)
+    n0 = len(verts)
+    for _ in range(2):
+        verts, faces, attributes = trimesh.remesh.subdivide(verts, faces, vertex_attributes={"g": g})
+        g = attributes["g"]
+    fresh = verts[n0:]
+    centroids = verts[faces].mean(axis=1)
+    points = np.concatenate([fresh, centroids])
+    return _onto_level(points, np.concatenate([g[n0:], g[faces].mean(axis=1)]), mean, spacing)
 
 
 def _onto_level(points: np.ndarray, grads: np.ndarray, mean, limit: float) -> np.ndarray:

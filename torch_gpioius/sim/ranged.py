@@ -22,10 +22,10 @@ class RangedScene(World):
     """
 
     range: np.ndarray
-    #: The converged ruler (:func:`torch_gpioius.sim.forcefield.estimate_metrics_3d`): marching cubes on a 2 cm grid,
+    #: The converged ruler (:func:`torch_gpioius.sim.forcefield.estimate_metrics_3d`): marching cubes on a 1 cm grid,
     #: the vertices moved onto mu = 0, the facets split to 1 cm on it and their chords corrected. Runs measured before
     #: carry none (marching cubes on a 2 cm grid alone).
-    ruler = "projected: 2 cm grid, vertices on mu = 0, 1 cm facets corrected to the level set"
+    ruler = "projected: 1 cm grid, vertices on mu = 0, 1 cm facets corrected to the level set"
 
     @abc.abstractmethod
     def true_surface_samples(self, spacing: float) -> np.ndarray:
