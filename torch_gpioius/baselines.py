@@ -51,6 +51,8 @@ class BaselineData:
         bounds: `(2, 3)` the box to mesh estimates in [m].
         resolution: the marching grid [m] (the converged ruler's).
         edge: the facets' longest edge [m].
+        keep: `(2, 3)` the box the estimates are judged in [m] (facets beyond it by more than a cell are not
+            refined); None: all of ``bounds``.
     """
 
     outer_x: np.ndarray
@@ -59,8 +61,9 @@ class BaselineData:
     kernel: object
     noise: float
     bounds: np.ndarray
-    resolution: float = 0.02
+    resolution: float = 0.01
     edge: float = BASELINE_EDGE
+    keep: np.ndarray | None = None
     _cache: dict = field(default_factory=dict, repr=False)
 
 
@@ -69,13 +72,14 @@ class BaselineEstimate:
     """A baseline's estimate of the inner surface.
 
     Attributes:
-        surface: a mesh on it [m] (closed where the estimate closes in the box).
-        inside: ``inside(points (m, 3)) -> (m,) bool``: whether points lie inside the estimate.
+        surface: a mesh on it [m] (closed where the estimate closes in the box), its facets' normals outward.
+        inside: ``inside(points (m, 3)) -> (m,) bool``: whether points lie inside the estimate; None: the side of the
+            closest facet of ``surface``.
         gap: the gap it was shrunk by [m] (NaN where none).
     """
 
     surface: trimesh.Trimesh
-    inside: Callable[[np.ndarray], np.ndarray]
+    inside: Callable[[np.ndarray], np.ndarray] | None = None
     gap: float = math.nan
 
 
@@ -107,14 +111,15 @@ def vision_surface(data: BaselineData) -> tuple[object, trimesh.Trimesh] | None:
     import copy
 
     from .models.gpis import GPIS
-    from .surfaces import converged_level_mesh
+    from .surfaces import converged_level_mesh, evaluate_grid
 
     out = None
     if len(data.outer_y) and (data.outer_y == 0).any():
         x = torch.as_tensor(data.outer_x, dtype=torch.float64)
         y = torch.as_tensor(data.outer_y, dtype=torch.float64)
         model = GPIS(x, y, kernel=copy.deepcopy(data.kernel), noise=data.noise)
-        mesh = converged_level_mesh(model, data.bounds, data.resolution, edge=data.edge)
+        field = evaluate_grid(model, data.bounds, data.resolution, 0, variance=False)
+        mesh = converged_level_mesh(model, None, field=field, edge=data.edge, keep=data.keep)
         out = None if mesh is None else (model, mesh)
     data._cache["vision"] = out
     return out
@@ -137,29 +142,20 @@ def contact_depths(model, mesh: trimesh.Trimesh, contacts: np.ndarray) -> np.nda
 
 
 def shrunk(model, mesh: trimesh.Trimesh, gap: float) -> BaselineEstimate:
-    """The vision surface moved inward along its normals (the GPIS's gradient, outward) by ``gap`` [m]; a point lies
-    inside it where it lies inside the vision surface deeper than ``gap``."""
-    from .geometry import surface_geometry
-    from .sim.meshes import MeshDistance
-
-    normals = surface_geometry(model, torch.as_tensor(np.asarray(mesh.vertices)), 0).normal.cpu().numpy()
+    """The vision surface ``mesh`` (:func:`vision_surface`) moved inward along its normals (the GPIS's gradient at each
+    vertex, outward: ``mesh.metadata["gradients"]``) by ``gap`` [m]; its facets keep their outward orientation."""
+    g = np.asarray(mesh.metadata["gradients"], dtype=np.float64)
+    normals = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
     moved = trimesh.Trimesh(vertices=np.asarray(mesh.vertices) - gap * normals, faces=np.asarray(mesh.faces),
                             process=False)
-    vision = MeshDistance(mesh, signed=False)
-
-    def inside(points: np.ndarray) -> np.ndarray:
-        depth = np.where(_mean(model, points) < 0, 1.0, -1.0) * np.asarray(vision(points), dtype=float)
-        return depth > gap
-
-    return BaselineEstimate(moved, inside, float(gap))
+    return BaselineEstimate(moved, None, float(gap))
 
 
 def _vision(data: BaselineData) -> BaselineEstimate | None:
     found = vision_surface(data)
     if found is None:
         return None
-    model, mesh = found
-    return BaselineEstimate(mesh, lambda p: _mean(model, p) < 0)
+    return BaselineEstimate(found[1], None)
 
 
 def _shrunk_by(first: int | None):

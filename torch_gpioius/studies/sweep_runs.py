@@ -404,7 +404,7 @@ def run_baselines(world, trace, log: Path) -> dict:
     model = trace.model
     # facets of 5 mm, as they are: a shrunk surface has no field of its own to correct its chords by
     data = BaselineData(first.x[outer], first.y[outer], np.asarray(trace.contacts, dtype=float), model.kernel,
-                        float(model.noise), world.bounds(0.05), METRICS_GRID, BASELINE_EDGE)
+                        float(model.noise), world.bounds(METRICS_GRID), METRICS_GRID, BASELINE_EDGE, world.range)
     with torch.no_grad():
         surface = model.train_targets.cpu().numpy() == 0
     return score_baselines(world, data, model.train_inputs[0].detach().cpu().numpy()[surface])
