@@ -11,10 +11,11 @@ For each body (a 22 cm bottle, objects of the seeded primitive family, pybullet'
   and the free space of each path's approach, as a contacts CSV with ``nx,ny,nz``.
 
 Then ``gpioius fit contacts.csv --cloud ... --camera-origin ... --mesh est.ply`` (the default settings), the same
-contacts alone, and the clouds with ``--settings paper``; the estimate within the studies' range (the body's box grown
-by 3 cm, from a quarter of its height up) against the body: Chamfer distance, F-score at 1 cm, median signed bias
-(negative: inside), Hausdorff, and the estimate's box against the body's (a phantom dome shows as a box far larger than
-the body).
+contacts alone, and the clouds with ``--settings paper``, and the simple baselines the first fit writes from the same
+observations (``--out``: vision alone, vision shrunk by the gap the first five or all contacts measure); the
+estimate within the studies' range (the body's box grown by 3 cm, from a quarter of its height up) against the body:
+Chamfer distance, F-score at 1 cm, median signed bias (negative: inside), Hausdorff, and the estimate's box against
+the body's (a phantom dome shows as a box far larger than the body).
 
     python scripts/own_data_check.py                        # the bottle and primitives 100-104
     python scripts/own_data_check.py --bodies bottle pybullet:duck primitives:120-124 --out outputs/own_data
@@ -32,6 +33,8 @@ import numpy as np
 import trimesh
 
 AT = np.array([0.5, 0.0, 0.1])
+#: The simple baselines `gpioius fit --out` writes beside the estimate (torch_gpioius.baselines), scored as arms.
+BASELINE_ARMS = ("vision", "vision-shrunk-5", "vision-shrunk-all")
 
 
 def bottle() -> trimesh.Trimesh:
@@ -178,16 +181,20 @@ def main() -> None:
         for arm, extra in arms:
             extra = [] if extra is None else clouds + extra
             mesh = folder / f"estimate_{arm.replace(' ', '_').replace(',', '')}.ply"
+            fit_out = ["--out", str(folder / "fit")] if arm == "with clouds" else []     # its baselines too
             code = gpioius(["fit", csv, *extra, "--mesh", str(mesh), "--resolution", str(args.resolution),
-                            "--force"])
+                            "--force", *fit_out])
             result[arm] = measure(mesh, truth) if code == 0 and mesh.exists() else {"failed": code}
+        for name in BASELINE_ARMS:                         # the simple baselines of the fit with clouds
+            mesh = folder / "fit" / "baselines" / f"{name}.ply"
+            result[name] = measure(mesh, truth) if mesh.exists() else {"failed": "no estimate"}
         rows.append(result)
         print(json.dumps(result), flush=True)
     (args.out / "summary.json").write_text(json.dumps(rows, indent=1))
     print("| body | extent [cm] | arm | Chamfer [cm] | F 1 cm | bias [mm] | Hausdorff [cm] | estimate's box [cm] |")
     print("|---|---|---|---|---|---|---|---|")
     for r in rows:
-        for arm, _ in arms:
+        for arm in [a for a, _ in arms] + list(BASELINE_ARMS):
             m = r[arm]
             if "failed" in m:
                 print(f"| {r['body']} | | {arm} | failed ({m['failed']}) | | | | |")

@@ -183,6 +183,10 @@ def _fit_report(args: argparse.Namespace, info: dict) -> None:
             print(f"wrote {what} to {info[key]}")
     if args.out:
         print(f"wrote {info['checkpoint']}, {info['figure']} and {Path(args.out) / 'fit.json'}")
+    if info.get("baselines"):
+        gaps = ", ".join(f"{name}" + (f" (gap {b['gap'] * 1000:.1f} mm)" if b["gap"] is not None else "")
+                         for name, b in info["baselines"].items() if b["mesh"])
+        print(f"wrote the simple baselines from the same observations to {Path(args.out) / 'baselines'}: {gaps}")
 
 
 def _interval_reading(lo: float, hi: float) -> str:

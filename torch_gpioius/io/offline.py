@@ -131,7 +131,9 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         ``{"n", "settings", "task_covariance", "similarity", "correlation", "correlation_interval", "mll",
         "checkpoint", "figure", "estimate", "mesh", "outer_mesh"}``; ``estimate`` says whether the inner estimate
         has a surface in the data's box (on the figure's grid); ``correlation_interval`` is the 95 %
-        profile-likelihood interval of the correlation (:meth:`torch_gpioius.GPIOIS.similarity_interval`).
+        profile-likelihood interval of the correlation (:meth:`torch_gpioius.GPIOIS.similarity_interval`). With
+        ``out`` and 3-D data of both tasks, also ``"baselines"``: the simple baselines from the same observations
+        (:mod:`torch_gpioius.baselines`), each surface written to ``out/baselines/<name>.ply``, with its gap.
     """
     from contextlib import ExitStack
 
@@ -286,8 +288,37 @@ def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mes
                            f"{' + '.join(Path(p).name for p in str(path).split(' + '))}: estimated inner shape "
                            "over its variance", res)
             info["checkpoint"], info["figure"] = str(out / "model.pt"), str(out / "fit.png")
+            if isinstance(model, GPIOIS) and ds.x.shape[1] == 3:
+                status("the simple baselines")
+                info["baselines"] = _write_baselines(ds, model, staged.path / "baselines", out / "baselines",
+                                                     mesh_res)
             atomic_write(staged.path / "fit.json", json.dumps(info, indent=2))
     return info
+
+
+def _write_baselines(ds: Dataset, model, folder: Path, final: Path, resolution: float) -> dict:
+    """The simple baselines (:mod:`torch_gpioius.baselines`) of a fit on files, from the same observations: each
+    surface written to ``folder/<name>.ply`` (moved to ``final`` with the fit's other files), with the gap it was
+    shrunk by. The camera's observations are the dataset's (a file's camera inside points already retracted where its
+    contacts showed a wide cover); the contacts are taken in the order of their steps, then of the file."""
+    from ..baselines import BASELINE_EDGE, BASELINES, BaselineData
+
+    folder.mkdir(parents=True, exist_ok=True)
+    contact = (ds.task == 0) & (ds.y == 0)
+    order = np.argsort(ds.step[contact], kind="stable")
+    data = BaselineData(ds.x[ds.task == 1], ds.y[ds.task == 1], ds.x[contact][order], model.kernel,
+                        float(model.noise), data_bounds(ds.x, pad=max(0.05, 2 * resolution)), resolution,
+                        BASELINE_EDGE)
+    out = {}
+    for name in BASELINES.names():
+        estimate = BASELINES[name](data)
+        if estimate is None:
+            out[name] = {"mesh": None, "gap": None}
+            continue
+        atomic_write(folder / f"{name}.ply", estimate.surface.export(file_type="ply"))
+        out[name] = {"mesh": str(final / f"{name}.ply"),
+                     "gap": None if not np.isfinite(estimate.gap) else float(estimate.gap)}
+    return out
 
 
 def _file_settings(ds: Dataset):
