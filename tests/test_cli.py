@@ -571,3 +571,26 @@ def test_a_refused_scene_leaves_no_folder_and_a_fit_no_lock(tmp_path, capsys):
     assert main(["fit", str(EXAMPLE), "--out", str(fit)]) == 0
     assert sorted(p.name for p in fit.iterdir()) == [".gpioius-output.json", "fit.json", "fit.png", "model.pt"]
     assert f"wrote {fit / 'model.pt'}, {fit / 'fit.png'} and {fit / 'fit.json'}" in capsys.readouterr().out
+
+
+def test_fit_writes_the_simple_baselines_from_the_same_files(tmp_path, capsys):
+    """Issue 61: `gpioius fit --out` sets the simple baselines beside the estimate, from the same observations: the
+    camera's surface alone, and shrunk by the gap the first five (or all) contacts measure: 1 cm on this sphere."""
+    import json
+
+    import trimesh
+
+    from tests.userfiles import CENTRE, EYES, sphere_files
+
+    csv, (left, right) = sphere_files(tmp_path, contacts=20, cover=800)
+    out = tmp_path / "fit"
+    assert main(["fit", str(csv), "--cloud", str(left), "--cloud", str(right), "--camera-origin",
+                 " ".join(map(str, EYES[0])), "--camera-origin", " ".join(map(str, EYES[1])), "--out", str(out)]) == 0
+    assert "wrote the simple baselines from the same observations" in capsys.readouterr().out
+    info = json.loads((out / "fit.json").read_text())["baselines"]
+    assert set(info) >= {"vision", "vision-shrunk-5", "vision-shrunk-all"}
+    for name in ("vision-shrunk-5", "vision-shrunk-all"):
+        assert abs(info[name]["gap"] - 0.01) < 0.003, info[name]
+    r = {name: np.median(np.linalg.norm(trimesh.load(out / "baselines" / f"{name}.ply").vertices - CENTRE, axis=1))
+         for name in ("vision", "vision-shrunk-5")}
+    assert abs(r["vision"] - 0.07) < 0.004 and abs(r["vision-shrunk-5"] - 0.06) < 0.004, r
