@@ -356,10 +356,10 @@ def score_surface(scene, surface: trimesh.Trimesh | None, inside, observations: 
     observed = cKDTree(obs).query(truth_c)[0] <= OBSERVED_WITHIN if len(obs) else np.zeros(len(truth_c), bool)
     observed_tree = cKDTree(truth_c[observed]) if observed.any() else None
 
-    def near_observed(points: np.ndarray) -> np.ndarray:
+    def near_observed(points: np.ndarray, within: float = OBSERVED_WITHIN) -> np.ndarray:
         if observed_tree is None:
             return np.zeros(len(points), bool)
-        return observed_tree.query(points)[0] <= OBSERVED_WITHIN
+        return observed_tree.query(points)[0] <= within
 
     near = near_observed(est_c)
     weights = est_w
@@ -367,7 +367,9 @@ def score_surface(scene, surface: trimesh.Trimesh | None, inside, observations: 
         # the suprema over the estimate (the Hausdorff distances) at facets as fine as where they are attained: the
         # facets at or near the largest distances, over the whole estimate and near the observed body, split twice
         # and their points moved onto the level set, weightless (the integrals keep their quadrature)
-        extra = _sup_points(mesh, grads, mean, spacing, keep, est_to_truth, near)
+        # (near the observed body: also the facets a facet's size beyond it, where its supremum may lie on a border)
+        extra = _sup_points(mesh, grads, mean, spacing, keep, est_to_truth,
+                            near_observed(est_c, OBSERVED_WITHIN + spacing))
         if len(extra):
             extra = extra[scene.in_range(extra)]
             d = np.asarray(inner(extra), dtype=float)
