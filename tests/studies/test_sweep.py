@@ -600,3 +600,31 @@ def test_a_study_whose_every_run_failed_names_each_reason_whole_and_exits_1(tmp_
     assert reason.startswith("refused: scene: ") and "garbage.stl" in reason and len(reason) > 60
     assert "gone_tactile_0, gone_tactile_1" in line and line.endswith(" ".join(reason.split()))
     assert rows[1]["reason"] == reason
+
+
+def test_a_run_records_where_its_time_went_its_ruler_and_its_baselines_and_another_rulers_run_is_done_again(tmp_path):
+    """Issue 61: a study's columns held only the planning step's median and 95th percentile (10-16 % of a run's wall
+    time): no reader could check the method's share. Each run now records its time by part, which add up to its wall
+    time, the ruler that measured it (a run of another ruler is done again, not mixed) and, for a visual-tactile run,
+    the simple baselines from its own observations."""
+    ball = ball_scene(tmp_path)
+    out = tmp_path / "s"
+    run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=out, backend="local",
+              progress=False, max_travel=0.04, metrics_every="schedule")
+    row = next(csv.DictReader(open(out / "runs.csv")))
+    parts = {k: float(row[f"time_{k}"]) for k in ("scene", "method", "camera", "contact", "measuring", "baselines")}
+    assert all(v >= 0 for v in parts.values()) and parts["method"] > 0 and parts["measuring"] > 0
+    assert sum(parts.values()) <= float(row["wall_time"]) * 1.001 + 0.05
+    assert sum(parts.values()) >= 0.8 * float(row["wall_time"])         # little of a run goes unaccounted
+    from torch_gpioius.sim.ranged import RangedScene
+
+    assert row["ruler"] == RangedScene.ruler
+    for name in ("vision", "vision-shrunk-5", "vision-shrunk-all"):
+        assert 0 < float(row[f"baseline_{name}_chamfer"]) < 0.05
+    path = out / "runs" / "ball_visual-tactile_0.json"
+    run = json.loads(path.read_text())
+    path.write_text(json.dumps({**run, "ruler": None}))                 # measured by the ruler of before
+    with pytest.warns(RuntimeWarning, match="measured by another ruler"):
+        again = run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=out, backend="local",
+                          progress=False, max_travel=0.04, metrics_every="schedule")
+    assert again["skipped"] == 0

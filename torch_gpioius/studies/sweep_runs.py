@@ -339,6 +339,7 @@ def run_one(spec: RunSpec) -> dict:
             t1 = time.perf_counter()
             record["baselines"] = run_baselines(world, trace, out / "logs" / f"{spec.key}.gpioius")
             record["time"]["baselines"] = time.perf_counter() - t1
+            record["wall_time"] = time.perf_counter() - t0           # the run's whole time, its baselines too
         record["n_outer"] = _n_outer(trace.model)
         record["n_vision_inside"] = _n_outer(trace.model, inside=True)
         # the outer task's prior mean at the end (1: the paper's; 1 - gap / ramp once the touches set it)
