@@ -87,11 +87,16 @@ def with_baselines(rows: list[dict]) -> list[dict]:
     the run's object and seed, so that every table and figure sets them beside the method. Touch alone is the study's
     own ``tactile`` mode."""
     out = list(rows)
+    measured = sorted({k[len("baseline_"):-len("_chamfer")] for r in rows for k in r
+                       if k.startswith("baseline_") and k.endswith("_chamfer") and r[k] not in ("", "nan")})
     for r in rows:
         if r["mode"] != "visual-tactile":
             continue
-        names = sorted({k[len("baseline_"):-len("_chamfer")] for k in r if k.startswith("baseline_")
-                        and k.endswith("_chamfer") and r[k] not in ("", "nan")})
+        names = [n for n in measured if r.get(f"baseline_{n}_chamfer") not in (None, "", "nan")]
+        if not names and cause(r):
+            # a run refused before it observed anything (its scene, its approach): no baseline has an estimate
+            # either, and each counts as failed, as the method does
+            names = measured
         for name in names:
             b = {"object": r["object"], "seed": r["seed"], "mode": f"baseline:{name}", "failed": "",
                  "terminated": "baseline", "travel": r.get("travel", "nan"), "wall_time": "nan"}
@@ -267,30 +272,56 @@ def leaderboard(arms: dict[str, list[dict]]) -> str:
     return "\n".join(out)
 
 
+#: How each mode is drawn in the CDF figures: (colour, line style, label).
+STYLES = {"visual-tactile": ("tab:blue", "-", "GPIOIS (visual-tactile)"),
+          "tactile": ("tab:orange", "--", "touch alone"),
+          "baseline:vision": ("0.5", ":", "vision alone"),
+          "baseline:vision-shrunk-5": ("tab:green", "-.", "vision shrunk by the first 5 touches' gap"),
+          "baseline:vision-shrunk-all": ("tab:red", (0, (5, 2, 1, 2, 1, 2)), "vision shrunk by all touches' gap")}
+
+
 def figures(arms: dict[str, list[dict]], folder: Path) -> list[Path]:
+    """One figure per metric: a panel per arm, each the CDF over its objects of the method, touch alone and every
+    baseline (one colour and line per mode throughout), the x axis clipped to the 95th percentile of every curve."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     written = []
+    cols = min(3, len(arms))
+    rows_n = int(math.ceil(len(arms) / cols))
     for key, title, scale, _ in METRICS[:5]:
-        fig, ax = plt.subplots(figsize=(5, 3.5))
-        for label, rows in arms.items():
-            modes = [("visual-tactile", "-"), ("tactile", "--")]
-            modes += [(m, ":") for m in sorted({r["mode"] for r in rows if r["mode"].startswith("baseline:")})]
-            for mode, ls in modes:
+        fig, axes = plt.subplots(rows_n, cols, figsize=(4.2 * cols, 3.2 * rows_n + 0.8), squeeze=False,
+                                 sharey=True)
+        drawn: dict = {}
+        for ax, (label, rows) in zip(axes.ravel(), arms.items()):
+            tops = []
+            for mode in [m for m in STYLES if any(r["mode"] == m for r in rows)]:
                 v = np.sort(np.array([number(r, key) * scale for r in rows if r["mode"] == mode]))
                 v = v[~np.isnan(v)]
-                if len(v):
-                    ax.step(v, np.arange(1, len(v) + 1) / len(v), ls=ls, where="post", label=f"{label}, {mode}")
-        ax.set_xlabel(title)
-        ax.set_ylabel("share of objects")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-        fig.tight_layout()
+                if not len(v):
+                    continue
+                colour, style, name = STYLES[mode]
+                finite = v[np.isfinite(v)]
+                if len(finite):
+                    tops.append(pct(finite, 95))
+                drawn[name] = ax.step(v, np.arange(1, len(v) + 1) / len(v), color=colour, ls=style, where="post",
+                                      lw=1.4)[0]
+            if tops:
+                ax.set_xlim(left=min(0.0, ax.get_xlim()[0]), right=max(tops) * 1.05)
+            ax.set_title(label, fontsize=10)
+            ax.set_xlabel(title)
+            ax.grid(alpha=0.3)
+        for ax in axes[:, 0]:
+            ax.set_ylabel("share of objects")
+        for ax in axes.ravel()[len(arms):]:
+            ax.axis("off")
+        fig.legend(list(drawn.values()), list(drawn), loc="lower center", ncol=min(3, len(drawn)), fontsize=8,
+                   frameon=False)
+        fig.tight_layout(rect=(0, 0.08 if rows_n > 1 else 0.14, 1, 1))
         path = folder / f"cdf_{key}.png"
-        fig.savefig(path, dpi=120)
+        fig.savefig(path, dpi=110)
         plt.close(fig)
         written.append(path)
     return written
