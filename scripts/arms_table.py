@@ -2,11 +2,14 @@
 unseen share at 10 %, 25 % and the end (docs/results-real.md uses it), with the paired difference of final
 Chamfer against the first arm.
 
-Each argument is ``LABEL=FOLDER[:MODE]`` (MODE: visual-tactile by default, or tactile); objects are matched by name,
-runs by seed. A failed run's missing estimate counts as inf (worse than any distance), as in every study table.
+Each argument is ``LABEL=FOLDER[:MODE]`` (MODE: visual-tactile by default, tactile, or ``baseline:NAME``: the
+baseline NAME scored beside each visual-tactile run, from the same observations; it has final Chamfer, H, F-score and
+bias only); objects are matched by name, runs by seed. A failed run's missing estimate counts as inf (worse than any
+distance), as in every study table; so does a baseline that gave no surface.
 
     python scripts/arms_table.py "no inside points=outputs/real_ff_noinside" \\
-        "default=outputs/real_ff_inside" "touch alone=outputs/real_ff_inside:tactile"
+        "default=outputs/real_ff_inside" "touch alone=outputs/real_ff_inside:tactile" \\
+        "shrunk by 5 touches=outputs/real_ff_inside:baseline:vision-shrunk-5"
 """
 
 from __future__ import annotations
@@ -37,18 +40,40 @@ COLUMNS = (("H 10 %", "hausdorff_10", 100, 1), ("H 25 %", "hausdorff_25", 100, 1
 TIMES = ("median_step_time", "p95_step_time", "max_step_time", "final_length", "final_noise", "final_outer_mean")
 
 
+# a baseline's columns in runs.csv (``baseline_<name>_<metric>``) by the run's column they stand for
+BASELINE_COLUMNS = {"final_chamfer": "chamfer", "final_hausdorff": "hausdorff", "final_fscore_10mm": "fscore_10mm",
+                    "final_fscore_5mm": "fscore_5mm", "final_bias": "bias"}
+
+
 def _arm(spec: str) -> tuple[str, dict]:
     label, _, where = spec.partition("=")
     folder, _, mode = where.partition(":")
+    mode, _, baseline = (mode or "visual-tactile").partition(":")
+    path = Path(folder) / "runs.csv"
+    if not label or not where:
+        raise SystemExit(f"arms_table: {spec!r} is not LABEL=FOLDER[:MODE]")
+    if not path.is_file():
+        raise SystemExit(f"arms_table: {spec!r}: no {path}")
     runs = defaultdict(dict)
-    for r in csv.DictReader(open(Path(folder) / "runs.csv")):
-        if r["mode"] == (mode or "visual-tactile"):
-            runs[r["object"]][int(r["seed"])] = r
+    for r in csv.DictReader(open(path)):
+        if mode == "baseline":
+            if r["mode"] != "visual-tactile":
+                continue
+            if f"baseline_{baseline}_chamfer" not in r:
+                raise SystemExit(f"arms_table: {spec!r}: {path} has no baseline {baseline!r} (its runs were made "
+                                 "before baselines were scored, or under another name)")
+            r = {"object": r["object"], "seed": r["seed"],
+                 **{key: r[f"baseline_{baseline}_{m}"] for key, m in BASELINE_COLUMNS.items()}}
+        elif r["mode"] != mode:
+            continue
+        runs[r["object"]][int(r["seed"])] = r
     return label, runs
 
 
 def _value(run: dict, key: str) -> float:
-    v = _f(run.get(key, math.nan))
+    if key not in run:        # a column this arm does not have (a baseline's H at 25 %): not a failure
+        return math.nan
+    v = _f(run[key])
     failed_estimate = key not in ("final_correlation", "unseen_25", *TIMES) and not math.isfinite(v)
     return math.inf if failed_estimate else v
 
