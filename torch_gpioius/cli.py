@@ -366,7 +366,7 @@ def _presets(dimension: int | None = None) -> list[str]:
 
 
 def _covers() -> list[str]:
-    """The covers of an object set's objects (``sim.objectsets.COVERS``: tight, wide)."""
+    """The covers of an object set's objects (``sim.objectsets.COVERS``: tight, wide, uneven, hanging)."""
     from .sim.objectsets import COVERS
 
     return list(COVERS)
@@ -607,8 +607,9 @@ def _add_study(sub, common, fmt) -> None:
                          "the cost); default: every 5 steps in the 3-D worlds, every step in 2-D; one per --out "
                          "folder")
     sw.add_argument("--cover", default=None, choices=_covers(),
-                    help="the cover of an object set's objects: tight (8 mm) or wide (4 cm); default tight; one per "
-                         "--out folder")
+                    help="the cover of an object set's objects: tight (8 mm), wide (4 cm), uneven (5 mm on one side "
+                         "to 5 cm on the other) or hanging (5 mm on top, hanging to the table); default tight; one "
+                         "per --out folder")
     sw.add_argument("--scenes", default=None,
                     help="comma-separated scene files (TOML; docs/tutorials/your-object.md) run as objects; with "
                          "--scenes and no --objects only the scenes run (3-D worlds)")

@@ -461,3 +461,90 @@ def test_the_figures_of_a_fitted_estimate_move_by_under_two_percent_when_the_gri
     assert abs(coarse.hausdorff - fine.hausdorff) <= max(0.02 * fine.hausdorff, 2e-5)
     assert abs(coarse.uncertainty - fine.uncertainty) <= 0.02 * fine.uncertainty
     assert coarse.surface.metadata["ruler"]["last_step"] < 1e-4         # every grid vertex within a step of mu = 0
+
+
+def _ball_on_table(radius=0.05):
+    import trimesh
+
+    ball = trimesh.creation.icosphere(subdivisions=4, radius=radius)
+    ball.apply_translation([0.5, 0.0, radius])
+    return ball, np.array([0.5, 0.0, radius])
+
+
+def test_an_uneven_cover_grows_from_its_thin_side_to_its_thick_side():
+    """Issue 62: the uneven cover is the level set {d = g(x)} with g linear in y over the body, 5 mm on its -y
+    extreme to 5 cm on its +y one. On a ball d = |x - c| - R in closed form: every vertex's d equals its own g within
+    the marching cubes' error, and the thin and thick sides stand off by the two gaps."""
+    from torch_gpioius.sim.forcefield import cover_around
+
+    radius, h = 0.05, 0.002
+    ball, centre = _ball_on_table(radius)
+    cover = cover_around(ball, "uneven", gap=0.005, gap_far=0.05, resolution=h)
+    assert cover.is_watertight and len(cover.split(only_watertight=False)) == 1
+    v = cover.vertices
+    d = np.linalg.norm(v - centre, axis=1) - radius        # the icosphere's facets lie within 0.1 mm of the ball
+    g = 0.005 + 0.045 * np.clip((v[:, 1] - centre[1] + radius) / (2 * radius), 0.0, 1.0)
+    assert np.abs(d - g).max() < h / 2
+    assert abs(v[:, 1].min() - (centre[1] - radius - 0.005)) < h / 2
+    assert abs(v[:, 1].max() - (centre[1] + radius + 0.05)) < h / 2
+    # the thick side turned to +x
+    turned = cover_around(ball, "uneven", gap=0.005, gap_far=0.05, resolution=h, thick_side=(1.0, 0.0, 0.3))
+    assert abs(turned.vertices[:, 0].max() - (centre[0] + radius + 0.05)) < h / 2
+
+
+def test_a_hanging_cover_lies_on_the_top_and_falls_straight_to_the_table():
+    """Issue 62: a ball on the table under a hanging cover: above its equator the cover is the ball grown by the
+    gap; below it, a vertical cylinder of that radius down to the table (the gap below the body's lowest point),
+    so the gap grows from 5 mm at the equator to the radius at the table."""
+    from torch_gpioius.sim.forcefield import cover_around
+
+    radius, gap, h = 0.05, 0.005, 0.002
+    ball, centre = _ball_on_table(radius)
+    cover = cover_around(ball, "hanging", gap=gap, resolution=h)
+    # one closed layer: no bubbles where the loose cover's level met a node exactly (they were, before the set
+    # the cover hangs from was taken as marching cubes takes it)
+    assert cover.is_watertight and len(cover.split(only_watertight=False)) == 1
+    v = cover.vertices - centre
+    top = v[:, 2] > 2 * h
+    side = (v[:, 2] < -h) & (v[:, 2] > -radius + 2 * h)
+    assert top.sum() > 100 and side.sum() > 100
+    # the top: the loose cover (a ball needs no bridge: within a spacing of the level set, as the closing's distance
+    # transform is); the hanging side: from the grid's distance transform
+    assert np.abs(np.linalg.norm(v[top], axis=1) - (radius + gap)).max() < h
+    off = np.linalg.norm(v[side, :2], axis=1) - (radius + gap)
+    assert np.abs(off).max() < 1.25 * h and np.median(np.abs(off)) < h / 2
+    assert abs(cover.bounds[0, 2] - (ball.bounds[0, 2] - gap)) < h
+
+
+def test_uneven_covers_that_cannot_be_built_are_refused():
+    from torch_gpioius.sim.forcefield import cover_around
+
+    ball, _ = _ball_on_table(0.05)
+    with pytest.raises(ValueError, match="kind: must be one of"):
+        cover_around(ball, "draped")
+    with pytest.raises(ValueError, match="gap_far: the thick side's gap"):
+        cover_around(ball, "uneven", gap=0.02, gap_far=0.01)
+    # 14.5 cm more over a 10 cm body would fold the layer: it grows at half a metre a metre instead, and says so
+    with pytest.warns(RuntimeWarning, match="grows at most 0.5 m a metre.* reaches 5.5 cm, not 15 cm"):
+        steep = cover_around(ball, "uneven", gap=0.005, gap_far=0.15, resolution=0.002)
+    assert abs(steep.vertices[:, 1].max() - (0.05 + 0.055)) < 0.001
+    with pytest.raises(ValueError, match="thick_side: must be a finite 3-vector with a horizontal part"):
+        cover_around(ball, "uneven", thick_side=(0.0, 0.0, 1.0))
+
+
+@pytest.mark.parametrize("cover, index, widest", [("uneven", 7, 0.03), ("hanging", 3, 0.012)])
+def test_a_set_object_under_a_varying_cover_builds_a_scene_whose_gap_varies(cover, index, widest):
+    """The object sets' uneven and hanging covers build a scene (cover, approach, range) whose cover-body gap spans
+    from about 5 mm to centimetres: 5 cm on the uneven cover's thick side (a cylinder), and where a standing
+    capsule's rounded bottom curves in under the cloth hanging from its widest part."""
+    import warnings
+
+    from torch_gpioius.sim.meshes import MeshDistance
+    from torch_gpioius.sim.objectsets import object_set, set_scene
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = set_scene(object_set(f"primitives:{index}")[0], cover)
+    gaps = MeshDistance(scene.inner)(scene.outer.vertices)
+    assert scene.outer.is_watertight
+    assert np.quantile(gaps, 0.02) < 0.008 and gaps.max() > widest

@@ -52,7 +52,7 @@ def test_a_set_object_stands_on_the_table_at_its_size_under_its_cover():
             assert abs(float(mesh.bounds[0, 2])) < 1e-12
             np.testing.assert_allclose((mesh.bounds[0, :2] + mesh.bounds[1, :2]) / 2, 0.0, atol=1e-12)
         scene = set_scene(object_set("primitives:7")[0], "wide")
-    assert scene.name == "primitives-007" and COVERS["wide"] == ("loose", 0.04)
+    assert scene.name == "primitives-007" and COVERS["wide"] == ("loose", {"gap": 0.04})
     assert abs(float(scene.inner.bounds[0, 2]) - STAND_AT[2]) < 1e-9
     with pytest.raises(ValueError, match="cover: must be one of"):
         set_scene(object_set("primitives:7")[0], "snug")

@@ -333,3 +333,23 @@ def test_a_pose_a_deep_file_and_an_unknown_cover_key_are_named(tmp_path):
     with pytest.raises(ValueError, match=r"unknown key\(s\) \['slak'\]; \[cover\] takes \['gap', 'kind'\] in every "
                                          r"world, and a world's own options \(forcefield: \['bridge'"):
         read_scene(path)
+
+
+def test_a_scene_file_builds_an_uneven_cover_with_its_thick_side(tmp_path):
+    """Issue 62: a scene file's ``[cover] kind = "uneven"`` with its far gap and thick side builds the force-field
+    world's uneven cover (5 mm on the thin side, 3 cm on the thick one); a far gap out of range is named when the file
+    is read."""
+    path = ball_scene(tmp_path)
+    text = path.read_text()
+    path.write_text(text.replace('kind = "tight"\ngap = 0.008', 'kind = "uneven"\ngap = 0.005\ngap_far = 0.03\n'
+                                 'thick_side = [1, 0, 0]'))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        scene = load_scene(path, world="forcefield")
+    gaps = MeshDistance(scene.inner)(scene.outer.vertices)
+    x = scene.outer.vertices[:, 0]
+    thin, thick = gaps[x < np.quantile(x, 0.01)], gaps[x > np.quantile(x, 0.99)]
+    assert np.median(thin) == pytest.approx(0.005, abs=0.0015) and np.median(thick) == pytest.approx(0.03, abs=0.003)
+    path.write_text(text.replace('kind = "tight"\ngap = 0.008', 'kind = "uneven"\ngap_far = 0.5'))
+    with pytest.raises(ValueError, match=r"gap_far: must be in \(0, 0.2\]"):
+        read_scene(path)

@@ -35,7 +35,7 @@ from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smoo
 
 __all__ = ["Scene3D", "paper_objects_3d", "sphere_scene", "simulated_ur5", "estimate_metrics_3d", "score_surface",
            "METRICS_GRID", "METRICS_EDGE",
-           "ROBOT_STUDY_DEFAULTS", "cover_around", "approach_from_above", "first_passage", "place"]
+           "ROBOT_STUDY_DEFAULTS", "COVER_KINDS", "cover_around", "approach_from_above", "first_passage", "place"]
 
 #: The robot study's settings (Sec. VI-A): theta 0.15, sigma^2 0.08, alpha 1 cm, 1.5 m of travel, the range
 #: penalty of eq. (25), the camera averaged in 5 cm voxels and cropped to 15 cm around the range.
@@ -528,6 +528,8 @@ class Scene3D(RangedScene):
         gap: float | None = None,
         bridge: float = 0.03,
         resolution: float | None = None,
+        gap_far: float = 0.05,
+        thick_side=(0.0, 1.0, 0.0),
         name: str = "",
         seed: int = 0,
         cover_stiffness: float | None = None,
@@ -554,8 +556,9 @@ class Scene3D(RangedScene):
 
         Args:
             inner: a ``trimesh.Trimesh`` or a path (STL, OBJ, PLY, GLB, OFF) [m after ``scale``].
-            cover: "tight" (the body grown by ``gap``) or "loose" (grown, and bridged over concavities narrower than
-                2 ``bridge``, as a draped cloth).
+            cover: "tight" (the body grown by ``gap``), "loose" (grown, and bridged over concavities narrower than
+                2 ``bridge``, as a draped cloth), "uneven" (``gap`` on one side, ``gap_far`` on the ``thick_side``)
+                or "hanging" (loose on top, hanging straight down to the table); :func:`cover_around`.
             start: `(3,)` fingertip start [m] (default: :func:`approach_from_above`).
             direction: `(3,)` approach direction (default: down).
             bounds: `(2, 3)` exploration range `[min corner; max corner]` [m] (default: :func:`approach_from_above`).
@@ -563,14 +566,17 @@ class Scene3D(RangedScene):
             at: `(3,)` where the bottom centre of the (posed) object's bounding box goes [m], or None.
             scale: factor to metres (0.001 for millimetres).
             repair: repair an open mesh (False refuses it).
-            gap: the cover's distance from the body [m] (default 8 mm tight, 1 cm loose).
-            bridge: the loose cover's bridging radius [m].
+            gap: the cover's distance from the body [m] (default 8 mm tight, 1 cm loose, 5 mm uneven (its thin
+                side) and hanging (on top)).
+            bridge: the loose and hanging covers' bridging radius [m].
             resolution: the cover's grid spacing [m] (default: 1/80 of the largest extent, 2-6 mm).
+            gap_far: the uneven cover's gap on its thick side [m].
+            thick_side: `(3,)` the uneven cover's thick side, a horizontal direction (default +y).
             name: label.
             seed: seed of the sensor and camera noise.
             sensor_noise: force-sensor noise per axis [N].
             defaults: overrides of :data:`ROBOT_STUDY_DEFAULTS`.
-            cover_stiffness: [N/m] (default 5 tight, 3 loose, as objects E-H).
+            cover_stiffness: [N/m] (default 5 tight, 3 for the others, as objects E-H).
             support: the table under the object ("base": at its lowest point; a height [m]; None: none).
             settings: "default" (:func:`object_defaults` and all three :data:`VIEWS`) or "paper" (the robot study's
                 :data:`ROBOT_STUDY_DEFAULTS` and the paper's single fixed camera); ``defaults`` replaces either.
@@ -599,8 +605,8 @@ class Scene3D(RangedScene):
         """
         from .meshes import load_mesh
 
-        if cover not in ("tight", "loose"):
-            raise ValueError(f"cover: the force-field world has 'tight' and 'loose' covers, got {cover!r}")
+        if cover not in COVER_KINDS:
+            raise ValueError(f"cover: the force-field world has the covers {COVER_KINDS}, got {cover!r}")
         if settings not in SETTINGS:
             raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
         mesh = place(load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner"), at)
@@ -618,8 +624,9 @@ class Scene3D(RangedScene):
             defaults = defaults.estimator_changed(learn=learn)
         defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside,
                                       vision_inside_gap=vision_inside_gap, cover_offset=cover_offset)
-        gap = (0.008 if cover == "tight" else 0.01) if gap is None else gap
-        outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution)
+        gap = {"tight": 0.008, "loose": 0.01}.get(cover, 0.005) if gap is None else gap
+        outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution, gap_far=gap_far,
+                             thick_side=thick_side)
         if start is None or direction is None or bounds is None:
             s, d, b = approach_from_above(mesh, outer)
             start, direction = (s, d) if start is None and direction is None else (start, direction)
@@ -862,8 +869,13 @@ def place(mesh: trimesh.Trimesh, at=None) -> trimesh.Trimesh:
     return out
 
 
+#: The force-field world's cover kinds (:func:`cover_around`).
+COVER_KINDS = ("tight", "loose", "uneven", "hanging")
+
+
 def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.008, bridge: float = 0.03,
-                 resolution: float | None = None) -> trimesh.Trimesh:
+                 resolution: float | None = None, gap_far: float = 0.05,
+                 thick_side=(0.0, 1.0, 0.0)) -> trimesh.Trimesh:
     """The outer surface of a cover over a closed mesh, for the force-field world.
 
     * "tight": the level set ``{d = gap}`` of the body's exact signed distance ``d`` (a cover of uniform thickness).
@@ -872,31 +884,52 @@ def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.0
       to the body elsewhere. The dilation is exact (``{d <= gap + bridge}``); the erosion uses the Euclidean distance
       transform of that set on the grid, so the surface is within about one grid spacing of the exact closing.
 
-    Both are meshed by marching cubes on a grid of ``resolution`` (error about that spacing); the result contains
+    Two covers whose gap varies over the body, as real cloth's does (a cover of one gap is what a camera-only surface
+    shrunk by one measured gap matches by construction):
+
+    * "uneven" (thick on one side, thin on the other): the level set ``{d = g(x)}`` with a gap ``g`` that grows
+      linearly from ``gap`` on the body's extreme opposite ``thick_side`` to ``gap_far`` on its extreme towards it
+      (a horizontal direction); on a body narrower than twice that growth, ``g`` grows at a slope of 1/2
+      (:data:`UNEVEN_SLOPE`, with a warning) and stops short of ``gap_far``. A slope below 1 keeps the level set one
+      closed layer around the body.
+    * "hanging" (a cloth laid over the body that hangs straight down to the table): the loose cover, and below
+      every part of it the column down to the table (the body's lowest point, less ``gap``). It lies ``gap`` off the
+      top and stands off by up to the body's overhang below its widest part (a sphere's lower half, a duck's
+      head). The hanging part's surface comes from the Euclidean distance transform of the set on the grid (within
+      about one spacing).
+
+    All are meshed by marching cubes on a grid of ``resolution`` (error about that spacing); the result contains
     the tight cover (it is united with ``{d <= gap}`` on the grid).
 
     Args:
         mesh: closed inner mesh [m].
-        kind: "tight" or "loose".
-        gap: the cover's distance from the body [m] (> 0).
-        bridge: the loose cover's bridging radius [m] (> 0).
+        kind: one of :data:`COVER_KINDS`: "tight", "loose", "uneven" or "hanging".
+        gap: the cover's distance from the body [m] (> 0; the uneven cover's on its thin side).
+        bridge: the loose and hanging covers' bridging radius [m] (> 0).
         resolution: grid spacing [m] (default: 1/80 of the largest extent, clipped to 2-6 mm).
+        gap_far: the uneven cover's gap on its thick side [m] (>= ``gap``, at most 0.2).
+        thick_side: `(3,)` the uneven cover's thick side, a horizontal direction in the base frame (its z is
+            dropped; default +y).
 
     Returns:
         A closed ``trimesh.Trimesh`` [m].
 
     Raises:
-        ValueError: an unknown kind, or a non-positive gap, bridge or resolution.
+        ValueError: an unknown kind, a non-positive gap, bridge or resolution, a far gap below the near one, or a
+            thick side with no horizontal direction.
     """
-    if kind not in ("tight", "loose"):
-        raise ValueError(f"kind: must be 'tight' or 'loose', got {kind!r}")
-    for label, v in (("gap", gap), ("bridge", bridge)):
+    if kind not in COVER_KINDS:
+        raise ValueError(f"kind: must be one of {COVER_KINDS}, got {kind!r}")
+    for label, v in (("gap", gap), ("bridge", bridge), ("gap_far", gap_far)):
         if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v <= 0.2):
             raise ValueError(f"{label}: must be in (0, 0.2] m, got {v!r}")
     h = float(np.clip(float(mesh.extents.max()) / 80, 0.002, 0.006)) if resolution is None else float(resolution)
     if not (math.isfinite(h) and 0 < h <= 0.05):
         raise ValueError(f"resolution: must be in (0, 0.05] m, got {resolution!r}")
-    reach = gap + (2 * bridge if kind == "loose" else 0.0) + 3 * h
+    thickness = None
+    if kind == "uneven":
+        thickness = _uneven_gap(mesh, gap, gap_far, thick_side)
+    reach = (gap_far if kind == "uneven" else gap) + (2 * bridge if kind in ("loose", "hanging") else 0.0) + 3 * h
     from .meshes import check_grid
 
     check_grid(mesh.bounds[0] - reach, mesh.bounds[1] + reach + h, h, "resolution", "the cover's grid")
@@ -908,7 +941,7 @@ def cover_around(mesh: trimesh.Trimesh, kind: str = "tight", *, gap: float = 0.0
     tries = [(shift, h) for shift in _GRID_SHIFTS] + [(_GRID_SHIFTS[0], h * f) for f in _FINER]
     for attempt, (shift, step) in enumerate(tries):
         out = _cover_on_grid(mesh, kind, gap, bridge, step, mesh.bounds[0] - reach - shift * step,
-                             mesh.bounds[1] + reach)
+                             mesh.bounds[1] + reach, thickness)
         if not out.is_watertight and _fill_small_holes(out, step):
             warnings.warn(f"cover_around: the {kind} cover's mesh had a few holes of less than a cell "
                           f"({step * 1e3:.2g} mm); they were filled", RuntimeWarning, stacklevel=2)
@@ -947,9 +980,50 @@ _LEVEL_OFFSET = 1e-3 / math.pi
 #: of a body placed at round coordinates lies at a node's distance), the others when a grid still gives an open mesh.
 _GRID_SHIFTS = (1 / math.pi, 1 / math.e, 1 / math.sqrt(5), 0.5 + 1 / (4 * math.pi))
 
+#: The uneven cover's steepest gap, metres of gap a metre along the thick side (:func:`cover_around`).
+UNEVEN_SLOPE = 0.5
+
+
+def _uneven_gap(mesh: trimesh.Trimesh, gap: float, gap_far: float, thick_side):
+    """The uneven cover's gap: `(n, 3)` points [m] -> `(n,)` [m], ``gap`` on the body's extreme opposite
+    ``thick_side`` (made horizontal and unit) growing linearly to ``gap_far`` on its extreme towards it."""
+    side = np.asarray(thick_side, dtype=float).reshape(-1)
+    if side.shape != (3,) or not np.isfinite(side).all() or np.linalg.norm(side[:2]) < 1e-9:
+        raise ValueError(f"thick_side: must be a finite 3-vector with a horizontal part, got {thick_side!r}")
+    side = np.r_[side[:2] / np.linalg.norm(side[:2]), 0.0]
+    if gap_far < gap:
+        raise ValueError(f"gap_far: the thick side's gap ({gap_far} m) must be at least the thin side's ({gap} m)")
+    along = mesh.vertices @ side
+    low, width = float(along.min()), float(np.ptp(along))
+    # a gap growing as fast as the distance from the body folds the layer onto itself: on a body narrower than
+    # (gap_far - gap) / UNEVEN_SLOPE along the thick side, the gap grows at that slope and stops short of gap_far
+    slope = min((gap_far - gap) / width, UNEVEN_SLOPE) if width > 0 else 0.0
+    if gap + slope * width < gap_far - 1e-9:
+        import warnings
+
+        warnings.warn(f"cover_around: the uneven cover's gap grows at most {UNEVEN_SLOPE:g} m a metre: over the "
+                      f"body's {width * 100:.3g} cm along the thick side it reaches {(gap + slope * width) * 100:.3g} "
+                      f"cm, not {gap_far * 100:.3g} cm", RuntimeWarning, stacklevel=3)
+
+    def thickness(points: np.ndarray) -> np.ndarray:
+        return gap + slope * np.clip(points @ side - low, 0.0, width)
+
+    return thickness
+
+
+def _signed_distance_of(inside: np.ndarray, h: float) -> np.ndarray:
+    """A grid set's signed distance [m] (negative inside), from the Euclidean distance transforms of it and of its
+    complement on a grid of spacing ``h``: within about a spacing of the exact one."""
+    from scipy import ndimage
+
+    return np.where(inside, -ndimage.distance_transform_edt(inside, sampling=h),
+                    ndimage.distance_transform_edt(~inside, sampling=h))
+
+
 def _cover_on_grid(mesh: trimesh.Trimesh, kind: str, gap: float, bridge: float, h: float, lo: np.ndarray,
-                   hi: np.ndarray) -> trimesh.Trimesh:
-    """:func:`cover_around`'s surface meshed on the grid of spacing ``h`` from ``lo`` to ``hi`` [m]."""
+                   hi: np.ndarray, thickness=None) -> trimesh.Trimesh:
+    """:func:`cover_around`'s surface meshed on the grid of spacing ``h`` from ``lo`` to ``hi`` [m] (``thickness``:
+    the uneven cover's gap, points -> [m])."""
     from scipy import ndimage
     from skimage import measure
 
@@ -959,13 +1033,23 @@ def _cover_on_grid(mesh: trimesh.Trimesh, kind: str, gap: float, bridge: float, 
     shape = tuple(len(a) for a in axes)
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     d = MeshDistance(mesh)(grid).reshape(shape)
-    field = d - gap
-    if kind == "loose":
+    field = d - (gap if thickness is None else thickness(grid).reshape(shape))
+    if kind in ("loose", "hanging"):
         grown = d <= gap + bridge
         inside = ndimage.distance_transform_edt(grown, sampling=h)
         outside = ndimage.distance_transform_edt(~grown, sampling=h)
         closing = np.where(grown, bridge - inside, bridge + outside)      # > 0 outside the closed set
         field = np.minimum(field, closing)
+    if kind == "hanging":
+        # every node below a node of the cover, down to the table (the body's lowest point, less the gap under it);
+        # only what the hanging adds takes the distance transform's field, so the cover keeps its exact level set
+        # where it lies on the body
+        cover = field < -h * _LEVEL_OFFSET           # inside as marching cubes below counts it
+        hangs = np.flip(np.logical_or.accumulate(np.flip(cover, axis=2), axis=2), axis=2)
+        hangs &= (axes[2] >= mesh.bounds[0, 2] - gap)[None, None, :]
+        added = hangs & ~cover
+        if added.any():
+            field = np.minimum(field, _signed_distance_of(added, h))
     # the level a hair off zero: the loose cover's erosion is an exact distance transform, whose values are lattice
     # distances sqrt(k) h; where the bridge is a whole number of cells (3 cm on the 3 mm grid of a 24 cm carton) many
     # nodes lie exactly on the level, marching cubes gives zero-area triangles there, and the mesh without them is
@@ -1144,7 +1228,7 @@ def _scene_from_file(mesh, kind: str, *, name: str, where: dict, cover: dict, se
 
 #: What a scene file's ``[cover]`` and ``[forcefield]`` sections may hold in this world.
 SCENE_SUPPORT = SceneSupport(
-    cover_keys=frozenset({"gap", "bridge", "resolution"}), cover_kinds=("tight", "loose"),
+    cover_keys=frozenset({"gap", "bridge", "resolution", "gap_far", "thick_side"}), cover_kinds=COVER_KINDS,
     settings_keys=frozenset({"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "lengthscale", "theta",
                              "noise", "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "cover_offset",
                              "learn"}),

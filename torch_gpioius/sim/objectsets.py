@@ -207,9 +207,14 @@ def object_set(text: str) -> list[SetObject]:
     return parse_object_set(text)
 
 
-#: The covers a set's objects are explored under: tight (the body grown by 8 mm) and wide (4 cm off, draped over
-#: concavities narrower than 6 cm, as the real shapes' wide covers): ``(cover kind, gap [m])``.
-COVERS = {"tight": ("tight", 0.008), "wide": ("loose", 0.04)}
+#: The covers a set's objects are explored under, ``name -> (cover kind, its options)``
+#: (:func:`~torch_gpioius.sim.forcefield.cover_around`): tight (the body grown by 8 mm), wide (4 cm off, draped over
+#: concavities narrower than 6 cm, as the real shapes' wide covers), and two whose gap varies over the body: uneven
+#: (5 mm on the -y side growing to 5 cm on the +y side) and hanging (5 mm on top, falling straight to the table below
+#: the body's widest part).
+COVERS = {"tight": ("tight", {"gap": 0.008}), "wide": ("loose", {"gap": 0.04}),
+          "uneven": ("uneven", {"gap": 0.005, "gap_far": 0.05, "thick_side": (0.0, 1.0, 0.0)}),
+          "hanging": ("hanging", {"gap": 0.005})}
 #: Where a set's object stands: the bottom centre of its box, on a table in front of the UR5 [m].
 STAND_AT = (0.5, 0.0, 0.1)
 
@@ -253,9 +258,9 @@ def set_scene(obj: SetObject, cover: str = "tight", *, settings: str = "default"
 
     if cover not in COVERS:
         raise ValueError(f"cover: must be one of {sorted(COVERS)}, got {cover!r}")
-    kind, gap = COVERS[cover]
+    kind, options = COVERS[cover]
     try:
-        scene = Scene3D.from_mesh(set_mesh(obj), kind, gap=gap, at=STAND_AT, name=obj.name, settings=settings,
+        scene = Scene3D.from_mesh(set_mesh(obj), kind, **options, at=STAND_AT, name=obj.name, settings=settings,
                                   **kwargs)
     except ValueError as exc:
         raise ValueError(f"{obj.name} ({obj.source}): {exc}") from None

@@ -15,7 +15,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     repair = true                     # close holes (with a warning stating the change) or refuse
 
     [cover]
-    kind = "tight"                    # "tight", "loose" (and "foam" in MuJoCo)
+    kind = "tight"                    # "tight", "loose"; "uneven", "hanging" (force field); "foam" (MuJoCo)
     gap = 0.008                       # tight: the cover's distance from the body
 
     [approach]                        # optional: by default straight down onto the middle of the top
@@ -28,7 +28,9 @@ A scene file, every length in metres in the UR5's base frame (z up)::
 
     [forcefield]                      # optional: settings and cover options of one world
     cover_stiffness = 5.0             # (Scene3D.from_mesh, cover_around)
-    bridge = 0.03                     # a loose cover's bridging radius
+    bridge = 0.03                     # a loose (or hanging) cover's bridging radius
+    gap_far = 0.05                    # an uneven cover's gap on its thick side (gap: on its thin side)
+    thick_side = [0, 1, 0]            # and that side's horizontal direction
     settings = "default"              # or "paper": one fixed camera, 5 cm voxels, the inverse multiquadric
     views = ["fixed", "mirrored", "wrist"]   # the simulated camera's views (or a count, or "paper")
     kernel = "matern52"               # or "imq"; lengthscale (theta): its length [m]; noise: sigma^2; voxel [m]
@@ -209,6 +211,10 @@ def read_scene(path) -> SceneSpec:
     if not isinstance(obj["mesh"], str):
         raise bad("object.mesh", f"must be a file name, got {obj['mesh']!r}")
     _check_cover(cover, world, bad)
+    for key, value in cover.items():
+        problem = _setting_problem(key, value)
+        if problem:
+            raise bad(f"[cover] {key}", problem)
     if "pose" in obj:
         from .meshes import as_pose
 
@@ -283,6 +289,7 @@ _RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, Tru
            "lengthscale": (*KERNEL_LENGTH, False),
            "noise": (1e-6, 10.0, False), "touch_inside": (0.0, 0.2, True), "vision_inside": (0.0, 0.2, True),
            "vision_inside_gap": (0.0, 0.5, True), "bridge": (0.0, 0.2, False), "gap": (0.0, 0.2, False),
+           "gap_far": (0.0, 0.2, False),
            "resolution": (0.0, 0.05, False), "spacing": (0.0, 0.2, False), "timestep": (0.0, 0.1, False),
            "settle_time": (0.0, 60.0, True)}
 

@@ -112,7 +112,8 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             length, where it starts); None: each world's own.
         noise: sigma^2 (where ``learn="all"`` learns it, where it starts); None: each world's own. ``kernel`` and
             ``noise`` too: one setting per folder.
-        cover: the cover of the object sets' objects, "tight" (8 mm) or "wide" (4 cm); default tight; one per
+        cover: the cover of the object sets' objects (:data:`~torch_gpioius.sim.objectsets.COVERS`): "tight"
+            (8 mm), "wide" (4 cm), "uneven" (5 mm to 5 cm) or "hanging" (to the table); default tight; one per
             folder.
         metrics_every: the estimate measured every k steps, or "schedule": at 10, 25 and 50 % of the travel, a stop
             and the end only (worlds with a travel budget; the fractions the summary reports, at a fraction of the

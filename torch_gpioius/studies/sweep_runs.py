@@ -83,7 +83,7 @@ class RunSpec:
     scene_hash: str | None = None   # the scene file's content (scenefile.scene_fingerprint): a run of an edited
     #                                 scene is another run, whatever its name
     set_object: Any = None          # an object of a set (sim.objectsets.SetObject) instead of a built-in object
-    cover: str | None = None        # a set object's cover: "tight" or "wide" (sim.objectsets.COVERS)
+    cover: str | None = None        # a set object's cover: a name of sim.objectsets.COVERS
     metrics_every: Any = None       # k steps or "schedule" (explore(metrics_every=)); None: every 5 steps under a
     #                                 travel budget, every step elsewhere
 
