@@ -17,20 +17,21 @@ def _directions(rng, n, upper=False):
 
 
 def sphere_files(folder, contacts: int = 30, cover: int = 1500, *, normal_sign: float = 1.0, repeat: int = 1,
-                 seed: int = 0, name: str = "contacts.csv"):
-    """Write ``contacts.csv`` (``contacts`` contacts with normals times ``normal_sign``, 15 free rows; every row
-    ``repeat`` times), ``left.ply`` and ``right.ply`` into ``folder``; returns ``(csv, [left, right])`` paths."""
+                 seed: int = 0, name: str = "contacts.csv", radius: float = 0.06):
+    """Write ``contacts.csv`` (``contacts`` contacts on a ball of ``radius`` [m] with normals times ``normal_sign``, 15
+    free rows twice as far out; every row ``repeat`` times), ``left.ply`` and ``right.ply`` (its cover 1 cm off)
+    into ``folder``; returns ``(csv, [left, right])`` paths."""
     import trimesh
 
     rng = np.random.default_rng(seed)
     touch = _directions(rng, contacts, upper=True)
-    passed = CENTRE + 0.12 * _directions(rng, 15, upper=True)
+    passed = CENTRE + 2 * radius * _directions(rng, 15, upper=True)
     rows = [f"{x:.6f},{y:.6f},{z:.6f},contact,{a:.4f},{b:.4f},{c:.4f}"
-            for (x, y, z), (a, b, c) in zip(CENTRE + 0.06 * touch, normal_sign * touch)]
+            for (x, y, z), (a, b, c) in zip(CENTRE + radius * touch, normal_sign * touch)]
     rows += [f"{x:.6f},{y:.6f},{z:.6f},free,,," for x, y, z in passed]
     path = folder / name
     path.write_text("x,y,z,label,nx,ny,nz\n" + "".join(f"{r}\n" * repeat for r in rows))
-    shell = CENTRE + 0.07 * _directions(rng, cover) + rng.normal(0, 0.001, (cover, 3))
+    shell = CENTRE + (radius + 0.01) * _directions(rng, cover) + rng.normal(0, 0.001, (cover, 3))
     trimesh.PointCloud(shell[shell[:, 1] < 0]).export(folder / "left.ply")
     trimesh.PointCloud(shell[shell[:, 1] >= 0]).export(folder / "right.ply")
     return path, [folder / "left.ply", folder / "right.ply"]

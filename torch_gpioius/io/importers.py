@@ -555,10 +555,13 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     if behind.sum() >= 5 and (~keep[behind]).mean() > 0.25:
         import warnings
 
+        depth = est.labels.touch_inside
         warnings.warn(f"{contacts_csv}: {int((~keep[behind]).sum())} of {int(behind.sum())} inside points behind the "
-                      "contacts lie where other observations show free space or the seen surface, and were dropped; "
-                      "do the contacts' normals or forces point out of the body, and are the files in one frame?",
-                      UserWarning, stacklevel=2)
+                      "contacts lie where other observations show free space or the seen surface, and were dropped. "
+                      "The contacts' directions point out of the body by the data's own account, so either the body "
+                      f"is thinner than the inside points' depth ({depth * 100:.3g} cm) where they were dropped (a "
+                      "neck, a handle, a wall: they came out on its far side, and dropping them was right), or the "
+                      "files are not in one frame", UserWarning, stacklevel=2)
     inner, inner_steps = inner.subset(keep), inner_steps[keep]
     gap = math.nan
     if captures and est.labels.vision_inside_gap is not None:
