@@ -358,7 +358,7 @@ def _robot_study_objects() -> tuple:
 
 def _presets(dimension: int | None = None) -> list[str]:
     """The estimator's presets by name (``EstimatorSettings``: default, paper, paper-2d); with ``dimension=3``,
-    those of the 3-D worlds and data (default, paper)."""
+    the 3-D worlds' settings (default, paper, gap)."""
     from .models.estimator import PRESETS
     from .sim.forcefield import SETTINGS
 
@@ -634,9 +634,10 @@ def _add_study(sub, common, fmt) -> None:
     sw.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     sw.add_argument("--settings", default=None, choices=_presets(3),
                     help="the 3-D worlds' settings, for scene files and built-in objects alike: default (three "
-                         "camera views, voxels a tenth of the body, a Matern-5/2 a fifth of it long, inside points) "
-                         "or paper (one fixed camera, 5 cm voxels, the inverse multiquadric); default: each file's "
-                         "own, the paper's for the built-in objects; one per --out folder")
+                         "camera views, voxels a tenth of the body, a Matern-5/2 a fifth of it long, inside points), "
+                         "paper (one fixed camera, 5 cm voxels, the inverse multiquadric) or gap (an experiment: the "
+                         "defaults with a transfer that knows the cover's gap, docs/method-notes.md section 16); "
+                         "default: each file's own, the paper's for the built-in objects; one per --out folder")
     sw.add_argument("--learn", default=None, choices=_learns(),
                     help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
                          "all (the length and the noise too), by the marginal likelihood on restart steps; default: "
@@ -764,7 +765,7 @@ def _add_import_bag(sub, common, fmt) -> None:
     bag.add_argument("--voxel", type=float, default=None,
                      help="voxel edge for the cloud [m] (default: the settings': a tenth of the --crop box, 2-5 cm, "
                           "by default; 5 cm without a crop box)")
-    bag.add_argument("--settings", default="default", choices=_presets(3),
+    bag.add_argument("--settings", default="default", choices=["default", "paper"],
                      help="the estimator's settings the dataset records for fit (kernel, sigma^2, free space, voxels) "
                           "and its labels: inside points behind the contacts, along the measured forces (none behind "
                           "the seen surface: a bag's clouds come from a moving camera)")

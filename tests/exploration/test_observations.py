@@ -273,3 +273,45 @@ def test_the_policy_refuses_a_cover_offset_that_is_not_a_switch():
     for bad in (1, "yes", None, 0.5):
         with pytest.raises(ValueError, match="cover_offset"):
             ObservationPolicy(cover_offset=bad)
+
+
+@pytest.mark.parametrize("cover", [0.008, 0.04, 0.05], ids=["tight", "wide", "wider"])
+def test_the_cameras_inside_points_are_continued_down_to_the_gap_with_the_offset(cover):
+    """``vision_inside_deep``: a body of 10 cm radius under a cover ``cover`` off it, the camera's inside points
+    2 cm behind the seen cover. Once five contacts show a gap beyond the 3 cm limit, they are kept (not retracted)
+    and continued along the radius every 2 cm down to the gap plus 2 cm, each labelled by its depth (4 cm under the
+    4 cm cover; 4 and 6 cm under the 5 cm one), once; under the tight cover, without the offset or with too few
+    contacts nothing is added. Each new point lies at its depth below the cover exactly (the sphere's radii)."""
+    from torch_gpioius.exploration.observations import (GAP_MIN_CONTACTS, deepen_vision_inside,
+                                                        retract_vision_inside)
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True)
+    outer_r = 0.10 + cover
+    seen = _sphere(outer_r, 300, seed=4)
+    inside = seen * (1.0 - 0.02 / outer_r)
+    contacts = _sphere(0.10, 12, seed=5)
+    x = np.r_[contacts, seen, inside]
+    y = np.r_[np.zeros(len(contacts) + len(seen)), np.full(len(inside), policy.inside_label(0.02))]
+    t = np.r_[np.zeros(len(contacts)), np.ones(len(seen) + len(inside))].astype(np.int64)
+    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t),
+                  kernel=tg.kernels.InverseMultiquadricKernel(0.1))
+    assert deepen_vision_inside(m, contacts[:GAP_MIN_CONTACTS - 1], policy) is None
+    assert deepen_vision_inside(m, contacts, dataclasses.replace(policy, cover_offset=False)) is None
+    assert deepen_vision_inside(m, contacts, dataclasses.replace(policy, vision_inside_deep=False)) is None
+    assert len(retract_vision_inside(m, contacts, policy)) == 0                 # kept under the option
+    deep = deepen_vision_inside(m, contacts, policy)
+    if cover < 0.03:
+        assert deep is None
+        return
+    from torch_gpioius.exploration.observations import cover_gap
+
+    gap = cover_gap(contacts, seen, reach=0.02)                # a plane through the curved cover: a hair under it
+    assert cover - 0.005 < gap <= cover
+    expected = [d for d in (0.04, 0.06, 0.08) if d <= gap + 0.02]
+    depth = policy.inside_depth(deep.y)
+    np.testing.assert_allclose(np.unique(depth.round(12)), expected, atol=1e-12)
+    assert (deep.task == 1).all() and deep.source == "camera-deep"
+    np.testing.assert_allclose(np.linalg.norm(deep.x, axis=1), outer_r - depth, atol=1e-12)
+    assert len(deep) == len(inside) * len(expected)              # the sphere contradicts none of them
+    m.add_observations(deep.x, deep.y, deep.task)
+    assert deepen_vision_inside(m, contacts, policy) is None                    # once

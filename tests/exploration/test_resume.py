@@ -223,3 +223,52 @@ def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
         assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
         assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
         assert resumed.model.outer_mean == reference.model.outer_mean
+
+
+def test_the_gap_settings_keep_and_deepen_the_cameras_inside_points_and_resume_alike(tmp_path):
+    """``settings="gap"`` under a cover 4 cm off an ellipsoid: at the first step whose contacts put the gap above
+    ``vision_inside_gap`` the camera's inside points are kept (never retracted) and continued down to the gap, each
+    labelled by its depth, once, in that step's batch; the outer mean stands for the gap. The log says so (its header
+    names the setting), its replay holds the run's final data, and a run cut after that step and resumed ends where
+    the uninterrupted one ends. The step is a chaotic run's: the rule is recomputed from the run's own data."""
+    import trimesh
+
+    from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, cover_gap
+    from torch_gpioius.io.runs import load_run
+    from torch_gpioius.sim.forcefield import Scene3D
+
+    body = trimesh.creation.icosphere(subdivisions=3, radius=0.06)
+    body.apply_scale([1.3, 1.0, 0.8])
+    scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1], settings="gap")
+    policy = scene.defaults.policy
+    assert policy.cover_offset and policy.vision_inside_deep and policy.vision_inside == 0.02
+    kw = dict(max_travel=0.08, metrics_every=100, progress=False)
+    log = tmp_path / "run.gpioius"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = tg.explore(scene, log=log, **kw)
+    run = load_run(log)
+    assert run.meta["policy"]["vision_inside_deep"] is True
+    last = run.states[run.steps[-1]]
+    np.testing.assert_array_equal(last.x, reference.model.train_inputs[0].numpy())
+    np.testing.assert_array_equal(last.y, reference.model.train_targets.numpy())
+    camera = [(run.states[k].task == 1) & (run.states[k].y < 0) for k in run.steps]
+    assert all(c.sum() >= camera[0].sum() for c in camera)                     # never retracted
+    deepest = [float(run.states[k].y[c].min()) for k, c in zip(run.steps, camera)]
+    first = policy.inside_label(policy.vision_inside)
+    deepened = run.steps.index(next(k for k, d in zip(run.steps, deepest) if d < first - 1e-9))
+    seen = run.states[run.steps[0]].x[(run.states[run.steps[0]].task == 1) & (run.states[run.steps[0]].y == 0)]
+    gap = cover_gap(reference.contacts[:deepened + 1], seen, max(0.02, policy.voxel or 0.0))
+    assert gap > policy.vision_inside_gap
+    assert -deepest[deepened] * policy.ramp <= gap + policy.vision_inside + 1e-9           # down to the gap
+    added = camera[deepened].sum() - camera[deepened - 1].sum()
+    assert added > 0 and all(c.sum() == camera[deepened].sum() for c in camera[deepened:])  # once
+    assert run.params[run.steps[deepened]]["outer_mean"] < 1.0
+    assert deepened >= GAP_MIN_CONTACTS - 1                                  # never before the fifth contact
+    _cut_after_step(log, run.steps[min(deepened + 1, len(run.steps) - 2)])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        resumed = tg.explore(scene, resume_from=log, **kw)
+    assert resumed.n_steps == reference.n_steps
+    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
+    assert torch.equal(resumed.model.train_targets, reference.model.train_targets)

@@ -24,8 +24,8 @@ from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
-from .observations import (Observations, drop_contradicted_inside, offset_outer_mean, retract_free_space,
-                           retract_vision_inside, thin_points, vision_observations)
+from .observations import (Observations, deepen_vision_inside, drop_contradicted_inside, offset_outer_mean,
+                           retract_free_space, retract_vision_inside, thin_points, vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .state import ExplorationState, StepRecord
 from .timing import PartClock
@@ -235,10 +235,13 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     if len(camera):                      # indices into the data before this step, as the log and replays read them
         removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
     offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
+    deep = deepen_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     obs = cfg.touch.select(state.model, obs)
     if (obs.y < 0).any():                # the model's data leave the device only when there is something to check
         obs = drop_contradicted_inside(obs, cfg.policy, state.model.train_inputs[0].cpu().numpy(),
                                        state.model.train_targets.cpu().numpy())
+    if deep is not None:                 # the camera's inside points continued down to the gap, in this step's batch
+        obs = Observations.concat([obs, deep])                       # the step and source of the touch
     _add(state.model, obs)
     return removed, obs
 

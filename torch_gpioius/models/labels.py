@@ -50,6 +50,12 @@ class ObservationPolicy:
             carries the cover's shape onto the body without its offset (the camera's inside points are retracted
             as without it; docs/method-notes.md section 15); False (the default everywhere): the paper's one mean
             for both tasks.
+        vision_inside_deep: with ``cover_offset``, once the touches show the cover standing off by a gap ``g`` beyond
+            ``vision_inside_gap``, the camera's inside points are kept (not retracted) and more are added behind
+            them every ``vision_inside`` down to ``g + vision_inside``, each labelled by its depth
+            (:func:`~torch_gpioius.exploration.observations.deepen_vision_inside`): the outer field a signed distance
+            down to the level the offset mean reads (docs/method-notes.md section 16). False (the default): as
+            without it.
     """
 
     vision_free_offset: float | None = 0.05
@@ -62,10 +68,12 @@ class ObservationPolicy:
     vision_inside: float | None = None
     vision_inside_gap: float | None = None
     cover_offset: bool = False
+    vision_inside_deep: bool = False
 
     def __post_init__(self) -> None:
-        if not isinstance(self.cover_offset, bool):
-            raise ValueError(f"ObservationPolicy.cover_offset: must be True or False, got {self.cover_offset!r}")
+        for name in ("cover_offset", "vision_inside_deep"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"ObservationPolicy.{name}: must be True or False, got {getattr(self, name)!r}")
         for name in ("vision_free_offset", "voxel", "crop_margin", "vision_free_far", "touch_inside", "vision_inside",
                      "vision_inside_gap"):
             v = getattr(self, name)

@@ -49,8 +49,9 @@ VIEWS = ("fixed", "mirrored", "wrist")
 DEFAULT_VIEWS = ("fixed",)
 
 
-#: What ``Scene3D.from_mesh(settings=...)`` accepts: "default" (this library's, for a user's object) or "paper".
-SETTINGS = ("default", "paper")
+#: What ``Scene3D.from_mesh(settings=...)`` accepts: "default" (this library's, for a user's object), "paper", or
+#: "gap" (an experiment: the defaults with the transfer that knows the cover's gap, :func:`gap_defaults`).
+SETTINGS = ("default", "paper", "gap")
 
 
 def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None) -> ExplorationDefaults:
@@ -81,12 +82,24 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
     return d.with_estimator(EstimatorSettings.default().for_extent(float(np.max(mesh.extents))))
 
 
+def gap_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None) -> ExplorationDefaults:
+    """:func:`object_defaults` with the transfer that knows the cover's gap (``settings="gap"``, an experiment, not
+    the default): once the touches show the cover standing more than 3 cm off, the outer task's prior mean stands for
+    the gap they measure (``ObservationPolicy.cover_offset``) and the camera's inside points are kept and continued
+    down to it, each labelled by its depth (``ObservationPolicy.vision_inside_deep``); under tighter covers nothing
+    changes. Measured offline on finished runs' data in docs/method-notes.md section 16, and in the loop in
+    docs/results-benchmark.md ("A transfer that knows the gap, in the loop")."""
+    return with_inside_depths(object_defaults(mesh, base), cover_offset=True).estimator_changed(
+        labels={"vision_inside_deep": True})
+
+
 
 
 def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefaults | None = None) -> dict:
     """``{"defaults", "views"}`` of a world under ``settings`` for a body ``mesh``: "default" (:func:`object_defaults`
-    on the world's own ``paper`` settings, all three :data:`VIEWS`) or "paper" (``paper``, default
-    :data:`ROBOT_STUDY_DEFAULTS`, and the fixed camera alone). Both 3-D worlds build their settings here.
+    on the world's own ``paper`` settings, all three :data:`VIEWS`), "gap" (:func:`gap_defaults`, likewise) or
+    "paper" (``paper``, default :data:`ROBOT_STUDY_DEFAULTS`, and the fixed camera alone). Both 3-D worlds build
+    their settings here.
 
     Raises:
         ValueError: an unknown setting.
@@ -96,6 +109,8 @@ def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefault
     paper = ROBOT_STUDY_DEFAULTS if paper is None else paper
     if settings == "paper":
         return {"defaults": paper, "views": "paper"}
+    if settings == "gap":
+        return {"defaults": gap_defaults(mesh, base=paper), "views": VIEWS}
     return {"defaults": object_defaults(mesh, base=paper), "views": VIEWS}
 
 
