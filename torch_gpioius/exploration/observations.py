@@ -435,12 +435,14 @@ def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
     x = model.train_inputs[0].cpu().numpy()
     seen = x[outer & (y == 0)]
     _, j = cKDTree(seen).query(x[behind])
-    step = x[behind] - seen[j]                                        # one vision_inside along the inward line
+    step = x[behind] - seen[j]            # the inward line (voxel averaging leaves it near, not at, vision_inside)
+    length = np.linalg.norm(step, axis=1, keepdims=True)
+    inward = step / np.maximum(length, 1e-12)
     depths = policy.vision_inside * np.arange(2, int((seen_gap + policy.vision_inside) // policy.vision_inside
                                                      + 1e-9) + 1)
     if not len(depths):
         return None
-    points = np.concatenate([seen[j] + step * (d / policy.vision_inside) for d in depths])
+    points = np.concatenate([seen[j] + inward * d for d in depths])
     labels = np.repeat([policy.inside_label(d) for d in depths], len(step))
     known = outer & (y >= 0)
     keep = uncontradicted(points, labels, policy, x[known], y[known])
