@@ -157,6 +157,19 @@ def test_a_run_that_reached_resumes_to_the_same_end(tmp_path, cut):
     assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
 
 
+def _resumes_alike(scene, log, cut: int, reference, kw: dict) -> None:
+    """The log cut after step ``cut`` and resumed ends where the uninterrupted ``reference`` run ended: the same
+    steps, contacts, labels and outer mean."""
+    _cut_after_step(log, cut)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        resumed = tg.explore(scene, resume_from=log, **kw)
+    assert resumed.n_steps == reference.n_steps
+    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
+    assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
+    assert resumed.model.outer_mean == reference.model.outer_mean
+
+
 @pytest.mark.parametrize("offset", [False, True], ids=["retracted", "outer-mean"])
 def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
     """Under a cover 4 cm off an ellipsoid (the defaults for a user's object) the touches measure the gap once five
@@ -215,14 +228,7 @@ def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
         assert set(means) == {1.0}
     assert len(run.steps) > gone + 2, "the run ended before a step after the retraction could be cut"
     for cut in (run.steps[gone - 2], run.steps[gone + 1]):   # before the gap is measured, and after
-        _cut_after_step(log, cut)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            resumed = tg.explore(scene, resume_from=log, **kw)
-        assert resumed.n_steps == reference.n_steps
-        assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
-        assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
-        assert resumed.model.outer_mean == reference.model.outer_mean
+        _resumes_alike(scene, log, cut, reference, kw)
 
 
 def test_the_gap_settings_keep_and_deepen_the_cameras_inside_points_and_resume_alike(tmp_path):
@@ -265,10 +271,4 @@ def test_the_gap_settings_keep_and_deepen_the_cameras_inside_points_and_resume_a
     assert added > 0 and all(c.sum() == camera[deepened].sum() for c in camera[deepened:])  # once
     assert run.params[run.steps[deepened]]["outer_mean"] < 1.0
     assert deepened >= GAP_MIN_CONTACTS - 1                                  # never before the fifth contact
-    _cut_after_step(log, run.steps[min(deepened + 1, len(run.steps) - 2)])
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        resumed = tg.explore(scene, resume_from=log, **kw)
-    assert resumed.n_steps == reference.n_steps
-    assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
-    assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
+    _resumes_alike(scene, log, run.steps[min(deepened + 1, len(run.steps) - 2)], reference, kw)

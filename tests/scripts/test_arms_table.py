@@ -2,20 +2,16 @@
 visual-tactile runs read as an arm of its own, and the paired difference against the first arm, recomputed by hand."""
 
 import csv
-import importlib.util
 import sys
 from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.scriptfiles import load_script
 
 
 def _load():
-    spec = importlib.util.spec_from_file_location("arms_table", ROOT / "scripts" / "arms_table.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("arms_table")
 
 
 def _study(folder: Path) -> None:

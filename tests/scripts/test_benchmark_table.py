@@ -3,18 +3,13 @@ percentile), the pairing of visual-tactile and touch alone per object and seed, 
 objects, recomputed by hand."""
 
 import csv
-import importlib.util
 from pathlib import Path
 
-
-ROOT = Path(__file__).resolve().parents[2]
+from tests.scriptfiles import ROOT, load_script
 
 
 def _load():
-    spec = importlib.util.spec_from_file_location("benchmark_table", ROOT / "scripts" / "benchmark_table.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("benchmark_table")
 
 
 def _study(folder: Path, chamfers_vt, chamfers_t, h25_vt, h25_t):

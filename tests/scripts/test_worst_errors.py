@@ -1,23 +1,15 @@
 """scripts/worst_errors.py and scripts/claims_table.py's per-seed count, on a study run here."""
 
 import csv
-import importlib.util
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tests.scenes import ball_scene
+from tests.scriptfiles import load_script
 
-ROOT = Path(__file__).resolve().parents[2]
-
-
-def _load(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+_load = load_script
 
 
 def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(tmp_path):
