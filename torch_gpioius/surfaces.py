@@ -14,7 +14,7 @@ from .geometry import predict_mean_task, predict_task
 from .polylines import distance_to_segments, segments
 
 __all__ = ["data_bounds", "grid_resolution", "GridField", "evaluate_grid", "zero_level_curves", "zero_level_mesh",
-           "closed_curves", "touched_pieces", "surface_samples", "clip_mesh", "project_to_level",
+           "closed_curves", "touched_pieces", "surface_samples", "clip_mesh", "project_to_level", "newton_onto_level",
            "converged_level_mesh", "converged_level_curves", "RULER", "REFINED_EDGE"]
 
 
@@ -189,7 +189,7 @@ def project_to_level(model, points, task: int = 0, *, max_step: float, iteration
     for a in range(0, len(pts), chunk):
         x = torch.as_tensor(pts[a:a + chunk], dtype=x0.dtype, device=x0.device)
         active = torch.ones(len(x), dtype=torch.bool, device=x.device)
-        for _ in range(iterations + 1):
+        for it in range(iterations + 1):
             xa = x[active].detach().requires_grad_(True)
             with torch.enable_grad():
                 mu = predict_mean_task(model, xa, task)
@@ -201,7 +201,7 @@ def project_to_level(model, points, task: int = 0, *, max_step: float, iteration
             residual[a + idx.cpu().numpy()] = torch.where(norm2 > 0, dist, torch.full_like(dist, np.inf)).cpu().numpy()
             grads[a + idx.cpu().numpy()] = g.cpu().numpy()
             moving = (dist > tol) & (norm2 > 0)
-            if not bool(moving.any()) or _ == iterations:
+            if not bool(moving.any()) or it == iterations:
                 break
             step = -(mu / norm2.clamp_min(1e-300)).unsqueeze(-1) * g
             length = step.norm(dim=-1, keepdim=True)
@@ -220,6 +220,21 @@ def _grid_gradient(field: GridField, points: np.ndarray) -> np.ndarray:
     parts = np.gradient(field.mean, *field.axes, edge_order=2)
     return np.stack([RegularGridInterpolator(field.axes, g, bounds_error=False, fill_value=None)(points)
                      for g in parts], axis=-1)
+
+
+def newton_onto_level(points: np.ndarray, grads: np.ndarray, mu: np.ndarray,
+                      max_step: float) -> tuple[np.ndarray, np.ndarray]:
+    """One Newton step of ``points`` `(n, d)` [m] onto the zero level of a field whose values there are ``mu`` `(n,)`,
+    along ``grads`` `(n, d)` [1/m] (the field's gradient there, or one interpolated near it): ``x - mu g / |g|^2``,
+    each step at most ``max_step`` [m] long.
+
+    Returns:
+        ``(points (n, d), residual (n,))``: the points moved, and ``|mu| / |g|`` [m] before the step (the distance
+        they were moved by, to first order)."""
+    norm2 = np.maximum((grads * grads).sum(axis=1), 1e-300)
+    step = -(mu / norm2)[:, None] * grads
+    length = np.linalg.norm(step, axis=1, keepdims=True)
+    return points + step * np.minimum(1.0, max_step / np.maximum(length, 1e-300)), np.abs(mu) / np.sqrt(norm2)
 
 
 #: A midpoint moved farther than this share of the grid's spacing by :func:`_settle` is projected by Newton's method
@@ -246,13 +261,8 @@ def _settle(model, points: np.ndarray, grads: np.ndarray, task: int, max_step: f
         for a in range(0, len(out), chunk):
             x = torch.as_tensor(out[a:a + chunk], dtype=x0.dtype, device=x0.device)
             mu = predict_mean_task(model, x, task).cpu().numpy()
-            g = grads[a:a + chunk]
-            norm2 = np.maximum((g * g).sum(axis=1), 1e-300)
-            step = -(mu / norm2)[:, None] * g
-            length = np.linalg.norm(step, axis=1, keepdims=True)
-            step *= np.minimum(1.0, max_step / np.maximum(length, 1e-300))
-            out[a:a + chunk] += step
-            moved[a:a + chunk] = np.abs(mu) / np.sqrt(norm2)
+            out[a:a + chunk], moved[a:a + chunk] = newton_onto_level(out[a:a + chunk], grads[a:a + chunk], mu,
+                                                                     max_step)
     return out, moved
 
 

@@ -429,11 +429,9 @@ def _sup_points(mesh: trimesh.Trimesh, grads, mean, spacing: float, keep: np.nda
 def _onto_level(points: np.ndarray, grads: np.ndarray, mean, limit: float) -> np.ndarray:
     """Points on or near facets moved onto the level set of ``mean`` by one Newton step along ``grads`` `(n, 3)`,
     each step at most ``limit`` [m] long (a facet's sagitta is far shorter)."""
-    mu = np.asarray(mean(points), dtype=float)
-    norm2 = np.maximum((grads * grads).sum(axis=1), 1e-300)
-    step = -(mu / norm2)[:, None] * grads
-    length = np.linalg.norm(step, axis=1, keepdims=True)
-    return points + step * np.minimum(1.0, limit / np.maximum(length, 1e-300))
+    from ..surfaces import newton_onto_level
+
+    return newton_onto_level(points, grads, np.asarray(mean(points), dtype=float), limit)[0]
 
 
 def _mesh(m, name: str) -> trimesh.Trimesh:

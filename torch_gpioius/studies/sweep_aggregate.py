@@ -13,7 +13,7 @@ import numpy as np
 
 from ..metrics import SHAPE_METRICS
 from .stats import median_interval, paired_difference
-from ..baselines import BASELINE_METRICS
+from ..baselines import BASELINE_METRICS, BASELINES
 from .sweep_runs import FRACTIONS, RunSpec, read_run_file
 
 #: The parts of a run's wall time a run file records (``time`` of :func:`~torch_gpioius.studies.sweep.run_one`).
@@ -119,12 +119,6 @@ def failures_text(reasons) -> str:
     return f"{sum(counts.values())}: " + ", ".join(f"{n} {why}" for why, n in sorted(counts.items()))
 
 
-def _baseline_names() -> list[str]:
-    from ..baselines import BASELINES
-
-    return BASELINES.names()
-
-
 def _row(run: dict, runs_by_key: dict) -> dict:
     s = run["series"]
     ref = _reference_travel(run, runs_by_key)
@@ -155,7 +149,7 @@ def _row(run: dict, runs_by_key: dict) -> dict:
            "ruler": run.get("ruler") or "",
            # the simple baselines from the same observations (visual-tactile runs; torch_gpioius.baselines)
            **{f"baseline_{name}_{k}": run.get("baselines", {}).get(name, {}).get(k, math.nan)
-              for name in _baseline_names() for k in BASELINE_METRICS},
+              for name in BASELINES.names() for k in BASELINE_METRICS},
            # older run files have the median alone
            "p95_step_time": run.get("p95_step_time", math.nan), "max_step_time": run.get("max_step_time", math.nan),
            "reference_travel": ref,
