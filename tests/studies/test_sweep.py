@@ -581,6 +581,39 @@ def test_a_study_killed_with_sigkill_leaves_no_ray_process_behind(tmp_path):
     assert not alive, {p: Path(f"/proc/{p}/cmdline").read_bytes()[:60] for p in alive}
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the watcher reads /proc")
+def test_the_watcher_ends_a_process_started_after_its_last_look_and_orphaned_before_the_kill(tmp_path):
+    """CI: a study killed within half a second of Ray's agents starting left them running (the watcher's snapshots
+    had not seen them, and their parent's death took them out of the study's tree). A process marked with the study's
+    token is ended wherever it sits; an unmarked one is left alone."""
+    from torch_gpioius.studies._reaper import TOKEN_VAR, _kill, _stat, marked
+
+    token = f"test-{os.getpid()}-{time.monotonic_ns()}"
+    pidfile = tmp_path / "pid"
+    # a parent that starts a sleeper and exits at once: the sleeper is re-parented out of this test's tree
+    spawn = ("import subprocess, sys; p = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(60)'], "
+             "start_new_session=True); open(sys.argv[1], 'w').write(str(p.pid))")
+    subprocess.run([sys.executable, "-c", spawn, str(pidfile)], env=dict(os.environ, **{TOKEN_VAR: token}), check=True)
+    subprocess.run([sys.executable, "-c", spawn, str(tmp_path / "other")], env=dict(os.environ), check=True)
+    orphan, other = int(pidfile.read_text()), int((tmp_path / "other").read_text())
+    try:
+        assert set(marked(token)) == {orphan}
+        _kill({}, token)
+        for _ in range(50):
+            if _stat(orphan) is None or Path(f"/proc/{orphan}/stat").read_text().split(") ")[1][0] == "Z":
+                break
+            time.sleep(0.1)
+        else:
+            raise AssertionError("the marked process is still running")
+        assert _stat(other) is not None, "an unmarked process was killed"
+    finally:
+        for pid in (orphan, other):
+            try:
+                os.kill(pid, 9)
+            except OSError:
+                pass
+
+
 def test_a_study_whose_every_run_failed_names_each_reason_whole_and_exits_1(tmp_path, capsys):
     """Issue 60, item 14: every run of a study failed with a reason cut to "... is not po" and the study exited 0."""
     from torch_gpioius.cli import main

@@ -4,27 +4,36 @@
 and outlive their raylet). Ray has no setting that ties them to the driver, so the study starts this watcher first
 (:class:`RayReaper`): a process of its own that notes every descendant of the study's process while the study runs,
 and kills those still alive once the study's end of a pipe closes without the word that it shut Ray down itself.
+Snapshots alone miss a process started in the last half second before the kill (Ray's agents start last, and a
+process whose parent died is re-parented out of the study's tree), so the study also marks its environment with a
+token every process it starts inherits, and the watcher ends, at the end, the descendants of every process it saw
+and every process that carries the token.
 
 Linux only (it reads ``/proc``); elsewhere :class:`RayReaper` does nothing and ``ray stop --force`` is the remedy.
 
-Run as ``python -m torch_gpioius.studies._reaper PID``: watches process PID, reading its pipe on standard input.
+Run as ``python -m torch_gpioius.studies._reaper PID TOKEN``: watches process PID, reading its pipe on standard
+input; TOKEN is the value of :data:`TOKEN_VAR` in the environment of the processes the study started.
 """
 
 from __future__ import annotations
 
 import os
+import secrets
 import select
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
-__all__ = ["RayReaper", "descendants", "DONE"]
+__all__ = ["RayReaper", "descendants", "marked", "DONE", "TOKEN_VAR"]
 
 #: What the study writes to the pipe when it shut Ray down itself (the watcher then leaves everything alone).
 DONE = b"done\n"
 #: Seconds between snapshots of the study's descendants.
 POLL = 0.5
+#: The environment variable that marks every process a study started (its value is the study's own token).
+TOKEN_VAR = "GPIOIUS_STUDY_TOKEN"
 
 
 def _stat(pid: int) -> tuple[int, int] | None:
@@ -56,19 +65,57 @@ def descendants(root: int) -> dict[int, int]:
     return out
 
 
-def _kill(seen: dict[int, int]) -> None:
-    """SIGKILL each process of ``seen`` still alive with the same start time (a pid reused since is left alone)."""
-    for pid, start in seen.items():
-        info = _stat(pid)
-        if info is not None and info[1] == start:
+def marked(token: str) -> dict[int, int]:
+    """``{pid: start time}`` of every process (of this user: others' environments are unreadable) whose environment
+    holds ``TOKEN_VAR=token``."""
+    mark = f"{TOKEN_VAR}={token}".encode()
+    out = {}
+    for entry in os.listdir("/proc"):
+        if entry.isdigit():
+            try:
+                env = Path(f"/proc/{entry}/environ").read_bytes()
+            except OSError:
+                continue
+            if mark in env.split(b"\0"):
+                info = _stat(int(entry))
+                if info is not None:
+                    out[int(entry)] = info[1]
+    return out
+
+
+def _alive(seen: dict[int, int]) -> dict[int, int]:
+    """The processes of ``seen`` still alive with the same start time (a pid reused since is left out)."""
+    return {pid: start for pid, start in seen.items() if (_stat(pid) or (0, -1))[1] == start}
+
+
+def _kill(seen: dict[int, int], token: str | None = None, rounds: int = 5) -> None:
+    """SIGKILL each process of ``seen`` still alive, its descendants and every process marked with ``token``; again
+    (up to ``rounds`` times) while a round finds a process the previous ones did not."""
+    me = os.getpid()
+    done: set[int] = set()
+    for _ in range(rounds):
+        todo = _alive(seen)
+        for pid in list(todo):
+            todo.update(descendants(pid))
+        if token:
+            todo.update(marked(token))
+        todo.pop(me, None)
+        fresh = {pid: start for pid, start in todo.items() if pid not in done}
+        if not fresh:
+            return
+        for pid in fresh:
             try:
                 os.kill(pid, signal.SIGKILL)
             except OSError:
                 pass
+        done.update(fresh)
+        seen = {**seen, **fresh}
+        time.sleep(0.1)
 
 
-def watch(study: int, pipe) -> int:
-    """Note the descendants of ``study`` until ``pipe`` closes; kill them then unless :data:`DONE` came first."""
+def watch(study: int, pipe, token: str | None = None) -> int:
+    """Note the descendants of ``study`` until ``pipe`` closes; kill them then (with their descendants and every
+    process marked with ``token``) unless :data:`DONE` came first."""
     seen: dict[int, int] = {}
     said = b""
     fd = pipe.fileno()
@@ -81,8 +128,7 @@ def watch(study: int, pipe) -> int:
                 break
             said += chunk
     if DONE not in said:
-        seen.pop(os.getpid(), None)
-        _kill(seen)
+        _kill(seen, token)
     return 0
 
 
@@ -93,16 +139,25 @@ class RayReaper:
 
     def __init__(self) -> None:
         self._proc: subprocess.Popen | None = None
+        self._before: str | None = None
 
     def __enter__(self) -> "RayReaper":
         if sys.platform.startswith("linux") and os.path.isdir("/proc"):
-            self._proc = subprocess.Popen([sys.executable, "-m", "torch_gpioius.studies._reaper", str(os.getpid())],
+            token = f"{os.getpid()}-{secrets.token_hex(8)}"
+            self._proc = subprocess.Popen([sys.executable, "-m", "torch_gpioius.studies._reaper", str(os.getpid()),
+                                           token],
                                           stdin=subprocess.PIPE, stdout=subprocess.DEVNULL,
                                           start_new_session=True)      # not killed with the study's group
+            self._before = os.environ.get(TOKEN_VAR)
+            os.environ[TOKEN_VAR] = token          # inherited by every process Ray starts from here
         return self
 
     def __exit__(self, *exc: object) -> None:
         if self._proc is not None:
+            if self._before is None:
+                os.environ.pop(TOKEN_VAR, None)
+            else:
+                os.environ[TOKEN_VAR] = self._before
             try:
                 self._proc.stdin.write(DONE)
                 self._proc.stdin.close()
@@ -115,4 +170,4 @@ class RayReaper:
 
 
 if __name__ == "__main__":          # pragma: no cover - run in its own process (tests/studies/test_sweep.py)
-    sys.exit(watch(int(sys.argv[1]), sys.stdin.buffer))
+    sys.exit(watch(int(sys.argv[1]), sys.stdin.buffer, sys.argv[2] if len(sys.argv) > 2 else None))
