@@ -72,7 +72,7 @@ def _study(args: argparse.Namespace) -> int:
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
                        touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
                        learn=args.learn, views=args.views, kernel=_kernel_choice(args), noise=args.noise,
-                       cover=args.cover, metrics_every=args.metrics_every)
+                       cover=args.cover, metrics_every=args.metrics_every, camera_error=args.camera_error)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -497,6 +497,13 @@ def _kernel_choice(args: argparse.Namespace):
     return choice if choice else None
 
 
+def _camera_error(text: str):
+    """An argparse type for a simulated camera error ("6mm,1deg"), as its canonical text."""
+    from .sensors.pointcloud import CameraError
+
+    return str(_argument(CameraError.parse, text))
+
+
 def _views(text: str):
     """An argparse type for camera views: comma-separated names, a count (1-3) or "paper"."""
     from .sim.forcefield import as_views
@@ -646,6 +653,10 @@ def _add_study(sub, common, fmt) -> None:
                     help="the 3-D worlds' simulated camera views in place of the settings': comma-separated names "
                          "(fixed, mirrored, wrist), a count (1-3) or paper (the fixed camera alone); one per --out "
                          "folder")
+    sw.add_argument("--camera-error", type=_camera_error, default=None, metavar="SIZES",
+                    help="the force-field world's simulated cameras off by a calibration error of these sizes, e.g. "
+                         "6mm,1deg (each view of each run draws its direction and axis from its seed; the records "
+                         "say what was applied); default: none; one per --out folder")
     sw.add_argument("--kernel", default=None, type=_kernel_name,
                     help=f"the kernel: {_kernel_names()} (imq: the paper's inverse multiquadric; a kernel registered "
                          "with register_kernel by its kind); default: each world's own; one per --out folder")

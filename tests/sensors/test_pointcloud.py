@@ -288,3 +288,49 @@ def test_a_camera_without_embree_says_so_once(monkeypatch):
         first, again = cam.capture(), cam.capture()
     said = [w for w in caught if "embreex is not installed" in str(w.message)]
     assert len(said) == 1 and len(first) == len(again) > 50
+
+
+def test_a_camera_error_parses_sizes_with_units_and_refuses_what_is_not_one():
+    from torch_gpioius.sensors.pointcloud import CameraError
+
+    e = CameraError.parse("6mm,1deg")
+    assert e.translation == pytest.approx(0.006) and e.rotation == pytest.approx(np.radians(1.0))
+    assert CameraError.parse(" 1deg , 0.5cm ") == CameraError(0.005, np.radians(1.0))
+    assert CameraError.parse("0.01rad") == CameraError(0.0, 0.01) and not CameraError.parse("0")
+    assert CameraError.parse(str(e)) == e                       # its text reads back
+    for text, match in (("6,1deg", "not a size with a unit"), ("6mm,2mm", "two lengths"), ("6in", "unit"),
+                        ("1deg,2deg", "two angles"), ("20cm", r"translation must be a size in \[0, 0.1\]"),
+                        ("-1mm", "translation"), ("30deg", "rotation"), ("nanmm", "translation")):
+        with pytest.raises(ValueError, match=match):
+            CameraError.parse(text)
+
+
+def test_a_camera_off_by_a_rigid_error_sees_the_sphere_moved_by_it_and_keeps_its_noise():
+    """Closed form: the captured sphere (radius R about C) lies, with the error, on a sphere of radius R about the
+    moved centre c + R_e (C - c) + t (c the camera's optical centre); the error has exactly the asked sizes, its
+    direction drawn from the seed; the depth noise is the same draw with and without it."""
+    from torch_gpioius.sensors.pointcloud import CameraError
+
+    error = CameraError.parse("6mm,1deg")
+    plain, off = sphere_camera(noise_a=0.001, seed=3), sphere_camera(noise_a=0.001, seed=3, error=error)
+    applied = off.applied_error
+    assert plain.applied_error is None
+    assert np.linalg.norm(applied.translation) == pytest.approx(0.006, rel=1e-12)
+    Rm = applied.matrix()
+    np.testing.assert_allclose(Rm @ Rm.T, np.eye(3), atol=1e-14)
+    assert np.degrees(np.arccos((np.trace(Rm) - 1) / 2)) == pytest.approx(1.0, rel=1e-9)
+    a, b = plain.capture(), off.capture()
+    np.testing.assert_allclose(b.origin, EYE)                   # the camera says it stands where it was calibrated
+    moved = EYE + Rm @ (C - EYE) + np.asarray(applied.translation)
+    r = np.linalg.norm(b.points - moved, axis=1)
+    assert np.abs(r - R).max() < 2e-4 + 5 * 0.001               # the icosphere's sag and the depth noise (5 sigma)
+    # the same pixels and noise, only moved: distances between points are kept to rounding
+    np.testing.assert_allclose(np.linalg.norm(b.points[1:] - b.points[:-1], axis=1),
+                               np.linalg.norm(a.points[1:] - a.points[:-1], axis=1), atol=1e-12)
+    assert np.linalg.norm(b.points - a.points, axis=1).min() > 1e-3   # and really moved (6 mm and 1 deg at 1 m)
+    # each seed its own direction; the same seed the same one; reseeded keeps the sizes
+    again = off.reseeded(4).applied_error
+    assert again != applied and off.reseeded(3).applied_error == applied
+    assert np.linalg.norm(again.rotation) == pytest.approx(np.radians(1.0), rel=1e-12)
+    rec = applied.as_record()
+    assert rec["size_mm"] == pytest.approx(6.0) and rec["angle_deg"] == pytest.approx(1.0)

@@ -548,3 +548,34 @@ def test_a_set_object_under_a_varying_cover_builds_a_scene_whose_gap_varies(cove
     gaps = MeshDistance(scene.inner)(scene.outer.vertices)
     assert scene.outer.is_watertight
     assert np.quantile(gaps, 0.02) < 0.008 and gaps.max() > widest
+
+
+def test_a_scene_with_a_camera_error_moves_every_views_capture_by_its_own_draw_and_says_so():
+    """Issue 63, item 1: each simulated view of each run (its seed) draws an extrinsic error of the asked sizes; the
+    captures carry it, the scene says what each view applied, the error survives a seed's perturbation, changes the
+    scene's fingerprint, and a scene with a user's camera refuses it."""
+    from torch_gpioius.sensors.pointcloud import CameraError
+
+    s = sphere_scene().with_views(["fixed", "mirrored", "wrist"])
+    off = s.with_camera_error("6mm,1deg")
+    assert s.camera_errors() == {} and off.camera_error == CameraError.parse("6mm,1deg")
+    errors = off.camera_errors()
+    assert set(errors) == {"fixed", "mirrored", "wrist"}
+    assert all(e["size_mm"] == pytest.approx(6.0) and e["angle_deg"] == pytest.approx(1.0) for e in errors.values())
+    assert len({tuple(e["translation_mm"]) for e in errors.values()}) == 3          # each view its own draw
+    # each view's capture is the plain one (the same noise) moved by that view's error about its optical centre
+    from torch_gpioius.sensors.pointcloud import AppliedCameraError
+
+    for name, plain, moved in zip(s.views, s.cameras(s.views).sources, off.cameras(off.views).sources):
+        a, b, e = plain.capture(), moved.capture(), errors[name]
+        back = AppliedCameraError(tuple(np.asarray(e["translation_mm"]) / 1e3), tuple(np.radians(e["rotation_deg"])))
+        np.testing.assert_allclose(b.points, back.apply(a.points, a.origin), atol=1e-6)   # the record's rounding
+        np.testing.assert_array_equal(a.origin, b.origin)
+    seeded = off.perturbed(2)
+    assert seeded.camera_error == off.camera_error and seeded.camera_errors() != errors
+    assert off.fingerprint() != s.fingerprint() and s.with_camera_error("0").fingerprint() == s.fingerprint()
+    own = Scene3D(s.inner, s.outer, s.start, s.direction, s.range, camera=s.default_camera())
+    with pytest.raises(ValueError, match="camera of its own"):
+        own.with_camera_error("6mm,1deg")
+    with pytest.raises(ValueError, match="not a size with a unit"):
+        s.with_camera_error("6")

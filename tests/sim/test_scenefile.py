@@ -304,6 +304,8 @@ def test_a_standing_carton_and_bottle_get_closed_covers_at_the_default_grid(shap
     ("[forcefield]\ncover_stiffness = -5.0\n", r"\[forcefield\] cover_stiffness: must be in \(0, 1e\+07\]"),
     ("[mujoco]\nvision_inside = nan\n", r"mujoco.vision_inside: must be a finite number"),
     ("[forcefield]\ncover_offset = 1\n", r"\[forcefield\] cover_offset: must be true or false"),
+    ("[forcefield]\ncamera_error = \"6\"\n", r"\[forcefield\] camera_error: '6' is not a size with a unit"),
+    ("[forcefield]\ncamera_error = \"30deg\"\n", r"\[forcefield\] camera_error: the rotation must be a size"),
 ])
 def test_scene_values_are_checked_when_the_file_is_read(tmp_path, extra, match):
     """Issue 51, item 26: `voxel = 1e-6` passed the parser, then failed with "voxel size must be a number in
@@ -353,3 +355,11 @@ def test_a_scene_file_builds_an_uneven_cover_with_its_thick_side(tmp_path):
     path.write_text(text.replace('kind = "tight"\ngap = 0.008', 'kind = "uneven"\ngap_far = 0.5'))
     with pytest.raises(ValueError, match=r"gap_far: must be in \(0, 0.2\]"):
         read_scene(path)
+
+
+def test_a_scene_files_camera_error_reaches_its_cameras(tmp_path):
+    """Issue 63, item 1: ``camera_error`` in ``[forcefield]`` gives the scene's simulated views that error."""
+    scene = load_scene(ball_scene(tmp_path, extra='[forcefield]\ncamera_error = "3mm,0.5deg"\nviews = 2\n'))
+    errors = scene.camera_errors()
+    assert str(scene.camera_error) == "3mm,0.5deg" and len(errors) == 2
+    assert all(e["size_mm"] == pytest.approx(3.0) and e["angle_deg"] == pytest.approx(0.5) for e in errors.values())

@@ -314,6 +314,30 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
     assert not (tmp_path / "bad").exists() and not (tmp_path / "planar").exists()
 
 
+def test_a_camera_error_is_a_study_setting_each_run_records_as_applied(tmp_path):
+    """Issue 63, item 1: --camera-error reaches every view of every run, each run's record says what each view
+    applied (the scene's own draw for that seed), a folder holds one error, and worlds without simulated cameras
+    refuse it before anything runs."""
+    from torch_gpioius.sim.scenefile import load_scene
+
+    ball = ball_scene(tmp_path)
+    run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=2, out=tmp_path / "off", smoke=True,
+              backend="local", progress=False, camera_error="1deg,6mm", views=["fixed", "wrist"])
+    for seed in (0, 1):
+        run = json.loads((tmp_path / "off" / "runs" / f"ball_visual-tactile_{seed}.json").read_text())
+        assert run["camera_error"]["asked"] == "6mm,1deg"
+        truth = load_scene(ball, seed=seed).with_views(["fixed", "wrist"]).with_camera_error("6mm,1deg")
+        assert run["camera_error"]["views"] == truth.camera_errors()
+    with pytest.raises(FileExistsError, match="camera_error"):
+        run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "off", smoke=True,
+                  backend="local", progress=False, camera_error="3mm,0.5deg", views=["fixed", "wrist"])
+    for world, kw, match in (("planar", {}, "planar world's cameras take no"),
+                             ("forcefield", {"scenes": [ball]}, "not a size with a unit")):
+        with pytest.raises(ValueError, match=match):
+            run_sweep(world, seeds=1, out=tmp_path / "bad", camera_error="6" if kw else "6mm", **kw)
+    assert not (tmp_path / "bad").exists()
+
+
 def test_a_patch_study_runs_and_keeps_its_own_folder(tmp_path):
     ball = ball_scene(tmp_path)
     run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "p", smoke=True,

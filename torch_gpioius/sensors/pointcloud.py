@@ -17,7 +17,8 @@ import trimesh
 
 from ..voxels import voxel_average
 
-__all__ = ["PointCloud", "PointCloudSource", "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "look_at"]
+__all__ = ["PointCloud", "PointCloudSource", "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "look_at",
+           "CameraError", "AppliedCameraError"]
 
 
 @dataclass
@@ -217,6 +218,12 @@ class PointCloudSource(abc.ABC):
         returns itself."""
         return self
 
+    def camera_errors(self) -> dict[str, dict]:
+        """The simulated extrinsic error each camera of this source applies (:meth:`AppliedCameraError.as_record`),
+        by view name; empty for a source without one (a file, a live camera, a camera simulated without error)."""
+        applied = getattr(self, "applied_error", None)
+        return {} if applied is None else {"camera": applied.as_record()}
+
 
 class MultiViewSource(PointCloudSource):
     """Several point-cloud sources captured together: one :class:`PointCloud` with each point's own camera origin
@@ -247,6 +254,9 @@ class MultiViewSource(PointCloudSource):
 
     def capture(self) -> PointCloud:
         return PointCloud.merge([src.capture() for src in self.sources])
+
+    def camera_errors(self) -> dict[str, dict]:
+        return {name: rec for name, src in zip(self.names, self.sources) for rec in src.camera_errors().values()}
 
     def reseeded(self, seed) -> "MultiViewSource":
         # each view its own stream: view k of seed s draws from [s, k], never the same noise as another view
@@ -325,6 +335,123 @@ class PinholeCamera:
                          np.ones(u.size)], axis=1)
 
 
+#: Units a :meth:`CameraError.parse` text may give: lengths to metres, angles to radians.
+_LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+_ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
+
+
+@dataclass(frozen=True)
+class AppliedCameraError:
+    """One camera's extrinsic error as drawn: its captures are moved rigidly about the optical centre ``c`` that the
+    camera reports, ``p' = c + R (p - c) + t``, while the reported origin stays ``c`` (a camera whose calibrated pose
+    is off: what it sees lands where its calibration says, not where it is).
+
+    Attributes:
+        translation: `(3,)` t [m], base frame.
+        rotation: `(3,)` the rotation R as a rotation vector (axis times angle) [rad], base frame.
+    """
+
+    translation: tuple
+    rotation: tuple
+
+    def matrix(self) -> np.ndarray:
+        """`(3, 3)` R (Rodrigues' formula)."""
+        w = np.asarray(self.rotation, dtype=np.float64)
+        angle = float(np.linalg.norm(w))
+        if angle == 0.0:
+            return np.eye(3)
+        k = w / angle
+        K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+        return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+
+    def apply(self, points: np.ndarray, origin: np.ndarray) -> np.ndarray:
+        """`(n, 3)` ``points`` [m] moved by this error about ``origin`` `(3,)` [m] (both base frame)."""
+        c = np.asarray(origin, dtype=np.float64)
+        return c + (np.asarray(points, dtype=np.float64) - c) @ self.matrix().T + np.asarray(self.translation)
+
+    def as_record(self) -> dict:
+        """The error for a run's record: ``translation_mm`` and ``rotation_deg`` (a rotation vector) as lists, and
+        their sizes ``|t|`` [mm] and the angle [deg]."""
+        t, w = np.asarray(self.translation), np.asarray(self.rotation)
+        return {"translation_mm": (t * 1e3).round(4).tolist(), "rotation_deg": np.degrees(w).round(5).tolist(),
+                "size_mm": round(float(np.linalg.norm(t)) * 1e3, 4),
+                "angle_deg": round(math.degrees(float(np.linalg.norm(w))), 5)}
+
+
+@dataclass(frozen=True)
+class CameraError:
+    """The size of a simulated depth camera's extrinsic (hand-eye) calibration error: each camera of each run draws a
+    rigid error of exactly these sizes, in a direction and about an axis uniform on the sphere, from its own seed
+    (:meth:`draw`; :class:`AppliedCameraError` says how it moves the captures).
+
+    Attributes:
+        translation: the translation's size [m] (0: none).
+        rotation: the rotation's angle [rad] (0: none).
+
+    Raises:
+        ValueError: a negative, non-finite or implausible size (above 10 cm or 20 degrees: not a calibration error).
+    """
+
+    translation: float = 0.0
+    rotation: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name, value, top in (("translation", self.translation, 0.1), ("rotation", self.rotation, math.radians(20))):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
+                    or not 0.0 <= value <= top:
+                raise ValueError(f"camera error: the {name} must be a size in [0, {top:.3g}] "
+                                 f"({'m' if name == 'translation' else 'rad'}), got {value!r}")
+        object.__setattr__(self, "translation", float(self.translation))
+        object.__setattr__(self, "rotation", float(self.rotation))
+
+    def __bool__(self) -> bool:
+        return self.translation > 0.0 or self.rotation > 0.0
+
+    @classmethod
+    def parse(cls, text) -> "CameraError":
+        """A camera error from text such as ``"6mm,1deg"``, ``"0.5cm"``, ``"1deg"`` or ``"0"`` (none): at most one
+        length (m, cm, mm) and one angle (deg, rad), comma-separated, in either order; a :class:`CameraError` is
+        returned as it is.
+
+        Raises:
+            ValueError: a part without a unit, an unknown unit, two lengths or two angles, or a size out of range.
+        """
+        if isinstance(text, CameraError):
+            return text
+        if not isinstance(text, str):
+            raise ValueError(f"camera error: expected text such as \"6mm,1deg\", got {text!r}")
+        parts = [p.strip().lower() for p in text.split(",") if p.strip()]
+        if parts in ([], ["0"], ["none"]):
+            return cls()
+        sizes: dict[str, float] = {}
+        for part in parts:
+            unit = next((u for u in sorted({**_LENGTH_UNITS, **_ANGLE_UNITS}, key=len, reverse=True)
+                         if part.endswith(u)), None)
+            try:
+                value = float(part[:len(part) - len(unit)]) if unit else None
+            except ValueError:
+                value = None
+            if unit is None or value is None:
+                raise ValueError(f"camera error: {part!r} is not a size with a unit (a length in m, cm or mm, an "
+                                 "angle in deg or rad: e.g. \"6mm,1deg\")")
+            kind = "translation" if unit in _LENGTH_UNITS else "rotation"
+            if kind in sizes:
+                raise ValueError(f"camera error: two {'lengths' if kind == 'translation' else 'angles'} in {text!r}")
+            sizes[kind] = value * (_LENGTH_UNITS.get(unit) or _ANGLE_UNITS[unit])
+        return cls(**sizes)
+
+    def __str__(self) -> str:
+        return f"{self.translation * 1e3:g}mm,{math.degrees(self.rotation):g}deg"
+
+    def draw(self, seed) -> AppliedCameraError:
+        """The error one camera applies, drawn from ``seed`` (an int or a sequence of ints, the camera's noise seed:
+        a stream of its own, so that the noise of a camera with and without an error is the same)."""
+        rng = np.random.default_rng([*np.atleast_1d(np.asarray(seed, dtype=np.int64)).tolist(), 0x0CA1])
+        unit = rng.standard_normal((2, 3))
+        unit /= np.linalg.norm(unit, axis=1, keepdims=True)
+        return AppliedCameraError(tuple(self.translation * unit[0]), tuple(self.rotation * unit[1]))
+
+
 class SimulatedDepthCamera(PointCloudSource):
     """A depth camera ray-cast against a mesh (the outer surface of a covered object).
 
@@ -341,16 +468,18 @@ class SimulatedDepthCamera(PointCloudSource):
         T_base_camera: `(4, 4)` camera pose (OpenCV axes, see :func:`look_at`).
         noise_a: depth noise at zero depth [m]; noise_b: its growth [1/m].
         dropout: fraction of pixels returned empty.
-        seed: random seed of noise and dropout.
+        seed: random seed of noise and dropout (and of the extrinsic error's direction, a stream of its own).
         engine: ray engine: "auto" (Embree when ``embreex`` is installed, else trimesh's own), "embree" or
             "triangle" (trimesh's pure-Python engine; slow, no extra needed).
+        error: a :class:`CameraError` (or its text, ``"6mm,1deg"``): every capture is moved by the rigid error drawn
+            from ``seed`` (:attr:`applied_error`), its reported origin left where the pose says; None: none.
     """
 
     ENGINES = ("auto", "embree", "triangle")
 
     def __init__(self, mesh: trimesh.Trimesh, intrinsics: PinholeCamera, T_base_camera, *,
                  noise_a: float = 0.0, noise_b: float = 0.0, dropout: float = 0.0, seed: int = 0,
-                 engine: str = "auto") -> None:
+                 engine: str = "auto", error: "CameraError | str | None" = None) -> None:
         T = np.asarray(T_base_camera, dtype=np.float64)
         if T.shape != (4, 4) or not np.isfinite(T).all() or not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3),
                                                                           atol=1e-6):
@@ -363,6 +492,9 @@ class SimulatedDepthCamera(PointCloudSource):
         self.mesh, self.intrinsics, self.T_base_camera = mesh, intrinsics, T
         self.noise_a, self.noise_b, self.dropout = float(noise_a), float(noise_b), float(dropout)
         self._rng = np.random.default_rng(seed)
+        self.error = CameraError() if error is None else CameraError.parse(error)
+        #: The rigid error this camera's captures carry (:meth:`CameraError.draw` of its seed), or None.
+        self.applied_error = self.error.draw(seed) if self.error else None
 
     @property
     def origin(self) -> np.ndarray:
@@ -370,9 +502,11 @@ class SimulatedDepthCamera(PointCloudSource):
         return self.T_base_camera[:3, 3].copy()
 
     def reseeded(self, seed) -> "SimulatedDepthCamera":
-        """The same camera with its noise and dropout drawn from ``seed`` (an int or a sequence of ints)."""
+        """The same camera with its noise, dropout and extrinsic error drawn from ``seed`` (an int or a sequence of
+        ints)."""
         return SimulatedDepthCamera(self.mesh, self.intrinsics, self.T_base_camera, noise_a=self.noise_a,
-                                    noise_b=self.noise_b, dropout=self.dropout, seed=seed, engine=self.engine)
+                                    noise_b=self.noise_b, dropout=self.dropout, seed=seed, engine=self.engine,
+                                    error=self.error)
 
     def depth_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free first hits: `(k, 3)` points in the camera frame and `(k,)` their pixel indices."""
@@ -423,7 +557,10 @@ class SimulatedDepthCamera(PointCloudSource):
         if self.dropout > 0:
             p_cam = p_cam[self._rng.uniform(size=len(p_cam)) >= self.dropout]
         R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
-        return PointCloud(p_cam @ R.T + t, t.copy())
+        points = p_cam @ R.T + t
+        if self.applied_error is not None:
+            points = self.applied_error.apply(points, t)
+        return PointCloud(points, t.copy())
 
 
 _SAID: set[str] = set()

@@ -26,7 +26,7 @@ from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Me
                                  perturbed_approaches)
 from ..metrics import hausdorff_distance
 from ..planning import RangePenalty
-from ..sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
+from ..sensors.pointcloud import CameraError, PinholeCamera, SimulatedDepthCamera, look_at
 from ..sensors.simulated import ForceFieldContact
 from ..surfaces import surface_samples
 from .._validation import as_bounds, as_float
@@ -477,9 +477,13 @@ class Scene3D(RangedScene):
     def __init__(self, inner: trimesh.Trimesh, outer: trimesh.Trimesh, start, direction, bounds, name: str = "",
                  camera=None, cover_stiffness: float = 5.0, sensor_noise: float = 0.02, seed: int = 0,
                  defaults: ExplorationDefaults | None = None, support: float | str | None = "base",
-                 views=DEFAULT_VIEWS) -> None:
+                 views=DEFAULT_VIEWS, camera_error=None) -> None:
         self.inner, self.outer = _mesh(inner, "inner"), _mesh(outer, "outer")
         self.views = as_views(views)
+        if camera_error is not None and camera is not None:
+            raise ValueError("camera_error: this scene has a camera of its own; simulate its error in that camera "
+                             "(SimulatedDepthCamera(error=))")
+        self.camera_error = CameraError.parse(camera_error if camera_error is not None else CameraError())
         base = float(self.inner.bounds[0, 2])
         if support == "base":
             self.support: float | None = base
@@ -559,6 +563,7 @@ class Scene3D(RangedScene):
         vision_inside_gap: float | None = None,
         learn: str | None = None,
         cover_offset: bool | None = None,
+        camera_error=None,
     ) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
@@ -611,6 +616,8 @@ class Scene3D(RangedScene):
             learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from the kernel's) or "all"
                 (the length and sigma^2, from the kernel's and ``noise``; ``explore(learn=)``); default: by
                 ``settings``.
+            camera_error: the simulated cameras' extrinsic error (:meth:`with_camera_error`: ``"6mm,1deg"``);
+                default: none.
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
@@ -648,7 +655,8 @@ class Scene3D(RangedScene):
             bounds = b if bounds is None else bounds
         stiffness = (5.0 if cover == "tight" else 3.0) if cover_stiffness is None else cover_stiffness
         return cls(mesh, outer, start, direction, bounds, name=name, cover_stiffness=stiffness,
-                   sensor_noise=sensor_noise, seed=seed, defaults=defaults, support=support, views=views)
+                   sensor_noise=sensor_noise, seed=seed, defaults=defaults, support=support, views=views,
+                   camera_error=camera_error)
 
     # ------------------------------------------------------------------ the World interface
     @property
@@ -694,7 +702,7 @@ class Scene3D(RangedScene):
         eye = target - distance * self.direction
         up = (0.0, 0.0, 1.0) if abs(self.direction[2]) < 0.9 else (1.0, 0.0, 0.0)
         return SimulatedDepthCamera(self.outer, PinholeCamera.realsense_d405(0.25), look_at(eye, target, up),
-                                    noise_a=0.0005, noise_b=0.002, seed=seed)
+                                    noise_a=0.0005, noise_b=0.002, seed=seed, error=self.camera_error)
 
     def hardware(self) -> Hardware:
         from ..contact import ContactConfig, ContactController
@@ -736,7 +744,10 @@ class Scene3D(RangedScene):
                              [self.cover_stiffness, self.sensor_noise, self.seed,
                               math.nan if self.support is None else self.support],
                              # the paper's single view hashes as before views existed (its logs still resume)
-                             *([] if self.views == ("fixed",) else [[VIEWS.index(v) for v in self.views]]))
+                             *([] if self.views == ("fixed",) else [[VIEWS.index(v) for v in self.views]]),
+                             # a scene without a camera error hashes as before there were any
+                             *([[self.camera_error.translation, self.camera_error.rotation]] if self.camera_error
+                               else []))
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
         return {"joints": hw.robot.read_joints().numpy(), "clock": np.array([hw.robot.time]),
@@ -771,6 +782,29 @@ class Scene3D(RangedScene):
             raise ValueError("views: this scene has a camera of its own; its views are not the simulated ones")
         return self._copy(views=views)
 
+    def with_camera_error(self, error) -> "Scene3D":
+        """The same scene seen by simulated cameras whose calibration is off: each view of each run (its seed) draws a
+        rigid error of the sizes ``error`` gives (a :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its
+        text, ``"6mm,1deg"``; ``"0"``: none) and moves its captures by it (:meth:`camera_errors` says what each view
+        applies).
+
+        Raises:
+            ValueError: a malformed error, or a scene with a camera of its own (simulate the error in that camera).
+        """
+        error = CameraError.parse(error)
+        if self._given_camera is not None:
+            raise ValueError("camera_error: this scene has a camera of its own; simulate its error in that camera "
+                             "(SimulatedDepthCamera(error=))")
+        return self._copy(camera_error=error)
+
+    def camera_errors(self) -> dict[str, dict]:
+        """The extrinsic error each simulated view of this scene (its seed) applies, by view name
+        (:meth:`~torch_gpioius.sensors.pointcloud.AppliedCameraError.as_record`); empty without one."""
+        if not self.camera_error:
+            return {}
+        errors = self.cameras(self.views).camera_errors()
+        return {"fixed": errors["camera"]} if "camera" in errors else errors
+
     def perturbed(self, seed: int) -> "Scene3D":
         """The same objects with a seeded perturbation (seed 0: unchanged): the start moved uniformly within a
         2 cm disc across the approach, the approach direction turned by up to 10 deg (uniform on the cap), and the
@@ -793,7 +827,8 @@ class Scene3D(RangedScene):
         views are placed for this scene's unperturbed approach, not its own)."""
         kw = dict(start=self.start, direction=self.direction, bounds=self.range, name=self.name,
                   camera=self._given_camera, cover_stiffness=self.cover_stiffness, sensor_noise=self.sensor_noise,
-                  seed=self.seed, defaults=self._defaults, support=self.support, views=self.views)
+                  seed=self.seed, defaults=self._defaults, support=self.support, views=self.views,
+                  camera_error=self.camera_error if self._given_camera is None else None)
         scene = Scene3D(self.inner, self.outer, **{**kw, **changes})
         scene._tripod_direction = self._tripod_direction
         return scene
@@ -847,7 +882,8 @@ class Scene3D(RangedScene):
         eye = target + back + 0.3 * side * lateral / np.linalg.norm(lateral) + np.array([0.0, 0.0, 0.3])
         eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
         return SimulatedDepthCamera(self.outer, PinholeCamera.kinect_v2(scale), look_at(eye, target),
-                                    noise_a=0.0015, noise_b=0.0015, seed=self.seed if seed is None else seed)
+                                    noise_a=0.0015, noise_b=0.0015, seed=self.seed if seed is None else seed,
+                                    error=self.camera_error)
 
     def true_distance(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` exact signed distance of `(n, 3)` points from the inner mesh [m] (negative inside)."""
@@ -1244,7 +1280,7 @@ SCENE_SUPPORT = SceneSupport(
     cover_keys=frozenset({"gap", "bridge", "resolution", "gap_far", "thick_side"}), cover_kinds=COVER_KINDS,
     settings_keys=frozenset({"cover_stiffness", "sensor_noise", "settings", "views", "kernel", "lengthscale", "theta",
                              "noise", "voxel", "touch_inside", "vision_inside", "vision_inside_gap", "cover_offset",
-                             "learn"}),
+                             "learn", "camera_error"}),
     build=_scene_from_file)
 
 register_world("forcefield", Scene3D, objects=lambda names, smoke: paper_objects_3d(0.01 if smoke else 0.006),

@@ -42,6 +42,7 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     vision_inside_gap = 0.03          # the camera's retracted once touches show the cover this far off [m] (0: never)
     cover_offset = false              # true: the outer task's prior mean then stands for the gap they measure
     learn = "task"                    # "length": the kernel's length learned with K_t; "all": the noise too
+    camera_error = "6mm,1deg"         # the simulated cameras' calibration error (each view its own draw; "0": none)
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
     slack = 0.03                      # a loose cloth's distance from the body before it settles
@@ -306,6 +307,14 @@ def _setting_problem(key: str, value) -> str | None:
         return None
     if key == "cover_offset" and not isinstance(value, bool):
         return f"must be true or false, got {value!r}"
+    if key == "camera_error":
+        from ..sensors.pointcloud import CameraError
+
+        try:
+            CameraError.parse(value)
+        except ValueError as exc:
+            return str(exc).removeprefix("camera error: ")
+        return None
     if key in _RANGES:
         lo, hi, closed = _RANGES[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)):

@@ -86,6 +86,7 @@ class RunSpec:
     cover: str | None = None        # a set object's cover: a name of sim.objectsets.COVERS
     metrics_every: Any = None       # k steps or "schedule" (explore(metrics_every=)); None: every 5 steps under a
     #                                 travel budget, every step elsewhere
+    camera_error: str | None = None  # the simulated cameras' extrinsic error ("6mm,1deg"; Scene3D.with_camera_error)
 
     @property
     def key(self) -> str:
@@ -93,12 +94,26 @@ class RunSpec:
 
 
 def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str | None = None,
-               settings: str | None = None, views=None, set_object=None, cover: str | None = None):
+               settings: str | None = None, views=None, set_object=None, cover: str | None = None,
+               camera_error: str | None = None):
     """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
     unperturbed object), under ``settings`` in place of its own (3-D worlds: "default" or "paper"), seen by
-    ``views`` in place of the settings' (3-D worlds: ``with_views``); or an object of a set
-    (:mod:`torch_gpioius.sim.objectsets`) under ``cover``, in the force-field world, the library's default settings
-    unless told."""
+    ``views`` in place of the settings' (3-D worlds: ``with_views``) through cameras off by ``camera_error``
+    (``with_camera_error``: "6mm,1deg"); or an object of a set (:mod:`torch_gpioius.sim.objectsets`) under
+    ``cover``, in the force-field world, the library's default settings unless told."""
+    made = _make_world(world, name, seed, smoke, scene, settings, views, set_object, cover)
+    if camera_error is None:
+        return made
+    if not hasattr(made, "with_camera_error"):
+        raise ValueError(f"camera_error: the {world} world's cameras take no simulated calibration error")
+    erred = made.with_camera_error(camera_error)
+    erred.scene_file = getattr(made, "scene_file", None)
+    return erred
+
+
+def _make_world(world: str, name: str, seed: int, smoke: bool, scene: str | None, settings: str | None, views,
+                set_object, cover: str | None):
+    """:func:`make_world` before the camera error."""
     if set_object is not None:
         from ..sim.objectsets import set_scene
 
@@ -312,7 +327,7 @@ def run_one(spec: RunSpec) -> dict:
     with torch_threads(spec.threads):
         try:
             world = make_world(spec.world, spec.object, spec.seed, spec.smoke, spec.scene, spec.settings, spec.views,
-                               spec.set_object, spec.cover)
+                               spec.set_object, spec.cover, spec.camera_error)
             scene_time = time.perf_counter() - t0
         except (ValueError, RuntimeError, OSError) as exc:
             # a scene that cannot be built (a cover that does not close, a mesh that will not load) is a failed
@@ -352,6 +367,8 @@ def run_one(spec: RunSpec) -> dict:
     record["touch"] = spec.touch
     if getattr(world, "views", None):                 # the camera's views (force-field world)
         record["views"] = "+".join(world.views)
+    if getattr(world, "camera_error", None):          # the simulated calibration error each view applied
+        record["camera_error"] = {"asked": str(world.camera_error), "views": world.camera_errors()}
     if spec.settings is not None:
         record["settings"] = spec.settings
     if spec.scene_hash is not None:

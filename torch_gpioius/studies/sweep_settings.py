@@ -72,12 +72,13 @@ class SweepSettings:
     set_objects: dict = field(default_factory=dict)     # an object set's object's name -> its SetObject
     cover: str | None = None                            # the set objects' cover
     metrics_every: Any = None                           # k steps or "schedule"; None: the sweep's own
+    camera_error: str | None = None                     # the simulated cameras' extrinsic error ("6mm,1deg")
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
                 learn=None, views=None, kernel=None, noise=None, cover=None,
-                metrics_every=None) -> "SweepSettings":
+                metrics_every=None, camera_error=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry, world_names
 
@@ -139,6 +140,13 @@ class SweepSettings:
                                  f"{', '.join(world_names(presets=True))}, not {world}'s")
         kernel = _kernel_choice(kernel)
         metrics_every = checked_metrics_every(metrics_every)
+        if camera_error is not None:
+            from ..sensors.pointcloud import CameraError
+
+            error = CameraError.parse(camera_error)
+            if not hasattr(entry.cls, "with_camera_error"):
+                raise ValueError(f"camera_error: the {world} world's cameras take no simulated calibration error")
+            camera_error = str(error) if error else None
         if noise is not None:
             from ..tolerances import tol
 
@@ -148,7 +156,8 @@ class SweepSettings:
         hashes = {name: scene_fingerprint(path) for name, path in scene_files.items()}
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
-                   kernel, noise, hashes, set_objects, (cover or "tight") if set_objects else None, metrics_every)
+                   kernel, noise, hashes, set_objects, (cover or "tight") if set_objects else None, metrics_every,
+                   camera_error)
 
     def _specs(self, out: Path) -> list[RunSpec]:
         # (name, scene file, identity, set object) of every object: a set's object is identified by its source,
@@ -160,7 +169,7 @@ class SweepSettings:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         scene, self.voxel, self.touch, self.outer_tol, self.device, self.settings, self.learn,
                         self.views, self.kernel, self.noise, identity, obj, self.cover if obj is not None else None,
-                        self.metrics_every)
+                        self.metrics_every, self.camera_error)
                 for o, scene, identity, obj in objects for m in self.modes for s in range(self.seeds)]
 
 
