@@ -594,3 +594,26 @@ def test_fit_writes_the_simple_baselines_from_the_same_files(tmp_path, capsys):
     r = {name: np.median(np.linalg.norm(trimesh.load(out / "baselines" / f"{name}.ply").vertices - CENTRE, axis=1))
          for name in ("vision", "vision-shrunk-5")}
     assert abs(r["vision"] - 0.07) < 0.004 and abs(r["vision-shrunk-5"] - 0.06) < 0.004, r
+
+
+def test_fit_corrects_a_miscalibrated_cameras_captures_when_asked_and_records_it(tmp_path, capsys):
+    """Issue 63, item 2: `gpioius fit --camera-bound` corrects each capture from the contacts, prints each
+    correction and writes them to fit.json; a dataset file (its cloud already in the model's frame) refuses it."""
+    import json
+
+    from tests.io.test_importers import _box_files
+
+    csv, clouds, eyes, _ = _box_files(tmp_path, "6mm,1deg")
+    args = ["fit", str(csv)]
+    for cloud, eye in zip(clouds, eyes):
+        args += ["--cloud", str(cloud), "--camera-origin", " ".join(f"{v:.6f}" for v in eye)]
+    out = tmp_path / "fit"
+    assert main([*args, "--camera-bound", "12mm,2deg", "--out", str(out), "--quiet"]) == 0
+    said = capsys.readouterr()
+    printed = said.out
+    assert "check the camera's calibration" in said.err                  # the large corrections, by file
+    assert "captures corrected from the contacts (within 12 mm and 2 deg)" in printed
+    record = json.loads((out / "fit.json").read_text())["camera_corrections"]
+    assert len(record["captures"]) == 3 and record["misfit_after_mm"] < record["misfit_before_mm"]
+    assert main(["fit", str(out / "model.pt"), "--camera-bound", "6mm,1deg"]) == 2
+    assert "--camera-bound go with a contacts CSV" in capsys.readouterr().err

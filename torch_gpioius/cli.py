@@ -72,7 +72,8 @@ def _study(args: argparse.Namespace) -> int:
                        progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
                        touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
                        learn=args.learn, views=args.views, kernel=_kernel_choice(args), noise=args.noise,
-                       cover=args.cover, metrics_every=args.metrics_every, camera_error=args.camera_error)
+                       cover=args.cover, metrics_every=args.metrics_every, camera_error=args.camera_error,
+                       camera_bound=args.camera_bound)
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -86,9 +87,10 @@ def _study(args: argparse.Namespace) -> int:
 
 def _fit(args: argparse.Namespace) -> int:
     own = Path(args.dataset).suffix.lower() == ".csv"
-    if not own and (args.cloud or args.camera_origin or args.units != "m" or args.contact_spacing is not None):
-        raise ValueError("fit: --cloud, --units, --camera-origin and --contact-spacing go with a contacts CSV (a "
-                         ".gpioius file holds its own cloud, in metres)")
+    if not own and (args.cloud or args.camera_origin or args.units != "m" or args.contact_spacing is not None
+                    or args.camera_bound is not None):
+        raise ValueError("fit: --cloud, --units, --camera-origin, --contact-spacing and --camera-bound go with a "
+                         "contacts CSV (a .gpioius file holds its own cloud, in metres)")
     origins = []
     for text in args.camera_origin or []:
         try:
@@ -142,7 +144,8 @@ def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list,
             settings = EstimatorSettings.of(settings).with_kernel(choice)
             kernel = None
         ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel, camera_origin=origin,
-                                settings=settings, contact_spacing=args.contact_spacing)
+                                settings=settings, contact_spacing=args.contact_spacing,
+                                camera_bound=args.camera_bound)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         source, settings = ds, None                  # the dataset holds the settings it was labelled with
     return fit_dataset(source, args.out, kernel=kernel, noise=args.noise, learn=args.learn, settings=settings,
@@ -174,6 +177,13 @@ def _fit_report(args: argparse.Namespace, info: dict) -> None:
     else:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")
+    if info.get("camera_corrections"):
+        c = info["camera_corrections"]
+        print(f"captures corrected from the contacts (within {c['bound']['translation_mm']:g} mm and "
+              f"{c['bound']['rotation_deg']:g} deg): " + "; ".join(
+                  f"{k}: {e['size_mm']:.1f} mm, {e['angle_deg']:.2f} deg ({e['contacts']} contacts under it)"
+                  for k, e in enumerate(c["captures"]))
+              + f"; the contacts' misfit {c['misfit_before_mm']:.1f} -> {c['misfit_after_mm']:.1f} mm")
     if info.get("converged") is False:
         print(f"  ({info['fit_note']})")
     if not info["estimate"]:
@@ -657,6 +667,10 @@ def _add_study(sub, common, fmt) -> None:
                     help="the force-field world's simulated cameras off by a calibration error of these sizes, e.g. "
                          "6mm,1deg (each view of each run draws its direction and axis from its seed; the records "
                          "say what was applied); default: none; one per --out folder")
+    sw.add_argument("--camera-bound", type=_camera_error, default=None, metavar="SIZES",
+                    help="the visual-tactile runs correct each camera view's capture from their contacts, by at most "
+                         "these sizes, e.g. 12mm,2deg (each record: camera_corrections); default: as captured; one per "
+                         "--out folder")
     sw.add_argument("--kernel", default=None, type=_kernel_name,
                     help=f"the kernel: {_kernel_names()} (imq: the paper's inverse multiquadric; a kernel registered "
                          "with register_kernel by its kind); default: each world's own; one per --out folder")
@@ -692,6 +706,10 @@ def _add_fit(sub, common, fmt) -> None:
         "it for several captures (each with its own --camera-origin, in the same order)",
     )
     fit.add_argument("--units", default="m", choices=["m", "cm", "mm"], help="units of the CSV and the cloud")
+    fit.add_argument("--camera-bound", type=_camera_error, default=None, metavar="SIZES",
+                     help="with clouds and their --camera-origin: correct each capture's pose (its camera's "
+                          "calibration) from the contacts and the other captures, by at most these sizes, e.g. "
+                          "6mm,1deg (fit.json: camera_corrections; a large one is warned of); default: as given")
     fit.add_argument("--contact-spacing", type=_length("contact-spacing"), default=None,
                      help="with a contacts CSV: drop rows within this distance [m] of an earlier row of their kind "
                           "(contacts, free space, inside points); an exact fit's memory grows with the square of the "

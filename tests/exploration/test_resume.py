@@ -272,3 +272,54 @@ def test_the_gap_settings_keep_and_deepen_the_cameras_inside_points_and_resume_a
     assert run.params[run.steps[deepened]]["outer_mean"] < 1.0
     assert deepened >= GAP_MIN_CONTACTS - 1                                  # never before the fifth contact
     _resumes_alike(scene, log, run.steps[min(deepened + 1, len(run.steps) - 2)], reference, kw)
+
+
+def test_a_miscalibrated_cameras_captures_are_corrected_once_logged_and_resume_alike(tmp_path):
+    """Issue 63, item 2: with ``ObservationPolicy.camera_bound`` a run whose simulated cameras are off by 6 mm and a
+    degree corrects each view's capture from its first :data:`CORRECT_AFTER` contacts, once, and replaces the camera's
+    observations by the corrected ones in that step's batch: the seen points move onto the true cover, the step's
+    record says what each view was moved by, the log replays the run's final data, and a run cut before that step or
+    after it and resumed ends where the uninterrupted one ends."""
+    import dataclasses
+    import math
+
+    import trimesh
+
+    from torch_gpioius.exploration.calibration import CORRECT_AFTER
+    from torch_gpioius.io.datasets import read_records
+    from torch_gpioius.io.runs import load_run
+    from torch_gpioius.sim.forcefield import Scene3D
+
+    body = trimesh.creation.box((0.10, 0.08, 0.12))
+    scene = Scene3D.from_mesh(body, cover="tight", at=[0.5, 0.0, 0.1]).with_camera_error("6mm,1deg")
+    policy = dataclasses.replace(scene.defaults.policy, camera_bound=(0.012, math.radians(2)))
+    kw = dict(max_steps=CORRECT_AFTER + 6, metrics_every=100, progress=False, policy=policy)
+    log = tmp_path / "run.gpioius"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = tg.explore(scene, log=log, **kw)
+    run = load_run(log)
+    assert run.meta["policy"]["camera_bound"] == [0.012, pytest.approx(math.radians(2))]
+    steps = [r for r in read_records(log) if r.kind == "step"]
+    marked = [int(r.meta["step"]) for r in steps if "camera_corrections" in r.meta]
+    assert marked == [CORRECT_AFTER - 1]                       # once, at the step of the 20th contact (step 0: 1st)
+    corrections = reference.camera_corrections
+    assert corrections == steps[marked[0]].meta["camera_corrections"] and len(corrections["captures"]) == 3
+    assert all(c["size_mm"] <= 12.0 + 1e-9 for c in corrections["captures"])
+
+    # each view's error at the body's middle, as applied and once corrected (1.5-2.5 cm -> a few mm)
+    from torch_gpioius.sensors.extrinsics import CaptureCorrection
+    from torch_gpioius.sensors.pointcloud import AppliedCameraError
+
+    middle = scene.inner.bounds.mean(axis=0)
+    for (name, applied), fix in zip(scene.camera_errors().items(), corrections["captures"]):
+        error = AppliedCameraError(tuple(np.asarray(applied["translation_mm"]) / 1e3),
+                                   tuple(np.radians(applied["rotation_deg"])))
+        seen = error.apply(middle[None], fix["origin"])
+        left = np.linalg.norm(CaptureCorrection.from_record(fix).apply(seen)[0] - middle)
+        assert left < 0.5 * np.linalg.norm(seen[0] - middle), name
+    last = run.states[run.steps[-1]]
+    np.testing.assert_array_equal(last.x, reference.model.train_inputs[0].numpy())
+    np.testing.assert_array_equal(last.y, reference.model.train_targets.numpy())
+    for cut in (marked[0] - 3, marked[0] + 2):
+        _resumes_alike(scene, log, cut, reference, kw)

@@ -529,3 +529,59 @@ def test_free_rows_alone_and_a_mesh_given_as_a_cloud_are_said_for_what_they_are(
     trimesh.creation.icosphere(2, 0.07).apply_translation([0.5, 0.0, 0.2]).export(tmp_path / "mesh.ply")
     with pytest.warns(UserWarning, match=r"mesh.ply: holds a mesh \(320 faces\), not a point cloud: its 162 vertices"):
         assert len(load_point_cloud(tmp_path / "mesh.ply")) == 162
+
+
+def _box_files(folder, error: str):
+    """A 10 x 8 x 12 cm box under a cover 8 mm off, its contacts (with normals) in a CSV and three captures of the
+    cover by cameras whose calibration is off by ``error``; returns the CSV, the clouds, their origins and the
+    cover's mesh."""
+    from torch_gpioius.sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
+
+    centre = np.array([0.5, 0.0, 0.2])
+    inner = trimesh.creation.box((0.10, 0.08, 0.12))
+    inner.apply_translation(centre)
+    outer = trimesh.creation.box((0.116, 0.096, 0.136))
+    outer.apply_translation(centre)
+    points, face = trimesh.sample.sample_surface(inner, 400, seed=1)
+    up = inner.face_normals[face][:, 2] > -0.5
+    rows = [f"{x:.6f},{y:.6f},{z:.6f},contact,{a:.4f},{b:.4f},{c:.4f}"
+            for (x, y, z), (a, b, c) in zip(points[up][:120], inner.face_normals[face][up][:120])]
+    csv = folder / "touch.csv"
+    csv.write_text("x,y,z,label,nx,ny,nz\n" + "\n".join(rows) + "\n")
+    eyes = [centre + [-0.6, -0.8, 0.5], centre + [-0.6, 0.8, 0.5], centre + [-0.4, 0.0, 0.8]]
+    clouds = []
+    for k, eye in enumerate(eyes):
+        cam = SimulatedDepthCamera(outer, PinholeCamera.kinect_v2(0.5), look_at(eye, centre), noise_a=0.0015,
+                                   noise_b=0.0015, seed=[0, k], error=error)
+        clouds.append(folder / f"view{k}.ply")
+        trimesh.PointCloud(cam.capture().points).export(clouds[-1])
+    return csv, clouds, eyes, outer
+
+
+def test_captures_of_a_miscalibrated_camera_are_corrected_from_the_contacts_and_said(tmp_path):
+    """Issue 63, item 2: `camera_bound` moves each capture onto the contacts (the seen cover's points fall from
+    6-12 mm off the true cover to about the depth noise), records each correction, and warns of the large ones by
+    file; without it the captures are used as given."""
+    csv, clouds, eyes, outer = _box_files(tmp_path, "6mm,1deg")
+    with pytest.warns(UserWarning, match="calibration is off by millimetres does this too"):
+        as_given = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0)   # the dropped inside points' hint
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fixed = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0, camera_bound="12mm,2deg")
+    assert "camera_corrections" not in as_given.meta
+    record = fixed.meta["camera_corrections"]
+    assert len(record["captures"]) == 3 and record["misfit_after_mm"] < record["misfit_before_mm"]
+    assert all(c["contacts"] >= 20 for c in record["captures"])
+
+    def off_the_cover(ds):
+        seen = ds.x[(ds.task == 1) & (ds.y == 0)]
+        return float(np.median(np.abs(trimesh.proximity.signed_distance(outer, seen[::10]))))
+
+    assert off_the_cover(as_given) > 0.005 and off_the_cover(fixed) < 0.0025
+    said = [str(w.message) for w in caught if "check the camera's calibration" in str(w.message)]
+    assert said and all(any(str(c) in line for c in clouds) for line in said)
+    for bad, match in (("6mm", "give both a translation and a rotation"), ("6", "not a size with a unit")):
+        with pytest.raises(DatasetError, match=match):
+            dataset_from_files(csv, clouds, camera_origin=eyes, camera_bound=bad)
+    with pytest.raises(DatasetError, match="give each cloud its camera origin"):
+        dataset_from_files(csv, clouds, camera_bound="6mm,1deg")

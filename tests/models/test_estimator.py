@@ -61,6 +61,9 @@ def test_a_partial_dict_changes_its_keys_on_the_preset_and_is_named_custom():
     ({"preset": "default", "lengthscale": -0.1}, "lengthscale"),
     ({"lengthscale": 0.1}, "give the kernel"),
     ("default", "expected a table of settings"),
+    ({"preset": "default", "labels": {"camera_bound": [0.2, 0.01]}}, r"camera_bound: must be \(translation in"),
+    ({"preset": "default", "labels": {"camera_bound": [0.01]}}, "camera_bound"),
+    ({"preset": "default", "labels": {"camera_bound": [0.01, True]}}, "camera_bound"),
 ])
 def test_bad_settings_are_refused_by_name(data, match):
     with pytest.raises(ValueError, match=match):
@@ -126,3 +129,10 @@ def test_make_model_gives_gpiois_on_both_tasks_gpis_on_touch_alone_each_with_its
     assert both.kernel is not settings.kernel and both.noise == pytest.approx(settings.noise)
     both.kernel.length = 0.3
     assert settings.lengthscale == pytest.approx(0.1)
+
+
+def test_a_camera_bound_survives_its_dict_through_json():
+    """Issue 63, item 2: ``ObservationPolicy.camera_bound`` (a pair, a list once through JSON) reads back equal."""
+    settings = EstimatorSettings.preset("default").replace(labels={"camera_bound": (0.012, 0.035)})
+    again = EstimatorSettings.from_dict(json.loads(json.dumps(settings.to_dict())))
+    assert again == settings and again.labels.camera_bound == (0.012, 0.035)

@@ -331,6 +331,20 @@ def test_a_camera_error_is_a_study_setting_each_run_records_as_applied(tmp_path)
     with pytest.raises(FileExistsError, match="camera_error"):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "off", smoke=True,
                   backend="local", progress=False, camera_error="3mm,0.5deg", views=["fixed", "wrist"])
+    # --camera-bound reaches each run's policy (its log's header) and its record; a folder holds one
+    run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "fix", smoke=True,
+              backend="local", progress=False, camera_error="6mm,1deg", camera_bound="12mm,2deg")
+    run = json.loads((tmp_path / "fix" / "runs" / "ball_visual-tactile_0.json").read_text())
+    assert run["camera_bound"] == "12mm,2deg"
+    from torch_gpioius.io.runs import load_run
+
+    header = load_run(tmp_path / "fix" / "logs" / "ball_visual-tactile_0.gpioius").meta
+    assert header["policy"]["camera_bound"] == [0.012, pytest.approx(math.radians(2))]
+    with pytest.raises(FileExistsError, match="camera_bound"):
+        run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "fix", smoke=True,
+                  backend="local", progress=False, camera_error="6mm,1deg")
+    with pytest.raises(ValueError, match="give both a translation and a rotation"):
+        run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", camera_bound="6mm")
     for world, kw, match in (("planar", {}, "planar world's cameras take no"),
                              ("forcefield", {"scenes": [ball]}, "not a size with a unit")):
         with pytest.raises(ValueError, match=match):

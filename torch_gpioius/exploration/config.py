@@ -196,10 +196,11 @@ class ExploreConfig(EstimatorView):
         return model.to_device(self.device)
 
     def _policy_record(self) -> dict:
-        """The observation policy for the header; the inside-point settings, ``cover_offset`` and
-        ``vision_inside_deep`` only when set, so that logs written before they existed still resume."""
+        """The observation policy for the header; the inside-point settings, ``cover_offset``,
+        ``vision_inside_deep`` and ``camera_bound`` only when set, so that logs written before they existed still
+        resume."""
         out = dataclasses.asdict(self.policy)
-        for key in ("touch_inside", "vision_inside", "vision_inside_gap"):
+        for key in ("touch_inside", "vision_inside", "vision_inside_gap", "camera_bound"):
             if out[key] is None:
                 del out[key]
         for key in ("cover_offset", "vision_inside_deep"):  # (since 2026-11-27 and 2026-11-29)

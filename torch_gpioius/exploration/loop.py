@@ -24,6 +24,7 @@ from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
+from .calibration import capture_views, correct_camera, vision_crop
 from .observations import (Observations, deepen_vision_inside, drop_contradicted_inside, offset_outer_mean,
                            retract_free_space, retract_vision_inside, thin_points, vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
@@ -107,6 +108,7 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     state.normal = touch.force_normal
     t1 = time.perf_counter()
     record = StepRecord(step=state.steps, travel=0.0, touch=touch)
+    uncorrected = state.camera_corrections is None
     record.observations, record.removed = ingest(state, cfg, touch)
     toucher = _TimedToucher(hw.controller)          # the step's time leaves out the motion of evidence actions
     if cfg.evidence is not None and cfg.evidence.due(state):
@@ -115,6 +117,8 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
         if evidence is not None:
             record.evidence.append(ingest_evidence(state, cfg, evidence))
     stalled = unstall(ctx, state, record, toucher)
+    if uncorrected and state.camera_corrections is not None:      # this step corrected the camera's captures
+        record.camera_corrections = state.camera_corrections
     _fit(state.model, cfg, state)
     _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1 - toucher.motion)
     stop = stalled or _first(r.check(state) for r in cfg.stop if not r.uses_estimate)
@@ -130,14 +134,13 @@ def begin(ctx: Run) -> ExplorationState:
     """Vision (when the mode uses it), the approach to the first contact, the first model and its fit: the state
     with record 0."""
     cfg, hw, world = ctx.config, ctx.hardware, ctx.world
-    outer = None
+    outer = captures = crop = None
     if cfg.uses_vision:
-        crop = world.crop_box()
-        if crop is not None and cfg.policy.crop_margin is not None:
-            crop = crop + np.array([[-cfg.policy.crop_margin], [cfg.policy.crop_margin]])
-        elif cfg.policy.crop_margin is None:
-            crop = None
-        x_out, y_out = vision_observations(hw.camera.capture(), cfg.policy, crop)
+        from ..sensors.pointcloud import PointCloud
+
+        crop = vision_crop(world, cfg.policy)
+        captures = capture_views(hw.camera)          # each view's, merged as the camera's own capture merges them
+        x_out, y_out = vision_observations(PointCloud.merge(captures), cfg.policy, crop)
         outer = Observations(x_out, y_out, np.ones(len(x_out), np.int64), source="vision")
     first = hw.controller.approach(torch.as_tensor(world.direction), max_travel=cfg.approach_travel)
     if not first.in_contact:
@@ -148,7 +151,8 @@ def begin(ctx: Run) -> ExplorationState:
     if outer is not None:
         inner = drop_contradicted_inside(inner, cfg.policy, outer.x, outer.y)
     state = ExplorationState(model=cfg.make_model(inner, outer), contacts=[contact], path=list(first.path.numpy()),
-                             normal=first.force_normal)
+                             normal=first.force_normal, crop=crop,
+                             captures=captures if cfg.policy.camera_bound is not None else None)
     t0 = time.perf_counter()
     state.model.fit()
     record = StepRecord(step=0, travel=0.0, touch=first, final=cfg.max_steps == 0,
@@ -236,12 +240,25 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
         removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
     offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     deep = deepen_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
+    corrected = None
+    if state.camera_corrections is None and state.captures is not None:
+        kept = int(state.model.train_targets.shape[0])
+        gone, corrected, state.camera_corrections = correct_camera(state.model, state.captures,
+                                                                    np.asarray(state.contacts), cfg.policy,
+                                                                    state.crop)
+        if corrected is not None:        # the camera's rows replaced by the corrected captures' (once per run)
+            state.captures = None
+            deep = None                  # continued from the rows just replaced: done from the new ones next step
+            left = np.delete(np.arange(before), removed)[:kept]          # the data before this step still there
+            removed = np.sort(np.concatenate([removed, left[gone]]))
     obs = cfg.touch.select(state.model, obs)
     if (obs.y < 0).any():                # the model's data leave the device only when there is something to check
         obs = drop_contradicted_inside(obs, cfg.policy, state.model.train_inputs[0].cpu().numpy(),
                                        state.model.train_targets.cpu().numpy())
     if deep is not None:                 # the camera's inside points continued down to the gap, in this step's batch
         obs = Observations.concat([obs, deep])                       # the step and source of the touch
+    if corrected is not None:
+        obs = Observations.concat([obs, corrected])
     _add(state.model, obs)
     return removed, obs
 

@@ -103,6 +103,7 @@ class StepRecord:
     length: float = math.nan
     noise: float = math.nan
     final: bool = False
+    camera_corrections: dict | None = None
     observations: Observations | None = None
     removed: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     touch: object = None
@@ -133,6 +134,10 @@ class ExplorationState:
         records: one :class:`StepRecord` per step, record 0 first.
         gap_check: the cover's gap as the contacts show it (:class:`CoverGap`), kept from step to step so that each
             contact's distance is computed once; rebuilt on resume, to the same values.
+        captures: each camera view's capture as first taken (kept only with ``ObservationPolicy.camera_bound``,
+            until it is used); crop: the box the camera's cloud is cropped to.
+        camera_corrections: what each view was moved by once the contacts corrected the captures
+            (:func:`~torch_gpioius.exploration.calibration.correct_camera`), or None before.
     """
 
     model: object
@@ -156,6 +161,9 @@ class ExplorationState:
     surface: object = None
     records: list = field(default_factory=list)
     gap_check: CoverGap = field(default_factory=CoverGap, repr=False, compare=False)
+    captures: list | None = field(default=None, repr=False, compare=False)
+    crop: np.ndarray | None = field(default=None, repr=False, compare=False)
+    camera_corrections: dict | None = None
 
     @property
     def contact(self) -> np.ndarray:

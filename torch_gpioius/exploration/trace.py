@@ -61,6 +61,8 @@ class Trace:
         noise: `(n,)` sigma^2 in use.
         time_split: where the run's wall time went [s]: ``{"method", "camera", "contact", "measuring", "total"}``
             (:class:`torch_gpioius.exploration.timing.PartClock`; a resumed run's: since it resumed).
+        camera_corrections: what each camera view was moved by when the contacts corrected the captures
+            (``ObservationPolicy.camera_bound``), or None.
     """
 
     mode: str
@@ -98,6 +100,7 @@ class Trace:
     reapproach_travel: np.ndarray = field(default_factory=lambda: np.zeros(0))
     shape: dict = field(default_factory=dict)
     time_split: dict = field(default_factory=dict)
+    camera_corrections: dict | None = None
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":
@@ -129,7 +132,8 @@ class Trace:
                    fit_gap=col("fit_gap"), length=col("length"), noise=col("noise"), estimate=col("estimate"),
                    reapproaches=np.array([r.reapproaches for r in recs], dtype=np.int64),
                    reapproach_travel=col("reapproach_travel"),
-                   shape={name: col(name) for name in SHAPE_METRICS})
+                   shape={name: col(name) for name in SHAPE_METRICS},
+                   camera_corrections=state.camera_corrections)
 
     @property
     def n_steps(self) -> int:

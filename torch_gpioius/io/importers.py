@@ -455,7 +455,8 @@ def _direction(row: dict, columns: tuple, label: float, path: Path, line: int) -
 
 def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, units: str = "m", voxel="auto",
                        settings="default", noise: float | None = None,
-                       source: str = "import", camera_origin=None, contact_spacing: float | None = None) -> Dataset:
+                       source: str = "import", camera_origin=None, contact_spacing: float | None = None,
+                       camera_bound=None) -> Dataset:
     """A user's contacts (inner, task 0) and camera captures (outer, task 1, step 0) labelled as an exploration with
     the same estimator settings labels them, in one Dataset.
 
@@ -486,10 +487,18 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             closer than this [m] (in metres, whatever ``units``), keeping the first in the file's order; None keeps
             every row. An exact fit's memory grows with the square and its time with the cube of the observations: a
             thousand contacts 3 mm apart under a 4 cm kernel say little more than a few hundred 5 mm apart.
+        camera_bound: the largest error each capture's pose (its camera's calibration) may have, a
+            :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text (``"6mm,1deg"``): each capture with
+            a camera origin is moved rigidly about it to agree with the contacts and the other captures
+            (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, the contacts' directions where the file
+            gives them), within that bound, before it is labelled; a correction beyond half the bound is warned of.
+            None: the captures as given.
 
     Returns:
-        A :class:`Dataset` whose ``meta["estimator"]`` holds the settings used (the voxel resolved), and
-        ``meta["cover_gap"]`` the gap the contacts show under the seen cover [m] (NaN with too few contacts).
+        A :class:`Dataset` whose ``meta["estimator"]`` holds the settings used (the voxel resolved),
+        ``meta["cover_gap"]`` the gap the contacts show under the seen cover [m] (NaN with too few contacts), and
+        with ``camera_bound`` ``meta["camera_corrections"]`` (each capture's correction, what fixed it, the
+        contacts' misfit before and after).
 
     Raises:
         DatasetError: an unreadable file, units that cannot be metres, a 3-D cloud with 2-D contacts, a bad
@@ -531,6 +540,10 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         est = _resolved_voxel(est, voxel, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
     else:                                           # contacts alone: the length from their extent
         est = _sized(est, float(np.max(x_in.max(axis=0) - x_in.min(axis=0))))
+    corrections = None
+    if camera_bound is not None and captures:
+        captures, corrections = _corrected(contacts_csv, files, captures, x_in, y_in, normal_in, camera_bound)
+        everything = np.concatenate([c.points for c in captures])
     outer = np.zeros((0, dim)), np.zeros(0)
     if captures:
         from ..sensors.pointcloud import PointCloud
@@ -561,7 +574,9 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
                       "The contacts' directions point out of the body by the data's own account, so either the body "
                       f"is thinner than the inside points' depth ({depth * 100:.3g} cm) where they were dropped (a "
                       "neck, a handle, a wall: they came out on its far side, and dropping them was right), or the "
-                      "files are not in one frame", UserWarning, stacklevel=2)
+                      "files are not in one frame (a camera whose calibration is off by millimetres does this too: "
+                      "camera_bound, gpioius fit --camera-bound, corrects each capture from the contacts)",
+                      UserWarning, stacklevel=2)
     inner, inner_steps = inner.subset(keep), inner_steps[keep]
     gap = math.nan
     if captures and est.labels.vision_inside_gap is not None:
@@ -585,7 +600,41 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
 
     if camera_origin is not None:
         meta["camera_origin"] = [metres(o) for o in origins] if several else metres(camera_origin)
+    if corrections is not None:
+        meta["camera_corrections"] = corrections.as_record()
     return Dataset(x, y, task, steps, meta=meta)
+
+
+def _corrected(contacts_csv, files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: np.ndarray, bound):
+    """The captures corrected from the contacts within ``bound`` (:func:`dataset_from_files`'s ``camera_bound``), and
+    the :class:`~torch_gpioius.sensors.extrinsics.CaptureCorrections`; a large correction is warned of by file."""
+    import warnings
+
+    from ..sensors.extrinsics import correct_captures
+    from ..sensors.pointcloud import CameraError, PointCloud
+
+    try:
+        bound = CameraError.parse(bound)
+    except ValueError as exc:
+        raise DatasetError(f"camera_bound: {exc}") from None
+    if not bound.translation or not bound.rotation:
+        raise DatasetError(f"camera_bound: give both a translation and a rotation (e.g. \"6mm,1deg\"), got {bound}")
+    if x_in.shape[1] != 3:
+        raise DatasetError("camera_bound: corrects the captures of a 3-D scene; these contacts are 2-D")
+    if any(c.origin is None for c in captures):
+        raise DatasetError("camera_bound: a capture's pose is corrected about its camera: give each cloud its "
+                           "camera origin (--camera-origin)")
+    contact = y_in == 0
+    # the directions the file gives (normals or forces, turned outward): a contact is paired with a capture's
+    # surface facing its way; without any, every contact and no facing test
+    normal = _outward(contacts_csv, x_in, y_in, normal_in, np.concatenate([c.points for c in captures]))
+    given = contact & np.isfinite(normal).all(axis=1)
+    use, directions = (given, normal[given]) if given.any() else (contact, None)
+    found = correct_captures(captures, x_in[use], directions, max_translation=bound.translation,
+                             max_rotation=bound.rotation)
+    for line in found.warnings([str(f) for f in files]):
+        warnings.warn(line, UserWarning, stacklevel=3)
+    return [PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)], found
 
 
 def _capture(path, origin, units: str, dim: int):

@@ -17,6 +17,7 @@ import warnings
 import numpy as np
 import torch
 
+from ..exploration.calibration import capture_views, vision_crop
 from ..exploration.protocols import Recorder
 from ..metrics import SHAPE_METRICS
 from ..exploration.state import ExplorationState, StepRecord
@@ -144,6 +145,8 @@ class LogRecorder(Recorder):
                 "fit_gap": record.fit_gap, "length": record.length, "noise": record.noise}
         if hasattr(state.model, "outer_mean"):      # the cover's offset (ObservationPolicy.cover_offset)
             meta["outer_mean"] = state.model.outer_mean
+        if record.camera_corrections is not None:  # the step that corrected the camera's captures (camera_bound)
+            meta["camera_corrections"] = record.camera_corrections
         if run.config.learn != "task":  # learned length and noise, raw, so that resume restores them exactly
             meta["hyperparameters"] = state.model.hyperparameter_state()
         fit_state = getattr(state.model, "fit_state", None)
@@ -307,6 +310,13 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         state.reapproach_travel = float(after.meta.get("reapproach_travel", state.reapproach_travel))
         state.contacts[-1] = np.asarray(after.arrays["contact"], dtype=np.float64)
         state.normal = torch.as_tensor(np.asarray(after.arrays["normal"], dtype=np.float64))
+    first = next((i for i, r in enumerate(steps) if isinstance(r.meta.get("camera_corrections"), dict)), None)
+    if first is not None:                        # the step that corrected the camera's captures, and what it did
+        state.camera_corrections = steps[first].meta["camera_corrections"]
+        state.records[first].camera_corrections = state.camera_corrections
+    elif config.policy.camera_bound is not None and config.uses_vision:
+        # not corrected yet: the views captured again (a fresh simulated camera gives the run's first capture)
+        state.captures, state.crop = capture_views(hardware.camera), vision_crop(world, config.policy)
     state.last_evidence = max((int(t.meta["step"]) for t in taps if t.kind == "tap"), default=0)
     state.last_recovery = max((int(t.meta["step"]) for t in taps if t.kind == "recovery"), default=0)
     world.restore(hardware, {k[len("world_"):]: v for k, v in after.arrays.items() if k.startswith("world_")})

@@ -248,6 +248,8 @@ def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mes
             "kernel": model.kernel.describe(), "lengthscale": float(f"{model.lengthscale:.15g}"),
             "noise": float(f"{model.noise:.15g}"), "mll": float(model.log_marginal_likelihood()), "learn": learn,
             "settings": None if used is None else used.to_dict()}
+    if ds.meta.get("camera_corrections") is not None:      # each capture's pose as corrected from the contacts
+        info["camera_corrections"] = ds.meta["camera_corrections"]
     if model.hyper_result is not None:
         r = model.hyper_result
         info["learned"] = {"length": r.length, "noise": r.noise, "kept": r.kept, "mll_before": r.mll_full_before,

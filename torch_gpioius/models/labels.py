@@ -56,6 +56,11 @@ class ObservationPolicy:
             (:func:`~torch_gpioius.exploration.observations.deepen_vision_inside`): the outer field a signed distance
             down to the level the offset mean reads (docs/method-notes.md section 16). False (the default): as
             without it.
+        camera_bound: ``(translation [m], rotation [rad])``, the largest error the camera's calibration may have:
+            once the contacts are many enough, each view's capture is moved rigidly about its camera to agree with
+            them and with the other views, within that bound, and the camera's observations are labelled again
+            from the corrected captures (:func:`~torch_gpioius.exploration.calibration.correct_camera`); None (the
+            default): the captures as the calibration places them.
     """
 
     vision_free_offset: float | None = 0.05
@@ -69,8 +74,18 @@ class ObservationPolicy:
     vision_inside_gap: float | None = None
     cover_offset: bool = False
     vision_inside_deep: bool = False
+    camera_bound: tuple | None = None
 
     def __post_init__(self) -> None:
+        if self.camera_bound is not None:
+            bound = self.camera_bound
+            ok = (isinstance(bound, (tuple, list)) and len(bound) == 2 and all(
+                not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) for v in bound)
+                and 0 < bound[0] <= 0.1 and 0 < bound[1] <= math.radians(20))
+            if not ok:
+                raise ValueError("ObservationPolicy.camera_bound: must be (translation in (0, 0.1] m, rotation in (0, "
+                                 f"{math.radians(20):.3g}] rad) or None, got {bound!r}")
+            object.__setattr__(self, "camera_bound", (float(bound[0]), float(bound[1])))
         for name in ("cover_offset", "vision_inside_deep"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ObservationPolicy.{name}: must be True or False, got {getattr(self, name)!r}")

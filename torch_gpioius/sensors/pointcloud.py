@@ -473,13 +473,15 @@ class SimulatedDepthCamera(PointCloudSource):
             "triangle" (trimesh's pure-Python engine; slow, no extra needed).
         error: a :class:`CameraError` (or its text, ``"6mm,1deg"``): every capture is moved by the rigid error drawn
             from ``seed`` (:attr:`applied_error`), its reported origin left where the pose says; None: none.
+        error_key: integers drawn with ``seed`` for the error alone (a scene's name, so that two objects' runs of
+            one seed are not off in the same direction); kept by :meth:`reseeded`.
     """
 
     ENGINES = ("auto", "embree", "triangle")
 
     def __init__(self, mesh: trimesh.Trimesh, intrinsics: PinholeCamera, T_base_camera, *,
                  noise_a: float = 0.0, noise_b: float = 0.0, dropout: float = 0.0, seed: int = 0,
-                 engine: str = "auto", error: "CameraError | str | None" = None) -> None:
+                 engine: str = "auto", error: "CameraError | str | None" = None, error_key=()) -> None:
         T = np.asarray(T_base_camera, dtype=np.float64)
         if T.shape != (4, 4) or not np.isfinite(T).all() or not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3),
                                                                           atol=1e-6):
@@ -493,8 +495,9 @@ class SimulatedDepthCamera(PointCloudSource):
         self.noise_a, self.noise_b, self.dropout = float(noise_a), float(noise_b), float(dropout)
         self._rng = np.random.default_rng(seed)
         self.error = CameraError() if error is None else CameraError.parse(error)
+        self.error_key = tuple(int(k) for k in np.atleast_1d(error_key))
         #: The rigid error this camera's captures carry (:meth:`CameraError.draw` of its seed), or None.
-        self.applied_error = self.error.draw(seed) if self.error else None
+        self.applied_error = self.error.draw([*np.atleast_1d(seed).tolist(), *self.error_key]) if self.error else None
 
     @property
     def origin(self) -> np.ndarray:
@@ -506,7 +509,7 @@ class SimulatedDepthCamera(PointCloudSource):
         ints)."""
         return SimulatedDepthCamera(self.mesh, self.intrinsics, self.T_base_camera, noise_a=self.noise_a,
                                     noise_b=self.noise_b, dropout=self.dropout, seed=seed, engine=self.engine,
-                                    error=self.error)
+                                    error=self.error, error_key=self.error_key)
 
     def depth_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free first hits: `(k, 3)` points in the camera frame and `(k,)` their pixel indices."""

@@ -702,7 +702,8 @@ class Scene3D(RangedScene):
         eye = target - distance * self.direction
         up = (0.0, 0.0, 1.0) if abs(self.direction[2]) < 0.9 else (1.0, 0.0, 0.0)
         return SimulatedDepthCamera(self.outer, PinholeCamera.realsense_d405(0.25), look_at(eye, target, up),
-                                    noise_a=0.0005, noise_b=0.002, seed=seed, error=self.camera_error)
+                                    noise_a=0.0005, noise_b=0.002, seed=seed, error=self.camera_error,
+                                    error_key=self._error_key())
 
     def hardware(self) -> Hardware:
         from ..contact import ContactConfig, ContactController
@@ -797,6 +798,13 @@ class Scene3D(RangedScene):
                              "(SimulatedDepthCamera(error=))")
         return self._copy(camera_error=error)
 
+    def _error_key(self) -> tuple:
+        """What a camera error is drawn with besides the view's seed: the scene's name (two objects' runs of one seed
+        are off in their own directions)."""
+        import zlib
+
+        return (zlib.crc32(self.name.encode()) % 2 ** 31,)
+
     def camera_errors(self) -> dict[str, dict]:
         """The extrinsic error each simulated view of this scene (its seed) applies, by view name
         (:meth:`~torch_gpioius.sensors.pointcloud.AppliedCameraError.as_record`); empty without one."""
@@ -883,7 +891,7 @@ class Scene3D(RangedScene):
         eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
         return SimulatedDepthCamera(self.outer, PinholeCamera.kinect_v2(scale), look_at(eye, target),
                                     noise_a=0.0015, noise_b=0.0015, seed=self.seed if seed is None else seed,
-                                    error=self.camera_error)
+                                    error=self.camera_error, error_key=self._error_key())
 
     def true_distance(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` exact signed distance of `(n, 3)` points from the inner mesh [m] (negative inside)."""

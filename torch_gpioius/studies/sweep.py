@@ -61,7 +61,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
               device: str | None = None, settings: str | None = None, learn: str | None = None,
               views=None, kernel=None, noise: float | None = None, cover: str | None = None,
-              metrics_every=None, camera_error=None) -> dict:
+              metrics_every=None, camera_error=None, camera_bound=None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -123,6 +123,10 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text ("6mm,1deg"): each view of each run
             draws a rigid error of those sizes from its seed, and the run's record says what it applied
             (``camera_error``); None: none. The force-field world; one per folder.
+        camera_bound: the visual-tactile runs correct each view's capture from their contacts within this bound (a
+            :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text, "12mm,2deg";
+            ``ObservationPolicy.camera_bound``; each record's ``camera_corrections`` says what each view was moved by);
+            None: the captures as the calibration places them. One per folder.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -137,7 +141,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
         settings=settings, learn=learn, views=views, kernel=kernel, noise=noise, cover=cover,
-        metrics_every=metrics_every, camera_error=camera_error)
+        metrics_every=metrics_every, camera_error=camera_error, camera_bound=camera_bound)
     return _run(sweep)
 
 
@@ -172,6 +176,7 @@ def _claim(sweep: SweepSettings) -> Path:
     identity = {"outer_tol": sweep.outer_tol, "settings": sweep.settings, "learn": sweep.learn,
                 "views": None if sweep.views is None else "+".join(sweep.views), "noise": sweep.noise,
                 "cover": sweep.cover, "metrics_every": sweep.metrics_every, "camera_error": sweep.camera_error,
+                "camera_bound": sweep.camera_bound,
                 # a folder's kernel as the command line names it (the earlier folders' keys)
                 "kernel": sweep.kernel.name if sweep.kernel else None,
                 "theta": sweep.kernel.lengthscale if sweep.kernel else None}

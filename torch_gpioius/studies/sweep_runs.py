@@ -87,6 +87,7 @@ class RunSpec:
     metrics_every: Any = None       # k steps or "schedule" (explore(metrics_every=)); None: every 5 steps under a
     #                                 travel budget, every step elsewhere
     camera_error: str | None = None  # the simulated cameras' extrinsic error ("6mm,1deg"; Scene3D.with_camera_error)
+    camera_bound: str | None = None  # the captures corrected from the contacts within it (policy.camera_bound)
 
     @property
     def key(self) -> str:
@@ -169,6 +170,14 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["interval_every"] = 1000 if spec.smoke else 10
     if spec.voxel is not None:
         kw["policy"] = world.defaults.policy.with_voxel(spec.voxel)
+    if spec.camera_bound is not None:    # the captures corrected from the contacts within this bound
+        import dataclasses
+
+        from ..sensors.pointcloud import CameraError
+
+        bound = CameraError.parse(spec.camera_bound)
+        kw["policy"] = dataclasses.replace(kw.get("policy", world.defaults.policy),
+                                           camera_bound=(bound.translation, bound.rotation))
     if spec.touch != "point":
         kw["touch"] = spec.touch
     if spec.outer_tol is not None and kw["mode"] == "visual-tactile" and "regions" not in kw:
@@ -369,6 +378,10 @@ def run_one(spec: RunSpec) -> dict:
         record["views"] = "+".join(world.views)
     if getattr(world, "camera_error", None):          # the simulated calibration error each view applied
         record["camera_error"] = {"asked": str(world.camera_error), "views": world.camera_errors()}
+    if spec.camera_bound is not None:
+        record["camera_bound"] = spec.camera_bound
+    if trace is not None and trace.camera_corrections is not None:   # what each view was moved by, and when
+        record["camera_corrections"] = trace.camera_corrections
     if spec.settings is not None:
         record["settings"] = spec.settings
     if spec.scene_hash is not None:

@@ -73,12 +73,13 @@ class SweepSettings:
     cover: str | None = None                            # the set objects' cover
     metrics_every: Any = None                           # k steps or "schedule"; None: the sweep's own
     camera_error: str | None = None                     # the simulated cameras' extrinsic error ("6mm,1deg")
+    camera_bound: str | None = None                     # the captures corrected within it ("12mm,2deg")
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
                 learn=None, views=None, kernel=None, noise=None, cover=None,
-                metrics_every=None, camera_error=None) -> "SweepSettings":
+                metrics_every=None, camera_error=None, camera_bound=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry, world_names
 
@@ -147,6 +148,15 @@ class SweepSettings:
             if not hasattr(entry.cls, "with_camera_error"):
                 raise ValueError(f"camera_error: the {world} world's cameras take no simulated calibration error")
             camera_error = str(error) if error else None
+        if camera_bound is not None:
+            from ..sensors.pointcloud import CameraError
+
+            bound = CameraError.parse(camera_bound)
+            if not bound.translation or not bound.rotation:
+                raise ValueError(f"camera_bound: give both a translation and a rotation (e.g. 12mm,2deg), got {bound}")
+            if not entry.presets or entry.dimension != 3:
+                raise ValueError(f"camera_bound: corrects the captures of the 3-D worlds' cameras, not {world}'s")
+            camera_bound = str(bound)
         if noise is not None:
             from ..tolerances import tol
 
@@ -157,7 +167,7 @@ class SweepSettings:
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
                    kernel, noise, hashes, set_objects, (cover or "tight") if set_objects else None, metrics_every,
-                   camera_error)
+                   camera_error, camera_bound)
 
     def _specs(self, out: Path) -> list[RunSpec]:
         # (name, scene file, identity, set object) of every object: a set's object is identified by its source,
@@ -169,7 +179,7 @@ class SweepSettings:
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
                         scene, self.voxel, self.touch, self.outer_tol, self.device, self.settings, self.learn,
                         self.views, self.kernel, self.noise, identity, obj, self.cover if obj is not None else None,
-                        self.metrics_every, self.camera_error)
+                        self.metrics_every, self.camera_error, self.camera_bound)
                 for o, scene, identity, obj in objects for m in self.modes for s in range(self.seeds)]
 
 

@@ -1,0 +1,89 @@
+"""The camera's captures corrected from the touches during an exploration (``ObservationPolicy.camera_bound``).
+
+A run captures its views once, before the first touch. Once :data:`CORRECT_AFTER` contacts are in, each view's
+capture is moved rigidly about its camera to agree with them and with the other views
+(:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, the contacts' normals the inner estimate's), within the
+bound the policy gives; the camera's observations in the model are replaced by those of the corrected captures,
+labelled as the first ones were. The replacement is an ordinary step batch (the old rows removed, the new ones
+added), so a log replays it and a resumed run continues from it; the step's record says what each view was moved
+by. Once per run.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from ..models.labels import ObservationPolicy
+from ..models.gpiois import OUTER
+from .observations import Observations, vision_observations
+
+__all__ = ["CORRECT_AFTER", "capture_views", "vision_crop", "correct_camera"]
+
+#: Contacts before the captures are corrected: enough, spread over the body, that several lie under each view's seen
+#: cover (a view with none is left to the bound's prior).
+CORRECT_AFTER = 20
+
+
+def capture_views(camera) -> list:
+    """Each view's capture of ``camera`` (a :class:`~torch_gpioius.sensors.pointcloud.MultiViewSource`'s views in
+    order; one capture for a single camera): what ``camera.capture()`` merges."""
+    sources = getattr(camera, "sources", None)
+    return [s.capture() for s in sources] if sources else [camera.capture()]
+
+
+def vision_crop(world, policy: ObservationPolicy) -> np.ndarray | None:
+    """The box `(2, d)` the camera's cloud is cropped to: the world's, grown by ``policy.crop_margin`` (None: no
+    crop)."""
+    crop = world.crop_box()
+    if crop is None or policy.crop_margin is None:
+        return None
+    return crop + np.array([[-policy.crop_margin], [policy.crop_margin]])
+
+
+def _normals(model, x: np.ndarray) -> np.ndarray:
+    """`(n, d)` the inner estimate's unit outward normals at ``x`` (the gradient of its posterior mean, by
+    autograd)."""
+    xt = torch.as_tensor(x, dtype=torch.float64).requires_grad_(True)
+    (g,) = torch.autograd.grad(model.predict_mean(xt, 0).sum(), xt)
+    g = g.detach().cpu().numpy()
+    return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+
+
+def correct_camera(model, captures: list, contacts: np.ndarray, policy: ObservationPolicy,
+                   crop: np.ndarray | None) -> tuple[np.ndarray, Observations | None, dict | None]:
+    """Correct the views' captures from the contacts and replace the model's camera observations by theirs.
+
+    Args:
+        model: the run's GPIOIS (modified: its outer rows removed).
+        captures: each view's :class:`~torch_gpioius.sensors.pointcloud.PointCloud` as first captured, base frame.
+        contacts: `(k, 3)` the contacts so far [m].
+        policy: the run's policy (``camera_bound``, and the labels the new observations get).
+        crop: the box the cloud is cropped to (:func:`vision_crop`).
+
+    Returns:
+        ``(removed, observations, record)``: the indices of the rows removed (into the model's data before the call),
+        the new camera observations (task outer, source "camera-corrected") and the correction's record
+        (:meth:`~torch_gpioius.sensors.extrinsics.CaptureCorrections.as_record`); ``(empty, None, None)`` when
+        nothing is due (no bound, too few contacts, a model without an outer task, a 2-D world).
+    """
+    none = np.zeros(0, dtype=np.int64), None, None
+    if (policy.camera_bound is None or not captures or len(contacts) < CORRECT_AFTER
+            or getattr(model, "num_tasks", 1) < 2 or np.asarray(contacts).shape[1] != 3):
+        return none
+    from ..sensors.extrinsics import correct_captures
+    from ..sensors.pointcloud import PointCloud
+
+    contacts = np.asarray(contacts, dtype=np.float64)
+    if crop is not None:                  # what lies beyond the range (a wall, the table's far end) is not the cover
+        captures = [c.cropped(crop[0], crop[1]) for c in captures]
+    if any(len(c) < 10 for c in captures):
+        return none
+    found = correct_captures(captures, contacts, _normals(model, contacts), max_translation=policy.camera_bound[0],
+                             max_rotation=policy.camera_bound[1])
+    moved = PointCloud.merge([PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)])
+    x, y = vision_observations(moved, policy, crop)
+    outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
+    model.remove_observations(torch.as_tensor(outer))
+    return (np.flatnonzero(outer), Observations(x, y, np.ones(len(y), np.int64), source="camera-corrected"),
+            found.as_record())

@@ -1,0 +1,420 @@
+"""Each camera capture's pose corrected from the touches: a bounded rigid alignment that knows the cover's gap.
+
+A depth camera's calibrated pose is off by a few millimetres and about a degree; a metre away that moves the seen
+cover by 1-2 cm, as much as the gap between a tight cover and the body. The touches say where the body is. Each
+contact lies on the inner surface, each capture's points on the outer one, a gap ``g`` off it along the cover's
+normal; where two captures see the same cover they must agree with each other. :func:`correct_captures` finds, for
+every capture ``k``, the rigid motion about its optical centre ``c_k``
+
+    ``T_k(q) = c_k + R(w_k) (q - c_k) + t_k``
+
+and one gap ``g`` that minimise, over the contacts under each capture's seen cover and the points where two captures
+overlap,
+
+    ``sum_i rho(m_i . (T_k(q_i) - p_i) - g) + sum_j rho(m_j . (T_k(q_j) - T_l(q'_j)))
+    + |t_k|^2 / s_t^2 + |w_k|^2 / s_w^2``
+
+(``p_i`` a contact, ``q_i`` the capture's nearest point and ``m_i`` its normal there, towards the camera; ``rho`` the
+Huber loss), by Gauss-Newton with correspondences found again at each iteration (point-to-plane ICP). The prior's
+scales ``s_t``, ``s_w`` are half the largest error the user says a calibration can have, and no correction goes beyond
+that bound (it is scaled back onto it and said).
+
+Written here rather than taken from a registration library (Open3D's ICP, probreg): those align two clouds; this
+aligns several captures to contacts that lie a gap behind the surface they see, estimates that gap with them, and
+bounds each correction.
+
+What the contacts can tell depends on where they are: contacts on one flat face fix the translation along its normal
+together with the gap, and nothing along the face. The Gauss-Newton curvature says which directions the data fix;
+:attr:`CaptureCorrection.weak` names those left to the prior.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["CaptureCorrection", "CaptureCorrections", "correct_captures"]
+
+#: Huber threshold of the residuals, in their standard deviations: a contact or overlap further off counts linearly
+#: (a wrong correspondence, a fold of the cover, an edge).
+HUBER = 2.0
+#: A contact and a capture's surface (or two captures' surfaces) pair only where their normals agree this well (the
+#: cosine of about 37 degrees).
+FACING = 0.8
+#: A direction of a capture's correction is "weak" when the data's curvature along it is below this share of the
+#: prior's: the prior, not the touches, set it.
+WEAK = 1.0
+
+
+def _skew(v: np.ndarray) -> np.ndarray:
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def _rotation(w: np.ndarray) -> np.ndarray:
+    """`(3, 3)` rotation of the rotation vector ``w`` [rad] (Rodrigues)."""
+    angle = float(np.linalg.norm(w))
+    if angle == 0.0:
+        return np.eye(3)
+    K = _skew(w / angle)
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+
+
+@dataclass(frozen=True)
+class CaptureCorrection:
+    """The rigid correction of one capture (base frame): ``q -> origin + R(rotation) (q - origin) + translation``.
+
+    Attributes:
+        translation: `(3,)` [m].
+        rotation: `(3,)` rotation vector [rad].
+        origin: `(3,)` the optical centre it turns about [m].
+        contacts: the contacts that lay under this capture's seen cover at the end (they fixed it).
+        overlap: the points where it overlaps another capture at the end.
+        at_bound: the correction reached the bound and was scaled back onto it.
+        weak: the directions the data left to the prior ("x", "y", "z" of the translation; "rx", "ry", "rz" of the
+            rotation, base frame).
+    """
+
+    translation: np.ndarray
+    rotation: np.ndarray
+    origin: np.ndarray
+    contacts: int = 0
+    overlap: int = 0
+    at_bound: bool = False
+    weak: tuple = ()
+
+    @classmethod
+    def from_record(cls, record: dict) -> "CaptureCorrection":
+        """The correction :meth:`as_record` wrote (to its rounding: 1 um, 1e-4 degree)."""
+        return cls(np.asarray(record["translation_mm"], dtype=np.float64) / 1e3,
+                   np.radians(np.asarray(record["rotation_deg"], dtype=np.float64)),
+                   np.asarray(record["origin"], dtype=np.float64), int(record.get("contacts", 0)),
+                   int(record.get("overlap", 0)), bool(record.get("at_bound", False)), tuple(record.get("weak", ())))
+
+    @property
+    def size(self) -> float:
+        """|translation| [m]."""
+        return float(np.linalg.norm(self.translation))
+
+    @property
+    def angle(self) -> float:
+        """The rotation's angle [rad]."""
+        return float(np.linalg.norm(self.rotation))
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """`(n, 3)` ``points`` [m] moved by the correction."""
+        p = np.asarray(points, dtype=np.float64)
+        return self.origin + (p - self.origin) @ _rotation(np.asarray(self.rotation)).T + self.translation
+
+    def as_record(self) -> dict:
+        """For records and ``fit.json``: the correction in mm and degrees about ``origin`` [m], its sizes, what fixed
+        it (:meth:`from_record` reads it back)."""
+        return {"translation_mm": (np.asarray(self.translation) * 1e3).round(3).tolist(),
+                "rotation_deg": np.degrees(self.rotation).round(4).tolist(),
+                "origin": np.asarray(self.origin, dtype=np.float64).round(6).tolist(),
+                "size_mm": round(self.size * 1e3, 3), "angle_deg": round(math.degrees(self.angle), 4),
+                "contacts": self.contacts, "overlap": self.overlap, "at_bound": self.at_bound,
+                "weak": list(self.weak)}
+
+
+@dataclass(frozen=True)
+class CaptureCorrections:
+    """What :func:`correct_captures` found.
+
+    Attributes:
+        captures: one :class:`CaptureCorrection` per capture, in order.
+        gap: the cover's gap the contacts show once the captures are corrected [m] (NaN: no contact counted).
+        before: the contacts' root-mean-square misfit under the captures as given [m] (their distance along the
+            cover's normal, less the gap fitted to them as given).
+        after: the same once corrected [m].
+        bound: ``(translation [m], rotation [rad])``, the largest correction allowed.
+    """
+
+    captures: list
+    gap: float
+    before: float
+    after: float
+    bound: tuple = field(default=(0.0, 0.0))
+
+    def as_record(self) -> dict:
+        return {"captures": [c.as_record() for c in self.captures],
+                "gap_mm": None if not math.isfinite(self.gap) else round(self.gap * 1e3, 3),
+                "misfit_before_mm": round(self.before * 1e3, 3), "misfit_after_mm": round(self.after * 1e3, 3),
+                "bound": {"translation_mm": round(self.bound[0] * 1e3, 3),
+                          "rotation_deg": round(math.degrees(self.bound[1]), 4)}}
+
+    def warnings(self, names=None, large: float = 0.5) -> list[str]:
+        """Lines for the user: each capture whose correction is more than ``large`` of the bound, or at it.
+
+        Args:
+            names: a name per capture (file names); default "capture k".
+            large: the share of the bound beyond which a correction is worth a word.
+        """
+        out = []
+        for k, c in enumerate(self.captures):
+            name = names[k] if names is not None else f"capture {k}"
+            share = max(c.size / self.bound[0] if self.bound[0] else 0.0, c.angle / self.bound[1] if self.bound[1]
+                        else 0.0)
+            if c.at_bound or share > large:
+                out.append(f"{name} moved {c.size * 1e3:.1f} mm and {math.degrees(c.angle):.2f} deg to agree with "
+                           f"the touches{' (the most allowed)' if c.at_bound else ''}: check the camera's calibration")
+        return out
+
+
+def _local_planes(points: np.ndarray, origin: np.ndarray, neighbours: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """`(n, 3)` centres and unit normals of the planes through each capture point's nearest neighbours, the normals
+    turned towards the camera (the cover's outside). The centre, not the point: a depth camera's noise (3 mm at a
+    metre) averaged over the patch."""
+    from scipy.spatial import cKDTree
+
+    k = min(neighbours, len(points))
+    _, idx = cKDTree(points).query(points, k=k)
+    centre = points[idx].mean(axis=1)
+    normal = np.linalg.svd(points[idx] - centre[:, None])[2][:, -1]
+    flip = ((origin - centre) * normal).sum(axis=1) < 0
+    normal[flip] *= -1
+    return centre, normal
+
+
+def _huber_weights(r: np.ndarray, delta: float) -> np.ndarray:
+    a = np.abs(r)
+    return np.where(a <= delta, 1.0, delta / np.maximum(a, 1e-300))
+
+
+def _consensus_shift(q: np.ndarray, m: np.ndarray, tree, p: np.ndarray, nrm: np.ndarray | None, far: float,
+                     reach: float, gap: float | None) -> tuple[np.ndarray, float, int, int]:
+    """The translation of one capture (and the gap) that puts the most contacts under its seen cover at the gap: a
+    grid of shifts ``reach`` apart within ``far`` on every axis, each with the gap that counts most (1 mm steps up to
+    ``far``; or ``gap`` when given); ties go to the smaller shift. Gauss-Newton from no shift stops in the first
+    minimum it meets (a face's contacts paired with the next face when the error is larger than the gap); this is
+    its start. Returns the shift `(3,)` [m], its gap [m], its count and the count with no shift."""
+    n = int(math.ceil(far / reach))
+    axis = np.arange(-n, n + 1) * reach
+    shifts = np.stack(np.meshgrid(axis, axis, axis, indexing="ij"), axis=-1).reshape(-1, 3)
+    moved = p[None, :, :] - shifts[:, None, :]               # the contacts against the shifted capture
+    d, j = tree.query(moved.reshape(-1, 3))
+    d, j = d.reshape(len(shifts), len(p)), j.reshape(len(shifts), len(p))
+    off = ((q[j] - moved) * m[j]).sum(axis=2)
+    along = np.sqrt(np.maximum(d ** 2 - off ** 2, 0.0))
+    ok = along <= reach
+    if nrm is not None:
+        ok &= (m[j] * nrm[None]).sum(axis=2) > FACING
+    gaps = np.array([gap]) if gap is not None else np.arange(0.0, far + 1e-12, 0.001)
+    tol = reach / 2
+    counts = ((np.abs(off[:, :, None] - gaps[None, None, :]) <= tol) & ok[:, :, None]).sum(axis=1)   # (shifts, gaps)
+    best = counts.max(axis=1)
+    size = np.linalg.norm(shifts, axis=1)
+    pick = int(np.lexsort((size, -best))[0])
+    none = int(np.argmin(size))
+    return shifts[pick], float(gaps[int(np.argmax(counts[pick]))]), int(best[pick]), int(best[none])
+
+
+def correct_captures(captures, contacts, normals=None, *, max_translation: float, max_rotation: float,
+                     reach: float = 0.006,
+                     overlap_reach: float = 0.01, sample: int = 1500, iterations: int = 25,
+                     gap: float | None = None, seed: int = 0, contact_sigma: float = 0.0025,
+                     overlap_sigma: float = 0.001) -> CaptureCorrections:
+    """Correct each capture's pose from the contacts and the other captures (see the module docstring).
+
+    Args:
+        captures: :class:`~torch_gpioius.sensors.pointcloud.PointCloud` objects with their camera's ``origin`` (a
+            capture without one turns about its points' centre), base frame [m].
+        contacts: `(m, 3)` contacts on the inner surface [m], base frame.
+        normals: `(m, 3)` the body's outward normal at each contact (a fingertip's force direction), or None. With
+            them a contact counts under a capture only where the capture's surface faces the same way (within
+            :data:`FACING`): a contact on a side the camera did not see is otherwise paired with the nearest seen
+            face across an edge.
+        max_translation: the largest translation a calibration can be off by [m] (> 0).
+        max_rotation: the largest rotation [rad] (> 0).
+        reach: a contact counts under a capture where its foot on the plane of the capture's nearest point lies
+            within this [m] of that point (the camera saw the cover right above it, not past its seen edge) and its
+            distance along the plane's normal is within this of the gap; that distance's window starts from what the
+            bound can move the captures by (a degree a metre away: 17 mm) and narrows to this.
+        overlap_reach: two captures overlap where their points lie within this [m].
+        sample: at most this many points of each capture take part (evenly chosen, seeded).
+        iterations: Gauss-Newton iterations, each with its correspondences found again.
+        gap: the cover's gap [m] if known (held); None: estimated with the corrections.
+        seed: the sampling's seed.
+        contact_sigma: a contact's misfit [m] beyond the captures' errors: how far it lies from the body's surface
+            (a fingertip pressed 1-3 mm in), the cover's sag, the estimate's normal there.
+        overlap_sigma: the misfit of two captures' planes where they overlap [m] (each plane's depth noise averaged
+            over its patch).
+
+    Returns:
+        :class:`CaptureCorrections`.
+
+    Raises:
+        ValueError: no captures, bad shapes, non-finite values or a bound that is not positive.
+    """
+    from scipy.spatial import cKDTree
+
+    captures = list(captures)
+    p = np.asarray(contacts, dtype=np.float64).reshape(-1, 3) if np.size(contacts) else np.zeros((0, 3))
+    if not captures:
+        raise ValueError("correct_captures: no captures")
+    if not np.isfinite(p).all():
+        raise ValueError("correct_captures: contacts must be finite (m, 3) points [m]")
+    nrm = None
+    if normals is not None:
+        nrm = np.asarray(normals, dtype=np.float64).reshape(-1, 3) if np.size(normals) else np.zeros((0, 3))
+        length = np.linalg.norm(nrm, axis=1, keepdims=True)
+        if nrm.shape != p.shape or not np.isfinite(nrm).all() or (length == 0).any():
+            raise ValueError(f"correct_captures: normals must be finite non-zero {p.shape} directions, one per "
+                             f"contact, got shape {nrm.shape}")
+        nrm = nrm / length
+    for name, v in (("max_translation", max_translation), ("max_rotation", max_rotation)):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+            raise ValueError(f"correct_captures: {name} must be a positive bound, got {v!r}")
+    rng = np.random.default_rng(seed)
+    pts, origins, normals = [], [], []
+    for k, cap in enumerate(captures):
+        q = np.asarray(cap.points, dtype=np.float64)
+        if q.ndim != 2 or q.shape[1] != 3 or len(q) < 10 or not np.isfinite(q).all():
+            raise ValueError(f"correct_captures: capture {k} needs at least 10 finite (n, 3) points")
+        o = np.asarray(cap.origin, dtype=np.float64) if cap.origin is not None else None
+        if o is not None and o.ndim == 2:           # a merged capture: its first camera's origin
+            o = o[np.isfinite(o).all(axis=1)][0] if np.isfinite(o).all(axis=1).any() else None
+        o = q.mean(axis=0) if o is None else o.reshape(3)
+        q, n = _local_planes(q, o)
+        if len(q) > sample:
+            pick = np.sort(rng.choice(len(q), sample, replace=False))
+            q, n = q[pick], n[pick]
+        pts.append(q)
+        origins.append(o)
+        normals.append(n)
+    K = len(captures)
+    # Each capture moves about its points' middle (the pivot d = pivot - c from its camera): q -> pivot + R (q - pivot)
+    # + u. About the optical centre a metre away, a degree and 17 mm of translation are nearly the same motion at the
+    # object, and Gauss-Newton crawls along that valley; about the object they are separate. The calibration's prior
+    # (t ~ N(0, s_t^2), w ~ N(0, s_w^2) about the optical centre) becomes, with u = t - [d]x w, a 6x6 Gaussian on
+    # (u, w); the answer goes back to the optical centre exactly: t = u + (I - R) d.
+    s_t, s_w = max_translation / 2.0, max_rotation / 2.0
+    pivots = [q.mean(axis=0) for q in pts]
+    prior = np.zeros((6 * K + 1, 6 * K + 1))
+    for k in range(K):
+        D = _skew(pivots[k] - origins[k])
+        cov = np.block([[s_t ** 2 * np.eye(3) + s_w ** 2 * D @ D.T, -s_w ** 2 * D],
+                        [-s_w ** 2 * D.T, s_w ** 2 * np.eye(3)]])
+        prior[6 * k:6 * k + 6, 6 * k:6 * k + 6] = np.linalg.inv(cov)
+    # the gap: a flat prior of 5 cm about none (the contacts fix it; the prior only keeps the system solvable when no
+    # contact lies under any seen cover)
+    prior[-1, -1] = 1.0 / 0.05 ** 2
+    x = np.zeros(6 * K + 1)                        # (u_k, w_k) per capture, then the gap
+    fixed_gap = gap is not None
+
+    def moved(k: int, xv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        R = _rotation(xv[6 * k + 3:6 * k + 6])
+        return pivots[k] + (pts[k] - pivots[k]) @ R.T + xv[6 * k:6 * k + 3], normals[k] @ R.T
+
+    def terms(xv: np.ndarray, reach_now: float = reach):
+        """Rows (jacobian, residual) of the contacts and the overlaps at ``xv``; the counts per capture."""
+        n = 6 * K + 1
+        J, r, counts, overlaps = [np.zeros((0, n))], [np.zeros(0)], [0] * K, [0] * K
+        g = xv[-1]
+        cur = [moved(k, xv) for k in range(K)]
+        for k, (q, m) in enumerate(cur):
+            arm = q - pivots[k] - xv[6 * k:6 * k + 3]                      # R (q0 - pivot): what the rotation turns
+            if len(p):
+                d, j = cKDTree(q).query(p)
+                off = ((q[j] - p) * m[j]).sum(axis=1)                     # along the cover's normal
+                along = np.sqrt(np.maximum(d ** 2 - off ** 2, 0.0))
+                # under the seen cover (its foot near a seen point: never past the seen edge, whatever the error),
+                # at about the gap from it (from what the bound allows down to ``reach``)
+                use = (along <= reach) & (np.abs(off - g) <= reach_now)
+                if nrm is not None:
+                    use &= (m[j] * nrm).sum(axis=1) > FACING
+                jj = j[use]
+                rows = np.zeros((len(jj), n))
+                rows[:, 6 * k:6 * k + 3] = m[jj]
+                rows[:, 6 * k + 3:6 * k + 6] = np.cross(arm[jj], m[jj])
+                rows[:, -1] = -1.0
+                J.append(rows)
+                r.append(off[use] - g)
+                counts[k] = int(use.sum())
+            for other in range(k + 1, K):
+                q2, m2 = cur[other]
+                d, j = cKDTree(q2).query(q, distance_upper_bound=max(overlap_reach, reach_now))
+                hit = np.isfinite(d)
+                hit[hit] = (m[hit] * m2[j[hit]]).sum(axis=1) > FACING
+                i, jj = np.flatnonzero(hit), j[hit]
+                mm = m2[jj]
+                arm2 = q2[jj] - pivots[other] - xv[6 * other:6 * other + 3]
+                rows = np.zeros((len(i), n))
+                rows[:, 6 * k:6 * k + 3] = mm
+                rows[:, 6 * k + 3:6 * k + 6] = np.cross(arm[i], mm)
+                rows[:, 6 * other:6 * other + 3] = -mm
+                rows[:, 6 * other + 3:6 * other + 6] = -np.cross(arm2, mm)
+                J.append(rows)
+                r.append(((q[i] - q2[jj]) * mm).sum(axis=1))
+                overlaps[k] += len(i)
+                overlaps[other] += len(i)
+        return np.concatenate(J), np.concatenate(r), counts, overlaps
+
+    def contact_misfit(xv: np.ndarray) -> tuple[float, float]:
+        """The contacts' rms misfit and their median distance (the gap) under the captures at ``xv``."""
+        J, r, _, _ = terms(xv)
+        rows = J[:, -1] == -1.0
+        if not rows.any():
+            return math.nan, math.nan
+        off = r[rows] + xv[-1]
+        g = xv[-1] if fixed_gap else float(np.median(off))
+        return float(np.sqrt(np.mean((off - g) ** 2))), g
+
+    if fixed_gap:
+        x[-1] = float(gap)
+    before, g0 = contact_misfit(x)
+    x[-1] = float(gap) if fixed_gap else (g0 if math.isfinite(g0) else 0.0)
+    H = prior.copy()
+    # how far the bound can move a capture at the object: an error of 6 mm and a degree moves the seen cover 1-2.5 cm,
+    # beyond a tight cover's gap
+    far = max(reach, max_translation + max_rotation * max(np.linalg.norm(pv - o) for pv, o in zip(pivots, origins)))
+    if len(p):
+        starts = [_consensus_shift(pts[k], normals[k], cKDTree(pts[k]), p, nrm, far, reach,
+                                   float(gap) if fixed_gap else None) for k in range(K)]
+        gaps, weights = [], []
+        for k, (shift, g_k, count, count0) in enumerate(starts):
+            if count >= 5 and count > count0 + 2:        # clearly more contacts under the cover than as given
+                x[6 * k:6 * k + 3] = shift
+                gaps.append(g_k)
+                weights.append(count)
+        if gaps and not fixed_gap:
+            x[-1] = float(np.average(gaps, weights=weights))
+        if gaps:
+            far = 2 * reach                              # the search put every capture within a cell or two
+    for it in range(iterations):
+        reach_now = reach + (far - reach) * max(0.0, 1.0 - it / max(1.0, iterations / 2))
+        J, r, _, _ = terms(x, reach_now)
+        if not len(r):
+            break
+        sigma = np.where(J[:, -1] == -1.0, contact_sigma, overlap_sigma)
+        w = _huber_weights(r / sigma, HUBER) / sigma ** 2
+        H = (J * w[:, None]).T @ J + prior
+        b = (J * w[:, None]).T @ r + prior @ x
+        if fixed_gap:
+            H[-1, :], H[:, -1], H[-1, -1], b[-1] = 0.0, 0.0, 1.0, 0.0
+        step = np.linalg.solve(H, -b)
+        x = x + step
+        if reach_now == reach and np.abs(step[:-1]).max() < 1e-7:
+            break
+    out = []
+    _, _, counts, overlaps = terms(x)
+    for k in range(K):
+        u, w = x[6 * k:6 * k + 3], x[6 * k + 3:6 * k + 6].copy()
+        t = u + (np.eye(3) - _rotation(w)) @ (pivots[k] - origins[k])
+        # each capture kept within its bound: scaled back onto it where the solution went beyond
+        over = max(np.linalg.norm(t) / max_translation, np.linalg.norm(w) / max_rotation)
+        if over > 1.0:
+            t, w = t / over, w / over
+        # what the data fixed: the directions of (u, w) along which their curvature is below the prior's
+        block = slice(6 * k, 6 * k + 6)
+        data = H[block, block] - prior[block, block]
+        vals, vecs = np.linalg.eigh(np.linalg.solve(prior[block, block], data))
+        weak = tuple(sorted({("x", "y", "z", "rx", "ry", "rz")[int(np.argmax(np.abs(v)))]
+                             for lam, v in zip(vals, vecs.T) if lam < WEAK}))
+        out.append(CaptureCorrection(t, w, origins[k].copy(), counts[k], overlaps[k], bool(over > 1.0), weak))
+    fixed_x = np.concatenate([np.r_[c.translation - (np.eye(3) - _rotation(c.rotation)) @ (pivots[k] - origins[k]),
+                                    c.rotation] for k, c in enumerate(out)] + [x[-1:]])
+    after, g1 = contact_misfit(fixed_x)
+    return CaptureCorrections(out, float(x[-1]) if fixed_gap else g1, before, after,
+                              (float(max_translation), float(max_rotation)))
