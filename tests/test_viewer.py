@@ -458,3 +458,18 @@ def test_a_taken_port_is_named_with_the_one_served(log_2d, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert f"port {port} is taken; serving on port " in err
     assert viewer_mod.port_note(0, 51234) is None and viewer_mod.port_note(8080, 8080) is None
+
+
+def test_the_viewer_says_what_the_touches_moved_each_camera_capture_by():
+    """Issue 63, item 2: from the step that corrected the captures on (a log), or for a whole dataset (a fit on files),
+    the info panel names each capture's correction and the contacts' misfit; a run without one says nothing of it."""
+    from types import SimpleNamespace
+
+    fix = {"captures": [{"size_mm": 6.0, "angle_deg": 1.25}, {"size_mm": 5.3, "angle_deg": 0.69}],
+           "misfit_before_mm": 3.0, "misfit_after_mm": 0.84}
+    log = SimpleNamespace(meta={}, steps=[0, 1, 2, 3], params={2: {"camera_corrections": fix}})
+    assert RunViewer._camera_corrections(log, 1) == ""
+    line = RunViewer._camera_corrections(log, 3)
+    assert "corrected from the touches at step 2: 6.0 mm 1.25 deg, 5.3 mm 0.69 deg" in line and "3.0 -> 0.8 mm" in line
+    files = SimpleNamespace(meta={"camera_corrections": fix}, steps=[0], params={})
+    assert "corrected from the touches: 6.0 mm" in RunViewer._camera_corrections(files, 0)

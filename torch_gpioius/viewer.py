@@ -680,7 +680,7 @@ class RunViewer:
                 f"{int(((ds.task == 0) & (ds.y == 1)).sum())} free-space, {int((ds.task == 1).sum())} outer points"
                 + (f", {int((ds.y < 0).sum())} inside" if (ds.y < 0).any() else "") + "  \n"
                 f"{measures}, Hausdorff {'n/a' if not math.isfinite(h) else f'{h * 100:.1f} cm'}"
-                + self._learned_values(run, p)
+                + self._learned_values(run, p) + self._camera_corrections(run, k)
                 + self._on_body(run, k) + self._no_estimate(surface)
                 + ("" if self._truth() is not None else "  \ntrue shape: not known for this run"))
         self.shown_step = k
@@ -694,6 +694,23 @@ class RunViewer:
         if not (math.isfinite(length) and math.isfinite(noise)):
             return ""
         return f"  \nlearned ({run.meta['learn']}): kernel length {length * 100:.1f} cm, sigma^2 {noise:.4g}"
+
+    @staticmethod
+    def _camera_corrections(run, k: int) -> str:
+        """What the touches moved each camera capture by (``camera_bound``), from the step that did it on (a log), or
+        for the whole dataset (``gpioius fit --camera-bound``); "" without."""
+        found = run.meta.get("camera_corrections")
+        at = None
+        for step in run.steps:
+            if step <= k and "camera_corrections" in run.params.get(step, {}):
+                found, at = run.params[step]["camera_corrections"], step
+        if not isinstance(found, dict):
+            return ""
+        views = ", ".join(f"{c['size_mm']:.1f} mm {c['angle_deg']:.2f} deg" for c in found.get("captures", []))
+        when = "" if at is None else f" at step {at}"
+        return (f"  \ncamera captures corrected from the touches{when}: {views} "
+                f"(the contacts' misfit {found.get('misfit_before_mm', math.nan):.1f} -> "
+                f"{found.get('misfit_after_mm', math.nan):.1f} mm)")
 
     def _no_estimate(self, surface) -> str:
         """A line saying that this step's estimate has no surface (an empty picture must not look like a bug)."""

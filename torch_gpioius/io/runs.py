@@ -145,6 +145,8 @@ def load_run(path: str | os.PathLike) -> RunHistory:
                 p["hyperparameters"] = rec.meta["hyperparameters"]
             if isinstance(rec.meta.get("outer_mean"), (int, float)):  # logged since 2026-11-27
                 p["outer_mean"] = float(rec.meta["outer_mean"])
+            if isinstance(rec.meta.get("camera_corrections"), dict):  # the step that corrected the captures
+                p["camera_corrections"] = rec.meta["camera_corrections"]
             for key in ("kt", "local_params", "contact", "pad_pose", "pad_size"):
                 if key in a:
                     p[key] = np.asarray(a[key], dtype=np.float64)
