@@ -35,8 +35,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from worst_errors import world_of  # noqa: E402  (scripts/ is not a package)
-from torch_gpioius.io.runs import load_run  # noqa: E402
+from worst_errors import visual_tactile_finals  # noqa: E402  (scripts/ is not a package)
 
 
 def _views(world):
@@ -83,15 +82,8 @@ def main() -> None:
                                                                           min(2 * error.rotation, math.radians(20)))
     names = ("calibrated", "off", "corrected", "corrected, gap known")
     rows = []
-    for log in args.logs:
-        run = load_run(log)
-        if run.meta.get("mode") != "visual-tactile":
-            continue
-        world = world_of(log, args.scenes)
+    for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
         policy = world.defaults.policy
-        last = run.steps[-1]
-        model = run.model_at(last)
-        data = run.states[last]
         inner = data.task == 0
         contacts = data.x[inner & (data.y == 0)]
         normals = _normals(model, contacts)

@@ -37,8 +37,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from worst_errors import world_of  # noqa: E402  (scripts/ is not a package)
-from torch_gpioius.io.runs import load_run  # noqa: E402
+from worst_errors import visual_tactile_finals  # noqa: E402  (scripts/ is not a package)
 
 
 def _matern52(x: torch.Tensor, z: torch.Tensor, length: torch.Tensor) -> torch.Tensor:
@@ -197,14 +196,7 @@ def main() -> None:
     warnings.simplefilter("ignore")
     torch.set_num_threads(1)
     rows = []
-    for log in args.logs:
-        run = load_run(log)
-        if run.meta.get("mode") != "visual-tactile":
-            continue
-        world = world_of(log, args.scenes)
-        last = run.steps[-1]
-        model = run.model_at(last)
-        data = run.states[last]
+    for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
         contacts = data.x[(data.task == 0) & (data.y == 0)]
         base = _row(world.measure(model, contacts))
         rho = model.correlation

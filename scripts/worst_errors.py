@@ -58,6 +58,17 @@ def world_of(log: Path, scenes: Path):
                       scene=str(scene) if scene.exists() else None, settings=record.get("settings"))
 
 
+def visual_tactile_finals(logs, scenes: Path):
+    """``(log, run, world, final model, final data)`` of each visual-tactile log among ``logs`` (the others are
+    skipped): what the offline studies of finished runs start from."""
+    for log in logs:
+        run = load_run(log)
+        if run.meta.get("mode") != "visual-tactile":
+            continue
+        last = run.steps[-1]
+        yield log, run, world_of(log, scenes), run.model_at(last), run.states[last]
+
+
 def worst_errors(log: Path, scenes: Path, far: float = 0.02) -> dict | None:
     """The worst misses of a study log's final estimate (None when it has no surface in the range).
 

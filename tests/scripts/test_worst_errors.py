@@ -66,3 +66,28 @@ def test_claims_table_counts_the_seeds_on_which_the_looser_cover_is_less_similar
     wide = {0: 0.95, 1: 1.0 - claims.SEED_MARGIN / 2, 2: 0.99, 4: 0.5, 5: 0.1}
     assert claims.seeds_lower(tight, wide) == (2, 3)
     assert claims.seeds_lower({}, wide) == (0, 0)
+
+
+def test_camera_correction_refits_a_runs_contacts_with_its_captures_off_and_corrected(tmp_path, capsys, monkeypatch):
+    """scripts/camera_correction.py on a smoke study's log: the four versions are fitted and measured, and the error
+    at the body's middle is the applied one's (6 mm and a degree about cameras 0.35-1.1 m away: under 3 cm)."""
+    import sys
+
+    from torch_gpioius.studies.sweep import run_sweep
+
+    run_sweep("forcefield", scenes=[ball_scene(tmp_path)], modes=["visual-tactile"], seeds=1, out=tmp_path / "s",
+              smoke=True, backend="local", progress=False, max_travel=1.5)
+    log = tmp_path / "s" / "logs" / "ball_visual-tactile_0.gpioius"
+    script = _load("camera_correction")
+    monkeypatch.setattr(sys, "argv", ["camera_correction.py", str(log), "--scenes", str(tmp_path)])
+    script.main()
+    out = capsys.readouterr().out
+    line = next(x for x in out.splitlines() if x.startswith("ball_visual-tactile_0 draw 0"))
+    import re
+
+    chamfer = re.findall(r"(calibrated|off|corrected|gap known) ([0-9.]+)", line.split(" cm |")[0])
+    assert [n for n, _ in chamfer] == ["calibrated", "off", "corrected", "gap known"]
+    assert all(0 < float(c) < 5 for _, c in chamfer)
+    before = [float(v) for v in line.split("error at the body [")[1].split("]")[0].split(",")]
+    assert len(before) == 3 and all(0 < b < 30 for b in before)       # [mm]: 6 mm and a degree, 0.35-1.1 m away
+    assert "1 runs: median Chamfer calibrated" in out
