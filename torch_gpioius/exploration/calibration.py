@@ -18,11 +18,14 @@ from ..models.labels import ObservationPolicy
 from ..models.gpiois import OUTER
 from .observations import Observations, vision_observations
 
-__all__ = ["CORRECT_AFTER", "capture_views", "vision_crop", "correct_camera"]
+__all__ = ["CORRECT_AFTER", "RETRY_EVERY", "capture_views", "vision_crop", "correct_camera"]
 
 #: Contacts before the captures are corrected: enough, spread over the body, that several lie under each view's seen
 #: cover (a view with none is left to the bound's prior).
 CORRECT_AFTER = 20
+#: Where too few of them lay under the seen cover (``CaptureCorrections.enough``), tried again every this many
+#: contacts more.
+RETRY_EVERY = 10
 
 
 def capture_views(camera) -> list:
@@ -65,11 +68,13 @@ def correct_camera(model, captures: list, contacts: np.ndarray, policy: Observat
         ``(removed, observations, record)``: the indices of the rows removed (into the model's data before the call),
         the new camera observations (task outer, source "camera-corrected") and the correction's record
         (:meth:`~torch_gpioius.sensors.extrinsics.CaptureCorrections.as_record`); ``(empty, None, None)`` when
-        nothing is due (no bound, too few contacts, a model without an outer task, a 2-D world).
+        nothing is due (no bound, a model without an outer task, a 2-D world; not :data:`CORRECT_AFTER` contacts yet,
+        or :data:`RETRY_EVERY` more since a try under which too few lay under the seen cover).
     """
     none = np.zeros(0, dtype=np.int64), None, None
-    if (policy.camera_bound is None or not captures or len(contacts) < CORRECT_AFTER
-            or getattr(model, "num_tasks", 1) < 2 or np.asarray(contacts).shape[1] != 3):
+    due = len(contacts) >= CORRECT_AFTER and (len(contacts) - CORRECT_AFTER) % RETRY_EVERY == 0
+    if (policy.camera_bound is None or not captures or not due or getattr(model, "num_tasks", 1) < 2
+            or np.asarray(contacts).shape[1] != 3):
         return none
     from ..sensors.extrinsics import correct_captures
     from ..sensors.pointcloud import PointCloud
@@ -81,6 +86,8 @@ def correct_camera(model, captures: list, contacts: np.ndarray, policy: Observat
         return none
     found = correct_captures(captures, contacts, _normals(model, contacts), max_translation=policy.camera_bound[0],
                              max_rotation=policy.camera_bound[1])
+    if not found.enough:                  # too few contacts under the seen cover yet: tried again later
+        return none
     moved = PointCloud.merge([PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)])
     x, y = vision_observations(moved, policy, crop)
     outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()

@@ -43,6 +43,8 @@ HUBER = 2.0
 #: A contact and a capture's surface (or two captures' surfaces) pair only where their normals agree this well (the
 #: cosine of about 37 degrees).
 FACING = 0.8
+#: Contacts under the seen cover (over all captures) below which no capture is corrected.
+MIN_CONTACTS = 5
 #: A direction of a capture's correction is "weak" when the data's curvature along it is below this share of the
 #: prior's: the prior, not the touches, set it.
 WEAK = 1.0
@@ -129,6 +131,9 @@ class CaptureCorrections:
             cover's normal, less the gap fitted to them as given).
         after: the same once corrected [m].
         bound: ``(translation [m], rotation [rad])``, the largest correction allowed.
+        enough: whether at least :data:`MIN_CONTACTS` contacts lay under the seen cover (over all captures) at the
+            end; when not, every correction is none (the captures as given): a handful of contacts pulls the
+            captures where they fit best, not where they belong.
     """
 
     captures: list
@@ -136,11 +141,13 @@ class CaptureCorrections:
     before: float
     after: float
     bound: tuple = field(default=(0.0, 0.0))
+    enough: bool = True
 
     def as_record(self) -> dict:
         return {"captures": [c.as_record() for c in self.captures],
                 "gap_mm": None if not math.isfinite(self.gap) else round(self.gap * 1e3, 3),
                 "misfit_before_mm": round(self.before * 1e3, 3), "misfit_after_mm": round(self.after * 1e3, 3),
+                "enough": self.enough,
                 "bound": {"translation_mm": round(self.bound[0] * 1e3, 3),
                           "rotation_deg": round(math.degrees(self.bound[1]), 4)}}
 
@@ -416,5 +423,9 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     fixed_x = np.concatenate([np.r_[c.translation - (np.eye(3) - _rotation(c.rotation)) @ (pivots[k] - origins[k]),
                                     c.rotation] for k, c in enumerate(out)] + [x[-1:]])
     after, g1 = contact_misfit(fixed_x)
-    return CaptureCorrections(out, float(x[-1]) if fixed_gap else g1, before, after,
-                              (float(max_translation), float(max_rotation)))
+    bound = (float(max_translation), float(max_rotation))
+    if sum(c.contacts for c in out) < MIN_CONTACTS:          # too few to say anything: the captures as given
+        out = [CaptureCorrection(np.zeros(3), np.zeros(3), c.origin, c.contacts, c.overlap, False,
+                                 ("x", "y", "z", "rx", "ry", "rz")) for c in out]
+        return CaptureCorrections(out, g0, before, before, bound, enough=False)
+    return CaptureCorrections(out, float(x[-1]) if fixed_gap else g1, before, after, bound)
