@@ -274,18 +274,19 @@ def test_the_gap_settings_keep_and_deepen_the_cameras_inside_points_and_resume_a
     _resumes_alike(scene, log, run.steps[min(deepened + 1, len(run.steps) - 2)], reference, kw)
 
 
-def test_a_miscalibrated_cameras_captures_are_corrected_once_logged_and_resume_alike(tmp_path):
+def test_a_miscalibrated_cameras_captures_are_corrected_logged_and_resume_alike(tmp_path):
     """Issue 63, item 2: with ``ObservationPolicy.camera_bound`` a run whose simulated cameras are off by 6 mm and a
-    degree corrects each view's capture from its first :data:`CORRECT_AFTER` contacts, once, and replaces the camera's
-    observations by the corrected ones in that step's batch: the seen points move onto the true cover, the step's
-    record says what each view was moved by, the log replays the run's final data, and a run cut before that step or
-    after it and resumed ends where the uninterrupted one ends."""
+    degree corrects each view's capture from its first :data:`CORRECT_AFTER` contacts, and again every
+    :data:`CORRECT_EVERY` more, replacing the camera's observations by the corrected ones in that step's batch: the
+    error at the body's middle falls, the step's record says what each view was moved by, the log replays the run's
+    final data, and a run cut before the first correction, or between two, and resumed ends where the uninterrupted
+    one ends."""
     import dataclasses
     import math
 
     import trimesh
 
-    from torch_gpioius.exploration.calibration import CORRECT_AFTER
+    from torch_gpioius.exploration.calibration import CORRECT_AFTER, CORRECT_EVERY
     from torch_gpioius.io.datasets import read_records
     from torch_gpioius.io.runs import load_run
     from torch_gpioius.sim.forcefield import Scene3D
@@ -293,7 +294,7 @@ def test_a_miscalibrated_cameras_captures_are_corrected_once_logged_and_resume_a
     body = trimesh.creation.box((0.10, 0.08, 0.12))
     scene = Scene3D.from_mesh(body, cover="tight", at=[0.5, 0.0, 0.1]).with_camera_error("6mm,1deg")
     policy = dataclasses.replace(scene.defaults.policy, camera_bound=(0.012, math.radians(2)))
-    kw = dict(max_steps=CORRECT_AFTER + 6, metrics_every=100, progress=False, policy=policy)
+    kw = dict(max_steps=CORRECT_AFTER + CORRECT_EVERY + 4, metrics_every=100, progress=False, policy=policy)
     log = tmp_path / "run.gpioius"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -302,9 +303,10 @@ def test_a_miscalibrated_cameras_captures_are_corrected_once_logged_and_resume_a
     assert run.meta["policy"]["camera_bound"] == [0.012, pytest.approx(math.radians(2))]
     steps = [r for r in read_records(log) if r.kind == "step"]
     marked = [int(r.meta["step"]) for r in steps if "camera_corrections" in r.meta]
-    assert marked == [CORRECT_AFTER - 1]                       # once, at the step of the 20th contact (step 0: 1st)
+    # at the steps of the 20th and 40th contacts (step 0: the first)
+    assert marked == [CORRECT_AFTER - 1, CORRECT_AFTER + CORRECT_EVERY - 1]
     corrections = reference.camera_corrections
-    assert corrections == steps[marked[0]].meta["camera_corrections"] and len(corrections["captures"]) == 3
+    assert corrections == steps[marked[-1]].meta["camera_corrections"] and len(corrections["captures"]) == 3
     assert all(c["size_mm"] <= 12.0 + 1e-9 for c in corrections["captures"])
 
     # each view's error at the body's middle, as applied and once corrected (1.5-2.5 cm -> a few mm)

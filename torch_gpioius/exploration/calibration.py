@@ -1,12 +1,13 @@
 """The camera's captures corrected from the touches during an exploration (``ObservationPolicy.camera_bound``).
 
-A run captures its views once, before the first touch. Once :data:`CORRECT_AFTER` contacts are in, each view's
-capture is moved rigidly about its camera to agree with them and with the other views
-(:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, the contacts' normals the inner estimate's), within the
-bound the policy gives; the camera's observations in the model are replaced by those of the corrected captures,
-labelled as the first ones were. The replacement is an ordinary step batch (the old rows removed, the new ones
-added), so a log replays it and a resumed run continues from it; the step's record says what each view was moved
-by. Once per run.
+A run captures its views once, before the first touch. At :data:`CORRECT_AFTER` contacts, and again every
+:data:`CORRECT_EVERY` more, each view's capture as first taken is moved rigidly about its camera to agree with all the
+contacts so far and with the other views (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, the contacts'
+normals the inner estimate's), within the bound the policy gives; the camera's observations in the model are replaced
+by those of the corrected captures, labelled as the first ones were. More contacts fix more of the error (twenty
+near the first touch leave 5-6 mm at the body's middle of 1-2.5 cm; the whole run's, less), so the correction is
+done again as they come. Each replacement is an ordinary step batch (the old rows removed, the new ones added), so a
+log replays it and a resumed run continues from it; the step's record says what each view was moved by.
 """
 
 from __future__ import annotations
@@ -18,14 +19,14 @@ from ..models.labels import ObservationPolicy
 from ..models.gpiois import OUTER
 from .observations import Observations, vision_observations
 
-__all__ = ["CORRECT_AFTER", "RETRY_EVERY", "capture_views", "vision_crop", "correct_camera"]
+__all__ = ["CORRECT_AFTER", "CORRECT_EVERY", "capture_views", "vision_crop", "correct_camera"]
 
-#: Contacts before the captures are corrected: enough, spread over the body, that several lie under each view's seen
-#: cover (a view with none is left to the bound's prior).
+#: Contacts before the captures are first corrected: enough, spread over the body, that several lie under each view's
+#: seen cover (a view with none is left to the overlaps and the bound's prior).
 CORRECT_AFTER = 20
-#: Where too few of them lay under the seen cover (``CaptureCorrections.enough``), tried again every this many
-#: contacts more.
-RETRY_EVERY = 10
+#: The captures corrected again (from their first capture, with every contact so far) every this many contacts more;
+#: also the retry when too few lay under the seen cover (``CaptureCorrections.enough``).
+CORRECT_EVERY = 20
 
 
 def capture_views(camera) -> list:
@@ -68,11 +69,11 @@ def correct_camera(model, captures: list, contacts: np.ndarray, policy: Observat
         ``(removed, observations, record)``: the indices of the rows removed (into the model's data before the call),
         the new camera observations (task outer, source "camera-corrected") and the correction's record
         (:meth:`~torch_gpioius.sensors.extrinsics.CaptureCorrections.as_record`); ``(empty, None, None)`` when
-        nothing is due (no bound, a model without an outer task, a 2-D world; not :data:`CORRECT_AFTER` contacts yet,
-        or :data:`RETRY_EVERY` more since a try under which too few lay under the seen cover).
+        nothing is due (no bound, a model without an outer task, a 2-D world; a contact count other than
+        :data:`CORRECT_AFTER` plus a multiple of :data:`CORRECT_EVERY`; too few contacts under the seen cover).
     """
     none = np.zeros(0, dtype=np.int64), None, None
-    due = len(contacts) >= CORRECT_AFTER and (len(contacts) - CORRECT_AFTER) % RETRY_EVERY == 0
+    due = len(contacts) >= CORRECT_AFTER and (len(contacts) - CORRECT_AFTER) % CORRECT_EVERY == 0
     if (policy.camera_bound is None or not captures or not due or getattr(model, "num_tasks", 1) < 2
             or np.asarray(contacts).shape[1] != 3):
         return none

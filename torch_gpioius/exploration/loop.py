@@ -108,7 +108,7 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
     state.normal = touch.force_normal
     t1 = time.perf_counter()
     record = StepRecord(step=state.steps, travel=0.0, touch=touch)
-    uncorrected = state.camera_corrections is None
+    corrections = state.camera_corrections
     record.observations, record.removed = ingest(state, cfg, touch)
     toucher = _TimedToucher(hw.controller)          # the step's time leaves out the motion of evidence actions
     if cfg.evidence is not None and cfg.evidence.due(state):
@@ -117,7 +117,7 @@ def step(ctx: Run, state: ExplorationState, observers) -> str | None:
         if evidence is not None:
             record.evidence.append(ingest_evidence(state, cfg, evidence))
     stalled = unstall(ctx, state, record, toucher)
-    if uncorrected and state.camera_corrections is not None:      # this step corrected the camera's captures
+    if state.camera_corrections is not corrections:              # this step corrected the camera's captures
         record.camera_corrections = state.camera_corrections
     _fit(state.model, cfg, state)
     _describe(record, state, ctx, step_time=t_plan + time.perf_counter() - t1 - toucher.motion)
@@ -241,13 +241,12 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     deep = deepen_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     corrected = None
-    if state.camera_corrections is None and state.captures is not None:
+    if state.captures is not None:       # ObservationPolicy.camera_bound: the captures corrected from the contacts
         kept = int(state.model.train_targets.shape[0])
-        gone, corrected, state.camera_corrections = correct_camera(state.model, state.captures,
-                                                                    np.asarray(state.contacts), cfg.policy,
-                                                                    state.crop)
-        if corrected is not None:        # the camera's rows replaced by the corrected captures' (once per run)
-            state.captures = None
+        gone, corrected, found = correct_camera(state.model, state.captures, np.asarray(state.contacts), cfg.policy,
+                                                state.crop)
+        if corrected is not None:        # the camera's rows replaced by the corrected captures'
+            state.camera_corrections = found
             deep = None                  # continued from the rows just replaced: done from the new ones next step
             left = np.delete(np.arange(before), removed)[:kept]          # the data before this step still there
             removed = np.sort(np.concatenate([removed, left[gone]]))

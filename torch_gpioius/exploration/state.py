@@ -134,9 +134,9 @@ class ExplorationState:
         records: one :class:`StepRecord` per step, record 0 first.
         gap_check: the cover's gap as the contacts show it (:class:`CoverGap`), kept from step to step so that each
             contact's distance is computed once; rebuilt on resume, to the same values.
-        captures: each camera view's capture as first taken (kept only with ``ObservationPolicy.camera_bound``,
-            until it is used); crop: the box the camera's cloud is cropped to.
-        camera_corrections: what each view was moved by once the contacts corrected the captures
+        captures: each camera view's capture as first taken (kept only with ``ObservationPolicy.camera_bound``);
+            crop: the box the camera's cloud is cropped to.
+        camera_corrections: what each view was moved by the last time the contacts corrected the captures
             (:func:`~torch_gpioius.exploration.calibration.correct_camera`), or None before.
     """
 

@@ -310,12 +310,12 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         state.reapproach_travel = float(after.meta.get("reapproach_travel", state.reapproach_travel))
         state.contacts[-1] = np.asarray(after.arrays["contact"], dtype=np.float64)
         state.normal = torch.as_tensor(np.asarray(after.arrays["normal"], dtype=np.float64))
-    first = next((i for i, r in enumerate(steps) if isinstance(r.meta.get("camera_corrections"), dict)), None)
-    if first is not None:                        # the step that corrected the camera's captures, and what it did
-        state.camera_corrections = steps[first].meta["camera_corrections"]
-        state.records[first].camera_corrections = state.camera_corrections
-    elif config.policy.camera_bound is not None and config.uses_vision:
-        # not corrected yet: the views captured again (a fresh simulated camera gives the run's first capture)
+    for i, r in enumerate(steps):                # the steps that corrected the camera's captures, and what they did
+        if isinstance(r.meta.get("camera_corrections"), dict):
+            state.camera_corrections = state.records[i].camera_corrections = r.meta["camera_corrections"]
+    if config.policy.camera_bound is not None and config.uses_vision:
+        # the views captured again, to be corrected as the contacts come (a fresh simulated camera gives the run's
+        # first capture; a real one, another)
         state.captures, state.crop = capture_views(hardware.camera), vision_crop(world, config.policy)
     state.last_evidence = max((int(t.meta["step"]) for t in taps if t.kind == "tap"), default=0)
     state.last_recovery = max((int(t.meta["step"]) for t in taps if t.kind == "recovery"), default=0)

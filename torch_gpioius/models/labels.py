@@ -57,10 +57,11 @@ class ObservationPolicy:
             down to the level the offset mean reads (docs/method-notes.md section 16). False (the default): as
             without it.
         camera_bound: ``(translation [m], rotation [rad])``, the largest error the camera's calibration may have:
-            once the contacts are many enough, each view's capture is moved rigidly about its camera to agree with
-            them and with the other views, within that bound, and the camera's observations are labelled again
-            from the corrected captures (:func:`~torch_gpioius.exploration.calibration.correct_camera`); None (the
-            default): the captures as the calibration places them.
+            once the contacts are many enough, and again as more come, each view's capture is moved rigidly about its
+            camera to agree with them and with the other views, within that bound, and the camera's observations are
+            labelled again from the corrected captures
+            (:func:`~torch_gpioius.exploration.calibration.correct_camera`); None (the default): the captures as the
+            calibration places them.
     """
 
     vision_free_offset: float | None = 0.05
