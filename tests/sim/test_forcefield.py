@@ -579,3 +579,21 @@ def test_a_scene_with_a_camera_error_moves_every_views_capture_by_its_own_draw_a
         own.with_camera_error("6mm,1deg")
     with pytest.raises(ValueError, match="not a size with a unit"):
         s.with_camera_error("6")
+
+
+def test_a_body_too_thin_to_be_felt_from_any_side_is_refused_with_its_thickness():
+    """Issue 63: six of pybullet's procedural objects 200-299 are pieces of sheets 1-3 mm thick; each was refused
+    as "the approach ray only grazes the inner mesh", as if another approach could feel it. A sheet 2 mm thick is
+    refused as too thin (nowhere more than 1 mm inside), a slab 2 cm thick is approached."""
+    import trimesh
+
+    from torch_gpioius.sim.forcefield import approach_from_above
+
+    sheet = trimesh.creation.box((0.12, 0.10, 0.002))
+    sheet.apply_translation([0.5, 0.0, 0.101])
+    with pytest.raises(ValueError, match=r"nowhere more than 1\.0 mm inside its surface .* 1 pieces"):
+        approach_from_above(sheet, sheet)
+    slab = trimesh.creation.box((0.12, 0.10, 0.02))
+    slab.apply_translation([0.5, 0.0, 0.11])
+    start, direction, _ = approach_from_above(slab, slab)
+    assert direction.tolist() == [0.0, 0.0, -1.0] and abs(start[0] - 0.5) < 0.02
