@@ -67,7 +67,23 @@ def finned(scan: trimesh.Trimesh) -> trimesh.Trimesh:
                            np.vstack([scan.faces, [[edge[0], edge[1], len(scan.vertices)]]]), process=False)
 
 
-def test_a_non_manifold_scan_is_remeshed_within_the_grid_error():
+def test_a_fin_on_a_scan_is_split_off_locally_and_dropped_and_the_holes_filled_flat():
+    """One non-manifold edge (a fin): split there (the fin becomes a piece of its own that encloses nothing and is
+    dropped), the holes filled flat: the original bottle, its surface unmoved."""
+    bad = finned(with_holes(bottle_mm()))
+    with pytest.warns(MeshRepairWarning) as said:
+        m = load_mesh(bad, scale=0.001)
+    text = " ".join(str(w.message) for w in said)
+    assert "1 non-manifold edge(s) split locally" in text and "dropped 1 flat piece" in text
+    assert inspect_mesh(m).closed
+    np.testing.assert_allclose(m.volume, bottle_mm().volume * 1e-9, rtol=1e-7)
+
+
+def test_a_non_manifold_scan_is_remeshed_within_the_grid_error(monkeypatch):
+    """More non-manifold edges than are split locally go to the winding-number remesh (here: none are split)."""
+    import torch_gpioius.sim.meshes as meshes
+
+    monkeypatch.setattr(meshes, "MAX_LOCAL_SPLITS", 0)
     bad = finned(with_holes(bottle_mm()))
     assert inspect_mesh(bad).nonmanifold_edges == 1
     with pytest.warns(MeshRepairWarning, match="winding-number remesh"):
@@ -263,3 +279,28 @@ def test_the_winding_number_tree_is_built_once_and_agrees_with_libigls_direct_ca
     # the fast (Taylor-expanded) winding number errs by up to ~1.5e-3 here: 1e-2 leaves a margin
     assert (np.abs(dist.winding_number(q[inside]) - 1) < 1e-2).all()
     assert (np.abs(dist.winding_number(q[outside])) < 1e-2).all()
+
+
+def test_two_closed_pieces_touching_along_an_edge_are_split_there_not_remeshed():
+    """Issue 63: one non-manifold edge (two closed parts of a procedural object meeting along it) sent the mesh to the
+    winding-number remesh, which moved pybullet's objects 230 and 295 by 29 and 15 mm and refused them. Two 4 cm cubes
+    that share an edge: the edge's two vertices get a copy for the second cube, the mesh is closed with the input's
+    vertices exactly (the same surface), its volume the two cubes', and the repair is said."""
+    from torch_gpioius.sim.meshes import split_nonmanifold
+
+    a = trimesh.creation.box((0.04, 0.04, 0.04))
+    a.apply_translation([0.02, 0.02, 0.02])
+    b = a.copy()
+    b.apply_translation([0.04, 0.04, 0.0])                  # shares the edge x = y = 4 cm, z in [0, 4] cm
+    both = trimesh.util.concatenate([a, b])
+    both.merge_vertices()
+    assert inspect_mesh(both).nonmanifold_edges == 1
+    split, count = split_nonmanifold(both)
+    assert count == 2 and inspect_mesh(split).nonmanifold_edges == 0 and inspect_mesh(split).closed
+    assert len(split.vertices) == len(both.vertices) + 2
+    np.testing.assert_array_equal(split.vertices[:len(both.vertices)], both.vertices)
+    with pytest.warns(MeshRepairWarning, match="1 non-manifold edge\\(s\\) split locally"):
+        loaded = load_mesh(both, name="cubes")
+    assert inspect_mesh(loaded).closed and loaded.volume == pytest.approx(2 * 0.04 ** 3, rel=1e-9)
+    d = MeshDistance(loaded)
+    assert abs(d(np.array([[0.02, 0.02, 0.02]]))[0] + 0.02) < 1e-12     # the first cube's centre, 2 cm deep
