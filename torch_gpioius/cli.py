@@ -616,8 +616,9 @@ def _add_study(sub, common, fmt) -> None:
                          "registered with register_world (docs/architecture.md)")
     sw.add_argument("--objects", default=None,
                     help="comma-separated object names (default: the world's objects, A-D in 2d and E-H in 3-D), or "
-                         "an object set in the forcefield world: primitives:0-49, pybullet-random:0-49, "
-                         "pybullet:duck,teddy or folder:PATH (each object sized 8-25 cm, standing on the table)")
+                         "an object set in the forcefield world: primitives:0-49, pybullet-random:0-49 (their "
+                         "-lying families: turned onto their side), pybullet:duck,teddy or folder:PATH (each object "
+                         "sized 8-25 cm, on the table)")
     sw.add_argument("--metrics-every", default=None, type=_metrics_every,
                     help="measure the estimate every K steps, or 'schedule': at 10, 25 and 50 %% of the travel, a "
                          "stop and the end only (3-D worlds; the fractions the summary reports, at a fraction of "

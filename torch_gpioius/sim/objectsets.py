@@ -115,6 +115,20 @@ def primitive_mesh(index: int) -> tuple[trimesh.Trimesh, str]:
     return _standing(mesh), kind
 
 
+def _lying(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """``mesh`` turned onto its side: a quarter turn about the horizontal axis (x or y) that leaves it lowest, then
+    standing on z = 0, centred on the z axis (a can on its side, a carton on its back); one that already lies (its
+    height its smallest extent: a blob's stable pose, often) stays as it is."""
+    if mesh.extents[2] <= mesh.extents[:2].min():
+        return _standing(mesh)
+    turns = []
+    for axis in ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0)):
+        turned = mesh.copy()
+        turned.apply_transform(trimesh.transformations.rotation_matrix(math.pi / 2, axis))
+        turns.append(turned)
+    return _standing(min(turns, key=lambda m: float(m.extents[2])))
+
+
 def _standing(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     """``mesh`` moved to stand on z = 0, centred on the z axis."""
     lo, hi = mesh.bounds
@@ -123,8 +137,9 @@ def _standing(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return mesh
 
 
-#: The families a set can be drawn from, and their largest index.
-FAMILIES = {"primitives": 10_000, "pybullet-random": 999}
+#: The families a set can be drawn from, and their largest index. A ``-lying`` family is the same objects turned onto
+#: their side (:func:`set_mesh`): low and wide, where a standing object is tall.
+FAMILIES = {"primitives": 10_000, "pybullet-random": 999, "primitives-lying": 10_000, "pybullet-random-lying": 999}
 
 
 def parse_object_set(text: str) -> list[SetObject]:
@@ -148,14 +163,16 @@ def parse_object_set(text: str) -> list[SetObject]:
     family = family.strip().lower()
     if family in FAMILIES:
         out = []
+        base, lying = family.removesuffix("-lying"), family.endswith("-lying")
+        tag = "-lying" if lying else ""
         for i in _indices(rest, FAMILIES[family], text):
-            rng = np.random.default_rng(_SALT + 500_000 + i) if family == "pybullet-random" else None
-            size = _size(rng) if rng is not None else float("nan")
-            if family == "primitives":
+            if base == "primitives":
                 size = float(np.max(primitive_mesh(i)[0].extents))
-                out.append(SetObject(f"primitives-{i:03d}", f"primitives:{i}", size, i))
-            else:
-                out.append(SetObject(f"pybullet-random-{i:03d}", f"pybullet:random_urdfs/{i:03d}/{i:03d}.obj", size, i))
+                out.append(SetObject(f"primitives{tag}-{i:03d}", f"primitives{tag}:{i}", size, i))
+            else:                       # the same size as the standing object's: one stream per index
+                size = _size(np.random.default_rng(_SALT + 500_000 + i))
+                out.append(SetObject(f"pybullet-random{tag}-{i:03d}",
+                                     f"pybullet{tag}:random_urdfs/{i:03d}/{i:03d}.obj", size, i))
         return out
     if family == "pybullet":
         names = [n.strip() for n in rest.split(",") if n.strip()]
@@ -221,12 +238,15 @@ STAND_AT = (0.5, 0.0, 0.1)
 
 def set_mesh(obj: SetObject) -> trimesh.Trimesh:
     """The closed mesh [m] of a set's object, in its most probable stable pose on the table (trimesh's
-    ``compute_stable_poses``; a primitive stands as it was built), z = 0 at its lowest point, centred on the z axis,
-    scaled so that its largest extent is ``obj.size``.
+    ``compute_stable_poses``; a primitive stands as it was built; a ``-lying`` family's object is that turned onto its
+    side), z = 0 at its lowest point, centred on the z axis, scaled so that its largest extent is ``obj.size``.
 
     Raises:
         ValueError: a mesh that cannot be loaded or closed (:func:`~torch_gpioius.sim.meshes.load_mesh`).
     """
+    if obj.source.startswith("primitives-lying:") or obj.source.startswith("pybullet-lying:"):
+        standing = SetObject(obj.name, obj.source.replace("-lying:", ":", 1), obj.size, obj.index)
+        return _lying(set_mesh(standing))
     if obj.source.startswith("primitives:"):
         return primitive_mesh(obj.index)[0]
     from .meshes import load_mesh, read_mesh
