@@ -309,13 +309,36 @@ def split_nonmanifold(mesh: trimesh.Trimesh) -> tuple[trimesh.Trimesh, int]:
     extra, split = len(mesh.vertices), 0
     for v in np.unique(keys[bad]):
         fan = np.flatnonzero((faces == v).any(axis=1))
-        for p in np.unique(piece[fan])[1:]:                 # the first piece keeps v; each other gets a copy
-            rows = fan[piece[fan] == p]
+        groups = piece[fan]
+        if len(np.unique(groups)) == 1:
+            # one piece meeting itself there (two parts welded at a few coincident vertices): its faces around v
+            # grouped by the manifold edges through v instead
+            groups = _fans(fan, faces, v)
+        for g in np.unique(groups)[1:]:                     # the first keeps v; each other gets a copy
+            rows = fan[groups == g]
             faces[rows] = np.where(faces[rows] == v, extra, faces[rows])
             vertices.append(np.asarray(mesh.vertices[v], dtype=np.float64)[None])
             extra += 1
             split += 1
     return trimesh.Trimesh(np.concatenate(vertices), faces, process=False), split
+
+
+def _fans(fan: np.ndarray, faces: np.ndarray, v: int) -> np.ndarray:
+    """A label per face of ``fan`` (the faces around vertex ``v``): faces that share an edge through ``v`` used by
+    exactly two of them carry one label."""
+    label = np.arange(len(fan))
+    others = [set(faces[f][faces[f] != v].tolist()) for f in fan]
+    for _ in range(len(fan)):                         # labels spread along the fan until they settle
+        changed = False
+        for w in set().union(*others):
+            users = [i for i, o in enumerate(others) if w in o]
+            if len(users) == 2 and label[users[0]] != label[users[1]]:
+                low = min(label[users[0]], label[users[1]])
+                label[label == max(label[users[0]], label[users[1]])] = low
+                changed = True
+        if not changed:
+            break
+    return label
 
 
 def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
