@@ -665,7 +665,7 @@ def _add_study(sub, common, fmt) -> None:
                          "(fixed, mirrored, wrist), a count (1-3) or paper (the fixed camera alone); one per --out "
                          "folder")
     sw.add_argument("--camera-error", type=_camera_error, default=None, metavar="SIZES",
-                    help="the force-field world's simulated cameras off by a calibration error of these sizes, e.g. "
+                    help="the 3-D worlds' simulated cameras off by a calibration error of these sizes, e.g. "
                          "6mm,1deg (each view of each run draws its direction and axis from its seed; the records "
                          "say what was applied); default: none; one per --out folder")
     sw.add_argument("--camera-bound", type=_camera_error, default=None, metavar="SIZES",

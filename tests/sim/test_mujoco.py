@@ -378,3 +378,20 @@ def test_more_views_see_more_of_the_scene_and_the_tripods_stay_where_they_stood(
     assert scene.with_views(3).views == VIEWS and scene.with_views(3).defaults is scene.defaults
     with pytest.raises(ValueError, match="views"):
         scene.with_views("side")
+
+
+def test_a_camera_error_moves_the_mujoco_cameras_captures_by_each_views_draw(scene):
+    """Issue 63, item 1, in the MuJoCo world: the capture of a camera off by 6 mm and a degree is the calibrated one
+    (the same noise) moved by the draw the scene reports, about the camera's reported origin; the error survives a
+    seed's perturbation and changes the scene's fingerprint."""
+    from torch_gpioius.sensors.pointcloud import AppliedCameraError
+
+    off = scene.with_camera_error("6mm,1deg")
+    assert scene.camera_errors() == {} and set(off.camera_errors()) == {"fixed"}
+    e = off.camera_errors()["fixed"]
+    assert e["size_mm"] == pytest.approx(6.0) and e["angle_deg"] == pytest.approx(1.0)
+    a, b = scene.hardware().camera.capture(), off.hardware().camera.capture()
+    applied = AppliedCameraError(tuple(np.asarray(e["translation_mm"]) / 1e3), tuple(np.radians(e["rotation_deg"])))
+    np.testing.assert_allclose(b.points, applied.apply(a.points, a.origin), atol=1e-6)   # the record's rounding
+    np.testing.assert_array_equal(a.origin, b.origin)
+    assert off.fingerprint() != scene.fingerprint() and off.perturbed(2).camera_error == off.camera_error

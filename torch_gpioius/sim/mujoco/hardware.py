@@ -293,15 +293,23 @@ class MujocoDepthCamera(PointCloudSource):
         intrinsics: :class:`torch_gpioius.sensors.PinholeCamera`.
         T_base_camera: `(4, 4)` camera pose (OpenCV axes).
         noise_a, noise_b: depth noise [m], [1/m].
-        seed: noise seed.
+        seed: noise seed (and the extrinsic error's direction, a stream of its own).
+        error, error_key: a simulated calibration error and what it is drawn with besides the seed, as
+            :class:`torch_gpioius.sensors.SimulatedDepthCamera`'s.
     """
 
     def __init__(self, physics: MujocoPhysics, intrinsics: PinholeCamera, T_base_camera, *, noise_a: float = 0.0,
-                 noise_b: float = 0.0, seed: int = 0) -> None:
+                 noise_b: float = 0.0, seed: int = 0, error=None, error_key=()) -> None:
+        from ...sensors.pointcloud import CameraError
+
         self.physics, self.intrinsics = physics, intrinsics
         self.T_base_camera = np.asarray(T_base_camera, dtype=np.float64)
         self.noise_a, self.noise_b = float(noise_a), float(noise_b)
         self._rng = np.random.default_rng(seed)
+        self.error = CameraError() if error is None else CameraError.parse(error)
+        #: The rigid error this camera's captures carry, or None.
+        self.applied_error = (self.error.draw([*np.atleast_1d(seed).tolist(), *np.atleast_1d(error_key).tolist()])
+                              if self.error else None)
 
     def capture(self) -> PointCloud:
         mj = self.physics.mj
@@ -332,4 +340,7 @@ class MujocoDepthCamera(PointCloudSource):
         if self.noise_a > 0 or self.noise_b > 0:
             z_noisy = zk + self._rng.standard_normal(len(zk)) * (self.noise_a + self.noise_b * zk ** 2)
             p_cam = p_cam * (z_noisy / zk)[:, None]
-        return PointCloud(p_cam @ R.T + t, t.copy())
+        points = p_cam @ R.T + t
+        if self.applied_error is not None:
+            points = self.applied_error.apply(points, t)
+        return PointCloud(points, t.copy())

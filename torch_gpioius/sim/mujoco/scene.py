@@ -99,11 +99,13 @@ class MujocoScene(RangedScene):
     def __init__(self, inner, cover: CoverMesh, start, direction, bounds, *, name: str = "",
                  seed: int = 0, sensor_noise: float = 0.02, timestep: float = 0.008, settle_time: float = 1.0,
                  camera_scale: float = 0.5, defaults: ExplorationDefaults | None = None,
-                 tool_length: float = 0.05, tip_radius: float = 0.004, views="paper") -> None:
+                 tool_length: float = 0.05, tip_radius: float = 0.004, views="paper", camera_error=None) -> None:
+        from ...sensors.pointcloud import CameraError
         from ..forcefield import as_views
 
         _require_mujoco()
         self.views = as_views(views)
+        self.camera_error = CameraError.parse(camera_error if camera_error is not None else CameraError())
         self.body = as_body(inner)
         if len(self.body) > MAX_PRIMITIVES:
             raise ValueError(f"inner: {len(self.body)} primitives or parts; at most {MAX_PRIMITIVES} are supported")
@@ -370,14 +372,15 @@ class MujocoScene(RangedScene):
             eye = target + back + side * 0.3 * across / np.linalg.norm(across) + np.array([0.0, 0.0, 0.3])
             eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
             return MujocoDepthCamera(physics, PinholeCamera.kinect_v2(self.camera_scale), look_at(eye, target),
-                                     noise_a=0.0015, noise_b=0.0015, seed=seed)
+                                     noise_a=0.0015, noise_b=0.0015, seed=seed, error=self.camera_error,
+                                     error_key=self._error_key())
 
         def wrist(seed):
             target = self.first_contact()
             up = (0.0, 0.0, 1.0) if abs(self.direction[2]) < 0.9 else (1.0, 0.0, 0.0)
             return MujocoDepthCamera(physics, PinholeCamera.realsense_d405(0.25),
                                      look_at(target - 0.35 * self.direction, target, up), noise_a=0.0005,
-                                     noise_b=0.002, seed=seed)
+                                     noise_b=0.002, seed=seed, error=self.camera_error, error_key=self._error_key())
 
         views = as_views(views)
         if views == ("fixed",):
@@ -427,10 +430,38 @@ class MujocoScene(RangedScene):
 
         return self._copy(self.start, self.direction, self.seed, views=as_views(views))
 
+    def with_camera_error(self, error) -> "MujocoScene":
+        """The same scene seen by cameras whose calibration is off (as
+        :meth:`torch_gpioius.sim.forcefield.Scene3D.with_camera_error`: each view of each run draws a rigid error of
+        these sizes, ``"6mm,1deg"``; :meth:`camera_errors` says what each applies). The cover settles again, to the
+        same state.
+
+        Raises:
+            ValueError: a malformed error.
+        """
+        from ...sensors.pointcloud import CameraError
+
+        return self._copy(self.start, self.direction, self.seed, camera_error=CameraError.parse(error))
+
+    def _error_key(self) -> tuple:
+        import zlib
+
+        return (zlib.crc32(self.name.encode()) % 2 ** 31,)
+
+    def camera_errors(self) -> dict[str, dict]:
+        """The extrinsic error each view of this scene (its seed) applies, by view name; empty without one (drawn as
+        the cameras draw it, without building them)."""
+        if not self.camera_error:
+            return {}
+        seeds = [self.seed] if self.views == ("fixed",) else [[self.seed, k] for k in range(len(self.views))]
+        return {v: self.camera_error.draw([*np.atleast_1d(s).tolist(), *self._error_key()]).as_record()
+                for v, s in zip(self.views, seeds)}
+
     def _copy(self, start, direction, seed: int, **changes) -> "MujocoScene":
         kw = dict(name=self.name, seed=seed, sensor_noise=self.sensor_noise, timestep=self.timestep,
                   settle_time=self.settle_time, camera_scale=self.camera_scale, defaults=self._defaults,
-                  tool_length=self.tool_length, tip_radius=self.tip_radius, views=self.views)
+                  tool_length=self.tool_length, tip_radius=self.tip_radius, views=self.views,
+                  camera_error=self.camera_error)
         scene = MujocoScene(self.body, self.cover, start, direction, self.range, **{**kw, **changes})
         scene._tripod_direction = self._tripod_direction
         return scene
@@ -502,6 +533,8 @@ class MujocoScene(RangedScene):
             self.direction,
             self.range,
             [self.seed, self.sensor_noise, self.timestep, self.settle_time],
+            # a scene without a camera error hashes as before there were any
+            *([[self.camera_error.translation, self.camera_error.rotation]] if self.camera_error else []),
         )
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
