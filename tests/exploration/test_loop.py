@@ -124,6 +124,11 @@ def test_lost_contact_falls_back_to_the_last_contact():
     ctl = Controller(False)
     assert recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost, budget_left=0.12) is None
     assert [round(r, 12) for _, r in ctl.calls] == [0.1, 0.02] and s.travel <= 0.12 + 1e-12
+    # a run whose re-approach spent the rest of its budget ends by its budget, not as a lost contact (a failure)
+    from torch_gpioius.exploration.loop import lost_contact_end
+
+    assert lost_contact_end(s, 0.12) == "travel" and lost_contact_end(s, 0.5) == "lost-contact"
+    assert lost_contact_end(s, None) == "lost-contact"
     s = ExplorationState(model=model, contacts=[last])
     ctl = Controller(True)
     assert recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost, budget_left=0.0) is None
