@@ -136,6 +136,14 @@ def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) 
                          "origin are accepted)")
 
 
+#: The sigma^2 a user may set, at every door (``EstimatorSettings``, scene files, ``gpioius study --noise``): the
+#: models take a wider range for the library's own use (``tol.noise_range``); below 1e-8 the exact engines fall back
+#: to dense arithmetic, and above 100 the labels (0 to 1) are noise.
+NOISE_RANGE = (1e-8, 100.0)
+#: The largest inside-point depth and cover gap a user may set [m] (``touch_inside``, ``vision_inside``,
+#: ``vision_inside_gap``), at every door: scene files read them against it, worlds build with it.
+INSIDE_DEPTH_MAX = 0.1
+
 #: The kernel lengths a user may set [m], at every door (the command line's --lengthscale and --theta, scene files,
 #: ``KernelChoice``, ``theta=``): below a millimetre each observation stands alone (no touch spacing is that fine)
 #: and the estimate has no surface; above 10 m one length spans any robot's workspace many times over.

@@ -363,3 +363,25 @@ def test_a_scene_files_camera_error_reaches_its_cameras(tmp_path):
     errors = scene.camera_errors()
     assert str(scene.camera_error) == "3mm,0.5deg" and len(errors) == 2
     assert all(e["size_mm"] == pytest.approx(3.0) and e["angle_deg"] == pytest.approx(0.5) for e in errors.values())
+
+
+def test_a_scene_files_inside_depths_and_noise_take_the_ranges_the_worlds_build_with(tmp_path):
+    """Issue 64: ``touch_inside = 0.15`` passed reading (0-0.2 m) and failed at build (0-0.1 m); sigma^2 was checked
+    against three ranges. One range each, at every door: read and build refuse alike, naming the file's key."""
+    from torch_gpioius._validation import INSIDE_DEPTH_MAX, NOISE_RANGE
+    from torch_gpioius.models.estimator import EstimatorSettings
+    from torch_gpioius.sim.forcefield import ROBOT_STUDY_DEFAULTS, with_inside_depths
+
+    for key in ("touch_inside", "vision_inside", "vision_inside_gap"):
+        path = ball_scene(tmp_path, extra=f"[forcefield]\n{key} = {INSIDE_DEPTH_MAX * 1.5}\n")
+        with pytest.raises(ValueError, match=rf"\[forcefield\] {key}: must be in \[0, 0.1\]"):
+            read_scene(path)
+        with pytest.raises(ValueError, match=key):
+            with_inside_depths(ROBOT_STUDY_DEFAULTS, **{key: INSIDE_DEPTH_MAX * 1.5})
+        with_inside_depths(ROBOT_STUDY_DEFAULTS, **{key: INSIDE_DEPTH_MAX})              # the top is allowed
+    for noise in (NOISE_RANGE[0] / 2, NOISE_RANGE[1] * 2):
+        with pytest.raises(ValueError, match="noise"):
+            read_scene(ball_scene(tmp_path, extra=f"[forcefield]\nnoise = {noise}\n"))
+        with pytest.raises(ValueError, match="noise"):
+            EstimatorSettings.preset("default").replace(noise=noise)
+    read_scene(ball_scene(tmp_path, extra=f"[forcefield]\nnoise = {NOISE_RANGE[1]}\n"))

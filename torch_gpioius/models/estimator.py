@@ -33,7 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_float, as_int
+from .._validation import NOISE_RANGE, as_float, as_int
 from ..kernels import (ExactKernel, InverseMultiquadricKernel, KernelChoice, Matern52, as_kernel, from_description,
                        kernel_named)
 from .labels import ObservationPolicy
@@ -161,7 +161,8 @@ class EstimatorSettings:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kernel", as_kernel(self.kernel))
-        object.__setattr__(self, "noise", as_float(self.noise, "noise", lo=1e-8, hi=100.0, positive=True))
+        object.__setattr__(self, "noise", as_float(self.noise, "noise", lo=NOISE_RANGE[0], hi=NOISE_RANGE[1],
+                                                   positive=True))
         if not isinstance(self.labels, ObservationPolicy):
             raise ValueError(f"labels: expected an ObservationPolicy, got {type(self.labels).__name__}")
         if self.voxel_rule is not None and not isinstance(self.voxel_rule, VoxelRule):

@@ -29,7 +29,7 @@ from ..planning import RangePenalty
 from ..sensors.pointcloud import CameraError, PinholeCamera, SimulatedDepthCamera, look_at
 from ..sensors.simulated import ForceFieldContact
 from ..surfaces import surface_samples
-from .._validation import as_bounds, as_float
+from .._validation import INSIDE_DEPTH_MAX, as_bounds, as_float
 from .ranged import RangedScene
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
@@ -136,7 +136,7 @@ def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDe
     offset = given.pop("cover_offset", None)
     if offset is not None and not isinstance(offset, bool):
         raise ValueError(f"cover_offset: must be true or false, got {offset!r}")
-    checked = {k: as_float(v, k, lo=0.0, hi=0.1, unit="m (0: none)") or None for k, v in given.items()}
+    checked = {k: as_float(v, k, lo=0.0, hi=INSIDE_DEPTH_MAX, unit="m (0: none)") or None for k, v in given.items()}
     if offset is not None:
         checked["cover_offset"] = offset
     return defaults.estimator_changed(labels=checked)

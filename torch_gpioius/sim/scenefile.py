@@ -62,7 +62,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import KERNEL_LENGTH
+from .._validation import INSIDE_DEPTH_MAX, KERNEL_LENGTH, NOISE_RANGE
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -288,9 +288,9 @@ def _check_finite(value, path: Path, key: str) -> None:
 #: (lowest, highest, whether the lowest is allowed) for lengths and numbers [SI units].
 _RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, True), "theta": (*KERNEL_LENGTH, False),
            "lengthscale": (*KERNEL_LENGTH, False),
-           "noise": (1e-6, 10.0, False), "touch_inside": (0.0, 0.2, True), "vision_inside": (0.0, 0.2, True),
-           "vision_inside_gap": (0.0, 0.5, True), "bridge": (0.0, 0.2, False), "gap": (0.0, 0.2, False),
-           "gap_far": (0.0, 0.2, False),
+           "noise": (*NOISE_RANGE, False), "touch_inside": (0.0, INSIDE_DEPTH_MAX, True),
+           "vision_inside": (0.0, INSIDE_DEPTH_MAX, True), "vision_inside_gap": (0.0, INSIDE_DEPTH_MAX, True),
+           "bridge": (0.0, 0.2, False), "gap": (0.0, 0.2, False), "gap_far": (0.0, 0.2, False),
            "resolution": (0.0, 0.05, False), "spacing": (0.0, 0.2, False), "timestep": (0.0, 0.1, False),
            "settle_time": (0.0, 60.0, True)}
 

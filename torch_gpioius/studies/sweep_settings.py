@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from typing import Any
 from pathlib import Path
 
-from .._validation import as_device, as_float
+from .._validation import NOISE_RANGE, as_device, as_float
 from .sweep_runs import RunSpec, study_worlds, sweep_modes
 
 __all__ = ["SweepSettings", "MAX_SEEDS", "checked_metrics_every"]
@@ -158,9 +158,7 @@ class SweepSettings:
                 raise ValueError(f"camera_bound: corrects the captures of the 3-D worlds' cameras, not {world}'s")
             camera_bound = str(bound)
         if noise is not None:
-            from ..tolerances import tol
-
-            noise = as_float(noise, "noise", lo=tol.noise_range[0], hi=tol.noise_range[1], positive=True)
+            noise = as_float(noise, "noise", lo=NOISE_RANGE[0], hi=NOISE_RANGE[1], positive=True)
         from ..sim.scenefile import scene_fingerprint
 
         hashes = {name: scene_fingerprint(path) for name, path in scene_files.items()}
