@@ -10,7 +10,7 @@ contacts (inner task, y = 0) and inside points, with the captures of the run's o
 * ``off``: every capture moved by a rigid error of ``--error`` sizes (:class:`~torch_gpioius.sensors.pointcloud.
   CameraError`), its reported origin unmoved;
 * ``corrected``: the off captures corrected by :func:`~torch_gpioius.sensors.extrinsics.correct_captures` from the
-  contacts (their normals the final model's, by autograd) within ``--bound`` (default: twice the error), the gap
+  contacts (their normals the final model's) within ``--bound`` (default: twice the error), the gap
   estimated with the corrections;
 * ``corrected, gap known``: the same with the cover's true gap held (what a user who knows the cover's thickness
   could give).
@@ -44,22 +44,12 @@ def _views(world):
 
 
 def _outer(world, policy, captures):
+    """The camera's observations of ``captures``, labelled and cropped as a run labels them."""
+    from torch_gpioius.exploration.calibration import vision_crop
     from torch_gpioius.exploration.observations import vision_observations
     from torch_gpioius.sensors.pointcloud import PointCloud
 
-    crop = world.crop_box()
-    if crop is not None and policy.crop_margin is not None:
-        crop = crop + np.array([[-policy.crop_margin], [policy.crop_margin]])
-    return vision_observations(PointCloud.merge(captures), policy, crop)
-
-
-def _normals(model, x: np.ndarray) -> np.ndarray:
-    """`(n, 3)` the inner estimate's outward normals at ``x``: the gradient of its posterior mean (by autograd)."""
-    xt = torch.as_tensor(x, dtype=torch.float64).requires_grad_(True)
-    mu = model.predict_mean(xt, 0)
-    (g,) = torch.autograd.grad(mu.sum(), xt)
-    g = g.detach().numpy()
-    return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+    return vision_observations(PointCloud.merge(captures), policy, vision_crop(world, policy))
 
 
 def main() -> None:
@@ -73,6 +63,7 @@ def main() -> None:
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     torch.set_num_threads(1)
+    from torch_gpioius.exploration.calibration import contact_normals
     from torch_gpioius.models.gpiois import GPIOIS
     from torch_gpioius.sensors.extrinsics import correct_captures
     from torch_gpioius.sensors.pointcloud import CameraError
@@ -86,7 +77,7 @@ def main() -> None:
         policy = world.defaults.policy
         inner = data.task == 0
         contacts = data.x[inner & (data.y == 0)]
-        normals = _normals(model, contacts)
+        faced, normals = contact_normals(model, contacts)          # those where the estimate has a normal
         middle = world.inner.bounds.mean(axis=0)
         tag = zlib.crc32(log.stem.encode()) % 2 ** 31          # each run its own errors (and noise)
         for draw in range(args.draws):
@@ -97,9 +88,9 @@ def main() -> None:
                         for k, v in enumerate(views)]
             calibrated = [c.capture() for c in plain]
             off = [c.capture() for c in off_cams]
-            fixes = [correct_captures(off, contacts, normals, max_translation=bound.translation,
+            fixes = [correct_captures(off, faced, normals, max_translation=bound.translation,
                                       max_rotation=bound.rotation),
-                     correct_captures(off, contacts, normals, max_translation=bound.translation,
+                     correct_captures(off, faced, normals, max_translation=bound.translation,
                                       max_rotation=bound.rotation, gap=args.gap)]
             versions = [calibrated, off] + [[type(c)(f.apply(c.points), c.origin) for c, f in zip(off, fix.captures)]
                                             for fix in fixes]

@@ -16,10 +16,11 @@ import numpy as np
 import torch
 
 from ..models.labels import ObservationPolicy
+from ..geometry import surface_geometry
 from ..models.gpiois import OUTER
 from .observations import Observations, vision_observations
 
-__all__ = ["CORRECT_AFTER", "CORRECT_EVERY", "capture_views", "vision_crop", "correct_camera"]
+__all__ = ["CORRECT_AFTER", "CORRECT_EVERY", "capture_views", "vision_crop", "contact_normals", "correct_camera"]
 
 #: Contacts before the captures are first corrected: enough, spread over the body, that several lie under each view's
 #: seen cover (a view with none is left to the overlaps and the bound's prior).
@@ -45,13 +46,13 @@ def vision_crop(world, policy: ObservationPolicy) -> np.ndarray | None:
     return crop + np.array([[-policy.crop_margin], [policy.crop_margin]])
 
 
-def _normals(model, x: np.ndarray) -> np.ndarray:
-    """`(n, d)` the inner estimate's unit outward normals at ``x`` (the gradient of its posterior mean, by
-    autograd)."""
-    xt = torch.as_tensor(x, dtype=torch.float64).requires_grad_(True)
-    (g,) = torch.autograd.grad(model.predict_mean(xt, 0).sum(), xt)
-    g = g.detach().cpu().numpy()
-    return g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-12)
+def contact_normals(model, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The contacts where the inner estimate has a normal, `(k, d)`, and those unit outward normals `(k, d)`
+    (:func:`~torch_gpioius.geometry.surface_geometry`: the gradient of the posterior mean; a contact where it vanishes
+    has no direction to pair by and is left out)."""
+    geo = surface_geometry(model, contacts, 0)
+    defined = geo.normal_defined.cpu().numpy()
+    return contacts[defined], geo.normal.cpu().numpy()[defined]
 
 
 def correct_camera(model, captures: list, contacts: np.ndarray, policy: ObservationPolicy,
@@ -85,7 +86,7 @@ def correct_camera(model, captures: list, contacts: np.ndarray, policy: Observat
         captures = [c.cropped(crop[0], crop[1]) for c in captures]
     if any(len(c) < 10 for c in captures):
         return none
-    found = correct_captures(captures, contacts, _normals(model, contacts), max_translation=policy.camera_bound[0],
+    found = correct_captures(captures, *contact_normals(model, contacts), max_translation=policy.camera_bound[0],
                              max_rotation=policy.camera_bound[1])
     if not found.enough:                  # too few contacts under the seen cover yet: tried again later
         return none

@@ -540,9 +540,13 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         est = _resolved_voxel(est, voxel, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
     else:                                           # contacts alone: the length from their extent
         est = _sized(est, float(np.max(x_in.max(axis=0) - x_in.min(axis=0))))
+    # the contacts' directions turned outward where the data say they point in (before any correction: it pairs
+    # contacts with the seen surface facing their way)
+    normal_in = _outward(contacts_csv, x_in, y_in, normal_in,
+                         np.concatenate([c.points for c in captures]) if captures else None)
     corrections = None
     if camera_bound is not None and captures:
-        captures, corrections = _corrected(contacts_csv, files, captures, x_in, y_in, normal_in, camera_bound)
+        captures, corrections = _corrected(files, captures, x_in, y_in, normal_in, camera_bound)
         everything = np.concatenate([c.points for c in captures])
     outer = np.zeros((0, dim)), np.zeros(0)
     if captures:
@@ -560,8 +564,6 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         for k, (f, o, c) in enumerate(zip(files, origins, captures)):
             _check_camera(f, c.points, o, units)
             _check_facing(f, k, len(files), c.points, c.origin, centre)
-    normal_in = _outward(contacts_csv, x_in, y_in, normal_in,
-                         np.concatenate([c.points for c in captures]) if captures else None)
     inner, inner_steps = _inner_with_inside_points(x_in, y_in, normal_in, step_in, est.labels)
     keep = uncontradicted_by_step(inner.x, inner.y, inner_steps, est.labels, outer[0], outer[1])
     behind = inner.y < 0
@@ -605,8 +607,9 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     return Dataset(x, y, task, steps, meta=meta)
 
 
-def _corrected(contacts_csv, files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: np.ndarray, bound):
-    """The captures corrected from the contacts within ``bound`` (:func:`dataset_from_files`'s ``camera_bound``), and
+def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: np.ndarray, bound):
+    """The captures corrected from the contacts (``normal_in``: their outward directions, NaN rows without) within
+    ``bound`` (:func:`dataset_from_files`'s ``camera_bound``), and
     the :class:`~torch_gpioius.sensors.extrinsics.CaptureCorrections`; a large correction is warned of by file."""
     import warnings
 
@@ -625,11 +628,10 @@ def _corrected(contacts_csv, files, captures, x_in: np.ndarray, y_in: np.ndarray
         raise DatasetError("camera_bound: a capture's pose is corrected about its camera: give each cloud its "
                            "camera origin (--camera-origin)")
     contact = y_in == 0
-    # the directions the file gives (normals or forces, turned outward): a contact is paired with a capture's
+    # the directions the file gives (normals or forces, already turned outward): a contact is paired with a capture's
     # surface facing its way; without any, every contact and no facing test
-    normal = _outward(contacts_csv, x_in, y_in, normal_in, np.concatenate([c.points for c in captures]))
-    given = contact & np.isfinite(normal).all(axis=1)
-    use, directions = (given, normal[given]) if given.any() else (contact, None)
+    given = contact & np.isfinite(normal_in).all(axis=1)
+    use, directions = (given, normal_in[given]) if given.any() else (contact, None)
     found = correct_captures(captures, x_in[use], directions, max_translation=bound.translation,
                              max_rotation=bound.rotation)
     for line in found.warnings([str(f) for f in files]):

@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .pointcloud import rigid_about, rotation_matrix, skew
+
 __all__ = ["CaptureCorrection", "CaptureCorrections", "correct_captures"]
 
 #: Huber threshold of the residuals, in their standard deviations: a contact or overlap further off counts linearly
@@ -48,19 +50,6 @@ MIN_CONTACTS = 5
 #: A direction of a capture's correction is "weak" when the data's curvature along it is below this share of the
 #: prior's: the prior, not the touches, set it.
 WEAK = 1.0
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _rotation(w: np.ndarray) -> np.ndarray:
-    """`(3, 3)` rotation of the rotation vector ``w`` [rad] (Rodrigues)."""
-    angle = float(np.linalg.norm(w))
-    if angle == 0.0:
-        return np.eye(3)
-    K = _skew(w / angle)
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
 
 
 @dataclass(frozen=True)
@@ -106,8 +95,7 @@ class CaptureCorrection:
 
     def apply(self, points: np.ndarray) -> np.ndarray:
         """`(n, 3)` ``points`` [m] moved by the correction."""
-        p = np.asarray(points, dtype=np.float64)
-        return self.origin + (p - self.origin) @ _rotation(np.asarray(self.rotation)).T + self.translation
+        return rigid_about(points, self.origin, self.rotation, self.translation)
 
     def as_record(self) -> dict:
         """For records and ``fit.json``: the correction in mm and degrees about ``origin`` [m], its sizes, what fixed
@@ -274,7 +262,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise ValueError(f"correct_captures: {name} must be a positive bound, got {v!r}")
     rng = np.random.default_rng(seed)
-    pts, origins, normals = [], [], []
+    pts, origins, faces = [], [], []   # each capture's plane centres, camera, plane normals
     for k, cap in enumerate(captures):
         q = np.asarray(cap.points, dtype=np.float64)
         if q.ndim != 2 or q.shape[1] != 3 or len(q) < 10 or not np.isfinite(q).all():
@@ -289,7 +277,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
             q, n = q[pick], n[pick]
         pts.append(q)
         origins.append(o)
-        normals.append(n)
+        faces.append(n)
     K = len(captures)
     # Each capture moves about its points' middle (the pivot d = pivot - c from its camera): q -> pivot + R (q - pivot)
     # + u. About the optical centre a metre away, a degree and 17 mm of translation are nearly the same motion at the
@@ -300,7 +288,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     pivots = [q.mean(axis=0) for q in pts]
     prior = np.zeros((6 * K + 1, 6 * K + 1))
     for k in range(K):
-        D = _skew(pivots[k] - origins[k])
+        D = skew(pivots[k] - origins[k])
         cov = np.block([[s_t ** 2 * np.eye(3) + s_w ** 2 * D @ D.T, -s_w ** 2 * D],
                         [-s_w ** 2 * D.T, s_w ** 2 * np.eye(3)]])
         prior[6 * k:6 * k + 6, 6 * k:6 * k + 6] = np.linalg.inv(cov)
@@ -311,8 +299,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     fixed_gap = gap is not None
 
     def moved(k: int, xv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        R = _rotation(xv[6 * k + 3:6 * k + 6])
-        return pivots[k] + (pts[k] - pivots[k]) @ R.T + xv[6 * k:6 * k + 3], normals[k] @ R.T
+        R = rotation_matrix(xv[6 * k + 3:6 * k + 6])
+        return pivots[k] + (pts[k] - pivots[k]) @ R.T + xv[6 * k:6 * k + 3], faces[k] @ R.T
 
     def terms(xv: np.ndarray, reach_now: float = reach):
         """Rows (jacobian, residual) of the contacts and the overlaps at ``xv``; the counts per capture."""
@@ -377,7 +365,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     # beyond a tight cover's gap
     far = max(reach, max_translation + max_rotation * max(np.linalg.norm(pv - o) for pv, o in zip(pivots, origins)))
     if len(p):
-        starts = [_consensus_shift(pts[k], normals[k], cKDTree(pts[k]), p, nrm, far, reach,
+        starts = [_consensus_shift(pts[k], faces[k], cKDTree(pts[k]), p, nrm, far, reach,
                                    float(gap) if fixed_gap else None) for k in range(K)]
         gaps, weights = [], []
         for k, (shift, g_k, count, count0) in enumerate(starts):
@@ -406,13 +394,16 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
             break
     out = []
     _, _, counts, overlaps = terms(x)
+    bounded = x.copy()                     # the (u, w) of the corrections as kept, for their misfit
     for k in range(K):
         u, w = x[6 * k:6 * k + 3], x[6 * k + 3:6 * k + 6].copy()
-        t = u + (np.eye(3) - _rotation(w)) @ (pivots[k] - origins[k])
+        lever = pivots[k] - origins[k]
+        t = u + (np.eye(3) - rotation_matrix(w)) @ lever
         # each capture kept within its bound: scaled back onto it where the solution went beyond
         over = max(np.linalg.norm(t) / max_translation, np.linalg.norm(w) / max_rotation)
         if over > 1.0:
             t, w = t / over, w / over
+        bounded[6 * k:6 * k + 6] = np.r_[t - (np.eye(3) - rotation_matrix(w)) @ lever, w]
         # what the data fixed: the directions of (u, w) along which their curvature is below the prior's
         block = slice(6 * k, 6 * k + 6)
         data = H[block, block] - prior[block, block]
@@ -420,9 +411,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         weak = tuple(sorted({("x", "y", "z", "rx", "ry", "rz")[int(np.argmax(np.abs(v)))]
                              for lam, v in zip(vals, vecs.T) if lam < WEAK}))
         out.append(CaptureCorrection(t, w, origins[k].copy(), counts[k], overlaps[k], bool(over > 1.0), weak))
-    fixed_x = np.concatenate([np.r_[c.translation - (np.eye(3) - _rotation(c.rotation)) @ (pivots[k] - origins[k]),
-                                    c.rotation] for k, c in enumerate(out)] + [x[-1:]])
-    after, g1 = contact_misfit(fixed_x)
+    after, g1 = contact_misfit(bounded)
     bound = (float(max_translation), float(max_rotation))
     if sum(c.contacts for c in out) < MIN_CONTACTS:          # too few to say anything: the captures as given
         out = [CaptureCorrection(np.zeros(3), np.zeros(3), c.origin, c.contacts, c.overlap, False,

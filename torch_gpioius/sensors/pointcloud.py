@@ -218,12 +218,6 @@ class PointCloudSource(abc.ABC):
         returns itself."""
         return self
 
-    def camera_errors(self) -> dict[str, dict]:
-        """The simulated extrinsic error each camera of this source applies (:meth:`AppliedCameraError.as_record`),
-        by view name; empty for a source without one (a file, a live camera, a camera simulated without error)."""
-        applied = getattr(self, "applied_error", None)
-        return {} if applied is None else {"camera": applied.as_record()}
-
 
 class MultiViewSource(PointCloudSource):
     """Several point-cloud sources captured together: one :class:`PointCloud` with each point's own camera origin
@@ -254,9 +248,6 @@ class MultiViewSource(PointCloudSource):
 
     def capture(self) -> PointCloud:
         return PointCloud.merge([src.capture() for src in self.sources])
-
-    def camera_errors(self) -> dict[str, dict]:
-        return {name: rec for name, src in zip(self.names, self.sources) for rec in src.camera_errors().values()}
 
     def reseeded(self, seed) -> "MultiViewSource":
         # each view its own stream: view k of seed s draws from [s, k], never the same noise as another view
@@ -335,6 +326,48 @@ class PinholeCamera:
                          np.ones(u.size)], axis=1)
 
 
+def skew(v) -> np.ndarray:
+    """`(3, 3)` the cross-product matrix of `(3,)` ``v``: ``skew(v) @ u == cross(v, u)``."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rotation_matrix(rotvec) -> np.ndarray:
+    """`(3, 3)` the rotation of the rotation vector `(3,)` ``rotvec`` (axis times angle [rad]; Rodrigues' formula)."""
+    w = np.asarray(rotvec, dtype=np.float64)
+    angle = float(np.linalg.norm(w))
+    if angle == 0.0:
+        return np.eye(3)
+    K = skew(w / angle)
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+
+
+def rigid_about(points, origin, rotvec, translation) -> np.ndarray:
+    """`(n, 3)` ``points`` [m] moved rigidly about ``origin`` `(3,)` [m]: ``origin + R (p - origin) + translation``,
+    R the rotation of ``rotvec`` [rad] (a camera's calibration error, or its correction)."""
+    c = np.asarray(origin, dtype=np.float64)
+    return (c + (np.asarray(points, dtype=np.float64) - c) @ rotation_matrix(rotvec).T
+            + np.asarray(translation, dtype=np.float64))
+
+
+def error_key(name: str) -> tuple:
+    """What a simulated camera error is drawn with besides a view's seed: the scene's name, so that two objects' runs
+    of one seed are off in their own directions."""
+    import zlib
+
+    return (zlib.crc32(name.encode()) % 2 ** 31,)
+
+
+def view_errors(error: "CameraError", views, seed: int, key: tuple = ()) -> dict[str, dict]:
+    """The error each simulated view of a world draws (:meth:`AppliedCameraError.as_record`, by view name), as its
+    camera draws it: the seed alone for the paper's single fixed view, ``[seed, k]`` for view k of several, each with
+    ``key`` (:func:`error_key`); empty without an error."""
+    if not error:
+        return {}
+    views = tuple(views)
+    seeds = [[seed]] if views == ("fixed",) else [[seed, k] for k in range(len(views))]
+    return {v: error.draw([*s, *key]).as_record() for v, s in zip(views, seeds)}
+
+
 #: Units a :meth:`CameraError.parse` text may give: lengths to metres, angles to radians.
 _LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 _ANGLE_UNITS = {"deg": math.pi / 180.0, "rad": 1.0}
@@ -355,19 +388,12 @@ class AppliedCameraError:
     rotation: tuple
 
     def matrix(self) -> np.ndarray:
-        """`(3, 3)` R (Rodrigues' formula)."""
-        w = np.asarray(self.rotation, dtype=np.float64)
-        angle = float(np.linalg.norm(w))
-        if angle == 0.0:
-            return np.eye(3)
-        k = w / angle
-        K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-        return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K @ K
+        """`(3, 3)` R (:func:`rotation_matrix`)."""
+        return rotation_matrix(self.rotation)
 
     def apply(self, points: np.ndarray, origin: np.ndarray) -> np.ndarray:
         """`(n, 3)` ``points`` [m] moved by this error about ``origin`` `(3,)` [m] (both base frame)."""
-        c = np.asarray(origin, dtype=np.float64)
-        return c + (np.asarray(points, dtype=np.float64) - c) @ self.matrix().T + np.asarray(self.translation)
+        return rigid_about(points, origin, self.rotation, self.translation)
 
     def as_record(self) -> dict:
         """The error for a run's record: ``translation_mm`` and ``rotation_deg`` (a rotation vector) as lists, and
@@ -443,6 +469,11 @@ class CameraError:
     def __str__(self) -> str:
         return f"{self.translation * 1e3:g}mm,{math.degrees(self.rotation):g}deg"
 
+    def drawn(self, seed, key=()) -> AppliedCameraError | None:
+        """What a camera seeded with ``seed`` (and ``key``, :func:`error_key`) applies: :meth:`draw`, or None
+        without an error."""
+        return self.draw([*np.atleast_1d(seed).tolist(), *np.atleast_1d(key).tolist()]) if self else None
+
     def draw(self, seed) -> AppliedCameraError:
         """The error one camera applies, drawn from ``seed`` (an int or a sequence of ints, the camera's noise seed:
         a stream of its own, so that the noise of a camera with and without an error is the same)."""
@@ -497,7 +528,7 @@ class SimulatedDepthCamera(PointCloudSource):
         self.error = CameraError() if error is None else CameraError.parse(error)
         self.error_key = tuple(int(k) for k in np.atleast_1d(error_key))
         #: The rigid error this camera's captures carry (:meth:`CameraError.draw` of its seed), or None.
-        self.applied_error = self.error.draw([*np.atleast_1d(seed).tolist(), *self.error_key]) if self.error else None
+        self.applied_error = self.error.drawn(seed, self.error_key)
 
     @property
     def origin(self) -> np.ndarray:

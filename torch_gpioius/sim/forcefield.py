@@ -26,7 +26,7 @@ from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Me
                                  perturbed_approaches)
 from ..metrics import hausdorff_distance
 from ..planning import RangePenalty
-from ..sensors.pointcloud import CameraError, PinholeCamera, SimulatedDepthCamera, look_at
+from ..sensors.pointcloud import CameraError, PinholeCamera, SimulatedDepthCamera, error_key, look_at, view_errors
 from ..sensors.simulated import ForceFieldContact
 from ..surfaces import surface_samples
 from .._validation import INSIDE_DEPTH_MAX, as_bounds, as_float
@@ -799,19 +799,13 @@ class Scene3D(RangedScene):
         return self._copy(camera_error=error)
 
     def _error_key(self) -> tuple:
-        """What a camera error is drawn with besides the view's seed: the scene's name (two objects' runs of one seed
-        are off in their own directions)."""
-        import zlib
-
-        return (zlib.crc32(self.name.encode()) % 2 ** 31,)
+        return error_key(self.name)
 
     def camera_errors(self) -> dict[str, dict]:
         """The extrinsic error each simulated view of this scene (its seed) applies, by view name
-        (:meth:`~torch_gpioius.sensors.pointcloud.AppliedCameraError.as_record`); empty without one."""
-        if not self.camera_error:
-            return {}
-        errors = self.cameras(self.views).camera_errors()
-        return {"fixed": errors["camera"]} if "camera" in errors else errors
+        (:meth:`~torch_gpioius.sensors.pointcloud.AppliedCameraError.as_record`); empty without one (drawn as the
+        cameras draw it, without building them)."""
+        return view_errors(self.camera_error, self.views, self.seed, self._error_key())
 
     def perturbed(self, seed: int) -> "Scene3D":
         """The same objects with a seeded perturbation (seed 0: unchanged): the start moved uniformly within a

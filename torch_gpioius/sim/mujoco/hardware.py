@@ -308,8 +308,7 @@ class MujocoDepthCamera(PointCloudSource):
         self._rng = np.random.default_rng(seed)
         self.error = CameraError() if error is None else CameraError.parse(error)
         #: The rigid error this camera's captures carry, or None.
-        self.applied_error = (self.error.draw([*np.atleast_1d(seed).tolist(), *np.atleast_1d(error_key).tolist()])
-                              if self.error else None)
+        self.applied_error = self.error.drawn(seed, error_key)
 
     def capture(self) -> PointCloud:
         mj = self.physics.mj

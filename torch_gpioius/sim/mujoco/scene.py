@@ -444,18 +444,16 @@ class MujocoScene(RangedScene):
         return self._copy(self.start, self.direction, self.seed, camera_error=CameraError.parse(error))
 
     def _error_key(self) -> tuple:
-        import zlib
+        from ...sensors.pointcloud import error_key
 
-        return (zlib.crc32(self.name.encode()) % 2 ** 31,)
+        return error_key(self.name)
 
     def camera_errors(self) -> dict[str, dict]:
         """The extrinsic error each view of this scene (its seed) applies, by view name; empty without one (drawn as
         the cameras draw it, without building them)."""
-        if not self.camera_error:
-            return {}
-        seeds = [self.seed] if self.views == ("fixed",) else [[self.seed, k] for k in range(len(self.views))]
-        return {v: self.camera_error.draw([*np.atleast_1d(s).tolist(), *self._error_key()]).as_record()
-                for v, s in zip(self.views, seeds)}
+        from ...sensors.pointcloud import view_errors
+
+        return view_errors(self.camera_error, self.views, self.seed, self._error_key())
 
     def _copy(self, start, direction, seed: int, **changes) -> "MujocoScene":
         kw = dict(name=self.name, seed=seed, sensor_noise=self.sensor_noise, timestep=self.timestep,
