@@ -39,6 +39,43 @@ def mll(x, y, task, kt, theta, noise, m=1.0):
     return -0.5 * logdet - 0.5 * r @ np.linalg.solve(g, r) - 0.5 * len(x) * np.log(2 * np.pi)
 
 
+def posterior_with_means(x, y, task, kt, theta, noise, xq, tq, mx, mq):
+    """Eq. (12)-(13) with a prior mean per observation ``mx`` `(n,)` and per query ``mq`` `(m,)` (a mean that varies
+    over space, such as the outer task's gap field)."""
+    g = gram(x, task, kt, theta, noise)
+    kq = imq(xq, x, theta) * kt[tq, task][None, :]
+    mean = mq + kq @ np.linalg.solve(g, y - mx)
+    var = kt[tq, tq] / theta - np.einsum("ij,ji->i", kq, np.linalg.solve(g, kq.T))
+    return mean, var
+
+
+def mll_with_means(x, y, task, kt, theta, noise, mx):
+    """Eq. (16) with a prior mean per observation ``mx`` `(n,)`."""
+    g = gram(x, task, kt, theta, noise)
+    r = y - mx
+    sign, logdet = np.linalg.slogdet(g)
+    assert sign > 0
+    return -0.5 * logdet - 0.5 * r @ np.linalg.solve(g, r) - 0.5 * len(x) * np.log(2 * np.pi)
+
+
+def gap_field(points, gaps, length, scale, noise, prior, xq):
+    """The GP regression mean of a scalar over space: ``prior + k(xq, P) (K + noise^2 I)^-1 (gaps - prior)``,
+    ``k = scale^2 exp(-|x - x'|^2 / (2 length^2))``."""
+    def k(a, b):
+        return scale ** 2 * np.exp(-0.5 * ((a[:, None, :] - b[None, :, :]) ** 2).sum(-1) / length ** 2)
+
+    alpha = np.linalg.solve(k(points, points) + noise ** 2 * np.eye(len(points)), gaps - prior)
+    return prior + k(xq, points) @ alpha
+
+
+def gap_field_mll(points, gaps, length, scale, noise, prior):
+    """The log marginal likelihood of ``gaps`` under that regression."""
+    g = scale ** 2 * np.exp(-0.5 * ((points[:, None, :] - points[None, :, :]) ** 2).sum(-1) / length ** 2) \
+        + noise ** 2 * np.eye(len(points))
+    r = gaps - prior
+    return -0.5 * np.linalg.slogdet(g)[1] - 0.5 * r @ np.linalg.solve(g, r) - 0.5 * len(r) * np.log(2 * np.pi)
+
+
 def kt_from_chol(phi):
     u, v, w = phi
     lo = np.array([[np.exp(u), 0.0], [v, np.exp(w)]])

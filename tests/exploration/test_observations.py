@@ -315,3 +315,91 @@ def test_the_cameras_inside_points_are_continued_down_to_the_gap_with_the_offset
     assert len(deep) == len(inside) * len(expected)              # the sphere contradicts none of them
     m.add_observations(deep.x, deep.y, deep.task)
     assert deepen_vision_inside(m, contacts, policy) is None                    # once
+
+
+def _uneven_sphere(n, seed, thin=0.005, thick=0.05):
+    """Directions on the unit sphere and a cover over a 10 cm sphere standing off by ``thin`` at the bottom (-z)
+    growing linearly in z to ``thick`` at the top."""
+    d = _sphere(1.0, n, seed=seed)
+    return d, 0.10 + thin + (thick - thin) * (d[:, 2] + 1) / 2
+
+
+def _gap_field_model(policy, seen_dirs, outer_r, contacts):
+    seen = seen_dirs * outer_r[:, None]
+    inside = seen_dirs * (outer_r - 0.02)[:, None]
+    x = np.r_[contacts, seen, inside]
+    y = np.r_[np.zeros(len(contacts) + len(seen)), np.full(len(inside), policy.inside_label(0.02))]
+    t = np.r_[np.zeros(len(contacts)), np.ones(len(seen) + len(inside))].astype(np.int64)
+    return tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t),
+                     kernel=tg.kernels.InverseMultiquadricKernel(0.1)), seen
+
+
+def test_the_gap_field_follows_a_cover_whose_gap_varies_and_leaves_a_tight_one_alone():
+    """``cover_gap_field``: a body of 10 cm radius under a cover 5 mm off at the bottom and 5 cm at the top, touched
+    all round (60 contacts). The outer mean becomes a field that reads the gap where it is (within 8 mm, the local
+    planes' sagitta and the field's smoothing) instead of one median; a second call with the same contacts changes
+    nothing. Under a cover 8 mm off everywhere the field never exceeds the 3 cm limit and the mean stays 1; the
+    setting alone, without the offset and the deep points it stands in for, is refused."""
+    from torch_gpioius.exploration.observations import offset_outer_mean
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
+                               cover_gap_field=True)
+    dirs, outer_r = _uneven_sphere(400, seed=4)
+    contacts = _sphere(0.10, 60, seed=5)
+    m, seen = _gap_field_model(policy, dirs, outer_r, contacts)
+    assert offset_outer_mean(m, contacts, policy) and m.outer_field is not None
+    true_gap = outer_r - 0.10
+    reads = m.outer_field.gap(seen).numpy()
+    band = np.abs(dirs[:, 2]) < 0.8                   # away from the poles, where the contacts surround the place
+    assert np.abs(reads - true_gap)[band].max() < 0.008
+    assert reads[dirs[:, 2] < -0.8].mean() < 0.015 and reads[dirs[:, 2] > 0.8].mean() > 0.04
+    field = m.outer_field
+    assert not offset_outer_mean(m, contacts, policy) and m.outer_field is field
+    tight, _ = _gap_field_model(policy, dirs, np.full(len(dirs), 0.108), contacts)
+    assert not offset_outer_mean(tight, contacts, policy) and tight.outer_field is None and tight.outer_mean == 1.0
+    with pytest.raises(ValueError, match="cover_gap_field"):
+        ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, cover_gap_field=True)
+
+
+def test_the_cameras_inside_points_go_down_to_the_fields_gap_where_each_lies_and_are_placed_again():
+    """With the gap field, each of the camera's inside points is continued every 2 cm down to the field's gap at its
+    seen point plus 2 cm: none where the cover is thin, down to 6 cm where it stands 4-5 cm off; each new point lies
+    at its labelled depth below the cover. ``renew_deep_vision_inside`` removes exactly those points, and they are
+    placed again alike."""
+    from torch_gpioius.exploration.observations import (deepen_vision_inside, offset_outer_mean,
+                                                        renew_deep_vision_inside)
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
+                               cover_gap_field=True)
+    dirs, outer_r = _uneven_sphere(400, seed=4)
+    contacts = _sphere(0.10, 60, seed=5)
+    m, seen = _gap_field_model(policy, dirs, outer_r, contacts)
+    assert deepen_vision_inside(m, contacts, policy) is None                     # no field yet
+    assert offset_outer_mean(m, contacts, policy)
+    deep = deepen_vision_inside(m, contacts, policy)
+    depth = policy.inside_depth(deep.y)
+    # each inside point's line runs from its nearest seen point through it; the new points lie on those lines
+    from scipy.spatial import cKDTree
+
+    inside = dirs * (outer_r - 0.02)[:, None]
+    _, near = cKDTree(seen).query(inside)
+    lines = [(seen[k], (p - seen[k]) / np.linalg.norm(p - seen[k])) for p, k in zip(inside, near)]
+    j = []
+    for p, d in zip(deep.x, depth):
+        hit = [i for i, (s0, u) in enumerate(lines) if np.linalg.norm(s0 + u * d - p) < 1e-12]
+        assert hit, "a deep point off every inside point's line"
+        j.append(near[hit[0]])
+    j = np.array(j)
+    local = m.outer_field.gap(seen[j]).numpy()
+    assert (depth <= local + policy.vision_inside + 1e-9).all()
+    assert set(np.unique(depth.round(12))) == {0.04, 0.06}
+    assert not (dirs[j, 2] < -0.5).any()                                         # none where the cover is thin
+    m.add_observations(deep.x, deep.y, deep.task)
+    assert deepen_vision_inside(m, contacts, policy) is None                     # continued already
+    n = len(m.train_targets)
+    gone = renew_deep_vision_inside(m, policy)
+    np.testing.assert_array_equal(gone, np.arange(n - len(deep), n))
+    again = deepen_vision_inside(m, contacts, policy)
+    np.testing.assert_array_equal(again.x, deep.x)
+    np.testing.assert_array_equal(again.y, deep.y)
+    assert len(renew_deep_vision_inside(m, dataclasses.replace(policy, cover_gap_field=False))) == 0

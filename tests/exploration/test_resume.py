@@ -327,3 +327,39 @@ def test_a_miscalibrated_cameras_captures_are_corrected_logged_and_resume_alike(
     np.testing.assert_array_equal(last.y, reference.model.train_targets.numpy())
     for cut in (marked[0] - 3, marked[0] + 2):
         _resumes_alike(scene, log, cut, reference, kw)
+
+
+def test_the_gap_field_settings_log_the_field_and_resume_alike(tmp_path):
+    """``settings="gapfield"`` under a cover 4 cm off an ellipsoid: once the field of the contacts' gaps exceeds the
+    3 cm limit the outer mean is that field (logged with each step: the replay's model at the last step predicts as
+    the run's does), the camera's inside points are continued down to it, and a run cut after that step and resumed
+    ends where the uninterrupted one ends, with the same field. The step is a chaotic run's: found from the log."""
+    import trimesh
+
+    from torch_gpioius.io.runs import load_run
+    from torch_gpioius.sim.forcefield import Scene3D
+
+    body = trimesh.creation.icosphere(subdivisions=3, radius=0.06)
+    body.apply_scale([1.3, 1.0, 0.8])
+    scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1], settings="gapfield")
+    assert scene.defaults.policy.cover_gap_field
+    kw = dict(max_travel=0.08, metrics_every=100, progress=False)
+    log = tmp_path / "run.gpioius"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = tg.explore(scene, log=log, **kw)
+    field = reference.model.outer_field
+    assert field is not None and field.gap(reference.contacts).min() > 0.02      # it stands for the 4 cm cover
+    run = load_run(log)
+    assert run.meta["policy"]["cover_gap_field"] is True
+    fielded = [k for k in run.steps if "outer_field" in run.params[k]]
+    assert fielded and run.params[run.steps[-1]]["outer_field"] == field
+    last = run.model_at(run.steps[-1])
+    q = torch.as_tensor(reference.contacts[::3])
+    torch.testing.assert_close(last.predict(q, 0)[0], reference.model.predict(q, 0)[0], rtol=0, atol=1e-9)
+    first = scene.defaults.policy.inside_label(scene.defaults.policy.vision_inside)
+    state = run.states[fielded[0]]
+    assert ((state.task == 1) & (state.y < first - 1e-9)).any()                  # continued down to it
+    _resumes_alike(scene, log, run.steps[min(run.steps.index(fielded[0]) + 1, len(run.steps) - 2)], reference, kw)
+    resumed = load_run(log)
+    assert resumed.params[resumed.steps[-1]]["outer_field"] == field

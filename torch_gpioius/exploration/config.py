@@ -197,13 +197,13 @@ class ExploreConfig(EstimatorView):
 
     def _policy_record(self) -> dict:
         """The observation policy for the header; the inside-point settings, ``cover_offset``,
-        ``vision_inside_deep`` and ``camera_bound`` only when set, so that logs written before they existed still
-        resume."""
+        ``vision_inside_deep``, ``cover_gap_field`` and ``camera_bound`` only when set, so that logs written before
+        they existed still resume."""
         out = dataclasses.asdict(self.policy)
         for key in ("touch_inside", "vision_inside", "vision_inside_gap", "camera_bound"):
             if out[key] is None:
                 del out[key]
-        for key in ("cover_offset", "vision_inside_deep"):  # (since 2026-11-27 and 2026-11-29)
+        for key in ("cover_offset", "vision_inside_deep", "cover_gap_field"):  # (since 2026-11-27, -29 and -29)
             if not out[key]:
                 del out[key]
         return out

@@ -26,7 +26,8 @@ from ..planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
 from .calibration import capture_views, correct_camera, vision_crop
 from .observations import (Observations, deepen_vision_inside, drop_contradicted_inside, offset_outer_mean,
-                           retract_free_space, retract_vision_inside, thin_points, vision_observations)
+                           renew_deep_vision_inside, retract_free_space, retract_vision_inside, thin_points,
+                           vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .state import ExplorationState, StepRecord
 from .timing import PartClock
@@ -238,7 +239,12 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     camera = retract_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     if len(camera):                      # indices into the data before this step, as the log and replays read them
         removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
-    offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
+    if offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check):
+        placed = int(state.model.train_targets.shape[0])
+        renewed = renew_deep_vision_inside(state.model, cfg.policy)    # the gap field moved: placed again below
+        if len(renewed):                 # indices into the data before this step, as the log and replays read them
+            left = np.delete(np.arange(before), removed)[:placed]
+            removed = np.sort(np.concatenate([removed, left[renewed]]))
     deep = deepen_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     corrected = None
     if state.captures is not None:       # ObservationPolicy.camera_bound: the captures corrected from the contacts

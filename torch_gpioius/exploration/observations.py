@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .._validation import as_int, label_problem
+from .._validation import INSIDE_DEPTH_MAX, as_int, label_problem
 from ..models.gpiois import INNER, OUTER
 from ..models.labels import MAX_VOXEL, ObservationPolicy, check_voxel
 from ..voxels import voxel_average
@@ -26,7 +26,7 @@ from ..voxels import voxel_average
 __all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices",
            "free_space_along", "retract_free_space", "vision_observations", "drop_contradicted_inside",
            "uncontradicted", "uncontradicted_by_step", "INSIDE_CLEARANCE", "retract_vision_inside", "offset_outer_mean",
-           "deepen_vision_inside",
+           "renew_deep_vision_inside", "deepen_vision_inside",
            "cover_gap", "CoverGap", "GAP_MIN_CONTACTS", "INNER", "OUTER"]
 
 @dataclass
@@ -283,14 +283,23 @@ class CoverGap:
     def __init__(self, neighbours: int = 6):
         self.neighbours = as_int(neighbours, "neighbours", 3)
         self._seen = self._tree = None
-        self._contacts = self._gap = self._along = None
+        self._contacts = self._gap = self._along = self._feet = None
 
     def __call__(self, contacts: np.ndarray, seen: np.ndarray, reach: float = 0.02) -> float:
         """The gap [m] (:func:`cover_gap`) of contacts `(k, d)` under seen cover `(m, d)`, base frame [m]."""
+        _, counted = self.measured(contacts, seen, reach)
+        return float(np.median(counted)) if len(counted) >= GAP_MIN_CONTACTS else math.nan
+
+    def measured(self, contacts: np.ndarray, seen: np.ndarray, reach: float = 0.02) -> tuple[np.ndarray,
+                                                                                              np.ndarray]:
+        """Each counted contact's gap, where it was measured: `(j, d)` the contacts' feet on the seen cover's local
+        planes [m] and `(j,)` their distances from those planes [m] (the contacts that count, as :func:`cover_gap`
+        says; none with fewer than :data:`GAP_MIN_CONTACTS` contacts or 3 seen points)."""
         contacts, seen = np.asarray(contacts, dtype=np.float64), np.asarray(seen, dtype=np.float64)
         k = min(self.neighbours, len(seen))
+        d = contacts.shape[-1] if contacts.ndim == 2 else seen.shape[-1]
         if len(contacts) < GAP_MIN_CONTACTS or k < 3:
-            return math.nan
+            return np.zeros((0, d)), np.zeros(0)
         if self._seen is None or not np.array_equal(self._seen, seen):
             from scipy.spatial import cKDTree
 
@@ -298,6 +307,7 @@ class CoverGap:
         done = 0 if self._contacts is None else len(self._contacts)
         if self._contacts is None or done > len(contacts) or not np.array_equal(self._contacts, contacts[:done]):
             done, self._contacts, self._gap, self._along = 0, contacts[:0].copy(), np.zeros(0), np.zeros(0)
+            self._feet = contacts[:0].copy()
         new = contacts[done:]
         if len(new):
             _, idx = self._tree.query(new, k=k)
@@ -305,12 +315,14 @@ class CoverGap:
             centre = patch.mean(axis=1)
             normal = np.linalg.svd(patch - centre[:, None])[2][:, -1]          # the plane's normal, (n, d)
             offset = new - centre
-            gap = np.abs((offset * normal).sum(axis=1))
+            height = (offset * normal).sum(axis=1)
+            gap = np.abs(height)
             along = np.sqrt(np.maximum((offset ** 2).sum(axis=1) - gap ** 2, 0.0))
             self._contacts = np.concatenate([self._contacts, new])
             self._gap, self._along = np.concatenate([self._gap, gap]), np.concatenate([self._along, along])
-        counted = self._gap[self._along <= reach]
-        return float(np.median(counted)) if len(counted) >= GAP_MIN_CONTACTS else math.nan
+            self._feet = np.concatenate([self._feet, new - height[:, None] * normal])
+        counted = self._along <= reach
+        return self._feet[counted], self._gap[counted]
 
 
 def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
@@ -388,6 +400,8 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
         return False
     y = model.train_targets.cpu().numpy()
     outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
+    if policy.cover_gap_field:
+        return _offset_outer_field(model, y, outer, contacts, policy, gap)
     seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
     current = (1.0 - model.outer_mean) * policy.ramp             # the gap the mean stands for now [m]
     if not math.isfinite(seen_gap) or (current == 0.0 and not seen_gap > policy.vision_inside_gap):
@@ -396,6 +410,49 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
         return False
     model.set_outer_mean(1.0 - seen_gap / policy.ramp)
     return True
+
+
+def _offset_outer_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
+                        gap: CoverGap | None) -> bool:
+    """:func:`offset_outer_mean` with ``policy.cover_gap_field``: the outer mean from a :class:`GapField` of the
+    contacts' gaps, set once the field at the contacts that measure it exceeds ``policy.vision_inside_gap`` somewhere
+    and renewed when it moves by more than :data:`OFFSET_STEP` at any seen point."""
+    from ..models.gapfield import GapField
+
+    measure = gap if gap is not None else CoverGap()
+    seen = model.train_inputs[0].cpu().numpy()[outer & (y == 0)]
+    feet, gaps = measure.measured(contacts, seen, reach=max(0.02, policy.voxel or 0.0))
+    if len(gaps) < GAP_MIN_CONTACTS:
+        return False
+    field = GapField.fit(feet, np.clip(gaps, 0.0, INSIDE_DEPTH_MAX), ramp=policy.ramp)
+    current = model.outer_field
+    if current is None:
+        if not float(field.gap(feet).max()) > policy.vision_inside_gap:
+            return False
+    elif float((field.gap(seen) - current.gap(seen)).abs().max()) <= OFFSET_STEP:
+        return False
+    model.set_outer_mean(field)
+    return True
+
+
+def renew_deep_vision_inside(model, policy: ObservationPolicy) -> np.ndarray:
+    """With ``policy.cover_gap_field``, remove the camera's inside points continued below the first
+    (:func:`deepen_vision_inside` places them again from the renewed field at the same step): call it when
+    :func:`offset_outer_mean` changed the field.
+
+    Returns:
+        `(k,)` indices (into the observations before the call) that were removed; empty when none.
+    """
+    none = np.zeros(0, dtype=np.int64)
+    if not policy.cover_gap_field or policy.vision_inside is None or getattr(model, "num_tasks", 1) < 2:
+        return none
+    y = model.train_targets.cpu().numpy()
+    outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
+    deep = outer & (y < policy.inside_label(policy.vision_inside) - 1e-9)
+    if not deep.any():
+        return none
+    model.remove_observations(torch.as_tensor(deep))
+    return np.flatnonzero(deep)
 
 
 def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
@@ -427,9 +484,14 @@ def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
     behind = outer & (y < 0)
     if not behind.any() or (y[behind] < first - 1e-9).any():      # none to continue, or continued already
         return None
-    seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
-    if not seen_gap > policy.vision_inside_gap:
-        return None
+    field = getattr(model, "outer_field", None) if policy.cover_gap_field else None
+    if policy.cover_gap_field:
+        if field is None:                                          # not yet set (_offset_outer_field)
+            return None
+    else:
+        seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
+        if not seen_gap > policy.vision_inside_gap:
+            return None
     from scipy.spatial import cKDTree
 
     x = model.train_inputs[0].cpu().numpy()
@@ -438,12 +500,17 @@ def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
     step = x[behind] - seen[j]            # the inward line (voxel averaging leaves it near, not at, vision_inside)
     length = np.linalg.norm(step, axis=1, keepdims=True)
     inward = step / np.maximum(length, 1e-12)
-    depths = policy.vision_inside * np.arange(2, int((seen_gap + policy.vision_inside) // policy.vision_inside
-                                                     + 1e-9) + 1)
+    vi = policy.vision_inside
+    g = (field.gap(seen[j]).numpy() if field is not None else np.full(len(j), seen_gap))  # each point's gap [m]
+    count = ((g + vi) // vi + 1e-9).astype(np.int64)               # depths vi * 2 .. vi * count
+    depths = vi * np.arange(2, max(int(count.max()), 1) + 1)
     if not len(depths):
         return None
-    points = np.concatenate([seen[j] + inward * d for d in depths])
-    labels = np.repeat([policy.inside_label(d) for d in depths], len(step))
+    reach = np.concatenate([count >= k for k in range(2, len(depths) + 2)])    # (len(depths) * n,)
+    points = np.concatenate([seen[j] + inward * d for d in depths])[reach]
+    labels = np.repeat([policy.inside_label(d) for d in depths], len(step))[reach]
+    if not len(points):
+        return None
     known = outer & (y >= 0)
     keep = uncontradicted(points, labels, policy, x[known], y[known])
     if not keep.any():

@@ -86,6 +86,12 @@ def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None
                "train_y": model.train_targets.detach().cpu().clone()}
     if kind == "GPIOIS":
         tensors["train_task"] = model.train_inputs[1].detach().cpu().reshape(-1).clone()
+        field = model.outer_field
+        if field is not None:      # the outer mean's gap field: its gaps, where they were measured, its numbers
+            tensors["outer_field_points"] = field.points.clone()
+            tensors["outer_field_gaps"] = field.gaps.clone()
+            tensors["outer_field_params"] = torch.tensor([field.length, field.scale, field.noise, field.prior,
+                                                          field.ramp], dtype=torch.float64)
     kernel = model.kernel.describe()
     _check_extra(kernel, "the kernel's description")
     payload = {
@@ -161,6 +167,12 @@ def load_checkpoint(path: str | os.PathLike):
             # saved before the outer task had a prior mean of its own (2026-11-27): the paper's, 1, for both tasks
             state = {**state, "outer_mean_module.raw_constant": torch.ones((), dtype=torch.float64)}
         model.load_state_dict(state)
+        if "outer_field_points" in tensors:        # saved with the outer mean a gap field (since 2026-11-29)
+            from ..models.gapfield import GapField
+
+            length, scale, noise, prior, ramp = tensors["outer_field_params"].tolist()
+            model.set_outer_mean(GapField(tensors["outer_field_points"], tensors["outer_field_gaps"], length, scale,
+                                          noise, prior, ramp))
     except (KeyError, ValueError, RuntimeError) as exc:
         raise CheckpointError(f"{path}: checkpoint data is inconsistent ({exc})") from exc
     model.eval()

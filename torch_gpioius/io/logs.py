@@ -91,6 +91,22 @@ def load_logged_hyperparameters(model, state, where: str):
     return model
 
 
+def logged_gap_field(meta: dict, arrays: dict, where: str):
+    """The outer mean's gap field a step record logged (``meta["outer_field"]``, its numbers; ``arrays``'
+    ``outer_field_points`` and ``outer_field_gaps``), as a :class:`~torch_gpioius.models.gapfield.GapField`.
+
+    Raises:
+        DatasetError: the record is not a gap field (names ``where``).
+    """
+    from ..models.gapfield import GapField
+
+    try:
+        return GapField.from_dict({**meta["outer_field"], "points": arrays["outer_field_points"],
+                                   "gaps": arrays["outer_field_gaps"]}, where)
+    except (KeyError, ValueError) as exc:
+        raise DatasetError(f"{where}: the logged gap field: {exc}") from None
+
+
 def _num(v) -> float | None:
     return None if v is None else float(v)
 
@@ -145,6 +161,9 @@ class LogRecorder(Recorder):
                 "fit_gap": record.fit_gap, "length": record.length, "noise": record.noise}
         if hasattr(state.model, "outer_mean"):      # the cover's offset (ObservationPolicy.cover_offset)
             meta["outer_mean"] = state.model.outer_mean
+        field = getattr(state.model, "outer_field", None)
+        if field is not None:                       # the gap a place at a time (ObservationPolicy.cover_gap_field)
+            meta["outer_field"] = {k: v for k, v in field.as_dict().items() if k not in ("points", "gaps")}
         if record.camera_corrections is not None:  # the step that corrected the camera's captures (camera_bound)
             meta["camera_corrections"] = record.camera_corrections
         if run.config.learn != "task":  # learned length and noise, raw, so that resume restores them exactly
@@ -164,6 +183,8 @@ class LogRecorder(Recorder):
         if obs.normal is not None:
             arrays["normals"] = obs.normal
         arrays.update(run.config.touch.footprint())       # a patch's pad at this step (the viewer draws it)
+        if field is not None:
+            arrays["outer_field_points"], arrays["outer_field_gaps"] = field.points.numpy(), field.gaps.numpy()
         if hasattr(state.model, "region_correlations"):
             arrays["local_params"] = state.model.params.detach().cpu().numpy()
         self.writer.append("step", meta, {**arrays, **world})
@@ -289,6 +310,8 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         model.task_covariance = torch.as_tensor(last.arrays["kt"])
         if isinstance(last.meta.get("outer_mean"), (int, float)):       # logged since 2026-11-27
             model.set_outer_mean(float(last.meta["outer_mean"]))
+        if isinstance(last.meta.get("outer_field"), dict):               # logged since 2026-11-29
+            model.set_outer_mean(logged_gap_field(last.meta, last.arrays, f"{path}: last step record"))
         if "fit_hessian" in last.arrays and callable(getattr(model, "restore_fit_state", None)):
             model.restore_fit_state(last.arrays["fit_hessian"], last.meta.get("fit_relearned", True),
                                     last.meta.get("held_fits", 0))

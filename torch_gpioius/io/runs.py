@@ -14,7 +14,7 @@ import trimesh
 import torch
 
 from .datasets import Dataset, DatasetError, load_dataset, replay
-from .logs import load_logged_hyperparameters, step_values
+from .logs import load_logged_hyperparameters, logged_gap_field, step_values
 
 __all__ = ["RunHistory", "load_run", "known_truth", "estimate_surface"]
 
@@ -81,7 +81,7 @@ class RunHistory:
             return model.set_params(p["local_params"])
         if "kt" in p and np.isfinite(p["kt"]).all():
             model = GPIOIS(ds.x, ds.y, ds.task, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
-                           kernel=kernel).set_outer_mean(p.get("outer_mean", 1.0))
+                           kernel=kernel).set_outer_mean(p.get("outer_field") or p.get("outer_mean", 1.0))
             return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
         return GPIOIS(ds.x, ds.y, ds.task, noise=noise, kernel=kernel).fit()
 
@@ -145,6 +145,9 @@ def load_run(path: str | os.PathLike) -> RunHistory:
                 p["hyperparameters"] = rec.meta["hyperparameters"]
             if isinstance(rec.meta.get("outer_mean"), (int, float)):  # logged since 2026-11-27
                 p["outer_mean"] = float(rec.meta["outer_mean"])
+            if isinstance(rec.meta.get("outer_field"), dict):        # logged since 2026-11-29
+                p["outer_field"] = logged_gap_field(rec.meta, rec.arrays, f"{path}: step record ending at byte "
+                                                                          f"{rec.end}")
             if isinstance(rec.meta.get("camera_corrections"), dict):  # the step that corrected the captures
                 p["camera_corrections"] = rec.meta["camera_corrections"]
             for key in ("kt", "local_params", "contact", "pad_pose", "pad_size"):

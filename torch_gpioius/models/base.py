@@ -193,19 +193,20 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
         x = self.train_inputs[0]
         key = self._key(x.shape[0])
         if self._engine is None or self._engine_key != key:
-            self._engine = self._engine_class()(x, self._engine_targets(self.train_targets, self._train_task()),
+            self._engine = self._engine_class()(x, self._engine_targets(self.train_targets, self._train_task(), x),
                                                 self._train_task(), self.covar_module, self.noise, self.prior_mean)
             self._engine_key = key
         return self._engine
 
-    def _engine_targets(self, y: Tensor, task: Tensor) -> Tensor:
-        """The labels `(n,)` as the engines take them, which subtract the one prior mean :attr:`prior_mean` from
-        every label: the labels themselves (GPIOIS shifts those of a task whose prior mean differs)."""
+    def _engine_targets(self, y: Tensor, task: Tensor, x: Tensor) -> Tensor:
+        """The labels `(n,)` at points `(n, d)` ``x`` as the engines take them, which subtract the one prior mean
+        :attr:`prior_mean` from every label: the labels themselves (GPIOIS shifts those of a task whose prior mean
+        differs)."""
         return y
 
     def _append_to_engine(self, x: Tensor, y: Tensor, task: Tensor) -> None:
         if self._engine is not None:
-            self._engine.append(x, self._engine_targets(y, task), task)
+            self._engine.append(x, self._engine_targets(y, task, x), task)
             n = self._engine.n
             self._engine_key = self._key(n)
 
@@ -465,7 +466,7 @@ class ImplicitSurfaceGP(gpytorch.models.ExactGP):
             kernel, start_noise = self.covar_module, self.noise
         keep = self._thinned(size, outer_size)
         task = self._train_task()
-        y = self._engine_targets(self.train_targets, task)[keep]
+        y = self._engine_targets(self.train_targets, task, self.train_inputs[0])[keep]
         result = maximize_hyperparameters(kernel, self.train_inputs[0][keep], y, task[keep],
                                           start_noise, self._learned_task_covariance(), self.prior_mean,
                                           max_iter=max_iter, learn_noise=bool(learn_noise), **bounds)

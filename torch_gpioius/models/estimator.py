@@ -395,7 +395,7 @@ class EstimatorSettings:
         p = self.labels
         inside = ("no inside points" if not (p.touch_inside or p.vision_inside) else
                   f"inside points {_cm(p.touch_inside)} behind contacts, {_cm(p.vision_inside)} behind the seen "
-                  f"surface" + (f" (retracted past a {_cm(p.vision_inside_gap)} cover gap)" if p.vision_inside_gap
+                  f"surface" + (f" ({_past_gap(p)})" if p.vision_inside_gap
                                 else ""))
         rule = self.voxel_rule
         voxel = (f"voxels a {_fraction(rule.fraction)} of the object ({_cm(rule.lo)}-{_cm(rule.hi)})"
@@ -485,3 +485,13 @@ COVER_GAP_LIMIT = 0.03
 #: The named presets.
 PRESETS = {"default": EstimatorSettings.default, "paper": EstimatorSettings.paper,
            "paper-2d": EstimatorSettings.paper_2d}
+
+
+def _past_gap(p) -> str:
+    """What the camera's inside points do past the cover gap ``p.vision_inside_gap``, in
+    :meth:`EstimatorSettings.summary`'s words."""
+    gap = f"a {_cm(p.vision_inside_gap)} cover gap"
+    if p.cover_offset and p.vision_inside_deep:
+        where = " a place at a time" if p.cover_gap_field else ""
+        return f"past {gap}: continued down to the gap{where}, the outer mean standing for it"
+    return f"retracted past {gap}" + (", the outer mean then standing for it" if p.cover_offset else "")

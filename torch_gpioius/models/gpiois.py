@@ -14,6 +14,7 @@ from gpytorch.means import ConstantMean
 from torch import Tensor
 
 from .base import ImplicitSurfaceGP, deprecated_theta
+from .gapfield import GapField
 from .._validation import as_float, as_int, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
@@ -156,6 +157,9 @@ class GPIOIS(ImplicitSurfaceGP):
         self.outer_mean_module = ConstantMean().double()
         self.outer_mean_module.constant.data.fill_(1.0)
         self.outer_mean_module.raw_constant.requires_grad_(False)
+        #: The cover's gap over the body when the outer mean stands for it place by place (:meth:`set_outer_mean`
+        #: with a :class:`GapField`); None: the constant ``outer_mean_module``.
+        self._outer_field: GapField | None = None
         #: Outcome of the last ``fit()`` (None before the first).
         self.fit_result: FitResult | None = None
         self._held_fits = 0
@@ -166,7 +170,8 @@ class GPIOIS(ImplicitSurfaceGP):
         """GPyTorch prior at `(n, d)` points with `(n, 1)` task ids: mean m, covariance k_x ∘ K_t (eq. 9)."""
         covar = self.covar_module(x).mul(self.task_covar_module(task))
         outer = task.squeeze(-1) == OUTER
-        return MultivariateNormal(torch.where(outer, self.outer_mean_module(x), self.mean_module(x)), covar)
+        outer_mean = self.outer_mean_module(x) if self._outer_field is None else self._outer_field.mean(x).to(x)
+        return MultivariateNormal(torch.where(outer, outer_mean, self.mean_module(x)), covar)
 
     def __call__(self, x, task=None, **kwargs):
         """``model(x, task)``: GPyTorch prior (train mode) or posterior (eval mode) of F_task at x.
@@ -278,53 +283,83 @@ class GPIOIS(ImplicitSurfaceGP):
     # ------------------------------------------------------------------ the outer task's prior mean
     @property
     def outer_mean(self) -> float:
-        """The outer task's constant prior mean (the inner task's is m = 1, eq. 2): 1 unless set."""
+        """The outer task's constant prior mean (the inner task's is m = 1, eq. 2): 1 unless set; with a gap field
+        (:attr:`outer_field`) the mean its median gap stands for, ``1 - g0 / ramp``."""
+        if self._outer_field is not None:
+            return self._outer_field.constant_mean
         return float(self.outer_mean_module.constant.reshape(-1)[0])
 
-    def set_outer_mean(self, value: float) -> "GPIOIS":
-        """Set the outer task's constant prior mean (1: the paper's model, one mean for both tasks).
+    @property
+    def outer_field(self) -> GapField | None:
+        """The cover's gap over the body the outer mean stands for place by place (``1 - g(x) / ramp``), or None
+        when the outer mean is one constant (:attr:`outer_mean`)."""
+        return self._outer_field
+
+    def set_outer_mean(self, value: "float | GapField") -> "GPIOIS":
+        """Set the outer task's prior mean: a constant (1: the paper's model, one mean for both tasks), or the mean
+        ``1 - g(x) / ramp`` of a :class:`GapField` ``g`` (a cover whose gap varies over the body).
 
         With a correlation near 1 the inner estimate away from the touches is ``1 + r (mu_out - m_out)`` (``r =
         K_t[0,1] / K_t[1,1]``): a cover that stands off the body by ``g`` everywhere is the body's field shifted by
         ``g / ramp`` label units (the labels rise from 0 on a surface to 1 a ramp out), and an outer mean of ``1 -
-        g / ramp`` lets the transfer carry the cover's shape without its offset (docs/method-notes.md section 15).
-        The labels stay as they are (0, 1, negative inside); the engines see each task's residual from its own mean.
-        The engine is rebuilt at the next use; K_t is kept (re-learn with :meth:`fit`).
+        g / ramp`` lets the transfer carry the cover's shape without its offset (docs/method-notes.md section 15);
+        a field ``g(x)`` does the same where the gap changes from place to place (section 18). The labels stay as
+        they are (0, 1, negative inside); the engines see each task's residual from its own mean. The engine is
+        rebuilt at the next use; K_t is kept (re-learn with :meth:`fit`).
 
         Args:
-            value: the mean, in label units, within ``1 +- tol.outer_mean_span``.
+            value: the mean, in label units, within ``1 +- tol.outer_mean_span``; or a :class:`GapField` (its
+                means at every place within that span).
 
         Raises:
-            ValueError: not a finite number in that range; the model is left unchanged.
+            ValueError: not a finite number in that range, nor a gap field; the model is left unchanged.
         """
+        if isinstance(value, GapField):
+            _check_outer_mean(1.0 - 0.1 / value.ramp)          # the deepest gap a field gives, INSIDE_DEPTH_MAX
+            if value != self._outer_field:
+                self._outer_field = value
+                self.outer_mean_module.constant.data.fill_(value.constant_mean)
+                self._engine = None
+            return self
         value = _check_outer_mean(value)
-        if value != self.outer_mean:
+        if value != self.outer_mean or self._outer_field is not None:
+            self._outer_field = None
             self.outer_mean_module.constant.data.fill_(value)
             self._engine = None          # not appended to: its labels were shifted for the old mean
         return self
 
-    def _outer_shift(self) -> float:
-        """How far the engines' labels of the outer task lie above the labels (``1 - outer_mean``): the engines
-        subtract one mean, 1, from every label."""
+    def _outer_shift(self, x: Tensor) -> Tensor | float:
+        """How far the engines' labels of the outer task lie above the labels at `(n, d)` points ``x``
+        (``1 - outer mean``): the engines subtract one mean, 1, from every label. A float for a constant mean,
+        `(n,)` for a gap field."""
+        if self._outer_field is not None:
+            return (1.0 - self._outer_field.mean(x)).to(x)
         return 1.0 - self.outer_mean
 
-    def _engine_targets(self, y: Tensor, task: Tensor) -> Tensor:
-        shift = self._outer_shift()
-        return y if shift == 0.0 else y + shift * (task == OUTER).to(y.dtype)
+    def _engine_targets(self, y: Tensor, task: Tensor, x: Tensor) -> Tensor:
+        shift = self._outer_shift(x)
+        if not torch.is_tensor(shift) and shift == 0.0:
+            return y
+        return y + shift * (task.reshape(-1) == OUTER).to(y.dtype)
 
     def _predict(self, x, task: int) -> tuple[Tensor, Tensor]:
         mean, var = super()._predict(x, task)
-        return (mean - self._outer_shift(), var) if task == OUTER else (mean, var)
+        return (mean - self._outer_shift(self._check_query(x)), var) if task_id(task) == OUTER else (mean, var)
 
     def _predict_mean(self, x, task: int) -> Tensor:
         mean = super()._predict_mean(x, task)
-        return mean - self._outer_shift() if task == OUTER else mean
+        return mean - self._outer_shift(self._check_query(x)) if task_id(task) == OUTER else mean
 
     def _predict_with_gradients(self, x, task: int):
         out = super()._predict_with_gradients(x, task)
         if out is None or task_id(task) != OUTER:
             return out
-        return (out[0] - self._outer_shift(),) + tuple(out[1:])
+        if self._outer_field is None:
+            return (out[0] - self._outer_shift(x),) + tuple(out[1:])
+        q = self._check_query(x).detach().requires_grad_(True)     # the field's x-gradient, by autograd
+        shift = self._outer_shift(q)
+        (grad,) = torch.autograd.grad(shift.sum(), q)
+        return (out[0] - shift.detach(), out[1], out[2] - grad) + tuple(out[3:])
 
     def check_state(self) -> None:
         super().check_state()
@@ -401,7 +436,7 @@ class GPIOIS(ImplicitSurfaceGP):
         return StructuredExactInference if has_outer and self.noise >= 1e-8 else DenseExactInference
 
     def _key(self, n: int) -> tuple:
-        return super()._key(n) + (self.outer_tol, self._outer_shift())
+        return super()._key(n) + (self.outer_tol, self.outer_mean, id(self._outer_field))
 
     def step_summary(self) -> dict:
         """:meth:`ImplicitSurfaceGP.step_summary` with the similarity, the correlation, K_t, the truncation's bound
@@ -528,8 +563,9 @@ class GPIOIS(ImplicitSurfaceGP):
         task = self._train_task()
         keep = self._thinned(size)
         cls = self._inference().scout_engine()
-        return cls(self.train_inputs[0][keep], self._engine_targets(self.train_targets, task)[keep], task[keep],
-                   self.covar_module, self.noise, self.prior_mean)
+        x = self.train_inputs[0]
+        return cls(x[keep], self._engine_targets(self.train_targets, task, x)[keep], task[keep], self.covar_module,
+                   self.noise, self.prior_mean)
 
     def _learned_task_covariance(self) -> Tensor | None:
         return self.task_covariance

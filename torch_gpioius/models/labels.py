@@ -56,6 +56,12 @@ class ObservationPolicy:
             (:func:`~torch_gpioius.exploration.observations.deepen_vision_inside`): the outer field a signed distance
             down to the level the offset mean reads (docs/method-notes.md section 16). False (the default): as
             without it.
+        cover_gap_field: with ``cover_offset`` and ``vision_inside_deep``, the gap a place at a time: the outer
+            task's prior mean ``1 - g(x) / ramp`` from a smooth field ``g`` regressed from each contact's gap
+            (:class:`~torch_gpioius.models.gapfield.GapField`, :func:`~torch_gpioius.exploration.observations.
+            offset_outer_mean`), set once the field somewhere exceeds ``vision_inside_gap`` and renewed as it moves,
+            and the camera's inside points continued down to the field's gap where each lies, placed again each
+            time (docs/method-notes.md section 18). False (the default): one gap, the touches' median.
         camera_bound: ``(translation [m], rotation [rad])``, the largest error the camera's calibration may have:
             once the contacts are many enough, and again as more come, each view's capture is moved rigidly about its
             camera to agree with them and with the other views, within that bound, and the camera's observations are
@@ -75,6 +81,7 @@ class ObservationPolicy:
     vision_inside_gap: float | None = None
     cover_offset: bool = False
     vision_inside_deep: bool = False
+    cover_gap_field: bool = False
     camera_bound: tuple | None = None
 
     def __post_init__(self) -> None:
@@ -87,9 +94,12 @@ class ObservationPolicy:
                 raise ValueError("ObservationPolicy.camera_bound: must be (translation in (0, 0.1] m, rotation in (0, "
                                  f"{math.radians(20):.3g}] rad) or None, got {bound!r}")
             object.__setattr__(self, "camera_bound", (float(bound[0]), float(bound[1])))
-        for name in ("cover_offset", "vision_inside_deep"):
+        for name in ("cover_offset", "vision_inside_deep", "cover_gap_field"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ObservationPolicy.{name}: must be True or False, got {getattr(self, name)!r}")
+        if self.cover_gap_field and not (self.cover_offset and self.vision_inside_deep):
+            raise ValueError("ObservationPolicy.cover_gap_field: needs cover_offset and vision_inside_deep (the gap "
+                             "field stands in for their one gap)")
         for name in ("vision_free_offset", "voxel", "crop_margin", "vision_free_far", "touch_inside", "vision_inside",
                      "vision_inside_gap"):
             v = getattr(self, name)

@@ -49,9 +49,10 @@ VIEWS = ("fixed", "mirrored", "wrist")
 DEFAULT_VIEWS = ("fixed",)
 
 
-#: What ``Scene3D.from_mesh(settings=...)`` accepts: "default" (this library's, for a user's object), "paper", or
-#: "gap" (an experiment: the defaults with the transfer that knows the cover's gap, :func:`gap_defaults`).
-SETTINGS = ("default", "paper", "gap")
+#: What ``Scene3D.from_mesh(settings=...)`` accepts: "default" (this library's, for a user's object), "paper",
+#: "gap" (an experiment: the defaults with the transfer that knows the cover's gap, :func:`gap_defaults`) or
+#: "gapfield" (another: that gap a place at a time, :func:`gap_field_defaults`).
+SETTINGS = ("default", "paper", "gap", "gapfield")
 
 
 def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None) -> ExplorationDefaults:
@@ -93,11 +94,20 @@ def gap_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None)
         labels={"vision_inside_deep": True})
 
 
+def gap_field_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None) -> ExplorationDefaults:
+    """:func:`gap_defaults` with the gap a place at a time (``settings="gapfield"``, an experiment): the outer task's
+    prior mean from a smooth field of the contacts' gaps, set once it exceeds 3 cm somewhere, and the camera's inside
+    points continued down to the field's gap where each lies (``ObservationPolicy.cover_gap_field``; for covers whose
+    gap varies over the body, docs/method-notes.md section 18)."""
+    return gap_defaults(mesh, base).estimator_changed(labels={"cover_gap_field": True})
+
+
 
 
 def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefaults | None = None) -> dict:
     """``{"defaults", "views"}`` of a world under ``settings`` for a body ``mesh``: "default" (:func:`object_defaults`
-    on the world's own ``paper`` settings, all three :data:`VIEWS`), "gap" (:func:`gap_defaults`, likewise) or
+    on the world's own ``paper`` settings, all three :data:`VIEWS`), "gap" (:func:`gap_defaults`, likewise),
+    "gapfield" (:func:`gap_field_defaults`, likewise) or
     "paper" (``paper``, default :data:`ROBOT_STUDY_DEFAULTS`, and the fixed camera alone). Both 3-D worlds build
     their settings here.
 
@@ -109,8 +119,9 @@ def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefault
     paper = ROBOT_STUDY_DEFAULTS if paper is None else paper
     if settings == "paper":
         return {"defaults": paper, "views": "paper"}
-    if settings == "gap":
-        return {"defaults": gap_defaults(mesh, base=paper), "views": VIEWS}
+    if settings in ("gap", "gapfield"):
+        make = gap_defaults if settings == "gap" else gap_field_defaults
+        return {"defaults": make(mesh, base=paper), "views": VIEWS}
     return {"defaults": object_defaults(mesh, base=paper), "views": VIEWS}
 
 
