@@ -17,10 +17,10 @@ def _directions(rng, n, upper=False):
 
 
 def sphere_files(folder, contacts: int = 30, cover: int = 1500, *, normal_sign: float = 1.0, repeat: int = 1,
-                 seed: int = 0, name: str = "contacts.csv", radius: float = 0.06):
+                 seed: int = 0, name: str = "contacts.csv", radius: float = 0.06, gap: float = 0.01):
     """Write ``contacts.csv`` (``contacts`` contacts on a ball of ``radius`` [m] with normals times ``normal_sign``, 15
-    free rows twice as far out; every row ``repeat`` times), ``left.ply`` and ``right.ply`` (its cover 1 cm off)
-    into ``folder``; returns ``(csv, [left, right])`` paths."""
+    free rows twice as far out; every row ``repeat`` times), ``left.ply`` and ``right.ply`` (its cover ``gap`` off)
+    into ``folder``; returns ``(csv, [left, right])`` paths. ``gap``: how far the cover stands off the ball [m]."""
     import trimesh
 
     rng = np.random.default_rng(seed)
@@ -31,7 +31,7 @@ def sphere_files(folder, contacts: int = 30, cover: int = 1500, *, normal_sign: 
     rows += [f"{x:.6f},{y:.6f},{z:.6f},free,,," for x, y, z in passed]
     path = folder / name
     path.write_text("x,y,z,label,nx,ny,nz\n" + "".join(f"{r}\n" * repeat for r in rows))
-    shell = CENTRE + (radius + 0.01) * _directions(rng, cover) + rng.normal(0, 0.001, (cover, 3))
+    shell = CENTRE + (radius + gap) * _directions(rng, cover) + rng.normal(0, 0.001, (cover, 3))
     trimesh.PointCloud(shell[shell[:, 1] < 0]).export(folder / "left.ply")
     trimesh.PointCloud(shell[shell[:, 1] >= 0]).export(folder / "right.ply")
     return path, [folder / "left.ply", folder / "right.ply"]

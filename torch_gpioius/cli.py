@@ -653,8 +653,9 @@ def _add_study(sub, common, fmt) -> None:
     sw.add_argument("--settings", default=None, choices=_presets(3),
                     help="the 3-D worlds' settings, for scene files and built-in objects alike: default (three "
                          "camera views, voxels a tenth of the body, a Matern-5/2 a fifth of it long, inside points), "
-                         "paper (one fixed camera, 5 cm voxels, the inverse multiquadric) or gap (an experiment: the "
-                         "defaults with a transfer that knows the cover's gap, docs/method-notes.md section 16); "
+                         "paper (one fixed camera, 5 cm voxels, the inverse multiquadric), gap (an experiment: the "
+                         "defaults with a transfer that knows the cover's gap, docs/method-notes.md section 16) or "
+                         "gapfield (another: that gap a place at a time, section 18); "
                          "default: each file's own, the paper's for the built-in objects; one per --out folder")
     sw.add_argument("--learn", default=None, choices=_learns(),
                     help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
@@ -726,8 +727,10 @@ def _add_fit(sub, common, fmt) -> None:
     fit.add_argument("--out", default=None, help="folder for model.pt (checkpoint), fit.png and fit.json")
     fit.add_argument("--settings", default=None, choices=_presets(),
                      help="the estimator's settings (kernel, sigma^2, labels, voxels): default (this library's, "
-                          "measured best on shapes nobody tuned to) or paper (the robot experiment's); default: "
-                          "'default' for a contacts CSV, the file's own for a .gpioius file")
+                          "measured best on shapes nobody tuned to), paper (the robot experiment's), or the "
+                          "experiments gap and gapfield (the defaults with the outer mean standing for the cover's "
+                          "gap the contacts measure, one gap or a field of them: for a cover standing more than 3 cm "
+                          "off); default: 'default' for a contacts CSV, the file's own for a .gpioius file")
     fit.add_argument("--mesh", default=None, metavar="EST.ply",
                      help="write the inner estimate {mu_in = 0} there (PLY, OBJ, STL, OFF, GLB; SVG, DXF in 2-D)")
     fit.add_argument("--outer-mesh", default=None, metavar="OUT.ply", help="write the outer estimate there")

@@ -136,3 +136,21 @@ def test_a_camera_bound_survives_its_dict_through_json():
     settings = EstimatorSettings.preset("default").replace(labels={"camera_bound": (0.012, 0.035)})
     again = EstimatorSettings.from_dict(json.loads(json.dumps(settings.to_dict())))
     assert again == settings and again.labels.camera_bound == (0.012, 0.035)
+
+
+def test_the_gap_presets_are_the_3d_worlds_gap_settings():
+    """The estimator's presets "gap" and "gapfield" (for a user's files: ``gpioius fit --settings gap``) label as the
+    3-D worlds' settings of those names do, sized to a body alike."""
+    import dataclasses
+
+    import trimesh
+
+    from torch_gpioius.sim.forcefield import gap_defaults, gap_field_defaults
+
+    body = trimesh.creation.box(extents=[0.2, 0.1, 0.15])
+    for preset, world in (("gap", gap_defaults), ("gapfield", gap_field_defaults)):
+        mine = EstimatorSettings.preset(preset).for_extent(0.2)
+        theirs = world(body).estimator
+        assert mine.name == preset and mine.labels == theirs.labels
+        assert dataclasses.replace(mine, name="custom") == theirs
+    assert EstimatorSettings.gap_field().labels.cover_gap_field and not EstimatorSettings.gap().labels.cover_gap_field

@@ -371,7 +371,7 @@ class Dataset:
         :class:`~torch_gpioius.models.estimator.EstimatorSettings`), else the header's (``estimator``, else its
         ``kernel`` and ``noise``; a log of a run with the Matérn-5/2 names it), else the inverse multiquadric of
         0.1 m and 0.006; ``kernel`` (an :class:`~torch_gpioius.kernels.ExactKernel`) or ``noise`` given here
-        replace them.
+        replace them. The outer task's prior mean is the header's (``outer_field`` or ``outer_mean``), else 1.
         """
         from ..kernels import kernel_of_record
         from ..models.estimator import EstimatorSettings
@@ -398,8 +398,20 @@ class Dataset:
         if (self.task == 1).any():
             if not (self.task == 0).any():
                 raise DatasetError("the dataset has outer (visual) observations only; GPIOIS needs touches too")
-            return GPIOIS(self.x, self.y, self.task, noise=noise, **kwargs)
+            return GPIOIS(self.x, self.y, self.task, noise=noise, **kwargs).set_outer_mean(self._outer_mean())
         return GPIS(self.x, self.y, noise=noise, **kwargs)
+
+    def _outer_mean(self):
+        """The outer mean the header records (``outer_field``: a gap field's record; ``outer_mean``: a number; set
+        by the gap rules of :func:`~torch_gpioius.io.importers.dataset_from_files`), else 1, the paper's."""
+        from ..models.gapfield import GapField
+
+        try:
+            if isinstance(self.meta.get("outer_field"), dict):
+                return GapField.from_dict(self.meta["outer_field"], "the header's outer_field")
+            return float(self.meta.get("outer_mean", 1.0))
+        except (TypeError, ValueError) as exc:
+            raise DatasetError(f"the header's outer mean: {exc}") from None
 
 
 def _fsync_dir(path: Path) -> None:

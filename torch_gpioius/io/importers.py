@@ -496,8 +496,10 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
 
     Returns:
         A :class:`Dataset` whose ``meta["estimator"]`` holds the settings used (the voxel resolved),
-        ``meta["cover_gap"]`` the gap the contacts show under the seen cover [m] (NaN with too few contacts), and
-        with ``camera_bound`` ``meta["camera_corrections"]`` (each capture's correction, what fixed it, the
+        ``meta["cover_gap"]`` the gap the contacts show under the seen cover [m] (NaN with too few contacts), with
+        ``cover_offset`` in the settings the outer mean the gap rules set (``meta["outer_mean"]`` or
+        ``meta["outer_field"]``, a :class:`~torch_gpioius.models.gapfield.GapField`'s record), and with
+        ``camera_bound`` ``meta["camera_corrections"]`` (each capture's correction, what fixed it, the
         contacts' misfit before and after).
 
     Raises:
@@ -580,11 +582,13 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
                       "camera_bound, gpioius fit --camera-bound, corrects each capture from the contacts)",
                       UserWarning, stacklevel=2)
     inner, inner_steps = inner.subset(keep), inner_steps[keep]
-    gap = math.nan
+    gap, offset = math.nan, None
     if captures and est.labels.vision_inside_gap is not None:
         seen = outer[0][outer[1] == 0]
         gap = cover_gap(x_in[y_in == 0], seen, reach=max(0.02, est.labels.voxel or 0.0))
-        if gap > est.labels.vision_inside_gap:            # the cover stands off: its inside points lie in the gap
+        if est.labels.cover_offset:                       # the gap rules of an exploration, applied at its end
+            outer, offset = _gap_rules(x_in[y_in == 0], outer, est.labels)
+        elif gap > est.labels.vision_inside_gap:          # the cover stands off: its inside points lie in the gap
             keep = outer[1] >= 0
             outer = outer[0][keep], outer[1][keep]
     steps = np.r_[inner_steps, np.zeros(len(outer[1]), np.int64)]
@@ -596,6 +600,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             # the files read: what a command writing the estimate must never overwrite
             "inputs": [str(p) for p in (contacts_csv, *files)]}
     meta["kernel"], meta["noise"] = est.kernel.describe(), float(est.noise)
+    if offset is not None:                                 # the outer mean the gap rules set (Dataset.to_model)
+        meta.update(offset)
 
     def metres(o):
         return None if o is None else [float(v) * _SCALE[units] for v in np.asarray(o, dtype=float).ravel()]
@@ -605,6 +611,33 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     if corrections is not None:
         meta["camera_corrections"] = corrections.as_record()
     return Dataset(x, y, task, steps, meta=meta)
+
+
+def _gap_rules(contacts: np.ndarray, outer: tuple[np.ndarray, np.ndarray], policy) -> tuple[tuple, dict | None]:
+    """The camera's observations ``outer`` (`(m, d)` points, `(m,)` labels) after the gap rules an exploration with
+    ``policy.cover_offset`` applies step by step, applied once to all the ``contacts`` `(k, d)`: the inside points
+    retracted (without ``vision_inside_deep``) or continued down to the gap (with it; a place at a time with
+    ``cover_gap_field``), and the outer mean that stands for the gap: ``{"outer_mean": m}`` or ``{"outer_field":
+    record}`` for :meth:`Dataset.to_model`, None when the rules leave the paper's mean."""
+    import torch
+
+    from ..exploration.observations import deepen_vision_inside, offset_outer_mean, retract_vision_inside
+    from ..models.gpiois import GPIOIS
+
+    x = np.concatenate([contacts, outer[0]])
+    y = np.concatenate([np.zeros(len(contacts)), outer[1]])
+    task = np.r_[np.zeros(len(contacts), np.int64), np.ones(len(outer[1]), np.int64)]
+    model = GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(task))   # its data only: never fitted
+    retract_vision_inside(model, contacts, policy)
+    offset_outer_mean(model, contacts, policy)
+    deep = deepen_vision_inside(model, contacts, policy)
+    keep = (model.train_inputs[1].squeeze(-1) == 1).numpy()
+    ox, oy = model.train_inputs[0].numpy()[keep], model.train_targets.numpy()[keep]
+    if deep is not None:
+        ox, oy = np.concatenate([ox, deep.x]), np.concatenate([oy, deep.y])
+    if model.outer_field is not None:
+        return (ox, oy), {"outer_field": model.outer_field.as_dict()}
+    return (ox, oy), ({"outer_mean": model.outer_mean} if model.outer_mean != 1.0 else None)
 
 
 def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: np.ndarray, bound):

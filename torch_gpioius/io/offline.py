@@ -261,6 +261,11 @@ def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mes
             from ..models.gpiois import fit_stop_reason
 
             info["fit_note"] = fit_stop_reason(model.fit_result)
+        info["outer_mean"] = model.outer_mean           # 1 but where the settings' gap rules set it
+        if model.outer_field is not None:
+            f = model.outer_field
+            info["outer_field"] = {"gaps": len(f.gaps), "median": f.prior, "length": f.length, "scale": f.scale,
+                                   "noise": f.noise}
         info.update(task_covariance=model.task_covariance.tolist(), similarity=model.similarity,
                     correlation=model.correlation, correlation_interval=list(model.similarity_interval(0.95)),
                     similarity_support=model.similarity_support())

@@ -19,7 +19,9 @@ Presets (:func:`EstimatorSettings.preset`):
   3 cm off the body;
 * ``"paper"``: the paper's robot experiment (Sec. VI): the inverse multiquadric of theta = 0.15 m, sigma^2 = 0.08,
   5 cm voxels, no inside points;
-* ``"paper-2d"``: the paper's 2-D simulation (Sec. V): the inverse multiquadric of theta = 0.1 m, sigma^2 = 0.006.
+* ``"paper-2d"``: the paper's 2-D simulation (Sec. V): the inverse multiquadric of theta = 0.1 m, sigma^2 = 0.006;
+* ``"gap"`` and ``"gapfield"`` (experiments, not the default): ``"default"`` with the transfer that knows the cover's
+  gap, one gap or a field of them (:meth:`EstimatorSettings.gap`, :meth:`EstimatorSettings.gap_field`).
 
 :meth:`EstimatorSettings.to_dict` and :meth:`EstimatorSettings.from_dict` give the plain dict that logs, datasets,
 checkpoints, run records and scene files store.
@@ -133,6 +135,12 @@ class LengthRule:
         return _sized(self, extent)
 
 
+#: The labels' changes of the transfer that knows the cover's gap (:meth:`EstimatorSettings.gap`).
+GAP_LABELS = {"cover_offset": True, "vision_inside_deep": True}
+#: ... and of that gap a place at a time (:meth:`EstimatorSettings.gap_field`).
+GAP_FIELD_LABELS = {**GAP_LABELS, "cover_gap_field": True}
+
+
 @dataclass(frozen=True, eq=False)
 class EstimatorSettings:
     """Everything that turns observations into a model and labels (see the module docstring).
@@ -147,7 +155,8 @@ class EstimatorSettings:
         learn: "task", "length" or "all" (:data:`LEARN`).
         restart_every: K_t's fit also starts from fixed values every this many steps of an exploration (None: warm
             starts only; a fit on files always does).
-        name: the preset it came from ("default", "paper", "paper-2d"), or "custom" once changed.
+        name: the preset it came from ("default", "paper", "paper-2d", "gap", "gapfield"), or "custom" once
+            changed.
     """
 
     kernel: ExactKernel
@@ -217,6 +226,20 @@ class EstimatorSettings:
         """The paper's robot experiment (Sec. VI)."""
         return cls(InverseMultiquadricKernel(lengthscale=0.15), 0.08, ObservationPolicy(voxel=0.05, crop_margin=0.15),
                    name="paper")
+
+    @classmethod
+    def gap(cls) -> "EstimatorSettings":
+        """:meth:`default` with the transfer that knows the cover's gap (an experiment, :data:`GAP_LABELS`): past
+        the 3 cm cover gap the outer mean stands for the gap the touches measure and the camera's inside points are
+        continued down to it (docs/method-notes.md sections 16-17; the 3-D worlds' settings "gap")."""
+        return cls.default().replace(labels=GAP_LABELS, name="gap")
+
+    @classmethod
+    def gap_field(cls) -> "EstimatorSettings":
+        """:meth:`gap` a place at a time (an experiment, :data:`GAP_FIELD_LABELS`): the outer mean from a field of
+        the contacts' gaps (:class:`~torch_gpioius.models.gapfield.GapField`; docs/method-notes.md section 18; the
+        3-D worlds' settings "gapfield")."""
+        return cls.default().replace(labels=GAP_FIELD_LABELS, name="gapfield")
 
     @classmethod
     def paper_2d(cls) -> "EstimatorSettings":
@@ -484,7 +507,8 @@ COVER_GAP_LIMIT = 0.03
 
 #: The named presets.
 PRESETS = {"default": EstimatorSettings.default, "paper": EstimatorSettings.paper,
-           "paper-2d": EstimatorSettings.paper_2d}
+           "paper-2d": EstimatorSettings.paper_2d, "gap": EstimatorSettings.gap,
+           "gapfield": EstimatorSettings.gap_field}
 
 
 def _past_gap(p) -> str:

@@ -19,7 +19,8 @@ import trimesh
 
 import torch
 
-from ..models.estimator import COVER_GAP_LIMIT, INSIDE_DEPTH, EstimatorSettings  # noqa: F401
+from ..models.estimator import (COVER_GAP_LIMIT, GAP_FIELD_LABELS, GAP_LABELS, INSIDE_DEPTH,  # noqa: F401
+                                EstimatorSettings)
 from ..exploration.stopping import TravelBudget
 from ..exploration.registry import SceneSupport, register_world
 from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, geometry_hash,
@@ -90,8 +91,7 @@ def gap_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None)
     down to it, each labelled by its depth (``ObservationPolicy.vision_inside_deep``); under tighter covers nothing
     changes. Measured offline on finished runs' data in docs/method-notes.md section 16, and in the loop in
     docs/results-benchmark.md ("A transfer that knows the gap, in the loop")."""
-    return with_inside_depths(object_defaults(mesh, base), cover_offset=True).estimator_changed(
-        labels={"vision_inside_deep": True})
+    return object_defaults(mesh, base).estimator_changed(labels=GAP_LABELS)
 
 
 def gap_field_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None) -> ExplorationDefaults:
@@ -99,7 +99,7 @@ def gap_field_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None =
     prior mean from a smooth field of the contacts' gaps, set once it exceeds 3 cm somewhere, and the camera's inside
     points continued down to the field's gap where each lies (``ObservationPolicy.cover_gap_field``; for covers whose
     gap varies over the body, docs/method-notes.md section 18)."""
-    return gap_defaults(mesh, base).estimator_changed(labels={"cover_gap_field": True})
+    return object_defaults(mesh, base).estimator_changed(labels=GAP_FIELD_LABELS)
 
 
 
