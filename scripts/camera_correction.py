@@ -13,7 +13,10 @@ contacts (inner task, y = 0) and inside points, with the captures of the run's o
   contacts (their normals the final model's) within ``--bound`` (default: twice the error), the gap
   estimated with the corrections;
 * ``corrected, gap known``: the same with the cover's true gap held (what a user who knows the cover's thickness
-  could give).
+  could give);
+* with ``--table``, ``corrected with the table``: each capture's points on the table the body stands on (the
+  simulated camera's ``support``) held to the table's plane, known (the robot can touch it), as well (gap
+  estimated).
 
 Each version is fitted as the run fitted (the run's kernel, sigma^2 and observation policy; K_t learned) and measured
 by the converged ruler; the printed rows give Chamfer [cm] and, for the corrections, the error left at the object
@@ -60,6 +63,8 @@ def main() -> None:
     parser.add_argument("--bound", default=None, help="the correction's bound (default: twice the error)")
     parser.add_argument("--draws", type=int, default=1, help="error draws per run")
     parser.add_argument("--gap", type=float, default=0.008, help="the cover's true gap [m] (the tight cover's 8 mm)")
+    parser.add_argument("--table", action="store_true",
+                        help="also correct with each capture's view of the table held to its known plane")
     args = parser.parse_args()
     warnings.simplefilter("ignore")
     torch.set_num_threads(1)
@@ -71,7 +76,8 @@ def main() -> None:
     error = CameraError.parse(args.error)
     bound = CameraError.parse(args.bound) if args.bound else CameraError(min(2 * error.translation, 0.1),
                                                                           min(2 * error.rotation, math.radians(20)))
-    names = ("calibrated", "off", "corrected", "corrected, gap known")
+    names = ("calibrated", "off", "corrected", "corrected, gap known") + (("corrected with the table",)
+                                                                         if args.table else ())
     rows = []
     for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
         policy = world.defaults.policy
@@ -83,8 +89,9 @@ def main() -> None:
         for draw in range(args.draws):
             views = _views(world)
             plain = [v.reseeded([draw, k, tag]) for k, v in enumerate(views)]
+            table = world.support if args.table else None
             off_cams = [type(v)(v.mesh, v.intrinsics, v.T_base_camera, noise_a=v.noise_a, noise_b=v.noise_b,
-                                dropout=v.dropout, seed=[draw, k, tag], engine=v.engine, error=error)
+                                dropout=v.dropout, seed=[draw, k, tag], engine=v.engine, error=error, support=table)
                         for k, v in enumerate(views)]
             calibrated = [c.capture() for c in plain]
             off = [c.capture() for c in off_cams]
@@ -92,6 +99,9 @@ def main() -> None:
                                       max_rotation=bound.rotation),
                      correct_captures(off, faced, normals, max_translation=bound.translation,
                                       max_rotation=bound.rotation, gap=args.gap)]
+            if args.table:
+                fixes.append(correct_captures(off, faced, normals, max_translation=bound.translation,
+                                              max_rotation=bound.rotation, support=((0.0, 0.0, 1.0), table)))
             versions = [calibrated, off] + [[type(c)(f.apply(c.points), c.origin) for c, f in zip(off, fix.captures)]
                                             for fix in fixes]
             left = []
@@ -112,7 +122,8 @@ def main() -> None:
             print(f"{log.stem} draw {draw}: Chamfer " + ", ".join(f"{n} {c:.2f}" for n, c in zip(names, chamfer))
                   + f" cm | error at the body {np.round(before, 1).tolist()} mm -> corrected "
                   f"{np.round(left[0], 1).tolist()} (gap {fixes[0].gap * 1e3:.1f} mm), gap known "
-                  f"{np.round(left[1], 1).tolist()}", flush=True)
+                  f"{np.round(left[1], 1).tolist()}"
+                  + (f", with the table {np.round(left[2], 1).tolist()}" if args.table else ""), flush=True)
     if rows:
         ch = np.array([r[0] for r in rows])
         print(f"{len(rows)} runs: median Chamfer " + ", ".join(f"{n} {v:.2f}" for n, v in

@@ -301,6 +301,7 @@ def test_a_miscalibrated_cameras_captures_are_corrected_logged_and_resume_alike(
         reference = tg.explore(scene, log=log, **kw)
     run = load_run(log)
     assert run.meta["policy"]["camera_bound"] == [0.012, pytest.approx(math.radians(2))]
+    assert run.meta["policy"]["camera_table"] is True              # the views of the table held to it as well
     steps = [r for r in read_records(log) if r.kind == "step"]
     marked = [int(r.meta["step"]) for r in steps if "camera_corrections" in r.meta]
     # at the steps of the 20th and 40th contacts (step 0: the first)
@@ -308,6 +309,7 @@ def test_a_miscalibrated_cameras_captures_are_corrected_logged_and_resume_alike(
     corrections = reference.camera_corrections
     assert corrections == steps[marked[-1]].meta["camera_corrections"] and len(corrections["captures"]) == 3
     assert all(c["size_mm"] <= 12.0 + 1e-9 for c in corrections["captures"])
+    assert all(c.get("support", 0) > 50 for c in corrections["captures"])   # each view's table took part
 
     # each view's error at the body's middle, as applied and once corrected (1.5-2.5 cm -> a few mm)
     from torch_gpioius.sensors.extrinsics import CaptureCorrection

@@ -334,3 +334,29 @@ def test_a_camera_off_by_a_rigid_error_sees_the_sphere_moved_by_it_and_keeps_its
     assert np.linalg.norm(again.rotation) == pytest.approx(np.radians(1.0), rel=1e-12)
     rec = applied.as_record()
     assert rec["size_mm"] == pytest.approx(6.0) and rec["angle_deg"] == pytest.approx(1.0)
+
+
+def test_a_simulated_camera_keeps_the_table_it_sees_apart_and_the_object_as_without_it():
+    """A box on a table at z = 0.1: the camera's table points (``support``) lie on the plane (no noise: exactly),
+    within the reach around the box, none behind the box; the box's points, noise and dropout drawn from the same
+    seed, are those of the same camera without a table."""
+    import trimesh
+
+    from torch_gpioius.sensors.pointcloud import SUPPORT_REACH, PinholeCamera, SimulatedDepthCamera, look_at
+
+    box = trimesh.creation.box((0.1, 0.1, 0.1))
+    box.apply_translation([0.5, 0.0, 0.15])
+    pose = look_at([0.0, -0.6, 0.7], [0.5, 0.0, 0.15])
+    bare = SimulatedDepthCamera(box, PinholeCamera.kinect_v2(0.25), pose, support=0.1)
+    table = bare.capture().support
+    assert len(table) > 100 and np.abs(table[:, 2] - 0.1).max() < 1e-9
+    lo, hi = box.bounds[0][:2] - SUPPORT_REACH, box.bounds[1][:2] + SUPPORT_REACH
+    assert ((table[:, :2] >= lo - 1e-9) & (table[:, :2] <= hi + 1e-9)).all()
+    assert not ((np.abs(table[:, 0] - 0.5) < 0.05) & (np.abs(table[:, 1]) < 0.05)).any()   # not under the box
+    kw = dict(noise_a=0.0015, noise_b=0.0015, dropout=0.1, seed=4)
+    with_table = SimulatedDepthCamera(box, PinholeCamera.kinect_v2(0.25), pose, support=0.1, **kw).capture()
+    without = SimulatedDepthCamera(box, PinholeCamera.kinect_v2(0.25), pose, **kw).capture()
+    np.testing.assert_array_equal(with_table.points, without.points)
+    assert without.support is None and len(with_table.support) > 50
+    with pytest.raises(ValueError, match="support"):
+        SimulatedDepthCamera(box, PinholeCamera.kinect_v2(0.25), pose, support=float("nan"))

@@ -20,7 +20,8 @@ from ..geometry import surface_geometry
 from ..models.gpiois import OUTER
 from .observations import Observations, vision_observations
 
-__all__ = ["CORRECT_AFTER", "CORRECT_EVERY", "capture_views", "vision_crop", "contact_normals", "correct_camera"]
+__all__ = ["CORRECT_AFTER", "CORRECT_EVERY", "capture_views", "vision_crop", "contact_normals", "camera_table",
+           "correct_camera"]
 
 #: Contacts before the captures are first corrected: enough, spread over the body, that several lie under each view's
 #: seen cover (a view with none is left to the overlaps and the bound's prior).
@@ -55,8 +56,19 @@ def contact_normals(model, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray
     return contacts[defined], geo.normal.cpu().numpy()[defined]
 
 
+def camera_table(hardware, policy: ObservationPolicy) -> float | None:
+    """The height [m] of the table a run's captures are held to when corrected (``policy.camera_table`` with a
+    ``camera_bound``): the floor the hardware's contact controller keeps the fingertip above, or None."""
+    if policy.camera_bound is None or not policy.camera_table:
+        return None
+    config = getattr(getattr(hardware, "controller", None), "config", None)
+    floor = getattr(config, "floor", None)
+    return None if floor is None else float(floor)
+
+
 def correct_camera(model, captures: list, contacts: np.ndarray, policy: ObservationPolicy,
-                   crop: np.ndarray | None) -> tuple[np.ndarray, Observations | None, dict | None]:
+                   crop: np.ndarray | None,
+                   table: float | None = None) -> tuple[np.ndarray, Observations | None, dict | None]:
     """Correct the views' captures from the contacts and replace the model's camera observations by theirs.
 
     Args:
@@ -65,6 +77,8 @@ def correct_camera(model, captures: list, contacts: np.ndarray, policy: Observat
         contacts: `(k, 3)` the contacts so far [m].
         policy: the run's policy (``camera_bound``, and the labels the new observations get).
         crop: the box the cloud is cropped to (:func:`vision_crop`).
+        table: the height [m] of the table (:func:`camera_table`) each capture's table points
+            (``PointCloud.support``, not cropped) are held to; None: none.
 
     Returns:
         ``(removed, observations, record)``: the indices of the rows removed (into the model's data before the call),
@@ -87,7 +101,8 @@ def correct_camera(model, captures: list, contacts: np.ndarray, policy: Observat
     if any(len(c) < 10 for c in captures):
         return none
     found = correct_captures(captures, *contact_normals(model, contacts), max_translation=policy.camera_bound[0],
-                             max_rotation=policy.camera_bound[1])
+                             max_rotation=policy.camera_bound[1],
+                             support=None if table is None else ((0.0, 0.0, 1.0), table))
     if not found.enough:                  # too few contacts under the seen cover yet: tried again later
         return none
     moved = PointCloud.merge([PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)])

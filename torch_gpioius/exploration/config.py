@@ -206,6 +206,8 @@ class ExploreConfig(EstimatorView):
         for key in ("cover_offset", "vision_inside_deep", "cover_gap_field"):  # (since 2026-11-27, -29 and -29)
             if not out[key]:
                 del out[key]
+        if out.get("camera_bound") is None:        # camera_table: said only where a bound makes it act
+            del out["camera_table"]
         return out
 
     def describe(self) -> dict:

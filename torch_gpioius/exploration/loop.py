@@ -24,7 +24,7 @@ from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
-from .calibration import capture_views, correct_camera, vision_crop
+from .calibration import camera_table, capture_views, correct_camera, vision_crop
 from .observations import (Observations, deepen_vision_inside, drop_contradicted_inside, offset_outer_mean,
                            renew_deep_vision_inside, retract_free_space, retract_vision_inside, thin_points,
                            vision_observations)
@@ -153,7 +153,8 @@ def begin(ctx: Run) -> ExplorationState:
         inner = drop_contradicted_inside(inner, cfg.policy, outer.x, outer.y)
     state = ExplorationState(model=cfg.make_model(inner, outer), contacts=[contact], path=list(first.path.numpy()),
                              normal=first.force_normal, crop=crop,
-                             captures=captures if cfg.policy.camera_bound is not None else None)
+                             captures=captures if cfg.policy.camera_bound is not None else None,
+                             table=camera_table(hw, cfg.policy))
     t0 = time.perf_counter()
     state.model.fit()
     record = StepRecord(step=0, travel=0.0, touch=first, final=cfg.max_steps == 0,
@@ -250,7 +251,7 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     if state.captures is not None:       # ObservationPolicy.camera_bound: the captures corrected from the contacts
         kept = int(state.model.train_targets.shape[0])
         gone, corrected, found = correct_camera(state.model, state.captures, np.asarray(state.contacts), cfg.policy,
-                                                state.crop)
+                                                state.crop, state.table)
         if corrected is not None:        # the camera's rows replaced by the corrected captures'
             state.camera_corrections = found
             deep = None                  # continued from the rows just replaced: done from the new ones next step

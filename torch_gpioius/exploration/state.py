@@ -162,6 +162,9 @@ class ExplorationState:
     records: list = field(default_factory=list)
     gap_check: CoverGap = field(default_factory=CoverGap, repr=False, compare=False)
     captures: list | None = field(default=None, repr=False, compare=False)
+    #: The height [m] of the table the captures' table points are held to when corrected
+    #: (``ObservationPolicy.camera_table``: the contact controller's floor), or None.
+    table: float | None = field(default=None, repr=False, compare=False)
     crop: np.ndarray | None = field(default=None, repr=False, compare=False)
     camera_corrections: dict | None = None
 

@@ -17,7 +17,7 @@ import warnings
 import numpy as np
 import torch
 
-from ..exploration.calibration import capture_views, vision_crop
+from ..exploration.calibration import camera_table, capture_views, vision_crop
 from ..exploration.protocols import Recorder
 from ..metrics import SHAPE_METRICS
 from ..exploration.state import ExplorationState, StepRecord
@@ -340,6 +340,7 @@ def restore_run(path: str | os.PathLike, world, hardware, config) -> Exploration
         # the views captured again, to be corrected as the contacts come (a fresh simulated camera gives the run's
         # first capture; a real one, another)
         state.captures, state.crop = capture_views(hardware.camera), vision_crop(world, config.policy)
+        state.table = camera_table(hardware, config.policy)
     state.last_evidence = max((int(t.meta["step"]) for t in taps if t.kind == "tap"), default=0)
     state.last_recovery = max((int(t.meta["step"]) for t in taps if t.kind == "recovery"), default=0)
     world.restore(hardware, {k[len("world_"):]: v for k, v in after.arrays.items() if k.startswith("world_")})

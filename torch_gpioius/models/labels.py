@@ -68,6 +68,12 @@ class ObservationPolicy:
             labelled again from the corrected captures
             (:func:`~torch_gpioius.exploration.calibration.correct_camera`); None (the default): the captures as the
             calibration places them.
+        camera_table: with ``camera_bound``, each capture's view of the table the object stands on (the points a
+            camera keeps apart as ``PointCloud.support``) is held to the table's plane as well, at the height the
+            contact controller keeps the fingertip above (``ContactConfig.floor``, which the robot knows); where the
+            captures carry no table points or there is no floor, as without it. True (the default with a bound):
+            the plane fixes the rotations about horizontal axes and the height, which the contacts on a body's few
+            faces leave loose (docs/method-notes.md section 17).
     """
 
     vision_free_offset: float | None = 0.05
@@ -83,6 +89,7 @@ class ObservationPolicy:
     vision_inside_deep: bool = False
     cover_gap_field: bool = False
     camera_bound: tuple | None = None
+    camera_table: bool = True
 
     def __post_init__(self) -> None:
         if self.camera_bound is not None:
@@ -94,7 +101,7 @@ class ObservationPolicy:
                 raise ValueError("ObservationPolicy.camera_bound: must be (translation in (0, 0.1] m, rotation in (0, "
                                  f"{math.radians(20):.3g}] rad) or None, got {bound!r}")
             object.__setattr__(self, "camera_bound", (float(bound[0]), float(bound[1])))
-        for name in ("cover_offset", "vision_inside_deep", "cover_gap_field"):
+        for name in ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ObservationPolicy.{name}: must be True or False, got {getattr(self, name)!r}")
         if self.cover_gap_field and not (self.cover_offset and self.vision_inside_deep):

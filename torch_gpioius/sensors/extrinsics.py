@@ -65,6 +65,8 @@ class CaptureCorrection:
         at_bound: the correction reached the bound and was scaled back onto it.
         weak: the directions the data left to the prior ("x", "y", "z" of the translation; "rx", "ry", "rz" of the
             rotation, base frame).
+        support: the capture's points on the known support plane that took part (``correct_captures``' ``support``;
+            0 without one).
     """
 
     translation: np.ndarray
@@ -74,6 +76,7 @@ class CaptureCorrection:
     overlap: int = 0
     at_bound: bool = False
     weak: tuple = ()
+    support: int = 0
 
     @classmethod
     def from_record(cls, record: dict) -> "CaptureCorrection":
@@ -81,7 +84,8 @@ class CaptureCorrection:
         return cls(np.asarray(record["translation_mm"], dtype=np.float64) / 1e3,
                    np.radians(np.asarray(record["rotation_deg"], dtype=np.float64)),
                    np.asarray(record["origin"], dtype=np.float64), int(record.get("contacts", 0)),
-                   int(record.get("overlap", 0)), bool(record.get("at_bound", False)), tuple(record.get("weak", ())))
+                   int(record.get("overlap", 0)), bool(record.get("at_bound", False)), tuple(record.get("weak", ())),
+                   int(record.get("support", 0)))
 
     @property
     def size(self) -> float:
@@ -105,7 +109,7 @@ class CaptureCorrection:
                 "origin": np.asarray(self.origin, dtype=np.float64).round(6).tolist(),
                 "size_mm": round(self.size * 1e3, 3), "angle_deg": round(math.degrees(self.angle), 4),
                 "contacts": self.contacts, "overlap": self.overlap, "at_bound": self.at_bound,
-                "weak": list(self.weak)}
+                "weak": list(self.weak), **({"support": self.support} if self.support else {})}
 
 
 @dataclass(frozen=True)
@@ -209,7 +213,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                      reach: float = 0.006,
                      overlap_reach: float = 0.01, sample: int = 1500, iterations: int = 25,
                      gap: float | None = None, seed: int = 0, contact_sigma: float = 0.0025,
-                     overlap_sigma: float = 0.001) -> CaptureCorrections:
+                     overlap_sigma: float = 0.001, support=None, support_sigma: float = 0.003,
+                     support_sample: int = 300) -> CaptureCorrections:
     """Correct each capture's pose from the contacts and the other captures (see the module docstring).
 
     Args:
@@ -235,6 +240,13 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
             (a fingertip pressed 1-3 mm in), the cover's sag, the estimate's normal there.
         overlap_sigma: the misfit of two captures' planes where they overlap [m] (each plane's depth noise averaged
             over its patch).
+        support: ``(normal (3,), offset)``, the plane ``normal . x = offset`` [m] the object stands on, known in the
+            base frame (a table whose height the robot measured): each capture's points on it
+            (``PointCloud.support``) are held to it as well, which fixes the two rotations about horizontal axes
+            and the height that the contacts on a body's few faces leave loose. None: no plane.
+        support_sigma: a support point's misfit [m] beyond the capture's error (its depth noise, the table's
+            flatness).
+        support_sample: at most this many support points of each capture take part (evenly chosen, seeded).
 
     Returns:
         :class:`CaptureCorrections`.
@@ -261,6 +273,16 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     for name, v in (("max_translation", max_translation), ("max_rotation", max_rotation)):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise ValueError(f"correct_captures: {name} must be a positive bound, got {v!r}")
+    plane = None
+    if support is not None:
+        try:
+            pn, po = np.asarray(support[0], dtype=np.float64).reshape(3), float(support[1])
+        except (TypeError, ValueError, IndexError) as exc:
+            raise ValueError(f"correct_captures: support must be (normal (3,), offset), got {support!r}") from exc
+        if not (np.isfinite(pn).all() and math.isfinite(po) and np.linalg.norm(pn) > 0):
+            raise ValueError("correct_captures: support must be a finite plane with a non-zero normal, got "
+                             f"{support!r}")
+        plane = (pn / np.linalg.norm(pn), po / np.linalg.norm(pn))
     rng = np.random.default_rng(seed)
     pts, origins, faces = [], [], []   # each capture's plane centres, camera, plane normals
     for k, cap in enumerate(captures):
@@ -278,6 +300,15 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         pts.append(q)
         origins.append(o)
         faces.append(n)
+    # each capture's points on the support plane (drawn after the object's, so that those are as without a plane)
+    table = [np.zeros((0, 3))] * len(captures)
+    if plane is not None:
+        for k, cap in enumerate(captures):
+            sp = getattr(cap, "support", None)
+            if sp is not None and len(sp):
+                sp = np.asarray(sp, dtype=np.float64).reshape(-1, 3)
+                table[k] = sp[np.sort(rng.choice(len(sp), support_sample, replace=False))] \
+                    if len(sp) > support_sample else sp
     K = len(captures)
     # Each capture moves about its points' middle (the pivot d = pivot - c from its camera): q -> pivot + R (q - pivot)
     # + u. About the optical centre a metre away, a degree and 17 mm of translation are nearly the same motion at the
@@ -303,11 +334,22 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         return pivots[k] + (pts[k] - pivots[k]) @ R.T + xv[6 * k:6 * k + 3], faces[k] @ R.T
 
     def terms(xv: np.ndarray, reach_now: float = reach):
-        """Rows (jacobian, residual) of the contacts and the overlaps at ``xv``; the counts per capture."""
+        """Rows (jacobian, residual, standard deviation) of the contacts, the support plane and the overlaps at
+        ``xv``; the counts per capture."""
         n = 6 * K + 1
-        J, r, counts, overlaps = [np.zeros((0, n))], [np.zeros(0)], [0] * K, [0] * K
+        J, r, sd, counts, overlaps = [np.zeros((0, n))], [np.zeros(0)], [np.zeros(0)], [0] * K, [0] * K
         g = xv[-1]
         cur = [moved(k, xv) for k in range(K)]
+        for k in range(K):
+            if len(table[k]):                   # on the known plane: n . (pivot + R (q - pivot) + u) = offset
+                R = rotation_matrix(xv[6 * k + 3:6 * k + 6])
+                arm = (table[k] - pivots[k]) @ R.T
+                rows = np.zeros((len(arm), n))
+                rows[:, 6 * k:6 * k + 3] = plane[0]
+                rows[:, 6 * k + 3:6 * k + 6] = np.cross(arm, plane[0])
+                J.append(rows)
+                r.append((pivots[k] + arm + xv[6 * k:6 * k + 3]) @ plane[0] - plane[1])
+                sd.append(np.full(len(arm), support_sigma))
         for k, (q, m) in enumerate(cur):
             arm = q - pivots[k] - xv[6 * k:6 * k + 3]                      # R (q0 - pivot): what the rotation turns
             if len(p):
@@ -326,6 +368,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 rows[:, -1] = -1.0
                 J.append(rows)
                 r.append(off[use] - g)
+                sd.append(np.full(len(jj), contact_sigma))
                 counts[k] = int(use.sum())
             for other in range(k + 1, K):
                 q2, m2 = cur[other]
@@ -342,13 +385,14 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 rows[:, 6 * other + 3:6 * other + 6] = -np.cross(arm2, mm)
                 J.append(rows)
                 r.append(((q[i] - q2[jj]) * mm).sum(axis=1))
+                sd.append(np.full(len(i), overlap_sigma))
                 overlaps[k] += len(i)
                 overlaps[other] += len(i)
-        return np.concatenate(J), np.concatenate(r), counts, overlaps
+        return np.concatenate(J), np.concatenate(r), np.concatenate(sd), counts, overlaps
 
     def contact_misfit(xv: np.ndarray) -> tuple[float, float]:
         """The contacts' rms misfit and their median distance (the gap) under the captures at ``xv``."""
-        J, r, _, _ = terms(xv)
+        J, r, _, _, _ = terms(xv)
         rows = J[:, -1] == -1.0
         if not rows.any():
             return math.nan, math.nan
@@ -379,10 +423,9 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
             far = 2 * reach                              # the search put every capture within a cell or two
     for it in range(iterations):
         reach_now = reach + (far - reach) * max(0.0, 1.0 - it / max(1.0, iterations / 2))
-        J, r, _, _ = terms(x, reach_now)
+        J, r, sigma, _, _ = terms(x, reach_now)
         if not len(r):
             break
-        sigma = np.where(J[:, -1] == -1.0, contact_sigma, overlap_sigma)
         w = _huber_weights(r / sigma, HUBER) / sigma ** 2
         H = (J * w[:, None]).T @ J + prior
         b = (J * w[:, None]).T @ r + prior @ x
@@ -393,7 +436,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         if reach_now == reach and np.abs(step[:-1]).max() < 1e-7:
             break
     out = []
-    _, _, counts, overlaps = terms(x)
+    _, _, _, counts, overlaps = terms(x)
     bounded = x.copy()                     # the (u, w) of the corrections as kept, for their misfit
     for k in range(K):
         u, w = x[6 * k:6 * k + 3], x[6 * k + 3:6 * k + 6].copy()
@@ -410,7 +453,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         vals, vecs = np.linalg.eigh(np.linalg.solve(prior[block, block], data))
         weak = tuple(sorted({("x", "y", "z", "rx", "ry", "rz")[int(np.argmax(np.abs(v)))]
                              for lam, v in zip(vals, vecs.T) if lam < WEAK}))
-        out.append(CaptureCorrection(t, w, origins[k].copy(), counts[k], overlaps[k], bool(over > 1.0), weak))
+        out.append(CaptureCorrection(t, w, origins[k].copy(), counts[k], overlaps[k], bool(over > 1.0), weak,
+                                     len(table[k])))
     after, g1 = contact_misfit(bounded)
     bound = (float(max_translation), float(max_rotation))
     if sum(c.contacts for c in out) < MIN_CONTACTS:          # too few to say anything: the captures as given

@@ -30,10 +30,15 @@ class PointCloud:
         origin: the optical centre [m], base frame: `(3,)` for one camera, `(n, 3)` per point for a merged capture
             (each point's own camera; a row of NaN where that capture's camera is unknown), or None if unknown (no
             free space then).
+        support: `(k, 3)` points the camera saw on the plane the object stands on (the table) around it [m], base
+            frame, kept apart from ``points`` (they are not the object): what a capture's pose can be checked
+            against (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`' ``support``); None: not kept.
+            A merged capture keeps none.
     """
 
     points: np.ndarray
     origin: np.ndarray | None = None
+    support: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         p = np.asarray(self.points, dtype=np.float64)
@@ -55,6 +60,11 @@ class PointCloud:
                 if o.shape != (p.shape[1],) or not np.isfinite(o).all():
                     raise ValueError(f"origin: expected a finite ({p.shape[1]},) position [m], got {self.origin!r}")
             self.origin = o
+        if self.support is not None:
+            sp = np.asarray(self.support, dtype=np.float64).reshape(-1, p.shape[1])
+            if not np.isfinite(sp).all():
+                raise ValueError("support: contains NaN or inf")
+            self.support = sp
 
     @classmethod
     def merge(cls, clouds) -> "PointCloud":
@@ -483,6 +493,11 @@ class CameraError:
         return AppliedCameraError(tuple(self.translation * unit[0]), tuple(self.rotation * unit[1]))
 
 
+#: How far around the mesh's bounding box [m] a simulated camera's table is seen (:attr:`SimulatedDepthCamera.support`):
+#: the part of a table a capture keeps beside the object.
+SUPPORT_REACH = 0.15
+
+
 class SimulatedDepthCamera(PointCloudSource):
     """A depth camera ray-cast against a mesh (the outer surface of a covered object).
 
@@ -506,13 +521,18 @@ class SimulatedDepthCamera(PointCloudSource):
             from ``seed`` (:attr:`applied_error`), its reported origin left where the pose says; None: none.
         error_key: integers drawn with ``seed`` for the error alone (a scene's name, so that two objects' runs of
             one seed are not off in the same direction); kept by :meth:`reseeded`.
+        support: the height [m] of a horizontal plane the object stands on (a table), seen where the rays miss the
+            mesh within :data:`SUPPORT_REACH` of it: kept apart in each capture (``PointCloud.support``), with the
+            same depth noise, dropout and extrinsic error (drawn after the object's, so that its points are as
+            without it); None: no table.
     """
 
     ENGINES = ("auto", "embree", "triangle")
 
     def __init__(self, mesh: trimesh.Trimesh, intrinsics: PinholeCamera, T_base_camera, *,
                  noise_a: float = 0.0, noise_b: float = 0.0, dropout: float = 0.0, seed: int = 0,
-                 engine: str = "auto", error: "CameraError | str | None" = None, error_key=()) -> None:
+                 engine: str = "auto", error: "CameraError | str | None" = None, error_key=(),
+                 support: float | None = None) -> None:
         T = np.asarray(T_base_camera, dtype=np.float64)
         if T.shape != (4, 4) or not np.isfinite(T).all() or not np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3),
                                                                           atol=1e-6):
@@ -522,6 +542,10 @@ class SimulatedDepthCamera(PointCloudSource):
         if engine not in self.ENGINES:
             raise ValueError(f"engine: must be one of {self.ENGINES}, got {engine!r}")
         self.engine = engine
+        if support is not None and (isinstance(support, bool) or not isinstance(support, (int, float))
+                                    or not math.isfinite(support)):
+            raise ValueError(f"support: a table's height [m] or None, got {support!r}")
+        self.support = None if support is None else float(support)
         self.mesh, self.intrinsics, self.T_base_camera = mesh, intrinsics, T
         self.noise_a, self.noise_b, self.dropout = float(noise_a), float(noise_b), float(dropout)
         self._rng = np.random.default_rng(seed)
@@ -540,7 +564,26 @@ class SimulatedDepthCamera(PointCloudSource):
         ints)."""
         return SimulatedDepthCamera(self.mesh, self.intrinsics, self.T_base_camera, noise_a=self.noise_a,
                                     noise_b=self.noise_b, dropout=self.dropout, seed=seed, engine=self.engine,
-                                    error=self.error, error_key=self.error_key)
+                                    error=self.error, error_key=self.error_key, support=self.support)
+
+    def support_points(self, hit: np.ndarray) -> np.ndarray:
+        """Noise-free points on the support plane (:attr:`support`) of the rays that hit nothing else: `(k, 3)` in
+        the camera frame, within the camera's depth range and :data:`SUPPORT_REACH` of the mesh's bounding box
+        (horizontally); ``hit``: `(j,)` the pixel indices :meth:`depth_points` found on the mesh."""
+        rays = self.intrinsics.rays()
+        R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
+        dirs = (rays / np.linalg.norm(rays, axis=1, keepdims=True)) @ R.T
+        free = np.ones(len(dirs), dtype=bool)
+        free[hit] = False
+        down = free & (dirs[:, 2] < -1e-9)
+        s = (self.support - t[2]) / np.where(down, dirs[:, 2], -1.0)
+        down &= s > 0
+        p = t + s[down, None] * dirs[down]
+        lo, hi = self.mesh.bounds[0][:2] - SUPPORT_REACH, self.mesh.bounds[1][:2] + SUPPORT_REACH
+        near = ((p[:, :2] >= lo) & (p[:, :2] <= hi)).all(axis=1)
+        p_cam = (p[near] - t) @ R
+        z = p_cam[:, 2]
+        return p_cam[(z >= self.intrinsics.min_depth) & (z <= self.intrinsics.max_depth)]
 
     def depth_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free first hits: `(k, 3)` points in the camera frame and `(k,)` their pixel indices."""
@@ -583,7 +626,15 @@ class SimulatedDepthCamera(PointCloudSource):
         return RayMeshIntersector(self.mesh)
 
     def capture(self) -> PointCloud:
-        p_cam, _ = self.depth_points()
+        p_cam, hit = self.depth_points()
+        points = self._sensed(p_cam)
+        if self.support is None:
+            return PointCloud(points, self.origin)
+        return PointCloud(points, self.origin, support=self._sensed(self.support_points(hit)))
+
+    def _sensed(self, p_cam: np.ndarray) -> np.ndarray:
+        """Noise-free points `(k, 3)` in the camera frame as the camera reports them in the base frame: depth noise,
+        dropout and the extrinsic error applied."""
         z = p_cam[:, 2]
         if self.noise_a > 0 or self.noise_b > 0:
             z_noisy = z + self._rng.standard_normal(len(z)) * (self.noise_a + self.noise_b * z**2)
@@ -594,7 +645,7 @@ class SimulatedDepthCamera(PointCloudSource):
         points = p_cam @ R.T + t
         if self.applied_error is not None:
             points = self.applied_error.apply(points, t)
-        return PointCloud(points, t.copy())
+        return points
 
 
 _SAID: set[str] = set()

@@ -714,7 +714,7 @@ class Scene3D(RangedScene):
         up = (0.0, 0.0, 1.0) if abs(self.direction[2]) < 0.9 else (1.0, 0.0, 0.0)
         return SimulatedDepthCamera(self.outer, PinholeCamera.realsense_d405(0.25), look_at(eye, target, up),
                                     noise_a=0.0005, noise_b=0.002, seed=seed, error=self.camera_error,
-                                    error_key=self._error_key())
+                                    error_key=self._error_key(), support=self.support)
 
     def hardware(self) -> Hardware:
         from ..contact import ContactConfig, ContactController
@@ -896,7 +896,7 @@ class Scene3D(RangedScene):
         eye = target + 1.1 * (eye - target) / np.linalg.norm(eye - target)
         return SimulatedDepthCamera(self.outer, PinholeCamera.kinect_v2(scale), look_at(eye, target),
                                     noise_a=0.0015, noise_b=0.0015, seed=self.seed if seed is None else seed,
-                                    error=self.camera_error, error_key=self._error_key())
+                                    error=self.camera_error, error_key=self._error_key(), support=self.support)
 
     def true_distance(self, points: np.ndarray) -> np.ndarray:
         """`(n,)` exact signed distance of `(n, 3)` points from the inner mesh [m] (negative inside)."""
