@@ -304,8 +304,10 @@ def test_a_miscalibrated_cameras_captures_are_corrected_logged_and_resume_alike(
     assert run.meta["policy"]["camera_table"] is True              # the views of the table held to it as well
     steps = [r for r in read_records(log) if r.kind == "step"]
     marked = [int(r.meta["step"]) for r in steps if "camera_corrections" in r.meta]
-    # at the steps of the 20th and 40th contacts (step 0: the first)
-    assert marked == [CORRECT_AFTER - 1, CORRECT_AFTER + CORRECT_EVERY - 1]
+    # before the first touch from the table alone (step 0), then at the steps of the 20th and 40th contacts
+    assert marked == [0, CORRECT_AFTER - 1, CORRECT_AFTER + CORRECT_EVERY - 1]
+    at_start = steps[0].meta["camera_corrections"]["captures"]
+    assert all(c["contacts"] == 0 and c["support"] >= 100 for c in at_start)
     corrections = reference.camera_corrections
     assert corrections == steps[marked[-1]].meta["camera_corrections"] and len(corrections["captures"]) == 3
     assert all(c["size_mm"] <= 12.0 + 1e-9 for c in corrections["captures"])
@@ -324,10 +326,17 @@ def test_a_miscalibrated_cameras_captures_are_corrected_logged_and_resume_alike(
         before.append(np.linalg.norm(seen[0] - middle))
         left.append(np.linalg.norm(CaptureCorrection.from_record(fix).apply(seen)[0] - middle))
     assert sum(left) < 0.5 * sum(before) and max(left) < 0.012, (before, left)
+    first = []                                       # the table alone, before any touch, already took most of it
+    for (name, applied), fix in zip(scene.camera_errors().items(), at_start):
+        error = AppliedCameraError(tuple(np.asarray(applied["translation_mm"]) / 1e3),
+                                   tuple(np.radians(applied["rotation_deg"])))
+        first.append(np.linalg.norm(CaptureCorrection.from_record(fix).apply(error.apply(middle[None],
+                                                                                     fix["origin"]))[0] - middle))
+    assert sum(first) < 0.75 * sum(before), (before, first)
     last = run.states[run.steps[-1]]
     np.testing.assert_array_equal(last.x, reference.model.train_inputs[0].numpy())
     np.testing.assert_array_equal(last.y, reference.model.train_targets.numpy())
-    for cut in (marked[0] - 3, marked[0] + 2):
+    for cut in (marked[1] - 3, marked[1] + 2):       # before and after the first correction from the contacts
         _resumes_alike(scene, log, cut, reference, kw)
 
 

@@ -21,7 +21,7 @@ from ..models.gpiois import OUTER
 from .observations import Observations, vision_observations
 
 __all__ = ["CORRECT_AFTER", "CORRECT_EVERY", "capture_views", "vision_crop", "contact_normals", "camera_table",
-           "correct_camera"]
+           "correct_at_start", "correct_camera"]
 
 #: Contacts before the captures are first corrected: enough, spread over the body, that several lie under each view's
 #: seen cover (a view with none is left to the overlaps and the bound's prior).
@@ -64,6 +64,34 @@ def camera_table(hardware, policy: ObservationPolicy) -> float | None:
     config = getattr(getattr(hardware, "controller", None), "config", None)
     floor = getattr(config, "floor", None)
     return None if floor is None else float(floor)
+
+
+def correct_at_start(captures: list, policy: ObservationPolicy, crop: np.ndarray | None,
+                     table: float | None) -> tuple[list, dict | None]:
+    """The views' captures corrected from the table alone, before the first touch (``policy.camera_bound`` and a
+    ``table`` height [m], :func:`camera_table`): each capture's view of the table held to its plane fixes its height
+    and its rotations about horizontal axes (a degree off a metre away lands the cover 1-2 cm off), the rest left to
+    the calibration's prior and the views' overlaps; the contacts correct the whole pose later (:func:`correct_camera`,
+    always from the captures as first taken).
+
+    Returns:
+        The captures to label the first observations with (corrected, or as given when nothing is due: no bound, no
+        table, a capture that sees too little of it) and the correction's record, or None.
+    """
+    if policy.camera_bound is None or table is None or not captures or np.asarray(captures[0].points).shape[1] != 3:
+        return captures, None
+    from ..sensors.extrinsics import correct_captures
+    from ..sensors.pointcloud import PointCloud
+
+    cropped = [c.cropped(crop[0], crop[1]) for c in captures] if crop is not None else captures
+    if any(len(c) < 10 for c in cropped):
+        return captures, None
+    found = correct_captures(cropped, np.zeros((0, 3)), None, max_translation=policy.camera_bound[0],
+                             max_rotation=policy.camera_bound[1], support=((0.0, 0.0, 1.0), table))
+    if not found.enough:
+        return captures, None
+    return ([PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)],
+            found.as_record())
 
 
 def correct_camera(model, captures: list, contacts: np.ndarray, policy: ObservationPolicy,

@@ -24,7 +24,7 @@ from ..contact import ContactResult
 from ..geometry import surface_geometry
 from ..planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
-from .calibration import camera_table, capture_views, correct_camera, vision_crop
+from .calibration import camera_table, capture_views, correct_at_start, correct_camera, vision_crop
 from .observations import (Observations, deepen_vision_inside, drop_contradicted_inside, offset_outer_mean,
                            renew_deep_vision_inside, retract_free_space, retract_vision_inside, thin_points,
                            vision_observations)
@@ -135,13 +135,16 @@ def begin(ctx: Run) -> ExplorationState:
     """Vision (when the mode uses it), the approach to the first contact, the first model and its fit: the state
     with record 0."""
     cfg, hw, world = ctx.config, ctx.hardware, ctx.world
-    outer = captures = crop = None
+    outer = captures = crop = start_fix = None
+    table = camera_table(hw, cfg.policy)
     if cfg.uses_vision:
         from ..sensors.pointcloud import PointCloud
 
         crop = vision_crop(world, cfg.policy)
         captures = capture_views(hw.camera)          # each view's, merged as the camera's own capture merges them
-        x_out, y_out = vision_observations(PointCloud.merge(captures), cfg.policy, crop)
+        # with a bound and a known table: the captures held to it before the first touch (the contacts later)
+        seen, start_fix = correct_at_start(captures, cfg.policy, crop, table)
+        x_out, y_out = vision_observations(PointCloud.merge(seen), cfg.policy, crop)
         outer = Observations(x_out, y_out, np.ones(len(x_out), np.int64), source="vision")
     first = hw.controller.approach(torch.as_tensor(world.direction), max_travel=cfg.approach_travel)
     if not first.in_contact:
@@ -154,11 +157,12 @@ def begin(ctx: Run) -> ExplorationState:
     state = ExplorationState(model=cfg.make_model(inner, outer), contacts=[contact], path=list(first.path.numpy()),
                              normal=first.force_normal, crop=crop,
                              captures=captures if cfg.policy.camera_bound is not None else None,
-                             table=camera_table(hw, cfg.policy))
+                             table=table, camera_corrections=start_fix)
     t0 = time.perf_counter()
     state.model.fit()
     record = StepRecord(step=0, travel=0.0, touch=first, final=cfg.max_steps == 0,
-                        observations=Observations.concat([inner, outer], source="start"))
+                        observations=Observations.concat([inner, outer], source="start"),
+                        camera_corrections=start_fix)
     _describe(record, state, ctx, step_time=time.perf_counter() - t0)
     state.records.append(record)
     return state

@@ -47,6 +47,10 @@ HUBER = 2.0
 FACING = 0.8
 #: Contacts under the seen cover (over all captures) below which no capture is corrected.
 MIN_CONTACTS = 5
+#: ... unless every capture has at least this many points on the known support plane (``correct_captures``'
+#: ``support``): the table alone fixes each capture's height and its rotations about horizontal axes, and the prior
+#: holds the rest.
+MIN_SUPPORT = 100
 #: A direction of a capture's correction is "weak" when the data's curvature along it is below this share of the
 #: prior's: the prior, not the touches, set it.
 WEAK = 1.0
@@ -124,8 +128,9 @@ class CaptureCorrections:
         after: the same once corrected [m].
         bound: ``(translation [m], rotation [rad])``, the largest correction allowed.
         enough: whether at least :data:`MIN_CONTACTS` contacts lay under the seen cover (over all captures) at the
-            end; when not, every correction is none (the captures as given): a handful of contacts pulls the
-            captures where they fit best, not where they belong.
+            end, or every capture held :data:`MIN_SUPPORT` points to a known support plane; when not, every
+            correction is none (the captures as given): a handful of contacts pulls the captures where they fit
+            best, not where they belong.
     """
 
     captures: list
@@ -457,7 +462,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                                      len(table[k])))
     after, g1 = contact_misfit(bounded)
     bound = (float(max_translation), float(max_rotation))
-    if sum(c.contacts for c in out) < MIN_CONTACTS:          # too few to say anything: the captures as given
+    held = plane is not None and all(len(t) >= MIN_SUPPORT for t in table)    # every capture sees the table
+    if sum(c.contacts for c in out) < MIN_CONTACTS and not held:   # too few to say anything: the captures as given
         out = [CaptureCorrection(np.zeros(3), np.zeros(3), c.origin, c.contacts, c.overlap, False,
                                  ("x", "y", "z", "rx", "ry", "rz")) for c in out]
         return CaptureCorrections(out, g0, before, before, bound, enough=False)
