@@ -616,4 +616,6 @@ def test_fit_corrects_a_miscalibrated_cameras_captures_when_asked_and_records_it
     record = json.loads((out / "fit.json").read_text())["camera_corrections"]
     assert len(record["captures"]) == 3 and record["misfit_after_mm"] < record["misfit_before_mm"]
     assert main(["fit", str(out / "model.pt"), "--camera-bound", "6mm,1deg"]) == 2
-    assert "--camera-bound go with a contacts CSV" in capsys.readouterr().err
+    assert "--camera-bound and --table go with a contacts CSV" in capsys.readouterr().err
+    assert main([*args, "--table", "0.13", "--out", str(tmp_path / "t"), "--quiet"]) == 2
+    assert "--table holds the captures to the table while --camera-bound corrects them" in capsys.readouterr().err

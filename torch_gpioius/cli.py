@@ -88,9 +88,11 @@ def _study(args: argparse.Namespace) -> int:
 def _fit(args: argparse.Namespace) -> int:
     own = Path(args.dataset).suffix.lower() == ".csv"
     if not own and (args.cloud or args.camera_origin or args.units != "m" or args.contact_spacing is not None
-                    or args.camera_bound is not None):
-        raise ValueError("fit: --cloud, --units, --camera-origin, --contact-spacing and --camera-bound go with a "
-                         "contacts CSV (a .gpioius file holds its own cloud, in metres)")
+                    or args.camera_bound is not None or args.table is not None):
+        raise ValueError("fit: --cloud, --units, --camera-origin, --contact-spacing, --camera-bound and --table go "
+                         "with a contacts CSV (a .gpioius file holds its own cloud, in metres)")
+    if args.table is not None and args.camera_bound is None:
+        raise ValueError("fit: --table holds the captures to the table while --camera-bound corrects them: give both")
     origins = []
     for text in args.camera_origin or []:
         try:
@@ -145,7 +147,7 @@ def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list,
             kernel = None
         ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel, camera_origin=origin,
                                 settings=settings, contact_spacing=args.contact_spacing,
-                                camera_bound=args.camera_bound)
+                                camera_bound=args.camera_bound, table=args.table)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         source, settings = ds, None                  # the dataset holds the settings it was labelled with
     return fit_dataset(source, args.out, kernel=kernel, noise=args.noise, learn=args.learn, settings=settings,
@@ -712,6 +714,10 @@ def _add_fit(sub, common, fmt) -> None:
                      help="with clouds and their --camera-origin: correct each capture's pose (its camera's "
                           "calibration) from the contacts and the other captures, by at most these sizes, e.g. "
                           "6mm,1deg (fit.json: camera_corrections; a large one is warned of); default: as given")
+    fit.add_argument("--table", type=float, default=None, metavar="Z",
+                     help="with --camera-bound: the height of the table the object stands on (z, in --units), "
+                          "known to the robot: each capture's view of the table around the object is held to it as "
+                          "well (give the clouds uncropped); default: no table")
     fit.add_argument("--contact-spacing", type=_length("contact-spacing"), default=None,
                      help="with a contacts CSV: drop rows within this distance [m] of an earlier row of their kind "
                           "(contacts, free space, inside points); an exact fit's memory grows with the square of the "

@@ -619,3 +619,52 @@ def test_a_users_files_under_a_wide_cover_take_the_gap_rules_their_settings_name
     seen = field.x[(field.task == 1) & (field.y == 0)]
     top = seen[seen[:, 2] > CENTRE[2] + 0.05]                                 # where the contacts are
     assert 0.025 < float(model.outer_field.gap(top).median()) < 0.045
+
+
+def test_a_users_captures_held_to_the_table_they_see_as_well(tmp_path):
+    """The box's three captures with the table around it (uncropped, as a camera gives them) and the table's height
+    known (``table``, ``gpioius fit --table``): each capture's table points are found (within the bound's band of the
+    height, away from the box's foot), held to the plane with the contacts, and taken out of the labelled captures;
+    with only the contacts on the box's top face the seen cover's points land closer to the true cover than without
+    the table. A table without a bound, or not a number, is refused by name."""
+    from torch_gpioius.sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
+
+    centre = np.array([0.5, 0.0, 0.2])
+    inner = trimesh.creation.box((0.10, 0.08, 0.12))
+    inner.apply_translation(centre)
+    outer = trimesh.creation.box((0.116, 0.096, 0.136))
+    outer.apply_translation(centre)
+    table = centre[2] - 0.068
+    points, face = trimesh.sample.sample_surface(inner, 400, seed=1)
+    top = inner.face_normals[face][:, 2] > 0.5
+    rows = [f"{x:.6f},{y:.6f},{z:.6f},contact,{a:.4f},{b:.4f},{c:.4f}"
+            for (x, y, z), (a, b, c) in zip(points[top][:40], inner.face_normals[face][top][:40])]
+    csv = tmp_path / "touch.csv"
+    csv.write_text("x,y,z,label,nx,ny,nz\n" + "\n".join(rows) + "\n")
+    eyes = [centre + [-0.6, -0.8, 0.5], centre + [-0.6, 0.8, 0.5], centre + [-0.4, 0.0, 0.8]]
+    clouds = []
+    for k, eye in enumerate(eyes):
+        cam = SimulatedDepthCamera(outer, PinholeCamera.kinect_v2(0.5), look_at(eye, centre), noise_a=0.0015,
+                                   noise_b=0.0015, seed=[1, k], error="6mm,1deg", support=table)
+        shot = cam.capture()
+        clouds.append(tmp_path / f"view{k}.ply")
+        trimesh.PointCloud(np.r_[shot.points, shot.support]).export(clouds[-1])
+
+    def off_the_cover(ds):
+        seen = ds.x[(ds.task == 1) & (ds.y == 0)]
+        return float(np.median(np.abs(trimesh.proximity.signed_distance(outer, seen[::10]))))
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        contacts_only = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0, camera_bound="12mm,2deg")
+        held = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0, camera_bound="12mm,2deg", table=table)
+    assert all(c["support"] >= 100 for c in held.meta["camera_corrections"]["captures"])
+    def low(ds):                                   # seen points at the table's height, beyond the box's foot
+        seen = ds.x[(ds.task == 1) & (ds.y == 0)]
+        beyond = (np.abs(seen[:, :2] - centre[:2]) > [0.058 + 0.03, 0.048 + 0.03]).any(axis=1)
+        return int(((seen[:, 2] < table + 0.01) & beyond).sum())
+
+    assert low(contacts_only) > 1000 and low(held) < 0.02 * low(contacts_only)    # the table left the captures
+    assert off_the_cover(held) < off_the_cover(contacts_only), (off_the_cover(held), off_the_cover(contacts_only))
+    with pytest.raises(DatasetError, match="table"):
+        dataset_from_files(csv, clouds, camera_origin=eyes, camera_bound="12mm,2deg", table="low")

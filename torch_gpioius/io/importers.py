@@ -456,7 +456,7 @@ def _direction(row: dict, columns: tuple, label: float, path: Path, line: int) -
 def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, units: str = "m", voxel="auto",
                        settings="default", noise: float | None = None,
                        source: str = "import", camera_origin=None, contact_spacing: float | None = None,
-                       camera_bound=None) -> Dataset:
+                       camera_bound=None, table: float | None = None) -> Dataset:
     """A user's contacts (inner, task 0) and camera captures (outer, task 1, step 0) labelled as an exploration with
     the same estimator settings labels them, in one Dataset.
 
@@ -493,6 +493,12 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, the contacts' directions where the file
             gives them), within that bound, before it is labelled; a correction beyond half the bound is warned of.
             None: the captures as given.
+        table: with ``camera_bound``, the height (z, in ``units``) of the table the object stands on, which the
+            robot knows (touch it): each capture's points on the table around the object (within the bound's reach
+            of that height, away from the object's footprint) are held to it as well, which fixes the rotations
+            about horizontal axes and the height that contacts on a few faces leave loose (give the clouds with the
+            table around the object, uncropped; its points are then taken out of the captures, not labelled as the
+            cover). None: no table.
 
     Returns:
         A :class:`Dataset` whose ``meta["estimator"]`` holds the settings used (the voxel resolved),
@@ -548,7 +554,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
                          np.concatenate([c.points for c in captures]) if captures else None)
     corrections = None
     if camera_bound is not None and captures:
-        captures, corrections = _corrected(files, captures, x_in, y_in, normal_in, camera_bound)
+        captures, corrections = _corrected(files, captures, x_in, y_in, normal_in, camera_bound,
+                                           None if table is None else _table_height(table, units))
         everything = np.concatenate([c.points for c in captures])
     outer = np.zeros((0, dim)), np.zeros(0)
     if captures:
@@ -640,10 +647,42 @@ def _gap_rules(contacts: np.ndarray, outer: tuple[np.ndarray, np.ndarray], polic
     return (ox, oy), ({"outer_mean": model.outer_mean} if model.outer_mean != 1.0 else None)
 
 
-def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: np.ndarray, bound):
+def _table_height(table, units: str) -> float:
+    """``table`` (:func:`dataset_from_files`'s) in metres; DatasetError naming it when not a finite number."""
+    if isinstance(table, bool) or not isinstance(table, (int, float)) or not math.isfinite(table):
+        raise DatasetError(f"table: the table's height (z, in the files' units), got {table!r}")
+    return float(table) * _SCALE[units]
+
+
+#: Of a user's capture, the points within this [m] horizontally of the object's (those more than the band above the
+#: table) are the object's foot, not the table (:func:`_on_the_table`).
+TABLE_CLEARANCE = 0.02
+
+
+def _on_the_table(points: np.ndarray, origin: np.ndarray, table: float, bound) -> np.ndarray:
+    """`(n,)` which of a capture's ``points`` lie on the table at height ``table`` [m]: within the band the
+    calibration ``bound`` can move them by at that distance from the camera ``origin`` (at least 1 cm) and more than
+    :data:`TABLE_CLEARANCE` horizontally from every point above the band (the object and its cover)."""
+    from scipy.spatial import cKDTree
+
+    reach = float(np.median(np.linalg.norm(points - origin, axis=1))) if len(points) else 1.0
+    band = max(0.01, bound.translation + bound.rotation * reach)
+    near = np.abs(points[:, 2] - table) <= band
+    above = points[:, 2] > table + band
+    if not near.any() or not above.any():
+        return near
+    d, _ = cKDTree(points[above][:, :2]).query(points[near][:, :2])
+    on = near.copy()
+    on[near] = d > TABLE_CLEARANCE
+    return on
+
+
+def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: np.ndarray, bound,
+               table: float | None = None):
     """The captures corrected from the contacts (``normal_in``: their outward directions, NaN rows without) within
-    ``bound`` (:func:`dataset_from_files`'s ``camera_bound``), and
-    the :class:`~torch_gpioius.sensors.extrinsics.CaptureCorrections`; a large correction is warned of by file."""
+    ``bound`` (:func:`dataset_from_files`'s ``camera_bound``) and, with ``table`` [m], from each capture's points on
+    the table as well, and the :class:`~torch_gpioius.sensors.extrinsics.CaptureCorrections`; a large correction is
+    warned of by file."""
     import warnings
 
     from ..sensors.extrinsics import correct_captures
@@ -665,11 +704,18 @@ def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: n
     # surface facing its way; without any, every contact and no facing test
     given = contact & np.isfinite(normal_in).all(axis=1)
     use, directions = (given, normal_in[given]) if given.any() else (contact, None)
-    found = correct_captures(captures, x_in[use], directions, max_translation=bound.translation,
-                             max_rotation=bound.rotation)
+    support, held = None, captures
+    if table is not None:                  # each capture's table apart from its object (PointCloud.support)
+        support, held = ((0.0, 0.0, 1.0), table), []
+        for c in captures:
+            on = _on_the_table(c.points, np.asarray(c.origin, dtype=np.float64), table, bound)
+            held.append(PointCloud(c.points[~on], c.origin, support=c.points[on]))
+    found = correct_captures(held, x_in[use], directions, max_translation=bound.translation,
+                             max_rotation=bound.rotation, support=support)
     for line in found.warnings([str(f) for f in files]):
         warnings.warn(line, UserWarning, stacklevel=3)
-    return [PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)], found
+    # (with a table, its points leave the captures: they are not the object's cover)
+    return [PointCloud(f.apply(c.points), c.origin) for c, f in zip(held, found.captures)], found
 
 
 def _capture(path, origin, units: str, dim: int):

@@ -342,7 +342,7 @@ class EstimatorSettings:
     @classmethod
     def from_dict(cls, data: dict) -> "EstimatorSettings":
         """Settings from :meth:`to_dict`'s data, or a partial dict on top of a preset: ``{"preset": "default",
-        "noise": 0.02, "labels": {"voxel": 0.03}}`` (a scene file's ``[estimator]`` section). ``kernel`` may be a
+        "noise": 0.02, "labels": {"voxel": 0.03}}``. ``kernel`` may be a
         description (``{"kernel": "Matern52", "lengthscale": 0.1}``) or a registered name with ``lengthscale``.
 
         Raises:
