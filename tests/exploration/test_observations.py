@@ -338,8 +338,9 @@ def test_the_gap_field_follows_a_cover_whose_gap_varies_and_leaves_a_tight_one_a
     """``cover_gap_field``: a body of 10 cm radius under a cover 5 mm off at the bottom and 5 cm at the top, touched
     all round (60 contacts). The outer mean becomes a field that reads the gap where it is (within 8 mm, the local
     planes' sagitta and the field's smoothing) instead of one median; a second call with the same contacts changes
-    nothing. Under a cover 8 mm off everywhere the field never exceeds the 3 cm limit and the mean stays 1; the
-    setting alone, without the offset and the deep points it stands in for, is refused."""
+    nothing. Under a cover 8 mm off everywhere the field never exceeds the 3 cm limit and the mean stays 1, nor with
+    six odd contacts in one spot where it does (fewer than a quarter of the places); the setting alone, without the offset and
+    the deep points it stands in for, is refused."""
     from torch_gpioius.exploration.observations import offset_outer_mean
 
     policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
@@ -357,6 +358,16 @@ def test_the_gap_field_follows_a_cover_whose_gap_varies_and_leaves_a_tight_one_a
     assert not offset_outer_mean(m, contacts, policy) and m.outer_field is field
     tight, _ = _gap_field_model(policy, dirs, np.full(len(dirs), 0.108), contacts)
     assert not offset_outer_mean(tight, contacts, policy) and tight.outer_field is None and tight.outer_mean == 1.0
+    # six contacts close together 5 cm under the tight cover (as beside a seen edge, where the local plane reads
+    # centimetres): the field passes 3 cm there, at fewer than a quarter of the places measured: no firing
+    from torch_gpioius.exploration.observations import CoverGap
+    from torch_gpioius.models.gapfield import GapField
+
+    spot = np.array([1.0, 0.0, 0.0]) + 0.15 * _sphere(1.0, 6, seed=9)
+    odd = np.r_[contacts, 0.058 * spot / np.linalg.norm(spot, axis=1, keepdims=True)]
+    feet, gaps = CoverGap().measured(odd, dirs * 0.108, reach=0.02)
+    assert GapField.fit(feet, np.clip(gaps, 0, 0.1)).gap(feet).max() > 0.03
+    assert not offset_outer_mean(tight, odd, policy) and tight.outer_field is None
     with pytest.raises(ValueError, match="cover_gap_field"):
         ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, cover_gap_field=True)
 
