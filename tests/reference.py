@@ -1,6 +1,7 @@
 """Independent dense float64 reference of eq. (2)-(3), (5), (9)-(13) and (16) in plain NumPy.
 
-No GPyTorch, no torch_gpioius code: the tests hold the library against these formulas.
+No GPyTorch, no torch_gpioius code in the formulas: the tests hold the library against them
+(:func:`assert_model_predicts` is the one helper that calls a model).
 """
 
 import numpy as np
@@ -84,3 +85,24 @@ def kt_from_chol(phi):
 
 # the finite differences live in the package, where users' own kernel tests find them too
 from torch_gpioius.testing.differences import assert_close_to_reference, richardson_derivative  # noqa: E402,F401
+
+
+def assert_model_predicts(model, xq, task, mean, var, atol=1e-8):
+    """``model``'s posterior of ``task`` at ``xq`` `(m, d)` by every route it has (``predict``, ``predict_mean``,
+    the engine's closed form where it has one, GPyTorch's eval-mode call) equals the reference ``mean``, ``var``;
+    returns the closed form's output (None without one). The one place the tests call the library here."""
+    import torch
+
+    q = torch.tensor(xq)
+    got_mean, got_var = model.predict(q, task=task)
+    np.testing.assert_allclose(got_mean.numpy(), mean, atol=atol, rtol=0)
+    np.testing.assert_allclose(got_var.numpy(), var, atol=atol, rtol=0)
+    np.testing.assert_allclose(model.predict_mean(q, task).detach().numpy(), mean, atol=atol, rtol=0)
+    closed = model._predict_with_gradients(q, task)
+    if closed is not None:
+        np.testing.assert_allclose(closed[0].numpy(), mean, atol=atol, rtol=0)
+    with torch.no_grad():
+        post = model.eval()(q, task)
+    model.train()
+    np.testing.assert_allclose(post.mean.numpy(), mean, atol=atol, rtol=0)
+    return closed

@@ -339,8 +339,8 @@ def test_the_gap_field_follows_a_cover_whose_gap_varies_and_leaves_a_tight_one_a
     all round (60 contacts). The outer mean becomes a field that reads the gap where it is (within 8 mm, the local
     planes' sagitta and the field's smoothing) instead of one median; a second call with the same contacts changes
     nothing. Under a cover 8 mm off everywhere the field never exceeds the 3 cm limit and the mean stays 1, nor with
-    six odd contacts in one spot where it does (fewer than a quarter of the places); the setting alone, without the offset and
-    the deep points it stands in for, is refused."""
+    six odd contacts in one spot where it does (fewer than a quarter of the places); the setting alone, without the
+    offset and the deep points it stands in for, is refused."""
     from torch_gpioius.exploration.observations import offset_outer_mean
 
     policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,

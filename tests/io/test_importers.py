@@ -531,10 +531,11 @@ def test_free_rows_alone_and_a_mesh_given_as_a_cloud_are_said_for_what_they_are(
         assert len(load_point_cloud(tmp_path / "mesh.ply")) == 162
 
 
-def _box_files(folder, error: str):
+def _box_files(folder, error: str, *, top_only: bool = False, table: bool = False, seed: int = 0):
     """A 10 x 8 x 12 cm box under a cover 8 mm off, its contacts (with normals) in a CSV and three captures of the
     cover by cameras whose calibration is off by ``error``; returns the CSV, the clouds, their origins and the
-    cover's mesh."""
+    cover's mesh. ``top_only``: 40 contacts on the top face (else 120 on every face but the bottom); ``table``: the
+    captures see the table the cover stands on too (at ``TABLE_Z``, in the clouds as a camera gives them)."""
     from torch_gpioius.sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
 
     centre = np.array([0.5, 0.0, 0.2])
@@ -543,19 +544,25 @@ def _box_files(folder, error: str):
     outer = trimesh.creation.box((0.116, 0.096, 0.136))
     outer.apply_translation(centre)
     points, face = trimesh.sample.sample_surface(inner, 400, seed=1)
-    up = inner.face_normals[face][:, 2] > -0.5
+    keep = inner.face_normals[face][:, 2] > (0.5 if top_only else -0.5)
+    count = 40 if top_only else 120
     rows = [f"{x:.6f},{y:.6f},{z:.6f},contact,{a:.4f},{b:.4f},{c:.4f}"
-            for (x, y, z), (a, b, c) in zip(points[up][:120], inner.face_normals[face][up][:120])]
+            for (x, y, z), (a, b, c) in zip(points[keep][:count], inner.face_normals[face][keep][:count])]
     csv = folder / "touch.csv"
     csv.write_text("x,y,z,label,nx,ny,nz\n" + "\n".join(rows) + "\n")
     eyes = [centre + [-0.6, -0.8, 0.5], centre + [-0.6, 0.8, 0.5], centre + [-0.4, 0.0, 0.8]]
     clouds = []
     for k, eye in enumerate(eyes):
         cam = SimulatedDepthCamera(outer, PinholeCamera.kinect_v2(0.5), look_at(eye, centre), noise_a=0.0015,
-                                   noise_b=0.0015, seed=[0, k], error=error)
+                                   noise_b=0.0015, seed=[seed, k], error=error, support=TABLE_Z if table else None)
+        shot = cam.capture()
         clouds.append(folder / f"view{k}.ply")
-        trimesh.PointCloud(cam.capture().points).export(clouds[-1])
+        trimesh.PointCloud(np.r_[shot.points, shot.support] if table else shot.points).export(clouds[-1])
     return csv, clouds, eyes, outer
+
+
+#: The height of the table under :func:`_box_files`' box [m] (its cover's bottom).
+TABLE_Z = 0.2 - 0.068
 
 
 def test_captures_of_a_miscalibrated_camera_are_corrected_from_the_contacts_and_said(tmp_path):
@@ -627,28 +634,8 @@ def test_a_users_captures_held_to_the_table_they_see_as_well(tmp_path):
     height, away from the box's foot), held to the plane with the contacts, and taken out of the labelled captures;
     with only the contacts on the box's top face the seen cover's points land closer to the true cover than without
     the table. A table without a bound, or not a number, is refused by name."""
-    from torch_gpioius.sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
-
-    centre = np.array([0.5, 0.0, 0.2])
-    inner = trimesh.creation.box((0.10, 0.08, 0.12))
-    inner.apply_translation(centre)
-    outer = trimesh.creation.box((0.116, 0.096, 0.136))
-    outer.apply_translation(centre)
-    table = centre[2] - 0.068
-    points, face = trimesh.sample.sample_surface(inner, 400, seed=1)
-    top = inner.face_normals[face][:, 2] > 0.5
-    rows = [f"{x:.6f},{y:.6f},{z:.6f},contact,{a:.4f},{b:.4f},{c:.4f}"
-            for (x, y, z), (a, b, c) in zip(points[top][:40], inner.face_normals[face][top][:40])]
-    csv = tmp_path / "touch.csv"
-    csv.write_text("x,y,z,label,nx,ny,nz\n" + "\n".join(rows) + "\n")
-    eyes = [centre + [-0.6, -0.8, 0.5], centre + [-0.6, 0.8, 0.5], centre + [-0.4, 0.0, 0.8]]
-    clouds = []
-    for k, eye in enumerate(eyes):
-        cam = SimulatedDepthCamera(outer, PinholeCamera.kinect_v2(0.5), look_at(eye, centre), noise_a=0.0015,
-                                   noise_b=0.0015, seed=[1, k], error="6mm,1deg", support=table)
-        shot = cam.capture()
-        clouds.append(tmp_path / f"view{k}.ply")
-        trimesh.PointCloud(np.r_[shot.points, shot.support]).export(clouds[-1])
+    csv, clouds, eyes, outer = _box_files(tmp_path, "6mm,1deg", top_only=True, table=True, seed=1)
+    centre, table = np.array([0.5, 0.0, 0.2]), TABLE_Z
 
     def off_the_cover(ds):
         seen = ds.x[(ds.task == 1) & (ds.y == 0)]

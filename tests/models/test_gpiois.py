@@ -556,17 +556,7 @@ def test_an_outer_mean_of_its_own_is_the_dense_per_task_mean_reference(random_da
     xq = np.random.default_rng(7).uniform(-0.4, 0.4, (15, 2))
     for task in (0, 1):
         rm, rv = ref.posterior(x.numpy(), y.numpy(), t.numpy(), KT, 0.1, 0.006, xq, task, m=(1.0, 0.3))
-        mean, var = m.predict(torch.tensor(xq), task=task)
-        np.testing.assert_allclose(mean.numpy(), rm, atol=1e-8, rtol=0)
-        np.testing.assert_allclose(var.numpy(), rv, atol=1e-8, rtol=0)
-        np.testing.assert_allclose(m.predict_mean(torch.tensor(xq), task).detach().numpy(), rm, atol=1e-8, rtol=0)
-        closed = m._predict_with_gradients(torch.tensor(xq), task)
-        if closed is not None:
-            np.testing.assert_allclose(closed[0].numpy(), rm, atol=1e-8, rtol=0)
-        with torch.no_grad():
-            post = m.eval()(torch.tensor(xq), task)
-        m.train()
-        np.testing.assert_allclose(post.mean.numpy(), rm, atol=1e-8, rtol=0)
+        ref.assert_model_predicts(m, xq, task, rm, rv)
     ref_mll = ref.mll(x.numpy(), y.numpy(), t.numpy(), KT, 0.1, 0.006, m=(1.0, 0.3))
     assert abs(float(m.log_marginal_likelihood()) - ref_mll) < 1e-9 * len(x)
     # an appended outer point enters with the outer mean (the engine's labels are shifted on the way in)
