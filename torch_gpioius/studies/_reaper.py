@@ -4,10 +4,12 @@
 and outlive their raylet). Ray has no setting that ties them to the driver, so the study starts this watcher first
 (:class:`RayReaper`): a process of its own that notes every descendant of the study's process while the study runs,
 and kills those still alive once the study's end of a pipe closes without the word that it shut Ray down itself.
-Snapshots alone miss a process started in the last half second before the kill (Ray's agents start last, and a
-process whose parent died is re-parented out of the study's tree), so the study also marks its environment with a
-token every process it starts inherits, and the watcher ends, at the end, the descendants of every process it saw
-and every process that carries the token.
+Snapshots alone miss a process started since the last one (Ray's agents start last, and a process whose parent died
+is re-parented out of the study's tree), so the study also marks its environment with a token every process it starts
+inherits, and the watcher ends, at the end, every process it saw, every process that carries the token, and the
+descendants of both, all found before the first is killed. The token alone is not enough either: Ray's agents set
+their process title, which can overwrite the environment ``/proc`` shows (one of two agents of a cluster here lost
+the token so); they are found below their raylet, which carries it.
 
 Linux only (it reads ``/proc``); elsewhere :class:`RayReaper` does nothing and ``ray stop --force`` is the remedy.
 
@@ -26,12 +28,12 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["RayReaper", "descendants", "marked", "DONE", "TOKEN_VAR"]
+__all__ = ["RayReaper", "descendants", "marked", "running", "DONE", "TOKEN_VAR"]
 
 #: What the study writes to the pipe when it shut Ray down itself (the watcher then leaves everything alone).
 DONE = b"done\n"
 #: Seconds between snapshots of the study's descendants.
-POLL = 0.5
+POLL = 0.2
 #: The environment variable that marks every process a study started (its value is the study's own token).
 TOKEN_VAR = "GPIOIUS_STUDY_TOKEN"
 
@@ -83,9 +85,23 @@ def marked(token: str) -> dict[int, int]:
     return out
 
 
+def running(pid: int, start: int) -> bool:
+    """Whether process ``pid`` that started at ``start`` (clock ticks) still runs: it exists with that start time (a
+    pid reused since is another process) and has not exited (a zombie, killed and waiting for whoever adopted it to
+    collect its status, has: it holds nothing but its pid, and is not Ray left behind)."""
+    info = _stat(pid)
+    if info is None or info[1] != start:
+        return False
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return False
+    return text[text.rindex(")") + 2:][:1] not in ("Z", "X")
+
+
 def _alive(seen: dict[int, int]) -> dict[int, int]:
-    """The processes of ``seen`` still alive with the same start time (a pid reused since is left out)."""
-    return {pid: start for pid, start in seen.items() if (_stat(pid) or (0, -1))[1] == start}
+    """The processes of ``seen`` still running (:func:`running`)."""
+    return {pid: start for pid, start in seen.items() if running(pid, start)}
 
 
 def _kill(seen: dict[int, int], token: str | None = None, rounds: int = 5) -> None:
@@ -95,10 +111,13 @@ def _kill(seen: dict[int, int], token: str | None = None, rounds: int = 5) -> No
     done: set[int] = set()
     for _ in range(rounds):
         todo = _alive(seen)
-        for pid in list(todo):
-            todo.update(descendants(pid))
         if token:
             todo.update(marked(token))
+        # every descendant found before any is killed: a process that renames itself (Ray's agents set their title,
+        # which can overwrite the environment /proc shows, token and all) is found below its parent (the raylet,
+        # marked), and would be out of reach once that parent is killed and it is adopted elsewhere
+        for pid in list(todo):
+            todo.update(descendants(pid))
         todo.pop(me, None)
         fresh = {pid: start for pid, start in todo.items() if pid not in done}
         if not fresh:
