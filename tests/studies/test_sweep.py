@@ -755,3 +755,38 @@ def test_the_watcher_ends_an_unmarked_child_of_a_marked_process(tmp_path):
     finally:
         parent.kill()
         parent.wait()
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the watcher reads /proc")
+def test_the_watcher_ends_a_process_holding_files_in_the_studys_ray_session(tmp_path):
+    """CI, a third time: a Ray agent outlived the killed study with neither the token in its /proc environment (its
+    title overwrote it) nor a parent left in the study's tree (the raylet dies with its driver). Ray keeps each
+    process's logs open in a session directory named after the driver's pid: a process holding a file there is ended;
+    one holding a file in another driver's session is not."""
+    from torch_gpioius.studies._reaper import _kill, _stat, in_session, running
+
+    study = 4_000_000 + os.getpid() % 1000             # a pid no process has: the session's name is what counts
+    ours = tmp_path / f"session_2026-11-29_14-00-00_123456_{study}" / "logs"
+    theirs = tmp_path / f"session_2026-11-29_14-00-00_123456_{study}1" / "logs"
+    code = ("import sys, time; f = open(sys.argv[1], 'w'); f.write('x'); f.flush(); print('ready', flush=True); "
+            "time.sleep(60)")
+    procs = []
+    for folder in (ours, theirs):
+        folder.mkdir(parents=True)
+        p = subprocess.Popen([sys.executable, "-c", code, str(folder / "agent.out")], stdout=subprocess.PIPE)
+        assert p.stdout.readline().strip() == b"ready"
+        procs.append(p)
+    try:
+        mine, other = procs
+        assert set(in_session(study)) == {mine.pid}
+        start = _stat(mine.pid)[1]
+        _kill({}, None, study=study)
+        for _ in range(50):
+            if not running(mine.pid, start):
+                break
+            time.sleep(0.1)
+        assert not running(mine.pid, start) and other.poll() is None
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()

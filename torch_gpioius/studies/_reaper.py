@@ -7,9 +7,11 @@ and kills those still alive once the study's end of a pipe closes without the wo
 Snapshots alone miss a process started since the last one (Ray's agents start last, and a process whose parent died
 is re-parented out of the study's tree), so the study also marks its environment with a token every process it starts
 inherits, and the watcher ends, at the end, every process it saw, every process that carries the token, and the
-descendants of both, all found before the first is killed. The token alone is not enough either: Ray's agents set
-their process title, which can overwrite the environment ``/proc`` shows (one of two agents of a cluster here lost
-the token so); they are found below their raylet, which carries it.
+descendants of all, found before the first is killed. The token alone is not enough either: Ray's agents set their
+process title, which can overwrite the environment ``/proc`` shows (one of two agents of a cluster here lost the
+token so), and the raylet above them dies with the study (Ray ties it to its driver), leaving them adopted
+elsewhere; they keep their logs open in the Ray session directory, which Ray names after the driver's pid, and the
+watcher ends every process holding a file there (:func:`in_session`).
 
 Linux only (it reads ``/proc``); elsewhere :class:`RayReaper` does nothing and ``ray stop --force`` is the remedy.
 
@@ -20,6 +22,7 @@ input; TOKEN is the value of :data:`TOKEN_VAR` in the environment of the process
 from __future__ import annotations
 
 import os
+import re
 import secrets
 import select
 import signal
@@ -28,7 +31,7 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["RayReaper", "descendants", "marked", "running", "DONE", "TOKEN_VAR"]
+__all__ = ["RayReaper", "descendants", "marked", "in_session", "running", "DONE", "TOKEN_VAR"]
 
 #: What the study writes to the pipe when it shut Ray down itself (the watcher then leaves everything alone).
 DONE = b"done\n"
@@ -99,20 +102,44 @@ def running(pid: int, start: int) -> bool:
     return text[text.rindex(")") + 2:][:1] not in ("Z", "X")
 
 
+def in_session(study: int) -> dict[int, int]:
+    """``{pid: start time}`` of every process (of this user) that holds a file open under the Ray session directory of
+    the driver ``study`` (``.../session_<date>_<time>_<study>/``: Ray names it after the driver's pid; its processes
+    keep their logs there): a Ray process of that study wherever it sits in the process tree and whatever its
+    title or environment say."""
+    mark = re.compile(rf"/session_[^/]*_{int(study)}(/|$)")
+    out = {}
+    for entry in os.listdir("/proc"):
+        if not entry.isdigit():
+            continue
+        try:
+            links = [os.readlink(f"/proc/{entry}/fd/{fd}") for fd in os.listdir(f"/proc/{entry}/fd")]
+        except OSError:
+            continue
+        if any(mark.search(link) for link in links):
+            info = _stat(int(entry))
+            if info is not None:
+                out[int(entry)] = info[1]
+    return out
+
+
 def _alive(seen: dict[int, int]) -> dict[int, int]:
     """The processes of ``seen`` still running (:func:`running`)."""
     return {pid: start for pid, start in seen.items() if running(pid, start)}
 
 
-def _kill(seen: dict[int, int], token: str | None = None, rounds: int = 5) -> None:
-    """SIGKILL each process of ``seen`` still alive, its descendants and every process marked with ``token``; again
-    (up to ``rounds`` times) while a round finds a process the previous ones did not."""
+def _kill(seen: dict[int, int], token: str | None = None, rounds: int = 5, study: int | None = None) -> None:
+    """SIGKILL each process of ``seen`` still alive, every process marked with ``token``, every process holding files
+    in the Ray session of the driver ``study`` (:func:`in_session`) and the descendants of all of them; again (up to
+    ``rounds`` times) while a round finds a process the previous ones did not."""
     me = os.getpid()
     done: set[int] = set()
     for _ in range(rounds):
         todo = _alive(seen)
         if token:
             todo.update(marked(token))
+        if study is not None:
+            todo.update(in_session(study))
         # every descendant found before any is killed: a process that renames itself (Ray's agents set their title,
         # which can overwrite the environment /proc shows, token and all) is found below its parent (the raylet,
         # marked), and would be out of reach once that parent is killed and it is adopted elsewhere
@@ -147,7 +174,7 @@ def watch(study: int, pipe, token: str | None = None) -> int:
                 break
             said += chunk
     if DONE not in said:
-        _kill(seen, token)
+        _kill(seen, token, study=study)
     return 0
 
 
