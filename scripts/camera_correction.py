@@ -101,7 +101,7 @@ def main() -> None:
                                       max_rotation=bound.rotation, gap=args.gap)]
             if args.table:
                 fixes.append(correct_captures(off, faced, normals, max_translation=bound.translation,
-                                              max_rotation=bound.rotation, support=((0.0, 0.0, 1.0), table)))
+                                              max_rotation=bound.rotation, support=table))
             versions = [calibrated, off] + [[type(c)(f.apply(c.points), c.origin) for c, f in zip(off, fix.captures)]
                                             for fix in fixes]
             left = []

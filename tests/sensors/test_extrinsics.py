@@ -144,6 +144,7 @@ def test_the_table_the_captures_see_fixes_the_rotations_the_contacts_leave_loose
         return np.degrees(tilt)
 
     without, held = left(None), left(((0.0, 0.0, 1.0), table))
+    np.testing.assert_array_equal(left(table), held)                   # a height: the horizontal plane there
     assert held.max() < 0.3 and held.mean() < 0.2
     assert held.mean() < 0.6 * without.mean(), (without, held)
     with pytest.raises(ValueError, match="support"):

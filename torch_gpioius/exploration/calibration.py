@@ -66,6 +66,22 @@ def camera_table(hardware, policy: ObservationPolicy) -> float | None:
     return None if floor is None else float(floor)
 
 
+def _corrections(captures: list, contacts: np.ndarray, normals: np.ndarray | None, policy: ObservationPolicy,
+                 crop: np.ndarray | None, table: float | None):
+    """The captures cropped as the run crops them and :func:`~torch_gpioius.sensors.extrinsics.correct_captures`'
+    corrections of them within ``policy.camera_bound`` (held to the ``table`` height as well, when given), or
+    ``(captures, None)`` when a cropped capture keeps too few points or the corrections are not ``enough``."""
+    from ..sensors.extrinsics import correct_captures
+
+    if crop is not None:                  # what lies beyond the range (a wall, the table's far end) is not the cover
+        captures = [c.cropped(crop[0], crop[1]) for c in captures]
+    if any(len(c) < 10 for c in captures):
+        return captures, None
+    found = correct_captures(captures, contacts, normals, max_translation=policy.camera_bound[0],
+                             max_rotation=policy.camera_bound[1], support=table)
+    return captures, (found if found.enough else None)
+
+
 def correct_at_start(captures: list, policy: ObservationPolicy, crop: np.ndarray | None,
                      table: float | None) -> tuple[list, dict | None]:
     """The views' captures corrected from the table alone, before the first touch (``policy.camera_bound`` and a
@@ -80,15 +96,10 @@ def correct_at_start(captures: list, policy: ObservationPolicy, crop: np.ndarray
     """
     if policy.camera_bound is None or table is None or not captures or np.asarray(captures[0].points).shape[1] != 3:
         return captures, None
-    from ..sensors.extrinsics import correct_captures
     from ..sensors.pointcloud import PointCloud
 
-    cropped = [c.cropped(crop[0], crop[1]) for c in captures] if crop is not None else captures
-    if any(len(c) < 10 for c in cropped):
-        return captures, None
-    found = correct_captures(cropped, np.zeros((0, 3)), None, max_translation=policy.camera_bound[0],
-                             max_rotation=policy.camera_bound[1], support=((0.0, 0.0, 1.0), table))
-    if not found.enough:
+    _, found = _corrections(captures, np.zeros((0, 3)), None, policy, crop, table)
+    if found is None:
         return captures, None
     return ([PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)],
             found.as_record())
@@ -120,18 +131,11 @@ def correct_camera(model, captures: list, contacts: np.ndarray, policy: Observat
     if (policy.camera_bound is None or not captures or not due or getattr(model, "num_tasks", 1) < 2
             or np.asarray(contacts).shape[1] != 3):
         return none
-    from ..sensors.extrinsics import correct_captures
     from ..sensors.pointcloud import PointCloud
 
     contacts = np.asarray(contacts, dtype=np.float64)
-    if crop is not None:                  # what lies beyond the range (a wall, the table's far end) is not the cover
-        captures = [c.cropped(crop[0], crop[1]) for c in captures]
-    if any(len(c) < 10 for c in captures):
-        return none
-    found = correct_captures(captures, *contact_normals(model, contacts), max_translation=policy.camera_bound[0],
-                             max_rotation=policy.camera_bound[1],
-                             support=None if table is None else ((0.0, 0.0, 1.0), table))
-    if not found.enough:                  # too few contacts under the seen cover yet: tried again later
+    captures, found = _corrections(captures, *contact_normals(model, contacts), policy, crop, table)
+    if found is None:                     # too few contacts under the seen cover yet: tried again later
         return none
     moved = PointCloud.merge([PointCloud(f.apply(c.points), c.origin) for c, f in zip(captures, found.captures)])
     x, y = vision_observations(moved, policy, crop)

@@ -242,25 +242,19 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
     removed = retract_free_space(state.model, contact, margin)
     state.retracted += len(removed)
     camera = retract_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
-    if len(camera):                      # indices into the data before this step, as the log and replays read them
-        removed = np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[camera]]))
+    removed = _also_removed(removed, before, camera)
     if offset_outer_mean(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check):
-        placed = int(state.model.train_targets.shape[0])
-        renewed = renew_deep_vision_inside(state.model, cfg.policy)    # the gap field moved: placed again below
-        if len(renewed):                 # indices into the data before this step, as the log and replays read them
-            left = np.delete(np.arange(before), removed)[:placed]
-            removed = np.sort(np.concatenate([removed, left[renewed]]))
+        # the gap field moved: the deep inside points placed from it are placed again below
+        removed = _also_removed(removed, before, renew_deep_vision_inside(state.model, cfg.policy))
     deep = deepen_vision_inside(state.model, np.asarray(state.contacts), cfg.policy, state.gap_check)
     corrected = None
     if state.captures is not None:       # ObservationPolicy.camera_bound: the captures corrected from the contacts
-        kept = int(state.model.train_targets.shape[0])
         gone, corrected, found = correct_camera(state.model, state.captures, np.asarray(state.contacts), cfg.policy,
                                                 state.crop, state.table)
         if corrected is not None:        # the camera's rows replaced by the corrected captures'
             state.camera_corrections = found
             deep = None                  # continued from the rows just replaced: done from the new ones next step
-            left = np.delete(np.arange(before), removed)[:kept]          # the data before this step still there
-            removed = np.sort(np.concatenate([removed, left[gone]]))
+            removed = _also_removed(removed, before, gone)
     obs = cfg.touch.select(state.model, obs)
     if (obs.y < 0).any():                # the model's data leave the device only when there is something to check
         obs = drop_contradicted_inside(obs, cfg.policy, state.model.train_inputs[0].cpu().numpy(),
@@ -271,6 +265,14 @@ def _learn(state: ExplorationState, obs: Observations, cfg: ExploreConfig,
         obs = Observations.concat([obs, corrected])
     _add(state.model, obs)
     return removed, obs
+
+
+def _also_removed(removed: np.ndarray, before: int, gone: np.ndarray) -> np.ndarray:
+    """``removed`` (indices into the step's ``before`` rows of data, as the log and replays read them) with ``gone``:
+    indices into the rows left after ``removed``, which a later removal of the same step returns."""
+    if not len(gone):
+        return removed
+    return np.sort(np.concatenate([removed, np.delete(np.arange(before), removed)[gone]]))
 
 
 def _fit(model, cfg: ExploreConfig, state: ExplorationState) -> None:

@@ -497,12 +497,12 @@ def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
     behind = outer & (y < 0)
     if not behind.any() or (y[behind] < first - 1e-9).any():      # none to continue, or continued already
         return None
-    field = getattr(model, "outer_field", None) if policy.cover_gap_field else None
     if policy.cover_gap_field:
+        field = getattr(model, "outer_field", None)
         if field is None:                                          # not yet set (_offset_outer_field)
             return None
     else:
-        seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
+        field, seen_gap = None, _seen_gap(model, y, outer, contacts, policy, gap)
         if not seen_gap > policy.vision_inside_gap:
             return None
     from scipy.spatial import cKDTree

@@ -704,14 +704,14 @@ def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: n
     # surface facing its way; without any, every contact and no facing test
     given = contact & np.isfinite(normal_in).all(axis=1)
     use, directions = (given, normal_in[given]) if given.any() else (contact, None)
-    support, held = None, captures
+    held = captures
     if table is not None:                  # each capture's table apart from its object (PointCloud.support)
-        support, held = ((0.0, 0.0, 1.0), table), []
+        held = []
         for c in captures:
             on = _on_the_table(c.points, np.asarray(c.origin, dtype=np.float64), table, bound)
             held.append(PointCloud(c.points[~on], c.origin, support=c.points[on]))
     found = correct_captures(held, x_in[use], directions, max_translation=bound.translation,
-                             max_rotation=bound.rotation, support=support)
+                             max_rotation=bound.rotation, support=table)
     for line in found.warnings([str(f) for f in files]):
         warnings.warn(line, UserWarning, stacklevel=3)
     # (with a table, its points leave the captures: they are not the object's cover)

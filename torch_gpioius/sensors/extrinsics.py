@@ -246,7 +246,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         overlap_sigma: the misfit of two captures' planes where they overlap [m] (each plane's depth noise averaged
             over its patch).
         support: ``(normal (3,), offset)``, the plane ``normal . x = offset`` [m] the object stands on, known in the
-            base frame (a table whose height the robot measured): each capture's points on it
+            base frame, or the height [m] of a horizontal one (a table whose height the robot measured, z up): each
+            capture's points on it
             (``PointCloud.support``) are held to it as well, which fixes the two rotations about horizontal axes
             and the height that the contacts on a body's few faces leave loose. None: no plane.
         support_sigma: a support point's misfit [m] beyond the capture's error (its depth noise, the table's
@@ -280,6 +281,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
             raise ValueError(f"correct_captures: {name} must be a positive bound, got {v!r}")
     plane = None
     if support is not None:
+        if isinstance(support, (int, float)) and not isinstance(support, bool):
+            support = ((0.0, 0.0, 1.0), support)             # a table's height: the horizontal plane z = support
         try:
             pn, po = np.asarray(support[0], dtype=np.float64).reshape(3), float(support[1])
         except (TypeError, ValueError, IndexError) as exc:
@@ -334,9 +337,9 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     x = np.zeros(6 * K + 1)                        # (u_k, w_k) per capture, then the gap
     fixed_gap = gap is not None
 
-    def moved(k: int, xv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def moved(k: int, xv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         R = rotation_matrix(xv[6 * k + 3:6 * k + 6])
-        return pivots[k] + (pts[k] - pivots[k]) @ R.T + xv[6 * k:6 * k + 3], faces[k] @ R.T
+        return pivots[k] + (pts[k] - pivots[k]) @ R.T + xv[6 * k:6 * k + 3], faces[k] @ R.T, R
 
     def terms(xv: np.ndarray, reach_now: float = reach):
         """Rows (jacobian, residual, standard deviation) of the contacts, the support plane and the overlaps at
@@ -345,9 +348,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         J, r, sd, counts, overlaps = [np.zeros((0, n))], [np.zeros(0)], [np.zeros(0)], [0] * K, [0] * K
         g = xv[-1]
         cur = [moved(k, xv) for k in range(K)]
-        for k in range(K):
+        for k, (_, _, R) in enumerate(cur):
             if len(table[k]):                   # on the known plane: n . (pivot + R (q - pivot) + u) = offset
-                R = rotation_matrix(xv[6 * k + 3:6 * k + 6])
                 arm = (table[k] - pivots[k]) @ R.T
                 rows = np.zeros((len(arm), n))
                 rows[:, 6 * k:6 * k + 3] = plane[0]
@@ -355,7 +357,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 J.append(rows)
                 r.append((pivots[k] + arm + xv[6 * k:6 * k + 3]) @ plane[0] - plane[1])
                 sd.append(np.full(len(arm), support_sigma))
-        for k, (q, m) in enumerate(cur):
+        for k, (q, m, _) in enumerate(cur):
             arm = q - pivots[k] - xv[6 * k:6 * k + 3]                      # R (q0 - pivot): what the rotation turns
             if len(p):
                 d, j = cKDTree(q).query(p)
@@ -376,7 +378,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 sd.append(np.full(len(jj), contact_sigma))
                 counts[k] = int(use.sum())
             for other in range(k + 1, K):
-                q2, m2 = cur[other]
+                q2, m2, _ = cur[other]
                 d, j = cKDTree(q2).query(q, distance_upper_bound=max(overlap_reach, reach_now))
                 hit = np.isfinite(d)
                 hit[hit] = (m[hit] * m2[j[hit]]).sum(axis=1) > FACING

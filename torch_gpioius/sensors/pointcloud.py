@@ -566,13 +566,17 @@ class SimulatedDepthCamera(PointCloudSource):
                                     noise_b=self.noise_b, dropout=self.dropout, seed=seed, engine=self.engine,
                                     error=self.error, error_key=self.error_key, support=self.support)
 
+    def _ray_directions(self) -> np.ndarray:
+        """`(pixels, 3)` unit directions of the rays through every pixel centre, base frame."""
+        rays = self.intrinsics.rays()
+        return (rays / np.linalg.norm(rays, axis=1, keepdims=True)) @ self.T_base_camera[:3, :3].T
+
     def support_points(self, hit: np.ndarray) -> np.ndarray:
         """Noise-free points on the support plane (:attr:`support`) of the rays that hit nothing else: `(k, 3)` in
         the camera frame, within the camera's depth range and :data:`SUPPORT_REACH` of the mesh's bounding box
         (horizontally); ``hit``: `(j,)` the pixel indices :meth:`depth_points` found on the mesh."""
-        rays = self.intrinsics.rays()
+        dirs = self._ray_directions()
         R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
-        dirs = (rays / np.linalg.norm(rays, axis=1, keepdims=True)) @ R.T
         free = np.ones(len(dirs), dtype=bool)
         free[hit] = False
         down = free & (dirs[:, 2] < -1e-9)
@@ -587,10 +591,8 @@ class SimulatedDepthCamera(PointCloudSource):
 
     def depth_points(self) -> tuple[np.ndarray, np.ndarray]:
         """Noise-free first hits: `(k, 3)` points in the camera frame and `(k,)` their pixel indices."""
-        rays = self.intrinsics.rays()
         R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
-        dirs = rays / np.linalg.norm(rays, axis=1, keepdims=True)
-        dirs = dirs @ R.T
+        dirs = self._ray_directions()
         origins = np.broadcast_to(t, dirs.shape)
         engine = self._ray_engine()
         # trimesh's fallback engine (no embreex) holds every candidate triangle of every ray in memory: chunk it
