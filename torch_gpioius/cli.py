@@ -670,7 +670,10 @@ def _add_study(sub, common, fmt) -> None:
     sw.add_argument("--camera-error", type=_camera_error, default=None, metavar="SIZES",
                     help="the 3-D worlds' simulated cameras off by a calibration error of these sizes, e.g. "
                          "6mm,1deg (each view of each run draws its direction and axis from its seed; the records "
-                         "say what was applied); default: none; one per --out folder")
+                         "say what was applied), and sensing worse than the camera model's: 3x (its depth noise "
+                         "tripled), 20%% (a fifth of the pixels lost at random), 20%%holes (a fifth of the image lost "
+                         "in blocks, anew each capture); e.g. 6mm,1deg,2x,20%%holes; default: none; one per --out "
+                         "folder")
     sw.add_argument("--camera-bound", type=_camera_error, default=None, metavar="SIZES",
                     help="the visual-tactile runs correct each camera view's capture from their contacts, by at most "
                          "these sizes, e.g. 12mm,2deg (each record: camera_corrections); default: as captured; one per "

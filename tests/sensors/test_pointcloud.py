@@ -298,11 +298,60 @@ def test_a_camera_error_parses_sizes_with_units_and_refuses_what_is_not_one():
     assert CameraError.parse(" 1deg , 0.5cm ") == CameraError(0.005, np.radians(1.0))
     assert CameraError.parse("0.01rad") == CameraError(0.0, 0.01) and not CameraError.parse("0")
     assert CameraError.parse(str(e)) == e                       # its text reads back
-    for text, match in (("6,1deg", "not a size with a unit"), ("6mm,2mm", "two lengths"), ("6in", "unit"),
-                        ("1deg,2deg", "two angles"), ("20cm", r"translation must be a size in \[0, 0.1\]"),
-                        ("-1mm", "translation"), ("30deg", "rotation"), ("nanmm", "translation")):
+    for text, match in (("6,1deg", "not a size with a unit"), ("6mm,2mm", "translation twice"), ("6in", "unit"),
+                        ("1deg,2deg", "rotation twice"), ("20cm", r"translation must be in \[0, 0.1\]"),
+                        ("-1mm", "translation"), ("30deg", "rotation"), ("nanmm", "translation"),
+                        ("2x,3x", "noise twice"), ("200x", "noise"), ("96%", "dropout"), ("-5%holes", "holes"),
+                        ("x", "not a size")):
         with pytest.raises(ValueError, match=match):
             CameraError.parse(text)
+    # the sensing terms: a multiple of the depth noise, pixels and blocks lost; none of them moves a capture
+    worse = CameraError.parse("2x, 20%, 10%holes,6mm,1deg")
+    assert (worse.noise, worse.dropout, worse.holes) == (2.0, pytest.approx(0.2), pytest.approx(0.1))
+    assert worse.extrinsic and worse.sensing and CameraError.parse(str(worse)) == worse
+    only = CameraError.parse("3x")
+    assert only and not only.extrinsic and only.drawn(0) is None and CameraError.parse(str(only)) == only
+    # a world's fingerprint of an extrinsic error alone is as before the sensing terms existed
+    assert e.fingerprint() == [[e.translation, e.rotation]] and CameraError().fingerprint() == []
+    assert e.check_bound() is e
+    for bound, match in ((worse, "a bound is a translation and a rotation"), (CameraError(0.006), "give both")):
+        with pytest.raises(ValueError, match=match):
+            bound.check_bound()
+
+
+def test_worse_sensing_scales_the_depth_noise_and_loses_pixels_and_blocks():
+    """A camera error's sensing terms, against the camera model's own: ``3x`` triples the depth noise's standard
+    deviation along each ray (the same pixels), ``40%`` loses that share of the pixels at random, ``25%holes`` a
+    quarter of the image's blocks, whole: the pixels kept are exactly those outside the lost blocks."""
+    from torch_gpioius.sensors.pointcloud import HOLE_BLOCKS, CameraError
+
+    clean = sphere_camera().capture()
+    d_clean = np.linalg.norm(clean.points - EYE, axis=1)
+    normal = sphere_camera(noise_a=0.001, seed=3).capture()
+    tripled = sphere_camera(noise_a=0.001, seed=3, error=CameraError.parse("3x")).capture()
+    assert len(tripled) == len(normal) == len(clean)
+    # the same draw, three times as far along the same rays
+    np.testing.assert_allclose(np.linalg.norm(tripled.points - EYE, axis=1) - d_clean,
+                               3 * (np.linalg.norm(normal.points - EYE, axis=1) - d_clean), atol=1e-12)
+    dropped = sphere_camera(error=CameraError.parse("40%"), seed=1).capture()
+    assert 0.55 * len(clean) < len(dropped) < 0.65 * len(clean)
+    cam = sphere_camera(error=CameraError.parse("25%holes"), seed=2)
+    holed = cam.capture()
+    intr = cam.intrinsics
+    size = intr.width / HOLE_BLOCKS
+
+    def block(points):
+        p = (points - EYE) @ cam.T_base_camera[:3, :3]
+        u, v = intr.fx * p[:, 0] / p[:, 2] + intr.cx, intr.fy * p[:, 1] / p[:, 2] + intr.cy
+        return (v // size).astype(int) * HOLE_BLOCKS + (u // size).astype(int)
+
+    seen, kept = set(block(clean.points)), set(block(holed.points))
+    assert kept < seen and 0.5 * len(seen) < len(kept) < 0.95 * len(seen)     # whole blocks lost, most kept
+    lost = seen - kept
+    assert not np.isin(block(holed.points), list(lost)).any()
+    assert (~np.isin(block(clean.points), list(lost))).sum() == len(holed)    # every pixel outside them kept
+    # anew each capture
+    assert set(block(cam.capture().points)) != kept
 
 
 def test_a_camera_off_by_a_rigid_error_sees_the_sphere_moved_by_it_and_keeps_its_noise():

@@ -579,6 +579,11 @@ def test_a_scene_with_a_camera_error_moves_every_views_capture_by_its_own_draw_a
         own.with_camera_error("6mm,1deg")
     with pytest.raises(ValueError, match="not a size with a unit"):
         s.with_camera_error("6")
+    # worse sensing alone moves nothing, records no view's draw, and changes the fingerprint beside the extrinsic one
+    noisy = s.with_camera_error("3x,20%holes")
+    assert noisy.camera_errors() == {} and noisy.camera_error.sensing
+    assert len({noisy.fingerprint(), off.fingerprint(), s.fingerprint(),
+                s.with_camera_error("6mm,1deg,3x,20%holes").fingerprint()}) == 4
 
 
 def test_a_body_too_thin_to_be_felt_from_any_side_is_refused_with_its_thickness():

@@ -305,7 +305,7 @@ def test_a_standing_carton_and_bottle_get_closed_covers_at_the_default_grid(shap
     ("[mujoco]\nvision_inside = nan\n", r"mujoco.vision_inside: must be a finite number"),
     ("[forcefield]\ncover_offset = 1\n", r"\[forcefield\] cover_offset: must be true or false"),
     ("[forcefield]\ncamera_error = \"6\"\n", r"\[forcefield\] camera_error: '6' is not a size with a unit"),
-    ("[forcefield]\ncamera_error = \"30deg\"\n", r"\[forcefield\] camera_error: the rotation must be a size"),
+    ("[forcefield]\ncamera_error = \"30deg\"\n", r"\[forcefield\] camera_error: the rotation must be in"),
 ])
 def test_scene_values_are_checked_when_the_file_is_read(tmp_path, extra, match):
     """Issue 51, item 26: `voxel = 1e-6` passed the parser, then failed with "voxel size must be a number in

@@ -345,6 +345,14 @@ def test_a_camera_error_is_a_study_setting_each_run_records_as_applied(tmp_path)
                   backend="local", progress=False, camera_error="6mm,1deg")
     with pytest.raises(ValueError, match="give both a translation and a rotation"):
         run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", camera_bound="6mm")
+    with pytest.raises(ValueError, match="a bound is a translation and a rotation"):
+        run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", camera_bound="6mm,1deg,2x")
+    # worse sensing (the error-source studies): no view moved, the record says what the cameras did
+    run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "noisy", smoke=True,
+              backend="local", progress=False, camera_error="2x,20%holes")
+    run = json.loads((tmp_path / "noisy" / "runs" / "ball_visual-tactile_0.json").read_text())
+    assert run["camera_error"] == {"asked": "2x,20%holes", "views": {},
+                                   "sensing": {"noise": 2.0, "dropout": 0.0, "holes": 0.2}}
     for world, kw, match in (("planar", {}, "planar world's cameras take no"),
                              ("forcefield", {"scenes": [ball]}, "not a size with a unit")):
         with pytest.raises(ValueError, match=match):

@@ -689,11 +689,9 @@ def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: n
     from ..sensors.pointcloud import CameraError, PointCloud
 
     try:
-        bound = CameraError.parse(bound)
+        bound = CameraError.parse(bound).check_bound()
     except ValueError as exc:
-        raise DatasetError(f"camera_bound: {exc}") from None
-    if not bound.translation or not bound.rotation:
-        raise DatasetError(f"camera_bound: give both a translation and a rotation (e.g. \"6mm,1deg\"), got {bound}")
+        raise DatasetError(str(exc) if str(exc).startswith("camera_bound") else f"camera_bound: {exc}") from None
     if x_in.shape[1] != 3:
         raise DatasetError("camera_bound: corrects the captures of a 3-D scene; these contacts are 2-D")
     if any(c.origin is None for c in captures):

@@ -371,7 +371,7 @@ def view_errors(error: "CameraError", views, seed: int, key: tuple = ()) -> dict
     """The error each simulated view of a world draws (:meth:`AppliedCameraError.as_record`, by view name), as its
     camera draws it: the seed alone for the paper's single fixed view, ``[seed, k]`` for view k of several, each with
     ``key`` (:func:`error_key`); empty without an error."""
-    if not error:
+    if not error.extrinsic:
         return {}
     views = tuple(views)
     seeds = [[seed]] if views == ("fixed",) else [[seed, k] for k in range(len(views))]
@@ -416,41 +416,84 @@ class AppliedCameraError:
 
 @dataclass(frozen=True)
 class CameraError:
-    """The size of a simulated depth camera's extrinsic (hand-eye) calibration error: each camera of each run draws a
-    rigid error of exactly these sizes, in a direction and about an axis uniform on the sphere, from its own seed
-    (:meth:`draw`; :class:`AppliedCameraError` says how it moves the captures).
+    """A simulated depth camera's errors beyond its model's own depth noise: the extrinsic (hand-eye) calibration
+    error, and worse sensing than the camera model's datasheet. Each camera of each run draws a rigid error of exactly
+    the extrinsic sizes, in a direction and about an axis uniform on the sphere, from its own seed (:meth:`draw`;
+    :class:`AppliedCameraError` says how it moves the captures); the sensing terms scale its depth noise and lose
+    pixels (:class:`SimulatedDepthCamera`).
 
     Attributes:
         translation: the translation's size [m] (0: none).
         rotation: the rotation's angle [rad] (0: none).
+        noise: a multiple of the camera model's depth noise (1: as the model gives it; 0: none).
+        dropout: the fraction of pixels lost at random, each on its own (beside the camera's own ``dropout``).
+        holes: the fraction of the image lost in square blocks (:data:`HOLE_BLOCKS` across the image), drawn anew
+            for each capture: the patches a real depth camera loses on dark, shiny or steep surfaces.
 
     Raises:
-        ValueError: a negative, non-finite or implausible size (above 10 cm or 20 degrees: not a calibration error).
+        ValueError: a negative, non-finite or implausible size (above 10 cm or 20 degrees: not a calibration error;
+            a noise above 100 times the model's; a fraction outside [0, 0.95]).
     """
 
     translation: float = 0.0
     rotation: float = 0.0
+    noise: float = 1.0
+    dropout: float = 0.0
+    holes: float = 0.0
 
     def __post_init__(self) -> None:
-        for name, value, top in (("translation", self.translation, 0.1), ("rotation", self.rotation, math.radians(20))):
+        for name, value, top, unit in (("translation", self.translation, 0.1, "m"),
+                                       ("rotation", self.rotation, math.radians(20), "rad"),
+                                       ("noise", self.noise, 100.0, "times the model's"),
+                                       ("dropout", self.dropout, 0.95, "a fraction"),
+                                       ("holes", self.holes, 0.95, "a fraction")):
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
                     or not 0.0 <= value <= top:
-                raise ValueError(f"camera error: the {name} must be a size in [0, {top:.3g}] "
-                                 f"({'m' if name == 'translation' else 'rad'}), got {value!r}")
-        object.__setattr__(self, "translation", float(self.translation))
-        object.__setattr__(self, "rotation", float(self.rotation))
+                raise ValueError(f"camera error: the {name} must be in [0, {top:.3g}] ({unit}), got {value!r}")
+            object.__setattr__(self, name, float(value))
+
+    @property
+    def extrinsic(self) -> bool:
+        """Whether the captures are moved (a translation or a rotation)."""
+        return self.translation > 0.0 or self.rotation > 0.0
+
+    @property
+    def sensing(self) -> bool:
+        """Whether the sensing is worse than the camera model's (noise scaled, pixels or blocks lost)."""
+        return self.noise != 1.0 or self.dropout > 0.0 or self.holes > 0.0
 
     def __bool__(self) -> bool:
-        return self.translation > 0.0 or self.rotation > 0.0
+        return self.extrinsic or self.sensing
+
+    def fingerprint(self) -> list:
+        """What a world's fingerprint hashes of this error: nothing without one, the extrinsic sizes as before the
+        sensing terms existed, the sensing terms after them when set (so that older logs still resume)."""
+        return ([[self.translation, self.rotation]] if self.extrinsic else []) \
+            + ([[self.noise, self.dropout, self.holes]] if self.sensing else [])
+
+    def check_bound(self, name: str = "camera_bound") -> "CameraError":
+        """This error as a bound on a correction: both a translation and a rotation, no sensing terms.
+
+        Raises:
+            ValueError: either size missing, or a noise, dropout or holes given.
+        """
+        if self.sensing:
+            raise ValueError(f"{name}: a bound is a translation and a rotation (e.g. 12mm,2deg); noise, dropout and "
+                             f"holes are simulated camera errors, got {self}")
+        if not self.translation or not self.rotation:
+            raise ValueError(f"{name}: give both a translation and a rotation (e.g. 12mm,2deg), got {self}")
+        return self
 
     @classmethod
     def parse(cls, text) -> "CameraError":
-        """A camera error from text such as ``"6mm,1deg"``, ``"0.5cm"``, ``"1deg"`` or ``"0"`` (none): at most one
-        length (m, cm, mm) and one angle (deg, rad), comma-separated, in either order; a :class:`CameraError` is
+        """A camera error from text such as ``"6mm,1deg"``, ``"0.5cm"``, ``"1deg"``, ``"3x"``, ``"6mm,1deg,2x,20%"``
+        or ``"0"`` (none), comma-separated parts in any order, each at most once: a length (m, cm, mm: the
+        translation), an angle (deg, rad: the rotation), a multiple of the depth noise (``3x``), a fraction of pixels
+        lost at random (``20%``) and a fraction of the image lost in blocks (``20%holes``); a :class:`CameraError` is
         returned as it is.
 
         Raises:
-            ValueError: a part without a unit, an unknown unit, two lengths or two angles, or a size out of range.
+            ValueError: a part without a unit, an unknown unit, a part given twice, or a size out of range.
         """
         if isinstance(text, CameraError):
             return text
@@ -459,30 +502,41 @@ class CameraError:
         parts = [p.strip().lower() for p in text.split(",") if p.strip()]
         if parts in ([], ["0"], ["none"]):
             return cls()
+        units = {**{u: ("translation", f) for u, f in _LENGTH_UNITS.items()},
+                 **{u: ("rotation", f) for u, f in _ANGLE_UNITS.items()},
+                 "x": ("noise", 1.0), "%": ("dropout", 0.01), "%holes": ("holes", 0.01)}
         sizes: dict[str, float] = {}
         for part in parts:
-            unit = next((u for u in sorted({**_LENGTH_UNITS, **_ANGLE_UNITS}, key=len, reverse=True)
-                         if part.endswith(u)), None)
+            unit = next((u for u in sorted(units, key=len, reverse=True) if part.endswith(u)), None)
             try:
                 value = float(part[:len(part) - len(unit)]) if unit else None
             except ValueError:
                 value = None
             if unit is None or value is None:
                 raise ValueError(f"camera error: {part!r} is not a size with a unit (a length in m, cm or mm, an "
-                                 "angle in deg or rad: e.g. \"6mm,1deg\")")
-            kind = "translation" if unit in _LENGTH_UNITS else "rotation"
+                                 "angle in deg or rad, a depth noise's multiple as 3x, pixels lost as 20% or "
+                                 "20%holes: e.g. \"6mm,1deg\")")
+            kind, factor = units[unit]
             if kind in sizes:
-                raise ValueError(f"camera error: two {'lengths' if kind == 'translation' else 'angles'} in {text!r}")
-            sizes[kind] = value * (_LENGTH_UNITS.get(unit) or _ANGLE_UNITS[unit])
+                raise ValueError(f"camera error: the {kind} twice in {text!r}")
+            sizes[kind] = value * factor
         return cls(**sizes)
 
     def __str__(self) -> str:
-        return f"{self.translation * 1e3:g}mm,{math.degrees(self.rotation):g}deg"
+        parts = [f"{self.translation * 1e3:g}mm,{math.degrees(self.rotation):g}deg"] if self.extrinsic else []
+        parts += [f"{self.noise:g}x"] if self.noise != 1.0 else []
+        parts += [f"{self.dropout * 100:g}%"] if self.dropout else []
+        parts += [f"{self.holes * 100:g}%holes"] if self.holes else []
+        return ",".join(parts) or "0mm,0deg"
+
+    def as_record(self) -> dict:
+        """The sensing terms for a run's record (the extrinsic draw is each view's: :func:`view_errors`)."""
+        return {"noise": self.noise, "dropout": self.dropout, "holes": self.holes}
 
     def drawn(self, seed, key=()) -> AppliedCameraError | None:
         """What a camera seeded with ``seed`` (and ``key``, :func:`error_key`) applies: :meth:`draw`, or None
         without an error."""
-        return self.draw([*np.atleast_1d(seed).tolist(), *np.atleast_1d(key).tolist()]) if self else None
+        return self.draw([*np.atleast_1d(seed).tolist(), *np.atleast_1d(key).tolist()]) if self.extrinsic else None
 
     def draw(self, seed) -> AppliedCameraError:
         """The error one camera applies, drawn from ``seed`` (an int or a sequence of ints, the camera's noise seed:
@@ -491,6 +545,58 @@ class CameraError:
         unit = rng.standard_normal((2, 3))
         unit /= np.linalg.norm(unit, axis=1, keepdims=True)
         return AppliedCameraError(tuple(self.translation * unit[0]), tuple(self.rotation * unit[1]))
+
+
+#: How many square blocks across the image a :class:`CameraError`'s ``holes`` are counted in (8 px of a half-resolution
+#: Kinect: 5 cm at a metre).
+HOLE_BLOCKS = 32
+
+
+def lost_blocks(error: CameraError, intrinsics: "PinholeCamera", rng: np.random.Generator) -> np.ndarray | None:
+    """The blocks of the image one capture loses (``error.holes`` of them, drawn from ``rng`` without replacement):
+    `(rows, HOLE_BLOCKS)` bool, or None without holes (nothing drawn, so that the noise is as without them)."""
+    if not error.holes:
+        return None
+    size = intrinsics.width / HOLE_BLOCKS
+    rows = max(1, math.ceil(intrinsics.height / size))
+    lost = np.zeros(rows * HOLE_BLOCKS, dtype=bool)
+    lost[rng.choice(lost.size, size=round(error.holes * lost.size), replace=False)] = True
+    return lost.reshape(rows, HOLE_BLOCKS)
+
+
+def sensed_points(p_cam: np.ndarray, T_base_camera: np.ndarray, intrinsics: "PinholeCamera",
+                  rng: np.random.Generator, *, noise_a: float, noise_b: float, dropout: float,
+                  lost: np.ndarray | None = None, applied: "AppliedCameraError | None" = None) -> np.ndarray:
+    """Noise-free points as a depth camera reports them (shared by the simulated cameras of every world).
+
+    Args:
+        p_cam: `(k, 3)` noise-free points in the camera frame (OpenCV axes) [m], each on its pixel's ray.
+        T_base_camera: `(4, 4)` the camera's calibrated pose.
+        intrinsics: the camera's :class:`PinholeCamera` (for the blocks ``lost`` is counted in).
+        rng: the camera's noise generator (drawn from only where a term is non-zero).
+        noise_a, noise_b: depth noise ``noise_a + noise_b z^2`` [m], along each ray (the pixel stays).
+        dropout: fraction of pixels lost at random.
+        lost: :func:`lost_blocks`, or None.
+        applied: the rigid extrinsic error the points are moved by about the optical centre, or None.
+
+    Returns:
+        `(j, 3)` points [m], base frame, ``j <= k``.
+    """
+    z = p_cam[:, 2]
+    if lost is not None and len(p_cam):
+        size = intrinsics.width / HOLE_BLOCKS
+        u = np.clip((intrinsics.fx * p_cam[:, 0] / z + intrinsics.cx) // size, 0, lost.shape[1] - 1).astype(int)
+        v = np.clip((intrinsics.fy * p_cam[:, 1] / z + intrinsics.cy) // size, 0, lost.shape[0] - 1).astype(int)
+        keep = ~lost[v, u]
+        p_cam, z = p_cam[keep], z[keep]
+    if noise_a > 0 or noise_b > 0:
+        z_noisy = z + rng.standard_normal(len(z)) * (noise_a + noise_b * z**2)
+        p_cam = p_cam * (z_noisy / z)[:, None]   # along the ray: the pixel stays, its depth changes
+    if dropout > 0:
+        p_cam = p_cam[rng.uniform(size=len(p_cam)) >= dropout]
+    R, t = T_base_camera[:3, :3], T_base_camera[:3, 3]
+    points = p_cam @ R.T + t
+    return points if applied is None else applied.apply(points, t)
 
 
 #: How far around the mesh's bounding box [m] a simulated camera's table is seen (:attr:`SimulatedDepthCamera.support`):
@@ -518,7 +624,8 @@ class SimulatedDepthCamera(PointCloudSource):
         engine: ray engine: "auto" (Embree when ``embreex`` is installed, else trimesh's own), "embree" or
             "triangle" (trimesh's pure-Python engine; slow, no extra needed).
         error: a :class:`CameraError` (or its text, ``"6mm,1deg"``): every capture is moved by the rigid error drawn
-            from ``seed`` (:attr:`applied_error`), its reported origin left where the pose says; None: none.
+            from ``seed`` (:attr:`applied_error`), its reported origin left where the pose says, its depth noise
+            scaled by ``error.noise``, its pixels lost by ``error.dropout`` and ``error.holes`` as well; None: none.
         error_key: integers drawn with ``seed`` for the error alone (a scene's name, so that two objects' runs of
             one seed are not off in the same direction); kept by :meth:`reseeded`.
         support: the height [m] of a horizontal plane the object stands on (a table), seen where the rays miss the
@@ -628,26 +735,21 @@ class SimulatedDepthCamera(PointCloudSource):
         return RayMeshIntersector(self.mesh)
 
     def capture(self) -> PointCloud:
+        lost = lost_blocks(self.error, self.intrinsics, self._rng)
         p_cam, hit = self.depth_points()
-        points = self._sensed(p_cam)
+        points = self._sensed(p_cam, lost)
         if self.support is None:
             return PointCloud(points, self.origin)
-        return PointCloud(points, self.origin, support=self._sensed(self.support_points(hit)))
+        return PointCloud(points, self.origin, support=self._sensed(self.support_points(hit), lost))
 
-    def _sensed(self, p_cam: np.ndarray) -> np.ndarray:
-        """Noise-free points `(k, 3)` in the camera frame as the camera reports them in the base frame: depth noise,
-        dropout and the extrinsic error applied."""
-        z = p_cam[:, 2]
-        if self.noise_a > 0 or self.noise_b > 0:
-            z_noisy = z + self._rng.standard_normal(len(z)) * (self.noise_a + self.noise_b * z**2)
-            p_cam = p_cam * (z_noisy / z)[:, None]   # along the ray: the pixel stays, its depth changes
-        if self.dropout > 0:
-            p_cam = p_cam[self._rng.uniform(size=len(p_cam)) >= self.dropout]
-        R, t = self.T_base_camera[:3, :3], self.T_base_camera[:3, 3]
-        points = p_cam @ R.T + t
-        if self.applied_error is not None:
-            points = self.applied_error.apply(points, t)
-        return points
+    def _sensed(self, p_cam: np.ndarray, lost: np.ndarray | None = None) -> np.ndarray:
+        """Noise-free points `(k, 3)` in the camera frame as the camera reports them in the base frame: the lost
+        blocks, depth noise, dropout and the extrinsic error applied (:func:`sensed_points`; the depth noise
+        scaled and the dropout joined by :attr:`error`'s sensing terms)."""
+        e = self.error
+        return sensed_points(p_cam, self.T_base_camera, self.intrinsics, self._rng, noise_a=self.noise_a * e.noise,
+                             noise_b=self.noise_b * e.noise, dropout=1.0 - (1.0 - self.dropout) * (1.0 - e.dropout),
+                             lost=lost, applied=self.applied_error)
 
 
 _SAID: set[str] = set()

@@ -759,8 +759,7 @@ class Scene3D(RangedScene):
                              # the paper's single view hashes as before views existed (its logs still resume)
                              *([] if self.views == ("fixed",) else [[VIEWS.index(v) for v in self.views]]),
                              # a scene without a camera error hashes as before there were any
-                             *([[self.camera_error.translation, self.camera_error.rotation]] if self.camera_error
-                               else []))
+                             *self.camera_error.fingerprint())
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
         return {"joints": hw.robot.read_joints().numpy(), "clock": np.array([hw.robot.time]),

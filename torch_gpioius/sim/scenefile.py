@@ -42,7 +42,8 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     vision_inside_gap = 0.03          # the camera's retracted once touches show the cover this far off [m] (0: never)
     cover_offset = false              # true: the outer task's prior mean then stands for the gap they measure
     learn = "task"                    # "length": the kernel's length learned with K_t; "all": the noise too
-    camera_error = "6mm,1deg"         # the simulated cameras' calibration error (each view its own draw; "0": none)
+    camera_error = "6mm,1deg"         # the simulated cameras' calibration error (each view its own draw; "0": none);
+                                      # and worse sensing: "2x" depth noise, "20%" pixels, "20%holes" blocks lost
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
     slack = 0.03                      # a loose cloth's distance from the body before it settles

@@ -119,10 +119,10 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             and the end only (worlds with a travel budget; the fractions the summary reports, at a fraction of the
             cost: docs/performance.md); None: every 5 steps under a travel budget, every step elsewhere. One per
             folder.
-        camera_error: the simulated cameras' extrinsic (calibration) error, a
-            :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text ("6mm,1deg"): each view of each run
-            draws a rigid error of those sizes from its seed, and the run's record says what it applied
-            (``camera_error``); None: none. The 3-D worlds; one per folder.
+        camera_error: the simulated cameras' errors, a :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its
+            text ("6mm,1deg"; "2x,20%holes"): each view of each run draws a rigid error of the extrinsic sizes from
+            its seed, its depth noise scaled and pixels lost as the sensing terms say, and the run's record says
+            what it applied (``camera_error``); None: none. The 3-D worlds; one per folder.
         camera_bound: the visual-tactile runs correct each view's capture from their contacts within this bound (a
             :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text, "12mm,2deg";
             ``ObservationPolicy.camera_bound``; each record's ``camera_corrections`` says what each view was moved by);

@@ -100,13 +100,13 @@ def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str
     """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
     unperturbed object), under ``settings`` in place of its own (3-D worlds: "default" or "paper"), seen by
     ``views`` in place of the settings' (3-D worlds: ``with_views``) through cameras off by ``camera_error``
-    (``with_camera_error``: "6mm,1deg"); or an object of a set (:mod:`torch_gpioius.sim.objectsets`) under
+    (``with_camera_error``: "6mm,1deg", "2x,20%holes"); or an object of a set (:mod:`torch_gpioius.sim.objectsets`) under
     ``cover``, in the force-field world, the library's default settings unless told."""
     made = _make_world(world, name, seed, smoke, scene, settings, views, set_object, cover)
     if camera_error is None:
         return made
     if not hasattr(made, "with_camera_error"):
-        raise ValueError(f"camera_error: the {world} world's cameras take no simulated calibration error")
+        raise ValueError(f"camera_error: the {world} world's cameras take no simulated camera error")
     erred = made.with_camera_error(camera_error)
     erred.scene_file = getattr(made, "scene_file", None)
     return erred
@@ -376,8 +376,10 @@ def run_one(spec: RunSpec) -> dict:
     record["touch"] = spec.touch
     if getattr(world, "views", None):                 # the camera's views (force-field world)
         record["views"] = "+".join(world.views)
-    if getattr(world, "camera_error", None):          # the simulated calibration error each view applied
-        record["camera_error"] = {"asked": str(world.camera_error), "views": world.camera_errors()}
+    error = getattr(world, "camera_error", None)
+    if error:                                         # the simulated camera error: what each view applied
+        record["camera_error"] = {"asked": str(error), "views": world.camera_errors(),
+                                  **({"sensing": error.as_record()} if error.sensing else {})}
     if spec.camera_bound is not None:
         record["camera_bound"] = spec.camera_bound
     if trace is not None and trace.camera_corrections is not None:   # what each view was moved by, and when

@@ -146,14 +146,12 @@ class SweepSettings:
 
             error = CameraError.parse(camera_error)
             if not hasattr(entry.cls, "with_camera_error"):
-                raise ValueError(f"camera_error: the {world} world's cameras take no simulated calibration error")
+                raise ValueError(f"camera_error: the {world} world's cameras take no simulated camera error")
             camera_error = str(error) if error else None
         if camera_bound is not None:
             from ..sensors.pointcloud import CameraError
 
-            bound = CameraError.parse(camera_bound)
-            if not bound.translation or not bound.rotation:
-                raise ValueError(f"camera_bound: give both a translation and a rotation (e.g. 12mm,2deg), got {bound}")
+            bound = CameraError.parse(camera_bound).check_bound()
             if not entry.presets or entry.dimension != 3:
                 raise ValueError(f"camera_bound: corrects the captures of the 3-D worlds' cameras, not {world}'s")
             camera_bound = str(bound)

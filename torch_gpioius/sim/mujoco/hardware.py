@@ -294,8 +294,8 @@ class MujocoDepthCamera(PointCloudSource):
         T_base_camera: `(4, 4)` camera pose (OpenCV axes).
         noise_a, noise_b: depth noise [m], [1/m].
         seed: noise seed (and the extrinsic error's direction, a stream of its own).
-        error, error_key: a simulated calibration error and what it is drawn with besides the seed, as
-            :class:`torch_gpioius.sensors.SimulatedDepthCamera`'s.
+        error, error_key: a simulated camera error (calibration; depth noise's multiple, pixels and blocks lost) and
+            what its extrinsic part is drawn with besides the seed, as :class:`torch_gpioius.sensors.SimulatedDepthCamera`'s.
     """
 
     def __init__(self, physics: MujocoPhysics, intrinsics: PinholeCamera, T_base_camera, *, noise_a: float = 0.0,
@@ -311,6 +311,9 @@ class MujocoDepthCamera(PointCloudSource):
         self.applied_error = self.error.drawn(seed, error_key)
 
     def capture(self) -> PointCloud:
+        from ...sensors.pointcloud import lost_blocks, sensed_points
+
+        lost = lost_blocks(self.error, self.intrinsics, self._rng)
         mj = self.physics.mj
         m, d = self.physics.model, self.physics.data
         rays = self.intrinsics.rays()
@@ -335,11 +338,8 @@ class MujocoDepthCamera(PointCloudSource):
         z = dist[hit] * (dirs[hit] @ np.array([0.0, 0.0, 1.0]))
         keep = (z >= self.intrinsics.min_depth) & (z <= self.intrinsics.max_depth)
         p_cam = dirs[hit][keep] * dist[hit][keep][:, None]
-        zk = z[keep]
-        if self.noise_a > 0 or self.noise_b > 0:
-            z_noisy = zk + self._rng.standard_normal(len(zk)) * (self.noise_a + self.noise_b * zk ** 2)
-            p_cam = p_cam * (z_noisy / zk)[:, None]
-        points = p_cam @ R.T + t
-        if self.applied_error is not None:
-            points = self.applied_error.apply(points, t)
+        e = self.error
+        points = sensed_points(p_cam, self.T_base_camera, self.intrinsics, self._rng, noise_a=self.noise_a * e.noise,
+                               noise_b=self.noise_b * e.noise, dropout=e.dropout, lost=lost,
+                               applied=self.applied_error)
         return PointCloud(points, t.copy())

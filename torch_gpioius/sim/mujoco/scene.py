@@ -532,7 +532,7 @@ class MujocoScene(RangedScene):
             self.range,
             [self.seed, self.sensor_noise, self.timestep, self.settle_time],
             # a scene without a camera error hashes as before there were any
-            *([[self.camera_error.translation, self.camera_error.rotation]] if self.camera_error else []),
+            *self.camera_error.fingerprint(),
         )
 
     def snapshot(self, hw: Hardware) -> dict[str, np.ndarray]:
