@@ -100,8 +100,8 @@ def make_world(world: str, name: str, seed: int, smoke: bool = False, scene: str
     """The world of one run: the named object (or the scene file ``scene``), perturbed by ``seed`` (seed 0: the
     unperturbed object), under ``settings`` in place of its own (3-D worlds: "default" or "paper"), seen by
     ``views`` in place of the settings' (3-D worlds: ``with_views``) through cameras off by ``camera_error``
-    (``with_camera_error``: "6mm,1deg", "2x,20%holes"); or an object of a set (:mod:`torch_gpioius.sim.objectsets`) under
-    ``cover``, in the force-field world, the library's default settings unless told."""
+    (``with_camera_error``: "6mm,1deg", "2x,20%holes"); or an object of a set (:mod:`torch_gpioius.sim.objectsets`)
+    under ``cover``, in the force-field world, the library's default settings unless told."""
     made = _make_world(world, name, seed, smoke, scene, settings, views, set_object, cover)
     if camera_error is None:
         return made

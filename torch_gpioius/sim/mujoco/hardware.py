@@ -295,7 +295,8 @@ class MujocoDepthCamera(PointCloudSource):
         noise_a, noise_b: depth noise [m], [1/m].
         seed: noise seed (and the extrinsic error's direction, a stream of its own).
         error, error_key: a simulated camera error (calibration; depth noise's multiple, pixels and blocks lost) and
-            what its extrinsic part is drawn with besides the seed, as :class:`torch_gpioius.sensors.SimulatedDepthCamera`'s.
+            what its extrinsic part is drawn with besides the seed, as
+            :class:`torch_gpioius.sensors.SimulatedDepthCamera`'s.
     """
 
     def __init__(self, physics: MujocoPhysics, intrinsics: PinholeCamera, T_base_camera, *, noise_a: float = 0.0,
