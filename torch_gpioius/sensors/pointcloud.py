@@ -574,7 +574,8 @@ def sensed_points(p_cam: np.ndarray, T_base_camera: np.ndarray, intrinsics: "Pin
         T_base_camera: `(4, 4)` the camera's calibrated pose.
         intrinsics: the camera's :class:`PinholeCamera` (for the blocks ``lost`` is counted in).
         rng: the camera's noise generator (drawn from only where a term is non-zero).
-        noise_a, noise_b: depth noise ``noise_a + noise_b z^2`` [m], along each ray (the pixel stays).
+        noise_a: depth noise at zero depth [m], along each ray (the pixel stays): ``noise_a + noise_b z^2``.
+        noise_b: its growth with depth [1/m].
         dropout: fraction of pixels lost at random.
         lost: :func:`lost_blocks`, or None.
         applied: the rigid extrinsic error the points are moved by about the optical centre, or None.
