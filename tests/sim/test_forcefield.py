@@ -602,3 +602,34 @@ def test_a_body_too_thin_to_be_felt_from_any_side_is_refused_with_its_thickness(
     slab.apply_translation([0.5, 0.0, 0.11])
     start, direction, _ = approach_from_above(slab, slab)
     assert direction.tolist() == [0.0, 0.0, -1.0] and abs(start[0] - 0.5) < 0.02
+
+
+def test_a_body_under_a_thin_roof_is_approached_from_the_side():
+    """Issue 63 (every object reached): a 6 cm box under a 1 mm sheet wider than it (pybullet's blob 127: every ray
+    from above passes a fin 0.4 mm deep first) is approached horizontally, at the box's height, from outside the
+    cover, the first passage through the body deep enough to feel; the range reaches to 1 cm short of the start along
+    the approach and holds the first contact; a body approached from above keeps its approach and range."""
+    import trimesh
+
+    from torch_gpioius.sim.forcefield import Scene3D, approach_from_above, first_passage
+    from torch_gpioius.sim.meshes import MeshDistance
+
+    box = trimesh.creation.box((0.06, 0.06, 0.06))
+    box.apply_translation([0.5, 0.0, 0.03])
+    roof = trimesh.creation.box((0.12, 0.12, 0.001))
+    roof.apply_translation([0.5, 0.0, 0.07])
+    body = trimesh.util.concatenate([box, roof])
+    start, direction, bounds = approach_from_above(body, body)
+    assert abs(direction[2]) == 0.0 and np.abs(direction).max() == 1.0
+    assert 0.0 < start[2] < 0.06 and (body.bounds[0] - 0.01 > start).any() | (start > body.bounds[1] + 0.01).any()
+    passage = first_passage(body, MeshDistance(body), start, direction)
+    assert passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH
+    axis = int(np.argmax(np.abs(direction)))
+    reach = bounds[1, axis] if direction[axis] < 0 else bounds[0, axis]
+    assert reach == pytest.approx(start[axis] + 0.01 * direction[axis])
+    hit = start + passage[0] * direction                       # the first contact: on the box's near face
+    assert abs(abs(hit[axis] - 0.5) - 0.03) < 1e-9 and ((bounds[0] <= hit) & (hit <= bounds[1])).all()
+    slab = trimesh.creation.box((0.12, 0.10, 0.02))
+    slab.apply_translation([0.5, 0.0, 0.11])
+    s_start, s_dir, s_bounds = approach_from_above(slab, slab)
+    assert s_dir.tolist() == [0.0, 0.0, -1.0] and s_bounds[1, 2] == pytest.approx(max(0.12 + 0.03, s_start[2] - 0.01))

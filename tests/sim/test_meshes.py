@@ -131,6 +131,24 @@ def test_overlapping_closed_pieces_are_united_exactly_or_by_the_remesh(monkeypat
     assert abs(m.volume - union) < 0.03 * union                   # the union's volume, grid error < 3 %
 
 
+def test_overlapping_pieces_one_with_a_small_hole_are_filled_and_united_exactly():
+    """Issue 63: two overlapping boxes, one missing a triangle (a hole of 3 edges, as two of pybullet's blobs 100-199
+    have): the hole is filled and the pieces united by the exact boolean, the outer surface where it was (the remesh
+    had moved such blobs' surface by 9-14 mm and refused them)."""
+    pytest.importorskip("manifold3d")
+    a = trimesh.creation.box((0.1, 0.1, 0.1))
+    b = trimesh.creation.box((0.1, 0.1, 0.1))
+    b.apply_translation((0.05, 0.03, 0.02))
+    holed = trimesh.Trimesh(b.vertices, b.faces[1:])
+    both = trimesh.util.concatenate([a, holed])
+    assert inspect_mesh(both).boundary_edges == 3
+    with pytest.warns(MeshRepairWarning, match=r"hole filling and an exact union.*within 0\.00 mm"):
+        m = load_mesh(both)
+    union = 2 * 0.1 ** 3 - 0.05 * 0.07 * 0.08
+    assert inspect_mesh(m).closed and overlapping_components(m) == 0 and abs(m.volume - union) < 1e-6 * union
+    assert MeshDistance(both, signed=False)(np.asarray(m.vertices)).max() < 1e-6 * 0.15
+
+
 def test_a_procedural_object_of_85_pieces_loads_with_its_surface_unmoved():
     """Issue 54: pybullet's random_urdfs/990 (85 overlapping closed pieces) was refused: the remesh moved its surface
     by 9.2 mm. The exact union keeps the outer surface: every vertex of the result lies on the input's faces."""

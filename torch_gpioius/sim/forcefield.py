@@ -1170,8 +1170,9 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
     of its top view (rays cast on a grid, so a ring's hole, where a ray meets nothing, is never aimed at; a cup's
     opening is: its ray meets the inside bottom, so give a cup a side approach) whose first passage through the body
     is at least ``Scene3D.MIN_APPROACH_DEPTH`` deep (:func:`first_passage`; not a thin lip), starting
-    ``clearance`` above the cover; the range is the cover's bounding box grown by ``margin`` [m], from a quarter of
-    the body's height up (the part a camera and a fingertip reach on a table).
+    ``clearance`` above the cover; where every ray from above first passes a part too thin to feel, from the side
+    (:func:`_side_approach`). The range is the cover's bounding box grown by ``margin`` [m], from a quarter of the
+    body's height up (the part a camera and a fingertip reach on a table), to 1 cm short of the start.
 
     Returns:
         ``(start (3,), direction (3,), bounds (2, 3))`` [m].
@@ -1210,10 +1211,49 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
             raise ValueError(f"the body is nowhere more than {thickest * 1e3:.1f} mm inside its surface (thin sheets, "
                              f"{len(inner.split(only_watertight=False))} pieces): a fingertip needs "
                              f"{Scene3D.MIN_APPROACH_DEPTH * 1e3:.0f} mm to feel it from any side")
+        # thick somewhere, but every ray from above first passes a thin part (a sheet over the body, a blob's fin):
+        # from the side, at the body's middle height first (pybullet's blob 127: 0.4 mm deep at most from above);
+        # none deep enough either: the scene then says that the approach from above grazes
+        side = _side_approach(inner, outer, distance, clearance)
+        if side is not None:
+            start, down = side
     b_lo, b_hi = outer.bounds[0] - margin, outer.bounds[1] + margin
     b_lo[2] = lo[2] + 0.25 * (hi[2] - lo[2])
-    b_hi[2] = max(b_hi[2], start[2] - 0.01)
+    axis = int(np.argmax(np.abs(down)))        # the range reaches to 1 cm short of the start along the approach
+    if down[axis] < 0:
+        b_hi[axis] = max(b_hi[axis], start[axis] - 0.01)
+    else:
+        b_lo[axis] = min(b_lo[axis], start[axis] + 0.01)
     return start, down, np.stack([b_lo, b_hi])
+
+
+def _side_approach(inner: trimesh.Trimesh, outer: trimesh.Trimesh, distance,
+                   clearance: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """A horizontal approach (along +-x, +-y) whose first passage through the body is at least
+    ``Scene3D.MIN_APPROACH_DEPTH`` deep, starting ``clearance`` outside the cover's box: of the rays on a grid over
+    each side view (heights from a third to nine tenths of the body's, across its middle 80 %), the one nearest the
+    middle of its view, the directions tried in turn; ``(start (3,), direction (3,))`` [m], or None."""
+    lo, hi = inner.bounds
+    centre = (lo + hi) / 2
+    o_lo, o_hi = outer.bounds
+    for axis, sign in ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0)):
+        d = np.zeros(3)
+        d[axis] = sign
+        across = 1 - axis
+        a = centre[across] + np.linspace(-0.4, 0.4, 9) * (hi[across] - lo[across])
+        z = lo[2] + np.linspace(1 / 3, 0.9, 9) * (hi[2] - lo[2])
+        grid = np.stack(np.meshgrid(a, z, indexing="ij"), -1).reshape(-1, 2)
+        grid = grid[np.argsort(np.hypot(grid[:, 0] - centre[across], grid[:, 1] - (lo[2] + hi[2]) / 2),
+                               kind="stable")]
+        origins = np.zeros((len(grid), 3))
+        origins[:, across], origins[:, 2] = grid[:, 0], grid[:, 1]
+        origins[:, axis] = (o_lo[axis] - clearance) if sign > 0 else (o_hi[axis] + clearance)
+        hit = inner.ray.intersects_any(origins, np.broadcast_to(d, origins.shape))
+        for i in np.flatnonzero(hit):
+            passage = first_passage(inner, distance, origins[i], d)
+            if passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH:
+                return origins[i], d
+    return None
 
 
 def _deepest_inside(inner: trimesh.Trimesh, distance, samples: int = 20000) -> float:
