@@ -628,7 +628,7 @@ class Scene3D(RangedScene):
             learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from the kernel's) or "all"
                 (the length and sigma^2, from the kernel's and ``noise``; ``explore(learn=)``); default: by
                 ``settings``.
-            camera_error: the simulated cameras' extrinsic error (:meth:`with_camera_error`: ``"6mm,1deg"``);
+            camera_error: the simulated cameras' errors (:meth:`with_camera_error`: ``"6mm,1deg"``, ``"3x,20%holes"``);
                 default: none.
 
         Raises:
@@ -798,7 +798,8 @@ class Scene3D(RangedScene):
         """The same scene seen by simulated cameras whose calibration is off: each view of each run (its seed) draws a
         rigid error of the sizes ``error`` gives (a :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its
         text, ``"6mm,1deg"``; ``"0"``: none) and moves its captures by it (:meth:`camera_errors` says what each view
-        applies).
+        applies); the error's sensing terms (``"3x"``, ``"20%"``, ``"20%holes"``) scale every view's depth noise and
+        lose its pixels.
 
         Raises:
             ValueError: a malformed error, or a scene with a camera of its own (simulate the error in that camera).
