@@ -422,6 +422,38 @@ def test_a_run_whose_final_estimate_vanished_is_failed_with_no_stale_value():
     assert failure(old) == "" and _row(old, {})["final_hausdorff"] == 0.0515
 
 
+def test_a_refused_scene_is_counted_by_what_its_message_says_not_by_the_objects_name():
+    """Issue 63: the failed column kept a refused scene's first 60 characters, mostly the object's name and file
+    ("scene: pybullet-random-110 (pybullet:random_urdfs/110/110.obj): inn"), so no two refusals counted together.
+    The messages the benchmark's blobs were refused with, as the scenes word them, give their cause; another message
+    keeps what follows the name."""
+    from torch_gpioius.studies.sweep_aggregate import failure, failures_text
+
+    name = "refused: scene: pybullet-random-1{} (pybullet:random_urdfs/1{}/1{}.obj): "
+    messages = {
+        "the body is nowhere more than 2.6 mm inside its surface (thin sheets, 37 pieces): a fingertip needs 3 mm to "
+        "feel it from any side": "too thin to feel",
+        "inner: not closed (1 hole(s) (4 boundary edges)); the repair (union by winding-number remesh at 1.2 mm) "
+        "moves the surface by 8.8 mm, more than the 2.6 mm allowed (max_repair_distance); close the mesh in a mesh "
+        "editor": "repair moves the surface",
+        "direction: the approach ray only grazes the inner mesh (0.4 mm deep at most; at least 3 mm is needed to "
+        "feel it)": "approach grazes",
+        "pybullet-random-168 (/site-packages/pybullet_data/random_urdfs/168/168.obj): the mesh has no extent":
+            "mesh has no extent",
+        "inner: a bent handle of unknown kind": "inner: a bent handle of unknown kind"}
+    reasons = []
+    for k, (message, label) in enumerate(messages.items()):
+        run = _run([0.08, 0.05])
+        run["terminated"] = name.format(k, k, k) + message
+        reasons.append(failure(run))
+        assert reasons[-1] == "scene: " + label
+    run["terminated"] = name.format(9, 9, 9) + "the body is nowhere more than 1.0 mm inside its surface"
+    reasons.append(failure(run))
+    assert failures_text(reasons) == ("6: 1 scene: approach grazes, 1 scene: inner: a bent handle of unknown kind, "
+                                      "1 scene: mesh has no extent, 1 scene: repair moves the surface, "
+                                      "2 scene: too thin to feel")
+
+
 def test_run_files_with_a_bad_estimate_series_are_refused(tmp_path):
     from torch_gpioius.studies.sweep import RunFileError, read_run_file
 

@@ -55,7 +55,8 @@ def _reference_travel(run: dict, runs_by_key: dict) -> float:
 
 
 def failure(run: dict) -> str:
-    """Why a run failed, or "" if it did not: "stalled" (the no-progress rule gave up), "approach: <why>" (no first
+    """Why a run failed, or "" if it did not: "stalled" (the no-progress rule gave up), "scene: <why>" (its world
+    could not be built: :data:`_SCENE_REASONS`), "approach: <why>" (no first
     contact: the approach missed the body or the robot refused it), "robot stop: <why>" (the
     safety layer or the contact controller stopped the robot before the run's own end), "lost contact", "step cap"
     (the step budget ran out before the travel budget) or "no estimate" (no estimated surface inside the range at
@@ -64,7 +65,7 @@ def failure(run: dict) -> str:
     if t == "stalled":
         return "stalled"
     if t.startswith("refused: scene"):
-        return "scene: " + t[len("refused: scene"):].lstrip(": ")[:60]
+        return "scene: " + _scene_reason(t[len("refused: scene"):].lstrip(": "))
     if t.startswith("refused: approach"):
         return "approach: " + _short_reason(t[len("refused: approach"):].lstrip(": "))
     if t.startswith("refused"):
@@ -95,6 +96,26 @@ def _final(run: dict, key: str) -> float:
     if s.get("estimate"):
         return float(s[key][-1]) if _has_final_estimate(run) else math.nan
     return _last_finite(s[key])
+
+
+#: A refused scene's message, by what it says, in a few words for counting (the message begins with the object's
+#: name and file, which the first 60 characters, kept before, were mostly made of).
+_SCENE_REASONS = (("nowhere more than", "too thin to feel"), ("max_repair_distance", "repair moves the surface"),
+                  ("only grazes", "approach grazes"), ("no downward ray", "approach misses"),
+                  ("no extent", "mesh has no extent"), ("probably in millimetres", "wrong units"),
+                  ("not closed", "mesh not closed"), ("no such file", "unreadable mesh"),
+                  ("cannot read", "unreadable mesh"), ("could not read", "unreadable mesh"),
+                  ("must contain the inner", "cover does not contain the body"))
+
+
+def _scene_reason(why: str) -> str:
+    """A refused scene's message in a few words (:data:`_SCENE_REASONS`); otherwise what follows the object's name
+    and file, cut to 40 characters."""
+    low = why.lower()
+    for key, label in _SCENE_REASONS:
+        if key in low:
+            return label
+    return why.rsplit("): ", 1)[-1][:40] or "refused"
 
 
 def _short_reason(why: str) -> str:
