@@ -566,7 +566,8 @@ def lost_blocks(error: CameraError, intrinsics: "PinholeCamera", rng: np.random.
 
 def sensed_points(p_cam: np.ndarray, T_base_camera: np.ndarray, intrinsics: "PinholeCamera",
                   rng: np.random.Generator, *, noise_a: float, noise_b: float, dropout: float,
-                  lost: np.ndarray | None = None, applied: "AppliedCameraError | None" = None) -> np.ndarray:
+                  error: CameraError | None = None, lost: np.ndarray | None = None,
+                  applied: "AppliedCameraError | None" = None) -> np.ndarray:
     """Noise-free points as a depth camera reports them (shared by the simulated cameras of every world).
 
     Args:
@@ -577,12 +578,18 @@ def sensed_points(p_cam: np.ndarray, T_base_camera: np.ndarray, intrinsics: "Pin
         noise_a: depth noise at zero depth [m], along each ray (the pixel stays): ``noise_a + noise_b z^2``.
         noise_b: its growth with depth [1/m].
         dropout: fraction of pixels lost at random.
+        error: the camera's :class:`CameraError`, whose sensing terms scale the depth noise and join the dropout
+            (the pixel kept only if neither loses it); None: as the camera model gives them.
         lost: :func:`lost_blocks`, or None.
         applied: the rigid extrinsic error the points are moved by about the optical centre, or None.
 
     Returns:
         `(j, 3)` points [m], base frame, ``j <= k``.
     """
+    if error is not None:
+        noise_a, noise_b = noise_a * error.noise, noise_b * error.noise
+        if error.dropout:
+            dropout = 1.0 - (1.0 - dropout) * (1.0 - error.dropout)
     z = p_cam[:, 2]
     if lost is not None and len(p_cam):
         size = intrinsics.width / HOLE_BLOCKS
@@ -745,12 +752,11 @@ class SimulatedDepthCamera(PointCloudSource):
 
     def _sensed(self, p_cam: np.ndarray, lost: np.ndarray | None = None) -> np.ndarray:
         """Noise-free points `(k, 3)` in the camera frame as the camera reports them in the base frame: the lost
-        blocks, depth noise, dropout and the extrinsic error applied (:func:`sensed_points`; the depth noise
-        scaled and the dropout joined by :attr:`error`'s sensing terms)."""
-        e = self.error
-        return sensed_points(p_cam, self.T_base_camera, self.intrinsics, self._rng, noise_a=self.noise_a * e.noise,
-                             noise_b=self.noise_b * e.noise, dropout=1.0 - (1.0 - self.dropout) * (1.0 - e.dropout),
-                             lost=lost, applied=self.applied_error)
+        blocks, depth noise, dropout and the extrinsic error applied (:func:`sensed_points`, with :attr:`error`'s
+        sensing terms)."""
+        return sensed_points(p_cam, self.T_base_camera, self.intrinsics, self._rng, noise_a=self.noise_a,
+                             noise_b=self.noise_b, dropout=self.dropout, error=self.error, lost=lost,
+                             applied=self.applied_error)
 
 
 _SAID: set[str] = set()

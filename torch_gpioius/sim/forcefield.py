@@ -1198,13 +1198,9 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
     # thin lip or the sliver where two pieces of a blob meet passes through without a contact); if none is, the
     # nearest that hits, and the scene says that its approach grazes
     distance = MeshDistance(inner)
-    start = origins[int(np.argmax(hit))]
-    for i in np.flatnonzero(hit):
-        passage = first_passage(inner, distance, origins[i], down)
-        if passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH:
-            start = origins[i]
-            break
-    else:
+    felt = _first_felt(inner, distance, origins, down, hit)
+    start = origins[int(np.argmax(hit)) if felt is None else felt]
+    if felt is None:
         # no ray from above is deep enough: a body too thin anywhere to be felt says so (pieces of thin sheets: 6 of
         # pybullet's procedural objects 200-299, 1-3 mm thick at most), not "the approach grazes"
         thickest = _deepest_inside(inner, distance)
@@ -1249,11 +1245,22 @@ def _side_approach(inner: trimesh.Trimesh, outer: trimesh.Trimesh, distance,
         origins = np.zeros((len(grid), 3))
         origins[:, across], origins[:, 2] = grid[:, 0], grid[:, 1]
         origins[:, axis] = (o_lo[axis] - clearance) if sign > 0 else (o_hi[axis] + clearance)
-        hit = inner.ray.intersects_any(origins, np.broadcast_to(d, origins.shape))
-        for i in np.flatnonzero(hit):
-            passage = first_passage(inner, distance, origins[i], d)
-            if passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH:
-                return origins[i], d
+        felt = _first_felt(inner, distance, origins, d,
+                           inner.ray.intersects_any(origins, np.broadcast_to(d, origins.shape)))
+        if felt is not None:
+            return origins[felt], d
+    return None
+
+
+def _first_felt(inner: trimesh.Trimesh, distance, origins: np.ndarray, direction: np.ndarray,
+                hit: np.ndarray) -> int | None:
+    """The first of the rays from `(n, 3)` ``origins`` along ``direction`` that hit the body (``hit``, `(n,)` bool)
+    whose first passage through it is at least ``Scene3D.MIN_APPROACH_DEPTH`` deep (:func:`first_passage`), or
+    None."""
+    for i in np.flatnonzero(hit):
+        passage = first_passage(inner, distance, origins[i], direction)
+        if passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH:
+            return int(i)
     return None
 
 

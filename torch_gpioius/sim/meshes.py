@@ -375,8 +375,9 @@ def repair_mesh(mesh: trimesh.Trimesh, resolution: float | None = None,
         # closed pieces that now overlap (a mug's handle filled where it enters the body, a procedural blob's
         # pieces) are united exactly where manifold3d can (the outer surface kept: the remesh moved two of pybullet's
         # blobs, each with one hole of 3-4 edges, by 9-14 mm), else by the remesh
-        united = exact_union(m) if ok and overlapping_components(m) > 0 else None
-        remesh = ok and united is None and overlapping_components(m) > 0
+        overlap = ok and overlapping_components(m) > 0
+        united = exact_union(m) if overlap else None
+        remesh = overlap and united is None
         if ok and not remesh:
             what = "hole filling" + (" and an exact union of the overlapping pieces (manifold3d)" if united else "")
             m = m if united is None else united

@@ -339,8 +339,7 @@ class MujocoDepthCamera(PointCloudSource):
         z = dist[hit] * (dirs[hit] @ np.array([0.0, 0.0, 1.0]))
         keep = (z >= self.intrinsics.min_depth) & (z <= self.intrinsics.max_depth)
         p_cam = dirs[hit][keep] * dist[hit][keep][:, None]
-        e = self.error
-        points = sensed_points(p_cam, self.T_base_camera, self.intrinsics, self._rng, noise_a=self.noise_a * e.noise,
-                               noise_b=self.noise_b * e.noise, dropout=e.dropout, lost=lost,
+        points = sensed_points(p_cam, self.T_base_camera, self.intrinsics, self._rng, noise_a=self.noise_a,
+                               noise_b=self.noise_b, dropout=0.0, error=self.error, lost=lost,
                                applied=self.applied_error)
         return PointCloud(points, t.copy())
