@@ -409,3 +409,64 @@ def test_a_simulated_camera_keeps_the_table_it_sees_apart_and_the_object_as_with
     assert without.support is None and len(with_table.support) > 50
     with pytest.raises(ValueError, match="support"):
         SimulatedDepthCamera(box, PinholeCamera.kinect_v2(0.25), pose, support=float("nan"))
+
+
+def _rays_of(cloud: PointCloud, origin) -> np.ndarray:
+    ray = cloud.points - origin
+    return ray / np.linalg.norm(ray, axis=1, keepdims=True)
+
+
+def test_smoothing_along_the_rays_leaves_a_noise_free_plane_and_step_where_they_are():
+    # a tilted plane, and a square 5 cm in front of it, seen obliquely: the inverse depth is affine in the image
+    # coordinates on each plane, so the fit is exact wherever most of a ray's neighbours lie on its own plane
+    u, v = np.meshgrid(np.linspace(-0.15, 0.15, 80), np.linspace(-0.15, 0.15, 80))
+    far = np.c_[u.ravel(), v.ravel(), 0.3 * u.ravel() + 0.1 * v.ravel()]
+    eye = np.array([0.2, -0.3, 1.0])
+    ray = far - eye                                      # the rays through the far plane's grid, first met by the square
+    normal = np.array([-0.3, -0.1, 1.0])                 # both planes': n . p = 0 (far) and 0.05 (near)
+    t = (0.05 - eye @ normal) / (ray @ normal)
+    hit = eye + t[:, None] * ray
+    square = (np.abs(hit[:, 0]) < 0.05) & (np.abs(hit[:, 1]) < 0.05)
+    cloud = PointCloud(np.where(square[:, None], hit, far), eye)
+    assert 0.05 < square.mean() < 0.2
+    moved = np.linalg.norm(cloud.smoothed_along_rays().points - cloud.points, axis=1)
+    assert (moved < 1e-9).mean() > 0.98
+    assert moved.max() < 0.05 * 1.2                      # a corner's ray at worst lands on the other plane
+
+
+def test_smoothing_along_the_rays_averages_the_depth_noise_and_keeps_each_point_on_its_ray():
+    noisy = sphere_camera(noise_a=0.005, noise_b=0.0, seed=4).capture()
+    smooth = noisy.smoothed_along_rays(24)
+    np.testing.assert_allclose(_rays_of(smooth, EYE), _rays_of(noisy, EYE), atol=1e-12)   # the same pixels' rays
+    off_noisy = np.linalg.norm(noisy.points - C, axis=1) - R
+    off_smooth = np.linalg.norm(smooth.points - C, axis=1) - R
+    # a 24-ray fit averages independent noise by about sqrt(24 / 3) = 2.8 (three coefficients per fit); the rim,
+    # where a ray grazes the sphere, is fitted worse: judged on the rays within 60 degrees of the sphere's normal
+    facing = ((noisy.points - C) @ (EYE - C) / R / np.linalg.norm(EYE - C)) > 0.6
+    assert np.std(off_smooth[facing]) < np.std(off_noisy[facing]) / 2.2
+    # a plane fitted to a curved patch: a 2 cm patch on a 10 cm sphere sags by 0.5 mm, well under the noise
+    assert abs(np.median(off_smooth[facing])) < 1e-3
+    # voxel means of the noisy surface spread behind it (noise pushed into the voxels in front of and behind it);
+    # those of the smoothed one stay within the curvature's sag and the remaining noise
+    inside_noisy = R - np.linalg.norm(noisy.voxel_averaged(0.02).points - C, axis=1)
+    inside_smooth = R - np.linalg.norm(smooth.voxel_averaged(0.02).points - C, axis=1)
+    assert inside_noisy.max() > 0.006 and inside_smooth.max() < 0.004
+
+
+def test_smoothing_along_the_rays_fits_each_view_of_a_merged_capture_apart():
+    mesh = trimesh.creation.icosphere(subdivisions=5, radius=R)
+    mesh.apply_translation(C)
+    a = sphere_camera(noise_a=0.004, seed=1).capture()
+    b = SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.5), look_at(EYE2, C), noise_a=0.004, seed=2).capture()
+    unknown = PointCloud(b.points[:50].copy())                   # a view whose camera is unknown stays as it is
+    merged = PointCloud.merge([a, b, unknown])
+    smooth = merged.smoothed_along_rays(16)
+    n_a, n_b = len(a), len(b)
+    np.testing.assert_allclose(smooth.points[:n_a], a.smoothed_along_rays(16).points, atol=1e-12)
+    np.testing.assert_allclose(smooth.points[n_a:n_a + n_b], b.smoothed_along_rays(16).points, atol=1e-12)
+    np.testing.assert_array_equal(smooth.points[n_a + n_b:], unknown.points)
+    np.testing.assert_array_equal(smooth.origin, merged.origin, strict=False)
+    assert unknown.smoothed_along_rays() is unknown                 # no camera: nothing to smooth along
+    for bad in (7, 2.5, True, 20_000):
+        with pytest.raises(ValueError, match="neighbours"):
+            a.smoothed_along_rays(bad)

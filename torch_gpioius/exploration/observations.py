@@ -552,6 +552,8 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
         cloud = cloud.cropped(crop[0], crop[1])
     if len(cloud) == 0:
         raise ValueError("vision: the camera sees nothing of the object near the exploration range")
+    if policy.ray_smoothing:
+        cloud = cloud.smoothed_along_rays(policy.ray_smoothing)
     seen = cloud.voxel_averaged(policy.voxel).points if policy.voxel else cloud.points
     xs, ys = [seen], [np.zeros(len(seen))]
     if policy.vision_free_offset is not None and cloud.sees_free_space:

@@ -667,7 +667,7 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
     no_voxel = ObservationPolicy(vision_free_offset=policy.vision_free_offset, voxel=None,
                                  free_space_spacing=policy.free_space_spacing,
                                  free_space_margin=policy.free_space_margin,
-                                 vision_free_far=policy.vision_free_far)
+                                 vision_free_far=policy.vision_free_far, ray_smoothing=policy.ray_smoothing)
     if policy.voxel:
         seen_acc, free_acc = VoxelAccumulator(policy.voxel), VoxelAccumulator(policy.voxel)
     else:

@@ -74,6 +74,11 @@ class ObservationPolicy:
             captures carry no table points or there is no floor, as without it. True (the default with a bound):
             the plane fixes the rotations about horizontal axes and the height, which the contacts on a body's few
             faces leave loose (docs/method-notes.md section 17).
+        ray_smoothing: before its points are averaged into voxels, each capture's depth noise is averaged along the
+            camera's rays over this many neighbouring rays of the same view
+            (:meth:`~torch_gpioius.sensors.PointCloud.smoothed_along_rays`): noise along a ray then stays on that
+            ray instead of spreading the surface into the voxels in front of and behind it. None: the measured
+            points as they are (the paper).
     """
 
     vision_free_offset: float | None = 0.05
@@ -90,6 +95,7 @@ class ObservationPolicy:
     cover_gap_field: bool = False
     camera_bound: tuple | None = None
     camera_table: bool = True
+    ray_smoothing: int | None = None
 
     def __post_init__(self) -> None:
         if self.camera_bound is not None:
@@ -101,6 +107,13 @@ class ObservationPolicy:
                 raise ValueError("ObservationPolicy.camera_bound: must be (translation in (0, 0.1] m, rotation in (0, "
                                  f"{math.radians(20):.3g}] rad) or None, got {bound!r}")
             object.__setattr__(self, "camera_bound", (float(bound[0]), float(bound[1])))
+        rays = self.ray_smoothing
+        if rays is not None and (isinstance(rays, bool) or not isinstance(rays, (int, np.integer))
+                                 or not 8 <= rays <= 10_000):
+            raise ValueError(f"ObservationPolicy.ray_smoothing: must be a number of rays in [8, 10000] or None, got "
+                             f"{rays!r}")
+        if rays is not None:
+            object.__setattr__(self, "ray_smoothing", int(rays))
         for name in ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ObservationPolicy.{name}: must be True or False, got {getattr(self, name)!r}")
