@@ -422,7 +422,7 @@ def test_smoothing_along_the_rays_leaves_a_noise_free_plane_and_step_where_they_
     u, v = np.meshgrid(np.linspace(-0.15, 0.15, 80), np.linspace(-0.15, 0.15, 80))
     far = np.c_[u.ravel(), v.ravel(), 0.3 * u.ravel() + 0.1 * v.ravel()]
     eye = np.array([0.2, -0.3, 1.0])
-    ray = far - eye                                      # the rays through the far plane's grid, first met by the square
+    ray = far - eye                          # the rays through the far plane's grid, first met by the square
     normal = np.array([-0.3, -0.1, 1.0])                 # both planes': n . p = 0 (far) and 0.05 (near)
     t = (0.05 - eye @ normal) / (ray @ normal)
     hit = eye + t[:, None] * ray

@@ -131,11 +131,12 @@ class PointCloud:
         each point on its ray and its neighbourhood in the image. Averaging in 3-D voxels instead spreads a noisy
         surface over the voxels in front of and behind it: with the Kinect's noise tripled (10 mm at 1.1 m) a tenth of
         the voxel means of a tight cover lay 11 mm or more inside it, where they contradict the points placed behind
-        the contacts. For each point, the depth of its nearest rays (nearest in the view's image plane, a gnomonic
-        projection about the view's mean direction) is fitted by a plane in the image coordinates, twice refitted
-        without the rays more than 2.5 robust standard deviations off, starting from those about the median depth
-        (a neighbourhood across an occluding edge keeps its majority's surface), and the point moved to the fit's depth on its own ray. Written here because
-        the field's smoothers (PCL's and Open3D's moving least squares, bilateral depth filters) move points along
+        the contacts. For each point, the inverse depth of its nearest rays (nearest in the view's image plane, a
+        gnomonic projection about the view's axis) is fitted by a plane in the image coordinates (exact on a plane
+        surface), twice refitted without the rays more than 2.5 robust standard deviations off, starting from those
+        about the median (a neighbourhood across an occluding edge keeps its majority's surface), and the point is
+        moved to the fit's depth on its own ray. Written here because the field's smoothers (PCL's and Open3D's moving
+        least squares, bilateral depth filters) move points along
         surface normals or need the depth image, which a merged, cropped capture no longer has.
 
         Args:
