@@ -470,3 +470,19 @@ def test_smoothing_along_the_rays_fits_each_view_of_a_merged_capture_apart():
     for bad in (7, 2.5, True, 20_000):
         with pytest.raises(ValueError, match="neighbours"):
             a.smoothed_along_rays(bad)
+
+
+def test_smoothing_along_the_rays_leaves_rays_outside_a_cameras_view_as_measured():
+    # a camera inside its cloud (a user's origin mistake): rays in every direction, which no image plane holds
+    rng = np.random.default_rng(0)
+    d = rng.normal(size=(3000, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    centre = np.array([0.5, 0.0, 0.25])
+    cloud = PointCloud(centre + d * (0.1 + rng.normal(0, 0.002, (3000, 1))), centre + [0.0, 0.0, 0.01])
+    smooth = cloud.smoothed_along_rays()
+    moved = np.linalg.norm(smooth.points - cloud.points, axis=1)
+    assert moved.max() < 0.01                       # none thrown along its ray: each at most a tenth of its depth
+    np.testing.assert_allclose(_rays_of(smooth, cloud.origin), _rays_of(cloud, cloud.origin), atol=1e-12)
+    axis = (cloud.points - cloud.origin).sum(axis=0)             # the view's axis: its rays' sum
+    wide = _rays_of(cloud, cloud.origin) @ (axis / np.linalg.norm(axis)) <= 0.5
+    assert wide.sum() > 1000 and (moved[wide] == 0).all()

@@ -145,8 +145,10 @@ class PointCloud:
 
         Returns:
             A new cloud (origins and support as they were); the cloud itself without known camera origins. Points
-            whose camera is unknown (a merged capture's NaN rows), and views with fewer points than a fit needs,
-            stay where they are.
+            whose camera is unknown (a merged capture's NaN rows), views with fewer points than a fit needs, rays more
+            than 60 degrees off their view's axis (:data:`RAY_FIT_CONE`: a camera inside its cloud, say) and points
+            whose fit would move them by more than a tenth of their depth (:data:`RAY_FIT_MOVE`) stay where they
+            are.
 
         Raises:
             ValueError: ``neighbours`` not an integer in [2 d + 2, 10000].
@@ -265,6 +267,14 @@ class PointCloud:
 RAY_FIT_CUT = 2.5
 
 
+#: The cosine of the widest angle from a view's axis at which :meth:`PointCloud.smoothed_along_rays` smooths a ray
+#: (60 degrees; depth cameras see 30-45 degrees off their axis).
+RAY_FIT_CONE = 0.5
+
+#: The farthest a ray's fit may move its point, as a fraction of its depth (:meth:`PointCloud.smoothed_along_rays`).
+RAY_FIT_MOVE = 0.1
+
+
 def _ray_fit(points: np.ndarray, origin: np.ndarray, neighbours: int, refits: int = 2) -> np.ndarray:
     """`(n, d)` the ``points`` `(n, d)` [m] of one view moved along their rays from ``origin`` `(d,)` to a robust
     local fit of depth (:meth:`PointCloud.smoothed_along_rays`).
@@ -274,11 +284,16 @@ def _ray_fit(points: np.ndarray, origin: np.ndarray, neighbours: int, refits: in
     from scipy.spatial import cKDTree
 
     ray = points - origin
+    length = np.linalg.norm(ray, axis=1)
     axis = ray.sum(axis=0)
+    out = points.copy()
+    if not np.linalg.norm(axis) > 0:
+        return out
     axis /= np.linalg.norm(axis)
     axial = ray @ axis                                       # depth along the view's axis [m]
-    ahead = axial > 1e-9 * max(float(np.abs(axial).max()), 1.0)
-    out = points.copy()
+    # rays within RAY_FIT_CONE of the axis: a camera's field of view (a wider one, or a camera inside its cloud,
+    # has rays the image plane cannot hold; those stay as measured)
+    ahead = (length > 0) & (axial > RAY_FIT_CONE * length)
     if ahead.sum() < len(axis) + 1:
         return out
     ray, axial = ray[ahead], axial[ahead]
@@ -299,7 +314,11 @@ def _ray_fit(points: np.ndarray, origin: np.ndarray, neighbours: int, refits: in
                                np.einsum("nki,nk->ni", weighted, inverse)[..., None])[..., 0]
         weight = _inliers(inverse - np.einsum("nki,ni->nk", design, coef), inverse)
     fitted = coef[:, 0]
-    ok = np.isfinite(fitted) & (fitted > 0)                  # a fit through the camera keeps the measured point
+    with np.errstate(divide="ignore", invalid="ignore"):
+        moved = axial * np.abs(1.0 / fitted / axial - 1.0)  # how far the fit moves the point along its ray [m]
+    # a fit through or behind the camera, or one that moves its point by more than a tenth of its depth (no
+    # surface of its own in the patch), keeps the measured point
+    ok = np.isfinite(moved) & (fitted > 0) & (moved <= RAY_FIT_MOVE * axial)
     out[np.flatnonzero(ahead)[ok]] = origin + scaled[ok] / fitted[ok, None]
     return out
 
