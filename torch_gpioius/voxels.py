@@ -41,13 +41,15 @@ def _grouped(keys: np.ndarray, values: np.ndarray, counts: np.ndarray) -> tuple[
     return uniq, sums, np.bincount(inv, weights=counts, minlength=len(uniq))
 
 
-def voxel_average(points: np.ndarray, voxel: float, values: np.ndarray | None = None):
+def voxel_average(points: np.ndarray, voxel: float, values: np.ndarray | None = None, at: np.ndarray | None = None):
     """Average the points in each occupied cubic voxel (the paper's 5 cm Kinect averaging).
 
     Args:
         points: `(n, d)` [m].
         voxel: edge length [m], in :data:`VOXEL_RANGE`; voxels are aligned to the origin of the frame.
         values: optional `(n, c)` values carried by the points (normals, say), averaged over the same voxels.
+        at: optional `(n, d)` positions [m] that choose each point's voxel in its place (a noisy point's smoothed
+            position, say); the means are still of ``points``.
 
     Returns:
         `(k, d)` one mean point per occupied voxel, in lexicographic voxel order; with ``values``, also their
@@ -60,11 +62,17 @@ def voxel_average(points: np.ndarray, voxel: float, values: np.ndarray | None = 
     points = np.asarray(points, dtype=np.float64)
     if len(points) == 0:
         return points if values is None else (points, np.asarray(values, dtype=np.float64).reshape(0, -1))
+    if at is None:
+        at = points
+    else:
+        at = np.asarray(at, dtype=np.float64)
+        if at.shape != points.shape:
+            raise ValueError(f"voxel_average: at must have the points' shape {points.shape}, got {at.shape}")
     if values is None:
-        _, sums, counts = _grouped(_keys(points, voxel), points, np.ones(len(points)))
+        _, sums, counts = _grouped(_keys(at, voxel), points, np.ones(len(points)))
         return sums / counts[:, None]
     values = np.asarray(values, dtype=np.float64).reshape(len(points), -1)
-    _, sums, counts = _grouped(_keys(points, voxel), np.concatenate([points, values], axis=1), np.ones(len(points)))
+    _, sums, counts = _grouped(_keys(at, voxel), np.concatenate([points, values], axis=1), np.ones(len(points)))
     means = sums / counts[:, None]
     return means[:, :points.shape[1]], means[:, points.shape[1]:]
 

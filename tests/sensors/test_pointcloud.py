@@ -115,6 +115,20 @@ def test_voxel_averaging_against_a_hand_computed_grid():
         voxel_average(pts, 0.0)
 
 
+def test_voxel_averaging_at_other_positions_groups_by_them_and_averages_the_points():
+    points = np.array([[0.011, 0.0, 0.0], [0.019, 0.0, 0.0], [0.021, 0.0, 0.0], [0.005, 0.0, 0.0]])
+    at = np.array([[0.011, 0.0, 0.0], [0.019, 0.0, 0.0], [0.019, 0.0, 0.0], [0.025, 0.0, 0.0]])  # 3rd and 4th swap
+    np.testing.assert_allclose(voxel_average(points, 0.01, at=at), [[(0.011 + 0.019 + 0.021) / 3, 0, 0],
+                                                                     [0.005, 0, 0]], atol=1e-15)
+    cloud = PointCloud(points, np.array([0.0, 0.0, 1.0]))
+    np.testing.assert_allclose(cloud.voxel_averaged(0.01, at=at).points, voxel_average(points, 0.01, at=at))
+    np.testing.assert_array_equal(cloud.voxel_averaged(0.01).points, voxel_average(points, 0.01))
+    with pytest.raises(ValueError, match="at"):
+        cloud.voxel_averaged(0.01, at=at[:2])
+    with pytest.raises(ValueError, match="at"):
+        voxel_average(points, 0.01, at=at[:, :2])
+
+
 def test_free_space_lies_on_the_rays_in_front_of_the_surface():
     cloud = sphere_camera().capture()
     free = cloud.free_space(0.05)

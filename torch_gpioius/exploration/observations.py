@@ -552,9 +552,11 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
         cloud = cloud.cropped(crop[0], crop[1])
     if len(cloud) == 0:
         raise ValueError("vision: the camera sees nothing of the object near the exploration range")
-    if policy.ray_smoothing:
-        cloud = cloud.smoothed_along_rays(policy.ray_smoothing)
-    seen = cloud.voxel_averaged(policy.voxel).points if policy.voxel else cloud.points
+    smooth = cloud.smoothed_along_rays(policy.ray_smoothing) if policy.ray_smoothing else cloud
+    if policy.voxel:          # each point averaged in the voxel its smoothed depth lies in (ray_smoothing's doc)
+        seen = cloud.voxel_averaged(policy.voxel, at=smooth.points if policy.ray_smoothing else None).points
+    else:
+        seen = smooth.points
     xs, ys = [seen], [np.zeros(len(seen))]
     if policy.vision_free_offset is not None and cloud.sees_free_space:
         free = cloud.free_space(policy.vision_free_offset)

@@ -14,7 +14,7 @@ Presets (:func:`EstimatorSettings.preset`):
 * ``"default"``: what measured best on shapes nobody tuned to (docs/method-notes.md sections 12-15): a Matérn-5/2 of
   length scale a fifth of the object's largest extent (4-10 cm; :class:`LengthRule`; 10 cm where the object's size
   is unknown), sigma^2 = 0.08, the camera's points averaged in voxels a tenth of the object's largest extent
-  (2-5 cm) after each capture's depth noise is averaged along its rays (over 24 neighbouring rays), a second
+  (2-5 cm), each in the voxel its depth smoothed along the camera's rays (over 24 of them) lies in, a second
   free-space point 10 cm in front of each seen point, inside points 2 cm behind every contact and every seen point,
   and those behind the seen surface retracted once the touches show the cover standing more than 3 cm off the body;
 * ``"paper"``: the paper's robot experiment (Sec. VI): the inverse multiquadric of theta = 0.15 m, sigma^2 = 0.08,
@@ -425,7 +425,7 @@ class EstimatorSettings:
         voxel = (f"voxels a {_fraction(rule.fraction)} of the object ({_cm(rule.lo)}-{_cm(rule.hi)})"
                  if rule is not None else f"{_cm(p.voxel)} voxels" if p.voxel else "every camera point")
         if p.ray_smoothing:
-            voxel += f" of depths smoothed along {p.ray_smoothing} rays"
+            voxel += f" chosen by depths smoothed along {p.ray_smoothing} rays"
         free = f"free space {_cm(p.vision_free_offset)}" + (f" and {_cm(p.vision_free_far)}" if p.vision_free_far
                                                                else "") + " in front of the seen surface"
         length = ("" if self.length_rule is None else f" (a {_fraction(self.length_rule.fraction)} of the object, "
@@ -508,10 +508,10 @@ INSIDE_DEPTH = 0.02
 #: ones (4 cm) (docs/method-notes.md section 13).
 COVER_GAP_LIMIT = 0.03
 
-#: Rays over which the default smooths each capture's depth noise (``ObservationPolicy.ray_smoothing``): with the
-#: Kinect's noise tripled it took the median Chamfer distance on 20 blobs from 0.92 to 0.50 cm and on 20 primitives
-#: from 0.53 to 0.36 cm (the calibrated camera's 0.49 and 0.35), and left the calibrated runs as they were or better
-#: (docs/results-benchmark.md "The camera's other errors").
+#: Rays over which the default smooths each capture's depth to choose each seen point's voxel
+#: (``ObservationPolicy.ray_smoothing``): with the Kinect's noise tripled it took the median Chamfer distance on 20
+#: blobs from 0.92 to 0.53 cm and on 20 primitives from 0.53 to 0.41 cm, and left the calibrated runs of objects 0-99
+#: as they were (docs/results-benchmark.md "The camera's other errors").
 RAY_NEIGHBOURS = 24
 
 #: The named presets.

@@ -74,11 +74,13 @@ class ObservationPolicy:
             captures carry no table points or there is no floor, as without it. True (the default with a bound):
             the plane fixes the rotations about horizontal axes and the height, which the contacts on a body's few
             faces leave loose (docs/method-notes.md section 17).
-        ray_smoothing: before its points are averaged into voxels, each capture's depth noise is averaged along the
-            camera's rays over this many neighbouring rays of the same view
-            (:meth:`~torch_gpioius.sensors.PointCloud.smoothed_along_rays`): noise along a ray then stays on that
-            ray instead of spreading the surface into the voxels in front of and behind it. None: the measured
-            points as they are (the paper).
+        ray_smoothing: each seen point is averaged in the voxel where its depth, smoothed along the camera's rays over
+            this many neighbouring rays of the same view, lies
+            (:meth:`~torch_gpioius.sensors.PointCloud.smoothed_along_rays`); the voxel's mean is of the measured
+            points. Depth noise then no longer carries points into the voxels behind the surface, whose means lay
+            inside it and contradicted the inside points (docs/method-notes.md section 20). Without voxels, the
+            smoothed points themselves. The free space and the inside points are the measured cloud's. None: each
+            point in the voxel it was measured in (the paper).
     """
 
     vision_free_offset: float | None = 0.05

@@ -112,14 +112,26 @@ class PointCloud:
             return np.zeros(len(self), dtype=np.int64)
         return np.unique(np.nan_to_num(self.origin, nan=np.inf), axis=0, return_inverse=True)[1].reshape(-1)
 
-    def voxel_averaged(self, voxel: float) -> "PointCloud":
-        """One mean point per occupied voxel of edge ``voxel`` [m] (paper: 0.05 m), per view of a merged capture."""
+    def voxel_averaged(self, voxel: float, at: np.ndarray | None = None) -> "PointCloud":
+        """One mean point per occupied voxel of edge ``voxel`` [m] (paper: 0.05 m), per view of a merged capture.
+
+        Args:
+            voxel: the voxels' edge [m].
+            at: `(n, d)` positions [m] that choose each point's voxel in its place (the cloud smoothed along its rays,
+                :meth:`smoothed_along_rays`, so that depth noise does not carry a point into the voxel behind its
+                surface); the means are of the measured points. None: the points themselves.
+        """
         if len(self) == 0:
             return self
+        if at is not None and np.shape(at) != self.points.shape:
+            raise ValueError(f"voxel_averaged: at must have the points' shape {self.points.shape}, got "
+                             f"{np.shape(at)}")
         if not self.per_point_origins:
-            return dataclasses.replace(self, points=voxel_average(self.points, voxel))
+            return dataclasses.replace(self, points=voxel_average(self.points, voxel, at=at))
         inverse = self.view_ids()
-        parts = [voxel_average(self.points[inverse == k], voxel) for k in range(inverse.max() + 1)]
+        at = None if at is None else np.asarray(at, dtype=np.float64)
+        parts = [voxel_average(self.points[inverse == k], voxel, at=None if at is None else at[inverse == k])
+                 for k in range(inverse.max() + 1)]
         origins = [np.broadcast_to(self.origin[inverse == k][0], part.shape) for k, part in enumerate(parts)]
         return dataclasses.replace(self, points=np.concatenate(parts), origin=np.concatenate(origins))
 
