@@ -14,8 +14,9 @@ _load = load_script
 
 def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(tmp_path):
     """On a smoke study of a 6 cm ball: the script's Hausdorff distance is the study's own final one (the same
-    world rebuilt from the record); the larger of its two exact worst distances lies at most that and at least two
-    sample spacings below it (the study's is between samples of both surfaces, each a spacing apart); the body's
+    world rebuilt from the record); the larger of its two exact worst distances lies within a sample spacing above
+    that and two below it (the script and the study sample the same surfaces a spacing apart, each its own samples:
+    a smoothed camera's run put the script's 1.5 um above the study's); the body's
     worst place lies in the body's box and on the ball, the estimate's as far from the sphere as reported; the
     nearest contact and seen point equal the ones recomputed from the log's final data."""
     from torch_gpioius.io.runs import load_run
@@ -32,7 +33,7 @@ def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(
     assert w is not None
     assert w["hausdorff"] == pytest.approx(float(row["final_hausdorff"]), abs=1e-9)
     exact = [w["estimate->body"]["worst"], w["body->estimate"]["worst"]]
-    assert max(exact) <= w["hausdorff"] + 1e-9
+    assert max(exact) <= w["hausdorff"] + worst.SPACING
     assert max(exact) >= w["hausdorff"] - 2 * worst.SPACING
     box = w["body->estimate"]["box"]
     assert np.all(box >= -1e-9) and np.all(box <= 1 + 1e-9)
