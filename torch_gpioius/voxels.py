@@ -95,14 +95,18 @@ class VoxelAccumulator:
         self._counts = np.zeros(0)
         self.points_added = 0
 
-    def add(self, points: np.ndarray) -> None:
-        """Add `(n, d)` points [m]."""
+    def add(self, points: np.ndarray, at: np.ndarray | None = None) -> None:
+        """Add `(n, d)` points [m]; ``at`` `(n, d)` [m], where given, chooses each point's voxel in its place (as
+        :func:`voxel_average`'s)."""
         p = np.asarray(points, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != self._keys.shape[1]:
             raise ValueError(f"points: expected (n, {self._keys.shape[1]}), got shape {p.shape}")
+        at = p if at is None else np.asarray(at, dtype=np.float64)
+        if at.shape != p.shape:
+            raise ValueError(f"VoxelAccumulator.add: at must have the points' shape {p.shape}, got {at.shape}")
         if len(p) == 0:
             return
-        k, s, c = _grouped(_keys(p, self.voxel), p, np.ones(len(p)))
+        k, s, c = _grouped(_keys(at, self.voxel), p, np.ones(len(p)))
         self._keys, self._sums, self._counts = _grouped(np.concatenate([self._keys, k]),
                                                         np.concatenate([self._sums, s]),
                                                         np.concatenate([self._counts, c]))

@@ -82,6 +82,25 @@ def test_cloud_without_voxels_is_exact(recording, mcap_bag):
     np.testing.assert_allclose((free - seen) / 0.05, ray, atol=1e-9)
 
 
+def test_a_bags_voxels_are_chosen_by_the_depth_smoothed_along_the_rays(recording, tmp_path):
+    """With ``ray_smoothing`` each frame's measured points are averaged in the voxels their smoothed depths choose, as
+    an exploration averages a capture (``vision_observations``): the import of a one-frame bag against the voxel
+    means recomputed from its unvoxelled import, not the means of the smoothed points."""
+    from torch_gpioius.exploration.observations import ObservationPolicy
+    from torch_gpioius.sensors import PointCloud
+    from torch_gpioius.voxels import voxel_average
+
+    msgs, truth = recording
+    bag = write_bag(tmp_path / "one", _with(msgs, "/camera/depth/points", lambda ms: ms[:1]), storage="mcap")
+    measured = _import(bag, truth, policy=ObservationPolicy(voxel=None))
+    measured = measured.x[(measured.task == 1) & (measured.y == 0)]
+    smooth = PointCloud(measured, origin=truth["T_base_optical"][:3, 3]).smoothed_along_rays(24).points
+    assert np.abs(smooth - measured).max() > 1e-6                  # the smoothing moves them: the check can fail
+    ds = _import(bag, truth, policy=ObservationPolicy(voxel=0.02, ray_smoothing=24))
+    np.testing.assert_allclose(ds.x[(ds.task == 1) & (ds.y == 0)], voxel_average(measured, 0.02, at=smooth),
+                               atol=1e-12)
+
+
 def test_camera_transform_replaces_tf(recording, mcap_bag):
     msgs, truth = recording
     via_tf = _import(mcap_bag, truth)

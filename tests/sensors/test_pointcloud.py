@@ -127,6 +127,14 @@ def test_voxel_averaging_at_other_positions_groups_by_them_and_averages_the_poin
         cloud.voxel_averaged(0.01, at=at[:2])
     with pytest.raises(ValueError, match="at"):
         voxel_average(points, 0.01, at=at[:, :2])
+    from torch_gpioius.voxels import VoxelAccumulator
+
+    batches = VoxelAccumulator(0.01)                      # in batches, as a bag's frames arrive: the same means
+    batches.add(points[:3], at=at[:3])
+    batches.add(points[3:], at=at[3:])
+    np.testing.assert_allclose(batches.mean(), voxel_average(points, 0.01, at=at), atol=1e-15)
+    with pytest.raises(ValueError, match="at"):
+        batches.add(points, at=at[:2])
 
 
 def test_free_space_lies_on_the_rays_in_front_of_the_surface():

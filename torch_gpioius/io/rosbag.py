@@ -667,7 +667,8 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
     no_voxel = ObservationPolicy(vision_free_offset=policy.vision_free_offset, voxel=None,
                                  free_space_spacing=policy.free_space_spacing,
                                  free_space_margin=policy.free_space_margin,
-                                 vision_free_far=policy.vision_free_far, ray_smoothing=policy.ray_smoothing)
+                                 vision_free_far=policy.vision_free_far,
+                                 ray_smoothing=None if policy.voxel else policy.ray_smoothing)
     if policy.voxel:
         seen_acc, free_acc = VoxelAccumulator(policy.voxel), VoxelAccumulator(policy.voxel)
     else:
@@ -699,7 +700,12 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
             continue  # nothing of this cloud inside the crop box
         n_used += 1
         if policy.voxel:
-            seen_acc.add(x[y == 0])
+            # this frame's measured points in the crop box, each in the voxel its depth smoothed along the rays
+            # lies in (ray_smoothing), as an exploration averages each capture
+            measured = x[y == 0]
+            at = (PointCloud(measured, origin=T_bc[:3, 3]).smoothed_along_rays(policy.ray_smoothing).points
+                  if policy.ray_smoothing else None)
+            seen_acc.add(measured, at=at)
             free_acc.add(x[y == 1])
         else:
             seen_all.append(x[y == 0])
