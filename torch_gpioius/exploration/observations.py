@@ -554,7 +554,7 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
         raise ValueError("vision: the camera sees nothing of the object near the exploration range")
     smooth = cloud.smoothed_along_rays(policy.ray_smoothing) if policy.ray_smoothing else cloud
     if policy.voxel:          # each point averaged in the voxel its smoothed depth lies in (ray_smoothing's doc)
-        seen = cloud.voxel_averaged(policy.voxel, at=smooth.points if policy.ray_smoothing else None).points
+        seen = cloud.voxel_averaged(policy.voxel, at=smooth.points).points
     else:
         seen = smooth.points
     xs, ys = [seen], [np.zeros(len(seen))]

@@ -15,6 +15,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .._validation import as_int
+
 __all__ = ["ObservationPolicy", "check_voxel", "MAX_VOXEL"]
 
 
@@ -109,13 +111,8 @@ class ObservationPolicy:
                 raise ValueError("ObservationPolicy.camera_bound: must be (translation in (0, 0.1] m, rotation in (0, "
                                  f"{math.radians(20):.3g}] rad) or None, got {bound!r}")
             object.__setattr__(self, "camera_bound", (float(bound[0]), float(bound[1])))
-        rays = self.ray_smoothing
-        if rays is not None and (isinstance(rays, bool) or not isinstance(rays, (int, np.integer))
-                                 or not 8 <= rays <= 10_000):
-            raise ValueError(f"ObservationPolicy.ray_smoothing: must be a number of rays in [8, 10000] or None, got "
-                             f"{rays!r}")
-        if rays is not None:
-            object.__setattr__(self, "ray_smoothing", int(rays))
+        object.__setattr__(self, "ray_smoothing", as_int(self.ray_smoothing, "ObservationPolicy.ray_smoothing (rays)",
+                                                         8, 10_000, allow_none=True))
         for name in ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"ObservationPolicy.{name}: must be True or False, got {getattr(self, name)!r}")

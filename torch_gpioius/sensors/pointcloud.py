@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
+from .._validation import as_int
 from ..voxels import voxel_average
 
 __all__ = ["PointCloud", "PointCloudSource", "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "look_at",
@@ -166,10 +167,7 @@ class PointCloud:
             ValueError: ``neighbours`` not an integer in [2 d + 2, 10000].
         """
         dim = self.points.shape[1]
-        if (isinstance(neighbours, bool) or not isinstance(neighbours, (int, np.integer))
-                or not 2 * dim + 2 <= neighbours <= 10_000):
-            raise ValueError(f"smoothed_along_rays: neighbours must be an integer in [{2 * dim + 2}, 10000], got "
-                             f"{neighbours!r}")
+        neighbours = as_int(neighbours, "smoothed_along_rays: neighbours", 2 * dim + 2, 10_000)
         if not self.sees_free_space or len(self) == 0:
             return self
         origin = np.broadcast_to(self.origin, self.points.shape)
@@ -179,7 +177,7 @@ class PointCloud:
         for view in np.unique(views[known]):
             mine = np.flatnonzero(known & (views == view))
             if len(mine) >= dim + 1:
-                out[mine] = _ray_fit(self.points[mine], origin[mine[0]], int(neighbours))
+                out[mine] = _ray_fit(self.points[mine], origin[mine[0]], neighbours)
         return dataclasses.replace(self, points=out)
 
     def cropped(self, lower, upper) -> "PointCloud":
