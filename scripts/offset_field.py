@@ -50,8 +50,9 @@ class OffsetField:
     """The two-scale outer-task model on one run's final data (dense, exact)."""
 
     def __init__(self, model, length_factor: float = 4.0, relabel: bool = False, learn_mean: bool = True,
-                 max_length: float = 0.3, field: bool = True, linear: bool = False):
+                 max_length: float = 0.3, field: bool = True, linear: bool = False, mean0: float = 1.0):
         self.base = model
+        self.mean0 = mean0
         self.x = model.train_inputs[0].detach()
         self.y = model.train_targets.detach().clone()
         self.t = model.train_task.detach()
@@ -80,7 +81,7 @@ class OffsetField:
         kt = chol @ chol.T
         length = self.max_length * torch.sigmoid(log_l)
         s = torch.exp(log_s) if self.field else torch.zeros((), dtype=p.dtype)
-        return kt, s, length, (m_out if self.learn_mean else torch.ones((), dtype=p.dtype))
+        return kt, s, length, (m_out if self.learn_mean else torch.full((), self.mean0, dtype=p.dtype))
 
     def outer_mean(self, p: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         m = self._parts(p)[3] * torch.ones(len(x), dtype=x.dtype)
@@ -105,7 +106,8 @@ class OffsetField:
         kt0 = self.base.task_covariance.detach()
         c0 = torch.linalg.cholesky(kt0 + 1e-6 * torch.eye(2, dtype=kt0.dtype))
         base = [math.log(float(c0[0, 0])), float(c0[1, 0]), math.log(max(float(c0[1, 1]), 1e-3))]
-        starts = starts or [(0.1, 1.0), (0.5, 0.2), (0.05, 0.6)]
+        starts = starts or ([(0.1, 1.0), (0.5, 0.2), (0.05, 0.6)] if self.mean0 == 1.0 else
+                            [(0.1, self.mean0), (0.02, self.mean0), (0.5, self.mean0)])
         best = None
         for s0, m0 in starts:
             frac = min(self.length0 / self.max_length, 0.9)
@@ -189,6 +191,9 @@ def main() -> None:
                         help="with --camera-inside: more inside points at these depths [m], labelled by them")
     parser.add_argument("--mean-one", action="store_true",
                         help="with --gap-mean: the outer mean left at 1 (the data changed, K_t re-learned)")
+    parser.add_argument("--field", action="store_true",
+                        help="with --gap-mean: the offset field of the outer task on top of the gap's mean (its outer "
+                             "mean starting at 1 - gap / ramp, held there with --fixed-mean)")
     parser.add_argument("--gap-mean", action="store_true",
                         help="instead: the library's model with the outer mean 1 - gap / ramp, the gap the contacts "
                              "measure (ObservationPolicy.cover_offset at the end of a run), K_t re-learned")
@@ -238,6 +243,13 @@ def main() -> None:
             elif gap == gap:                               # NaN: too few contacts under the seen cover
                 model.set_outer_mean(1.0 - gap / ObservationPolicy().ramp).fit(multi_start=True)
                 variant = _row(world.measure(model, contacts))
+                if args.field:                             # the offset field on top of the gap's mean
+                    field = OffsetField(model, args.length_factor, False, not args.fixed_mean, args.max_length,
+                                        mean0=model.outer_mean).fit()
+                    gapped = variant
+                    variant = _row(world.measure(field.as_model(), contacts))
+                    print(f"    gap mean alone Ch {gapped['chamfer'] * 100:.2f}; field s {field.s:.3f} "
+                          f"L {field.length * 100:.1f} cm m_out {field.m_out:.2f} rho {field.correlation():.2f}")
             rows.append((base, variant))
             print(f"{log.stem}: base Ch {base['chamfer'] * 100:.2f} rho {rho:.2f} | gap {gap * 100:.1f} cm, outer mean "
                   f"{model.outer_mean:.2f}: Ch {variant['chamfer'] * 100:.2f} H {variant['hausdorff'] * 100:.1f} "
