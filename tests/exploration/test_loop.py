@@ -135,6 +135,39 @@ def test_lost_contact_falls_back_to_the_last_contact():
     assert ctl.calls == [] and s.reapproaches == 0
 
 
+def test_the_first_reapproach_reaches_twice_the_controllers_own_search_for_lost_contact():
+    """Issue 63: after a slide that lost contact, the leg along the estimate's inward normal goes at most twice the
+    distance the controller has just pressed in vain (10 cm with the controller's default 5 cm; a controller
+    without a config, 10 cm), so that a small body's search does not spend 10 cm on a wrong normal."""
+    import torch
+
+    from torch_gpioius.contact import ContactConfig, ContactResult
+    from torch_gpioius.exploration import ExplorationState, Hardware
+    from torch_gpioius.exploration.loop import reapproach_reach, recover
+
+    class Controller:
+        def __init__(self, config):
+            self.calls = []
+            if config is not None:
+                self.config = config
+
+        def approach(self, direction, max_travel=0.3):
+            self.calls.append(max_travel)
+            p = torch.zeros(2, 2, dtype=torch.float64)
+            return ContactResult(False, p[-1], p[:1], p, torch.zeros_like(p), 0.0)
+
+    model = tg.GPIS(np.array([[0.1, 0.0], [0.3, 0.0]]), np.array([0.0, 1.0]),
+                    kernel=tg.kernels.InverseMultiquadricKernel(0.1), noise=1e-3)
+    here = torch.tensor([[0.12, 0.0], [0.13, 0.0]], dtype=torch.float64)
+    lost = ContactResult(False, here[-1], here[:1], here, torch.zeros_like(here), 0.01)
+    for config, reach in ((ContactConfig(max_normal_travel=0.015), 0.03), (ContactConfig(), 0.1), (None, 0.1)):
+        ctl = Controller(config)
+        assert reapproach_reach(ctl) == pytest.approx(reach)
+        s = ExplorationState(model=model, contacts=[np.array([0.1, 0.0])])
+        assert recover(s, Hardware(robot=None, sensor=None, camera=None, controller=ctl), lost) is None
+        assert ctl.calls[0] == pytest.approx(reach) and len(ctl.calls) == 2
+
+
 @pytest.mark.parametrize("kwargs, field", [
     (dict(metrics_resolution=1e-5), "metrics_resolution"),     # a 25 GiB grid before the check existed
     (dict(step=1e6), "step"),                                   # MemoryError before

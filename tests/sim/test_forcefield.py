@@ -637,3 +637,43 @@ def test_a_body_under_a_thin_roof_is_approached_from_the_side():
     slab.apply_translation([0.5, 0.0, 0.11])
     s_start, s_dir, s_bounds = approach_from_above(slab, slab)
     assert s_dir.tolist() == [0.0, 0.0, -1.0] and s_bounds[1, 2] == pytest.approx(max(0.12 + 0.03, s_start[2] - 0.01))
+
+
+def test_a_slide_off_an_edge_gives_up_after_a_tenth_of_the_seen_body_not_five_centimetres():
+    """Issue 63 (every object reached): a slide that runs off an edge presses inward along the old normal, past the
+    surface it left, and finds nothing however far it presses. The force-field world's controller searches a tenth of
+    the cover's largest extent (1-5 cm), not the controller's 5 cm: on a 20 cm box under an 8 mm cover the slide off
+    its top edge ends out of contact having pressed 2.2 cm below the top, where the 5 cm controller presses 5 cm."""
+    import trimesh
+
+    from torch_gpioius.sim.forcefield import LOST_CONTACT_SEARCH, cover_around, lost_contact_search
+
+    box = trimesh.creation.box((0.20, 0.20, 0.10))
+    box.apply_translation([0.5, 0.0, 0.05])
+    outer = cover_around(box, "tight", gap=0.008)
+    scene = Scene3D(box, outer, start=(0.5, 0.0, 0.2), direction=(0.0, 0.0, -1.0),
+                    bounds=[[0.2, -0.3, 0.0], [0.8, 0.3, 0.3]], support="base")
+    search = lost_contact_search(outer)
+    fraction, lo, hi = LOST_CONTACT_SEARCH
+    assert search == pytest.approx(fraction * float(np.max(outer.extents)), abs=1e-4) and lo < search < hi
+    assert search == pytest.approx(0.0216, abs=5e-4)                 # the cover 20 + 2 x 0.8 cm across
+    pressed = {}
+    for name, config in (("world", None), ("five", ContactConfig(floor=scene.support))):
+        hw = scene.hardware()
+        if config is not None:
+            hw.controller = ContactController(hw.robot, hw.sensor, config)
+        assert hw.controller.config.max_normal_travel == (search if config is None else 0.05)
+        first = hw.controller.approach(torch.tensor([0.0, 0.0, -1.0]), max_travel=0.3)
+        assert first.in_contact
+        top = float(first.path[-1, 2])
+        for _ in range(6):                                           # 3 cm slides towards the edge, 10 cm away
+            r = hw.controller.slide(torch.tensor([0.03, 0.0, 0.0]), torch.tensor([0.0, 0.0, 1.0]))
+            if not r.in_contact:
+                break
+        assert not r.in_contact and float(r.path[-1, 0]) > 0.59      # lost at the edge
+        pressed[name] = top - float(r.path[:, 2].min())
+    step = ContactConfig().normal_step
+    assert pressed["world"] == pytest.approx(search, abs=2 * step)
+    assert pressed["five"] == pytest.approx(0.05, abs=2 * step)
+    assert lost_contact_search(trimesh.creation.box((0.04, 0.04, 0.04))) == lo          # a small body: 1 cm
+    assert lost_contact_search(trimesh.creation.box((0.9, 0.5, 0.5))) == hi             # a torso: the 5 cm

@@ -34,7 +34,7 @@ from .timing import PartClock
 from .trace import Trace
 from .world import World
 
-__all__ = ["explore", "run", "begin", "step", "ingest", "ingest_evidence", "unstall", "recover"]
+__all__ = ["explore", "run", "begin", "step", "ingest", "ingest_evidence", "unstall", "recover", "reapproach_reach"]
 
 
 def explore(world: World, mode: str = "visual-tactile", *, recorders=(), progress: bool = False,
@@ -380,14 +380,29 @@ def lost_contact_end(state: ExplorationState, budget: float | None) -> str:
     return "lost-contact"
 
 
+def reapproach_reach(controller) -> float:
+    """How far [m] the first re-approach after a lost contact goes along the estimate's inward normal: twice the
+    controller's search for lost contact (``config.max_normal_travel``), 10 cm for a controller without one.
+
+    The fingertip has just pressed that far along the measured normal and found nothing; where the estimate's normal
+    is right the surface lies within about as much, and where it is wrong a longer leg only spends travel before the
+    leg back to the last contact. The force-field world sizes its search to the body
+    (:func:`torch_gpioius.sim.forcefield.lost_contact_search`): a lying rod 1.6 cm thick (pybullet's blob 104) spent
+    10 cm on every such leg, 88 % of its travel on re-approaches, and ended with four contacts.
+    """
+    search = getattr(getattr(controller, "config", None), "max_normal_travel", None)
+    return 0.1 if search is None else 2.0 * float(search)
+
+
 def recover(state: ExplorationState, hw, lost: ContactResult, budget_left: float | None = None
             ) -> ContactResult | None:
     """Contact was lost during a step (the surface curved away, or a cover dragged the fingertip): a re-approach
-    from where the fingertip is, along the estimated inward normal there, for at most 10 cm; if that finds nothing,
-    one towards the last contact, for its distance + 5 cm. Neither goes past ``budget_left`` [m] of the travel
-    budget (a run ends at most one step past it). Each re-approach is counted in ``state.reapproaches`` and its
-    travel in ``state.reapproach_travel``. Returns the merged result of the step and the re-approaches, or None
-    (the run then ends on "lost-contact")."""
+    from where the fingertip is, along the estimated inward normal there, for at most twice the controller's own
+    search for lost contact (``config.max_normal_travel``; 10 cm with its default 5 cm, :func:`reapproach_reach`); if
+    that finds nothing, one towards the last contact, for its distance + 5 cm. Neither goes past ``budget_left`` [m]
+    of the travel budget (a run ends at most one step past it). Each re-approach is counted in
+    ``state.reapproaches`` and its travel in ``state.reapproach_travel``. Returns the merged result of the step and
+    the re-approaches, or None (the run then ends on "lost-contact")."""
     left = [math.inf if budget_left is None else budget_left]
 
     def approach(direction, reach: float):
@@ -408,7 +423,7 @@ def recover(state: ExplorationState, hw, lost: ContactResult, budget_left: float
     here = lost.path[-1]
     geo = surface_geometry(state.model, here.reshape(1, -1).to(state.model.train_inputs[0]), 0)
     if bool(geo.normal_defined[0]):
-        back = approach(-geo.normal[0], 0.1)
+        back = approach(-geo.normal[0], reapproach_reach(hw.controller))
         if back is not None:
             res = _then(res, back)
             if back.in_contact:

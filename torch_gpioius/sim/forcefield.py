@@ -198,6 +198,28 @@ def as_views(views) -> tuple[str, ...]:
     return names
 
 
+#: The inward search of a slide that lost contact (``ContactConfig.max_normal_travel``) as a fraction of the seen
+#: body's largest extent, and its bounds [m]: see :func:`lost_contact_search`.
+LOST_CONTACT_SEARCH = (0.1, 0.01, 0.05)
+
+
+def lost_contact_search(outer: trimesh.Trimesh) -> float:
+    """How far [m] the simulated fingertip presses inward along the contact normal before a slide counts as having
+    lost contact (``ContactConfig.max_normal_travel``): a tenth of the cover's largest extent (what the camera sees,
+    not the hidden body), 1-5 cm, rounded to 0.1 mm. A torso keeps the controller's 5 cm; a 15 cm body searches
+    1.7 cm.
+
+    A slide that runs off an edge or a thin part presses along the old normal, past the surface it left, and finds
+    nothing however far it goes; the re-approach that follows (``exploration.loop.recover``, along the estimate's
+    inward normal) finds the surface again, at a median 9 mm. On the object sets' blobs the 5 cm searches took 39 %
+    of a 0.6 m budget (steps that lost contact, 40 runs of objects 0-39), and three flat blobs (52, 104 and, with
+    the other settings of their time, 60 and 73) spent their travel on them and ended without an estimate
+    (docs/results-benchmark.md "Every object reached?").
+    """
+    fraction, lo, hi = LOST_CONTACT_SEARCH
+    return round(float(np.clip(fraction * float(np.max(outer.extents)), lo, hi)), 4)
+
+
 def simulated_ur5(start, direction, lower, upper, *, tool_length: float = 0.05,
                   q_home=(0.0, -1.2, 1.5, -1.9, -1.57, 0.0), margin: float = 0.1, floor: float | None = None):
     """A kinematic UR5 placed by IK with its fingertip at ``start`` pointing along ``direction``, behind a gate
@@ -730,8 +752,8 @@ class Scene3D(RangedScene):
         # state from one run to the next, and the same call gave another cloud in the same process (a study worker's
         # second run of a seed-0 scene, a test run after another); a given source is the user's and used as it is
         camera = self._given_camera if self._given_camera is not None else self.cameras(self.views)
-        return Hardware(robot, sensor, camera, ContactController(robot, sensor, ContactConfig(floor=self.support)),
-                        self.tactile_pad(robot, field))
+        config = ContactConfig(floor=self.support, max_normal_travel=lost_contact_search(self.outer))
+        return Hardware(robot, sensor, camera, ContactController(robot, sensor, config), self.tactile_pad(robot, field))
 
     def tactile_pad(self, robot, field=None):
         """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
