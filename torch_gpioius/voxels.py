@@ -32,6 +32,17 @@ def _keys(points: np.ndarray, voxel: float) -> np.ndarray:
     return scaled.astype(np.int64)
 
 
+def _placed(points: np.ndarray, at, where: str) -> np.ndarray:
+    """The `(n, d)` positions that choose the voxels of ``points`` `(n, d)`: ``at`` where given (as float64), else
+    the points themselves. Raises a ValueError naming ``where`` when ``at`` has another shape."""
+    if at is None:
+        return points
+    at = np.asarray(at, dtype=np.float64)
+    if at.shape != points.shape:
+        raise ValueError(f"{where}: at must have the points' shape {points.shape}, got {at.shape}")
+    return at
+
+
 def _grouped(keys: np.ndarray, values: np.ndarray, counts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unique voxel keys (lexicographic), the summed values and counts of each."""
     uniq, inv = np.unique(keys, axis=0, return_inverse=True)
@@ -62,12 +73,7 @@ def voxel_average(points: np.ndarray, voxel: float, values: np.ndarray | None = 
     points = np.asarray(points, dtype=np.float64)
     if len(points) == 0:
         return points if values is None else (points, np.asarray(values, dtype=np.float64).reshape(0, -1))
-    if at is None:
-        at = points
-    else:
-        at = np.asarray(at, dtype=np.float64)
-        if at.shape != points.shape:
-            raise ValueError(f"voxel_average: at must have the points' shape {points.shape}, got {at.shape}")
+    at = _placed(points, at, "voxel_average")
     if values is None:
         _, sums, counts = _grouped(_keys(at, voxel), points, np.ones(len(points)))
         return sums / counts[:, None]
@@ -101,9 +107,7 @@ class VoxelAccumulator:
         p = np.asarray(points, dtype=np.float64)
         if p.ndim != 2 or p.shape[1] != self._keys.shape[1]:
             raise ValueError(f"points: expected (n, {self._keys.shape[1]}), got shape {p.shape}")
-        at = p if at is None else np.asarray(at, dtype=np.float64)
-        if at.shape != p.shape:
-            raise ValueError(f"VoxelAccumulator.add: at must have the points' shape {p.shape}, got {at.shape}")
+        at = _placed(p, at, "VoxelAccumulator.add")
         if len(p) == 0:
             return
         k, s, c = _grouped(_keys(at, self.voxel), p, np.ones(len(p)))
