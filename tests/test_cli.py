@@ -148,7 +148,7 @@ def seen(monkeypatch) -> dict:
 
 def test_voxel_reaches_the_study_and_the_3d_simulation_and_bad_values_are_refused(seen, tmp_path, capsys):
     assert main(["study", "--world", "forcefield", "--voxel", "0.01", "--out", str(tmp_path / "s")]) == 2
-    assert seen["voxel"] == 0.01
+    assert seen["estimator"].voxel == 0.01
     assert main(["simulate3d", "--voxel", "0", "--touch", "patch", "--out", str(tmp_path / "t")]) == 2
     assert seen["voxel"] == 0.0 and seen["touch"] == "patch"
     for bad in ("abc", "-0.01", "nan", "3"):

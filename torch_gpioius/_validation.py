@@ -9,7 +9,8 @@ import torch
 from torch import Tensor
 
 __all__ = ["as_points", "as_labels", "label_problem", "LABELS", "as_tasks", "as_int", "as_float", "as_bounds",
-           "task_id", "TASK_NAMES", "check_metres", "as_length", "MAX_SCENE_EXTENT", "MAX_COORDINATE", "MAX_LENGTH"]
+           "task_id", "TASK_NAMES", "check_metres", "as_length", "MAX_SCENE_EXTENT", "MAX_COORDINATE", "MAX_LENGTH",
+           "as_noise", "NOISE_RANGE"]
 
 #: Largest extent of a scene's data [m]: a robot's tabletop workspace is ~2 m and an uncropped depth camera sees
 #: ~8 m; data larger than this are almost always in millimetres (an object of 15 cm is 150 "m" across then).
@@ -140,6 +141,17 @@ def check_metres(x, where: str, *, hint: str = "pass units='mm' (or --units mm) 
 #: models take a wider range for the library's own use (``tol.noise_range``); below 1e-8 the exact engines fall back
 #: to dense arithmetic, and above 100 the labels (0 to 1) are noise.
 NOISE_RANGE = (1e-8, 100.0)
+
+
+def as_noise(value, name: str = "noise") -> float:
+    """sigma^2 set by a user, in :data:`NOISE_RANGE` (the one check every door makes).
+
+    Raises:
+        ValueError: naming ``name``, the value and the range.
+    """
+    return as_float(value, name, lo=NOISE_RANGE[0], hi=NOISE_RANGE[1], positive=True)
+
+
 #: The largest inside-point depth and cover gap a user may set [m] (``touch_inside``, ``vision_inside``,
 #: ``vision_inside_gap``), at every door: scene files read them against it, worlds build with it.
 INSIDE_DEPTH_MAX = 0.1

@@ -69,11 +69,10 @@ def _study(args: argparse.Namespace) -> int:
     result = run_sweep(world=args.world, objects=objects, scenes=scenes, modes=args.modes.split(","),
                        seeds=args.seeds, out=args.out, workers=args.workers, address=args.address,
                        max_travel=args.max_travel, max_steps=args.max_steps, smoke=args.smoke,
-                       progress=not args.quiet, threads=args.threads, force=args.force, voxel=args.voxel,
-                       touch=args.touch, outer_tol=args.outer_tol, device=args.device, settings=args.settings,
-                       learn=args.learn, views=args.views, kernel=_kernel_choice(args), noise=args.noise,
+                       progress=not args.quiet, threads=args.threads, force=args.force, touch=args.touch,
+                       outer_tol=args.outer_tol, device=args.device, settings=args.settings, views=args.views,
                        cover=args.cover, metrics_every=args.metrics_every, camera_error=args.camera_error,
-                       camera_bound=args.camera_bound)
+                       camera_bound=args.camera_bound, estimator=_estimator_overrides(args))
     print((Path(args.out) / "summary.md").read_text())
     print(f"{result['runs']} runs ({result['skipped']} already done) in {result['seconds']:.0f} s on "
           f"{result['backend']}; wrote runs.csv, summary.json, summary.md and figures to {args.out}")
@@ -103,15 +102,10 @@ def _fit(args: argparse.Namespace) -> int:
     if origins and len(origins) != len(clouds):
         raise ValueError(f"--camera-origin: {len(origins)} given for {len(clouds)} --cloud file(s); give one per "
                          "cloud, in the same order")
-    from .kernels import KernelChoice
-    from .models.base import kernel_for_theta
-
-    choice = KernelChoice(args.kernel, args.lengthscale)
-    if choice and args.theta is not None:
-        raise ValueError("fit: --theta (deprecated) names a kernel and its length; give --kernel and --lengthscale "
-                         "instead, not both")
-    # the deprecated --theta: the inverse multiquadric of that length
-    kernel = choice if choice else kernel_for_theta(args.theta, None, "gpioius fit --theta; fit_dataset")
+    overrides = _estimator_overrides(args)
+    if not own and (overrides.voxel is not None or overrides.labels):
+        raise ValueError("fit: --voxel and --estimator labels.* label a contacts CSV and its clouds; a .gpioius file "
+                         "holds its observations labelled already")
     from contextlib import nullcontext
 
     from .io.offline import fit_outputs
@@ -124,14 +118,17 @@ def _fit(args: argparse.Namespace) -> int:
     # arguments checked first; a fit refused or failed leaves no folder behind; a long one says what it does
     with claimed_folder(args.out, "fit", args.force) if args.out else nullcontext(), \
             Heartbeat("gpioius fit") if not args.quiet else nullcontext():
-        info = _fit_files(args, own, clouds, origins, choice, kernel)
+        info = _fit_files(args, own, clouds, origins, overrides)
     _fit_report(args, info)
     return 0
 
 
-def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list, choice, kernel) -> dict:
-    """`gpioius fit`'s import (a contacts CSV and clouds) and fit."""
+def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list, overrides) -> dict:
+    """`gpioius fit`'s import (a contacts CSV and clouds) and fit, with the estimator's flags (``overrides``, an
+    :class:`~torch_gpioius.models.overrides.EstimatorOverrides`) on the settings: a user's files are labelled, sized
+    and fitted with them; a dataset file is fitted with its kernel, sigma^2 and learning changed."""
     from .io.offline import fit_dataset
+    from .models.estimator import EstimatorSettings
 
     source = args.dataset
     settings = args.settings if args.settings is not None else ("default" if own else None)
@@ -140,18 +137,16 @@ def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list,
 
         cloud = None if not clouds else (clouds[0] if len(clouds) == 1 else clouds)
         origin = None if not origins else (origins[0] if len(origins) == 1 else origins)
-        if choice:                               # the files are labelled, and the length sized, with the choice
-            from .models.estimator import EstimatorSettings
-
-            settings = EstimatorSettings.of(settings).with_kernel(choice)
-            kernel = None
-        ds = dataset_from_files(args.dataset, cloud, units=args.units, voxel=args.voxel, camera_origin=origin,
-                                settings=settings, contact_spacing=args.contact_spacing,
-                                camera_bound=args.camera_bound, table=args.table)
+        # the files labelled, the voxel and length sized, and the model fitted with the flags' settings
+        ds = dataset_from_files(args.dataset, cloud, units=args.units, camera_origin=origin,
+                                settings=overrides.apply(EstimatorSettings.of(settings)),
+                                contact_spacing=args.contact_spacing, camera_bound=args.camera_bound, table=args.table)
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
-        source, settings = ds, None                  # the dataset holds the settings it was labelled with
-    return fit_dataset(source, args.out, kernel=kernel, noise=args.noise, learn=args.learn, settings=settings,
-                       mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution, force=args.force)
+        return fit_dataset(ds, args.out, mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution,
+                           force=args.force)                # the dataset holds the settings it was labelled with
+    return fit_dataset(source, args.out, kernel=overrides.kernel, noise=overrides.noise, learn=overrides.learn,
+                       settings=settings, mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution,
+                       force=args.force)
 
 
 def _fit_report(args: argparse.Namespace, info: dict) -> None:
@@ -227,8 +222,8 @@ def _replay(args: argparse.Namespace) -> int:
 
 
 def _import_bag(args: argparse.Namespace) -> int:
-    from .exploration.observations import ObservationPolicy
     from .io.datasets import save_dataset
+    from .models.estimator import EstimatorSettings
     from .io.rosbag import BagTopics, import_bag
 
     def numbers(text: str | None, n: int, what: str):
@@ -265,8 +260,8 @@ def _import_bag(args: argparse.Namespace) -> int:
     ds = import_bag(args.bag, topics=topics, base_frame=args.base_frame, camera_transform=args.camera_transform,
                     tool_offset=tool, tip_radius=args.tip_radius, contact_force=args.contact_force,
                     contact_spacing=args.contact_spacing, max_gap=args.max_gap,
-                    policy=None if args.voxel is None else ObservationPolicy(voxel=args.voxel),
-                    settings=args.settings, crop=None if crop is None else [crop[:3], crop[3:]],
+                    settings=_estimator_overrides(args).apply(EstimatorSettings.preset(args.settings)),
+                    crop=None if crop is None else [crop[:3], crop[3:]],
                     time_window=window, tactile_calibration=calibration, tactile_transform=args.tactile_transform)
     path = save_dataset(ds, out, overwrite=args.force)
     c = ds.meta["counts"]
@@ -434,11 +429,6 @@ OUTER_TOL_HELP = ("visual-tactile runs with a truncated outer basis dropping a P
                   "docs/performance.md); default: exact")
 
 
-def _fit_voxel(text: str):
-    """``fit --voxel``: "auto" or an edge [m]."""
-    return "auto" if text == "auto" else _voxel(text)
-
-
 def _device(text: str) -> str:
     from ._validation import as_device
 
@@ -495,18 +485,84 @@ def _kernel_name(text: str) -> str:
     return text                      # as typed: a study folder records the name its command line gave
 
 
-def _kernel_choice(args: argparse.Namespace):
-    """``--kernel`` and ``--lengthscale`` (or the deprecated ``--theta``) as one KernelChoice, or None."""
-    from .kernels import KernelChoice
+def _noise(text: str) -> float:
+    """An argparse type for sigma^2, in the one range every door takes."""
+    from ._validation import as_noise
 
-    length = args.lengthscale
+    return _argument(lambda v: as_noise(v, "--noise"), _number(text, "noise", "a number"))
+
+
+def _voxel_or_auto(text: str):
+    """An argparse type for the camera's voxel edge [m] (0: every point), or "auto" (None: the settings' rule)."""
+    return None if text == "auto" else _voxel(text)
+
+
+def _assignment(text: str):
+    """An argparse type for ``--estimator KEY=VALUE``: the pair, its key and value checked at once."""
+    from .models.overrides import EstimatorOverrides
+
+    _argument(lambda t: EstimatorOverrides.from_assignments([t]), text)
+    return text
+
+
+def _add_estimator_arguments(parser: argparse.ArgumentParser, default: str) -> None:
+    """The estimator's flags, declared once for every sub-command that takes them (``study``, ``fit``,
+    ``import-bag``): each read into one :class:`~torch_gpioius.models.overrides.EstimatorOverrides` by
+    :func:`_estimator_overrides` and checked by the one check its setting has. ``default`` says what each
+    replaces ("each world's own", "the settings'")."""
+    group = parser.add_argument_group("the estimator's settings")
+    group.add_argument("--kernel", default=None, type=_kernel_name,
+                       help=f"the kernel: {_kernel_names()} (imq: the paper's inverse multiquadric; a kernel "
+                            "registered with register_kernel by its kind; without --lengthscale at the length the "
+                            f"settings' rule or kernel gives); default: {default}")
+    group.add_argument("--lengthscale", type=_kernel_length("lengthscale"), default=None,
+                       help="the kernel's length scale [m] (the paper's theta for the inverse multiquadric; with "
+                            "--learn length or all, where the learning starts; the length rule dropped); default: "
+                            f"{default}")
+    group.add_argument("--theta", type=_kernel_length("theta"), default=None,
+                       help="deprecated: the paper's inverse multiquadric of this length (--kernel imq --lengthscale "
+                            "THETA)")
+    group.add_argument("--noise", type=_noise, default=None,
+                       help=f"sigma^2 (with --learn all, where the learning starts); default: {default}")
+    group.add_argument("--learn", default=None, choices=_learns(),
+                       help="what is learned: task (K_t alone, the paper's), length (also the kernel's length) or "
+                            "all (the length and the noise too), by the exact marginal likelihood; default: "
+                            f"{default}")
+    group.add_argument("--voxel", type=_voxel_or_auto, default=None,
+                       help="edge of the camera's voxels [m] (0 keeps every camera point; auto: the settings' rule, "
+                            f"a tenth of the object within 2-5 cm by default); default: {default}")
+    group.add_argument("--estimator", action="append", default=None, type=_assignment, metavar="KEY=VALUE",
+                       help="any other estimator setting, repeatable: noise, learn, restart_every, kernel, "
+                            "lengthscale, voxel, or labels.FIELD for a field of the labelling policy (e.g. "
+                            "labels.ray_smoothing=none, labels.vision_inside=0.03, labels.cover_offset=true); none "
+                            "is None")
+
+
+def _estimator_overrides(args: argparse.Namespace):
+    """The estimator's flags (:func:`_add_estimator_arguments`) as one
+    :class:`~torch_gpioius.models.overrides.EstimatorOverrides`.
+
+    Raises:
+        ValueError: a setting given twice (by its flag and by ``--estimator``), or ``--theta`` beside ``--kernel``
+            or ``--lengthscale``.
+    """
+    from .models.overrides import EstimatorOverrides
+
     if args.theta is not None:
-        if length is not None:
-            raise ValueError("--theta, --lengthscale: the same length under two names; give --lengthscale")
-        warnings.warn("--theta is --lengthscale under the paper's name", DeprecationWarning)
-        length = args.theta
-    choice = KernelChoice(args.kernel, length)
-    return choice if choice else None
+        if args.kernel is not None or args.lengthscale is not None:
+            raise ValueError("--theta (deprecated) names a kernel and its length; give --kernel and --lengthscale "
+                             "instead, not both")
+        warnings.warn("--theta is the paper's name for the inverse multiquadric's length: give --kernel imq "
+                      "--lengthscale", DeprecationWarning)
+    flags = {"kernel": "imq" if args.theta is not None else args.kernel,
+             "lengthscale": args.theta if args.theta is not None else args.lengthscale,
+             "noise": args.noise, "learn": args.learn, "voxel": args.voxel}
+    flags = {k: v for k, v in flags.items() if v is not None}
+    given = EstimatorOverrides.from_assignments(args.estimator or ()).to_dict()
+    twice = sorted(set(flags) & set(given))
+    if twice:
+        raise ValueError(f"--estimator: {', '.join(twice)} given by its own flag too; give it once")
+    return EstimatorOverrides.from_dict({**flags, **given}, "the estimator's flags")
 
 
 def _camera_error(text: str):
@@ -644,7 +700,6 @@ def _add_study(sub, common, fmt) -> None:
     sw.add_argument("--max-travel", type=_length("max-travel"), default=None,
                     help="travel budget per run [m] (3-D worlds)")
     sw.add_argument("--max-steps", type=int, default=None, help="cap on planning steps per run")
-    sw.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP + "; one setting per --out folder")
     sw.add_argument("--touch", default="point", type=_touch_name,
                     help="a registered touch model: point (the fingertip's contact), patch (a gel pad's depth map, "
                          "3-D worlds) or one registered with register_touch_model; one per --out folder")
@@ -659,10 +714,6 @@ def _add_study(sub, common, fmt) -> None:
                          "defaults with a transfer that knows the cover's gap, docs/method-notes.md section 16) or "
                          "gapfield (another: that gap a place at a time, section 18); "
                          "default: each file's own, the paper's for the built-in objects; one per --out folder")
-    sw.add_argument("--learn", default=None, choices=_learns(),
-                    help="what the runs learn: task (K_t alone, the paper's), length (also the kernel's length) or "
-                         "all (the length and the noise too), by the marginal likelihood on restart steps; default: "
-                         "each world's own; one per --out folder")
     sw.add_argument("--views", type=_views, default=None,
                     help="the 3-D worlds' simulated camera views in place of the settings': comma-separated names "
                          "(fixed, mirrored, wrist), a count (1-3) or paper (the fixed camera alone); one per --out "
@@ -678,17 +729,7 @@ def _add_study(sub, common, fmt) -> None:
                     help="the visual-tactile runs correct each camera view's capture from their contacts, by at most "
                          "these sizes, e.g. 12mm,2deg (each record: camera_corrections); default: as captured; one per "
                          "--out folder")
-    sw.add_argument("--kernel", default=None, type=_kernel_name,
-                    help=f"the kernel: {_kernel_names()} (imq: the paper's inverse multiquadric; a kernel registered "
-                         "with register_kernel by its kind); default: each world's own; one per --out folder")
-    sw.add_argument("--lengthscale", type=_kernel_length("lengthscale"), default=None,
-                    help="the kernel's length scale [m] (the paper's theta for the inverse multiquadric; with --learn "
-                         "length or all, where the learning starts); default: the kernel's own; one per --out folder")
-    sw.add_argument("--theta", type=_kernel_length("theta"), default=None,
-                    help="deprecated: --lengthscale under the paper's name")
-    sw.add_argument("--noise", type=float, default=None,
-                    help="sigma^2 (with --learn all, where the learning starts); default: each world's own; one per "
-                         "--out folder")
+    _add_estimator_arguments(sw, "each world's own; one per --out folder")
     sw.add_argument("--smoke", action="store_true", help="tiny runs, claims not judged (CI)")
     sw.add_argument("--quiet", action="store_true", help="no progress output")
     _force(sw, "--out holds files that are not a study of this world")
@@ -726,9 +767,6 @@ def _add_fit(sub, common, fmt) -> None:
                           "(contacts, free space, inside points); an exact fit's memory grows with the square of the "
                           "observations (default: every row)")
     fit.add_argument("--quiet", action="store_true", help="no progress lines during a long fit")
-    fit.add_argument("--voxel", type=_fit_voxel, default="auto",
-                     help="voxel edge of the cloud [m] (0: every point; auto: the settings' rule, a tenth of the "
-                          "clouds' largest extent within 2-5 cm by default)")
     fit.add_argument("--camera-origin", action="append", default=None, metavar='"X Y Z"',
                      help="the camera's optical centre in the files' frame and units: adds the free space in front "
                           "of the seen surface (without it the model knows where the cover is, not which side is "
@@ -746,18 +784,7 @@ def _add_fit(sub, common, fmt) -> None:
     fit.add_argument("--resolution", type=_length("resolution"), default=None,
                      help="grid of the estimate [m] (default: its figure 5 mm in 2-D and 2 cm in 3-D, its meshes "
                           "5 mm and 1 cm, as export's)")
-    fit.add_argument("--kernel", default=None, type=_kernel_name,
-                     help=f"the kernel in place of the settings': {_kernel_names()} (at the settings' length, or "
-                          "the settings' length rule, when --lengthscale is not given)")
-    fit.add_argument("--lengthscale", type=_kernel_length("lengthscale"), default=None,
-                     help="the kernel's length scale [m] in place of the settings' (whose default is a fifth of the "
-                          "object's largest extent, 4-10 cm); with --learn length or all, where the learning starts")
-    fit.add_argument("--theta", type=_kernel_length("theta"), default=None,
-                     help="deprecated: the inverse multiquadric's length scale [m] in place of the settings' kernel")
-    fit.add_argument("--noise", type=float, default=None, help="sigma^2 in place of the settings'")
-    fit.add_argument("--learn", default=None, choices=_learns(),
-                     help="learn K_t alone (the paper's), also the kernel's length, or the length and the noise too "
-                          "(by the exact marginal likelihood, from the settings' values); default: the settings'")
+    _add_estimator_arguments(fit, "the settings'")
     _force(fit, "--out holds files that `gpioius fit` did not write")
     fit.set_defaults(func=_fit)
 
@@ -804,9 +831,6 @@ def _add_import_bag(sub, common, fmt) -> None:
     bag.add_argument("--contact-force", type=float, default=1.0, help="|F| of a contact [N] (paper: 1.0)")
     bag.add_argument("--contact-spacing", type=float, default=0.005, help="thin contacts to this spacing [m]")
     bag.add_argument("--max-gap", type=float, default=0.1, help="longest joint-state gap to interpolate over [s]")
-    bag.add_argument("--voxel", type=float, default=None,
-                     help="voxel edge for the cloud [m] (default: the settings': a tenth of the --crop box, 2-5 cm, "
-                          "by default; 5 cm without a crop box)")
     bag.add_argument("--settings", default="default", choices=["default", "paper"],
                      help="the estimator's settings the dataset records for fit (kernel, sigma^2, free space, voxels) "
                           "and its labels: inside points behind the contacts, along the measured forces (none behind "
@@ -825,6 +849,8 @@ def _add_import_bag(sub, common, fmt) -> None:
                      help="indentation [m] at which a pixel is a contact (default: DIGIT's)")
     bag.add_argument("--tactile-transform", default=None,
                      help="T_tool_pad: the pad frame in the fingertip frame, 'x y z qx qy qz qw' (default: identity)")
+    _add_estimator_arguments(bag, "the settings' (the voxel: a tenth of the --crop box, 2-5 cm, by default; 5 cm "
+                                  "without a crop box)")
     _force(bag, "--out exists")
     bag.set_defaults(func=_import_bag)
 

@@ -278,19 +278,21 @@ def test_a_kernel_registered_outside_the_package_is_used_by_name_from_a_scene_fi
     import json
 
     from tests.scenes import ball_scene
-    from torch_gpioius.cli import _kernel_choice, build_parser
+    from torch_gpioius.cli import _estimator_overrides, build_parser
     from torch_gpioius.sim.scenefile import load_scene
     from torch_gpioius.studies.sweep import run_sweep
 
     scene = load_scene(ball_scene(tmp_path, extra='[forcefield]\nkernel = "TestMatern32"\n'))
+    # a kind without a learnable length: its own, the length rule dropped
     assert isinstance(scene.defaults.kernel, Matern32) and scene.defaults.kernel.ell == 0.1
+    assert scene.defaults.estimator.length_rule is None
     trace = tg.explore(scene, "tactile", max_steps=2, metrics_every=100)
     assert isinstance(trace.model.kernel, Matern32)
     # the command line: the name is checked against the registry, then reaches every run (a local backend: Ray's
     # workers would need the kernel's module importable, as any user's code run there)
     args = build_parser().parse_args(["study", "--world", "forcefield", "--kernel", "TestMatern32",
                                       "--out", str(tmp_path / "s")])
-    choice = _kernel_choice(args)
+    choice = _estimator_overrides(args).kernel
     assert choice.name == "TestMatern32" and choice.lengthscale is None
     run_sweep("forcefield", scenes=[ball_scene(tmp_path)], modes=["tactile"], seeds=1, out=tmp_path / "s",
               smoke=True, backend="local", progress=False, kernel=choice)

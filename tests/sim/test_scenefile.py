@@ -374,7 +374,7 @@ def test_a_scene_files_inside_depths_and_noise_take_the_ranges_the_worlds_build_
 
     for key in ("touch_inside", "vision_inside", "vision_inside_gap"):
         path = ball_scene(tmp_path, extra=f"[forcefield]\n{key} = {INSIDE_DEPTH_MAX * 1.5}\n")
-        with pytest.raises(ValueError, match=rf"\[forcefield\] {key}: must be in \[0, 0.1\]"):
+        with pytest.raises(ValueError, match=rf"\[forcefield\] {key}: must be in \(0, 0.1\] m or none"):
             read_scene(path)
         with pytest.raises(ValueError, match=key):
             with_inside_depths(ROBOT_STUDY_DEFAULTS, **{key: INSIDE_DEPTH_MAX * 1.5})

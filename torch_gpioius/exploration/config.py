@@ -13,11 +13,9 @@ from .._validation import as_device, as_float, as_int
 from ..planning import RangePenalty
 from ..kernels import InverseMultiquadricKernel, as_kernel
 from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, EstimatorView, as_learn  # noqa: F401
-from ..models.gpiois import GPIOIS, INNER, OUTER
-from ..models.gpis import GPIS
-from ..models.local import LocalGPIOIS
+from ..models.gpiois import INNER, OUTER
 from .policies import evidence_policy
-from .observations import ObservationPolicy, Observations
+from .observations import Observations
 from .recovery import NoProgress
 from .stopping import StopRule, TravelBudget
 from .touch import touch_model
@@ -183,16 +181,15 @@ class ExploreConfig(EstimatorView):
                               np.r_[np.full(len(inner), INNER), np.full(len(outer), OUTER)])
 
     def model_for(self, x: np.ndarray, y: np.ndarray, task: np.ndarray):
-        """The model of this mode on observations in the given order (GPIS keeps the inner ones)."""
-        kernel = self.estimator.new_kernel()          # a copy: a GPyTorch module belongs to one model
+        """The model of this mode on observations in the given order (GPIS keeps the inner ones), made by the
+        estimator's settings (:meth:`~torch_gpioius.models.estimator.EstimatorSettings.make_model`)."""
         if not self.uses_vision:
             inner = np.asarray(task) == INNER
-            model = GPIS(np.asarray(x)[inner], np.asarray(y)[inner], noise=self.noise, kernel=kernel)
+            model = self.estimator.make_model(np.asarray(x)[inner], np.asarray(y)[inner])
         elif self.regions is not None:
-            model = LocalGPIOIS(x, y, task, regions=self.regions, noise=self.noise, kernel=kernel)
+            model = self.estimator.make_model(x, y, task, regions=self.regions)
         else:
-            model = GPIOIS(x, y, task, noise=self.noise, kernel=kernel,
-                           inference=self.touch.inference, outer_tol=self.outer_tol)
+            model = self.estimator.make_model(x, y, task, inference=self.touch.inference, outer_tol=self.outer_tol)
         return model.to_device(self.device)
 
     def _policy_record(self) -> dict:
@@ -237,33 +234,26 @@ class ExploreConfig(EstimatorView):
 
 def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) -> EstimatorSettings:
     """The estimator's settings of one exploration: ``settings`` (an :class:`EstimatorSettings` or a preset's name;
-    a preset's voxel and length rules sized to the world's object) or the world's own, with the single settings given
-    beside it in their place."""
+    a preset's voxel and length rules sized to the world's object; an
+    :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: the world's own with those changes) or the world's
+    own, with the single settings given beside it in their place (one resolver,
+    :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, checks and applies them)."""
+    from ..models.overrides import KEEP, EstimatorOverrides
+
+    changes = settings if isinstance(settings, EstimatorOverrides) else EstimatorOverrides()
+    if isinstance(settings, EstimatorOverrides):
+        settings = None
     est = world.defaults.estimator if settings is None else EstimatorSettings.of(settings)
     if est.sized_to_object and est is not world.defaults.estimator:
         extent = world.object_extent
         if extent is not None:
             est = est.for_extent(extent)
-    changes = {}
     if kernel is not None:
-        changes["kernel"] = as_kernel(kernel)        # an ExactKernel, or a TypeError naming what it is
-    if noise is not None:
-        changes["noise"] = as_float(noise, "noise", positive=True)
-    if policy is not None:
-        if not isinstance(policy, ObservationPolicy):
-            raise ValueError(f"policy: expected an ObservationPolicy, got {type(policy).__name__}")
-        changes["labels"] = policy
-        changes["voxel_rule"] = None
-    if learn is not None:
-        changes["learn"] = as_learn(learn)
-    if not (isinstance(restart_every, str) and restart_every == "default"):
-        changes["restart_every"] = restart_every
-    if changes.get("learn", est.learn) != "task":
-        k = changes.get("kernel", est.kernel)
-        if not k.learnable_length:
-            raise ValueError(f"learn={changes.get('learn', est.learn)!r}: the {type(k).__name__} kernel has no "
-                             "learnable length (ExactKernel.length and value_at)")
-    return est.replace(**changes) if changes else est
+        kernel = as_kernel(kernel)                   # an ExactKernel, or a TypeError naming what it is
+    keep = isinstance(restart_every, str) and restart_every == "default"
+    loose = EstimatorOverrides(kernel=kernel, noise=noise, policy=policy, learn=learn,
+                               restart_every=KEEP if keep else restart_every)
+    return changes.merged(loose).apply(est)
 
 
 @dataclass

@@ -373,33 +373,19 @@ class Dataset:
         0.1 m and 0.006; ``kernel`` (an :class:`~torch_gpioius.kernels.ExactKernel`) or ``noise`` given here
         replace them. The outer task's prior mean is the header's (``outer_field`` or ``outer_mean``), else 1.
         """
-        from ..kernels import kernel_of_record
         from ..models.estimator import EstimatorSettings
-        from ..models.gpiois import GPIOIS
-        from ..models.gpis import GPIS
 
         if len(self) == 0:
             raise DatasetError("the dataset is empty: nothing to fit")
-        if settings is None and isinstance(self.meta.get("estimator"), dict):
+        if settings is None:
             try:
-                settings = EstimatorSettings.from_dict(self.meta["estimator"])
+                settings = EstimatorSettings.of_record(self.meta)      # old headers: their kernel and noise
             except ValueError as exc:
-                raise DatasetError(f"the header's estimator settings: {exc}") from None
-        if kwargs.get("kernel") is None and kwargs.get("theta") is None:    # theta=: the models' deprecated alias
-            if settings is not None:
-                kwargs["kernel"] = settings.new_kernel()
-            else:
-                try:
-                    kwargs["kernel"] = kernel_of_record(self.meta)
-                except ValueError as exc:
-                    raise DatasetError(f"the header's kernel: {exc}") from None
-        if noise is None:
-            noise = settings.noise if settings is not None else (self.meta.get("noise") or 0.006)
-        if (self.task == 1).any():
-            if not (self.task == 0).any():
-                raise DatasetError("the dataset has outer (visual) observations only; GPIOIS needs touches too")
-            return GPIOIS(self.x, self.y, self.task, noise=noise, **kwargs).set_outer_mean(self._outer_mean())
-        return GPIS(self.x, self.y, noise=noise, **kwargs)
+                raise DatasetError(str(exc)) from None
+        if (self.task == 1).any() and not (self.task == 0).any():
+            raise DatasetError("the dataset has outer (visual) observations only; GPIOIS needs touches too")
+        model = settings.make_model(self.x, self.y, self.task, noise=noise, **kwargs)
+        return model.set_outer_mean(self._outer_mean()) if (self.task == 1).any() else model
 
     def _outer_mean(self):
         """The outer mean the header records (``outer_field``: a gap field's record; ``outer_mean``: a number; set

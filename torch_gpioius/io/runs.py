@@ -62,38 +62,40 @@ class RunHistory:
     def model_at(self, step: int):
         """The model of the run after ``step``: rebuilt from the observations with the logged K_t / local
         parameters (no re-learning), or fitted where the file records none (datasets)."""
-        from ..models.gpiois import GPIOIS
-        from ..models.gpis import GPIS
-
         k = self.nearest_step(step)
         ds, p = self.states[k], self.params.get(k, {})
-        noise = float(self.meta.get("noise") or 0.006)
-        kernel = self.kernel()
+        settings = self.settings()
         has_outer = bool((ds.task == 1).any())
         if not has_outer or self.meta.get("mode") == "tactile":
-            inner = ds.task == 0
-            model = GPIS(ds.x[inner], ds.y[inner], noise=noise, kernel=kernel)
+            model = settings.make_model(ds.x[ds.task == 0], ds.y[ds.task == 0])
             return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
         if "local_params" in p and self.meta.get("regions"):
-            from ..models.local import LocalGPIOIS
-
-            model = LocalGPIOIS(ds.x, ds.y, ds.task, regions=int(self.meta["regions"]), noise=noise, kernel=kernel)
+            model = settings.make_model(ds.x, ds.y, ds.task, regions=int(self.meta["regions"]))
             return model.set_params(p["local_params"])
         if "kt" in p and np.isfinite(p["kt"]).all():
-            model = GPIOIS(ds.x, ds.y, ds.task, noise=noise, task_covariance=torch.as_tensor(p["kt"]),
-                           kernel=kernel).set_outer_mean(p.get("outer_field") or p.get("outer_mean", 1.0))
+            model = settings.make_model(ds.x, ds.y, ds.task, task_covariance=torch.as_tensor(p["kt"]))
+            model.set_outer_mean(p.get("outer_field") or p.get("outer_mean", 1.0))
             return load_logged_hyperparameters(model, p.get("hyperparameters"), f"{self.path}: step {k}")
-        return GPIOIS(ds.x, ds.y, ds.task, noise=noise, kernel=kernel).fit()
+        return settings.make_model(ds.x, ds.y, ds.task).fit()
 
-    def kernel(self):
-        """A new copy of the run's kernel as its header describes it (the inverse multiquadric of the header's
-        ``theta`` in files that describe none)."""
-        from ..kernels import kernel_of_record
+    def settings(self):
+        """The estimator's settings the run recorded (its header's ``estimator``; for files written before, its
+        kernel and noise: :meth:`~torch_gpioius.models.estimator.EstimatorSettings.of_record`).
+
+        Raises:
+            DatasetError: settings the header holds that cannot be read (names the file).
+        """
+        from ..models.estimator import EstimatorSettings
 
         try:
-            return kernel_of_record(self.meta)
+            return EstimatorSettings.of_record(self.meta)
         except ValueError as exc:
-            raise DatasetError(f"{self.path}: the header's kernel: {exc}") from None
+            raise DatasetError(f"{self.path}: {exc}") from None
+
+    def kernel(self):
+        """A new copy of the run's kernel as its recorded settings describe it (the inverse multiquadric of the
+        header's ``theta`` in files that describe none)."""
+        return self.settings().new_kernel()
 
     def pad_footprints(self, step: int) -> np.ndarray:
         """`(p, 4, 3)` the corners of the gel pad at every patch up to ``step`` [m], base frame (in order around

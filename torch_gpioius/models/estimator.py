@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import NOISE_RANGE, as_float, as_int
+from .._validation import as_float, as_int, as_noise
 from ..kernels import (ExactKernel, InverseMultiquadricKernel, KernelChoice, Matern52, as_kernel, from_description,
                        kernel_named)
 from .labels import ObservationPolicy
@@ -170,8 +170,7 @@ class EstimatorSettings:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kernel", as_kernel(self.kernel))
-        object.__setattr__(self, "noise", as_float(self.noise, "noise", lo=NOISE_RANGE[0], hi=NOISE_RANGE[1],
-                                                   positive=True))
+        object.__setattr__(self, "noise", as_noise(self.noise))
         if not isinstance(self.labels, ObservationPolicy):
             raise ValueError(f"labels: expected an ObservationPolicy, got {type(self.labels).__name__}")
         if self.voxel_rule is not None and not isinstance(self.voxel_rule, VoxelRule):
@@ -316,19 +315,40 @@ class EstimatorSettings:
         """A copy of the kernel for one model (a GPyTorch module belongs to one model)."""
         return copy.deepcopy(self.kernel)
 
-    def make_model(self, x, y, task=None, **kwargs):
-        """A model on observations `(n, d)` [m] with labels `(n,)`: a GPIOIS when ``task`` `(n,)` holds both tasks, a
-        GPIS on the inner (task 0) observations otherwise; ``kwargs`` go to the model (``inference``, ...)."""
+    def make_model(self, x, y, task=None, *, noise: float | None = None, kernel: ExactKernel | None = None,
+                   regions: int | None = None, **kwargs):
+        """The model these settings make on observations `(n, d)` [m] with labels `(n,)`: every model the package
+        builds comes from here (an exploration's, a fit's on a dataset, a replayed step's).
+
+        A :class:`~torch_gpioius.models.gpiois.GPIOIS` when ``task`` `(n,)` holds both tasks (a
+        :class:`~torch_gpioius.models.local.LocalGPIOIS` of ``regions`` regions when given), a
+        :class:`~torch_gpioius.models.gpis.GPIS` on the inner (task 0) observations otherwise. ``noise`` and
+        ``kernel`` replace the settings' for this model (a value a run learned, a caller's kernel; the kernel is
+        used as given, the settings' is copied); ``kwargs`` go to the model (``inference``, ``outer_tol``,
+        ``task_covariance``, ...).
+
+        Raises:
+            ValueError: ``regions`` without both tasks, or what the model refuses (names it).
+        """
         from .gpiois import GPIOIS
         from .gpis import GPIS
 
         x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+        noise = self.noise if noise is None else noise
+        if kernel is None and kwargs.get("theta") is None:      # theta=: the models' deprecated alias, as given
+            kernel = self.new_kernel()
         if task is not None:
             task = np.asarray(task)
             if (task == 1).any() and (task == 0).any():
-                return GPIOIS(x, y, task, noise=self.noise, kernel=self.new_kernel(), **kwargs)
+                if regions is not None:
+                    from .local import LocalGPIOIS
+
+                    return LocalGPIOIS(x, y, task, regions=regions, noise=noise, kernel=kernel, **kwargs)
+                return GPIOIS(x, y, task, noise=noise, kernel=kernel, **kwargs)
             x, y = x[task == 0], y[task == 0]
-        return GPIS(x, y, noise=self.noise, kernel=self.new_kernel(), **kwargs)
+        if regions is not None:
+            raise ValueError("regions: a similarity per region needs observations of both tasks")
+        return GPIS(x, y, noise=noise, kernel=kernel, **kwargs)
 
     # ------------------------------------------------------------------ as plain data
     def to_dict(self) -> dict:
@@ -406,6 +426,35 @@ class EstimatorSettings:
             return dataclasses.replace(settings, **changes, name=name)
         except TypeError as exc:
             raise ValueError(f"estimator settings: {exc}") from None
+
+    @classmethod
+    def of_record(cls, meta: dict) -> "EstimatorSettings":
+        """The settings a record was made with (a log's, a dataset's or a run folder's header): its ``estimator``
+        (:meth:`to_dict`'s form), else, for records written before the settings were recorded whole, the kernel it
+        names (``kernel``, else the inverse multiquadric of ``theta``, else of 0.1 m) and its ``noise`` (else the
+        paper's 2-D 0.006) with the paper's labels: the one reading of old records that replay, export, the viewer
+        and a dataset's model share.
+
+        Raises:
+            ValueError: settings, a kernel or a noise the record holds that cannot be read (names which).
+        """
+        from ..kernels import kernel_of_record
+
+        if not isinstance(meta, dict):
+            raise ValueError(f"record: expected a header's fields, got {type(meta).__name__}")
+        if isinstance(meta.get("estimator"), dict):
+            try:
+                return cls.from_dict(meta["estimator"])
+            except ValueError as exc:
+                raise ValueError(f"the header's estimator settings: {exc}") from None
+        try:
+            kernel = kernel_of_record(meta)
+        except ValueError as exc:
+            raise ValueError(f"the header's kernel: {exc}") from None
+        try:
+            return cls(kernel, meta.get("noise") or 0.006, ObservationPolicy(), name="custom")
+        except ValueError as exc:
+            raise ValueError(f"the header's noise: {exc}") from None
 
     # ------------------------------------------------------------------ reading
     def __eq__(self, other) -> bool:

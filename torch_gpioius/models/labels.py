@@ -11,7 +11,7 @@ a user's files and a bag import label alike. :mod:`torch_gpioius.exploration.obs
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -102,38 +102,80 @@ class ObservationPolicy:
     ray_smoothing: int | None = None
 
     def __post_init__(self) -> None:
-        if self.camera_bound is not None:
-            bound = self.camera_bound
-            ok = (isinstance(bound, (tuple, list)) and len(bound) == 2 and all(
-                not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) for v in bound)
-                and 0 < bound[0] <= 0.1 and 0 < bound[1] <= math.radians(20))
-            if not ok:
-                raise ValueError("ObservationPolicy.camera_bound: must be (translation in (0, 0.1] m, rotation in (0, "
-                                 f"{math.radians(20):.3g}] rad) or None, got {bound!r}")
-            object.__setattr__(self, "camera_bound", (float(bound[0]), float(bound[1])))
-        object.__setattr__(self, "ray_smoothing", as_int(self.ray_smoothing, "ObservationPolicy.ray_smoothing (rays)",
-                                                         8, 10_000, allow_none=True))
-        for name in ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table"):
-            if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"ObservationPolicy.{name}: must be True or False, got {getattr(self, name)!r}")
+        for f in fields(self):
+            object.__setattr__(self, f.name, self.check_field(f.name, getattr(self, f.name)))
         if self.cover_gap_field and not (self.cover_offset and self.vision_inside_deep):
             raise ValueError("ObservationPolicy.cover_gap_field: needs cover_offset and vision_inside_deep (the gap "
                              "field stands in for their one gap)")
-        for name in ("vision_free_offset", "voxel", "crop_margin", "vision_free_far", "touch_inside", "vision_inside",
-                     "vision_inside_gap"):
-            v = getattr(self, name)
-            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not
-                                  (math.isfinite(v) and v > 0)):
-                raise ValueError(f"ObservationPolicy.{name}: must be a positive number [m] or None, got {v!r}")
-        for name in ("free_space_spacing", "free_space_margin"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= 1.0):
-                raise ValueError(f"ObservationPolicy.{name}: must be in (0, 1] m, got {v!r}")
         if self.vision_free_far is not None and (self.vision_free_offset is None or
                                                  not self.vision_free_far > self.vision_free_offset):
             raise ValueError(f"ObservationPolicy.vision_free_far: must lie beyond vision_free_offset "
                              f"({self.vision_free_offset!r} m), got {self.vision_free_far!r}")
 
+    @classmethod
+    def check_field(cls, name: str, value):
+        """``value`` as the field ``name`` holds it, checked against that field's one range (every door that sets a
+        label's field, a keyword, a command-line flag, a scene file, checks it here); the checks between fields
+        are the constructor's.
+
+        Raises:
+            ValueError: an unknown field (names the fields), or a value outside its range (names the field, the
+                value and the range).
+        """
+        from .._validation import INSIDE_DEPTH_MAX
+
+        where = f"ObservationPolicy.{name}"
+        if name == "camera_bound":
+            if value is None:
+                return None
+            ok = (isinstance(value, (tuple, list)) and len(value) == 2 and all(
+                not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) for v in value)
+                and 0 < value[0] <= 0.1 and 0 < value[1] <= math.radians(20))
+            if not ok:
+                raise ValueError(f"{where}: must be (translation in (0, 0.1] m, rotation in (0, "
+                                 f"{math.radians(20):.3g}] rad) or None, got {value!r}")
+            return float(value[0]), float(value[1])
+        if name == "ray_smoothing":
+            return as_int(value, f"{where} (rays)", 8, 10_000, allow_none=True)
+        if name in _FLAGS:
+            if not isinstance(value, bool):
+                raise ValueError(f"{where}: must be true or false, got {value!r}")
+            return value
+        if name in _LENGTHS:
+            hi = INSIDE_DEPTH_MAX if name in _DEPTHS else _LENGTHS[name]
+            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not
+                                      (math.isfinite(value) and 0 < value <= hi)):
+                raise ValueError(f"{where}: must be in (0, {hi:g}] m or none, got {value!r}")
+            return value
+        if name in _SPACINGS:
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value)
+                                                                                    and 0 < value <= 1.0):
+                raise ValueError(f"{where}: must be in (0, 1] m, got {value!r}")
+            return value
+        raise ValueError(f"ObservationPolicy: unknown field {name!r}; the fields are "
+                         f"{', '.join(f.name for f in fields(cls))}")
+
+    @classmethod
+    def field_range(cls, name: str) -> str:
+        """What :meth:`check_field` accepts for the field ``name``, in words (the configuration reference's).
+
+        Raises:
+            ValueError: an unknown field.
+        """
+        from .._validation import INSIDE_DEPTH_MAX
+
+        if name == "camera_bound":
+            return f"(translation in (0, 0.1] m, rotation in (0, {math.radians(20):.3g}] rad) or none"
+        if name == "ray_smoothing":
+            return "8-10000 rays, or none"
+        if name in _FLAGS:
+            return "true or false"
+        if name in _LENGTHS:
+            return f"(0, {INSIDE_DEPTH_MAX if name in _DEPTHS else _LENGTHS[name]:g}] m, or none"
+        if name in _SPACINGS:
+            return "(0, 1] m"
+        cls.check_field(name, None)         # raises, naming the fields
+        return ""                           # pragma: no cover
 
     @property
     def ramp(self) -> float:
@@ -194,3 +236,14 @@ def check_voxel(voxel) -> float:
         raise ValueError(f"voxel: must be 0 (keep every camera point) or an edge in [{VOXEL_RANGE[0]:g}, "
                          f"{MAX_VOXEL:g}] m, got {voxel!r}")
     return float(voxel)
+
+
+#: The policy's on/off fields.
+_FLAGS = ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table")
+#: The policy's optional lengths [m] and the largest each takes (None: off); the depths' bound is
+#: ``INSIDE_DEPTH_MAX``, the voxels' :data:`MAX_VOXEL`.
+_LENGTHS = {"vision_free_offset": 1.0, "voxel": 1.0, "crop_margin": 10.0, "vision_free_far": 1.0,
+            "touch_inside": None, "vision_inside": None, "vision_inside_gap": None}
+_DEPTHS = ("touch_inside", "vision_inside", "vision_inside_gap")
+#: The policy's spacings along the fingertip's path [m], in (0, 1].
+_SPACINGS = ("free_space_spacing", "free_space_margin")

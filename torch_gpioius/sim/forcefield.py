@@ -21,6 +21,8 @@ import torch
 
 from ..models.estimator import (COVER_GAP_LIMIT, GAP_FIELD_LABELS, GAP_LABELS, INSIDE_DEPTH,  # noqa: F401
                                 EstimatorSettings)
+from ..models.labels import ObservationPolicy
+from ..models.overrides import EstimatorOverrides
 from ..exploration.stopping import TravelBudget
 from ..exploration.registry import SceneSupport, register_world
 from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, geometry_hash,
@@ -30,7 +32,7 @@ from ..planning import RangePenalty
 from ..sensors.pointcloud import CameraError, PinholeCamera, SimulatedDepthCamera, error_key, look_at, view_errors
 from ..sensors.simulated import ForceFieldContact
 from ..surfaces import surface_samples
-from .._validation import INSIDE_DEPTH_MAX, as_bounds, as_float
+from .._validation import as_bounds
 from .ranged import RangedScene
 from .shapes3d import MeshSDF, capsule, mesh_from_sdf, offset, rounded_box, smooth_union
 
@@ -145,35 +147,10 @@ def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDe
         raise ValueError(f"inside depths: unknown {sorted(unknown)}; the settings are {', '.join(INSIDE_SETTINGS)}")
     if not given:
         return defaults
-    offset = given.pop("cover_offset", None)
-    if offset is not None and not isinstance(offset, bool):
-        raise ValueError(f"cover_offset: must be true or false, got {offset!r}")
-    checked = {k: as_float(v, k, lo=0.0, hi=INSIDE_DEPTH_MAX, unit="m (0: none)") or None for k, v in given.items()}
-    if offset is not None:
-        checked["cover_offset"] = offset
+    # the labels' own ranges (0 for a depth: none)
+    checked = {k: ObservationPolicy.check_field(k, None if k != "cover_offset" and v == 0 else v)
+               for k, v in given.items()}
     return defaults.estimator_changed(labels=checked)
-
-
-def with_kernel(defaults: ExplorationDefaults, kernel) -> ExplorationDefaults:
-    """``defaults`` with the kernel ``kernel``: an :class:`~torch_gpioius.kernels.ExactKernel`, a name users type
-    ("imq", "matern52", a registered kind; at the held kernel's length when of its kind), or a
-    :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length scale); None or an empty choice: as they are
-    (and so keep their name).
-
-    Raises:
-        ValueError: an unknown kernel name or a bad length (names it).
-    """
-    from ..kernels import ExactKernel, KernelChoice
-
-    if isinstance(kernel, str):
-        kernel = KernelChoice(kernel)
-    if isinstance(kernel, KernelChoice):
-        kernel = kernel.apply(defaults.kernel) if kernel else None
-    if kernel is None:
-        return defaults
-    if not isinstance(kernel, ExactKernel):
-        raise ValueError(f"kernel: expected a name, a KernelChoice or an ExactKernel, got {type(kernel).__name__}")
-    return defaults.estimator_changed(kernel=kernel)
 
 
 def as_views(views) -> tuple[str, ...]:
@@ -633,10 +610,11 @@ class Scene3D(RangedScene):
             settings: "default" (:func:`object_defaults` and all three :data:`VIEWS`) or "paper" (the robot study's
                 :data:`ROBOT_STUDY_DEFAULTS` and the paper's single fixed camera); ``defaults`` replaces either.
             views: the camera's views (see the class; default: by ``settings``).
-            kernel: "imq" (the paper's inverse multiquadric), "matern52" (each at the settings' length when the
-                settings hold that kind), a :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length scale)
-                or an :class:`~torch_gpioius.kernels.ExactKernel` (default: by ``settings``, a Matérn of 0.1 m or
-                the inverse multiquadric of 0.15 m).
+            kernel: "imq" (the paper's inverse multiquadric), "matern52" (each at the settings' length, the length
+                rule's where they hold one), a :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length
+                scale) or an :class:`~torch_gpioius.kernels.ExactKernel` (default: by ``settings``, a Matérn a fifth
+                of the body long or the inverse multiquadric of 0.15 m). This and the estimator's other settings
+                below go through :class:`~torch_gpioius.models.overrides.EstimatorOverrides`.
             noise: sigma^2 (default: by ``settings``, 0.08).
             voxel: the camera's voxel edge [m] (0: every point; default: by ``settings``).
             touch_inside: depth [m] of the inside point behind each contact (``ObservationPolicy.touch_inside``; 0:
@@ -666,18 +644,15 @@ class Scene3D(RangedScene):
         mesh = place(load_mesh(inner, scale=scale, pose=pose, repair=repair, name="inner"), at)
         chosen = settings_for(settings, mesh)
         views = as_views(chosen["views"] if views is None else views)
-        defaults = with_kernel(chosen["defaults"] if defaults is None else defaults, kernel)
-        if noise is not None:
-            defaults = defaults.estimator_changed(noise=as_float(noise, "noise", positive=True))
-        if voxel is not None:
-            defaults = defaults.with_estimator(defaults.estimator.with_voxel(voxel))
-        if learn is not None:
-            from ..exploration.config import as_learn
-
-            learn = as_learn(learn)
-            defaults = defaults.estimator_changed(learn=learn)
-        defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside,
-                                      vision_inside_gap=vision_inside_gap, cover_offset=cover_offset)
+        defaults = chosen["defaults"] if defaults is None else defaults
+        # the estimator's loose settings, by the one resolver (0 for a depth: none)
+        depths = {k: v for k, v in (("touch_inside", touch_inside), ("vision_inside", vision_inside),
+                                    ("vision_inside_gap", vision_inside_gap), ("cover_offset", cover_offset))
+                  if v is not None}
+        changes = EstimatorOverrides(kernel=kernel, noise=noise, voxel=voxel, learn=learn, labels={
+            k: None if k != "cover_offset" and v == 0 else v for k, v in depths.items()})
+        if changes:
+            defaults = defaults.with_estimator(changes.apply(defaults.estimator))
         gap = {"tight": 0.008, "loose": 0.01}.get(cover, 0.005) if gap is None else gap
         outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution, gap_far=gap_far,
                              thick_side=thick_side)
@@ -803,6 +778,26 @@ class Scene3D(RangedScene):
         if self._given_camera is not None:
             raise ValueError("settings: this scene has a camera of its own; its views are not the settings' to change")
         return self._copy(**chosen)
+
+    def with_estimator(self, estimator) -> "Scene3D":
+        """The same scene with other estimator settings: an :class:`~torch_gpioius.models.estimator.EstimatorSettings`
+        in place of its own, or an :class:`~torch_gpioius.models.overrides.EstimatorOverrides` (or its plain dict: a
+        scene file's ``[estimator]`` section) applied to its own.
+
+        Raises:
+            ValueError: anything else, or changes that do not hold together (named).
+        """
+        from ..models.estimator import EstimatorSettings
+        from ..models.overrides import EstimatorOverrides
+
+        if isinstance(estimator, dict):
+            estimator = EstimatorOverrides.from_dict(estimator)
+        if isinstance(estimator, EstimatorOverrides):
+            estimator = estimator.apply(self.defaults.estimator)
+        if not isinstance(estimator, EstimatorSettings):
+            raise ValueError(f"estimator: expected EstimatorSettings or EstimatorOverrides, got "
+                             f"{type(estimator).__name__}")
+        return self._copy(defaults=self.defaults.with_estimator(estimator))
 
     def with_views(self, views) -> "Scene3D":
         """The same objects, approach, range and settings seen by other simulated views (:func:`as_views`: names

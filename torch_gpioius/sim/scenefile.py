@@ -44,6 +44,9 @@ A scene file, every length in metres in the UR5's base frame (z up)::
     learn = "task"                    # "length": the kernel's length learned with K_t; "all": the noise too
     camera_error = "6mm,1deg"         # the simulated cameras' calibration error (each view its own draw; "0": none);
                                       # and worse sensing: "2x" depth noise, "20%" pixels, "20%holes" blocks lost
+    [estimator]                       # optional: the estimator's settings in every world, on the world's own
+    noise = 0.05                      # (EstimatorOverrides.from_dict: kernel, lengthscale, noise, voxel, learn,
+    labels = { ray_smoothing = 24 }   #  restart_every, and labels = a table of ObservationPolicy fields)
     [mujoco]                          # (MujocoScene.from_mesh, make_cover)
     spacing = 0.02
     slack = 0.03                      # a loose cloth's distance from the body before it settles
@@ -63,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import INSIDE_DEPTH_MAX, KERNEL_LENGTH, NOISE_RANGE
+from .._validation import KERNEL_LENGTH, NOISE_RANGE
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -74,7 +77,7 @@ __all__ = ["SceneSpec", "read_scene", "load_scene", "resolve_mesh", "scene_finge
            "scene_worlds"]
 
 #: The keys of a scene file besides the sections of the worlds that build scene files (``[forcefield]``).
-_TOP = {"name", "world", "object", "cover", "approach", "range"}
+_TOP = {"name", "world", "object", "cover", "approach", "range", "estimator"}
 _OBJECT = {"mesh", "scale", "pose", "at", "repair", "resolution"}
 
 
@@ -115,6 +118,7 @@ class SceneSpec:
     approach: dict | None = None
     range: np.ndarray | None = None
     settings: dict = field(default_factory=dict)      # world name -> that world's settings
+    estimator: dict | None = None                     # [estimator]: changes to every world's estimator settings
 
 
 def resolve_mesh(ref: str, base: Path) -> Path:
@@ -250,7 +254,12 @@ def read_scene(path) -> SceneSpec:
             problem = _setting_problem(key, value)
             if problem:
                 raise bad(f"[{w}] {key}", problem)
-    return SceneSpec(path, name, world, dict(obj), dict(cover), approach, bounds, settings)
+    estimator = data.get("estimator")
+    if estimator is not None:              # checked as every door checks the estimator's changes
+        from ..models.overrides import EstimatorOverrides
+
+        estimator = EstimatorOverrides.from_dict(estimator, f"{path}: [estimator]").to_dict()
+    return SceneSpec(path, name, world, dict(obj), dict(cover), approach, bounds, settings, estimator)
 
 
 def _check_cover(cover, world: str, bad) -> None:
@@ -289,11 +298,16 @@ def _check_finite(value, path: Path, key: str) -> None:
 #: (lowest, highest, whether the lowest is allowed) for lengths and numbers [SI units].
 _RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, True), "theta": (*KERNEL_LENGTH, False),
            "lengthscale": (*KERNEL_LENGTH, False),
-           "noise": (*NOISE_RANGE, False), "touch_inside": (0.0, INSIDE_DEPTH_MAX, True),
-           "vision_inside": (0.0, INSIDE_DEPTH_MAX, True), "vision_inside_gap": (0.0, INSIDE_DEPTH_MAX, True),
+           "noise": (*NOISE_RANGE, False),
            "bridge": (0.0, 0.2, False), "gap": (0.0, 0.2, False), "gap_far": (0.0, 0.2, False),
            "resolution": (0.0, 0.05, False), "spacing": (0.0, 0.2, False), "timestep": (0.0, 0.1, False),
            "settle_time": (0.0, 60.0, True)}
+
+
+#: The world sections' keys that are the labels' fields, checked by the labels' own ranges, and those of them where 0
+#: means none.
+_POLICY_KEYS = ("touch_inside", "vision_inside", "vision_inside_gap", "cover_offset")
+_DEPTH_KEYS = ("touch_inside", "vision_inside", "vision_inside_gap")
 
 
 def _setting_problem(key: str, value) -> str | None:
@@ -306,8 +320,14 @@ def _setting_problem(key: str, value) -> str | None:
         except ValueError as exc:
             return str(exc).removeprefix("voxel: ")
         return None
-    if key == "cover_offset" and not isinstance(value, bool):
-        return f"must be true or false, got {value!r}"
+    if key in _POLICY_KEYS:          # the labels' own ranges (0 for a depth: none)
+        from ..models.labels import ObservationPolicy
+
+        try:
+            ObservationPolicy.check_field(key, None if key in _DEPTH_KEYS and value == 0 else value)
+        except ValueError as exc:
+            return str(exc).removeprefix(f"ObservationPolicy.{key}: ")
+        return None
     if key == "camera_error":
         from ..sensors.pointcloud import CameraError
 
@@ -420,6 +440,11 @@ def load_scene(path, world: str | None = None, seed: int = 0, smoke: bool = Fals
             where["bounds"] = spec.range
         scene = support.build(mesh, kind, name=spec.name, where=where, cover=cover, settings=settings,
                               preset=preset, smoke=smoke)
+        if spec.estimator:                  # [estimator]: on the world's (or the preset's) own
+            if not hasattr(scene, "with_estimator"):
+                raise ValueError(f"[estimator]: the {world} world's scenes take no estimator settings "
+                                 "(with_estimator)")
+            scene = scene.with_estimator(spec.estimator)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{spec.path}: {exc}") from None
     if support.ur5:

@@ -61,7 +61,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
               device: str | None = None, settings: str | None = None, learn: str | None = None,
               views=None, kernel=None, noise: float | None = None, cover: str | None = None,
-              metrics_every=None, camera_error=None, camera_bound=None) -> dict:
+              metrics_every=None, camera_error=None, camera_bound=None, estimator=None) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -127,6 +127,10 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text, "12mm,2deg";
             ``ObservationPolicy.camera_bound``; each record's ``camera_corrections`` says what each view was moved by);
             None: the captures as the calibration places them. One per folder.
+        estimator: other changes to each world's estimator settings: an
+            :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, its plain dict (``{"labels":
+            {"ray_smoothing": None}}``) or ``KEY=VALUE`` texts (the command line's ``--estimator``); the runs and
+            the folder record them. None: none. One per folder.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -141,7 +145,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
         settings=settings, learn=learn, views=views, kernel=kernel, noise=noise, cover=cover,
-        metrics_every=metrics_every, camera_error=camera_error, camera_bound=camera_bound)
+        metrics_every=metrics_every, camera_error=camera_error, camera_bound=camera_bound, estimator=estimator)
     return _run(sweep)
 
 
@@ -179,7 +183,9 @@ def _claim(sweep: SweepSettings) -> Path:
                 "camera_bound": sweep.camera_bound,
                 # a folder's kernel as the command line names it (the earlier folders' keys)
                 "kernel": sweep.kernel.name if sweep.kernel else None,
-                "theta": sweep.kernel.lengthscale if sweep.kernel else None}
+                "theta": sweep.kernel.lengthscale if sweep.kernel else None,
+                # the other changes to the estimator (--estimator), as their plain dict; older folders: none
+                "estimator": sweep.estimator.to_dict() if sweep.estimator else None}
     return claim_folder(sweep.out, "study", sweep.force, world=sweep.world, voxel=sweep.voxel,
                         touch=None if sweep.touch == "point" else sweep.touch, **identity)   # older: point runs
 

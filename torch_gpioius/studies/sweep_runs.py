@@ -71,15 +71,11 @@ class RunSpec:
     max_steps: int | None = None
     threads: int = 1
     scene: str | None = None        # a scene file (torch_gpioius.sim.scenefile) instead of a built-in object
-    voxel: float | None = None      # camera voxel edge [m] (0: every point); None: the world's own (0.05)
     touch: str = "point"            # "point" (the fingertip's contact) or "patch" (a gel pad's depth map)
     outer_tol: float | None = None  # visual-tactile with a truncated outer basis (GPIOIS(outer_tol=)); None: exact
     device: str | None = None       # where the model's arithmetic runs ("cuda"); None: the CPU
     settings: str | None = None     # 3-D worlds: "default" or "paper" (World.with_settings); None: the world's own
-    learn: str | None = None        # "task", "length" or "all" (explore(learn=)); None: the world's own
     views: tuple | None = None      # 3-D worlds: the camera's views (World.with_views); None: the world's own
-    kernel: Any = None              # a KernelChoice (a kernel's name and length scale); None: the world's own
-    noise: float | None = None      # sigma^2; None: the world's own
     scene_hash: str | None = None   # the scene file's content (scenefile.scene_fingerprint): a run of an edited
     #                                 scene is another run, whatever its name
     set_object: Any = None          # an object of a set (sim.objectsets.SetObject) instead of a built-in object
@@ -87,7 +83,9 @@ class RunSpec:
     metrics_every: Any = None       # k steps or "schedule" (explore(metrics_every=)); None: every 5 steps under a
     #                                 travel budget, every step elsewhere
     camera_error: str | None = None  # the simulated cameras' extrinsic error ("6mm,1deg"; Scene3D.with_camera_error)
-    camera_bound: str | None = None  # the captures corrected from the contacts within it (policy.camera_bound)
+    camera_bound: str | None = None  # the captures corrected from the contacts within it, as asked (the record's)
+    estimator: Any = None           # the changes to the world's estimator settings (EstimatorOverrides: the voxel,
+    #                                 kernel, sigma^2, what is learned, the camera bound, any label); None: its own
 
     @property
     def key(self) -> str:
@@ -168,26 +166,12 @@ def _explore_kwargs(spec: RunSpec, world) -> dict:
         kw["max_steps"] = 12 if budget is None else 40
     if kw["mode"] == "visual-tactile":
         kw["interval_every"] = 1000 if spec.smoke else 10
-    if spec.voxel is not None:
-        kw["policy"] = world.defaults.policy.with_voxel(spec.voxel)
-    if spec.camera_bound is not None:    # the captures corrected from the contacts within this bound
-        import dataclasses
-
-        from ..sensors.pointcloud import CameraError
-
-        bound = CameraError.parse(spec.camera_bound)
-        kw["policy"] = dataclasses.replace(kw.get("policy", world.defaults.policy),
-                                           camera_bound=(bound.translation, bound.rotation))
+    if spec.estimator:                   # every change to the world's estimator, resolved in one place
+        kw["settings"] = spec.estimator.apply(world.defaults.estimator)
     if spec.touch != "point":
         kw["touch"] = spec.touch
     if spec.outer_tol is not None and kw["mode"] == "visual-tactile" and "regions" not in kw:
         kw["outer_tol"] = spec.outer_tol
-    if spec.learn is not None:
-        kw["learn"] = spec.learn
-    if spec.kernel:
-        kw["kernel"] = spec.kernel.apply(world.defaults.kernel)
-    if spec.noise is not None:
-        kw["noise"] = spec.noise
     if spec.device is not None:
         kw["device"] = spec.device
     return kw
@@ -368,7 +352,8 @@ def run_one(spec: RunSpec) -> dict:
         record["n_vision_inside"] = _n_outer(trace.model, inside=True)
         # the outer task's prior mean at the end (1: the paper's; 1 - gap / ramp once the touches set it)
         record["outer_mean"] = float(getattr(trace.model, "outer_mean", math.nan))
-    policy = kw.get("policy", world.defaults.policy)
+    estimator = kw.get("settings", world.defaults.estimator)
+    policy = estimator.labels
     record["voxel"] = policy.voxel or 0.0
     # the inside points' depths [m] (0: the paper's labels only)
     record["touch_inside"], record["vision_inside"] = policy.touch_inside or 0.0, policy.vision_inside or 0.0
@@ -397,10 +382,12 @@ def run_one(spec: RunSpec) -> dict:
         record["max_fit_gap"] = float(np.nanmax(trace.fit_gap))
     if trace is not None and len(trace.length):      # the kernel's length and sigma^2 at the end (as learned)
         record["length"], record["noise"] = float(trace.length[-1]), float(trace.noise[-1])
-    record["learn"] = kw.get("learn") or getattr(world.defaults, "learn", "task")
+    record["learn"] = estimator.learn
     if trace is not None:               # the estimator's settings the run used, as its log's header records them
         record["estimator"] = _logged_estimator(out / "logs" / f"{spec.key}.gpioius")
-    record["kernel"] = kw.get("kernel", world.defaults.kernel).kind
+    record["kernel"] = estimator.kernel.kind
+    if spec.estimator:                  # the changes asked for, beside the settings they made (``estimator``)
+        record["overrides"] = spec.estimator.to_dict()
     if trace is not None and getattr(trace.model, "regions", None) and len(trace.region_correlation):
         # the local model's regions: the seen surface coloured by its correlation, and each region over the run
         from .figures import figure_regions

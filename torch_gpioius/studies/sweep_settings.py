@@ -3,12 +3,14 @@ anything runs (:class:`SweepSettings`)."""
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass, field
 from typing import Any
 from pathlib import Path
 
-from .._validation import NOISE_RANGE, as_device, as_float
+from .._validation import as_device, as_float, as_noise
+from ..kernels import KernelChoice
 from .sweep_runs import RunSpec, study_worlds, sweep_modes
 
 __all__ = ["SweepSettings", "MAX_SEEDS", "checked_metrics_every"]
@@ -74,12 +76,30 @@ class SweepSettings:
     metrics_every: Any = None                           # k steps or "schedule"; None: the sweep's own
     camera_error: str | None = None                     # the simulated cameras' extrinsic error ("6mm,1deg")
     camera_bound: str | None = None                     # the captures corrected within it ("12mm,2deg")
+    estimator: Any = None                               # the other changes (EstimatorOverrides), or None
+
+    @property
+    def overrides(self):
+        """Every change this study makes to each world's estimator settings, as one
+        :class:`~torch_gpioius.models.overrides.EstimatorOverrides` (the voxel, kernel, sigma^2, what is learned, the
+        camera bound, then ``estimator``'s other changes), or None for none."""
+        from ..models.overrides import EstimatorOverrides
+        from ..sensors.pointcloud import CameraError
+
+        labels = {}
+        if self.camera_bound is not None:
+            bound = CameraError.parse(self.camera_bound)
+            labels["camera_bound"] = (bound.translation, bound.rotation)
+        own = EstimatorOverrides(kernel=self.kernel, noise=self.noise, voxel=self.voxel, learn=self.learn,
+                                 labels=labels)
+        merged = own.merged(self.estimator) if self.estimator else own
+        return merged or None
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
                 learn=None, views=None, kernel=None, noise=None, cover=None,
-                metrics_every=None, camera_error=None, camera_bound=None) -> "SweepSettings":
+                metrics_every=None, camera_error=None, camera_bound=None, estimator=None) -> "SweepSettings":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry, world_names
 
@@ -87,6 +107,20 @@ class SweepSettings:
         if world not in study_worlds():
             raise ValueError(f"world: must be one of {study_worlds()}, got {world!r}")
         entry = world_entry(world)
+        # the estimator's changes: those of their own arguments (the folder's identity keys since before the
+        # resolver) taken out of ``estimator``, the rest kept there
+        estimator, loose = _overrides(estimator), {"voxel": voxel, "learn": learn, "noise": noise, "kernel": kernel}
+        if estimator is not None:
+            for key in loose:
+                value = getattr(estimator, key)
+                if value is None or (key == "kernel" and not isinstance(value, KernelChoice)):
+                    continue
+                if loose[key] is not None:
+                    raise ValueError(f"estimator: {key} given beside the {key} argument; give it once")
+                loose[key] = value
+            estimator = dataclasses.replace(estimator, voxel=None, learn=None, noise=None, kernel=(
+                estimator.kernel if not isinstance(estimator.kernel, KernelChoice) else None)) or None
+        voxel, learn, noise, kernel = loose["voxel"], loose["learn"], loose["noise"], loose["kernel"]
         scene_files = _scene_files(scenes, world)
         set_objects, objects = _set_objects(objects, world, cover)
         objects = tuple(dict.fromkeys(objects or ([] if scene_files or set_objects else entry.object_names)))
@@ -156,14 +190,14 @@ class SweepSettings:
                 raise ValueError(f"camera_bound: corrects the captures of the 3-D worlds' cameras, not {world}'s")
             camera_bound = str(bound)
         if noise is not None:
-            noise = as_float(noise, "noise", lo=NOISE_RANGE[0], hi=NOISE_RANGE[1], positive=True)
+            noise = as_noise(noise)
         from ..sim.scenefile import scene_fingerprint
 
         hashes = {name: scene_fingerprint(path) for name, path in scene_files.items()}
         return cls(world, objects, modes, seeds, Path(out), workers, address, max_travel, max_steps, smoke, progress,
                    threads, backend, force, scene_files, voxel, touch, outer_tol, device, settings, learn, views,
                    kernel, noise, hashes, set_objects, (cover or "tight") if set_objects else None, metrics_every,
-                   camera_error, camera_bound)
+                   camera_error, camera_bound, estimator)
 
     def _specs(self, out: Path) -> list[RunSpec]:
         # (name, scene file, identity, set object) of every object: a set's object is identified by its source,
@@ -172,11 +206,34 @@ class SweepSettings:
         objects += [(o, path, self.scene_hashes.get(o), None) for o, path in self.scene_files.items()]
         objects += [(o, None, f"set:{obj.source}:{obj.size!r}:{self.cover}", obj)
                     for o, obj in self.set_objects.items()]
+        estimator = self.overrides
         return [RunSpec(self.world, o, m, s, str(out), self.smoke, self.max_travel, self.max_steps, self.threads,
-                        scene, self.voxel, self.touch, self.outer_tol, self.device, self.settings, self.learn,
-                        self.views, self.kernel, self.noise, identity, obj, self.cover if obj is not None else None,
-                        self.metrics_every, self.camera_error, self.camera_bound)
+                        scene, touch=self.touch, outer_tol=self.outer_tol, device=self.device,
+                        settings=self.settings, views=self.views, scene_hash=identity, set_object=obj,
+                        cover=self.cover if obj is not None else None, metrics_every=self.metrics_every,
+                        camera_error=self.camera_error, camera_bound=self.camera_bound, estimator=estimator)
                 for o, scene, identity, obj in objects for m in self.modes for s in range(self.seeds)]
+
+
+def _overrides(estimator):
+    """A study's changes to the estimator as an :class:`~torch_gpioius.models.overrides.EstimatorOverrides` (None
+    for none): one, its plain dict or ``KEY=VALUE`` texts.
+
+    Raises:
+        ValueError: anything else, or a bad key or value (named).
+    """
+    from ..models.overrides import EstimatorOverrides
+
+    if estimator is None:
+        return None
+    if isinstance(estimator, dict):
+        estimator = EstimatorOverrides.from_dict(estimator)
+    elif isinstance(estimator, (list, tuple)):
+        estimator = EstimatorOverrides.from_assignments(estimator)
+    if not isinstance(estimator, EstimatorOverrides):
+        raise ValueError(f"estimator: expected EstimatorOverrides, a dict or KEY=VALUE texts, got "
+                         f"{type(estimator).__name__}")
+    return estimator or None
 
 
 def checked_metrics_every(value):

@@ -418,6 +418,26 @@ class MujocoScene(RangedScene):
 
         return self._copy(self.start, self.direction, self.seed, **settings_for(settings, self.inner, MUJOCO_DEFAULTS))
 
+    def with_estimator(self, estimator) -> "MujocoScene":
+        """The same scene with other estimator settings: an :class:`~torch_gpioius.models.estimator.EstimatorSettings`
+        in place of its own, or an :class:`~torch_gpioius.models.overrides.EstimatorOverrides` (or its plain dict: a
+        scene file's ``[estimator]`` section) applied to its own. The cover settles again, to the same state.
+
+        Raises:
+            ValueError: anything else, or changes that do not hold together (named).
+        """
+        from ...models.estimator import EstimatorSettings
+        from ...models.overrides import EstimatorOverrides
+
+        if isinstance(estimator, dict):
+            estimator = EstimatorOverrides.from_dict(estimator)
+        if isinstance(estimator, EstimatorOverrides):
+            estimator = estimator.apply(self.defaults.estimator)
+        if not isinstance(estimator, EstimatorSettings):
+            raise ValueError(f"estimator: expected EstimatorSettings or EstimatorOverrides, got "
+                             f"{type(estimator).__name__}")
+        return self._copy(self.start, self.direction, self.seed, defaults=self.defaults.with_estimator(estimator))
+
     def with_views(self, views) -> "MujocoScene":
         """The same body, cover, approach, range and settings seen by other views
         (:func:`~torch_gpioius.sim.forcefield.as_views`: names, a count or "paper"); the tripods stand where they
