@@ -43,8 +43,10 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     Every world-specific setting is the world's (``world.defaults``: alpha, stop rules, the estimator's settings it
     suggests for its object; its hardware, camera and range penalty); the arguments below override them for one run.
     The estimator's settings (kernel, sigma^2, labels, voxels, what is learned) are one
-    :class:`~torch_gpioius.models.estimator.EstimatorSettings`: ``settings`` gives another whole, and ``kernel``,
-    ``noise``, ``policy``, ``learn`` and ``restart_every`` change one of them.
+    :class:`~torch_gpioius.models.estimator.EstimatorSettings`: ``settings`` gives another whole, or the world's own
+    with changes (an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: any of them, a label's field
+    included); ``kernel``, ``noise``, ``policy``, ``learn`` and ``restart_every`` change one of them, through the same
+    resolver (docs/reference/settings.md).
 
     Args:
         world: a :class:`~torch_gpioius.exploration.world.World` (``tg.sim.Scene2D``, ``tg.sim.Scene3D``,
@@ -58,8 +60,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             (:mod:`torch_gpioius.exploration.touch`).
         step: alpha, the planned step [m], in (0, 0.1].
         settings: the estimator's settings (an :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a
-            preset's name: "default", "paper", "paper-2d"; a preset's voxel rule sized to the world's object); None:
-            the world's.
+            preset's name: "default", "paper", "paper-2d"; a preset's voxel rule sized to the world's object), or
+            changes to the world's (an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, e.g.
+            ``EstimatorOverrides(labels={"ray_smoothing": None})``); None: the world's.
         kernel: an :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length scale, in place of the
             settings' (``theta=``, the paper's name for the inverse multiquadric's length scale, is a deprecated
             alias of ``kernel=InverseMultiquadricKernel(lengthscale=...)``); noise: sigma^2.
