@@ -185,7 +185,8 @@ def main(argv=None) -> int:
     if args.check:
         stale = [page for page, text in pages.items() if not page.is_file() or page.read_text() != text]
         for page in pages:
-            print(f"{page}: {'differs from the code: run scripts/reference_pages.py' if page in stale else 'up to date'}")
+            said = "differs from the code: run scripts/reference_pages.py" if page in stale else "up to date"
+            print(f"{page}: {said}")
         return 1 if stale else 0
     for page, text in pages.items():
         page.write_text(text)
