@@ -11,8 +11,8 @@ PACKAGE = Path(__file__).resolve().parents[1] / "torch_gpioius"
 
 #: The layers, lowest first (docs/architecture.md). A module may import its own layer and those before it.
 LAYERS = [
-    {"_version", "tolerances", "settings", "_validation", "_progress", "threads", "voxels", "polylines", "_extras",
-     "registry"},
+    {"_version", "tolerances", "exact", "settings", "_validation", "_progress", "threads", "voxels", "polylines",
+     "_extras", "registry"},
     {"kernels"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"},
     {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"baselines"}, {"io"}, {"testing"}, {"session"}, {"studies"},
     {"viewer"},
@@ -199,3 +199,24 @@ def test_no_two_modules_import_each_other():
         if m not in state:
             visit(m, [m])
     assert not circles, "modules that import each other:\n" + "\n".join(circles)
+
+
+def test_the_renamed_settings_still_import_with_a_warning():
+    """"settings" names the estimator's settings alone: the other three were renamed (exact arithmetic, a study's
+    plan, a patch's thinning); their old names still import, for one release, with a DeprecationWarning."""
+    import importlib
+    import sys
+
+    import torch_gpioius.exact as exact
+    import torch_gpioius.exploration as exploration
+    from torch_gpioius.exploration.patches import PatchThinning
+    from torch_gpioius.studies import sweep, sweep_settings
+
+    sys.modules.pop("torch_gpioius.settings", None)
+    with pytest.warns(DeprecationWarning, match="torch_gpioius.exact"):
+        old = importlib.import_module("torch_gpioius.settings")
+    assert old.exact_arithmetic is exact.exact_arithmetic
+    for module, name, new in ((exploration, "PatchSettings", PatchThinning), (sweep, "SweepSettings", sweep.StudyPlan),
+                              (sweep_settings, "SweepSettings", sweep.StudyPlan)):
+        with pytest.warns(DeprecationWarning, match=new.__name__):
+            assert getattr(module, name) is new

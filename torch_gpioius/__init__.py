@@ -29,7 +29,7 @@ from .io import (BagImportError, CheckpointError, Dataset, DatasetError, RunHist
 from .kernels import InverseMultiquadricKernel  # noqa: E402
 from .models import GPIOIS, GPIS, INNER, OUTER, LocalGPIOIS, UnidentifiedSimilarityWarning  # noqa: E402
 from .models.estimator import EstimatorSettings  # noqa: E402
-from .settings import exact_arithmetic  # noqa: E402
+from .exact import exact_arithmetic  # noqa: E402
 from .threads import torch_threads  # noqa: E402
 from .tolerances import tol  # noqa: E402
 

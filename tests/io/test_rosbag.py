@@ -429,13 +429,13 @@ def _pad_frames(recording, every=1, bad=None):
 
 
 def test_a_pad_topic_imports_patches_on_the_known_object(recording, tmp_path):
-    from torch_gpioius.exploration.patches import PatchSettings
+    from torch_gpioius.exploration.patches import PatchThinning
 
     msgs, T_tool_pad, cal = _pad_frames(recording)
     truth = recording[1]
     bag = write_bag(tmp_path / "pad", msgs, storage="mcap")
     ds = _import(bag, truth, topics=BagTopics(tactile="/digit/depth"), tactile_calibration=cal,
-                 tactile_transform=T_tool_pad, patch=PatchSettings(spacing=0.002))
+                 tactile_transform=T_tool_pad, patch=PatchThinning(spacing=0.002))
     counts = ds.meta["counts"]
     assert counts["pad_frames_used"] >= 3 and counts["pad_frames_out_of_contact"] == 2
     assert counts["pad_frames"] == counts["pad_frames_used"] + counts["pad_frames_out_of_contact"] + \

@@ -140,10 +140,10 @@ def test_a_study_sends_every_change_to_its_runs_in_one_object(tmp_path):
     keys), the folder records it, and another change is another folder."""
     from torch_gpioius.studies.sweep import _claim
     from torch_gpioius.studies.sweep_runs import _explore_kwargs
-    from torch_gpioius.studies.sweep_settings import SweepSettings
+    from torch_gpioius.studies.sweep_settings import StudyPlan
 
     def settings(**kw):
-        return SweepSettings.checked(world="planar", objects=["A"], modes=["visual-tactile"], seeds=1,
+        return StudyPlan.checked(world="planar", objects=["A"], modes=["visual-tactile"], seeds=1,
                                      out=tmp_path / "s", workers=None, address=None, max_travel=None,
                                      max_steps=None, smoke=True, progress=False, threads=1, backend="local",
                                      force=False, scenes=(), voxel=None, touch="point", outer_tol=None,

@@ -8,7 +8,7 @@ import pytest
 import torch
 
 import torch_gpioius as tg
-from torch_gpioius.exploration.patches import PatchSettings, patch_observations
+from torch_gpioius.exploration.patches import PatchThinning, patch_observations
 from torch_gpioius.sensors.tactile import (DIGIT_CALIBRATION, DepthMapTactileSensor, DigitTactileSensor,
                                            TactileCalibration, TactileReading, depth_from_image_message)
 
@@ -42,7 +42,7 @@ def test_a_pressed_sphere_gives_points_on_it_normals_of_it_and_free_space_outsid
     pose = None if seed is None else _pose(seed)
     radius = 0.02
     reading, centre = _sphere_reading(radius, pose=pose)
-    settings = PatchSettings(spacing=0.001, free_spacing=0.002, free_margin=0.002)
+    settings = PatchThinning(spacing=0.001, free_spacing=0.002, free_margin=0.002)
     obs = patch_observations(reading, settings, step=3)
     surf, free = obs.x[obs.y == 0], obs.x[obs.y == 1]
     assert obs.source == "patch" and obs.step == 3 and (obs.task == 0).all()
@@ -82,7 +82,7 @@ def test_a_patch_does_not_depend_on_rounding_of_its_depths():
 
 def test_a_patch_feeds_the_model_and_its_estimate_passes_through_the_sphere():
     reading, centre = _sphere_reading(0.03, press=1.5e-3, shape=(200, 200))
-    obs = patch_observations(reading, PatchSettings(spacing=0.002, free_spacing=0.003, free_margin=0.003))
+    obs = patch_observations(reading, PatchThinning(spacing=0.002, free_spacing=0.003, free_margin=0.003))
     model = tg.GPIS(
         torch.tensor(obs.x), torch.tensor(obs.y), kernel=tg.kernels.InverseMultiquadricKernel(0.05), noise=1e-3
     ).fit()
@@ -136,7 +136,7 @@ def test_bad_calibrations_are_refused(kwargs):
 
 def test_settings_are_checked():
     with pytest.raises(ValueError, match="spacing"):
-        PatchSettings(spacing=-1.0)
+        PatchThinning(spacing=-1.0)
 
 
 def test_depth_map_adapter_checks_each_frame():

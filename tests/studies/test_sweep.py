@@ -101,13 +101,13 @@ def test_workers_are_capped_at_the_cores_of_a_local_run():
 
 
 def test_a_studys_settings_reach_every_run_built_in_objects_and_scene_files_alike(tmp_path):
-    from torch_gpioius.studies.sweep import SweepSettings
+    from torch_gpioius.studies.sweep import StudyPlan
 
     kw = dict(world="forcefield", objects=["E"], modes=["visual-tactile"], seeds=2, out=tmp_path, workers=1,
               address=None, max_travel=None, max_steps=None, smoke=True, progress=False, threads=1, backend="local",
               force=False, scenes=[str(ROOT / "examples/scenes/real/duck-tight.toml")], voxel=None, touch="point",
               outer_tol=None, device=None, settings="default")
-    specs = SweepSettings.checked(**kw)._specs(tmp_path)
+    specs = StudyPlan.checked(**kw)._specs(tmp_path)
     assert {s.object for s in specs} == {"E", "duck-tight"} and {s.settings for s in specs} == {"default"}
 
 

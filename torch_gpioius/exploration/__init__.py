@@ -14,7 +14,7 @@ from .evidence import Evidence, TapPolicy
 from .loop import begin, explore, run
 from .observations import (Observations, ObservationPolicy, free_space_along, retract_free_space, thin_points,
                            vision_observations)
-from .patches import PatchSettings, patch_observations
+from .patches import PatchThinning, patch_observations
 from .policies import EVIDENCE_POLICIES, evidence_policy, register_evidence_policy
 from .protocols import EvidencePolicy, Recorder, Toucher, TouchModel, TouchModelBase
 from .reach import ReachPlan, ReachPolicy
@@ -35,5 +35,13 @@ __all__ = ["explore", "run", "begin", "MODES", "ExploreConfig", "Run", "Observat
            "PointTouch", "TOUCH_MODELS", "touch_model", "StopRule", "OnceAround", "TravelBudget", "gone_around",
            "largest_uncovered_gap", "World", "Hardware", "ExplorationDefaults", "Measurement", "RobotWorld",
            "geometry_hash", "register_world", "world_entry", "world_names", "make_world", "WorldEntry",
-           "free_space_along", "retract_free_space", "thin_points", "vision_observations", "PatchSettings",
+           "free_space_along", "retract_free_space", "thin_points", "vision_observations", "PatchThinning",
            "patch_observations"]
+
+
+def __getattr__(name):
+    if name == "PatchSettings":         # renamed PatchThinning (a deprecated alias; settings are the estimator's)
+        from . import patches
+
+        return patches.__getattr__(name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -26,14 +26,24 @@ import numpy as np
 
 from .observations import Observations, thin_indices
 
-__all__ = ["PatchSettings", "patch_observations", "DEPTH_RESOLUTION"]
+__all__ = ["PatchThinning", "patch_observations", "DEPTH_RESOLUTION"]
+
+
+def __getattr__(name):
+    if name == "PatchSettings":         # renamed: "settings" are the estimator's
+        import warnings
+
+        warnings.warn("PatchSettings is PatchThinning now (settings are the estimator's)", DeprecationWarning,
+                      stacklevel=2)
+        return PatchThinning
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 DEPTH_RESOLUTION = 1e-9
 """Depths closer than this [m] count as equal when ordering a patch's points (far below any gel's noise)."""
 
 
 @dataclass(frozen=True)
-class PatchSettings:
+class PatchThinning:
     """How densely a patch is recorded.
 
     Attributes:
@@ -56,7 +66,7 @@ class PatchSettings:
         for name in ("spacing", "free_spacing", "free_margin"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not (math.isfinite(v) and 0 < v <= 0.1):
-                raise ValueError(f"PatchSettings.{name}: must be in (0, 0.1] m, got {v!r}")
+                raise ValueError(f"PatchThinning.{name}: must be in (0, 0.1] m, got {v!r}")
 
 
 def _normals(depth: np.ndarray, contact: np.ndarray, pitch: float) -> np.ndarray:
@@ -80,12 +90,12 @@ def _normals(depth: np.ndarray, contact: np.ndarray, pitch: float) -> np.ndarray
     return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
-def patch_observations(reading, settings: PatchSettings | None = None, step: int = 0) -> Observations:
+def patch_observations(reading, settings: PatchThinning | None = None, step: int = 0) -> Observations:
     """The observations of one tactile reading (see the module docstring).
 
     Args:
         reading: a :class:`~torch_gpioius.sensors.tactile.TactileReading` (checked on construction).
-        settings: thinning (default :class:`PatchSettings`).
+        settings: thinning (default :class:`PatchThinning`).
         step: the exploration step it arrives at.
 
     Returns:
@@ -96,7 +106,7 @@ def patch_observations(reading, settings: PatchSettings | None = None, step: int
         ValueError: an all-NaN depth map (the gel reports no reading at all: a sensor fault or an unreadable frame,
             since the exploration reads the pad at a contact).
     """
-    settings = settings or PatchSettings()
+    settings = settings or PatchThinning()
     depth = reading.depth
     if not np.isfinite(depth).any():
         raise ValueError("tactile reading: the depth map is all NaN (the gel reports nothing at all; at a contact "

@@ -12,7 +12,7 @@ import torch
 from .._validation import as_int
 from ..registry import Registry
 from .observations import Observations, ObservationPolicy, thin_points
-from .patches import PatchSettings, patch_observations
+from .patches import PatchThinning, patch_observations
 from .protocols import TouchModelBase
 
 __all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "register_touch_model", "touch_model", "inside_observation"]
@@ -81,7 +81,7 @@ class PatchTouch(TouchModelBase):
             ``Hardware.tactile`` when the run starts if None.
     """
 
-    settings: PatchSettings = field(default_factory=PatchSettings)
+    settings: PatchThinning = field(default_factory=PatchThinning)
     min_gain: float = 0.1
     sensor: Any = None
     max_points: int | None = 12

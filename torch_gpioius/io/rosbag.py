@@ -425,7 +425,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         tactile_transform: ``T_tool_pad``, the pad frame in the fingertip's frame (the frame the forward kinematics
             gives at ``tool_offset``), in the same forms as ``camera_transform``; default identity (the gel centred
             on the fingertip centre, facing along the tool's z axis).
-        patch: :class:`~torch_gpioius.exploration.patches.PatchSettings` (thinning and free-space margin).
+        patch: :class:`~torch_gpioius.exploration.patches.PatchThinning` (thinning and free-space margin).
         settings: the estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's
             name), recorded in the dataset for ``fit``; their labels give the free space and the voxel (a voxel rule
             sized to ``crop``'s largest extent, else the labels' voxel) unless ``policy`` is given; their
@@ -536,16 +536,16 @@ class _BagImport:
         T_fixed = parse_transform(camera_transform) if camera_transform is not None else None
         T_pad = None
         if topics.tactile is not None:
-            from ..exploration.patches import PatchSettings
+            from ..exploration.patches import PatchThinning
             from ..sensors.tactile import TactileCalibration
 
             if not isinstance(tactile_calibration, TactileCalibration):
                 raise ValueError("import_bag: topics.tactile needs tactile_calibration (a TactileCalibration: pixel "
                                  f"pitch, gel thickness, contact depth), got {tactile_calibration!r}")
             T_pad = np.eye(4) if tactile_transform is None else parse_transform(tactile_transform)
-            patch = patch or PatchSettings()
-            if not isinstance(patch, PatchSettings):
-                raise ValueError(f"import_bag: patch must be a PatchSettings, got {type(patch).__name__}")
+            patch = patch or PatchThinning()
+            if not isinstance(patch, PatchThinning):
+                raise ValueError(f"import_bag: patch must be a PatchThinning, got {type(patch).__name__}")
         if crop is not None:
             crop = as_bounds(crop, 3)
         window = None

@@ -19,7 +19,7 @@ from ..inference.dense import DenseExactInference
 from ..inference.hyperparameters import (LENGTH_BOUNDS, NOISE_BOUNDS, HyperparameterResult,
                                          maximize_hyperparameters)
 from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
-from ..settings import exact_arithmetic
+from ..exact import exact_arithmetic
 from ..tolerances import tol
 
 __all__ = ["ImplicitSurfaceGP"]

@@ -39,10 +39,10 @@ from .sweep_aggregate import (METRICS, MIN_SEEDS_TO_JUDGE, NOT_APPLICABLE_METRIC
 from .sweep_runs import (BASE_MODES, CONTACT_WITHIN, FRACTIONS, RunFileError, RunSpec, atomic_json,  # noqa: F401
                          finished, make_world, read_run_file, run_one, scene_failure_record, sweep_modes)
 from .sweep_runs import __getattr__  # noqa: F401 (WORLDS, DEFAULT_OBJECTS, MODES: from the registries)
-from .sweep_settings import MAX_SEEDS, SweepSettings  # noqa: F401
+from .sweep_settings import MAX_SEEDS, StudyPlan  # noqa: F401
 
 # WORLDS and MODES: the module's __getattr__, from the registries
-__all__ = ["run_sweep", "SweepSettings", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError",  # noqa
+__all__ = ["run_sweep", "StudyPlan", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError",  # noqa
            "MODES", "WORLDS", "FRACTIONS", "MAX_SEEDS", "BASE_MODES", "sweep_modes"]  # noqa: F822
 
 # ---------------------------------------------------------------------------------------------- execution
@@ -140,7 +140,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         FileExistsError: ``out`` holds something else and ``force`` is False.
         RuntimeError: another sweep is writing to ``out``.
     """
-    sweep = SweepSettings.checked(
+    sweep = StudyPlan.checked(
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
         force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
@@ -149,7 +149,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
     return _run(sweep)
 
 
-def _run(sweep: SweepSettings) -> dict:
+def _run(sweep: StudyPlan) -> dict:
     """Claim and lock the folder, run what is not done yet, aggregate (see :func:`run_sweep`)."""
     from ..io.outputs import FolderLock
 
@@ -171,7 +171,7 @@ def _run(sweep: SweepSettings) -> dict:
     return result
 
 
-def _claim(sweep: SweepSettings) -> Path:
+def _claim(sweep: StudyPlan) -> Path:
     from ..io.outputs import claim_folder
 
     # every setting, None where it is the world's own: a folder of one setting refuses runs of another either
@@ -199,7 +199,7 @@ def _prepare(out: Path) -> Path:
     return running
 
 
-def _built_first(sweep: SweepSettings, todo: list[RunSpec]) -> list[RunSpec]:
+def _built_first(sweep: StudyPlan, todo: list[RunSpec]) -> list[RunSpec]:
     """Build each scene file that has runs to do once, before the first run: a scene that cannot be built (a
     cover that does not close, a mesh that will not load) gets a failed row for each of its runs, with the cause,
     and the other runs go ahead (a 30-run study used to die at such a scene after 29 minutes of runs)."""
@@ -221,7 +221,7 @@ def _built_first(sweep: SweepSettings, todo: list[RunSpec]) -> list[RunSpec]:
     return [s for s in todo if s.object not in broken]
 
 
-def _execute(sweep: SweepSettings, todo: list[RunSpec]) -> str:
+def _execute(sweep: StudyPlan, todo: list[RunSpec]) -> str:
     """Run ``todo`` on Ray or in-process; returns how (for the report)."""
     from .._progress import progress as reporter
 

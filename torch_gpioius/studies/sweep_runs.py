@@ -54,6 +54,13 @@ def __getattr__(name):
         return {w: world_entry(w).object_names for w in study_worlds()}
     if name == "MODES":
         return sweep_modes()
+    if name == "SweepSettings":         # renamed: "settings" are the estimator's
+        import warnings
+
+        from .sweep_settings import StudyPlan
+
+        warnings.warn("SweepSettings is StudyPlan now (settings are the estimator's)", DeprecationWarning, stacklevel=2)
+        return StudyPlan
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 

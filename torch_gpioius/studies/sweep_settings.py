@@ -1,5 +1,5 @@
 """A study's settings (:mod:`.sweep`): every argument of ``gpioius study`` checked against the registries before
-anything runs (:class:`SweepSettings`)."""
+anything runs (:class:`StudyPlan`)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,16 @@ from .._validation import as_device, as_float, as_noise
 from ..kernels import KernelChoice
 from .sweep_runs import RunSpec, study_worlds, sweep_modes
 
-__all__ = ["SweepSettings", "MAX_SEEDS", "checked_metrics_every"]
+__all__ = ["StudyPlan", "MAX_SEEDS", "checked_metrics_every"]
+
+
+def __getattr__(name):
+    if name == "SweepSettings":         # renamed: "settings" are the estimator's
+        import warnings
+
+        warnings.warn("SweepSettings is StudyPlan now (settings are the estimator's)", DeprecationWarning, stacklevel=2)
+        return StudyPlan
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 #: Most seeds a sweep accepts per object and mode (a study over more is a mistake, not a request).
 MAX_SEEDS = 10_000
@@ -41,7 +50,7 @@ def _kernel_choice(kernel):
 
 
 @dataclass(frozen=True)
-class SweepSettings:
+class StudyPlan:
     """Everything one sweep runs with, checked once (:meth:`checked`), then run in short steps (:meth:`run`): claim
     and lock the folder, plan the runs, execute those not yet done, aggregate. Fields as :func:`run_sweep`'s
     arguments; ``scene_files`` maps a scene's name to its file."""
@@ -99,7 +108,7 @@ class SweepSettings:
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
                 threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
                 learn=None, views=None, kernel=None, noise=None, cover=None,
-                metrics_every=None, camera_error=None, camera_bound=None, estimator=None) -> "SweepSettings":
+                metrics_every=None, camera_error=None, camera_bound=None, estimator=None) -> "StudyPlan":
         """The settings, each checked before anything runs (raises ValueError naming the argument)."""
         from ..exploration.registry import canonical_world_name, world_entry, world_names
 
