@@ -58,3 +58,44 @@ def test_a_users_baseline_is_one_function_and_one_registration_and_no_estimate_s
     assert scores["nothing-for-test"]["chamfer"] == math.inf and scores["nothing-for-test"]["fscore_5mm"] == 0.0
     with pytest.raises(ValueError, match="already"):
         register_baseline("vision", exact)
+
+
+def test_the_plain_baselines_shrink_the_capture_labelled_without_the_smoothing_and_equal_the_others_without_it():
+    """``vision-shrunk-*-plain`` use :attr:`BaselineData.plain` (here the seen cover labelled 5 mm further out, as
+    another labelling of the same capture would place it): their gap is measured against that surface (1.5 cm) and
+    they still find the body; without a plain form they are the baselines above, to the digit."""
+    world = sphere_scene(radius=0.06, cover=0.01, subdivisions=5)
+    data = _data(world)
+    seen = data.outer_y == 0
+    c = world.inner.bounds.mean(axis=0)
+    x = data.outer_x.copy()
+    x[seen] = c + (x[seen] - c) * (0.075 / 0.07)
+    names = ["vision-shrunk-5", "vision-shrunk-5-plain", "vision-shrunk-all-plain"]
+    scores = score_baselines(world, BaselineData(data.outer_x, data.outer_y, data.contacts, data.kernel, data.noise,
+                                                 data.bounds, plain=(x, data.outer_y)), np.zeros((0, 3)), names)
+    assert scores["vision-shrunk-5"]["gap"] == pytest.approx(0.01, abs=0.002)
+    for name in names[1:]:
+        assert scores[name]["gap"] == pytest.approx(0.015, abs=0.002)
+        assert abs(scores[name]["bias"]) < 0.002 and scores[name]["fscore_5mm"] > 0.9
+    alone = score_baselines(world, _data(world), np.zeros((0, 3)), ["vision-shrunk-5", "vision-shrunk-5-plain"])
+    assert alone["vision-shrunk-5-plain"] == alone["vision-shrunk-5"]
+
+
+def test_a_smoothing_run_keeps_its_capture_as_the_paper_labels_it_for_the_baselines():
+    """The plain form a run with the ray smoothing keeps is what a run without it labels from the same capture."""
+    import torch_gpioius as tg
+    from torch_gpioius.models.overrides import EstimatorOverrides
+    from torch_gpioius.sim.objectsets import object_set, set_scene
+
+    world = set_scene(next(iter(object_set("primitives:3"))), "tight", seed=0)
+    smooth = tg.explore(world, max_steps=1, metrics_every=1000)
+    plain = tg.explore(world, max_steps=1, metrics_every=1000,
+                       settings=EstimatorOverrides(labels={"ray_smoothing": None}))
+    assert world.defaults.policy.ray_smoothing and plain.vision_plain is None
+    x, y = smooth.vision_plain
+    task = plain.model._train_task().numpy()
+    np.testing.assert_array_equal(x, plain.model.train_inputs[0].numpy()[task == 1][:len(x)])
+    np.testing.assert_array_equal(y, plain.model.train_targets.numpy()[task == 1][:len(y)])
+    assert (task == 1).sum() == len(x)                       # the capture's observations, nothing retracted yet
+    seen = smooth.model.train_targets.numpy()[smooth.model._train_task().numpy() == 1] == 0
+    assert seen.sum() != (y == 0).sum()                      # the smoothing chose other voxels

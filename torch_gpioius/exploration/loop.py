@@ -13,6 +13,7 @@ crash-safe log of :mod:`torch_gpioius.io.logs`).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -135,7 +136,7 @@ def begin(ctx: Run) -> ExplorationState:
     """Vision (when the mode uses it), the approach to the first contact, the first model and its fit: the state
     with record 0."""
     cfg, hw, world = ctx.config, ctx.hardware, ctx.world
-    outer = captures = crop = start_fix = None
+    outer = captures = crop = start_fix = plain = None
     table = camera_table(hw, cfg.policy)
     if cfg.uses_vision:
         from ..sensors.pointcloud import PointCloud
@@ -146,6 +147,10 @@ def begin(ctx: Run) -> ExplorationState:
         seen, start_fix = correct_at_start(captures, cfg.policy, crop, table)
         x_out, y_out = vision_observations(PointCloud.merge(seen), cfg.policy, crop)
         outer = Observations(x_out, y_out, np.ones(len(x_out), np.int64), source="vision")
+        if cfg.policy.ray_smoothing and cfg.policy.voxel:
+            # the same capture as the paper labels it, for the simple baselines alone (not the model's)
+            plain = vision_observations(PointCloud.merge(seen), dataclasses.replace(cfg.policy, ray_smoothing=None),
+                                        crop)
     first = hw.controller.approach(torch.as_tensor(world.direction), max_travel=cfg.approach_travel)
     if not first.in_contact:
         raise RuntimeError(f"approach from {np.round(world.start, 4).tolist()} along "
@@ -157,7 +162,7 @@ def begin(ctx: Run) -> ExplorationState:
     state = ExplorationState(model=cfg.make_model(inner, outer), contacts=[contact], path=list(first.path.numpy()),
                              normal=first.force_normal, crop=crop,
                              captures=captures if cfg.policy.camera_bound is not None else None,
-                             table=table, camera_corrections=start_fix)
+                             table=table, camera_corrections=start_fix, vision_plain=plain)
     t0 = time.perf_counter()
     state.model.fit()
     record = StepRecord(step=0, travel=0.0, touch=first, final=cfg.max_steps == 0,

@@ -138,6 +138,9 @@ class ExplorationState:
             crop: the box the camera's cloud is cropped to.
         camera_corrections: what each view was moved by the last time the contacts corrected the captures
             (:func:`~torch_gpioius.exploration.calibration.correct_camera`), or None before.
+        vision_plain: ``(x, y)`` the first capture labelled as the paper labels it, each point in the voxel it was
+            measured in (no ``ray_smoothing``), where the policy smooths; None otherwise (the simple baselines are
+            also scored on it: :mod:`torch_gpioius.baselines`). Not the model's.
     """
 
     model: object
@@ -167,6 +170,7 @@ class ExplorationState:
     table: float | None = field(default=None, repr=False, compare=False)
     crop: np.ndarray | None = field(default=None, repr=False, compare=False)
     camera_corrections: dict | None = None
+    vision_plain: tuple | None = field(default=None, repr=False, compare=False)
 
     @property
     def contact(self) -> np.ndarray:

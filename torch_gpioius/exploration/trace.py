@@ -61,6 +61,8 @@ class Trace:
         noise: `(n,)` sigma^2 in use.
         time_split: where the run's wall time went [s]: ``{"method", "camera", "contact", "measuring", "total"}``
             (:class:`torch_gpioius.exploration.timing.PartClock`; a resumed run's: since it resumed).
+        vision_plain: ``(x, y)`` the first capture labelled without the ray smoothing (each point in the voxel it was
+            measured in), where the settings smooth; None otherwise or on resume (the simple baselines' second input).
         camera_corrections: what each camera view was moved by when the contacts corrected the captures
             (``ObservationPolicy.camera_bound``), or None.
     """
@@ -101,6 +103,7 @@ class Trace:
     shape: dict = field(default_factory=dict)
     time_split: dict = field(default_factory=dict)
     camera_corrections: dict | None = None
+    vision_plain: tuple | None = None
 
     @classmethod
     def from_state(cls, state, world, config) -> "Trace":
@@ -133,7 +136,7 @@ class Trace:
                    reapproaches=np.array([r.reapproaches for r in recs], dtype=np.int64),
                    reapproach_travel=col("reapproach_travel"),
                    shape={name: col(name) for name in SHAPE_METRICS},
-                   camera_corrections=state.camera_corrections)
+                   camera_corrections=state.camera_corrections, vision_plain=state.vision_plain)
 
     @property
     def n_steps(self) -> int:

@@ -413,7 +413,8 @@ def run_one(spec: RunSpec) -> dict:
 def run_baselines(world, trace, log: Path) -> dict:
     """The simple baselines (:mod:`torch_gpioius.baselines`) of a visual-tactile run, scored by the converged ruler:
     from the camera's observations as its log's first record holds them (before any retraction of their inside
-    points), the run's contacts in order and its kernel and sigma^2."""
+    points; and as the paper labels them, where the run smoothed them: ``trace.vision_plain``), the run's contacts in
+    order and its kernel and sigma^2."""
     import torch
 
     from ..baselines import BASELINE_EDGE, BaselineData, score_baselines
@@ -431,7 +432,8 @@ def run_baselines(world, trace, log: Path) -> dict:
     model = trace.model
     # facets of 5 mm, as they are: a shrunk surface has no field of its own to correct its chords by
     data = BaselineData(first.x[outer], first.y[outer], np.asarray(trace.contacts, dtype=float), model.kernel,
-                        float(model.noise), world.bounds(METRICS_GRID), METRICS_GRID, BASELINE_EDGE, world.range)
+                        float(model.noise), world.bounds(METRICS_GRID), METRICS_GRID, BASELINE_EDGE, world.range,
+                        plain=trace.vision_plain)
     with torch.no_grad():
         surface = model.train_targets.cpu().numpy() == 0
     return score_baselines(world, data, model.train_inputs[0].detach().cpu().numpy()[surface])
