@@ -378,6 +378,15 @@ def test_more_views_see_more_of_the_scene_and_the_tripods_stay_where_they_stood(
     assert scene.with_views(3).views == VIEWS and scene.with_views(3).defaults is scene.defaults
     with pytest.raises(ValueError, match="views"):
         scene.with_views("side")
+    # other estimator settings keep the views and the cover: changes on the scene's own (a scene file's [estimator])
+    from torch_gpioius.models.overrides import EstimatorOverrides
+
+    changed = three.with_estimator(EstimatorOverrides(noise=0.05, labels={"ray_smoothing": None}))
+    assert changed.views == three.views and changed.defaults.estimator == three.defaults.estimator.replace(
+        noise=0.05, labels={"ray_smoothing": None})
+    assert three.with_estimator({"learn": "length"}).defaults.learn == "length"
+    with pytest.raises(ValueError, match="estimator"):
+        three.with_estimator("paper")
 
 
 def test_a_camera_error_moves_the_mujoco_cameras_captures_by_each_views_draw(scene):

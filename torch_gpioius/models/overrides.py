@@ -31,7 +31,7 @@ from ..kernels import ExactKernel, KernelChoice, from_description
 from .estimator import EstimatorSettings, as_learn
 from .labels import ObservationPolicy, check_voxel
 
-__all__ = ["EstimatorOverrides", "parse_assignment", "OVERRIDE_KEYS"]
+__all__ = ["EstimatorOverrides", "parse_assignment", "resolved", "OVERRIDE_KEYS"]
 
 #: The keys :meth:`EstimatorOverrides.from_dict` reads (``labels.<field>`` for one label; ``theta`` is
 #: ``lengthscale`` under the paper's name).
@@ -237,6 +237,22 @@ class EstimatorOverrides:
                 raise ValueError(f"{where}: {key} given twice")
             data[key] = value
         return cls.from_dict(data, where)
+
+
+def resolved(estimator, base: EstimatorSettings) -> EstimatorSettings:
+    """Settings from what a caller gives in place of ``base``: an :class:`EstimatorSettings` (itself), an
+    :class:`EstimatorOverrides` or its plain dict (a scene file's ``[estimator]`` section), applied to ``base``.
+
+    Raises:
+        ValueError: anything else, or changes that do not hold together (named).
+    """
+    if isinstance(estimator, dict):
+        estimator = EstimatorOverrides.from_dict(estimator)
+    if isinstance(estimator, EstimatorOverrides):
+        estimator = estimator.apply(base)
+    if not isinstance(estimator, EstimatorSettings):
+        raise ValueError(f"estimator: expected EstimatorSettings or EstimatorOverrides, got {type(estimator).__name__}")
+    return estimator
 
 
 def _none(value):

@@ -787,17 +787,9 @@ class Scene3D(RangedScene):
         Raises:
             ValueError: anything else, or changes that do not hold together (named).
         """
-        from ..models.estimator import EstimatorSettings
-        from ..models.overrides import EstimatorOverrides
+        from ..models.overrides import resolved
 
-        if isinstance(estimator, dict):
-            estimator = EstimatorOverrides.from_dict(estimator)
-        if isinstance(estimator, EstimatorOverrides):
-            estimator = estimator.apply(self.defaults.estimator)
-        if not isinstance(estimator, EstimatorSettings):
-            raise ValueError(f"estimator: expected EstimatorSettings or EstimatorOverrides, got "
-                             f"{type(estimator).__name__}")
-        return self._copy(defaults=self.defaults.with_estimator(estimator))
+        return self._copy(defaults=self.defaults.with_estimator(resolved(estimator, self.defaults.estimator)))
 
     def with_views(self, views) -> "Scene3D":
         """The same objects, approach, range and settings seen by other simulated views (:func:`as_views`: names

@@ -426,16 +426,9 @@ class MujocoScene(RangedScene):
         Raises:
             ValueError: anything else, or changes that do not hold together (named).
         """
-        from ...models.estimator import EstimatorSettings
-        from ...models.overrides import EstimatorOverrides
+        from ...models.overrides import resolved
 
-        if isinstance(estimator, dict):
-            estimator = EstimatorOverrides.from_dict(estimator)
-        if isinstance(estimator, EstimatorOverrides):
-            estimator = estimator.apply(self.defaults.estimator)
-        if not isinstance(estimator, EstimatorSettings):
-            raise ValueError(f"estimator: expected EstimatorSettings or EstimatorOverrides, got "
-                             f"{type(estimator).__name__}")
+        estimator = resolved(estimator, self.defaults.estimator)
         return self._copy(self.start, self.direction, self.seed, defaults=self.defaults.with_estimator(estimator))
 
     def with_views(self, views) -> "MujocoScene":
