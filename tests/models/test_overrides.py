@@ -231,6 +231,7 @@ def test_every_model_comes_from_the_settings_factory():
     est = EstimatorSettings.paper_2d()
     assert type(est.make_model(x, y, task)).__name__ == "GPIOIS"
     assert type(est.make_model(x, y, task, regions=2)).__name__ == "LocalGPIOIS"
+    assert type(est.make_model(x, y, np.ones(30, int))).__name__ == "GPIOIS"   # the camera's alone, before a touch
     gpis = est.make_model(x, y)
     assert type(gpis).__name__ == "GPIS" and gpis.noise == pytest.approx(0.006)
     inner = est.make_model(x, y, np.zeros(30, int), noise=0.01, kernel=Matern52(0.05))

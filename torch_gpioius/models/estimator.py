@@ -320,9 +320,9 @@ class EstimatorSettings:
         """The model these settings make on observations `(n, d)` [m] with labels `(n,)`: every model the package
         builds comes from here (an exploration's, a fit's on a dataset, a replayed step's).
 
-        A :class:`~torch_gpioius.models.gpiois.GPIOIS` when ``task`` `(n,)` holds both tasks (a
-        :class:`~torch_gpioius.models.local.LocalGPIOIS` of ``regions`` regions when given), a
-        :class:`~torch_gpioius.models.gpis.GPIS` on the inner (task 0) observations otherwise. ``noise`` and
+        A :class:`~torch_gpioius.models.gpiois.GPIOIS` when ``task`` `(n,)` holds outer (task 1) observations (a
+        :class:`~torch_gpioius.models.local.LocalGPIOIS` of ``regions`` regions when given; before the first touch,
+        the camera's alone), a :class:`~torch_gpioius.models.gpis.GPIS` on the inner (task 0) observations otherwise. ``noise`` and
         ``kernel`` replace the settings' for this model (a value a run learned, a caller's kernel; the kernel is
         used as given, the settings' is copied); ``kwargs`` go to the model (``inference``, ``outer_tol``,
         ``task_covariance``, ...).
@@ -339,7 +339,7 @@ class EstimatorSettings:
             kernel = self.new_kernel()
         if task is not None:
             task = np.asarray(task)
-            if (task == 1).any() and (task == 0).any():
+            if (task == 1).any():               # outer observations: the two-task model (before any touch too)
                 if regions is not None:
                     from .local import LocalGPIOIS
 
@@ -347,7 +347,7 @@ class EstimatorSettings:
                 return GPIOIS(x, y, task, noise=noise, kernel=kernel, **kwargs)
             x, y = x[task == 0], y[task == 0]
         if regions is not None:
-            raise ValueError("regions: a similarity per region needs observations of both tasks")
+            raise ValueError("regions: a similarity per region needs the camera's (outer) observations")
         return GPIS(x, y, noise=noise, kernel=kernel, **kwargs)
 
     # ------------------------------------------------------------------ as plain data
