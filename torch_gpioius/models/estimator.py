@@ -323,12 +323,12 @@ class EstimatorSettings:
         A :class:`~torch_gpioius.models.gpiois.GPIOIS` when ``task`` `(n,)` holds outer (task 1) observations (a
         :class:`~torch_gpioius.models.local.LocalGPIOIS` of ``regions`` regions when given; before the first touch,
         the camera's alone), a :class:`~torch_gpioius.models.gpis.GPIS` on the inner (task 0) observations otherwise.
-        ``noise`` and ``kernel`` replace the settings' for this model (a value a run learned, a caller's kernel; the kernel is
-        used as given, the settings' is copied); ``kwargs`` go to the model (``inference``, ``outer_tol``,
+        ``noise`` and ``kernel`` replace the settings' for this model (a value a run learned, a caller's kernel; the
+        kernel is used as given, the settings' is copied); ``kwargs`` go to the model (``inference``, ``outer_tol``,
         ``task_covariance``, ...).
 
         Raises:
-            ValueError: ``regions`` without both tasks, or what the model refuses (names it).
+            ValueError: ``regions`` without the camera's observations, or what the model refuses (names it).
         """
         from .gpiois import GPIOIS
         from .gpis import GPIS
