@@ -7,6 +7,7 @@ restore of :mod:`torch_gpioius.io.logs`, which sit above it.
 from __future__ import annotations
 
 import os
+import warnings
 
 from .exploration.config import ExploreConfig
 from .exploration.loop import run
@@ -45,8 +46,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     The estimator's settings (kernel, sigma^2, labels, voxels, what is learned) are one
     :class:`~torch_gpioius.models.estimator.EstimatorSettings`: ``settings`` gives another whole, or the world's own
     with changes (an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: any of them, a label's field
-    included); ``kernel``, ``noise``, ``policy``, ``learn`` and ``restart_every`` change one of them, through the same
-    resolver (docs/reference/settings.md).
+    included; docs/reference/settings.md). The keywords ``kernel``, ``noise``, ``policy``, ``learn`` and
+    ``restart_every`` still change one of them, through the same resolver, with a DeprecationWarning.
 
     Args:
         world: a :class:`~torch_gpioius.exploration.world.World` (``tg.sim.Scene2D``, ``tg.sim.Scene3D``,
@@ -63,13 +64,15 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             preset's name: "default", "paper", "paper-2d"; a preset's voxel rule sized to the world's object), or
             changes to the world's (an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, e.g.
             ``EstimatorOverrides(labels={"ray_smoothing": None})``); None: the world's.
-        kernel: an :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length scale, in place of the
-            settings' (``theta=``, the paper's name for the inverse multiquadric's length scale, is a deprecated
-            alias of ``kernel=InverseMultiquadricKernel(lengthscale=...)``); noise: sigma^2.
+        kernel: deprecated (``settings=EstimatorOverrides(kernel=...)``): an
+            :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length scale, in place of the settings'
+            (``theta=``, the paper's name for the inverse multiquadric's length scale, is a deprecated alias of
+            ``kernel=InverseMultiquadricKernel(lengthscale=...)``); noise: sigma^2, deprecated likewise.
         max_steps: cap on planning steps.
         max_travel: fingertip travel budget since the first contact [m] (adds or replaces a ``TravelBudget``).
         stop: stop rules replacing the world's.
-        policy: the observation policy.
+        policy: deprecated (``settings=EstimatorOverrides(policy=...)``, or ``labels={...}`` for single fields): the
+            observation policy.
         penalty: C(x) replacing the world's.
         metrics_every: ground-truth metrics every k steps (and always at the last), or "schedule": only at 10, 25 and
             50 % of the travel budget, at a stop and at the end (a long run measured at every step spent a third
@@ -87,10 +90,11 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             points (fine voxels); each record's ``truncation`` says how far the Gram matrix moved (None: exact).
         device: where the model's data and exact arithmetic live ("cuda" for a GPU, float64 either way; default:
             the CPU). The world, the robot and every record stay on the CPU; a run may resume on another device.
-        restart_every: every this many steps K_t's re-learning also starts from fixed values and keeps the best
-            optimum, so that a warm start cannot hold it in a worse local optimum (default 25; None: warm starts
-            only, as before this setting existed).
-        learn: "task" (K_t alone, the paper's), "length" or "all": the kernel's length (and with "all" sigma^2)
+        restart_every: deprecated (``settings=EstimatorOverrides(restart_every=...)``): every this many steps K_t's
+            re-learning also starts from fixed values and keeps the best optimum, so that a warm start cannot hold it
+            in a worse local optimum (default 25; None: warm starts only, as before this setting existed).
+        learn: deprecated (``settings=EstimatorOverrides(learn=...)``): "task" (K_t alone, the paper's), "length"
+            or "all": the kernel's length (and with "all" sigma^2)
             is learned with K_t by the exact marginal likelihood on every ``restart_every``-th step, from the
             configured values, on a copy of at most 256 inner and 512 outer points, and kept only where the full
             data's likelihood rises
@@ -118,6 +122,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     if not isinstance(world, World):
         raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
                         f"{type(world).__name__}")
+    _warn_loose(kernel=kernel, noise=noise, policy=policy, learn=learn,
+                restart_every=None if isinstance(restart_every, str) and restart_every == "default" else restart_every)
     kernel = kernel_for_theta(theta, kernel, "explore")  # the paper's name, a deprecated alias
     config = ExploreConfig.from_world(
         world,
@@ -178,3 +184,14 @@ def _check_log_path(path, name: str, *, must_exist: bool, overwrite: bool = Fals
         raise FileExistsError(f"{name}: {p} exists ({os.path.getsize(p)} bytes, a run's log that resume_from relies "
                               f"on); pass resume_from={p!r} to continue it, overwrite=True to replace it, or another "
                               "log path")
+
+
+def _warn_loose(**given) -> None:
+    """The DeprecationWarning of ``explore``'s loose estimator keywords (they still work, through the same resolver,
+    for one release): the estimator's settings are one object, ``settings=EstimatorOverrides(...)``."""
+    named = [k for k, v in given.items() if v is not None]
+    if named:
+        warnings.warn(f"explore({', '.join(f'{k}=' for k in named)}): give settings=EstimatorOverrides("
+                      f"{', '.join(f'{k}=...' for k in named)}) (torch_gpioius.models.overrides; the estimator's "
+                      "settings in one object, docs/reference/settings.md); these keywords go in a later release",
+                      DeprecationWarning, stacklevel=3)

@@ -18,6 +18,7 @@ from torch_gpioius.exploration import (Evidence, ExplorationDefaults, Hardware, 
                                        register_evidence_policy, register_touch_model, register_world, world_entry)
 from torch_gpioius.kernels import ExactKernel
 from torch_gpioius.sensors import ForceReading, ForceSensor, PointCloud, PointCloudSource
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 CENTRE, RADIUS, COVER = np.array([0.5, 0.0, 0.2]), 0.06, 0.08
 
@@ -221,7 +222,8 @@ class Diary(Recorder):
 # ------------------------------------------------------------------------------------------------ the tests
 def test_a_world_sensor_kernel_policy_and_recorder_of_ones_own_run_through_explore(tmp_path):
     diary = Diary()
-    trace = tg.explore(BallWorld(), kernel=Matern32(0.1), evidence=Poke(), recorders=[diary], metrics_every=2,
+    trace = tg.explore(BallWorld(), settings=EstimatorOverrides(kernel=Matern32(0.1)), evidence=Poke(),
+                       recorders=[diary], metrics_every=2,
                        log=tmp_path / "ball.gpioius")
     assert trace.terminated == "travel" and trace.travel[-1] >= 0.15
     # the recorder saw start, every step in order, and the end
@@ -266,8 +268,11 @@ def test_a_policy_or_touch_without_the_contract_is_named():
         tg.explore(BallWorld(), evidence=object())
     with pytest.raises(ValueError, match="touch: expected a name or an object with observations"):
         tg.explore(BallWorld(), touch=object())
-    with pytest.raises(TypeError, match="kernel: expected a torch_gpioius.kernels.ExactKernel"):
-        tg.explore(BallWorld(), kernel="matern")
+    with pytest.warns(DeprecationWarning, match="EstimatorOverrides"), \
+            pytest.raises(TypeError, match="kernel: expected a torch_gpioius.kernels.ExactKernel"):
+        tg.explore(BallWorld(), kernel="matern")          # the deprecated keyword still checks its value
+    with pytest.raises(ValueError, match="'matern'"):
+        tg.explore(BallWorld(), settings=EstimatorOverrides(kernel="matern"))
 
 
 def test_a_kernel_registered_outside_the_package_is_used_by_name_from_a_scene_file_and_a_study(tmp_path):

@@ -6,6 +6,7 @@ import pytest
 import torch_gpioius as tg
 from torch_gpioius.exploration import gone_around, largest_uncovered_gap
 from torch_gpioius.sim import Scene2D
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 
 def _polygon_circle(r, n=72, c=(0.0, 0.0)):
@@ -184,8 +185,9 @@ def test_the_first_reapproach_reaches_twice_the_controllers_own_search_for_lost_
 ])
 def test_bad_exploration_settings_are_named_before_anything_moves(kwargs, field):
     scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
+    estimator = {k: kwargs.pop(k) for k in ("noise", "learn", "restart_every") if k in kwargs}
     with pytest.raises(ValueError, match=field):
-        tg.explore(scene, **kwargs)
+        tg.explore(scene, **kwargs, **({"settings": EstimatorOverrides(**estimator)} if estimator else {}))
 
 
 def test_resume_compares_the_geometry_not_the_name(tmp_path):
@@ -269,7 +271,8 @@ def test_a_run_learns_its_length_and_noise_on_the_restart_steps():
     length is refused before anything moves. (A few touches of a 2-D circle: the learned values are not judged here,
     and the short run's fits and estimate may be poor; the studies judge them.)"""
     scene = Scene2D(_polygon_circle(0.10), _polygon_circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
-    trace = tg.explore(scene, max_steps=7, restart_every=3, learn="all", metrics_every=100)
+    trace = tg.explore(scene, max_steps=7, settings=EstimatorOverrides(restart_every=3, learn="all"),
+                       metrics_every=100)
     assert trace.n_steps == 8 and np.isfinite(trace.length).all() and np.isfinite(trace.noise).all()
     changed = [i for i in range(1, trace.n_steps) if trace.length[i] != trace.length[i - 1]
                or trace.noise[i] != trace.noise[i - 1]]
@@ -279,14 +282,19 @@ def test_a_run_learns_its_length_and_noise_on_the_restart_steps():
     assert trace.noise[-1] == trace.model.noise and trace.model.hyper_result.kept
     rows = trace.records()
     assert rows[-1]["length"] == trace.length[-1] and rows[-1]["noise"] == trace.noise[-1]
-    only_length = tg.explore(scene, max_steps=4, restart_every=3, learn="length", metrics_every=100)
+    only_length = tg.explore(scene, max_steps=4, settings=EstimatorOverrides(restart_every=3, learn="length"),
+                             metrics_every=100)
     assert np.all(only_length.noise == only_length.noise[0]) and only_length.length[3] != only_length.length[0]
 
     class Plain(tg.kernels.Matern52):          # a kernel that does not offer its length for learning
         learnable_length = False
 
     with pytest.raises(ValueError, match="no learnable length"):
-        tg.explore(scene, kernel=Plain(0.1), learn="length")
+        tg.explore(scene, settings=EstimatorOverrides(kernel=Plain(0.1), learn="length"))
+    # the loose keywords still work for a release, through the same resolver, with a warning that names the way
+    with pytest.warns(DeprecationWarning, match=r"explore\(learn=, restart_every=\): give settings=EstimatorOverrides"):
+        loose = tg.explore(scene, max_steps=4, restart_every=3, learn="length", metrics_every=100)
+    np.testing.assert_array_equal(loose.length, only_length.length)
 
 
 def test_the_measuring_schedule_measures_at_its_fractions_of_the_travel_and_the_end_only():

@@ -13,6 +13,7 @@ from torch_gpioius._validation import as_labels
 from torch_gpioius.exploration.observations import ObservationPolicy, Observations, vision_observations
 from torch_gpioius.exploration.touch import PointTouch
 from torch_gpioius.sim.plane import PlanarView
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 
 def test_labels_below_zero_mean_inside_and_everything_else_is_still_refused():
@@ -90,7 +91,7 @@ def test_inside_points_of_an_exploration_lie_inside_the_true_bodies():
 
     scene = load_scene("examples/scenes/real/duck-tight.toml")
     policy = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.02)
-    trace = tg.explore(scene, max_travel=0.05, metrics_every=1000, policy=policy)
+    trace = tg.explore(scene, max_travel=0.05, metrics_every=1000, settings=EstimatorOverrides(policy=policy))
     x, y, t = (v.numpy() for v in (trace.model.train_inputs[0], trace.model.train_targets, trace.model.train_task))
     touch_in, seen_in = (y < 0) & (t == 0), (y < 0) & (t == 1)
     assert touch_in.sum() == ((y == 0) & (t == 0)).sum()           # one per contact

@@ -8,6 +8,7 @@ from torch_gpioius.exploration.registry import make_world
 from torch_gpioius.exploration.touch import PatchTouch
 from torch_gpioius.io.datasets import read_records, replay
 from torch_gpioius.io.runs import load_run
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 
 @pytest.mark.parametrize("mode", ["visual-tactile", "tactile"])
@@ -186,8 +187,8 @@ def test_a_patch_touch_adds_one_inside_point_behind_its_contact(tmp_path):
     world = make_world("forcefield", "E", 0, smoke=True)
     policy = dataclasses.replace(world.defaults.policy, touch_inside=0.02)
     log = tmp_path / "run.gpioius"
-    trace = tg.explore(world, "visual-tactile", touch="patch", policy=policy, max_travel=0.03, metrics_every=100,
-                       log=log)
+    trace = tg.explore(world, "visual-tactile", touch="patch", settings=EstimatorOverrides(policy=policy),
+                       max_travel=0.03, metrics_every=100, log=log)
     steps = [r for r in read_records(log) if r.kind == "step" and r.meta["step"] > 0]
     assert len(steps) >= 3
     for r in steps:

@@ -13,6 +13,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.io.datasets import TornLogWarning, read_records
+from torch_gpioius.models.overrides import EstimatorOverrides
 from torch_gpioius.sim import paper_objects_2d
 
 STEPS = 24
@@ -97,11 +98,11 @@ def test_3d_run_resumes_with_robot_and_sensor_state(tmp_path, inside, learn):
 
     scene = sphere_scene(subdivisions=3)
     scene.sensor_noise = 0.02             # a noisy sensor: resuming must restore its generator too
-    kw = dict(mode="visual-tactile", max_travel=0.1, metrics_every=100, progress=False, learn=learn)
-    if learn == "all":
-        kw["restart_every"] = 3
+    estimator = dict(learn=learn, restart_every=3 if learn == "all" else "keep")
     if inside:
-        kw["policy"] = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.01)
+        estimator["policy"] = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.01)
+    kw = dict(mode="visual-tactile", max_travel=0.1, metrics_every=100, progress=False,
+              settings=EstimatorOverrides(**estimator))
     log = tmp_path / "run.gpioius"
     reference = tg.explore(scene, log=log, **kw)
     assert reference.n_steps > 6

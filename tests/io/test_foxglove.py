@@ -12,6 +12,7 @@ import torch_gpioius as tg  # noqa: E402
 from torch_gpioius.cli import main  # noqa: E402
 from torch_gpioius.io.foxglove import INSIDE_TOPIC, MCAP_TOPICS, PAD_TOPIC, export_mcap  # noqa: E402
 from torch_gpioius.io.runs import load_run  # noqa: E402
+from torch_gpioius.models.overrides import EstimatorOverrides  # noqa: E402
 
 
 def _decoder(schema):
@@ -111,7 +112,8 @@ def test_a_run_with_inside_points_exports_them_on_their_own_topic(tmp_path):
     scene = sphere_scene(subdivisions=3)
     policy = dataclasses.replace(scene.defaults.policy, touch_inside=0.02, vision_inside=0.01)
     log = tmp_path / "inside.gpioius"
-    tg.explore(scene, max_travel=0.03, metrics_every=100, policy=policy, log=log, progress=False)
+    tg.explore(scene, max_travel=0.03, metrics_every=100, settings=EstimatorOverrides(policy=policy), log=log,
+               progress=False)
     run, topics, got = _exported(log, tmp_path, [INSIDE_TOPIC, "/gpioius/cloud"])
     assert topics == set(MCAP_TOPICS) | {INSIDE_TOPIC}
     ds, first = run.states[run.steps[-1]], run.states[run.steps[0]]

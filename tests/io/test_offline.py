@@ -11,6 +11,7 @@ from torch_gpioius.io import offline
 from torch_gpioius.io.offline import fit_dataset
 from torch_gpioius.io.outputs import FolderLock, StagedFiles
 from torch_gpioius.kernels import InverseMultiquadricKernel
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 DATA = "data/example_2d.gpioius"
 
@@ -108,8 +109,8 @@ def test_a_replay_uses_the_runs_kernel_and_the_length_it_learned(tmp_path):
 
     scene = Scene2D(circle(0.10), circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
     log = tmp_path / "run.gpioius"
-    trace = tg.explore(scene, kernel=tg.kernels.Matern52(0.1), max_steps=7, restart_every=3, learn="length",
-                       metrics_every=100, log=log)
+    trace = tg.explore(scene, settings=EstimatorOverrides(kernel=tg.kernels.Matern52(0.1), restart_every=3,
+                                                          learn="length"), max_steps=7, metrics_every=100, log=log)
     assert trace.length[-1] != 0.1 and trace.model.hyper_result.kept
     model = tg.load_dataset(log).to_model()
     assert isinstance(model.kernel, tg.kernels.Matern52) and model.kernel.length == 0.1

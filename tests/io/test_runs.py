@@ -9,6 +9,7 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.io.runs import load_run
 from torch_gpioius.sim import Scene2D
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 
 def _circle(r, n=72):
@@ -24,7 +25,8 @@ def test_model_at_uses_the_length_and_noise_the_run_had_learned(tmp_path):
     rebuilt mean by ~1e-7 relative.)"""
     scene = Scene2D(_circle(0.10), _circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
     log = tmp_path / "run.gpioius"
-    trace = tg.explore(scene, max_steps=7, restart_every=3, learn="length", metrics_every=100, log=log)
+    trace = tg.explore(scene, max_steps=7, settings=EstimatorOverrides(restart_every=3, learn="length"),
+                       metrics_every=100, log=log)
     assert trace.model.hyper_result.kept and trace.length[-1] != trace.length[0]
     run = load_run(log)
     last = run.model_at(run.steps[-1])

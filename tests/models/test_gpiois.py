@@ -10,6 +10,7 @@ from scipy.optimize import minimize
 import torch_gpioius as tg
 from tests import reference as ref
 from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 KT = np.array([[0.8, 0.5], [0.5, 1.3]])
 
@@ -483,10 +484,11 @@ def test_the_exploration_restarts_k_t_every_restart_every_steps():
     a = np.linspace(0, 2 * np.pi, 64, endpoint=False)
     circle = lambda r: np.c_[r * np.cos(a), r * np.sin(a)]                                      # noqa: E731
     scene = Scene2D(circle(0.10), circle(0.13), start=(-0.25, 0.0), direction=(1, 0))
-    tg.explore(scene, max_steps=7, restart_every=3, recorders=[Starts()], metrics_every=100)
+    tg.explore(scene, max_steps=7, settings=EstimatorOverrides(restart_every=3), recorders=[Starts()],
+               metrics_every=100)
     assert starts == [1, 1, 4, 1, 1, 4, 1]              # steps 1-7: restarts at 3 and 6
     with pytest.raises(ValueError, match="restart_every"):
-        tg.explore(scene, max_steps=1, restart_every=0)
+        tg.explore(scene, max_steps=1, settings=EstimatorOverrides(restart_every=0))
 
 
 def test_the_transfer_sets_the_inner_level_by_the_amplitude_ratio_not_the_geometry():

@@ -626,7 +626,7 @@ class Scene3D(RangedScene):
             cover_offset: beyond that gap, the outer task's prior mean stands for the gap the touches measure
                 (``ObservationPolicy.cover_offset``; default: off).
             learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from the kernel's) or "all"
-                (the length and sigma^2, from the kernel's and ``noise``; ``explore(learn=)``); default: by
+                (the length and sigma^2, from the kernel's and ``noise``; ``EstimatorSettings.learn``); default: by
                 ``settings``.
             camera_error: the simulated cameras' errors (:meth:`with_camera_error`: ``"6mm,1deg"``, ``"3x,20%holes"``);
                 default: none.

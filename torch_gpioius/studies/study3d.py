@@ -245,7 +245,7 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         voxel: edge of the camera's voxels [m] (0: every camera point; None: each scene's own, 0.05 as the paper).
         outer_tol: the visual-tactile runs with a truncated outer basis (``explore(outer_tol=...)``); the
             tactile-only runs have no camera points. None: exact.
-        **explore_kwargs: forwarded to ``explore`` (step, kernel, noise, policy, device, ...).
+        **explore_kwargs: forwarded to ``explore`` (step, settings, device, ...).
     """
     from ..exploration.registry import world_entry
     from ..io.outputs import StagedFiles
@@ -255,8 +255,8 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
         from ..exploration.observations import check_voxel
 
         voxel = check_voxel(voxel)
-        if "policy" in explore_kwargs:
-            raise ValueError("voxel: give either voxel or policy (whose voxel it would replace), not both")
+        if "policy" in explore_kwargs or "settings" in explore_kwargs:
+            raise ValueError("voxel: give either voxel or policy / settings (whose voxel it would replace), not both")
     unknown = [o for o in objects if o not in OBJECTS or o not in entry.object_names]
     if unknown:   # before building the meshes (seconds)
         raise ValueError(f"objects: unknown {unknown} in the {entry.name} world; choose among "
@@ -284,6 +284,7 @@ def _run_study_3d(scenes: dict, objects: list, modes, out: Path, max_travel: flo
                   explore_kwargs: dict) -> dict:
     """:func:`run_study_3d`'s runs, figures and tables, written into ``out`` (its staging folder)."""
     from .._progress import progress as reporter
+    from ..models.overrides import EstimatorOverrides
 
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -295,8 +296,8 @@ def _run_study_3d(scenes: dict, objects: list, modes, out: Path, max_travel: flo
     for name, mode in jobs:
         bar.set_postfix_str(f"object {name}, {mode}")
         kw = dict(explore_kwargs)
-        if voxel is not None:
-            kw["policy"] = scenes[name].defaults.policy.with_voxel(voxel)
+        if voxel is not None:             # each scene's own settings with that voxel
+            kw["settings"] = EstimatorOverrides(voxel=voxel)
         if outer_tol is not None and mode == "visual-tactile":
             kw["outer_tol"] = outer_tol
         traces.setdefault(name, {})[mode] = explore(

@@ -103,7 +103,7 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             ``Scene3D.with_settings``, ``MujocoScene.with_settings``), for scene files and built-in objects alike;
             None: each file's own, the paper's for the built-in objects. A study folder holds one setting.
         learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2;
-            ``explore(learn=)``); None: each world's own. A study folder holds one setting.
+            ``EstimatorSettings.learn``); None: each world's own. A study folder holds one setting.
         views: the 3-D worlds' simulated camera views in place of the settings' (names from
             ``torch_gpioius.sim.forcefield.VIEWS``, a count or "paper": the fixed camera alone; ``with_views``);
             None: each world's own. A study folder holds one setting.
