@@ -144,9 +144,10 @@ def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list,
         ds.meta["files"] = " + ".join(str(p) for p in (args.dataset, *clouds) if p)
         return fit_dataset(ds, args.out, mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution,
                            force=args.force)                # the dataset holds the settings it was labelled with
-    return fit_dataset(source, args.out, kernel=overrides.kernel, noise=overrides.noise, learn=overrides.learn,
-                       settings=settings, mesh=args.mesh, outer_mesh=args.outer_mesh, resolution=args.resolution,
-                       force=args.force)
+    # a dataset file: the flags change the preset asked for, else the file's own settings
+    settings = overrides.apply(EstimatorSettings.of(settings)) if settings is not None else (overrides or None)
+    return fit_dataset(source, args.out, settings=settings, mesh=args.mesh, outer_mesh=args.outer_mesh,
+                       resolution=args.resolution, force=args.force)
 
 
 def _fit_report(args: argparse.Namespace, info: dict) -> None:

@@ -22,7 +22,8 @@ def _snapshot(folder):
 
 def test_a_failed_fit_leaves_the_earlier_fit_whole(tmp_path, monkeypatch):
     out = tmp_path / "fit"
-    first = fit_dataset(DATA, out, kernel=InverseMultiquadricKernel(0.1), noise=0.006, resolution=0.02)
+    first = fit_dataset(DATA, out, settings=EstimatorOverrides(kernel=InverseMultiquadricKernel(0.1), noise=0.006),
+                        resolution=0.02)
     before = _snapshot(out)
     assert set(before) == {"model.pt", "fit.png", "fit.json"}
     assert json.loads(before["fit.json"])["lengthscale"] == first["lengthscale"]
@@ -32,7 +33,8 @@ def test_a_failed_fit_leaves_the_earlier_fit_whole(tmp_path, monkeypatch):
 
     monkeypatch.setattr(offline, "_plot_estimate", broken)   # after model.pt of the second fit was written
     with pytest.raises(RuntimeError, match="figure failed"):
-        fit_dataset(DATA, out, kernel=InverseMultiquadricKernel(0.2), noise=0.006, resolution=0.02)
+        fit_dataset(DATA, out, settings=EstimatorOverrides(kernel=InverseMultiquadricKernel(0.2), noise=0.006),
+                    resolution=0.02)
     assert _snapshot(out) == before                            # model.pt too: not the second fit's
     assert [p.name for p in out.iterdir() if p.name.startswith(".staging")] == []
 

@@ -238,3 +238,18 @@ def test_every_model_comes_from_the_settings_factory():
     assert inner.noise == pytest.approx(0.01) and isinstance(inner.kernel, Matern52)
     with pytest.raises(ValueError, match="regions"):
         est.make_model(x, y, regions=2)
+
+
+def test_fit_dataset_takes_changes_to_the_files_own_settings_and_its_loose_keywords_warn():
+    """``fit_dataset(settings=EstimatorOverrides(...))`` changes the file's own settings (and records what it used);
+    the loose ``kernel``, ``noise``, ``learn`` give the same fit with a DeprecationWarning naming the way."""
+    from torch_gpioius.io.offline import fit_dataset
+
+    data = "data/example_2d.gpioius"
+    one = fit_dataset(data, settings=EstimatorOverrides(kernel=InverseMultiquadricKernel(0.12), noise=0.01),
+                      resolution=0.02)
+    with pytest.warns(DeprecationWarning, match=r"fit_dataset\(kernel=, noise=\): give settings=EstimatorOverrides"):
+        loose = fit_dataset(data, kernel=InverseMultiquadricKernel(0.12), noise=0.01, resolution=0.02)
+    assert one["task_covariance"] == loose["task_covariance"] and one["mll"] == loose["mll"]
+    assert one["lengthscale"] == pytest.approx(0.12) and one["noise"] == pytest.approx(0.01)
+    assert one["settings"]["noise"] == 0.01 and one["settings"]["kernel"]["lengthscale"] == pytest.approx(0.12)

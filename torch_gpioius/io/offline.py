@@ -18,7 +18,7 @@ from .datasets import Dataset, DatasetError, load_dataset, read_records, replay
 from .logs import load_logged_hyperparameters
 from ..models.gpiois import GPIOIS, INNER
 from ..metrics import hausdorff_distance, uncertainty_measure
-from ..models.estimator import EstimatorSettings, as_learn
+from ..models.estimator import EstimatorSettings
 from ..surfaces import closed_curves, data_bounds, evaluate_grid, grid_resolution, zero_level_curves, zero_level_mesh
 from .export import check_format
 
@@ -110,18 +110,23 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         path: a ``.gpioius`` dataset or log, or a :class:`Dataset` (e.g. from
             :func:`torch_gpioius.io.importers.dataset_from_files`, which labels a user's files by estimator settings).
         out: folder for ``model.pt``, ``fit.png`` and ``fit.json`` (None: write nothing).
-        kernel: an :class:`~torch_gpioius.kernels.ExactKernel` (it carries its length scale) in place of the
-            settings', or a :class:`~torch_gpioius.kernels.KernelChoice` (a name and/or a length) applied to the
-            settings' kernel (the file's own without ``settings``).
-        noise: sigma^2 in place of the settings'.
+        kernel: deprecated (``settings=EstimatorOverrides(kernel=...)``): an
+            :class:`~torch_gpioius.kernels.ExactKernel` (it carries its length scale) in place of the settings', or a
+            :class:`~torch_gpioius.kernels.KernelChoice` (a name and/or a length) applied to the settings' kernel
+            (the file's own without ``settings``).
+        noise: deprecated likewise: sigma^2 in place of the settings'.
         resolution: grid spacing of the estimate [m] (its figure and meshes).
-        learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2), by the
+        learn: deprecated likewise: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and
+            sigma^2), by the
             exact marginal likelihood on a copy of at most 256 inner and 512 outer points, kept where the full data's
             likelihood rises (``GPIOIS.learn_hyperparameters``); None: the settings'. The checkpoint and ``fit.json``
             hold what was learned.
         settings: the estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings` or a
-            preset's name); None: the file's own (a dataset records the settings it was labelled with), else the
-            inverse multiquadric of 0.1 m and 0.006 of earlier files.
+            preset's name), or changes to the file's own (an
+            :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: kernel, sigma^2, what is learned; its
+            labels are the file's); None: the file's own (a dataset records the settings it was labelled with), else
+            the inverse multiquadric of 0.1 m and 0.006 of earlier files
+            (:meth:`~torch_gpioius.models.estimator.EstimatorSettings.of_record`).
         mesh: write the inner estimate ``{mu_in = 0}`` here (PLY, OBJ, STL, OFF, GLB in 3-D; SVG, DXF, PLY, OBJ
             curves in 2-D; coloured by its variance where the format allows).
         outer_mesh: write the outer estimate here (visual-tactile data only).
@@ -139,10 +144,7 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
 
     from .outputs import FileClaim, check_distinct, check_not_inputs
 
-    if learn is not None:
-        as_learn(learn)
-    if settings is not None:
-        settings = EstimatorSettings.of(settings)
+    settings = _fit_settings(settings, kernel, noise, learn)
     check_distinct(mesh=mesh, outer_mesh=outer_mesh)
     inputs = list(path.meta.get("inputs") or []) if isinstance(path, Dataset) else [path]
     check_not_inputs(fit_outputs(out, mesh, outer_mesh), inputs)
@@ -154,8 +156,8 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
         ds = path if isinstance(path, Dataset) else load_dataset(path)
         for claim in claims.values():
             check_format(claim.target, ds.x.shape[1])
-        return _fit(ds, ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path, out, kernel, noise,
-                    resolution, learn, settings, claims.get("--mesh"), claims.get("--outer-mesh"))
+        return _fit(ds, ds.meta.get("files", "dataset") if isinstance(path, Dataset) else path, out, resolution,
+                    settings, claims.get("--mesh"), claims.get("--outer-mesh"))
 
 
 #: What an exact fit of n observations holds at its peak, in float64 matrices of n x n (measured on users' files of
@@ -225,21 +227,48 @@ def fit_outputs(out, mesh, outer_mesh) -> dict:
     return {"--mesh": mesh, "--outer-mesh": outer_mesh, **folder}
 
 
-def _fit(ds: Dataset, path, out, kernel, noise, resolution, learn, settings, mesh, outer_mesh) -> dict:
+def _fit_settings(settings, kernel, noise, learn):
+    """``fit_dataset``'s settings: an :class:`EstimatorSettings` (a preset's name read), an
+    :class:`~torch_gpioius.models.overrides.EstimatorOverrides` (changes to the file's own) or None; the deprecated
+    ``kernel``, ``noise`` and ``learn`` folded in, with a DeprecationWarning.
+
+    Raises:
+        ValueError: a bad setting (names it).
+    """
+    from ..models.overrides import EstimatorOverrides
+
+    if not isinstance(settings, EstimatorOverrides) and settings is not None:
+        settings = EstimatorSettings.of(settings)
+    if kernel is None and noise is None and learn is None:
+        return settings
+    import warnings
+
+    named = [k for k, v in (("kernel", kernel), ("noise", noise), ("learn", learn)) if v is not None]
+    warnings.warn(f"fit_dataset({', '.join(f'{k}=' for k in named)}): give settings=EstimatorOverrides("
+                  f"{', '.join(f'{k}=...' for k in named)}) (torch_gpioius.models.overrides); these keywords go in a "
+                  "later release", DeprecationWarning, stacklevel=3)
+    changes = EstimatorOverrides(kernel=kernel, noise=noise, learn=learn)
+    if settings is None:
+        return changes
+    return settings.merged(changes) if isinstance(settings, EstimatorOverrides) else changes.apply(settings)
+
+
+def _fit(ds: Dataset, path, out, resolution, settings, mesh, outer_mesh) -> dict:
     """:func:`fit_dataset` on a loaded dataset, its meshes claimed (:class:`~torch_gpioius.io.outputs.FileClaim`)."""
     from ..exploration.config import LEARN_SIZE
-    from ..kernels import KernelChoice, kernel_of_record
+    from ..models.overrides import EstimatorOverrides
     from .export import write_estimate
 
     used = settings if settings is not None else _file_settings(ds)
-    if isinstance(kernel, KernelChoice):             # a name and/or a length on the kernel the data were made with
-        kernel = kernel.apply(used.kernel if used is not None else kernel_of_record(ds.meta)) if kernel else None
+    if isinstance(used, EstimatorOverrides):        # changes to the file's own (or its old header's kernel and noise)
+        base = _file_settings(ds)
+        used = used.apply(base if base is not None else EstimatorSettings.of_record(ds.meta))
     check_fit_memory(ds)
     status(f"fitting K_t on {len(ds):,} observations ({int((ds.task == 0).sum()):,} inner)")
-    model = ds.to_model(noise=noise, settings=settings, **({} if kernel is None else {"kernel": kernel}))
+    model = ds.to_model(settings=used)
     # a large file's first K_t: its starts scouted on a thinned copy, the full data re-learned from the basins found
     model = model.fit(scout=FIT_SCOUT) if isinstance(model, GPIOIS) else model.fit()
-    learn = learn if learn is not None else (used.learn if used is not None else "task")
+    learn = used.learn if used is not None else "task"
     if learn != "task":
         model.learn_hyperparameters(*LEARN_SIZE, learn_noise=learn == "all")
     # 15 significant digits: a length passes through GPyTorch's positive constraint (softplus and back), which
