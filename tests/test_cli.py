@@ -7,6 +7,7 @@ import torch
 import pytest
 
 from torch_gpioius.cli import build_parser, main
+from torch_gpioius.models.estimator import EstimatorSettings
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "data" / "example_2d.gpioius"
@@ -378,7 +379,8 @@ def test_fit_takes_several_captures_each_with_its_own_camera(tmp_path, capsys):
     trimesh.PointCloud(right).export(tmp_path / "right.ply")
     eyes = [c + [0, -1.0, 0], c + [0, 1.0, 0]]
     files = [str(tmp_path / "left.ply"), str(tmp_path / "right.ply")]
-    ds = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=eyes, settings="paper")
+    paper_every_point = EstimatorSettings.paper().with_voxel(0)
+    ds = dataset_from_files(tmp_path / "touch.csv", files, camera_origin=eyes, settings=paper_every_point)
     free = ds.x[(ds.task == 1) & (ds.y == 1)]
     assert len(free) == len(left) + len(right)
     r = np.linalg.norm(free - c, axis=1)
@@ -396,8 +398,8 @@ def test_fit_takes_several_captures_each_with_its_own_camera(tmp_path, capsys):
     with pytest.raises(Exception, match=r"3 origin\(s\) for 2 point clouds"):
         dataset_from_files(tmp_path / "touch.csv", files, camera_origin=[eyes[0], eyes[1], None])
     # a capture without camera: its points, no free space
-    one = dataset_from_files(tmp_path / "touch.csv", files, voxel=None, camera_origin=[eyes[0], None],
-                             settings="paper")
+    one = dataset_from_files(tmp_path / "touch.csv", files, camera_origin=[eyes[0], None],
+                             settings=paper_every_point)
     assert int(((one.task == 1) & (one.y == 1)).sum()) == len(left)
 
 

@@ -9,6 +9,7 @@ import trimesh
 from torch_gpioius.io.datasets import DatasetError
 from torch_gpioius.io.importers import dataset_from_files, load_contacts_csv, load_point_cloud, read_contacts_csv
 from torch_gpioius.voxels import voxel_average
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 PTS = np.array([[0.01, 0.02, 0.03], [0.04, -0.05, 0.06], [0.2, 0.1, -0.3], [0.021, 0.022, 0.023]])
 
@@ -98,7 +99,7 @@ def test_inside_points_in_a_contacts_csv(tmp_path):
     x, y, _ = load_contacts_csv(p, units="mm")
     np.testing.assert_allclose(y, [0.0, -0.4, -0.2, 1.0], rtol=1e-15)
     np.savez(tmp_path / "cloud.npz", points=PTS * 1000 + [100, 0, 0])          # millimetres, around the contacts
-    ds = dataset_from_files(p, tmp_path / "cloud.npz", voxel=None, units="mm")
+    ds = dataset_from_files(p, tmp_path / "cloud.npz", settings=EstimatorOverrides(voxel=0), units="mm")
     assert ds.y[:4].tolist() == y.tolist()
     assert float(ds.to_model().train_targets.min()) == pytest.approx(-0.4, rel=1e-15)
     for body, match in [("x,y,label,depth\n1,2,inside,\n", "c.csv:2: an inside point needs its depth"),
@@ -117,7 +118,7 @@ def test_inside_points_in_a_contacts_csv(tmp_path):
 def test_dataset_from_files(tmp_path):
     (tmp_path / "c.csv").write_text("x,y,z,label\n0.1,0,0,contact\n0.3,0,0,free\n")
     np.savez(tmp_path / "cloud.npz", points=PTS)
-    ds = dataset_from_files(tmp_path / "c.csv", tmp_path / "cloud.npz", voxel=None)
+    ds = dataset_from_files(tmp_path / "c.csv", tmp_path / "cloud.npz", settings=EstimatorOverrides(voxel=0))
     assert len(ds) == 6 and ds.task.tolist() == [0, 0, 1, 1, 1, 1] and ds.y.tolist() == [0, 1, 0, 0, 0, 0]
     (tmp_path / "c2.csv").write_text("x,y,label\n0.1,0,contact\n")
     with pytest.raises(DatasetError, match="3-D"):
@@ -182,7 +183,7 @@ def test_complex_and_boolean_points_are_refused(tmp_path):
 def test_dataset_from_files_validates_its_parameters(tmp_path):
     (tmp_path / "a.csv").write_text("x,y,label\n0.1,0.2,contact\n")
     with pytest.raises(ValueError, match="noise"):
-        dataset_from_files(tmp_path / "a.csv", noise=-1)
+        dataset_from_files(tmp_path / "a.csv", settings=EstimatorOverrides(noise=-1))
     with pytest.raises(ValueError, match="settings: must be one of"):
         dataset_from_files(tmp_path / "a.csv", settings="mine")
 
@@ -201,7 +202,7 @@ def test_contacts_and_clouds_in_millimetres_are_refused_naming_the_units(tmp_pat
         load_point_cloud(tmp_path / "cloud_mm.npz")
     with pytest.raises(DatasetError, match="touch_mm.csv"):
         dataset_from_files(mm, tmp_path / "cloud_mm.npz")
-    assert len(dataset_from_files(mm, tmp_path / "cloud_mm.npz", units="mm", voxel=None)) == 7
+    assert len(dataset_from_files(mm, tmp_path / "cloud_mm.npz", units="mm", settings=EstimatorOverrides(voxel=0))) == 7
 
 
 def test_a_dataset_in_millimetres_is_refused_wherever_it_is_built(tmp_path):
@@ -302,14 +303,15 @@ def test_a_cloud_that_does_not_belong_to_the_contacts_is_refused(tmp_path):
     csv_path, cloud, c = _ball_files(tmp_path)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        ok = dataset_from_files(csv_path, cloud, voxel=0.02, camera_origin=c + [-1.0, 0.0, 0.3])
+        ok = dataset_from_files(csv_path, cloud, settings=EstimatorOverrides(voxel=0.02),
+                                camera_origin=c + [-1.0, 0.0, 0.3])
     assert (ok.task == 1).any()
     far_csv, far_cloud, _ = _ball_files(tmp_path, shift=(1.5, 0.0, 0.0))
     with pytest.raises(DatasetError, match=r"outside the cloud's box.*not in one frame or not in one unit"):
-        dataset_from_files(far_csv, far_cloud, voxel=0.02)
+        dataset_from_files(far_csv, far_cloud, settings=EstimatorOverrides(voxel=0.02))
     mm_csv, m_cloud, _ = _ball_files(tmp_path, contacts_scale=1000.0)
     with pytest.raises(DatasetError, match="not in one frame or not in one unit"):
-        dataset_from_files(mm_csv, m_cloud, units="mm", voxel=0.02)
+        dataset_from_files(mm_csv, m_cloud, units="mm", settings=EstimatorOverrides(voxel=0.02))
 
 
 def test_a_camera_inside_the_cloud_is_warned_of(tmp_path):
@@ -318,7 +320,7 @@ def test_a_camera_inside_the_cloud_is_warned_of(tmp_path):
 
     csv_path, cloud, c = _ball_files(tmp_path)
     with pytest.warns(UserWarning, match="camera origin .* lies inside the cloud's convex hull"):
-        dataset_from_files(csv_path, cloud, voxel=0.02, camera_origin=c)
+        dataset_from_files(csv_path, cloud, settings=EstimatorOverrides(voxel=0.02), camera_origin=c)
 
 
 @pytest.mark.parametrize("row, match", [("0.5,0,0.2,-1e6", "below -20"), ("0.5,0,0.2,-1e308", "below -20"),
@@ -392,7 +394,7 @@ def test_a_capture_that_sees_only_the_top_is_not_taken_for_another_frame(tmp_pat
     top = trimesh.creation.icosphere(3, radius=0.108).vertices
     top = top[top[:, 2] > 0.1] + c
     trimesh.PointCloud(top).export(tmp_path / "top.ply")
-    ds = dataset_from_files(csv_path, [cloud, tmp_path / "top.ply"], voxel=0.02,
+    ds = dataset_from_files(csv_path, [cloud, tmp_path / "top.ply"], settings=EstimatorOverrides(voxel=0.02),
                             camera_origin=[c + [-1.0, 0.0, 0.3], c + [0.0, 0.0, 0.5]])
     assert (ds.task == 1).sum() > 50
 
@@ -571,10 +573,11 @@ def test_captures_of_a_miscalibrated_camera_are_corrected_from_the_contacts_and_
     file; without it the captures are used as given."""
     csv, clouds, eyes, outer = _box_files(tmp_path, "6mm,1deg")
     with pytest.warns(UserWarning, match="calibration is off by millimetres does this too"):
-        as_given = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0)   # the dropped inside points' hint
+        every = EstimatorOverrides(voxel=0)
+        as_given = dataset_from_files(csv, clouds, camera_origin=eyes, settings=every)   # the inside points' hint
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        fixed = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0, camera_bound="12mm,2deg")
+        fixed = dataset_from_files(csv, clouds, camera_origin=eyes, settings=every, camera_bound="12mm,2deg")
     assert "camera_corrections" not in as_given.meta
     record = fixed.meta["camera_corrections"]
     assert len(record["captures"]) == 3 and record["misfit_after_mm"] < record["misfit_before_mm"]
@@ -643,8 +646,10 @@ def test_a_users_captures_held_to_the_table_they_see_as_well(tmp_path):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        contacts_only = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0, camera_bound="12mm,2deg")
-        held = dataset_from_files(csv, clouds, camera_origin=eyes, voxel=0, camera_bound="12mm,2deg", table=table)
+        every = EstimatorOverrides(voxel=0)
+        contacts_only = dataset_from_files(csv, clouds, camera_origin=eyes, settings=every, camera_bound="12mm,2deg")
+        held = dataset_from_files(csv, clouds, camera_origin=eyes, settings=every, camera_bound="12mm,2deg",
+                                  table=table)
     assert all(c["support"] >= 100 for c in held.meta["camera_corrections"]["captures"])
     def low(ds):                                   # seen points at the table's height, beyond the box's foot
         seen = ds.x[(ds.task == 1) & (ds.y == 0)]

@@ -253,3 +253,26 @@ def test_fit_dataset_takes_changes_to_the_files_own_settings_and_its_loose_keywo
     assert one["task_covariance"] == loose["task_covariance"] and one["mll"] == loose["mll"]
     assert one["lengthscale"] == pytest.approx(0.12) and one["noise"] == pytest.approx(0.01)
     assert one["settings"]["noise"] == 0.01 and one["settings"]["kernel"]["lengthscale"] == pytest.approx(0.12)
+
+
+def test_dataset_from_files_takes_changes_to_the_default_preset_and_its_loose_keywords_warn(tmp_path):
+    """``settings=EstimatorOverrides(voxel=..., noise=...)`` labels a user's files with the default preset so changed
+    (the length rule still sized to the clouds); the loose ``voxel`` and ``noise`` give the same dataset, warned."""
+    from torch_gpioius.io.importers import dataset_from_files
+
+    rng = np.random.default_rng(1)
+    d = rng.standard_normal((400, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    c = np.array([0.5, 0.0, 0.2])
+    np.savez(tmp_path / "cloud.npz", points=c + 0.08 * d[d[:, 2] > 0])
+    (tmp_path / "touch.csv").write_text("x,y,z,label\n" + "".join(f"{x},{y},{z},contact\n"
+                                                                   for x, y, z in c + 0.07 * d[:8]))
+    one = dataset_from_files(tmp_path / "touch.csv", tmp_path / "cloud.npz",
+                             settings=EstimatorOverrides(voxel=0.03, noise=0.02))
+    with pytest.warns(DeprecationWarning, match=r"dataset_from_files\(noise=, voxel=\)"):
+        loose = dataset_from_files(tmp_path / "touch.csv", tmp_path / "cloud.npz", voxel=0.03, noise=0.02)
+    np.testing.assert_array_equal(one.x, loose.x)
+    assert one.meta["estimator"] == loose.meta["estimator"]
+    est = EstimatorSettings.from_dict(one.meta["estimator"])
+    assert est.labels.voxel == 0.03 and est.voxel_rule is None and est.noise == 0.02
+    assert est.length_rule is not None and est.lengthscale == est.length_rule.length(0.16)   # sized to the cloud

@@ -474,11 +474,13 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         point_cloud: the camera's cloud, in the contacts' frame (:func:`load_point_cloud`), a list of clouds (several
             captures, e.g. from two sides), or None.
         units: both files' units ("m", "cm", "mm").
-        voxel: "auto" (the settings' voxel rule from the clouds' largest extent, or their fixed voxel), an edge [m],
-            or 0 / None (every point).
+        voxel: deprecated (``settings=EstimatorOverrides(voxel=...)``): "auto" (the settings' voxel rule from the
+            clouds' largest extent, or their fixed voxel), an edge [m], or 0 / None (every point).
         settings: an :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's name ("default",
-            "paper").
-        noise: sigma^2 in place of the settings'.
+            "paper"), or changes to the default preset (an
+            :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: ``EstimatorOverrides(voxel=0.02)``; the
+            voxel and the length rules still size what they hold to the clouds).
+        noise: deprecated likewise: sigma^2 in place of the settings'.
         source: the dataset's ``source``.
         camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None; with several clouds,
             a list of origins, one per cloud (None for a cloud whose camera is unknown: its points, no free space and
@@ -514,14 +516,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             file or argument).
     """
     from ..exploration.observations import cover_gap, uncontradicted_by_step, vision_observations
-    from ..models.estimator import EstimatorSettings
 
-    try:
-        est = EstimatorSettings.of(settings)
-    except ValueError as exc:
-        raise DatasetError(str(exc)) from None
-    if noise is not None:
-        est = est.replace(noise=noise)
+    est = _import_settings(settings, voxel, noise)
     x_in, y_in, step_in, normal_in = read_contacts_csv(contacts_csv, units=units)
     dim = x_in.shape[1]
     if contact_spacing is not None:
@@ -545,7 +541,7 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
     captures = [_capture(f, o, units, dim) for f, o in zip(files, origins)]
     if captures:
         everything = np.concatenate([c.points for c in captures])
-        est = _resolved_voxel(est, voxel, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
+        est = _sized(est, float(np.max(everything.max(axis=0) - everything.min(axis=0))))
     else:                                           # contacts alone: the length from their extent
         est = _sized(est, float(np.max(x_in.max(axis=0) - x_in.min(axis=0))))
     # the contacts' directions turned outward where the data say they point in (before any correction: it pairs
@@ -764,16 +760,37 @@ def _sized(est, extent: float):
     return est.for_extent(extent) if extent > 0 else est
 
 
-def _resolved_voxel(est, voxel, extent: float):
-    """The settings sized to an object of largest extent ``extent`` [m] (their length rule), with the voxel asked
-    for: "auto" (their voxel rule from ``extent``, or their fixed voxel), an edge [m], or 0 / None (every point)."""
-    if isinstance(voxel, str) and voxel != "auto":
-        raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
-    est = _sized(est, extent)
-    if isinstance(voxel, str):
-        return est
+def _import_settings(settings, voxel, noise):
+    """:func:`dataset_from_files`'s settings before they are sized to the files: a preset's name or an
+    :class:`~torch_gpioius.models.estimator.EstimatorSettings`, or changes to the default preset (an
+    :class:`~torch_gpioius.models.overrides.EstimatorOverrides`); the deprecated ``voxel`` (other than "auto") and
+    ``noise`` folded in, with a DeprecationWarning.
+
+    Raises:
+        DatasetError: a bad setting (names it).
+    """
+    from ..models.estimator import EstimatorSettings
+    from ..models.overrides import EstimatorOverrides
+
+    changes = settings if isinstance(settings, EstimatorOverrides) else EstimatorOverrides()
+    loose = {}
+    if noise is not None:
+        loose["noise"] = noise
+    if not (isinstance(voxel, str) and voxel == "auto"):
+        if isinstance(voxel, str):
+            raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
+        loose["voxel"] = 0.0 if voxel is None else voxel
     try:
-        return est.with_voxel(0.0 if voxel is None else voxel)
+        if loose:
+            import warnings
+
+            warnings.warn(f"dataset_from_files({', '.join(f'{k}=' for k in loose)}): give settings="
+                          f"EstimatorOverrides({', '.join(f'{k}=...' for k in loose)}) (changes to the default preset) "
+                          "or the settings whole (torch_gpioius.models.overrides); these keywords go in a later "
+                          "release", DeprecationWarning, stacklevel=3)
+            changes = changes.merged(EstimatorOverrides(**loose))
+        base = "default" if isinstance(settings, EstimatorOverrides) else settings
+        return changes.apply(EstimatorSettings.of(base))
     except ValueError as exc:
         raise DatasetError(str(exc)) from None
 
