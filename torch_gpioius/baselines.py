@@ -178,6 +178,13 @@ def _vision(data: BaselineData) -> BaselineEstimate | None:
     return BaselineEstimate(found[1], None)
 
 
+def _plain(baseline):
+    """``baseline`` on the capture labelled without the ray smoothing (:meth:`BaselineData.plain_data`)."""
+    def on_plain(data: BaselineData) -> BaselineEstimate | None:
+        return baseline(data.plain_data())
+    return on_plain
+
+
 def _shrunk_by(first: int | None):
     def baseline(data: BaselineData) -> BaselineEstimate | None:
         found = vision_surface(data)
@@ -191,12 +198,6 @@ def _shrunk_by(first: int | None):
 
 register_baseline("vision", _vision, description="a GPIS of the camera's observations alone, taken for the inner "
                                                  "surface")
-def _plain(baseline):
-    def on_plain(data: BaselineData) -> BaselineEstimate | None:
-        return baseline(data.plain_data())
-    return on_plain
-
-
 register_baseline("vision-shrunk-5", _shrunk_by(5), description="the vision surface moved inward by the median depth "
                                                                 "of the first five contacts under it")
 register_baseline("vision-shrunk-all", _shrunk_by(None), description="the vision surface moved inward by the median "

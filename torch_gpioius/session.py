@@ -7,7 +7,6 @@ restore of :mod:`torch_gpioius.io.logs`, which sit above it.
 from __future__ import annotations
 
 import os
-import warnings
 
 from .exploration.config import ExploreConfig
 from .exploration.loop import run
@@ -15,6 +14,7 @@ from .exploration.trace import Trace
 from .exploration.world import World
 from .io.logs import LogRecorder, restore_run
 from .models.base import kernel_for_theta
+from .models.overrides import warn_loose
 
 __all__ = ["explore"]
 
@@ -122,8 +122,8 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     if not isinstance(world, World):
         raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
                         f"{type(world).__name__}")
-    _warn_loose(kernel=kernel, noise=noise, policy=policy, learn=learn,
-                restart_every=None if isinstance(restart_every, str) and restart_every == "default" else restart_every)
+    warn_loose("explore", 2, kernel=kernel, noise=noise, policy=policy, learn=learn,
+               restart_every=None if isinstance(restart_every, str) and restart_every == "default" else restart_every)
     kernel = kernel_for_theta(theta, kernel, "explore")  # the paper's name, a deprecated alias
     config = ExploreConfig.from_world(
         world,
@@ -185,13 +185,3 @@ def _check_log_path(path, name: str, *, must_exist: bool, overwrite: bool = Fals
                               f"on); pass resume_from={p!r} to continue it, overwrite=True to replace it, or another "
                               "log path")
 
-
-def _warn_loose(**given) -> None:
-    """The DeprecationWarning of ``explore``'s loose estimator keywords (they still work, through the same resolver,
-    for one release): the estimator's settings are one object, ``settings=EstimatorOverrides(...)``."""
-    named = [k for k, v in given.items() if v is not None]
-    if named:
-        warnings.warn(f"explore({', '.join(f'{k}=' for k in named)}): give settings=EstimatorOverrides("
-                      f"{', '.join(f'{k}=...' for k in named)}) (torch_gpioius.models.overrides; the estimator's "
-                      "settings in one object, docs/reference/settings.md); these keywords go in a later release",
-                      DeprecationWarning, stacklevel=3)

@@ -240,9 +240,9 @@ def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) 
     :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, checks and applies them)."""
     from ..models.overrides import KEEP, EstimatorOverrides
 
-    changes = settings if isinstance(settings, EstimatorOverrides) else EstimatorOverrides()
-    if isinstance(settings, EstimatorOverrides):
-        settings = None
+    changes = EstimatorOverrides()
+    if isinstance(settings, EstimatorOverrides):            # the world's own, with these changes
+        changes, settings = settings, None
     est = world.defaults.estimator if settings is None else EstimatorSettings.of(settings)
     if est.sized_to_object and est is not world.defaults.estimator:
         extent = world.object_extent

@@ -145,12 +145,12 @@ def begin(ctx: Run) -> ExplorationState:
         captures = capture_views(hw.camera)          # each view's, merged as the camera's own capture merges them
         # with a bound and a known table: the captures held to it before the first touch (the contacts later)
         seen, start_fix = correct_at_start(captures, cfg.policy, crop, table)
-        x_out, y_out = vision_observations(PointCloud.merge(seen), cfg.policy, crop)
+        merged = PointCloud.merge(seen)
+        x_out, y_out = vision_observations(merged, cfg.policy, crop)
         outer = Observations(x_out, y_out, np.ones(len(x_out), np.int64), source="vision")
         if cfg.policy.ray_smoothing and cfg.policy.voxel:
             # the same capture as the paper labels it, for the simple baselines alone (not the model's)
-            plain = vision_observations(PointCloud.merge(seen), dataclasses.replace(cfg.policy, ray_smoothing=None),
-                                        crop)
+            plain = vision_observations(merged, dataclasses.replace(cfg.policy, ray_smoothing=None), crop)
     first = hw.controller.approach(torch.as_tensor(world.direction), max_travel=cfg.approach_travel)
     if not first.in_contact:
         raise RuntimeError(f"approach from {np.round(world.start, 4).tolist()} along "

@@ -770,7 +770,7 @@ def _import_settings(settings, voxel, noise):
         DatasetError: a bad setting (names it).
     """
     from ..models.estimator import EstimatorSettings
-    from ..models.overrides import EstimatorOverrides
+    from ..models.overrides import EstimatorOverrides, warn_loose
 
     changes = settings if isinstance(settings, EstimatorOverrides) else EstimatorOverrides()
     loose = {}
@@ -781,13 +781,7 @@ def _import_settings(settings, voxel, noise):
             raise DatasetError(f"voxel: expected 'auto', an edge [m] or 0, got {voxel!r}")
         loose["voxel"] = 0.0 if voxel is None else voxel
     try:
-        if loose:
-            import warnings
-
-            warnings.warn(f"dataset_from_files({', '.join(f'{k}=' for k in loose)}): give settings="
-                          f"EstimatorOverrides({', '.join(f'{k}=...' for k in loose)}) (changes to the default preset) "
-                          "or the settings whole (torch_gpioius.models.overrides); these keywords go in a later "
-                          "release", DeprecationWarning, stacklevel=3)
+        if warn_loose("dataset_from_files", 3, **loose):
             changes = changes.merged(EstimatorOverrides(**loose))
         base = "default" if isinstance(settings, EstimatorOverrides) else settings
         return changes.apply(EstimatorSettings.of(base))

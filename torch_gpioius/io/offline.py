@@ -235,18 +235,12 @@ def _fit_settings(settings, kernel, noise, learn):
     Raises:
         ValueError: a bad setting (names it).
     """
-    from ..models.overrides import EstimatorOverrides
+    from ..models.overrides import EstimatorOverrides, warn_loose
 
     if not isinstance(settings, EstimatorOverrides) and settings is not None:
         settings = EstimatorSettings.of(settings)
-    if kernel is None and noise is None and learn is None:
+    if not warn_loose("fit_dataset", 3, kernel=kernel, noise=noise, learn=learn):
         return settings
-    import warnings
-
-    named = [k for k, v in (("kernel", kernel), ("noise", noise), ("learn", learn)) if v is not None]
-    warnings.warn(f"fit_dataset({', '.join(f'{k}=' for k in named)}): give settings=EstimatorOverrides("
-                  f"{', '.join(f'{k}=...' for k in named)}) (torch_gpioius.models.overrides); these keywords go in a "
-                  "later release", DeprecationWarning, stacklevel=3)
     changes = EstimatorOverrides(kernel=kernel, noise=noise, learn=learn)
     if settings is None:
         return changes

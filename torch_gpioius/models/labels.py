@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from .._validation import as_int
+from .._validation import INSIDE_DEPTH_MAX, as_int
 
 __all__ = ["ObservationPolicy", "check_voxel", "MAX_VOXEL"]
 
@@ -120,60 +120,46 @@ class ObservationPolicy:
 
         Raises:
             ValueError: an unknown field (names the fields), or a value outside its range (names the field, the
-                value and the range).
+                value and the range, :meth:`field_range`).
         """
-        from .._validation import INSIDE_DEPTH_MAX
-
         where = f"ObservationPolicy.{name}"
-        if name == "camera_bound":
-            if value is None:
-                return None
-            ok = (isinstance(value, (tuple, list)) and len(value) == 2 and all(
-                not isinstance(v, bool) and isinstance(v, (int, float)) and math.isfinite(v) for v in value)
-                and 0 < value[0] <= 0.1 and 0 < value[1] <= math.radians(20))
-            if not ok:
-                raise ValueError(f"{where}: must be (translation in (0, 0.1] m, rotation in (0, "
-                                 f"{math.radians(20):.3g}] rad) or None, got {value!r}")
-            return float(value[0]), float(value[1])
         if name == "ray_smoothing":
-            return as_int(value, f"{where} (rays)", 8, 10_000, allow_none=True)
-        if name in _FLAGS:
-            if not isinstance(value, bool):
-                raise ValueError(f"{where}: must be true or false, got {value!r}")
-            return value
-        if name in _LENGTHS:
-            hi = INSIDE_DEPTH_MAX if name in _DEPTHS else _LENGTHS[name]
-            if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float)) or not
-                                      (math.isfinite(value) and 0 < value <= hi)):
-                raise ValueError(f"{where}: must be in (0, {hi:g}] m or none, got {value!r}")
-            return value
-        if name in _SPACINGS:
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not (math.isfinite(value)
-                                                                                    and 0 < value <= 1.0):
-                raise ValueError(f"{where}: must be in (0, 1] m, got {value!r}")
-            return value
-        raise ValueError(f"ObservationPolicy: unknown field {name!r}; the fields are "
-                         f"{', '.join(f.name for f in fields(cls))}")
+            return as_int(value, f"{where} (rays)", *_RAYS, allow_none=True)
+        if name == "camera_bound":
+            ok = value is None or (isinstance(value, (tuple, list)) and len(value) == 2
+                                   and all(_in_range(v, hi) for v, hi in zip(value, _CAMERA_BOUND)))
+        elif name in _FLAGS:
+            ok = isinstance(value, bool)
+        elif name in _LENGTHS:
+            ok = value is None or _in_range(value, _LENGTHS[name])
+        elif name in _SPACINGS:
+            ok = _in_range(value, 1.0)
+        else:
+            raise ValueError(f"ObservationPolicy: unknown field {name!r}; the fields are "
+                             f"{', '.join(f.name for f in fields(cls))}")
+        if not ok:
+            raise ValueError(f"{where}: must be {cls.field_range(name)}, got {value!r}")
+        return (float(value[0]), float(value[1])) if name == "camera_bound" and value is not None else value
 
     @classmethod
     def field_range(cls, name: str) -> str:
-        """What :meth:`check_field` accepts for the field ``name``, in words (the configuration reference's).
+        """What :meth:`check_field` accepts for the field ``name``, in words (its error messages' and the
+        configuration reference's).
 
         Raises:
             ValueError: an unknown field.
         """
-        from .._validation import INSIDE_DEPTH_MAX
-
         if name == "camera_bound":
-            return f"(translation in (0, 0.1] m, rotation in (0, {math.radians(20):.3g}] rad) or none"
+            return (f"(translation in (0, {_CAMERA_BOUND[0]:g}] m, rotation in (0, {_CAMERA_BOUND[1]:.3g}] rad) or "
+                    "none")
         if name == "ray_smoothing":
-            return "8-10000 rays, or none"
+            return f"{_RAYS[0]}-{_RAYS[1]} rays, or none"
         if name in _FLAGS:
             return "true or false"
         if name in _LENGTHS:
-            return f"(0, {INSIDE_DEPTH_MAX if name in _DEPTHS else _LENGTHS[name]:g}] m, or none"
+            return f"in (0, {_LENGTHS[name]:g}] m or none"
         if name in _SPACINGS:
-            return "(0, 1] m"
+            return "in (0, 1] m"
         cls.check_field(name, None)         # raises, naming the fields
         return ""                           # pragma: no cover
 
@@ -240,10 +226,18 @@ def check_voxel(voxel) -> float:
 
 #: The policy's on/off fields.
 _FLAGS = ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table")
-#: The policy's optional lengths [m] and the largest each takes (None: off); the depths' bound is
-#: ``INSIDE_DEPTH_MAX``, the voxels' :data:`MAX_VOXEL`.
-_LENGTHS = {"vision_free_offset": 1.0, "voxel": 1.0, "crop_margin": 10.0, "vision_free_far": 1.0,
-            "touch_inside": None, "vision_inside": None, "vision_inside_gap": None}
-_DEPTHS = ("touch_inside", "vision_inside", "vision_inside_gap")
+#: The policy's optional lengths [m] and the largest each takes (None: off).
+_LENGTHS = {"vision_free_offset": 1.0, "voxel": MAX_VOXEL, "crop_margin": 10.0, "vision_free_far": 1.0,
+            "touch_inside": INSIDE_DEPTH_MAX, "vision_inside": INSIDE_DEPTH_MAX, "vision_inside_gap": INSIDE_DEPTH_MAX}
 #: The policy's spacings along the fingertip's path [m], in (0, 1].
 _SPACINGS = ("free_space_spacing", "free_space_margin")
+#: The largest camera bound: (translation [m], rotation [rad]).
+_CAMERA_BOUND = (0.1, math.radians(20))
+#: The rays ``ray_smoothing`` may average over.
+_RAYS = (8, 10_000)
+
+
+def _in_range(value, hi: float) -> bool:
+    """Whether ``value`` is a finite number in (0, ``hi``] (a bool is not a number here)."""
+    return (not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+            and 0 < value <= hi)

@@ -31,7 +31,7 @@ from ..kernels import ExactKernel, KernelChoice, from_description
 from .estimator import EstimatorSettings, as_learn
 from .labels import ObservationPolicy, check_voxel
 
-__all__ = ["EstimatorOverrides", "parse_assignment", "resolved", "OVERRIDE_KEYS"]
+__all__ = ["EstimatorOverrides", "parse_assignment", "resolved", "warn_loose", "OVERRIDE_KEYS"]
 
 #: The keys :meth:`EstimatorOverrides.from_dict` reads (``labels.<field>`` for one label; ``theta`` is
 #: ``lengthscale`` under the paper's name).
@@ -122,9 +122,10 @@ class EstimatorOverrides:
             est = est.replace(labels=dataclasses.replace(est.labels, **dict(self.labels)))
         if self.voxel is not None:
             est = est.with_voxel(self.voxel)
-        if isinstance(self.kernel, KernelChoice) and not self.kernel.apply(est.kernel).learnable_length:
-            est = est.replace(kernel=self.kernel.apply(est.kernel))   # a kind without a length: no rule to keep
-        elif isinstance(self.kernel, KernelChoice):
+        chosen = self.kernel.apply(est.kernel) if isinstance(self.kernel, KernelChoice) else None
+        if chosen is not None and not chosen.learnable_length:
+            est = est.replace(kernel=chosen)        # a kind without a length: no rule to keep
+        elif chosen is not None:
             length = est.lengthscale
             est = est.with_kernel(self.kernel)
             if est.length_rule is not None and length is not None and est.lengthscale != length:
@@ -253,6 +254,23 @@ def resolved(estimator, base: EstimatorSettings) -> EstimatorSettings:
     if not isinstance(estimator, EstimatorSettings):
         raise ValueError(f"estimator: expected EstimatorSettings or EstimatorOverrides, got {type(estimator).__name__}")
     return estimator
+
+
+def warn_loose(owner: str, stacklevel: int, **given) -> list[str]:
+    """The DeprecationWarning of an entry point's loose estimator keywords (``given``, None: not given; they still
+    work, through the same resolver, for one release): the estimator's settings are one object,
+    ``settings=EstimatorOverrides(...)``. ``stacklevel`` counts from the caller of this function, as
+    :func:`warnings.warn`'s. Returns the names given.
+    """
+    named = [k for k, v in given.items() if v is not None]
+    if named:
+        import warnings
+
+        warnings.warn(f"{owner}({', '.join(f'{k}=' for k in named)}): give settings=EstimatorOverrides("
+                      f"{', '.join(f'{k}=...' for k in named)}) (torch_gpioius.models.overrides; the estimator's "
+                      "settings in one object, docs/reference/settings.md); these keywords go in a later release",
+                      DeprecationWarning, stacklevel=stacklevel + 1)
+    return named
 
 
 def _none(value):

@@ -132,25 +132,33 @@ def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefault
 INSIDE_SETTINGS = ("touch_inside", "vision_inside", "vision_inside_gap", "cover_offset")
 
 
-def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDefaults:
-    """``defaults`` with the inside points' depths [m] given (``touch_inside``, ``vision_inside``; 0: none; None:
-    as they are), the cover's gap beyond which the camera's are retracted (``vision_inside_gap``; 0: never), each
-    checked to lie in [0, 0.1] m, and whether the outer task's prior mean then stands for that gap (``cover_offset``,
-    True or False).
+def inside_labels(**depths) -> dict:
+    """The labels' fields of :data:`INSIDE_SETTINGS` given (None: not given), each checked by the labels' own range
+    (:meth:`~torch_gpioius.models.labels.ObservationPolicy.check_field`), where a depth or gap of 0 means none (the
+    scene files' and ``from_mesh``'s convention).
 
     Raises:
-        ValueError: a value outside that range, or an unknown name (names it).
+        ValueError: a value outside its range, or an unknown name (names it).
     """
     given = {k: v for k, v in depths.items() if v is not None}
     unknown = set(given) - set(INSIDE_SETTINGS)
     if unknown:
         raise ValueError(f"inside depths: unknown {sorted(unknown)}; the settings are {', '.join(INSIDE_SETTINGS)}")
-    if not given:
-        return defaults
-    # the labels' own ranges (0 for a depth: none)
-    checked = {k: ObservationPolicy.check_field(k, None if k != "cover_offset" and v == 0 else v)
-               for k, v in given.items()}
-    return defaults.estimator_changed(labels=checked)
+    return {k: ObservationPolicy.check_field(k, None if k != "cover_offset" and v == 0 else v)
+            for k, v in given.items()}
+
+
+def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDefaults:
+    """``defaults`` with the inside points' depths [m] given (``touch_inside``, ``vision_inside``; 0: none; None:
+    as they are), the cover's gap beyond which the camera's are retracted (``vision_inside_gap``; 0: never), each
+    checked to lie in [0, 0.1] m, and whether the outer task's prior mean then stands for that gap (``cover_offset``,
+    True or False) (:func:`inside_labels`).
+
+    Raises:
+        ValueError: a value outside that range, or an unknown name (names it).
+    """
+    checked = inside_labels(**depths)
+    return defaults.estimator_changed(labels=checked) if checked else defaults
 
 
 def as_views(views) -> tuple[str, ...]:
@@ -645,14 +653,12 @@ class Scene3D(RangedScene):
         chosen = settings_for(settings, mesh)
         views = as_views(chosen["views"] if views is None else views)
         defaults = chosen["defaults"] if defaults is None else defaults
-        # the estimator's loose settings, by the one resolver (0 for a depth: none)
-        depths = {k: v for k, v in (("touch_inside", touch_inside), ("vision_inside", vision_inside),
-                                    ("vision_inside_gap", vision_inside_gap), ("cover_offset", cover_offset))
-                  if v is not None}
-        changes = EstimatorOverrides(kernel=kernel, noise=noise, voxel=voxel, learn=learn, labels={
-            k: None if k != "cover_offset" and v == 0 else v for k, v in depths.items()})
+        # the estimator's loose settings, by the one resolver
+        changes = EstimatorOverrides(kernel=kernel, noise=noise, voxel=voxel, learn=learn)
         if changes:
             defaults = defaults.with_estimator(changes.apply(defaults.estimator))
+        defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside,
+                                      vision_inside_gap=vision_inside_gap, cover_offset=cover_offset)
         gap = {"tight": 0.008, "loose": 0.01}.get(cover, 0.005) if gap is None else gap
         outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution, gap_far=gap_far,
                              thick_side=thick_side)

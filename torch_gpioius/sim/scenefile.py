@@ -304,12 +304,6 @@ _RANGES = {"cover_stiffness": (0.0, 1e7, False), "sensor_noise": (0.0, 10.0, Tru
            "settle_time": (0.0, 60.0, True)}
 
 
-#: The world sections' keys that are the labels' fields, checked by the labels' own ranges, and those of them where 0
-#: means none.
-_POLICY_KEYS = ("touch_inside", "vision_inside", "vision_inside_gap", "cover_offset")
-_DEPTH_KEYS = ("touch_inside", "vision_inside", "vision_inside_gap")
-
-
 def _setting_problem(key: str, value) -> str | None:
     """Why a world section's ``key = value`` cannot be used, or None (the world checks the rest when it builds)."""
     if key == "voxel":
@@ -320,11 +314,11 @@ def _setting_problem(key: str, value) -> str | None:
         except ValueError as exc:
             return str(exc).removeprefix("voxel: ")
         return None
-    if key in _POLICY_KEYS:          # the labels' own ranges (0 for a depth: none)
-        from ..models.labels import ObservationPolicy
+    from .forcefield import INSIDE_SETTINGS, inside_labels
 
+    if key in INSIDE_SETTINGS:       # the labels' own ranges (0 for a depth: none)
         try:
-            ObservationPolicy.check_field(key, None if key in _DEPTH_KEYS and value == 0 else value)
+            inside_labels(**{key: value})
         except ValueError as exc:
             return str(exc).removeprefix(f"ObservationPolicy.{key}: ")
         return None

@@ -54,13 +54,10 @@ def __getattr__(name):
         return {w: world_entry(w).object_names for w in study_worlds()}
     if name == "MODES":
         return sweep_modes()
-    if name == "SweepSettings":         # renamed: "settings" are the estimator's
-        import warnings
+    if name == "SweepSettings":         # renamed StudyPlan (sweep re-exports this module's attributes)
+        from . import sweep_settings
 
-        from .sweep_settings import StudyPlan
-
-        warnings.warn("SweepSettings is StudyPlan now (settings are the estimator's)", DeprecationWarning, stacklevel=2)
-        return StudyPlan
+        return sweep_settings.__getattr__(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
