@@ -181,17 +181,19 @@ def test_quoted_output_is_what_the_command_prints(page, cmd, quoted, capsys, mon
     assert capsys.readouterr().out.rstrip("\n").splitlines() == quoted, f"{page} quotes other output for `{cmd}`"
 
 
-def test_the_readme_tables_writing_commands_each_name_their_own_folder():
-    """Issue 35, item 6: the table's commands could not run in order (two wrote the same default folder)."""
-    table = [line for line in (ROOT / "README.md").read_text().splitlines() if line.startswith("| ")]
+def test_the_command_tables_writing_commands_each_name_their_own_folder():
+    """The one-command-per-job table (docs/getting-started.md, once the README's) could not run in order when two
+    commands wrote the same default folder."""
+    table = [line for page in ("README.md", "docs/getting-started.md")
+             for line in (ROOT / page).read_text().splitlines() if line.startswith("| ")]
     commands = [c for line in table for c in re.findall(r"`(gpioius (?:simulate3d|simulate|study) [^`]*)`", line)]
     assert len(commands) >= 5
     outs = []
     for c in commands:
         argv = shlex.split(c)
-        assert "--out" in argv, f"README: `{c}` writes the command's default folder; name one"
+        assert "--out" in argv, f"command table: `{c}` writes the command's default folder; name one"
         outs.append(argv[argv.index("--out") + 1])
-    assert len(set(outs)) == len(outs), f"README: two commands write one folder: {outs}"
+    assert len(set(outs)) == len(outs), f"command tables: two commands write one folder: {outs}"
 
 
 def test_the_readme_says_what_a_second_run_into_its_own_folder_does():
