@@ -95,9 +95,11 @@ def render() -> str:
         "|---|---|",
         "| Python | `tg.explore(world, settings=...)`: an `EstimatorSettings`, a preset's name, or an "
         "`EstimatorOverrides` (the world's own settings with those changes); `fit_dataset(settings=...)`, "
-        "`dataset_from_files(settings=...)`, `import_bag(settings=...)` likewise |",
+        "`dataset_from_files(settings=...)`, `import_bag(settings=...)`, `Dataset.to_model(settings=...)` "
+        "likewise; a simulated object's own: `Scene3D.from_mesh(estimator=EstimatorOverrides(...))` |",
         "| command line | `gpioius study`, `fit` and `import-bag` share the flags below (declared once) |",
-        "| scene file | an `[estimator]` section: the keys below, `labels` a table of the policy's fields |",
+        "| scene file | an `[estimator]` section: the keys below, `labels` a table of the policy's fields (the "
+        "force-field section's `kernel`, `noise`, `voxel`, `learn` and inside depths are read into the same object) |",
         "| study | `run_sweep(estimator=...)`: an `EstimatorOverrides`, its plain dict or `KEY=VALUE` texts |",
         "| a recorded run | logs, datasets and run records keep the settings whole (`to_dict`); replay, export and the "
         "viewer rebuild the model from them (`EstimatorSettings.of_record`, which also reads files written before "

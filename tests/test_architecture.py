@@ -220,3 +220,31 @@ def test_the_renamed_settings_still_import_with_a_warning():
                               (sweep_settings, "SweepSettings", sweep.StudyPlan)):
         with pytest.warns(DeprecationWarning, match=new.__name__):
             assert getattr(module, name) is new
+
+
+#: "About ten": a public function with more parameters than this says why in its docstring (or its class's).
+MANY_PARAMETERS = 13
+
+
+def test_no_public_function_takes_many_parameters_without_saying_why():
+    """Signatures stay readable: what travels together is one object (the estimator's settings, a study's plan);
+    where a function still takes many separate choices, its docstring says why ("Why this many parameters")."""
+    bad = []
+    for path, rel, _ in _modules():
+        tree = ast.parse(path.read_text())
+        for cls in [None, *[n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)]]:
+            body = tree.body if cls is None else cls.body
+            if cls is not None and cls.name.startswith("_"):
+                continue
+            for node in body:
+                if not isinstance(node, ast.FunctionDef) or (node.name.startswith("_") and node.name != "__init__"):
+                    continue
+                args = node.args
+                names = [a.arg for a in args.posonlyargs + args.args + args.kwonlyargs if a.arg not in ("self", "cls")]
+                if len(names) <= MANY_PARAMETERS:
+                    continue
+                docs = (ast.get_docstring(node) or "") + (ast.get_docstring(cls) or "" if cls is not None else "")
+                if "Why this many parameters" not in " ".join(docs.split()):
+                    where = f"{cls.name}." if cls is not None else ""
+                    bad.append(f"{rel}:{node.lineno} {where}{node.name}: {len(names)} parameters")
+    assert not bad, "public functions with many parameters and no reason given:\n" + "\n".join(bad)

@@ -29,11 +29,13 @@ from .io import (BagImportError, CheckpointError, Dataset, DatasetError, RunHist
 from .kernels import InverseMultiquadricKernel  # noqa: E402
 from .models import GPIOIS, GPIS, INNER, OUTER, LocalGPIOIS, UnidentifiedSimilarityWarning  # noqa: E402
 from .models.estimator import EstimatorSettings  # noqa: E402
+from .models.overrides import EstimatorOverrides  # noqa: E402
 from .exact import exact_arithmetic  # noqa: E402
 from .threads import torch_threads  # noqa: E402
 from .tolerances import tol  # noqa: E402
 
-__all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings", "InverseMultiquadricKernel",
+__all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings", "EstimatorOverrides",
+           "InverseMultiquadricKernel",
            "DenseExactInference", "StructuredExactInference", "JitterWarning", "NotPositiveDefiniteError",
            "UnidentifiedSimilarityWarning", "exact_arithmetic", "tol", "torch_threads", "__version__",
            "ObservationPolicy", "Trace", "World", "RobotWorld", "Observations", "explore", "kernels", "models",

@@ -7,28 +7,26 @@ restore of :mod:`torch_gpioius.io.logs`, which sit above it.
 from __future__ import annotations
 
 import os
+import warnings
 
-from .exploration.config import ExploreConfig
+from .exploration.config import LOOSE, ExploreConfig
 from .exploration.loop import run
 from .exploration.trace import Trace
 from .exploration.world import World
 from .io.logs import LogRecorder, restore_run
 from .models.base import kernel_for_theta
-from .models.overrides import warn_loose
+from .models.overrides import loose_keywords, warn_loose
 
 __all__ = ["explore"]
 
 
-def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=None, step: float | None = None,
-            theta: float | None = None, kernel=None, noise: float | None = None, max_steps: int | None = None,
-            max_travel: float | None = None, stop=None, policy=None, penalty=None,
-            metrics_every: int | str | None = None, metrics_resolution: float | None = None,
+def explore(world: World, mode: str = "visual-tactile", *, settings=None, evidence=None, touch=None,
+            step: float | None = None, max_steps: int | None = None, max_travel: float | None = None, stop=None,
+            penalty=None, metrics_every: int | str | None = None, metrics_resolution: float | None = None,
             interval_every: int | None = None, regions: int | None = None, stall="default",
-            outer_tol: float | None = None, device=None, restart_every="default", learn: str | None = None,
-            settings=None, recorders=(),
-            progress: bool = False,
+            outer_tol: float | None = None, device=None, recorders=(), progress: bool = False,
             log: str | os.PathLike | None = None, resume_from: str | os.PathLike | None = None,
-            overwrite: bool = False) -> Trace:
+            overwrite: bool = False, **deprecated) -> Trace:
     """Explore ``world`` and record per-step metrics: the same loop for every world.
 
     Protocol (both modes alike): visual-tactile mode captures one point cloud before exploring (outer surface
@@ -46,8 +44,12 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     The estimator's settings (kernel, sigma^2, labels, voxels, what is learned) are one
     :class:`~torch_gpioius.models.estimator.EstimatorSettings`: ``settings`` gives another whole, or the world's own
     with changes (an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: any of them, a label's field
-    included; docs/reference/settings.md). The keywords ``kernel``, ``noise``, ``policy``, ``learn`` and
-    ``restart_every`` still change one of them, through the same resolver, with a DeprecationWarning.
+    included; docs/reference/settings.md). The keywords ``theta``, ``kernel``, ``noise``, ``policy``, ``learn`` and
+    ``restart_every`` of earlier releases (``**deprecated``) still change one of them for one release, through the same
+    resolver, with a DeprecationWarning.
+
+    Why this many parameters: each is a separate choice of one run (how it explores, when it stops, what it measures,
+    where it computes and logs); the estimator's settings, the part that grows, are one object (``settings``).
 
     Args:
         world: a :class:`~torch_gpioius.exploration.world.World` (``tg.sim.Scene2D``, ``tg.sim.Scene3D``,
@@ -64,15 +66,9 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             preset's name: "default", "paper", "paper-2d"; a preset's voxel rule sized to the world's object), or
             changes to the world's (an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, e.g.
             ``EstimatorOverrides(labels={"ray_smoothing": None})``); None: the world's.
-        kernel: deprecated (``settings=EstimatorOverrides(kernel=...)``): an
-            :class:`~torch_gpioius.kernels.ExactKernel`, carrying its own length scale, in place of the settings'
-            (``theta=``, the paper's name for the inverse multiquadric's length scale, is a deprecated alias of
-            ``kernel=InverseMultiquadricKernel(lengthscale=...)``); noise: sigma^2, deprecated likewise.
         max_steps: cap on planning steps.
         max_travel: fingertip travel budget since the first contact [m] (adds or replaces a ``TravelBudget``).
         stop: stop rules replacing the world's.
-        policy: deprecated (``settings=EstimatorOverrides(policy=...)``, or ``labels={...}`` for single fields): the
-            observation policy.
         penalty: C(x) replacing the world's.
         metrics_every: ground-truth metrics every k steps (and always at the last), or "schedule": only at 10, 25 and
             50 % of the travel budget, at a stop and at the end (a long run measured at every step spent a third
@@ -90,16 +86,6 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
             points (fine voxels); each record's ``truncation`` says how far the Gram matrix moved (None: exact).
         device: where the model's data and exact arithmetic live ("cuda" for a GPU, float64 either way; default:
             the CPU). The world, the robot and every record stay on the CPU; a run may resume on another device.
-        restart_every: deprecated (``settings=EstimatorOverrides(restart_every=...)``): every this many steps K_t's
-            re-learning also starts from fixed values and keeps the best optimum, so that a warm start cannot hold it
-            in a worse local optimum (default 25; None: warm starts only, as before this setting existed).
-        learn: deprecated (``settings=EstimatorOverrides(learn=...)``): "task" (K_t alone, the paper's), "length"
-            or "all": the kernel's length (and with "all" sigma^2)
-            is learned with K_t by the exact marginal likelihood on every ``restart_every``-th step, from the
-            configured values, on a copy of at most 256 inner and 512 outer points, and kept only where the full
-            data's likelihood rises
-            (``GPIOIS.learn_hyperparameters``; each record's ``length`` and ``noise`` say what was used). Default:
-            the world's (``world.defaults.learn``).
         recorders: :class:`~torch_gpioius.exploration.protocols.Recorder` objects observing the run (after the
             metrics and the interval, before the log).
         progress: report progress (a bar on a terminal, plain lines otherwise).
@@ -108,12 +94,15 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
         resume_from: continue the run logged in this file from its last complete step (same world, parameters
             and hardware state; appends to the log). The resumed run ends where an uninterrupted one would.
         overwrite: replace an existing file at ``log`` (default: refuse it, since ``resume_from`` relies on it).
+        **deprecated: ``theta``, ``kernel``, ``noise``, ``policy``, ``learn``, ``restart_every`` (one release; give
+            ``settings=EstimatorOverrides(...)``; ``theta`` is the inverse multiquadric's length, ``kernel=
+            InverseMultiquadricKernel(lengthscale=...)``).
 
     Returns:
         :class:`~torch_gpioius.exploration.trace.Trace`.
 
     Raises:
-        TypeError: ``world`` is not a World.
+        TypeError: ``world`` is not a World, or a keyword ``explore`` does not take.
         ValueError: an invalid argument (names it), a ``log`` that is a folder or lies in a folder that does not
             exist, or a log that does not match this run on resume.
         FileExistsError: ``log`` exists and ``overwrite`` is False (names the file and both ways on).
@@ -122,33 +111,24 @@ def explore(world: World, mode: str = "visual-tactile", *, evidence=None, touch=
     if not isinstance(world, World):
         raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
                         f"{type(world).__name__}")
-    warn_loose("explore", 2, kernel=kernel, noise=noise, policy=policy, learn=learn,
+    loose = loose_keywords("explore", deprecated, LOOSE)
+    restart_every = loose["restart_every"]
+    warn_loose("explore", 2, kernel=loose["kernel"], noise=loose["noise"], policy=loose["policy"],
+               learn=loose["learn"],
                restart_every=None if isinstance(restart_every, str) and restart_every == "default" else restart_every)
-    kernel = kernel_for_theta(theta, kernel, "explore")  # the paper's name, a deprecated alias
-    config = ExploreConfig.from_world(
-        world,
-        mode,
-        evidence=evidence,
-        touch=touch,
-        step=step,
-        kernel=kernel,
-        noise=noise,
-        max_steps=max_steps,
-        max_travel=max_travel,
-        stop=stop,
-        policy=policy,
-        penalty=penalty,
-        metrics_every=metrics_every,
-        metrics_resolution=metrics_resolution,
-        interval_every=interval_every,
-        regions=regions,
-        stall=stall,
-        outer_tol=outer_tol,
-        device=device,
-        restart_every=restart_every,
-        learn=learn,
-        settings=settings,
-    )
+    kernel = kernel_for_theta(loose["theta"], loose["kernel"], "explore")  # the paper's name, a deprecated alias
+    given = {"kernel": kernel, "noise": loose["noise"], "policy": loose["policy"], "learn": loose["learn"]}
+    given = {k: v for k, v in given.items() if v is not None}
+    if not (isinstance(restart_every, str) and restart_every == "default"):
+        given["restart_every"] = restart_every
+    with warnings.catch_warnings():
+        # said once above, naming explore; from_world reads the same keywords and would say it again
+        warnings.filterwarnings("ignore", r"ExploreConfig\.from_world\(", DeprecationWarning)
+        config = ExploreConfig.from_world(
+            world, mode, evidence=evidence, touch=touch, step=step, max_steps=max_steps, max_travel=max_travel,
+            stop=stop, penalty=penalty, metrics_every=metrics_every, metrics_resolution=metrics_resolution,
+            interval_every=interval_every, regions=regions, stall=stall, outer_tol=outer_tol, device=device,
+            settings=settings, **given)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     if log is not None:

@@ -190,7 +190,8 @@ def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
 
     body = trimesh.creation.icosphere(subdivisions=3, radius=0.06)
     body.apply_scale([1.3, 1.0, 0.8])
-    scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1], cover_offset=offset)
+    scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1],
+                              estimator=tg.EstimatorOverrides(labels={"cover_offset": offset}))
     policy = scene.defaults.policy
     assert policy.vision_inside_gap == 0.03 and policy.cover_offset == offset
     assert not Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1]).defaults.policy.cover_offset

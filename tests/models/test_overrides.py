@@ -118,15 +118,22 @@ def test_merged_lets_the_later_win_and_merges_labels():
 def test_explore_takes_the_changes_as_keywords_or_as_one_object_and_makes_the_same_settings():
     scene = tg.sim.paper_objects_2d()["A"]
     policy = dataclasses.replace(scene.defaults.policy, vision_free_offset=0.04)
-    loose = ExploreConfig.from_world(scene, noise=0.01, learn="length", kernel=Matern52(0.08), policy=policy,
-                                     restart_every=5)
+    with pytest.warns(DeprecationWarning, match=r"ExploreConfig.from_world\(kernel=, noise=, policy=, learn=, "
+                      r"restart_every=\): give settings=EstimatorOverrides"):
+        loose = ExploreConfig.from_world(scene, noise=0.01, learn="length", kernel=Matern52(0.08), policy=policy,
+                                         restart_every=5)
     one = ExploreConfig.from_world(scene, settings=EstimatorOverrides(
         noise=0.01, learn="length", kernel=Matern52(0.08), policy=policy, restart_every=5))
     assert loose.estimator == one.estimator
     assert one.estimator.noise == 0.01 and one.estimator.labels.vision_free_offset == 0.04
     assert one.estimator.restart_every == 5 and one.estimator.lengthscale == 0.08
     with pytest.raises(ValueError, match="no learnable length"):     # the settings' own check, after merging
-        ExploreConfig.from_world(scene, settings=EstimatorOverrides(learn="length"), kernel=_FixedLength(0.1))
+        with pytest.warns(DeprecationWarning):
+            ExploreConfig.from_world(scene, settings=EstimatorOverrides(learn="length"), kernel=_FixedLength(0.1))
+    with pytest.raises(TypeError, match="unexpected keyword argument 'nosie'"):
+        ExploreConfig.from_world(scene, nosie=0.01)
+    with pytest.raises(TypeError, match="explore\\(\\) got an unexpected keyword argument 'voxel'"):
+        tg.explore(scene, voxel=0.01)
 
 
 class _FixedLength(InverseMultiquadricKernel):
@@ -140,18 +147,19 @@ def test_a_study_sends_every_change_to_its_runs_in_one_object(tmp_path):
     keys), the folder records it, and another change is another folder."""
     from torch_gpioius.studies.sweep import _claim
     from torch_gpioius.studies.sweep_runs import _explore_kwargs
-    from torch_gpioius.studies.sweep_settings import StudyPlan
+    from torch_gpioius.studies.sweep_settings import StudyPlan, with_loose
 
-    def settings(**kw):
+    def settings(estimator, **loose):
         return StudyPlan.checked(world="planar", objects=["A"], modes=["visual-tactile"], seeds=1,
-                                     out=tmp_path / "s", workers=None, address=None, max_travel=None,
-                                     max_steps=None, smoke=True, progress=False, threads=1, backend="local",
-                                     force=False, scenes=(), voxel=None, touch="point", outer_tol=None,
-                                     device=None, **kw)
+                                 out=tmp_path / "s", workers=None, address=None, max_travel=None,
+                                 max_steps=None, smoke=True, progress=False, threads=1, backend="local",
+                                 force=False, scenes=(), touch="point", outer_tol=None,
+                                 device=None, estimator=with_loose(estimator, loose))
 
-    sweep = settings(noise=0.02, estimator=["labels.vision_free_offset=0.04", "learn=length"])
-    assert sweep.noise == 0.02 and sweep.learn == "length"               # the identity keys of their own
+    sweep = settings(["labels.vision_free_offset=0.04", "learn=length", "noise=0.02"])
+    assert sweep.noise == 0.02 and sweep.learn == "length"               # the folder's identity keys, as before
     assert dict(sweep.estimator.labels) == {"vision_free_offset": 0.04} and sweep.estimator.learn is None
+    assert settings(["labels.vision_free_offset=0.04", "learn=length"], noise=0.02) == sweep   # the old keyword
     (spec,) = sweep._specs(tmp_path / "s")
     world = tg.sim.paper_objects_2d()["A"]
     est = _explore_kwargs(spec, world)["settings"]
@@ -159,9 +167,9 @@ def test_a_study_sends_every_change_to_its_runs_in_one_object(tmp_path):
     assert est.kernel.describe() == world.defaults.kernel.describe()
     _claim(sweep)
     with pytest.raises(FileExistsError):
-        _claim(settings(noise=0.02, estimator=["labels.vision_free_offset=0.03", "learn=length"]))
+        _claim(settings(["labels.vision_free_offset=0.03", "learn=length", "noise=0.02"]))
     with pytest.raises(ValueError, match="noise given beside the noise argument"):
-        settings(noise=0.02, estimator={"noise": 0.03})
+        settings({"noise": 0.03}, noise=0.02)
 
 
 def test_the_command_line_declares_the_estimators_flags_once_for_each_command(monkeypatch):
@@ -276,3 +284,39 @@ def test_dataset_from_files_takes_changes_to_the_default_preset_and_its_loose_ke
     est = EstimatorSettings.from_dict(one.meta["estimator"])
     assert est.labels.voxel == 0.03 and est.voxel_rule is None and est.noise == 0.02
     assert est.length_rule is not None and est.lengthscale == est.length_rule.length(0.16)   # sized to the cloud
+
+
+def test_every_door_reads_its_old_loose_keywords_once_with_the_way_named():
+    """The loose estimator keywords left the signatures (explore, Scene3D.from_mesh, Dataset.to_model, import_bag,
+    fit_dataset, dataset_from_files): each still works for one release, through the one resolver, with one
+    DeprecationWarning naming settings=EstimatorOverrides(...); a keyword none of them took is a TypeError."""
+    import inspect
+
+    import trimesh
+
+    from torch_gpioius.io.importers import dataset_from_files
+    from torch_gpioius.io.offline import fit_dataset
+    from torch_gpioius.io.rosbag import import_bag
+    from torch_gpioius.sim.forcefield import Scene3D
+
+    for door in (tg.explore, ExploreConfig.from_world, Scene3D.from_mesh, tg.Dataset.to_model, import_bag,
+                 fit_dataset, dataset_from_files):
+        named = set(inspect.signature(door).parameters)
+        assert not named & {"noise", "voxel", "theta", "lengthscale", "kernel"}, door.__qualname__
+    body = trimesh.creation.icosphere(subdivisions=2, radius=0.06)
+    with pytest.warns(DeprecationWarning, match=r"Scene3D.from_mesh\(noise=, touch_inside=\): give settings="):
+        loose = Scene3D.from_mesh(body, at=[0.5, 0.0, 0.1], noise=0.05, touch_inside=0)
+    one = Scene3D.from_mesh(body, at=[0.5, 0.0, 0.1],
+                            estimator=tg.EstimatorOverrides(noise=0.05, labels={"touch_inside": None}))
+    assert loose.defaults.estimator == one.defaults.estimator
+    assert one.defaults.estimator.noise == 0.05 and one.defaults.policy.touch_inside is None
+    with pytest.raises(TypeError, match="from_mesh\\(\\) got an unexpected keyword argument 'nosie'"):
+        Scene3D.from_mesh(body, at=[0.5, 0.0, 0.1], nosie=0.05)
+    from pathlib import Path
+
+    ds = tg.load_dataset(Path(__file__).resolve().parents[2] / "data" / "example_2d.gpioius")
+    with pytest.warns(DeprecationWarning, match=r"Dataset.to_model\(noise=\)"):
+        old = ds.to_model(noise=0.01)
+    new = ds.to_model(settings=tg.EstimatorOverrides(noise=0.01))
+    assert float(old.noise) == float(new.noise) == pytest.approx(0.01)
+    assert type(old.covar_module) is type(new.covar_module)

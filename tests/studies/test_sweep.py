@@ -17,6 +17,7 @@ import pytest
 from scipy.stats import wilcoxon
 
 from torch_gpioius.kernels import KernelChoice
+from torch_gpioius.models.overrides import EstimatorOverrides
 from torch_gpioius.studies.stats import median_interval, paired_difference
 from torch_gpioius.studies.sweep import make_world, run_sweep
 
@@ -105,7 +106,7 @@ def test_a_studys_settings_reach_every_run_built_in_objects_and_scene_files_alik
 
     kw = dict(world="forcefield", objects=["E"], modes=["visual-tactile"], seeds=2, out=tmp_path, workers=1,
               address=None, max_travel=None, max_steps=None, smoke=True, progress=False, threads=1, backend="local",
-              force=False, scenes=[str(ROOT / "examples/scenes/real/duck-tight.toml")], voxel=None, touch="point",
+              force=False, scenes=[str(ROOT / "examples/scenes/real/duck-tight.toml")], touch="point",
               outer_tol=None, device=None, settings="default")
     specs = StudyPlan.checked(**kw)._specs(tmp_path)
     assert {s.object for s in specs} == {"E", "duck-tight"} and {s.settings for s in specs} == {"default"}
@@ -261,7 +262,7 @@ def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_p
     counts = {}
     for voxel, name in ((None, "default"), (0.01, "fine")):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / name, smoke=True,
-                  backend="local", progress=False, voxel=voxel)
+                  backend="local", progress=False, estimator=None if voxel is None else EstimatorOverrides(voxel=voxel))
         rows = list(csv.DictReader(open(tmp_path / name / "runs.csv")))
         assert rows[0]["failed"] == ""
         counts[name] = (float(rows[0]["voxel"]), int(rows[0]["n_outer"]))
@@ -276,9 +277,15 @@ def test_camera_voxels_are_a_study_setting_recorded_per_run_and_per_folder(tmp_p
                   smoke=True, backend="local", progress=False)
     for bad in (-0.01, math.nan, 2.0, True):
         with pytest.raises(ValueError, match="voxel"):
-            run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", voxel=bad)
+            run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", estimator={"voxel": bad})
     with pytest.raises(ValueError, match="voxel-averaged"):
-        run_sweep("planar", seeds=1, out=tmp_path / "planar", voxel=0.01)
+        run_sweep("planar", seeds=1, out=tmp_path / "planar", estimator=EstimatorOverrides(voxel=0.01))
+    with pytest.warns(DeprecationWarning, match=r"run_sweep\(voxel=\): give settings=EstimatorOverrides"):
+        with pytest.raises(ValueError, match="voxel-averaged"):         # the old keyword: the same setting
+            run_sweep("planar", seeds=1, out=tmp_path / "planar", voxel=0.01)
+    with pytest.raises(ValueError, match="voxel given beside the voxel argument"):
+        with pytest.warns(DeprecationWarning):
+            run_sweep("forcefield", seeds=1, out=tmp_path / "bad", voxel=0.01, estimator={"voxel": 0.02})
     assert not (tmp_path / "bad").exists() and not (tmp_path / "planar").exists()
 
 
@@ -288,7 +295,8 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
     holds one setting of each, and bad values are refused before anything runs."""
     ball = ball_scene(tmp_path)
     rows = {}
-    for name, kw in (("own", {}), ("one", dict(views=1, kernel=KernelChoice("imq", 0.12), noise=0.05))):
+    for name, kw in (("own", {}), ("one", dict(views=1, estimator=EstimatorOverrides(kernel=KernelChoice("imq", 0.12),
+                                                                                     noise=0.05)))):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / name, smoke=True,
                   backend="local", progress=False, **kw)
         rows[name] = json.loads((tmp_path / name / "runs" / "ball_visual-tactile_0.json").read_text())
@@ -300,12 +308,13 @@ def test_views_kernel_length_and_noise_are_study_settings_that_reach_every_run(t
     assert 0 < one["n_outer"] < own["n_outer"]
     with pytest.raises(FileExistsError, match="views"):
         run_sweep("forcefield", scenes=[ball], modes=["visual-tactile"], seeds=1, out=tmp_path / "one",
-                  smoke=True, backend="local", progress=False, kernel=KernelChoice("imq", 0.12), noise=0.05)
+                  smoke=True, backend="local", progress=False,
+                  estimator=EstimatorOverrides(kernel=KernelChoice("imq", 0.12), noise=0.05))
     with pytest.raises(ValueError, match="lengthscale: 2000 m is above 10 m"):
         KernelChoice(lengthscale=2e3)
-    bad = [(dict(views="side"), "views"), (dict(views=4), "views"), (dict(kernel="rbf"), "kernel"),
-           (dict(kernel=0.1), "kernel"), (dict(noise=0.0), "noise"),
-           (dict(noise=math.inf), "noise")]
+    bad = [(dict(views="side"), "views"), (dict(views=4), "views"), (dict(estimator={"kernel": "rbf"}), "kernel"),
+           (dict(estimator={"kernel": 0.1}), "kernel"), (dict(estimator={"noise": 0.0}), "noise"),
+           (dict(estimator={"noise": math.inf}), "noise")]
     for kw, match in bad:
         with pytest.raises(ValueError, match=match):
             run_sweep("forcefield", scenes=[ball], seeds=1, out=tmp_path / "bad", **kw)

@@ -364,27 +364,40 @@ class Dataset:
     def __len__(self) -> int:
         return int(self.x.shape[0])
 
-    def to_model(self, noise: float | None = None, *, settings=None, **kwargs: Any):
+    def to_model(self, *, settings=None, **kwargs: Any):
         """A :class:`torch_gpioius.GPIOIS` on these observations (GPIS if no outer observation), not yet fit.
 
-        The kernel and sigma^2 are, in order: ``settings`` (an
-        :class:`~torch_gpioius.models.estimator.EstimatorSettings`), else the header's (``estimator``, else its
-        ``kernel`` and ``noise``; a log of a run with the Matérn-5/2 names it), else the inverse multiquadric of
-        0.1 m and 0.006; ``kernel`` (an :class:`~torch_gpioius.kernels.ExactKernel`) or ``noise`` given here
-        replace them. The outer task's prior mean is the header's (``outer_field`` or ``outer_mean``), else 1.
+        The estimator's settings (kernel, sigma^2) are ``settings`` (an
+        :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's name), else the header's
+        (``estimator``, else its ``kernel`` and ``noise``; a log of a run with the Matérn-5/2 names it), else the
+        inverse multiquadric of 0.1 m and 0.006; an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`
+        changes the header's (e.g. ``settings=EstimatorOverrides(noise=0.01)``). ``kwargs`` go to the model
+        (``inference``, ``outer_tol``, ``task_covariance``, ...); ``noise`` and ``kernel`` among them are deprecated
+        (one release: the same change, with a DeprecationWarning). The outer task's prior mean is the header's
+        (``outer_field`` or ``outer_mean``), else 1.
         """
         from ..models.estimator import EstimatorSettings
+        from ..models.overrides import EstimatorOverrides, warn_loose
 
         if len(self) == 0:
             raise DatasetError("the dataset is empty: nothing to fit")
+        changes = EstimatorOverrides()
+        if isinstance(settings, EstimatorOverrides):
+            changes, settings = settings, None
         if settings is None:
             try:
                 settings = EstimatorSettings.of_record(self.meta)      # old headers: their kernel and noise
             except ValueError as exc:
                 raise DatasetError(str(exc)) from None
+        else:
+            settings = EstimatorSettings.of(settings)
+        loose = {k: kwargs.pop(k) for k in ("kernel", "noise") if kwargs.get(k) is not None}
+        if warn_loose("Dataset.to_model", 2, **loose):
+            changes = changes.merged(EstimatorOverrides(**loose))
+        settings = changes.apply(settings)
         if (self.task == 1).any() and not (self.task == 0).any():
             raise DatasetError("the dataset has outer (visual) observations only; GPIOIS needs touches too")
-        model = settings.make_model(self.x, self.y, self.task, noise=noise, **kwargs)
+        model = settings.make_model(self.x, self.y, self.task, **kwargs)
         return model.set_outer_mean(self._outer_mean()) if (self.task == 1).any() else model
 
     def _outer_mean(self):

@@ -453,10 +453,9 @@ def _direction(row: dict, columns: tuple, label: float, path: Path, line: int) -
     return v / n
 
 
-def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, units: str = "m", voxel="auto",
-                       settings="default", noise: float | None = None,
+def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, units: str = "m", settings="default",
                        source: str = "import", camera_origin=None, contact_spacing: float | None = None,
-                       camera_bound=None, table: float | None = None) -> Dataset:
+                       camera_bound=None, table: float | None = None, **deprecated) -> Dataset:
     """A user's contacts (inner, task 0) and camera captures (outer, task 1, step 0) labelled as an exploration with
     the same estimator settings labels them, in one Dataset.
 
@@ -474,13 +473,10 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         point_cloud: the camera's cloud, in the contacts' frame (:func:`load_point_cloud`), a list of clouds (several
             captures, e.g. from two sides), or None.
         units: both files' units ("m", "cm", "mm").
-        voxel: deprecated (``settings=EstimatorOverrides(voxel=...)``): "auto" (the settings' voxel rule from the
-            clouds' largest extent, or their fixed voxel), an edge [m], or 0 / None (every point).
         settings: an :class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's name ("default",
             "paper"), or changes to the default preset (an
             :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: ``EstimatorOverrides(voxel=0.02)``; the
             voxel and the length rules still size what they hold to the clouds).
-        noise: deprecated likewise: sigma^2 in place of the settings'.
         source: the dataset's ``source``.
         camera_origin: `(3,)` the camera's optical centre in the same frame and units, or None; with several clouds,
             a list of origins, one per cloud (None for a cloud whose camera is unknown: its points, no free space and
@@ -501,6 +497,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             about horizontal axes and the height that contacts on a few faces leave loose (give the clouds with the
             table around the object, uncropped; its points are then taken out of the captures, not labelled as the
             cover). None: no table.
+        **deprecated: ``voxel`` ("auto", an edge [m], or 0 / None: every point) and ``noise`` (sigma^2), for one
+            release: give ``settings=EstimatorOverrides(voxel=..., noise=...)``.
 
     Returns:
         A :class:`Dataset` whose ``meta["estimator"]`` holds the settings used (the voxel resolved),
@@ -514,10 +512,13 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
         DatasetError: an unreadable file, units that cannot be metres, a 3-D cloud with 2-D contacts, a bad
             ``camera_origin``, as many origins as clouds missing, contacts far outside the clouds (each names the
             file or argument).
+        TypeError: a keyword it does not take.
     """
     from ..exploration.observations import cover_gap, uncontradicted_by_step, vision_observations
+    from ..models.overrides import loose_keywords
 
-    est = _import_settings(settings, voxel, noise)
+    loose = loose_keywords("dataset_from_files", deprecated, ("voxel", "noise"))
+    est = _import_settings(settings, "auto" if "voxel" not in deprecated else loose["voxel"], loose["noise"])
     x_in, y_in, step_in, normal_in = read_contacts_csv(contacts_csv, units=units)
     dim = x_in.shape[1]
     if contact_spacing is not None:

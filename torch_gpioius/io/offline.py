@@ -100,27 +100,16 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
     plt.close(fig)
 
 
-def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None = None, *,
-                kernel=None, noise: float | None = None, resolution: float | None = None,
-                learn: str | None = None, settings=None, mesh: str | os.PathLike | None = None,
-                outer_mesh: str | os.PathLike | None = None, force: bool = False) -> dict:
+def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None = None, *, settings=None,
+                resolution: float | None = None, mesh: str | os.PathLike | None = None,
+                outer_mesh: str | os.PathLike | None = None, force: bool = False, **deprecated) -> dict:
     """Learn K_t on a dataset (or the final state of a log); save a checkpoint, a figure and the estimate's meshes.
 
     Args:
         path: a ``.gpioius`` dataset or log, or a :class:`Dataset` (e.g. from
             :func:`torch_gpioius.io.importers.dataset_from_files`, which labels a user's files by estimator settings).
         out: folder for ``model.pt``, ``fit.png`` and ``fit.json`` (None: write nothing).
-        kernel: deprecated (``settings=EstimatorOverrides(kernel=...)``): an
-            :class:`~torch_gpioius.kernels.ExactKernel` (it carries its length scale) in place of the settings', or a
-            :class:`~torch_gpioius.kernels.KernelChoice` (a name and/or a length) applied to the settings' kernel
-            (the file's own without ``settings``).
-        noise: deprecated likewise: sigma^2 in place of the settings'.
         resolution: grid spacing of the estimate [m] (its figure and meshes).
-        learn: deprecated likewise: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and
-            sigma^2), by the
-            exact marginal likelihood on a copy of at most 256 inner and 512 outer points, kept where the full data's
-            likelihood rises (``GPIOIS.learn_hyperparameters``); None: the settings'. The checkpoint and ``fit.json``
-            hold what was learned.
         settings: the estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings` or a
             preset's name), or changes to the file's own (an
             :class:`~torch_gpioius.models.overrides.EstimatorOverrides`: kernel, sigma^2, what is learned; its
@@ -131,6 +120,10 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
             curves in 2-D; coloured by its variance where the format allows).
         outer_mesh: write the outer estimate here (visual-tactile data only).
         force: replace existing mesh files.
+        **deprecated: ``kernel`` (an :class:`~torch_gpioius.kernels.ExactKernel` or a
+            :class:`~torch_gpioius.kernels.KernelChoice`), ``noise`` (sigma^2) and ``learn`` ("task", "length" or
+            "all": what the exact marginal likelihood learns), for one release: give
+            ``settings=EstimatorOverrides(kernel=..., noise=..., learn=...)``.
 
     Returns:
         ``{"n", "settings", "task_covariance", "similarity", "correlation", "correlation_interval", "mll",
@@ -144,7 +137,10 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
 
     from .outputs import FileClaim, check_distinct, check_not_inputs
 
-    settings = _fit_settings(settings, kernel, noise, learn)
+    from ..models.overrides import loose_keywords
+
+    loose = loose_keywords("fit_dataset", deprecated, ("kernel", "noise", "learn"))
+    settings = _fit_settings(settings, loose["kernel"], loose["noise"], loose["learn"])
     check_distinct(mesh=mesh, outer_mesh=outer_mesh)
     inputs = list(path.meta.get("inputs") or []) if isinstance(path, Dataset) else [path]
     check_not_inputs(fit_outputs(out, mesh, outer_mesh), inputs)

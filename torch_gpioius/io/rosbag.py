@@ -388,13 +388,12 @@ def _window_text(w0: float, w1: float) -> str:
     return f"{w0:g}-{w1:g} s" if w1 < 1e11 else f"from {w0:g} s on"
 
 
-def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_frame: str = "base",
+def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | None = None, base_frame: str = "base",
                camera_transform=None, tool_offset: Sequence[float] = (0.0, 0.0, 0.0), tip_radius: float = 0.0,
                contact_force: float = 1.0, contact_spacing: float = 0.005, max_gap: float = 0.1,
-               joint_names: Sequence[str] | None = None, policy=None, crop=None,
-               kernel=None, noise: float | None = None, time_window=None,
+               joint_names: Sequence[str] | None = None, crop=None, time_window=None,
                max_joint_speed: float = UR5_MAX_JOINT_SPEED, tactile_calibration=None, tactile_transform=None,
-               patch=None, settings=None) -> Dataset:
+               patch=None, **deprecated) -> Dataset:
     """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
 
     Args:
@@ -410,12 +409,7 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
         contact_spacing: contacts closer than this to a kept earlier one are dropped [m].
         max_gap: the longest gap between joint states the interpolation bridges [s].
         joint_names: the six joint names in base-to-tool order (default: the UR driver's).
-        policy: :class:`torch_gpioius.exploration.observations.ObservationPolicy` for free space and the voxel
-            (default: the exploration's, with the paper's 5 cm voxel).
         crop: `(2, 3)` box `[min; max]` [m] to crop the cloud to (tables and walls are not the object); None keeps all.
-        kernel: an :class:`~torch_gpioius.kernels.ExactKernel` whose description the header stores as the
-            dataset's kernel for fitting (without ``settings``).
-        noise: noise variance stored in the header likewise.
         time_window: ``(start, end)`` [s] after the first wrench sample: only wrench samples and clouds stamped
             inside it are imported (joint states and tf are read whole, for interpolation and lookups).
         max_joint_speed: the robot's fastest joint speed [rad/s] (UR5: pi); joint states that would need a joint
@@ -427,11 +421,15 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             on the fingertip centre, facing along the tool's z axis).
         patch: :class:`~torch_gpioius.exploration.patches.PatchThinning` (thinning and free-space margin).
         settings: the estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings` or a preset's
-            name), recorded in the dataset for ``fit``; their labels give the free space and the voxel (a voxel rule
-            sized to ``crop``'s largest extent, else the labels' voxel) unless ``policy`` is given; their
-            inside points are placed behind the contacts along the measured forces (``touch_inside``; judged as an
-            exploration judges them), none behind the seen surface (the recorded settings say so). None: the paper's 5
-            cm voxels, and the fit's kernel from ``kernel`` / ``noise``.
+            name, or changes to the "default" preset: an :class:`~torch_gpioius.models.overrides.EstimatorOverrides`),
+            recorded in the dataset for ``fit``; their labels give the free space and the voxel (a voxel rule sized
+            to ``crop``'s largest extent, else the labels' voxel); their inside points are placed behind the
+            contacts along the measured forces (``touch_inside``; judged as an exploration judges them), none behind
+            the seen surface (the recorded settings say so). None: the paper's 5 cm voxels and no settings recorded
+            (``fit`` then uses the inverse multiquadric of 0.1 m and 0.006, or the deprecated ``kernel`` / ``noise``).
+        **deprecated: ``policy`` (an :class:`~torch_gpioius.models.labels.ObservationPolicy` in place of the
+            settings' labels), ``kernel`` and ``noise`` (stored in the header for the fit), for one release: give
+            ``settings=EstimatorOverrides(policy=..., kernel=..., noise=...)``.
 
     With ``topics.tactile``, every pad frame stamped at a contact (the nearest wrench sample within ``max_gap``
     has ``|F| >= contact_force``) becomes a patch (:func:`~torch_gpioius.exploration.patches.patch_observations`)
@@ -439,6 +437,9 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
     with no pixel pressed to the contact depth, are counted and skipped. Surface points of later frames are thinned
     against the earlier ones to the patch spacing, and the fingertip's free space is kept the policy's margin from
     them too.
+
+    Why this many parameters: a recording's frames, thresholds and sensors are each one fact of the user's rig that
+    the bag does not hold; the estimator's settings, the part that grows, are one object (``settings``).
 
     Clouds are read one at a time and averaged into the voxels as they come (:class:`torch_gpioius.voxels.
     VoxelAccumulator`), so memory holds one cloud and the occupied voxels, not the recording.
@@ -454,7 +455,13 @@ def import_bag(bag: str | os.PathLike, *, topics: BagTopics | None = None, base_
             coordinates, a joint named twice or moving faster than the robot can, a NaN or non-rotation tf, an
             unknown camera frame, a pad frame that is not a depth image or presses beyond the gel's reach).
         ValueError: bad arguments.
+        TypeError: a keyword it does not take.
     """
+    from ..models.overrides import loose_keywords, warn_loose
+
+    loose = loose_keywords("import_bag", deprecated, ("policy", "kernel", "noise"))
+    warn_loose("import_bag", 2, **loose)
+    policy, kernel, noise = loose["policy"], loose["kernel"], loose["noise"]
     s = _BagImport.checked(bag, topics=topics, base_frame=base_frame, camera_transform=camera_transform,
                            tool_offset=tool_offset, tip_radius=tip_radius, contact_force=contact_force,
                            contact_spacing=contact_spacing, max_gap=max_gap, joint_names=joint_names, policy=policy,
@@ -738,8 +745,13 @@ def _bag_settings(settings, crop, policy):
         return None
     from ..models.estimator import EstimatorSettings
 
+    from ..models.overrides import EstimatorOverrides
+
     try:
-        est = EstimatorSettings.of(settings)
+        if isinstance(settings, EstimatorOverrides):       # changes to the default preset
+            est = settings.apply(EstimatorSettings.of("default"))
+        else:
+            est = EstimatorSettings.of(settings)
     except ValueError as exc:
         raise ValueError(f"import_bag: {exc}") from None
     if crop is not None and est.sized_to_object:

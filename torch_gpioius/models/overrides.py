@@ -31,7 +31,7 @@ from ..kernels import ExactKernel, KernelChoice, from_description
 from .estimator import EstimatorSettings, as_learn
 from .labels import ObservationPolicy, check_voxel
 
-__all__ = ["EstimatorOverrides", "parse_assignment", "resolved", "warn_loose", "OVERRIDE_KEYS"]
+__all__ = ["EstimatorOverrides", "parse_assignment", "resolved", "warn_loose", "loose_keywords", "OVERRIDE_KEYS"]
 
 #: The keys :meth:`EstimatorOverrides.from_dict` reads (``labels.<field>`` for one label; ``theta`` is
 #: ``lengthscale`` under the paper's name).
@@ -271,6 +271,24 @@ def warn_loose(owner: str, stacklevel: int, **given) -> list[str]:
                       "settings in one object, docs/reference/settings.md); these keywords go in a later release",
                       DeprecationWarning, stacklevel=stacklevel + 1)
     return named
+
+
+def loose_keywords(owner: str, given: dict, allowed: tuple[str, ...]) -> dict:
+    """The deprecated loose estimator keywords an entry point still reads for one release from its ``**deprecated``
+    (``given``), by name, each defaulting to None (``restart_every``: "default", the world's); they are out of its
+    signature, so that one object, ``settings=``, is what the signature offers.
+
+    Raises:
+        TypeError: a keyword the entry point never took, as Python names an unexpected one.
+    """
+    unknown = sorted(set(given) - set(allowed))
+    if unknown:
+        raise TypeError(f"{owner}() got an unexpected keyword argument {unknown[0]!r}")
+    out = {name: None for name in allowed}
+    if "restart_every" in allowed:
+        out["restart_every"] = "default"
+    out.update(given)
+    return out
 
 
 def _none(value):

@@ -222,6 +222,9 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                      support_sample: int = 300) -> CaptureCorrections:
     """Correct each capture's pose from the contacts and the other captures (see the module docstring).
 
+    Why this many parameters: beside the bound (the one a user must give), each is a robust weight or a sample size
+    with a measured default, kept reachable for a camera unlike the simulated ones.
+
     Args:
         captures: :class:`~torch_gpioius.sensors.pointcloud.PointCloud` objects with their camera's ``origin`` (a
             capture without one turns about its points' centre), base frame [m].

@@ -148,6 +148,35 @@ def inside_labels(**depths) -> dict:
             for k, v in given.items()}
 
 
+#: The estimator's settings a force-field scene took as loose values before the one object (``Scene3D.from_mesh``'s
+#: deprecated keywords, a scene file's ``[forcefield]`` section): :func:`estimator_changes` makes them one.
+ESTIMATOR_KEYS = ("kernel", "noise", "voxel", "learn") + INSIDE_SETTINGS
+
+
+def estimator_changes(estimator=None, **loose) -> "EstimatorOverrides":
+    """One :class:`~torch_gpioius.models.overrides.EstimatorOverrides` from ``estimator`` (one, its plain dict, or
+    None) with the loose values of :data:`ESTIMATOR_KEYS` on top (None: not given): ``kernel``, ``noise``, ``voxel``
+    and ``learn`` as the overrides take them, the inside points' depths and gap as labels where 0 means none
+    (:func:`inside_labels`).
+
+    Raises:
+        ValueError: an unknown key, or a value outside its range (names it).
+    """
+
+    unknown = sorted(set(loose) - set(ESTIMATOR_KEYS))
+    if unknown:
+        raise ValueError(f"estimator: unknown {unknown}; the loose settings are {', '.join(ESTIMATOR_KEYS)}")
+    if estimator is None:
+        estimator = EstimatorOverrides()
+    elif isinstance(estimator, dict):
+        estimator = EstimatorOverrides.from_dict(estimator)
+    if not isinstance(estimator, EstimatorOverrides):
+        raise ValueError(f"estimator: expected EstimatorOverrides or its dict, got {type(estimator).__name__}")
+    labels = inside_labels(**{k: loose.get(k) for k in INSIDE_SETTINGS})
+    return estimator.merged(EstimatorOverrides(kernel=loose.get("kernel"), noise=loose.get("noise"),
+                                               voxel=loose.get("voxel"), learn=loose.get("learn"), labels=labels))
+
+
 def with_inside_depths(defaults: ExplorationDefaults, **depths) -> ExplorationDefaults:
     """``defaults`` with the inside points' depths [m] given (``touch_inside``, ``vision_inside``; 0: none; None:
     as they are), the cover's gap beyond which the camera's are retracted (``vision_inside_gap``; 0: never), each
@@ -467,6 +496,9 @@ class Scene3D(RangedScene):
     """A covered object in 3-D, seen by a depth camera and touched by the UR5's fingertip (the force-field world,
     registered as ``forcefield``).
 
+    Why this many parameters: the body, the cover, the approach and range, and the simulated sensors are each one
+    fact of the scene; :meth:`from_mesh` builds most of them from a mesh.
+
     Args:
         inner: closed mesh of the rigid inner object [m], base frame.
         outer: closed mesh of the cover's outer surface [m] (must contain the inner one).
@@ -574,15 +606,9 @@ class Scene3D(RangedScene):
         support: float | str | None = "base",
         settings: str = "default",
         views=None,
-        kernel=None,
-        noise: float | None = None,
-        voxel: float | None = None,
-        touch_inside: float | None = None,
-        vision_inside: float | None = None,
-        vision_inside_gap: float | None = None,
-        learn: str | None = None,
-        cover_offset: bool | None = None,
+        estimator=None,
         camera_error=None,
+        **deprecated,
     ) -> "Scene3D":
         """A force-field scene around any closed mesh: a user's scan or CAD model as the hidden body.
 
@@ -618,32 +644,31 @@ class Scene3D(RangedScene):
             settings: "default" (:func:`object_defaults` and all three :data:`VIEWS`) or "paper" (the robot study's
                 :data:`ROBOT_STUDY_DEFAULTS` and the paper's single fixed camera); ``defaults`` replaces either.
             views: the camera's views (see the class; default: by ``settings``).
-            kernel: "imq" (the paper's inverse multiquadric), "matern52" (each at the settings' length, the length
-                rule's where they hold one), a :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length
-                scale) or an :class:`~torch_gpioius.kernels.ExactKernel` (default: by ``settings``, a Matérn a fifth
-                of the body long or the inverse multiquadric of 0.15 m). This and the estimator's other settings
-                below go through :class:`~torch_gpioius.models.overrides.EstimatorOverrides`.
-            noise: sigma^2 (default: by ``settings``, 0.08).
-            voxel: the camera's voxel edge [m] (0: every point; default: by ``settings``).
-            touch_inside: depth [m] of the inside point behind each contact (``ObservationPolicy.touch_inside``; 0:
-                none; default: by ``settings``, 2 cm or none).
-            vision_inside: depth [m] of the inside points behind the seen surface (``ObservationPolicy.vision_inside``;
-                0: none; default: by ``settings``).
-            vision_inside_gap: the cover's gap [m] beyond which the touches retract the camera's inside points
-                (``ObservationPolicy.vision_inside_gap``; 0: never; default: by ``settings``, 3 cm or never).
-            cover_offset: beyond that gap, the outer task's prior mean stands for the gap the touches measure
-                (``ObservationPolicy.cover_offset``; default: off).
-            learn: "task" (K_t alone, the paper's), "length" (the kernel's length too, from the kernel's) or "all"
-                (the length and sigma^2, from the kernel's and ``noise``; ``EstimatorSettings.learn``); default: by
-                ``settings``.
+            estimator: changes to the estimator's settings of ``settings`` (an
+                :class:`~torch_gpioius.models.overrides.EstimatorOverrides` or its plain dict, e.g.
+                ``EstimatorOverrides(kernel="imq", noise=0.05, labels={"touch_inside": None})``;
+                docs/reference/settings.md); None: the preset's.
             camera_error: the simulated cameras' errors (:meth:`with_camera_error`: ``"6mm,1deg"``, ``"3x,20%holes"``);
                 default: none.
+            **deprecated: the estimator's loose settings of earlier releases, for one release: ``kernel``,
+                ``noise``, ``voxel``, ``learn`` and the inside points' ``touch_inside``, ``vision_inside``,
+                ``vision_inside_gap`` (0: none), ``cover_offset``; give ``estimator=EstimatorOverrides(...)``
+                (:func:`estimator_changes` says how each maps).
+
+        Why this many parameters: the body, its cover and the approach are each a few numbers a user's object needs
+        (the estimator's settings, the part that grows, are one object, ``estimator``).
 
         Raises:
             ValueError: an unreadable, empty or irreparable mesh, an unknown cover, a start inside the cover or an
                 approach that misses the body (each names the problem).
+            TypeError: a keyword it does not take.
         """
+        from ..models.overrides import loose_keywords, warn_loose
         from .meshes import load_mesh
+
+        loose = {k: v for k, v in loose_keywords("Scene3D.from_mesh", deprecated, ESTIMATOR_KEYS).items()
+                 if v is not None}
+        warn_loose("Scene3D.from_mesh", 2, **loose)
 
         if cover not in COVER_KINDS:
             raise ValueError(f"cover: the force-field world has the covers {COVER_KINDS}, got {cover!r}")
@@ -653,12 +678,9 @@ class Scene3D(RangedScene):
         chosen = settings_for(settings, mesh)
         views = as_views(chosen["views"] if views is None else views)
         defaults = chosen["defaults"] if defaults is None else defaults
-        # the estimator's loose settings, by the one resolver
-        changes = EstimatorOverrides(kernel=kernel, noise=noise, voxel=voxel, learn=learn)
+        changes = estimator_changes(estimator, **loose)            # by the one resolver
         if changes:
             defaults = defaults.with_estimator(changes.apply(defaults.estimator))
-        defaults = with_inside_depths(defaults, touch_inside=touch_inside, vision_inside=vision_inside,
-                                      vision_inside_gap=vision_inside_gap, cover_offset=cover_offset)
         gap = {"tight": 0.008, "loose": 0.01}.get(cover, 0.005) if gap is None else gap
         outer = cover_around(mesh, cover, gap=gap, bridge=bridge, resolution=resolution, gap_far=gap_far,
                              thick_side=thick_side)
@@ -1364,7 +1386,10 @@ def _scene_from_file(mesh, kind: str, *, name: str, where: dict, cover: dict, se
     ``preset`` replaces the file's ``settings``; ``smoke`` changes nothing here (the cover is static)."""
     if preset is not None:
         settings = dict(settings, settings=preset)
-    return Scene3D.from_mesh(mesh, kind, name=name, **where, **cover, **settings)
+    # the section's estimator settings (the scene format keeps them beside the world's own) as one object
+    loose = {k: settings.pop(k) for k in ESTIMATOR_KEYS if k in settings}
+    return Scene3D.from_mesh(mesh, kind, name=name, **where, **cover, **settings,
+                             estimator=estimator_changes(**loose) if loose else None)
 
 
 #: What a scene file's ``[cover]`` and ``[forcefield]`` sections may hold in this world.

@@ -39,7 +39,7 @@ from .sweep_aggregate import (METRICS, MIN_SEEDS_TO_JUDGE, NOT_APPLICABLE_METRIC
 from .sweep_runs import (BASE_MODES, CONTACT_WITHIN, FRACTIONS, RunFileError, RunSpec, atomic_json,  # noqa: F401
                          finished, make_world, read_run_file, run_one, scene_failure_record, sweep_modes)
 from .sweep_runs import __getattr__  # noqa: F401 (WORLDS, DEFAULT_OBJECTS, MODES: from the registries)
-from .sweep_settings import MAX_SEEDS, StudyPlan  # noqa: F401
+from .sweep_settings import with_loose, MAX_SEEDS, StudyPlan  # noqa: F401
 
 # WORLDS and MODES: the module's __getattr__, from the registries
 __all__ = ["run_sweep", "StudyPlan", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError",  # noqa
@@ -58,10 +58,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
               out: str | Path = "outputs/study", workers: int | None = None, address: str | None = None,
               max_travel: float | None = None, max_steps: int | None = None, smoke: bool = False,
               progress: bool = True, threads: int = 1, backend: str = "auto", force: bool = False,
-              scenes=(), voxel: float | None = None, touch: str = "point", outer_tol: float | None = None,
-              device: str | None = None, settings: str | None = None, learn: str | None = None,
-              views=None, kernel=None, noise: float | None = None, cover: str | None = None,
-              metrics_every=None, camera_error=None, camera_bound=None, estimator=None) -> dict:
+              scenes=(), touch: str = "point", outer_tol: float | None = None, device: str | None = None,
+              settings: str | None = None, views=None, cover: str | None = None, metrics_every=None,
+              camera_error=None, camera_bound=None, estimator=None, **deprecated) -> dict:
     """Run objects x modes x seeds and aggregate (see the module docstring for the outputs).
 
     The output folder belongs to one world's study: a new or empty folder, or one a study of the same world wrote
@@ -89,8 +88,6 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         force: write into a non-empty folder that is not this world's study folder.
         scenes: scene files (:mod:`torch_gpioius.sim.scenefile`) to run as objects too, named by their ``name``;
             with scenes and no ``objects``, only the scenes run. Only the 3-D worlds build scene files.
-        voxel: edge of the camera's voxels [m] (0: every camera point; None: each world's own, 0.05 as the
-            paper). A study folder holds one setting: compare settings across folders (docs/results-resolution.md).
         touch: "point" (the paper's fingertip contact) or "patch" (a gel pad's depth map at each contact; the
             force-field world has a pad); a study folder holds one.
         outer_tol: the visual-tactile runs with a truncated outer basis (``GPIOIS(outer_tol=...)``, an approximation
@@ -102,16 +99,9 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         settings: the 3-D worlds' settings, "default" or "paper" (the paper's fixed camera and 5 cm voxels;
             ``Scene3D.with_settings``, ``MujocoScene.with_settings``), for scene files and built-in objects alike;
             None: each file's own, the paper's for the built-in objects. A study folder holds one setting.
-        learn: "task" (K_t alone), "length" (the kernel's length too) or "all" (the length and sigma^2;
-            ``EstimatorSettings.learn``); None: each world's own. A study folder holds one setting.
         views: the 3-D worlds' simulated camera views in place of the settings' (names from
             ``torch_gpioius.sim.forcefield.VIEWS``, a count or "paper": the fixed camera alone; ``with_views``);
             None: each world's own. A study folder holds one setting.
-        kernel: a kernel's name ("imq", the paper's inverse multiquadric, "matern52", or a registered kind) or a
-            :class:`~torch_gpioius.kernels.KernelChoice` (a name and a length scale [m]; where ``learn`` learns the
-            length, where it starts); None: each world's own.
-        noise: sigma^2 (where ``learn="all"`` learns it, where it starts); None: each world's own. ``kernel`` and
-            ``noise`` too: one setting per folder.
         cover: the cover of the object sets' objects (:data:`~torch_gpioius.sim.objectsets.COVERS`): "tight"
             (8 mm), "wide" (4 cm), "uneven" (5 mm to 5 cm) or "hanging" (to the table); default tight; one per
             folder.
@@ -127,10 +117,19 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text, "12mm,2deg";
             ``ObservationPolicy.camera_bound``; each record's ``camera_corrections`` says what each view was moved by);
             None: the captures as the calibration places them. One per folder.
-        estimator: other changes to each world's estimator settings: an
-            :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, its plain dict (``{"labels":
-            {"ray_smoothing": None}}``) or ``KEY=VALUE`` texts (the command line's ``--estimator``); the runs and
-            the folder record them. None: none. One per folder.
+        estimator: changes to each world's estimator settings: an
+            :class:`~torch_gpioius.models.overrides.EstimatorOverrides`, its plain dict (``{"voxel": 0.01,
+            "labels": {"ray_smoothing": None}}``) or ``KEY=VALUE`` texts (the command line's ``--estimator``): the
+            camera's voxel [m] (0: every point; compare settings across folders, docs/results-resolution.md), the
+            kernel (a name or a :class:`~torch_gpioius.kernels.KernelChoice`; where ``learn`` learns the length,
+            where it starts), sigma^2, what is learned, any label. The runs and the folder record them (the voxel,
+            kernel, sigma^2 and ``learn`` among the folder's identity keys, as before). None: each world's own. One
+            per folder.
+        **deprecated: ``voxel``, ``learn``, ``kernel`` and ``noise`` of earlier releases, for one release: give
+            ``estimator=EstimatorOverrides(voxel=..., ...)``.
+
+    Why this many parameters: a study's plan is many independent choices (what runs, where, how it is measured);
+    the estimator's settings, the part that grows, are one object (``estimator``). :class:`StudyPlan` holds them.
 
     Returns:
         ``{"runs", "skipped", "seconds", "backend", "rows", "summary", "claims"}``.
@@ -139,13 +138,19 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
         ValueError: a bad argument (names it).
         FileExistsError: ``out`` holds something else and ``force`` is False.
         RuntimeError: another sweep is writing to ``out``.
+        TypeError: a keyword it does not take.
     """
+    from ..models.overrides import loose_keywords, warn_loose
+
+    loose = {k: v for k, v in loose_keywords("run_sweep", deprecated, ("voxel", "learn", "kernel", "noise")).items()
+             if v is not None}
+    warn_loose("run_sweep", 2, **loose)
     sweep = StudyPlan.checked(
         world=world, objects=objects, modes=modes, seeds=seeds, out=out, workers=workers, address=address,
         max_travel=max_travel, max_steps=max_steps, smoke=smoke, progress=progress, threads=threads, backend=backend,
-        force=force, scenes=scenes, voxel=voxel, touch=touch, outer_tol=outer_tol, device=device,
-        settings=settings, learn=learn, views=views, kernel=kernel, noise=noise, cover=cover,
-        metrics_every=metrics_every, camera_error=camera_error, camera_bound=camera_bound, estimator=estimator)
+        force=force, scenes=scenes, touch=touch, outer_tol=outer_tol, device=device, settings=settings, views=views,
+        cover=cover, metrics_every=metrics_every, camera_error=camera_error, camera_bound=camera_bound,
+        estimator=with_loose(estimator, loose))
     return _run(sweep)
 
 

@@ -106,26 +106,26 @@ class StudyPlan:
 
     @classmethod
     def checked(cls, *, world, objects, modes, seeds, out, workers, address, max_travel, max_steps, smoke, progress,
-                threads, backend, force, scenes, voxel, touch, outer_tol, device, settings=None,
-                learn=None, views=None, kernel=None, noise=None, cover=None,
+                threads, backend, force, scenes, touch, outer_tol, device, settings=None, views=None, cover=None,
                 metrics_every=None, camera_error=None, camera_bound=None, estimator=None) -> "StudyPlan":
-        """The settings, each checked before anything runs (raises ValueError naming the argument)."""
+        """The settings, each checked before anything runs (raises ValueError naming the argument): those of
+        :func:`~torch_gpioius.studies.sweep.run_sweep`, whose parameters these are (the estimator's voxel, kernel,
+        sigma^2 and ``learn`` read from ``estimator`` into the plan's fields, the folder's identity keys). Why this
+        many parameters: run_sweep's, one each, checked together."""
         from ..exploration.registry import canonical_world_name, world_entry, world_names
 
         world = canonical_world_name(world, warn=True)
         if world not in study_worlds():
             raise ValueError(f"world: must be one of {study_worlds()}, got {world!r}")
         entry = world_entry(world)
-        # the estimator's changes: those of their own arguments (the folder's identity keys since before the
-        # resolver) taken out of ``estimator``, the rest kept there
-        estimator, loose = _overrides(estimator), {"voxel": voxel, "learn": learn, "noise": noise, "kernel": kernel}
+        # the estimator's changes: those that are the folder's identity keys since before the resolver (the plan's
+        # own fields) taken out of ``estimator``, the rest kept there
+        estimator, loose = _overrides(estimator), {"voxel": None, "learn": None, "noise": None, "kernel": None}
         if estimator is not None:
             for key in loose:
                 value = getattr(estimator, key)
                 if value is None or (key == "kernel" and not isinstance(value, KernelChoice)):
                     continue
-                if loose[key] is not None:
-                    raise ValueError(f"estimator: {key} given beside the {key} argument; give it once")
                 loose[key] = value
             estimator = dataclasses.replace(estimator, voxel=None, learn=None, noise=None, kernel=(
                 estimator.kernel if not isinstance(estimator.kernel, KernelChoice) else None)) or None
@@ -222,6 +222,25 @@ class StudyPlan:
                         cover=self.cover if obj is not None else None, metrics_every=self.metrics_every,
                         camera_error=self.camera_error, camera_bound=self.camera_bound, estimator=estimator)
                 for o, scene, identity, obj in objects for m in self.modes for s in range(self.seeds)]
+
+
+def with_loose(estimator, loose: dict):
+    """A study's ``estimator`` (:func:`_overrides`' forms) with the deprecated loose ``voxel``, ``learn``, ``kernel``
+    and ``noise`` of :func:`~torch_gpioius.studies.sweep.run_sweep` (``loose``: those given) on top, as one
+    :class:`~torch_gpioius.models.overrides.EstimatorOverrides`; ``estimator`` itself when none is given.
+
+    Raises:
+        ValueError: a setting given both ways, or a bad value (named).
+    """
+    if not loose:
+        return estimator
+    from ..models.overrides import EstimatorOverrides
+
+    given = _overrides(estimator) or EstimatorOverrides()
+    for key in loose:
+        if getattr(given, key) is not None:
+            raise ValueError(f"estimator: {key} given beside the {key} argument; give it once")
+    return given.merged(EstimatorOverrides(**loose))
 
 
 def _overrides(estimator):

@@ -66,6 +66,9 @@ class MujocoScene(RangedScene):
     at the start (its fingertip at ``start``, pointing along ``direction``), and the cover settled under gravity; every
     :meth:`hardware` call starts from that settled state.
 
+    Why this many parameters: the scene's objects, its approach and range, and the simulation's step, noise and
+    views are each fixed by the physics or the rig, not by one another.
+
     Args:
         inner: the inner object: a :class:`~torch_gpioius.sim.mujoco.bodies.PrimitiveBody` or
             :class:`~torch_gpioius.sim.mujoco.bodies.MeshBody`, or primitives
@@ -186,6 +189,9 @@ class MujocoScene(RangedScene):
                   name: str = "", seed: int = 0, base: str = "cap", spacing: float | None = None, axis=None,
                   centre=None, facing=None, half_angle: float = 100.0, **cover_options) -> "MujocoScene":
         """A MuJoCo scene around any closed mesh: a user's scan or CAD model as the hidden body.
+
+        Why this many parameters: the body's pose, its collision model and the cover's base and shape are each a few
+        numbers a user's object needs; the cloth's own physics go through ``cover_options`` (:meth:`from_primitives`).
 
         The mesh is loaded, checked and, if it is open or non-manifold, repaired with a warning that states how far
         the repair moved the surface (:func:`torch_gpioius.sim.meshes.load_mesh`); it collides as CoACD convex parts
