@@ -126,7 +126,7 @@ print(json.dumps(failed))
     assert not failed, "\n".join(failed)
 
 
-@pytest.mark.parametrize("name", ["run", "step", "explore"])
+@pytest.mark.parametrize("name", ["run", "step", "begin"])
 def test_the_loop_is_short(name):
     """The loop only calls its stages and hooks (dm_control's Environment.step is 29 lines)."""
     tree = ast.parse((PACKAGE / "exploration" / "loop.py").read_text())
@@ -220,6 +220,18 @@ def test_the_renamed_settings_still_import_with_a_warning():
                               (sweep_settings, "SweepSettings", sweep.StudyPlan)):
         with pytest.warns(DeprecationWarning, match=new.__name__):
             assert getattr(module, name) is new
+
+
+def test_one_public_explore():
+    """torch_gpioius.explore is the one explore; the loop's own (which took the same settings without the log) is
+    gone from torch_gpioius.exploration, and its old names give the one with a DeprecationWarning."""
+    import torch_gpioius as tg
+    from torch_gpioius.exploration import loop
+
+    assert "explore" not in tg.exploration.__all__ and "explore" not in loop.__all__
+    for module in (tg.exploration, loop):
+        with pytest.warns(DeprecationWarning, match="is torch_gpioius.explore now"):
+            assert module.explore is tg.explore
 
 
 #: "About ten": a public function with more parameters than this says why in its docstring (or its class's).

@@ -6,12 +6,14 @@
   :class:`EvidencePolicy`, :class:`Recorder`; stop rules (:class:`StopRule`); worlds (:class:`World`,
   :class:`Hardware`); the registries of worlds, touch models and evidence policies (:func:`register_world`,
   :func:`register_touch_model`, :func:`register_evidence_policy`; :mod:`torch_gpioius.registry`);
-* the loop: :func:`explore` / :func:`run` (``torch_gpioius.explore`` adds the crash-safe log and resume).
+* the loop: :func:`run` (``torch_gpioius.explore``, the one public explore, builds its settings and adds the
+  crash-safe log and resume).
 """
 
 from .config import MODES, ExploreConfig, Run
 from .evidence import Evidence, TapPolicy
-from .loop import begin, explore, run
+from . import loop
+from .loop import begin, run
 from .observations import (Observations, ObservationPolicy, free_space_along, retract_free_space, thin_points,
                            vision_observations)
 from .patches import PatchThinning, patch_observations
@@ -27,7 +29,7 @@ from .touch import TOUCH_MODELS, PointTouch, register_touch_model, touch_model
 from .trace import Trace
 from .world import ExplorationDefaults, Hardware, Measurement, RobotWorld, World, geometry_hash
 
-__all__ = ["explore", "run", "begin", "MODES", "ExploreConfig", "Run", "Observations", "ObservationPolicy",
+__all__ = ["run", "begin", "MODES", "ExploreConfig", "Run", "Observations", "ObservationPolicy",
            "ExplorationState", "StepRecord", "RECORD_FIELDS", "Trace", "Toucher", "TouchModel", "TouchModelBase",
            "EvidencePolicy", "Recorder", "MetricsRecorder", "NoEstimateWarning", "IntervalRecorder", "ProgressRecorder",
            "Evidence", "TapPolicy", "ReachPolicy", "ReachPlan", "NoProgress", "EVIDENCE_POLICIES", "evidence_policy",
@@ -40,6 +42,13 @@ __all__ = ["explore", "run", "begin", "MODES", "ExploreConfig", "Run", "Observat
 
 
 def __getattr__(name):
+    if name == "explore":               # one public explore: torch_gpioius.explore
+        import warnings
+
+        from ..session import explore
+
+        warnings.warn(loop.EXPLORE_MOVED, DeprecationWarning, stacklevel=2)
+        return explore
     if name == "PatchSettings":         # renamed PatchThinning (a deprecated alias; settings are the estimator's)
         from . import patches
 

@@ -35,23 +35,23 @@ from .timing import PartClock
 from .trace import Trace
 from .world import World
 
-__all__ = ["explore", "run", "begin", "step", "ingest", "ingest_evidence", "unstall", "recover", "reapproach_reach"]
+__all__ = ["run", "begin", "step", "ingest", "ingest_evidence", "unstall", "recover", "reapproach_reach"]
 
 
-def explore(world: World, mode: str = "visual-tactile", *, recorders=(), progress: bool = False,
-            state: ExplorationState | None = None, hardware=None, **settings) -> Trace:
-    """Explore ``world`` (see :func:`torch_gpioius.explore` for the settings; that function adds the crash-safe
-    log and resume). ``recorders`` observe the run after the built-in metrics and interval recorders.
+#: What the old second ``explore`` (this module's, and ``torch_gpioius.exploration``'s) says when asked for.
+EXPLORE_MOVED = ("torch_gpioius.exploration.explore is torch_gpioius.explore now (one explore, with the crash-safe "
+                 "log and resume); the loop itself is torch_gpioius.exploration.run")
 
-    Raises:
-        TypeError: ``world`` is not a :class:`~torch_gpioius.exploration.world.World`.
-        ValueError: an invalid setting (names it).
-    """
-    if not isinstance(world, World):
-        raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
-                        f"{type(world).__name__}")
-    return run(world, ExploreConfig.from_world(world, mode, **settings), recorders=recorders, progress=progress,
-               state=state, hardware=hardware)
+
+def __getattr__(name):
+    if name == "explore":               # one public explore: torch_gpioius.explore (the loop with its log)
+        import warnings
+
+        from ..session import explore
+
+        warnings.warn(EXPLORE_MOVED, DeprecationWarning, stacklevel=2)
+        return explore
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = False,
