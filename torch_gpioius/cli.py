@@ -263,7 +263,8 @@ def _import_bag(args: argparse.Namespace) -> int:
                     contact_spacing=args.contact_spacing, max_gap=args.max_gap,
                     settings=_estimator_overrides(args).apply(EstimatorSettings.preset(args.settings)),
                     crop=None if crop is None else [crop[:3], crop[3:]],
-                    time_window=window, tactile_calibration=calibration, tactile_transform=args.tactile_transform)
+                    time_window=window, tactile_calibration=calibration, tactile_transform=args.tactile_transform,
+                    camera_bound=args.camera_bound)
     path = save_dataset(ds, out, overwrite=args.force)
     c = ds.meta["counts"]
     frames = ", ".join(ds.meta["camera_frames"]) or "none"
@@ -276,6 +277,13 @@ def _import_bag(args: argparse.Namespace) -> int:
         print(f"pad {args.tactile_topic}: {c['pad_frames']} frames, {c['pad_frames_used']} at contacts -> "
               f"{c['patch_surface']} surface + {c['patch_free_space']} free-space points "
               f"({c['pad_frames_out_of_contact']} out of contact, {c['pad_frames_untouched']} with no pixel pressed)")
+    if "camera_corrections" in ds.meta:
+        record = ds.meta["camera_corrections"]
+        moved = record["captures"][0]
+        print(f"camera: moved {moved['size_mm']:.1f} mm and {moved['angle_deg']:.2f} deg to agree with the touches "
+              f"({moved['contacts']} contacts under its view; misfit {record['misfit_before_mm']} -> "
+              f"{record['misfit_after_mm']} mm)" if record["enough"] else
+              "camera: not corrected (too few contacts under its view); as the calibration places it")
     print(f"wrote {path}; next: gpioius fit {path} --out outputs/fit")
     return 0
 
@@ -827,6 +835,10 @@ def _add_import_bag(sub, common, fmt) -> None:
     bag.add_argument("--base-frame", default="base", help="the robot's base frame in tf")
     bag.add_argument("--camera-transform", default=None,
                      help="T_base_cloudframe as 'x y z qx qy qz qw' (replaces the tf lookup)")
+    bag.add_argument("--camera-bound", type=_camera_error, default=None, metavar="SIZES",
+                     help="correct the camera's pose (its calibration or tf) from the contacts, by at most these "
+                          "sizes, e.g. 6mm,1deg: a camera fixed in the base frame (the dataset records the "
+                          "correction; a large one is warned of); default: as the calibration places it")
     bag.add_argument("--tool-offset", default="0 0 0", help="fingertip centre in the flange frame 'x y z' [m]")
     bag.add_argument("--tip-radius", type=float, default=0.0, help="fingertip radius [m] (contact = centre - r F/|F|)")
     bag.add_argument("--contact-force", type=float, default=1.0, help="|F| of a contact [N] (paper: 1.0)")

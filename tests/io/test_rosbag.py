@@ -2,6 +2,7 @@
 
 import copy
 import dataclasses
+import math
 
 import numpy as np
 import pytest
@@ -517,3 +518,81 @@ def test_a_bag_imported_with_the_default_settings_has_inside_points_behind_its_c
     assert ds.meta["estimator"]["labels"]["vision_inside"] is None
     paper = _import(mcap_bag, truth, settings="paper")
     assert not (paper.y < 0).any() and paper.meta["counts"]["inside_points"] == 0
+
+
+# ------------------------------------------------------------------------------------ a camera whose pose is off
+def _off_by(T: np.ndarray, translation: float, degrees: float, seed: int) -> str:
+    """``T`` `(4, 4)` moved by ``translation`` [m] and turned by ``degrees`` about its own origin, each in a seeded
+    direction, as ``"x y z qx qy qz qw"``: a calibration that is off."""
+    from scipy.spatial.transform import Rotation
+
+    rng = np.random.default_rng(seed)
+    d, a = rng.standard_normal(3), rng.standard_normal(3)
+    R = Rotation.from_rotvec(np.radians(degrees) * a / np.linalg.norm(a)).as_matrix() @ T[:3, :3]
+    t = T[:3, 3] + translation * d / np.linalg.norm(d)
+    return " ".join(f"{v:.17g}" for v in [*t, *Rotation.from_matrix(R).as_quat()])
+
+
+def _cover_centre_error(ds, truth) -> float:
+    """How far [m] the sphere fitted to the imported cover's seen points lies from the true cover's centre (least
+    squares, algebraic: the points' own fit, independent of the correction's)."""
+    seen = ds.x[(ds.task == 1) & (ds.y == 0)]
+    solution = np.linalg.lstsq(np.c_[2 * seen, np.ones(len(seen))], (seen ** 2).sum(axis=1), rcond=None)[0]
+    return float(np.linalg.norm(solution[:3] - truth["center"]))
+
+
+def test_a_fixed_cameras_clouds_are_corrected_from_the_contacts_within_the_bound(tmp_path):
+    """A camera transform off by 6 mm and a degree (the cover's centre then 1-1.5 cm off): with camera_bound the
+    clouds, as one capture, move towards the contacts (the fitted cover's centre at least a third closer), the
+    dataset records the correction within its bound, and a calibrated camera is left nearly as it is."""
+    msgs, truth = example_bag_messages(image=(120, 160))
+    bag = write_bag(tmp_path / "run", msgs, storage="mcap")
+    T = truth["T_base_optical"]
+    for seed in (1, 3):
+        given = _off_by(T, 0.006, 1.0, seed)
+        off = _import(bag, truth, camera_transform=given)
+        fixed = _import(bag, truth, camera_transform=given, camera_bound="12mm,2deg")
+        assert _cover_centre_error(off, truth) > 0.008
+        assert _cover_centre_error(fixed, truth) < 2 / 3 * _cover_centre_error(off, truth)
+        record = fixed.meta["camera_corrections"]
+        assert record["enough"] and len(record["captures"]) == 1
+        moved = record["captures"][0]
+        assert 0 < moved["size_mm"] <= 12 + 1e-9 and moved["angle_deg"] <= 2 + 1e-9
+        # the misfit as given is NaN where no contact lay within reach of the seen cover before the correction
+        assert math.isfinite(record["misfit_after_mm"]) and not record["misfit_after_mm"] > record["misfit_before_mm"]
+        assert "camera_corrections" not in off.meta
+    calibrated = _import(bag, truth, camera_bound="12mm,2deg")
+    moved = calibrated.meta["camera_corrections"]["captures"][0]
+    assert moved["size_mm"] < 2.0 and moved["angle_deg"] < 0.3
+    assert _cover_centre_error(calibrated, truth) < _cover_centre_error(_import(bag, truth), truth) + 0.0015
+
+
+def test_camera_bound_refuses_clouds_whose_pose_changes_and_bad_bounds(recording, tmp_path):
+    """A correction is one camera's: clouds in two frames that tf places apart (a camera on the arm, or two
+    cameras) are refused, naming the topic and why; a bound that is not one is refused before the bag is read."""
+    msgs, truth = recording
+
+    def two_frames(ms):
+        other = [dataclasses.replace(m, t_ns=m.t_ns + 50_000_000, msg=dataclasses.replace(
+            m.msg, header=dataclasses.replace(m.msg.header, frame_id="camera_link"))) for m in ms]
+        return ms + other
+
+    bag = write_bag(tmp_path / "two", _with(msgs, "/camera/depth/points", two_frames), storage="mcap")
+    _import(bag, truth)                                        # as they are: both frames' clouds, through tf
+    with pytest.raises(BagImportError, match=r"/camera/depth/points: camera_bound corrects one camera fixed"):
+        _import(bag, truth, camera_bound="12mm,2deg")
+    with pytest.raises(ValueError, match="camera_bound"):
+        _import(bag, truth, camera_bound="12mm")
+
+
+def test_cli_import_bag_corrects_the_camera_and_says_by_how_much(tmp_path, capsys):
+    msgs, truth = example_bag_messages(image=(120, 160))
+    bag = write_bag(tmp_path / "run", msgs, storage="mcap")
+    given = _off_by(truth["T_base_optical"], 0.006, 1.0, 1)
+    assert main(["import-bag", str(bag), "--out", str(tmp_path / "d.gpioius"), "--tool-offset", "0 0 0.05",
+                 "--tip-radius", str(truth["tip_radius"]), "--camera-transform", given,
+                 "--camera-bound", "12mm,2deg"]) == 0
+    line = next(t for t in capsys.readouterr().out.splitlines() if t.startswith("camera:"))
+    assert "to agree with the touches" in line
+    record = load_dataset(tmp_path / "d.gpioius").meta["camera_corrections"]
+    assert f"moved {record['captures'][0]['size_mm']:.1f} mm" in line

@@ -393,7 +393,7 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
                contact_force: float = 1.0, contact_spacing: float = 0.005, max_gap: float = 0.1,
                joint_names: Sequence[str] | None = None, crop=None, time_window=None,
                max_joint_speed: float = UR5_MAX_JOINT_SPEED, tactile_calibration=None, tactile_transform=None,
-               patch=None, **deprecated) -> Dataset:
+               patch=None, camera_bound=None, **deprecated) -> Dataset:
     """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
 
     Args:
@@ -427,6 +427,15 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
             contacts along the measured forces (``touch_inside``; judged as an exploration judges them), none behind
             the seen surface (the recorded settings say so). None: the paper's 5 cm voxels and no settings recorded
             (``fit`` then uses the inverse multiquadric of 0.1 m and 0.006, or the deprecated ``kernel`` / ``noise``).
+        camera_bound: the largest error the camera's pose in the base frame (its extrinsic calibration, or the tf
+            that places it) may have, a :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text
+            (``"6mm,1deg"``): the clouds, as one capture, are moved rigidly about the camera to agree with the
+            contacts (along the measured forces) within that bound before they are labelled
+            (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, as ``gpioius fit --camera-bound`` corrects a
+            user's files); ``meta["camera_corrections"]`` records it and a correction beyond half the bound is warned
+            of. For a camera fixed in the base frame (the paper's Kinect): one that moves with the arm (its pose
+            changing between clouds) is refused, since its error is the hand-eye transform's, not one capture's.
+            None: the clouds as the calibration places them.
         **deprecated: ``policy`` (an :class:`~torch_gpioius.models.labels.ObservationPolicy` in place of the
             settings' labels), ``kernel`` and ``noise`` (stored in the header for the fit), for one release: give
             ``settings=EstimatorOverrides(policy=..., kernel=..., noise=...)``.
@@ -467,7 +476,8 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
                            contact_spacing=contact_spacing, max_gap=max_gap, joint_names=joint_names, policy=policy,
                            crop=crop, kernel=kernel, noise=noise, time_window=time_window,
                            max_joint_speed=max_joint_speed, tactile_calibration=tactile_calibration,
-                           tactile_transform=tactile_transform, patch=patch, settings=settings)
+                           tactile_transform=tactile_transform, patch=patch, settings=settings,
+                           camera_bound=camera_bound)
     reader = _open(s.path)
     try:
         if not list(reader.connections):
@@ -478,7 +488,7 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
         tf = None if s.T_fixed is not None else _read_tf(reader, s)
         inner = _inner_from_wrenches(s, wrenches, joint_msgs)
         pads = _pads(reader, s, inner)
-        outer = _outer_from_clouds(reader, s, tf, inner["t_first"])
+        outer = _outer_from_clouds(reader, s, tf, inner["t_first"], _camera_correction(reader, s, tf, inner))
     finally:
         reader.close()
     return _bag_dataset(s, inner, pads, outer)
@@ -511,11 +521,12 @@ class _BagImport:
     patch: object
     ur5: object
     estimator: object = None
+    camera_bound: object = None          # a CameraError, or None
 
     @classmethod
     def checked(cls, bag, *, topics, base_frame, camera_transform, tool_offset, tip_radius, contact_force,
                 contact_spacing, max_gap, joint_names, policy, crop, kernel, noise, time_window, max_joint_speed,
-                tactile_calibration, tactile_transform, patch, settings=None) -> "_BagImport":
+                tactile_calibration, tactile_transform, patch, settings=None, camera_bound=None) -> "_BagImport":
         from kinematics.dh import UR5_JOINT_NAMES
         from kinematics.ur5 import UR5
 
@@ -566,9 +577,16 @@ class _BagImport:
                 raise ValueError(f"import_bag: time_window must satisfy 0 <= start < end (finite seconds), got "
                                  f"{time_window!r}")
             window = (w0, w1)
+        if camera_bound is not None:
+            from ..sensors.pointcloud import CameraError
+
+            try:
+                camera_bound = CameraError.parse(camera_bound).check_bound()
+            except ValueError as exc:
+                raise ValueError(f"import_bag: {exc}") from None
         return cls(Path(bag), topics, base_frame.lstrip("/"), T_fixed, tuple(tool_offset), tip_radius, contact_force,
                    contact_spacing, max_gap, names, policy, crop, kernel, noise, window, max_joint_speed,
-                   tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset), estimator)
+                   tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset), estimator, camera_bound)
 
     def in_window(self, t: float, t_first: float) -> bool:
         return self.window is None or t_first + self.window[0] <= t <= t_first + self.window[1]
@@ -661,9 +679,74 @@ def _pads(reader, s: _BagImport, inner: dict) -> dict:
     return pads
 
 
-def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
-    """One cloud at a time into the base frame, the exploration's vision rule (surface and free space along the
-    rays), then the voxels; memory holds one cloud and the occupied voxels."""
+def _camera_pose(s: _BagImport, tf, frame: str, t: float) -> np.ndarray:
+    """``T_base_cloudframe`` `(4, 4)` of a cloud stamped ``t`` in ``frame``: the given transform, else tf's."""
+    if s.T_fixed is not None:
+        return s.T_fixed
+    try:
+        return tf.lookup(s.base, frame, t)
+    except LookupError as exc:
+        raise BagImportError(f"{s.path}: topic {s.topics.cloud}: {exc}; pass camera_transform / "
+                             "--camera-transform") from None
+
+
+#: The voxel [m] the clouds are averaged into before their capture is corrected (:func:`_camera_correction`).
+CORRECTION_VOXEL = 0.005
+
+
+def _camera_correction(reader, s: _BagImport, tf, inner: dict):
+    """With ``s.camera_bound``: the clouds' measured points in the crop box, voxel-averaged, as one capture of a
+    camera fixed in the base frame, corrected from the contacts along their measured forces
+    (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`); the
+    :class:`~torch_gpioius.sensors.extrinsics.CaptureCorrections` (a large correction warned of), None without a
+    bound. A first pass over the clouds; :func:`_outer_from_clouds` labels them moved.
+
+    Raises:
+        BagImportError: a camera whose pose changes between clouds (it moves with the arm), or no point in the box.
+    """
+    if s.camera_bound is None:
+        return None
+    import warnings
+
+    from ..sensors.extrinsics import correct_captures
+    from ..sensors.pointcloud import PointCloud
+    from ..voxels import VoxelAccumulator
+
+    # 5 mm voxels: the surface as measured (the labels' coarser voxels average a curved cover onto its chords, and
+    # the gap the contacts show would read short), within the memory of a few clouds
+    acc, pose = VoxelAccumulator(CORRECTION_VOXEL), None
+    for t, msg in _iter_messages(reader, s.path, s.topics.cloud, "cloud"):
+        if not s.in_window(t, inner["t_first"]):
+            continue
+        pts = decode_point_cloud2(msg, topic=s.topics.cloud)
+        frame = msg.header.frame_id.lstrip("/")
+        T_bc = _camera_pose(s, tf, frame, t)
+        if pose is None:
+            pose = T_bc
+        elif not np.allclose(T_bc, pose, atol=1e-6):
+            raise BagImportError(f"{s.path}: topic {s.topics.cloud}: camera_bound corrects one camera fixed in the "
+                                 f"base frame; the pose of the clouds' frame ({frame} at t = {t:.3f} s) changes "
+                                 "between clouds (a camera riding on the arm, whose error is its hand-eye "
+                                 "transform's, or several cameras): calibrate that, or import without camera_bound")
+        pts = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
+        if s.crop is not None:
+            pts = pts[np.all((pts >= s.crop[0]) & (pts <= s.crop[1]), axis=1)]
+        if len(pts):
+            acc.add(pts)
+    seen = acc.mean()
+    if pose is None or not len(seen):
+        raise BagImportError(f"{s.path}: topic {s.topics.cloud}: camera_bound: no cloud point to correct")
+    found = correct_captures([PointCloud(seen, pose[:3, 3])], inner["contacts"], inner["normals"],
+                             max_translation=s.camera_bound.translation, max_rotation=s.camera_bound.rotation)
+    for line in found.warnings([s.topics.cloud]):
+        warnings.warn(line, UserWarning, stacklevel=4)
+    return found
+
+
+def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float, corrections=None) -> dict:
+    """One cloud at a time into the base frame (moved by ``corrections``, :func:`_camera_correction`, where given),
+    the exploration's vision rule (surface and free space along the rays), then the voxels; memory holds one cloud
+    and the occupied voxels."""
     from ..exploration.observations import ObservationPolicy, vision_observations
     from ..sensors.pointcloud import PointCloud
     from ..voxels import VoxelAccumulator
@@ -691,16 +774,14 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
             continue
         frame = msg.header.frame_id.lstrip("/")
         cloud_frames.add(frame)
-        if s.T_fixed is not None:
-            T_bc = s.T_fixed
-        else:
-            try:
-                T_bc = tf.lookup(s.base, frame, t)
-            except LookupError as exc:
-                raise BagImportError(f"{path}: topic {topics.cloud}: {exc}; pass camera_transform / "
-                                     "--camera-transform") from None
+        T_bc = _camera_pose(s, tf, frame, t)
         pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
         del pts
+        if corrections is not None:         # the capture moved about its camera, and the camera with it
+            fix = corrections.captures[0]
+            pts_b = fix.apply(pts_b)
+            T_bc = T_bc.copy()
+            T_bc[:3, 3] = fix.apply(T_bc[None, :3, 3])[0]
         try:
             x, y = vision_observations(PointCloud(pts_b, origin=T_bc[:3, 3]), no_voxel, s.crop)
         except ValueError:
@@ -733,7 +814,8 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float) -> dict:
     else:
         seen = np.concatenate(seen_all)
         free_o = np.concatenate(free_all) if free_all else np.empty((0, 3))
-    return {"seen": seen, "free": free_o, "frames": sorted(cloud_frames), "n_clouds": n_clouds, "n_raw": n_raw}
+    return {"seen": seen, "free": free_o, "frames": sorted(cloud_frames), "n_clouds": n_clouds, "n_raw": n_raw,
+            "corrections": corrections}
 
 
 def _bag_settings(settings, crop, policy):
@@ -822,6 +904,8 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
         meta["noise"] = s.noise
     if s.estimator is not None:
         meta["estimator"] = s.estimator.to_dict()
+    if outer["corrections"] is not None:
+        meta["camera_corrections"] = outer["corrections"].as_record()
     trace = {"positions": inner["tips"], "forces": inner["forces"], "timestamps": inner["t_w"] - inner["t_w"][0]}
     return Dataset(x, y, task, step, meta=meta, trace=trace)
 
