@@ -222,7 +222,7 @@ def score_baselines(scene, data: BaselineData, observations: np.ndarray, names=N
         ``{name: {"chamfer", "fscore_5mm", "fscore_10mm", "bias", "hausdorff", "gap"}}``; NaN metrics (F-scores 0)
         where a baseline gives no estimate in the range.
     """
-    from .sim.forcefield import score_surface
+    from .sim.ruler import score_surface
 
     out = {}
     for name in names if names is not None else BASELINES.names():

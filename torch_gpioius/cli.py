@@ -376,7 +376,7 @@ def _presets(dimension: int | None = None) -> list[str]:
     """The estimator's presets by name (``EstimatorSettings``: default, paper, paper-2d); with ``dimension=3``,
     the 3-D worlds' settings (default, paper, gap)."""
     from .models.estimator import PRESETS
-    from .sim.forcefield import SETTINGS
+    from .sim.presets import SETTINGS
 
     return list(PRESETS) if dimension is None else list(SETTINGS)
 
@@ -583,7 +583,7 @@ def _camera_error(text: str):
 
 def _views(text: str):
     """An argparse type for camera views: comma-separated names, a count (1-3) or "paper"."""
-    from .sim.forcefield import as_views
+    from .sim.presets import as_views
 
     text = text.strip()
     return _argument(as_views, int(text) if text.isdigit() else tuple(v.strip() for v in text.split(","))

@@ -314,7 +314,7 @@ def _setting_problem(key: str, value) -> str | None:
         except ValueError as exc:
             return str(exc).removeprefix("voxel: ")
         return None
-    from .forcefield import INSIDE_SETTINGS, inside_labels
+    from .presets import INSIDE_SETTINGS, inside_labels
 
     if key in INSIDE_SETTINGS:       # the labels' own ranges (0 for a depth: none)
         try:

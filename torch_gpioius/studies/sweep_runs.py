@@ -416,7 +416,7 @@ def run_baselines(world, trace, log: Path) -> dict:
 
     from ..baselines import BASELINE_EDGE, BaselineData, score_baselines
     from ..io.datasets import replay
-    from ..sim.forcefield import METRICS_GRID
+    from ..sim.ruler import METRICS_GRID
 
     first = None
     for _, ds in replay(log):

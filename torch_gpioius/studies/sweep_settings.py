@@ -162,7 +162,7 @@ class StudyPlan:
         if device is not None:
             device = str(as_device(device))      # fails here, before any run, on a device this machine lacks
         if settings is not None:
-            from ..sim.forcefield import SETTINGS
+            from ..sim.presets import SETTINGS
 
             if settings not in SETTINGS:
                 raise ValueError(f"settings: must be one of {SETTINGS}, got {settings!r}")
@@ -176,7 +176,7 @@ class StudyPlan:
             if any(m == "local" for m in modes):
                 raise ValueError(f"learn: the local mode has a similarity per region; learn={learn!r} does not apply")
         if views is not None:
-            from ..sim.forcefield import as_views
+            from ..sim.presets import as_views
 
             views = as_views(views)
             if not entry.presets:

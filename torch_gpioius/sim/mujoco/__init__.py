@@ -23,7 +23,8 @@ def _scene_from_file(mesh, kind: str, *, name: str, where: dict, cover: dict, se
     views for this body, the file's inside depths then apply on top; ``smoke`` coarsens the cover to 4 cm."""
     import numpy as np
 
-    from ..forcefield import INSIDE_SETTINGS, approach_from_above, settings_for, with_inside_depths
+    from ..forcefield import approach_from_above
+    from ..presets import INSIDE_SETTINGS, settings_for, with_inside_depths
 
     where, settings = dict(where), dict(settings)
     if "start" not in where or "bounds" not in where:

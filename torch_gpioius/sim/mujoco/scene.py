@@ -104,7 +104,7 @@ class MujocoScene(RangedScene):
                  camera_scale: float = 0.5, defaults: ExplorationDefaults | None = None,
                  tool_length: float = 0.05, tip_radius: float = 0.004, views="paper", camera_error=None) -> None:
         from ...sensors.pointcloud import CameraError
-        from ..forcefield import as_views
+        from ..presets import as_views
 
         _require_mujoco()
         self.views = as_views(views)
@@ -368,7 +368,7 @@ class MujocoScene(RangedScene):
         :class:`~torch_gpioius.sim.mujoco.hardware.MujocoDepthCamera` seeded by the scene's seed; several views are
         one :class:`~torch_gpioius.sensors.MultiViewSource` whose view k draws its noise from ``[seed, k]``."""
         from ...sensors.pointcloud import MultiViewSource, PinholeCamera, look_at
-        from ..forcefield import as_views
+        from ..presets import as_views
         from .hardware import MujocoDepthCamera
 
         def tripod(seed, side: float):
@@ -420,7 +420,7 @@ class MujocoScene(RangedScene):
         Raises:
             ValueError: an unknown setting.
         """
-        from ..forcefield import settings_for
+        from ..presets import settings_for
 
         return self._copy(self.start, self.direction, self.seed, **settings_for(settings, self.inner, MUJOCO_DEFAULTS))
 
@@ -445,7 +445,7 @@ class MujocoScene(RangedScene):
         Raises:
             ValueError: unknown views.
         """
-        from ..forcefield import as_views
+        from ..presets import as_views
 
         return self._copy(self.start, self.direction, self.seed, views=as_views(views))
 
@@ -537,7 +537,7 @@ class MujocoScene(RangedScene):
         return hausdorff_distance(self.inner_samples_in_range(spacing), verts[self.in_range(verts)])
 
     def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
-        from ..forcefield import METRICS_GRID, estimate_metrics_3d
+        from ..ruler import METRICS_GRID, estimate_metrics_3d
 
         return estimate_metrics_3d(model, self, METRICS_GRID if resolution is None else resolution, contacts=contacts)
 
