@@ -18,7 +18,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from torch_gpioius.studies.sweep import run_sweep
+from torch_gpioius.studies.study import run_sweep
 
 
 def main() -> None:

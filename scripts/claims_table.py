@@ -25,7 +25,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from torch_gpioius.studies.stats import median_interval, paired_difference
-from torch_gpioius.studies.sweep import no_harm_margin
+from torch_gpioius.studies.study import no_harm_margin
 
 
 #: How far apart [correlation] two intervals must lie to count as disjoint: correlations of 1 - 1e-10 and

@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from claims_table import _cm, _f, _hausdorff  # noqa: E402  (scripts/ is not a package)
 
 from torch_gpioius.studies.stats import median_interval  # noqa: E402
-from torch_gpioius.studies.sweep import no_harm_margin  # noqa: E402
+from torch_gpioius.studies.study import no_harm_margin  # noqa: E402
 
 #: Tight and loose covers of the same body (docs/results-3d.md).
 PAIRS = (("E", "F"), ("G", "H"))

@@ -134,7 +134,7 @@ def test_the_loop_is_short(name):
     assert fn.end_lineno - fn.lineno + 1 <= 80
 
 
-@pytest.mark.parametrize("module, name", [("io/rosbag.py", "import_bag"), ("studies/sweep.py", "run_sweep")])
+@pytest.mark.parametrize("module, name", [("io/rosbag.py", "import_bag"), ("studies/study.py", "run_sweep")])
 def test_the_long_entry_points_are_short_steps_over_checked_settings(module, name):
     """Issue 35, item 22: import_bag was one 270-line function and run_sweep 121 lines; each now checks its
     arguments into a settings object (``.checked(...)``) and calls a few steps: the body (docstring aside) stays
@@ -210,14 +210,14 @@ def test_the_renamed_settings_still_import_with_a_warning():
     import torch_gpioius.exact as exact
     import torch_gpioius.exploration as exploration
     from torch_gpioius.exploration.patches import PatchThinning
-    from torch_gpioius.studies import sweep, sweep_settings
+    from torch_gpioius.studies import study as sweep, study_plan
 
     sys.modules.pop("torch_gpioius.settings", None)
     with pytest.warns(DeprecationWarning, match="torch_gpioius.exact"):
         old = importlib.import_module("torch_gpioius.settings")
     assert old.exact_arithmetic is exact.exact_arithmetic
     for module, name, new in ((exploration, "PatchSettings", PatchThinning), (sweep, "SweepSettings", sweep.StudyPlan),
-                              (sweep_settings, "SweepSettings", sweep.StudyPlan)):
+                              (study_plan, "SweepSettings", sweep.StudyPlan)):
         with pytest.warns(DeprecationWarning, match=new.__name__):
             assert getattr(module, name) is new
 
@@ -260,3 +260,20 @@ def test_no_public_function_takes_many_parameters_without_saying_why():
                     where = f"{cls.name}." if cls is not None else ""
                     bad.append(f"{rel}:{node.lineno} {where}{node.name}: {len(names)} parameters")
     assert not bad, "public functions with many parameters and no reason given:\n" + "\n".join(bad)
+
+
+@pytest.mark.parametrize("old, new", [("study2d", "simulate"), ("study3d", "simulate3d"), ("sweep", "study"),
+                                      ("sweep_settings", "study_plan"), ("sweep_runs", "study_runs"),
+                                      ("sweep_aggregate", "study_aggregate"), ("sweep_figures", "study_figures")])
+def test_the_studies_modules_are_named_for_their_commands_and_the_old_names_still_import(old, new):
+    """gpioius simulate runs studies.simulate, simulate3d studies.simulate3d, study studies.study (and its plan, runs,
+    tables and figures); the old module names import for one release, with a warning, and give the same objects."""
+    import importlib
+    import sys
+
+    moved = importlib.import_module(f"torch_gpioius.studies.{new}")
+    sys.modules.pop(f"torch_gpioius.studies.{old}", None)
+    with pytest.warns(DeprecationWarning, match=f"studies.{old} is torch_gpioius.studies.{new} now"):
+        shim = importlib.import_module(f"torch_gpioius.studies.{old}")
+    name = next(n for n in dir(moved) if not n.startswith("_") and callable(getattr(moved, n)))
+    assert getattr(shim, name) is getattr(moved, name)

@@ -116,7 +116,7 @@ def test_replay_labels_what_is_missing_by_its_cause(tmp_path, monkeypatch):
 
 def test_study_defaults_to_the_worlds_own_objects(monkeypatch, tmp_path):
     """`gpioius study --world mujoco` failed: the default --objects were the 2-D A-D."""
-    import torch_gpioius.studies.sweep as sweep
+    import torch_gpioius.studies.study as sweep
 
     seen = {}
 
@@ -133,8 +133,8 @@ def test_study_defaults_to_the_worlds_own_objects(monkeypatch, tmp_path):
 @pytest.fixture
 def seen(monkeypatch) -> dict:
     """The keyword arguments the study and the 3-D simulation would have been called with (neither runs)."""
-    import torch_gpioius.studies.study3d as study3d
-    import torch_gpioius.studies.sweep as sweep
+    import torch_gpioius.studies.simulate3d as study3d
+    import torch_gpioius.studies.study as sweep
 
     calls = {}
 
@@ -186,7 +186,7 @@ def test_policy_with_voxel():
 @pytest.fixture
 def fake_2d_study(monkeypatch):
     """run_study replaced by one that writes what the real one writes for its objects (in a second)."""
-    import torch_gpioius.studies.study2d as study2d
+    import torch_gpioius.studies.simulate as study2d
 
     def fake(objects, out, **kw):
         from pathlib import Path

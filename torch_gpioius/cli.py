@@ -20,7 +20,7 @@ __all__ = ["main"]
 
 def _simulate(args: argparse.Namespace) -> int:
     from .io.outputs import FolderLock, claimed_folder
-    from .studies.study2d import run_study
+    from .studies.simulate import run_study
 
     objects = list(_objects_of("planar")) if args.object == "all" else [args.object]
     max_steps = 12 if args.smoke else args.max_steps
@@ -35,7 +35,7 @@ def _simulate(args: argparse.Namespace) -> int:
 
 def _simulate3d(args: argparse.Namespace) -> int:
     from .io.outputs import FolderLock, claimed_folder
-    from .studies.study3d import run_study_3d
+    from .studies.simulate3d import run_study_3d
 
     if args.outer_tol is not None and args.touch == "patch":
         raise SystemExit("gpioius simulate3d: --outer-tol: patch runs use the batched engine, which has no truncated "
@@ -61,7 +61,7 @@ def _simulate3d(args: argparse.Namespace) -> int:
 
 
 def _study(args: argparse.Namespace) -> int:
-    from .studies.sweep import run_sweep
+    from .studies.study import run_sweep
 
     # an object set (a name with a colon) is one value, commas included (pybullet:duck,teddy; primitives:0-9,20)
     objects = None if args.objects is None else ([args.objects] if ":" in args.objects else args.objects.split(","))
@@ -367,7 +367,7 @@ def _objects_of(world: str) -> tuple:
 
 def _robot_study_objects() -> tuple:
     """The objects of the robot study in 3-D (Sec. VI: E-H), those ``simulate3d`` runs."""
-    from .studies.study3d import OBJECTS
+    from .studies.simulate3d import OBJECTS
 
     return tuple(OBJECTS)
 
@@ -396,7 +396,7 @@ def _learns() -> list[str]:
 
 
 def _sweep_modes() -> tuple:
-    from .studies.sweep import sweep_modes
+    from .studies.study import sweep_modes
 
     return sweep_modes()
 
@@ -592,7 +592,7 @@ def _views(text: str):
 
 def _metrics_every(text: str):
     """An argparse type for ``--metrics-every``: a number of steps or "schedule"."""
-    from .studies.sweep_settings import checked_metrics_every
+    from .studies.study_plan import checked_metrics_every
 
     return _argument(checked_metrics_every, text.strip())
 

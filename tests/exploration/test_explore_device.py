@@ -7,7 +7,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.cli import main as cli_main
-from torch_gpioius.studies.sweep_runs import RunSpec, _explore_kwargs
+from torch_gpioius.studies.study_runs import RunSpec, _explore_kwargs
 
 
 def _run(device, mode="visual-tactile", steps=6):
@@ -33,7 +33,7 @@ def test_an_unusable_device_is_refused_before_the_run():
     with pytest.raises(SystemExit):                          # argparse names it and exits 2
         cli_main(["study", "--device", "gpu", "--out", "unused"])
     with pytest.raises(ValueError, match="device"):
-        tg.studies.sweep.run_sweep(world="planar", objects=["A"], seeds=1, out="unused", device=bad)
+        tg.studies.study.run_sweep(world="planar", objects=["A"], seeds=1, out="unused", device=bad)
 
 
 def test_a_study_passes_the_device_to_every_run():

@@ -285,7 +285,7 @@ def test_a_kernel_registered_outside_the_package_is_used_by_name_from_a_scene_fi
     from tests.scenes import ball_scene
     from torch_gpioius.cli import _estimator_overrides, build_parser
     from torch_gpioius.sim.scenefile import load_scene
-    from torch_gpioius.studies.sweep import run_sweep
+    from torch_gpioius.studies.study import run_sweep
 
     scene = load_scene(ball_scene(tmp_path, extra='[forcefield]\nkernel = "TestMatern32"\n'))
     # a kind without a learnable length: its own, the length rule dropped
@@ -359,7 +359,7 @@ def test_a_world_policy_and_touch_registered_outside_the_package_run_from_a_scen
     from torch_gpioius.cli import build_parser
     from torch_gpioius.exploration import world_names
     from torch_gpioius.sim.scenefile import load_scene, scene_worlds
-    from torch_gpioius.studies.sweep import run_sweep, sweep_modes
+    from torch_gpioius.studies.study import run_sweep, sweep_modes
 
     assert "toyball" in scene_worlds() and "toyball" in world_names(simulated=True)
     assert "visual-tactile+poke" in sweep_modes() and "tactile+poke" not in sweep_modes()

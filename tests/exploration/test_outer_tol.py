@@ -6,7 +6,7 @@ import pytest
 import torch_gpioius as tg
 from torch_gpioius.io.datasets import read_records
 from torch_gpioius.sim import paper_objects_2d
-from torch_gpioius.studies.sweep_runs import RunSpec, _explore_kwargs
+from torch_gpioius.studies.study_runs import RunSpec, _explore_kwargs
 
 
 def test_every_record_carries_the_bound_and_a_log_resumes_with_it(tmp_path):
@@ -53,5 +53,5 @@ def test_a_study_passes_it_to_its_visual_tactile_runs_only():
         kw = _explore_kwargs(RunSpec("planar", "A", mode, 0, "out", outer_tol=1e-3), world)
         assert kw.get("outer_tol") == expected
     with pytest.raises(ValueError, match="outer_tol"):
-        tg.studies.sweep.run_sweep(world="forcefield", objects=["E"], modes=["visual-tactile"], seeds=1,
+        tg.studies.study.run_sweep(world="forcefield", objects=["E"], modes=["visual-tactile"], seeds=1,
                                    out="unused", touch="patch", outer_tol=1e-3)

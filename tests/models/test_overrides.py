@@ -64,7 +64,7 @@ def test_the_checks_are_the_settings_own_at_every_door(tmp_path, capsys):
     scene file's [estimator] section and a study: one check, one message."""
     from tests.sim.test_scenefile import ball_scene
     from torch_gpioius.sim.scenefile import read_scene
-    from torch_gpioius.studies.sweep import run_sweep
+    from torch_gpioius.studies.study import run_sweep
 
     noise = NOISE_RANGE[1] * 2
     messages = []
@@ -145,9 +145,9 @@ class _FixedLength(InverseMultiquadricKernel):
 def test_a_study_sends_every_change_to_its_runs_in_one_object(tmp_path):
     """--estimator reaches each run's settings beside the flags of their own (which keep the folder's old identity
     keys), the folder records it, and another change is another folder."""
-    from torch_gpioius.studies.sweep import _claim
-    from torch_gpioius.studies.sweep_runs import _explore_kwargs
-    from torch_gpioius.studies.sweep_settings import StudyPlan, with_loose
+    from torch_gpioius.studies.study import _claim
+    from torch_gpioius.studies.study_runs import _explore_kwargs
+    from torch_gpioius.studies.study_plan import StudyPlan, with_loose
 
     def settings(estimator, **loose):
         return StudyPlan.checked(world="planar", objects=["A"], modes=["visual-tactile"], seeds=1,

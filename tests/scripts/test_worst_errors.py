@@ -20,7 +20,7 @@ def test_worst_errors_measure_the_run_as_the_study_did_and_place_the_worst_miss(
     worst place lies in the body's box and on the ball, the estimate's as far from the sphere as reported; the
     nearest contact and seen point equal the ones recomputed from the log's final data."""
     from torch_gpioius.io.runs import load_run
-    from torch_gpioius.studies.sweep import run_sweep
+    from torch_gpioius.studies.study import run_sweep
 
     # a smoke run's 40 steps over the world's own travel (a smoke run stops at 6 cm otherwise: too rough an estimate
     # for the worst places to be more than pieces of it)
@@ -74,7 +74,7 @@ def test_camera_correction_refits_a_runs_contacts_with_its_captures_off_and_corr
     at the body's middle is the applied one's (6 mm and a degree about cameras 0.35-1.1 m away: under 3 cm)."""
     import sys
 
-    from torch_gpioius.studies.sweep import run_sweep
+    from torch_gpioius.studies.study import run_sweep
 
     run_sweep("forcefield", scenes=[ball_scene(tmp_path)], modes=["visual-tactile"], seeds=1, out=tmp_path / "s",
               smoke=True, backend="local", progress=False, max_travel=1.5)

@@ -200,7 +200,7 @@ def test_a_scene_takes_a_users_settings_and_back():
 
     from torch_gpioius.kernels import Matern52
     from torch_gpioius.sim.forcefield import ROBOT_STUDY_DEFAULTS, VIEWS, object_defaults
-    from torch_gpioius.studies.sweep import make_world
+    from torch_gpioius.studies.study import make_world
 
     paper = sphere_scene(radius=0.08, cover=0.01)
     mine = paper.with_settings("default")

@@ -40,7 +40,7 @@ def _tick_texts(fig):
 
 
 def test_fig4_keeps_legends_off_the_data_and_shows_both_modes_early(short_pair, tmp_path):
-    from torch_gpioius.studies.study2d import _snapshot
+    from torch_gpioius.studies.simulate import _snapshot
 
     scene, pair, logs = short_pair
     early = {m: _snapshot(logs / f"{m}.gpioius", pair[m], 0.1 * float(pair["tactile"].travel[-1])) for m in pair}
@@ -119,7 +119,7 @@ def test_fig5_gives_each_object_its_own_panel_and_band(short_pair, tmp_path):
 
 
 def test_paired_figure_labels_every_panel_with_plain_numbers(tmp_path):
-    from torch_gpioius.studies.sweep_figures import figure_paired
+    from torch_gpioius.studies.study_figures import figure_paired
 
     rows = [{"object": o, "mode": m, "seed": s, "final_hausdorff": v}
             for o, base in (("A", 0.005), ("B", 0.1)) for m, f in (("tactile", 1.0), ("visual-tactile", 1.9))

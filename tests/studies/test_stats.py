@@ -9,7 +9,7 @@ import pytest
 from scipy.stats import wilcoxon
 
 from torch_gpioius.studies.stats import median_interval, paired_difference
-from torch_gpioius.studies.sweep import aggregate, failure, failures_text
+from torch_gpioius.studies.study import aggregate, failure, failures_text
 
 
 def test_a_missing_value_is_the_worst_value_not_a_dropped_one():

@@ -470,11 +470,10 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
 
     loose = loose_keywords("import_bag", deprecated, ("policy", "kernel", "noise"))
     warn_loose("import_bag", 2, **loose)
-    policy, kernel, noise = loose["policy"], loose["kernel"], loose["noise"]
     s = _BagImport.checked(bag, topics=topics, base_frame=base_frame, camera_transform=camera_transform,
                            tool_offset=tool_offset, tip_radius=tip_radius, contact_force=contact_force,
-                           contact_spacing=contact_spacing, max_gap=max_gap, joint_names=joint_names, policy=policy,
-                           crop=crop, kernel=kernel, noise=noise, time_window=time_window,
+                           contact_spacing=contact_spacing, max_gap=max_gap, joint_names=joint_names, **loose,
+                           crop=crop, time_window=time_window,
                            max_joint_speed=max_joint_speed, tactile_calibration=tactile_calibration,
                            tactile_transform=tactile_transform, patch=patch, settings=settings,
                            camera_bound=camera_bound)

@@ -7,7 +7,7 @@ import pytest
 import torch_gpioius as tg
 
 from torch_gpioius.cli import main
-from torch_gpioius.studies.study2d import FRACTIONS, check_claims, run_study
+from torch_gpioius.studies.simulate import FRACTIONS, check_claims, run_study
 
 
 def test_cli_smoke_writes_figures_records_and_summary(tmp_path, capsys):
@@ -45,7 +45,7 @@ def test_cli_bad_object_exits_nonzero():
 
 
 def test_the_claims_table_points_to_the_explanations():
-    from torch_gpioius.studies.study2d import _markdown
+    from torch_gpioius.studies.simulate import _markdown
 
     row = {f"{k}_{int(f * 100)}": 0.01 for k in ("H_vt", "H_t") for f in FRACTIONS}
     row.update({f"S_{int(f * 100)}": 0.9 for f in FRACTIONS}, object="A", steps_vt=1, steps_t=1, terminated_vt="x",

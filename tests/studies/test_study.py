@@ -19,7 +19,7 @@ from scipy.stats import wilcoxon
 from torch_gpioius.kernels import KernelChoice
 from torch_gpioius.models.overrides import EstimatorOverrides
 from torch_gpioius.studies.stats import median_interval, paired_difference
-from torch_gpioius.studies.sweep import make_world, run_sweep
+from torch_gpioius.studies.study import make_world, run_sweep
 
 from tests.scenes import ball_scene
 
@@ -92,7 +92,7 @@ def test_bad_sweep_arguments(tmp_path):
 
 def test_workers_are_capped_at_the_cores_of_a_local_run():
     """Issue 51, item 17: `study --workers 1000` started one Ray process per run."""
-    from torch_gpioius.studies.sweep_settings import _checked_workers
+    from torch_gpioius.studies.study_plan import _checked_workers
 
     cores = os.cpu_count()
     with pytest.warns(UserWarning, match=f"workers: 1000 parallel runs on {cores} cores .* running {cores} at a time"):
@@ -102,7 +102,7 @@ def test_workers_are_capped_at_the_cores_of_a_local_run():
 
 
 def test_a_studys_settings_reach_every_run_built_in_objects_and_scene_files_alike(tmp_path):
-    from torch_gpioius.studies.sweep import StudyPlan
+    from torch_gpioius.studies.study import StudyPlan
 
     kw = dict(world="forcefield", objects=["E"], modes=["visual-tactile"], seeds=2, out=tmp_path, workers=1,
               address=None, max_travel=None, max_steps=None, smoke=True, progress=False, threads=1, backend="local",
@@ -185,7 +185,7 @@ def test_study_folders_belong_to_one_world_and_are_never_someone_elses(tmp_path)
 
 
 def test_damaged_and_foreign_run_files_are_named_and_damaged_runs_done_again(tmp_path):
-    from torch_gpioius.studies.sweep import RunFileError, aggregate, read_run_file
+    from torch_gpioius.studies.study import RunFileError, aggregate, read_run_file
 
     out = tmp_path / "s"
     run_sweep("planar", objects=["A"], modes=["tactile"], seeds=2, out=out, smoke=True, backend="local", progress=False)
@@ -226,23 +226,23 @@ def test_scene_files_run_as_objects_and_a_run_that_never_touches_is_a_counted_fa
     assert float(rows[0]["contacts_on_body"]) == 1.0
     assert out["summary"]["objects"]["ball"]["visual-tactile"]["n"] == 1
     # a run that cannot start: the range lets the approach pass the ball and leave the workspace
-    from torch_gpioius.studies.sweep import RunSpec, failure, read_run_file, run_one
+    from torch_gpioius.studies.study import RunSpec, failure, read_run_file, run_one
 
     spec = RunSpec("forcefield", "ball", "tactile", 0, str(tmp_path / "s"), True, None, None, 1, str(ball))
-    import torch_gpioius.studies.sweep_runs as sweep_runs
+    import torch_gpioius.studies.study_runs as study_runs
 
-    real = sweep_runs.make_world
+    real = study_runs.make_world
 
     def missing(*args, **kw):
         world = real(*args, **kw)
         world.start = world.start + np.array([0.08, 0.0, 0.0])      # 2 cm past the ball's side
         return world
 
-    sweep_runs.make_world = missing                                  # the runs' module builds the world
+    study_runs.make_world = missing                                  # the runs' module builds the world
     try:
         record = run_one(spec)
     finally:
-        sweep_runs.make_world = real
+        study_runs.make_world = real
     assert record["terminated"].startswith("refused: approach")
     assert failure(read_run_file(tmp_path / "s" / "runs" / f"{spec.key}.json")).startswith("approach")
     with pytest.raises(ValueError, match="also the names of objects"):
@@ -418,7 +418,7 @@ def _run(hausdorff, estimate=None, terminated="travel"):
 
 def test_a_run_whose_final_estimate_vanished_is_failed_with_no_stale_value():
     """Issue 33, item 5: runs.csv gave an earlier step's Hausdorff (0.0515) as final_hausdorff, `failed` empty."""
-    from torch_gpioius.studies.sweep_aggregate import _row, failure
+    from torch_gpioius.studies.study_aggregate import _row, failure
 
     nan = math.nan
     lost = _run([0.08, nan, 0.0515, nan], [1.0, nan, 1.0, 0.0])
@@ -436,7 +436,7 @@ def test_a_refused_scene_is_counted_by_what_its_message_says_not_by_the_objects_
     ("scene: pybullet-random-110 (pybullet:random_urdfs/110/110.obj): inn"), so no two refusals counted together.
     The messages the benchmark's blobs were refused with, as the scenes word them, give their cause; another message
     keeps what follows the name."""
-    from torch_gpioius.studies.sweep_aggregate import failure, failures_text
+    from torch_gpioius.studies.study_aggregate import failure, failures_text
 
     name = "refused: scene: pybullet-random-1{} (pybullet:random_urdfs/1{}/1{}.obj): "
     messages = {
@@ -464,7 +464,7 @@ def test_a_refused_scene_is_counted_by_what_its_message_says_not_by_the_objects_
 
 
 def test_run_files_with_a_bad_estimate_series_are_refused(tmp_path):
-    from torch_gpioius.studies.sweep import RunFileError, read_run_file
+    from torch_gpioius.studies.study import RunFileError, read_run_file
 
     path = tmp_path / "r.json"
     path.write_text(json.dumps(_run([0.08, 0.05], [1.0, 2.0])))
@@ -473,7 +473,7 @@ def test_run_files_with_a_bad_estimate_series_are_refused(tmp_path):
 
 
 def test_a_fraction_whose_estimate_vanished_is_not_filled_by_a_later_one():
-    from torch_gpioius.studies.sweep_aggregate import _at_travel
+    from torch_gpioius.studies.study_aggregate import _at_travel
 
     nan = math.nan
     series = {"travel": [0.0, 0.05, 0.1, 0.2], "hausdorff": [0.09, nan, nan, 0.03], "estimate": [1.0, nan, 0.0, 1.0]}
@@ -489,7 +489,7 @@ def test_an_edited_scene_file_is_run_again_and_a_scene_that_cannot_be_built_is_a
     with no runs.csv."""
     import warnings
 
-    from torch_gpioius.studies.sweep import read_run_file
+    from torch_gpioius.studies.study import read_run_file
 
     ball = ball_scene(tmp_path)
     broken = tmp_path / "broken.toml"
@@ -522,7 +522,7 @@ def test_an_edited_scene_file_is_run_again_and_a_scene_that_cannot_be_built_is_a
 def test_claims_are_not_judged_on_too_few_seeds():
     """Issue 51, item 13: `study --seeds 2` judged the paper's claims "holds: yes" beside its own table's 50 %
     coverage and Wilcoxon p = 0.5."""
-    from torch_gpioius.studies.sweep_aggregate import METRICS, MIN_SEEDS_TO_JUDGE, _claims, _summarize
+    from torch_gpioius.studies.study_aggregate import METRICS, MIN_SEEDS_TO_JUDGE, _claims, _summarize
 
     def rows(seeds):
         out = []

@@ -7,7 +7,7 @@ import pytest
 
 import torch_gpioius as tg
 from torch_gpioius.cli import main
-from torch_gpioius.studies.study3d import check_claims_3d, run_study_3d
+from torch_gpioius.studies.simulate3d import check_claims_3d, run_study_3d
 
 
 def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):
@@ -36,7 +36,7 @@ def test_cli_smoke_runs_the_loop_end_to_end(tmp_path, capsys):
                          if r["mode"] == "tactile"])
     np.testing.assert_allclose(touched, contacts)
     # issue 51, item 5: a re-run killed half-way left the new run's partial logs beside the old run's summary
-    import torch_gpioius.studies.study3d as study3d
+    import torch_gpioius.studies.simulate3d as study3d
 
     before = {p.relative_to(tmp_path): p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()
               and p.name != ".lock"}
@@ -114,7 +114,7 @@ def _trace(mode, hausdorff, estimate, shape=None):
 
 def test_the_summary_names_runs_without_an_estimate_and_counts_valid_samples():
     """Issue 33, item 5: "8.3 / 8.3 / 8.3" was printed when 4 of 6 samples were NaN, and "nan" said nothing."""
-    from torch_gpioius.studies.study3d import _markdown, summarize_3d
+    from torch_gpioius.studies.simulate3d import _markdown, summarize_3d
 
     nan = np.nan
     vt = _trace("visual-tactile", [0.083, nan, nan, nan, nan, nan, 0.083], [1, 0, nan, 0, 0, 0, 1])
@@ -133,7 +133,7 @@ def test_the_summary_names_runs_without_an_estimate_and_counts_valid_samples():
 def test_claims_are_not_judged_on_runs_that_barely_explored():
     """Issue 33, item 9: `--max-travel 1e-9` marked the claims "yes" after one step, `--max-steps 0` marked them
     "no"; below a stated minimum they are "not judged"."""
-    from torch_gpioius.studies import study2d, study3d
+    from torch_gpioius.studies import simulate as study2d, simulate3d as study3d
 
     short = _trace("visual-tactile", [0.05, 0.04], [1, 1])                    # 2 records: 1 step, 0.6 m
     why = study3d.explored_enough({"E": {"visual-tactile": short}})
@@ -149,7 +149,7 @@ def test_claims_are_not_judged_on_runs_that_barely_explored():
 
 def test_a_summary_of_scene_files_has_no_empty_claims_table():
     """Issue 35, item 18: scene files gave an empty claims table."""
-    from torch_gpioius.studies.study3d import _markdown, check_claims_3d, summarize_3d
+    from torch_gpioius.studies.simulate3d import _markdown, check_claims_3d, summarize_3d
 
     long = _trace("visual-tactile", [0.05] * 30, [1] * 30)
     rows = summarize_3d({"bunny": {"visual-tactile": long, "tactile": long}}, {})
@@ -160,7 +160,7 @@ def test_a_summary_of_scene_files_has_no_empty_claims_table():
 
 def test_the_summary_shows_the_fields_metrics_at_the_end():
     """Issue 34, item 5: Chamfer, F-score, bias and the unseen share beside H in simulate3d's summary."""
-    from torch_gpioius.studies.study3d import _markdown, summarize_3d
+    from torch_gpioius.studies.simulate3d import _markdown, summarize_3d
 
     vt = _trace("visual-tactile", [0.05] * 3, [1] * 3, {"chamfer": 0.012, "fscore_5mm": 0.31, "bias": -0.011,
                                                         "unseen": 0.25})
