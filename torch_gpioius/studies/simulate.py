@@ -187,6 +187,14 @@ def _markdown(rows: list[dict], claims: list[dict] | None, why_not: str | None =
     return "\n".join(lines) + "\n"
 
 
+def write_summary(out: Path, rows, claims, why_not: str | None, markdown) -> None:
+    """A study's ``summary.json`` (``rows``, ``claims`` and why they were not judged) and ``summary.md``
+    (``markdown(rows, claims, why_not)``) in ``out``: both simulations write theirs so."""
+    (out / "summary.json").write_text(json.dumps({"rows": rows, "claims": claims, "claims_not_judged": why_not},
+                                                 indent=1))
+    (out / "summary.md").write_text(markdown(rows, claims, why_not))
+
+
 def write_records(traces: dict[str, dict[str, Trace]], out: Path) -> None:
     """Every per-step record of every run to ``out/records.csv`` and ``out/records.json``."""
     records = [r for pair in traces.values() for tr in pair.values() for r in tr.records()]
@@ -268,7 +276,5 @@ def _run_study(scenes: dict, objects, out: Path, max_steps: int, progress: bool,
     rows = summarize(traces)
     why_not = "smoke run (a few steps per run)" if smoke else explored_enough(traces)
     claims = None if why_not else check_claims(rows)
-    (out / "summary.json").write_text(json.dumps({"rows": rows, "claims": claims, "claims_not_judged": why_not},
-                                                 indent=1))
-    (out / "summary.md").write_text(_markdown(rows, claims, why_not))
+    write_summary(out, rows, claims, why_not, _markdown)
     return {"traces": traces, "rows": rows, "claims": claims, "seconds": time.perf_counter() - t0}

@@ -3,7 +3,6 @@ visual-tactile vs tactile-only, figures like Fig. 9 and 10, and the Sec. VI-B cl
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -12,7 +11,7 @@ import numpy as np
 from ..exploration import Trace
 from ..session import explore
 from .figures import figure_3d_object, figure_similarity
-from .simulate import write_records
+from .simulate import write_records, write_summary
 
 __all__ = ["run_study_3d", "summarize_3d", "check_claims_3d"]
 
@@ -314,7 +313,5 @@ def _run_study_3d(scenes: dict, objects: list, modes, out: Path, max_travel: flo
     rows = summarize_3d(traces, hio)
     why_not = "smoke run (a few centimetres of travel)" if smoke else explored_enough(traces)
     claims = None if why_not else check_claims_3d(rows)
-    (out / "summary.json").write_text(json.dumps({"rows": rows, "claims": claims, "claims_not_judged": why_not},
-                                                 indent=1))
-    (out / "summary.md").write_text(_markdown(rows, claims, why_not))
+    write_summary(out, rows, claims, why_not, _markdown)
     return {"traces": traces, "rows": rows, "claims": claims, "seconds": time.perf_counter() - t0}

@@ -1,13 +1,6 @@
-"""Deprecated: this module is :mod:`torch_gpioius.studies.simulate` now (named for gpioius simulate); its names still
-import from here for one release, with a DeprecationWarning."""
+"""Deprecated: :mod:`torch_gpioius.studies.simulate` (named for gpioius simulate); its names import from here for one
+release."""
 
-import importlib
-import warnings
+from ._moved import forward
 
-warnings.warn(
-    "torch_gpioius.studies.study2d is torch_gpioius.studies.simulate now (named for gpioius simulate)",
-    DeprecationWarning, stacklevel=2)
-
-
-def __getattr__(name):
-    return getattr(importlib.import_module("torch_gpioius.studies.simulate"), name)
+__getattr__ = forward("study2d", "simulate", "gpioius simulate")

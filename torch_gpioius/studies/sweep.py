@@ -1,13 +1,6 @@
-"""Deprecated: this module is :mod:`torch_gpioius.studies.study` now (named for gpioius study); its names still import
-from here for one release, with a DeprecationWarning."""
+"""Deprecated: :mod:`torch_gpioius.studies.study` (named for gpioius study); its names import from here for one
+release."""
 
-import importlib
-import warnings
+from ._moved import forward
 
-warnings.warn(
-    "torch_gpioius.studies.sweep is torch_gpioius.studies.study now (named for gpioius study)",
-    DeprecationWarning, stacklevel=2)
-
-
-def __getattr__(name):
-    return getattr(importlib.import_module("torch_gpioius.studies.study"), name)
+__getattr__ = forward("sweep", "study", "gpioius study")

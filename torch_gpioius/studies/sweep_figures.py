@@ -1,13 +1,6 @@
-"""Deprecated: this module is :mod:`torch_gpioius.studies.study_figures` now (named for a study's figures); its names
-still import from here for one release, with a DeprecationWarning."""
+"""Deprecated: :mod:`torch_gpioius.studies.study_figures` (named for a study's figures); its names import from here for
+one release."""
 
-import importlib
-import warnings
+from ._moved import forward
 
-warnings.warn(
-    "torch_gpioius.studies.sweep_figures is torch_gpioius.studies.study_figures now (named for a study's figures)",
-    DeprecationWarning, stacklevel=2)
-
-
-def __getattr__(name):
-    return getattr(importlib.import_module("torch_gpioius.studies.study_figures"), name)
+__getattr__ = forward("sweep_figures", "study_figures", "a study's figures")

@@ -1,13 +1,6 @@
-"""Deprecated: this module is :mod:`torch_gpioius.studies.study_runs` now (named for a study's runs); its names still
-import from here for one release, with a DeprecationWarning."""
+"""Deprecated: :mod:`torch_gpioius.studies.study_runs` (named for a study's runs); its names import from here for one
+release."""
 
-import importlib
-import warnings
+from ._moved import forward
 
-warnings.warn(
-    "torch_gpioius.studies.sweep_runs is torch_gpioius.studies.study_runs now (named for a study's runs)",
-    DeprecationWarning, stacklevel=2)
-
-
-def __getattr__(name):
-    return getattr(importlib.import_module("torch_gpioius.studies.study_runs"), name)
+__getattr__ = forward("sweep_runs", "study_runs", "a study's runs")
