@@ -97,7 +97,8 @@ def render() -> str:
         "`EstimatorOverrides` (the world's own settings with those changes); `fit_dataset(settings=...)`, "
         "`dataset_from_files(settings=...)`, `import_bag(settings=...)`, `Dataset.to_model(settings=...)` "
         "likewise; a simulated object's own: `Scene3D.from_mesh(estimator=EstimatorOverrides(...))` |",
-        "| command line | `gpioius study`, `fit` and `import-bag` share the flags below (declared once) |",
+        "| command line | `gpioius study`, `simulate3d`, `fit` and `import-bag` share the flags below (declared "
+        "once) |",
         "| scene file | an `[estimator]` section: the keys below, `labels` a table of the policy's fields (the "
         "force-field section's `kernel`, `noise`, `voxel`, `learn` and inside depths are read into the same object) |",
         "| study | `run_sweep(estimator=...)`: an `EstimatorOverrides`, its plain dict or `KEY=VALUE` texts |",
@@ -136,8 +137,9 @@ def render() -> str:
                "labels": "a table of the labelling policy's fields (below)"}
     assert set(accepts) == set(OVERRIDE_KEYS), "a key of EstimatorOverrides is not described here"
     lines += [f"| `{k}` | {accepts[k]} |" for k in OVERRIDE_KEYS]
-    lines += ["", "## Command-line flags", "", "`gpioius study`, `gpioius fit` and `gpioius import-bag` (each "
-              "says what a flag left out means: each world's own, the settings'):", "", "| flag | what |", "|---|---|"]
+    lines += ["", "## Command-line flags", "", "`gpioius study`, `gpioius simulate3d`, `gpioius fit` and `gpioius "
+              "import-bag` (each says what a flag left out means: each world's own, the settings'):", "",
+              "| flag | what |", "|---|---|"]
     lines += [f"| `{flags}` | {text} |" for flags, text in _estimator_flags()]
     described = _attributes(ObservationPolicy)
     lines += ["", "## The labelling policy's fields", "",

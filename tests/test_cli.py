@@ -8,6 +8,7 @@ import pytest
 
 from torch_gpioius.cli import build_parser, main
 from torch_gpioius.models.estimator import EstimatorSettings
+from torch_gpioius.models.overrides import EstimatorOverrides
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "data" / "example_2d.gpioius"
@@ -151,7 +152,10 @@ def test_voxel_reaches_the_study_and_the_3d_simulation_and_bad_values_are_refuse
     assert main(["study", "--world", "forcefield", "--voxel", "0.01", "--out", str(tmp_path / "s")]) == 2
     assert seen["estimator"].voxel == 0.01
     assert main(["simulate3d", "--voxel", "0", "--touch", "patch", "--out", str(tmp_path / "t")]) == 2
-    assert seen["voxel"] == 0.0 and seen["touch"] == "patch"
+    assert seen["estimator"].voxel == 0.0 and seen["touch"] == "patch"
+    assert main(["simulate3d", "--noise", "0.05", "--estimator", "labels.ray_smoothing=none",
+                 "--out", str(tmp_path / "t2")]) == 2                 # every estimator flag, as study's
+    assert seen["estimator"] == EstimatorOverrides(noise=0.05, labels={"ray_smoothing": None})
     for bad in ("abc", "-0.01", "nan", "3"):
         with pytest.raises(SystemExit):
             main(["study", "--voxel", bad, "--out", str(tmp_path / "u")])

@@ -11,6 +11,7 @@ or written before by the same command (:mod:`torch_gpioius.io.outputs`).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import warnings
 from pathlib import Path
@@ -46,15 +47,19 @@ def _simulate3d(args: argparse.Namespace) -> int:
     else:
         objects = list(_robot_study_objects()) if args.object == "all" else [args.object]
     identity = {} if args.outer_tol is None else {"outer_tol": args.outer_tol}   # older folders: exact
+    estimator = _estimator_overrides(args)
+    others = dataclasses.replace(estimator, voxel=None).to_dict()      # the voxel: the folder's key since before
     travel = 0.06 if args.smoke else args.max_travel
     # a scene refused when it is built leaves no folder behind
-    with claimed_folder(args.out, "simulate3d", args.force, world=args.world, voxel=args.voxel,
+    with claimed_folder(args.out, "simulate3d", args.force, world=args.world, voxel=estimator.voxel,
                         touch=None if args.touch == "point" else args.touch,   # older folders: point
-                        objects=",".join([*objects, *(str(Path(s).resolve()) for s in scenes)]), added=("objects",),
+                        objects=",".join([*objects, *(str(Path(s).resolve()) for s in scenes)]),
+                        estimator=others or None, added=("objects", "estimator"),
                         **identity), FolderLock(args.out, "gpioius simulate3d"):
         result = run_study_3d(objects, out=args.out, max_travel=travel, metrics_every=args.metrics_every,
                               progress=not args.quiet, smoke=args.smoke, world=args.world, scenes=scenes,
-                              voxel=args.voxel, touch=args.touch, outer_tol=args.outer_tol, device=args.device)
+                              estimator=estimator or None, touch=args.touch, outer_tol=args.outer_tol,
+                              device=args.device)
     print((Path(args.out) / "summary.md").read_text())
     print(f"wrote figures, records.csv/json, logs/ and summary.md to {args.out} in {result['seconds']:.0f} s")
     return 0
@@ -406,8 +411,6 @@ def _names(registry) -> str:
     return ", ".join(registry.choices())
 
 
-VOXEL_HELP = ("edge of the camera's voxels [m] (default: the world's, 0.05 as in the paper; 0 keeps every camera "
-              "point; docs/results-resolution.md)")
 
 
 def _number(text: str, name: str, what: str) -> float:
@@ -657,7 +660,6 @@ def _add_simulate3d(sub, common, fmt) -> None:
     s3.add_argument("--out", default="outputs/study3d", help="output folder")
     s3.add_argument("--max-travel", type=_length("max-travel"), default=1.5, help="fingertip travel per run [m]")
     s3.add_argument("--metrics-every", type=int, default=5, help="surface metrics every k steps")
-    s3.add_argument("--voxel", type=_voxel, default=None, help=VOXEL_HELP)
     s3.add_argument("--touch", default="point", type=_touch_name,
                     help="a registered touch model: point (the fingertip's contact, the paper), patch (a DIGIT-like "
                          "gel pad's depth map at each contact, both 3-D worlds), or one registered with "
@@ -666,6 +668,7 @@ def _add_simulate3d(sub, common, fmt) -> None:
     s3.add_argument("--device", type=_device, default=None, help=DEVICE_HELP + " (default: cpu)")
     s3.add_argument("--smoke", action="store_true", help="6 cm of travel on coarse meshes, claims not judged (CI)")
     s3.add_argument("--quiet", action="store_true", help="no progress output")
+    _add_estimator_arguments(s3, "each scene's own (the paper's for E-H)")
     _force(s3, "--out holds files that `gpioius simulate3d` (of this world) did not write")
     s3.set_defaults(func=_simulate3d)
 

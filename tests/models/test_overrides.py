@@ -173,7 +173,7 @@ def test_a_study_sends_every_change_to_its_runs_in_one_object(tmp_path):
 
 
 def test_the_command_line_declares_the_estimators_flags_once_for_each_command(monkeypatch):
-    """study, fit and import-bag take the same flags, of the same types, from one declaration."""
+    """study, simulate3d, fit and import-bag take the same flags, of the same types, from one declaration."""
     import argparse
 
     from torch_gpioius import cli
@@ -187,7 +187,7 @@ def test_the_command_line_declares_the_estimators_flags_once_for_each_command(mo
 
     monkeypatch.setattr(cli, "_add_estimator_arguments", spy)
     cli.build_parser()
-    assert set(seen) == {"study", "fit", "import-bag"}, seen
+    assert set(seen) == {"study", "simulate3d", "fit", "import-bag"}, seen
     args = argparse.Namespace(theta=None, kernel="imq", lengthscale=None, noise=0.1, learn=None, voxel=0.02,
                               estimator=["labels.ray_smoothing=none"])
     changes = cli._estimator_overrides(args)
@@ -320,3 +320,17 @@ def test_every_door_reads_its_old_loose_keywords_once_with_the_way_named():
     new = ds.to_model(settings=tg.EstimatorOverrides(noise=0.01))
     assert float(old.noise) == float(new.noise) == pytest.approx(0.01)
     assert type(old.covar_module) is type(new.covar_module)
+
+
+def test_the_3d_simulation_takes_the_estimators_changes_as_one_object():
+    """run_study_3d(estimator=...) as the study's; its voxel= of before still read (with the warning), and an
+    estimator beside explore's own settings refused, each before anything is built."""
+    from torch_gpioius.studies.simulate3d import run_study_3d
+
+    with pytest.warns(DeprecationWarning, match=r"run_study_3d\(voxel=\)"):
+        with pytest.raises(ValueError, match="objects: unknown"):            # read, then the objects checked
+            run_study_3d(["Q"], voxel=0.01)
+    with pytest.raises(ValueError, match="give either estimator or policy / settings"):
+        run_study_3d(["E"], estimator={"noise": 0.05}, settings="paper")
+    with pytest.raises(ValueError, match="unknown key"):
+        run_study_3d(["E"], estimator={"nosie": 0.05})

@@ -31,7 +31,8 @@ from ..kernels import ExactKernel, KernelChoice, from_description
 from .estimator import EstimatorSettings, as_learn
 from .labels import ObservationPolicy, check_voxel
 
-__all__ = ["EstimatorOverrides", "parse_assignment", "resolved", "warn_loose", "loose_keywords", "OVERRIDE_KEYS"]
+__all__ = ["EstimatorOverrides", "parse_assignment", "resolved", "warn_loose", "loose_keywords", "resolved_changes",
+           "OVERRIDE_KEYS"]
 
 #: The keys :meth:`EstimatorOverrides.from_dict` reads (``labels.<field>`` for one label; ``theta`` is
 #: ``lengthscale`` under the paper's name).
@@ -254,6 +255,25 @@ def resolved(estimator, base: EstimatorSettings) -> EstimatorSettings:
     if not isinstance(estimator, EstimatorSettings):
         raise ValueError(f"estimator: expected EstimatorSettings or EstimatorOverrides, got {type(estimator).__name__}")
     return estimator
+
+
+def resolved_changes(changes) -> "EstimatorOverrides":
+    """Changes in any of their forms as one :class:`EstimatorOverrides`: one itself, its plain dict (a scene file's
+    ``[estimator]`` section), ``KEY=VALUE`` texts (the command line's ``--estimator``) or None (none).
+
+    Raises:
+        ValueError: anything else, or a bad key or value (named).
+    """
+    if changes is None:
+        return EstimatorOverrides()
+    if isinstance(changes, dict):
+        return EstimatorOverrides.from_dict(changes)
+    if isinstance(changes, (list, tuple)):
+        return EstimatorOverrides.from_assignments(changes)
+    if not isinstance(changes, EstimatorOverrides):
+        raise ValueError(f"estimator: expected EstimatorOverrides, its dict or KEY=VALUE texts, got "
+                         f"{type(changes).__name__}")
+    return changes
 
 
 def warn_loose(owner: str, stacklevel: int, **given) -> list[str]:

@@ -221,7 +221,7 @@ def _write_meshes(traces: dict, scenes: dict, out: Path, resolution: float) -> N
 
 def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3d", max_travel: float = 1.5,
                  metrics_every: int = 5, modes=MODES, progress: bool = True, smoke: bool = False,
-                 world: str = "forcefield", scenes=(), voxel: float | None = None, outer_tol: float | None = None,
+                 world: str = "forcefield", scenes=(), estimator=None, outer_tol: float | None = None,
                  **explore_kwargs) -> dict:
     """Run the simulated robot study on objects E-H and write figures, records, logs and the summary.
 
@@ -241,21 +241,27 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
             (``tg.sim.mujoco_objects_3d``: cloth and foam covers on MuJoCo's contact physics; the ``mujoco`` extra).
         scenes: scene files (:mod:`torch_gpioius.sim.scenefile`) explored as further objects, named by their
             ``name`` (the claims are judged on E-H only).
-        voxel: edge of the camera's voxels [m] (0: every camera point; None: each scene's own, 0.05 as the paper).
+        estimator: changes to each scene's own estimator settings (an
+            :class:`~torch_gpioius.models.overrides.EstimatorOverrides` or its plain dict: the camera's voxel, the
+            kernel, sigma^2, any label; ``gpioius simulate3d``'s estimator flags); None: each scene's own (the
+            paper's for E-H). ``voxel=`` of earlier releases is read for one release, as
+            ``estimator=EstimatorOverrides(voxel=...)``, with a DeprecationWarning.
         outer_tol: the visual-tactile runs with a truncated outer basis (``explore(outer_tol=...)``); the
             tactile-only runs have no camera points. None: exact.
         **explore_kwargs: forwarded to ``explore`` (step, settings, device, ...).
     """
     from ..exploration.registry import world_entry
     from ..io.outputs import StagedFiles
+    from ..models.overrides import EstimatorOverrides, resolved_changes, warn_loose
 
     entry = world_entry(world)
-    if voxel is not None:
-        from ..exploration.observations import check_voxel
-
-        voxel = check_voxel(voxel)
-        if "policy" in explore_kwargs or "settings" in explore_kwargs:
-            raise ValueError("voxel: give either voxel or policy / settings (whose voxel it would replace), not both")
+    if warn_loose("run_study_3d", 2, voxel=explore_kwargs.get("voxel")):
+        estimator = resolved_changes(estimator).merged(EstimatorOverrides(voxel=explore_kwargs.pop("voxel")))
+    explore_kwargs.pop("voxel", None)
+    estimator = resolved_changes(estimator) or None
+    if estimator is not None and ("policy" in explore_kwargs or "settings" in explore_kwargs):
+        raise ValueError("estimator: give either estimator or policy / settings (whose values it would change), not "
+                         "both")
     unknown = [o for o in objects if o not in OBJECTS or o not in entry.object_names]
     if unknown:   # before building the meshes (seconds)
         raise ValueError(f"objects: unknown {unknown} in the {entry.name} world; choose among "
@@ -274,16 +280,14 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     # the run's files are written into a staging folder and moved in at the end: a run killed half-way leaves the
     # earlier run's logs, records and summary whole, never the new run's logs beside the old run's summary
     with StagedFiles(final) as staged:
-        return _run_study_3d(scenes, objects, modes, staged.path, max_travel, metrics_every, progress, smoke, voxel,
-                             outer_tol, explore_kwargs)
+        return _run_study_3d(scenes, objects, modes, staged.path, max_travel, metrics_every, progress, smoke,
+                             estimator, outer_tol, explore_kwargs)
 
 
 def _run_study_3d(scenes: dict, objects: list, modes, out: Path, max_travel: float, metrics_every: int,
-                  progress: bool, smoke: bool, voxel: float | None, outer_tol: float | None,
-                  explore_kwargs: dict) -> dict:
+                  progress: bool, smoke: bool, estimator, outer_tol: float | None, explore_kwargs: dict) -> dict:
     """:func:`run_study_3d`'s runs, figures and tables, written into ``out`` (its staging folder)."""
     from .._progress import progress as reporter
-    from ..models.overrides import EstimatorOverrides
 
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -295,8 +299,8 @@ def _run_study_3d(scenes: dict, objects: list, modes, out: Path, max_travel: flo
     for name, mode in jobs:
         bar.set_postfix_str(f"object {name}, {mode}")
         kw = dict(explore_kwargs)
-        if voxel is not None:             # each scene's own settings with that voxel
-            kw["settings"] = EstimatorOverrides(voxel=voxel)
+        if estimator is not None:         # each scene's own settings with these changes
+            kw["settings"] = estimator
         if outer_tol is not None and mode == "visual-tactile":
             kw["outer_tol"] = outer_tol
         traces.setdefault(name, {})[mode] = explore(

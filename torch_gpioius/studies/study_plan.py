@@ -245,23 +245,14 @@ def with_loose(estimator, loose: dict):
 
 def _overrides(estimator):
     """A study's changes to the estimator as an :class:`~torch_gpioius.models.overrides.EstimatorOverrides` (None
-    for none): one, its plain dict or ``KEY=VALUE`` texts.
+    for none): one, its plain dict or ``KEY=VALUE`` texts (:func:`~torch_gpioius.models.overrides.resolved_changes`).
 
     Raises:
         ValueError: anything else, or a bad key or value (named).
     """
-    from ..models.overrides import EstimatorOverrides
+    from ..models.overrides import resolved_changes
 
-    if estimator is None:
-        return None
-    if isinstance(estimator, dict):
-        estimator = EstimatorOverrides.from_dict(estimator)
-    elif isinstance(estimator, (list, tuple)):
-        estimator = EstimatorOverrides.from_assignments(estimator)
-    if not isinstance(estimator, EstimatorOverrides):
-        raise ValueError(f"estimator: expected EstimatorOverrides, a dict or KEY=VALUE texts, got "
-                         f"{type(estimator).__name__}")
-    return estimator or None
+    return resolved_changes(estimator) or None
 
 
 def checked_metrics_every(value):
