@@ -17,7 +17,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.io.importers import load_contacts_csv
-from torch_gpioius.io.offline import fit_dataset
+from torch_gpioius.fitting import fit_dataset
 
 ROOT = Path(__file__).resolve().parents[1]
 

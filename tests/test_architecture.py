@@ -14,7 +14,8 @@ LAYERS = [
     {"_version", "tolerances", "exact", "settings", "_validation", "_progress", "threads", "voxels", "polylines",
      "_extras", "registry"},
     {"kernels"}, {"inference"}, {"models"}, {"geometry"}, {"metrics"}, {"surfaces"}, {"planning"},
-    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"baselines"}, {"io"}, {"testing"}, {"session"}, {"studies"},
+    {"sensors"}, {"contact"}, {"exploration"}, {"sim"}, {"baselines"}, {"io"}, {"testing"}, {"session", "fitting"},
+    {"studies"},
     {"viewer"},
     {"cli"},
     {"(root)"},
@@ -180,10 +181,11 @@ def _module_graph() -> dict[str, set[str]]:
 
 
 def test_no_two_modules_import_each_other():
-    """Issue 35, item 21: io/export.py and io/offline.py imported each other, and sensors/pointcloud.py reached up
-    into io/importers.py, which imports it; a circle between modules, even through function-level imports."""
+    """io/export.py and the fitting module (then io/offline.py) once imported each other, and sensors/pointcloud.py
+    reached up into io/importers.py, which imports it; a circle between modules, even through function-level
+    imports."""
     graph = _module_graph()
-    assert "io.export" in graph["io.offline"] or "surfaces" in graph["io.offline"]
+    assert "io.export" in graph["fitting"]
     circles, state = [], {}
 
     def visit(m, stack):
@@ -277,3 +279,19 @@ def test_the_studies_modules_are_named_for_their_commands_and_the_old_names_stil
         shim = importlib.import_module(f"torch_gpioius.studies.{old}")
     name = next(n for n in dir(moved) if not n.startswith("_") and callable(getattr(moved, n)))
     assert getattr(shim, name) is getattr(moved, name)
+
+
+def test_fitting_has_its_own_room_and_its_old_names_still_work():
+    """What gpioius fit and replay do lives in torch_gpioius.fitting, apart from the file formats of io/; 0.1's
+    tg.offline is that module, and torch_gpioius.io.offline imports for one release with a warning."""
+    import importlib
+    import sys
+
+    import torch_gpioius as tg
+    from torch_gpioius import fitting
+
+    assert tg.offline is fitting and tg.fitting is fitting and "offline" not in tg.io.__all__
+    sys.modules.pop("torch_gpioius.io.offline", None)
+    with pytest.warns(DeprecationWarning, match="torch_gpioius.io.offline is torch_gpioius.fitting now"):
+        old = importlib.import_module("torch_gpioius.io.offline")
+    assert old.fit_dataset is fitting.fit_dataset and old.replay_log is fitting.replay_log

@@ -90,7 +90,7 @@ def test_replay_labels_what_is_missing_by_its_cause(tmp_path, monkeypatch):
     from matplotlib.figure import Figure
 
     from torch_gpioius.io.datasets import Dataset, save_dataset
-    from torch_gpioius.io.offline import replay_log
+    from torch_gpioius.fitting import replay_log
 
     rng = np.random.default_rng(2)
     d = rng.standard_normal((90, 3))
@@ -295,7 +295,7 @@ def test_warnings_reach_the_user_as_one_line(capsys, monkeypatch, tmp_path):
     """Issue 35, item 10: warnings reached users raw, with a line of library source."""
     import warnings as w
 
-    import torch_gpioius.io.offline as offline
+    import torch_gpioius.fitting as offline
 
     def fit(*args, **kwargs):
         w.warn("GPIOIS.fit: K_t's fit stopped at its cap", RuntimeWarning)
@@ -425,7 +425,7 @@ def test_kernel_lengths_have_one_range_at_every_door_and_a_short_one_is_named_as
     """Issue 60, item 13: `fit --theta 500` was accepted, `--lengthscale 25` refused, scene files took (0.001, 10]; a
     length of 0.1 mm ended in "no estimate ... (too few contacts, or units other than metres?)"."""
     from torch_gpioius.io.datasets import load_dataset
-    from torch_gpioius.io.offline import why_no_estimate
+    from torch_gpioius.fitting import why_no_estimate
     from torch_gpioius.kernels import KernelChoice
 
     for option in ("--theta", "--lengthscale"):

@@ -24,7 +24,7 @@ from .session import explore  # noqa: E402
 from .inference import (DenseExactInference, JitterWarning, NotPositiveDefiniteError,  # noqa: E402
                         StructuredExactInference)
 from .io import (BagImportError, CheckpointError, Dataset, DatasetError, RunHistory, checkpoints,  # noqa: E402
-                 datasets, export_run, import_bag, importers, load_checkpoint, load_dataset, load_run, offline,
+                 datasets, export_run, import_bag, importers, load_checkpoint, load_dataset, load_run,
                  save_checkpoint, save_dataset)
 from .kernels import InverseMultiquadricKernel  # noqa: E402
 from .models import GPIOIS, GPIS, INNER, OUTER, LocalGPIOIS, UnidentifiedSimilarityWarning  # noqa: E402
@@ -40,11 +40,15 @@ __all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings
            "UnidentifiedSimilarityWarning", "exact_arithmetic", "tol", "torch_threads", "__version__",
            "ObservationPolicy", "Trace", "World", "RobotWorld", "Observations", "explore", "kernels", "models",
            "inference", "exploration", "io", "geometry", "metrics", "planning", "surfaces", "sim", "checkpoints",
-           "datasets", "importers", "offline", "Dataset", "DatasetError", "CheckpointError", "load_dataset",
+           "datasets", "importers", "offline", "fitting", "Dataset", "DatasetError", "CheckpointError", "load_dataset",
            "save_dataset", "load_checkpoint", "save_checkpoint", "import_bag", "BagImportError", "export_run",
            "load_run", "RunHistory"]
 
+from . import fitting  # noqa: E402
+from . import fitting as offline  # noqa: E402  (0.1's torch_gpioius.offline: fitting and replay, now their own room)
+
 # the io modules of 0.1 are also attributes of the package (tg.datasets, ...): their module paths stay the real ones
-for _old in ("datasets", "checkpoints", "importers", "offline"):
+for _old in ("datasets", "checkpoints", "importers"):
     _sys.modules.setdefault(f"{__name__}.{_old}", getattr(io, _old))
+_sys.modules.setdefault(f"{__name__}.offline", fitting)
 del _old

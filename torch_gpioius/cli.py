@@ -113,7 +113,7 @@ def _fit(args: argparse.Namespace) -> int:
                          "holds its observations labelled already")
     from contextlib import nullcontext
 
-    from .io.offline import fit_outputs
+    from .fitting import fit_outputs
     from .io.outputs import check_not_inputs, claimed_folder
 
     # --force replaces results, never the data: checked before the import
@@ -132,7 +132,7 @@ def _fit_files(args: argparse.Namespace, own: bool, clouds: list, origins: list,
     """`gpioius fit`'s import (a contacts CSV and clouds) and fit, with the estimator's flags (``overrides``, an
     :class:`~torch_gpioius.models.overrides.EstimatorOverrides`) on the settings: a user's files are labelled, sized
     and fitted with them; a dataset file is fitted with its kernel, sigma^2 and learning changed."""
-    from .io.offline import fit_dataset
+    from .fitting import fit_dataset
     from .models.estimator import EstimatorSettings
 
     source = args.dataset
@@ -215,7 +215,7 @@ def _interval_reading(lo: float, hi: float) -> str:
 
 
 def _replay(args: argparse.Namespace) -> int:
-    from .io.offline import replay_log
+    from .fitting import replay_log
     from .io.outputs import claimed_folder
 
     with claimed_folder(args.out, "replay", args.force):

@@ -169,7 +169,7 @@ def test_inputs_are_never_outputs_and_a_refused_command_leaves_no_folder(tmp_pat
 def test_fit_never_writes_over_its_inputs_and_refuses_a_bad_mesh_before_the_fit(tmp_path, capsys, monkeypatch):
     """Issue 60, items 2, 12 and 19: `fit ... --cloud left.ply --mesh left.ply --force` replaced the cloud with the
     estimate; `--mesh /proc/x.ply` and a bad ending were refused only after the fit (naming a temporary file)."""
-    import torch_gpioius.io.offline as offline
+    import torch_gpioius.fitting as offline
     from tests.userfiles import EYES, sphere_files
 
     csv, (left, right) = sphere_files(tmp_path, contacts=12, cover=400)

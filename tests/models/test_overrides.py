@@ -251,7 +251,7 @@ def test_every_model_comes_from_the_settings_factory():
 def test_fit_dataset_takes_changes_to_the_files_own_settings_and_its_loose_keywords_warn():
     """``fit_dataset(settings=EstimatorOverrides(...))`` changes the file's own settings (and records what it used);
     the loose ``kernel``, ``noise``, ``learn`` give the same fit with a DeprecationWarning naming the way."""
-    from torch_gpioius.io.offline import fit_dataset
+    from torch_gpioius.fitting import fit_dataset
 
     data = "data/example_2d.gpioius"
     one = fit_dataset(data, settings=EstimatorOverrides(kernel=InverseMultiquadricKernel(0.12), noise=0.01),
@@ -295,7 +295,7 @@ def test_every_door_reads_its_old_loose_keywords_once_with_the_way_named():
     import trimesh
 
     from torch_gpioius.io.importers import dataset_from_files
-    from torch_gpioius.io.offline import fit_dataset
+    from torch_gpioius.fitting import fit_dataset
     from torch_gpioius.io.rosbag import import_bag
     from torch_gpioius.sim.forcefield import Scene3D
 

@@ -7,8 +7,8 @@ import time
 import numpy as np
 import pytest
 
-from torch_gpioius.io import offline
-from torch_gpioius.io.offline import fit_dataset
+from torch_gpioius import fitting as offline
+from torch_gpioius.fitting import fit_dataset
 from torch_gpioius.io.outputs import FolderLock, StagedFiles
 from torch_gpioius.kernels import InverseMultiquadricKernel
 from torch_gpioius.models.overrides import EstimatorOverrides
@@ -125,7 +125,7 @@ def test_a_fit_that_would_run_out_of_memory_is_refused_before_it_starts(tmp_path
     """Issue 60, item 9: 1,000 contacts took 204 s and 1.45 GB without a word, 3,000 over 300 s and 7.5 GB. A fit
     larger than the memory free is refused first, naming the remedy; the rows can be thinned; a long fit says what it
     does while it runs."""
-    import torch_gpioius.io.offline as offline
+    import torch_gpioius.fitting as offline
     from tests.userfiles import EYES, sphere_files
     from torch_gpioius.cli import main
     from torch_gpioius.io.importers import dataset_from_files
