@@ -45,7 +45,8 @@ __all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings
            "load_run", "RunHistory"]
 
 from . import fitting  # noqa: E402
-from . import fitting as offline  # noqa: E402  (0.1's torch_gpioius.offline: fitting and replay, now their own room)
+
+offline = fitting               # 0.1's torch_gpioius.offline: fitting and replay, now their own room
 
 # the io modules of 0.1 are also attributes of the package (tg.datasets, ...): their module paths stay the real ones
 for _old in ("datasets", "checkpoints", "importers"):

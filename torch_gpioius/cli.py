@@ -411,8 +411,6 @@ def _names(registry) -> str:
     return ", ".join(registry.choices())
 
 
-
-
 def _number(text: str, name: str, what: str) -> float:
     try:
         return float(text)

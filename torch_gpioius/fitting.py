@@ -138,7 +138,6 @@ def fit_dataset(path: str | os.PathLike | Dataset, out: str | os.PathLike | None
     from contextlib import ExitStack
 
     from .io.outputs import FileClaim, check_distinct, check_not_inputs
-
     from .models.overrides import loose_keywords
 
     loose = loose_keywords("fit_dataset", deprecated, ("kernel", "noise", "learn"))

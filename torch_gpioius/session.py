@@ -112,15 +112,10 @@ def explore(world: World, mode: str = "visual-tactile", *, settings=None, eviden
         raise TypeError(f"world: expected a torch_gpioius World (Scene2D, Scene3D, MujocoScene, RobotWorld), got "
                         f"{type(world).__name__}")
     loose = loose_keywords("explore", deprecated, LOOSE)
-    restart_every = loose["restart_every"]
     warn_loose("explore", 2, kernel=loose["kernel"], noise=loose["noise"], policy=loose["policy"],
-               learn=loose["learn"],
-               restart_every=None if isinstance(restart_every, str) and restart_every == "default" else restart_every)
-    kernel = kernel_for_theta(loose["theta"], loose["kernel"], "explore")  # the paper's name, a deprecated alias
-    given = {"kernel": kernel, "noise": loose["noise"], "policy": loose["policy"], "learn": loose["learn"]}
-    given = {k: v for k, v in given.items() if v is not None}
-    if not (isinstance(restart_every, str) and restart_every == "default"):
-        given["restart_every"] = restart_every
+               learn=loose["learn"], restart_every=loose["restart_every"])
+    # the paper's name, a deprecated alias, read here so that its warning and errors name explore
+    loose["kernel"] = kernel_for_theta(loose.pop("theta"), loose["kernel"], "explore")
     with warnings.catch_warnings():
         # said once above, naming explore; from_world reads the same keywords and would say it again
         warnings.filterwarnings("ignore", r"ExploreConfig\.from_world\(", DeprecationWarning)
@@ -128,7 +123,7 @@ def explore(world: World, mode: str = "visual-tactile", *, settings=None, eviden
             world, mode, evidence=evidence, touch=touch, step=step, max_steps=max_steps, max_travel=max_travel,
             stop=stop, penalty=penalty, metrics_every=metrics_every, metrics_resolution=metrics_resolution,
             interval_every=interval_every, regions=regions, stall=stall, outer_tol=outer_tol, device=device,
-            settings=settings, **given)
+            settings=settings, **loose)
     if resume_from is not None and log is not None and os.path.abspath(log) != os.path.abspath(resume_from):
         raise ValueError("resume_from appends to its own log; pass log=None or the same path")
     if log is not None:

@@ -32,5 +32,5 @@ def test_loose_settings_become_one_change_where_a_depth_of_zero_means_none():
         estimator_changes(nosie=0.1)
     with pytest.raises(ValueError, match="touch_inside"):
         estimator_changes(touch_inside=0.5)                                        # beyond the labels' range
-    with pytest.raises(ValueError, match="expected EstimatorOverrides or its dict"):
+    with pytest.raises(ValueError, match="expected EstimatorOverrides, its dict or KEY=VALUE texts"):
         estimator_changes(0.05)

@@ -101,14 +101,72 @@ class ExploreConfig(EstimatorView):
         loose = loose_keywords("ExploreConfig.from_world", deprecated, LOOSE)
         restart = loose["restart_every"]
         warn_loose("ExploreConfig.from_world", 2, kernel=loose["kernel"], noise=loose["noise"],
-                   policy=loose["policy"], learn=loose["learn"],
-                   restart_every=None if isinstance(restart, str) and restart == "default" else restart)
-        kernel = kernel_for_theta(loose.pop("theta"), loose.pop("kernel"), "ExploreConfig.from_world")
-        return _from_world(cls, world, mode, evidence=evidence, touch=touch, step=step, kernel=kernel,
-                           max_steps=max_steps, max_travel=max_travel, stop=stop, penalty=penalty,
-                           metrics_every=metrics_every, metrics_resolution=metrics_resolution,
-                           interval_every=interval_every, regions=regions, stall=stall, outer_tol=outer_tol,
-                           device=device, settings=settings, **loose)
+                   policy=loose["policy"], learn=loose["learn"], restart_every=restart)
+        kernel = kernel_for_theta(loose["theta"], loose["kernel"], "ExploreConfig.from_world")
+        if mode not in MODES:
+            raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
+        evidence = evidence_policy(evidence)
+        if evidence is not None and mode != "visual-tactile" and evidence.needs_vision:
+            raise ValueError(f"evidence: the {evidence.name} policy is about the similarity; it needs "
+                             "mode='visual-tactile'")
+        if regions is not None:
+            regions = as_int(regions, "regions", 1, 64)
+            if mode != "visual-tactile":
+                raise ValueError("regions: a similarity per region needs mode='visual-tactile'")
+        touch = touch_model(touch)
+        if outer_tol is not None:
+            outer_tol = as_float(outer_tol, "outer_tol", positive=True)
+            if mode != "visual-tactile" or regions is not None:
+                raise ValueError("outer_tol: the truncated outer basis is GPIOIS's; it needs mode='visual-tactile' "
+                                 "and no regions")
+            inference = touch.inference
+            if inference != "auto":
+                raise ValueError(f"outer_tol: the {touch.name} touch uses the {inference} "
+                                 "engine, which has no truncated outer basis")
+        d = world.defaults
+        step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
+        estimator = _estimator(world, settings, kernel=kernel, noise=loose["noise"], policy=loose["policy"],
+                               learn=loose["learn"], restart_every=restart)
+        max_steps = as_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
+        metrics_every = d.metrics_every if metrics_every is None else metrics_every
+        if isinstance(metrics_every, str) and metrics_every == "schedule":
+            if not any(isinstance(r, TravelBudget) for r in (d.stop if stop is None else stop)) and max_travel is None:
+                raise ValueError("metrics_every='schedule': measures at fractions of a travel budget; this run has "
+                                 "none (give max_travel, or a number of steps)")
+            metrics_every = None                            # the schedule alone: REPORT_FRACTIONS, a stop, the end
+        else:
+            metrics_every = as_int(metrics_every, "metrics_every", 1, 1_000_000)
+        if interval_every is not None:
+            interval_every = as_int(interval_every, "interval_every", 1, 1_000_000)
+        if metrics_resolution is not None:
+            metrics_resolution = as_float(metrics_resolution, "metrics_resolution", lo=1e-3, hi=0.5, unit="m")
+        rules = tuple(d.stop if stop is None else stop)
+        if not all(isinstance(r, StopRule) for r in rules):
+            raise ValueError("stop: every rule must be a torch_gpioius.exploration.StopRule")
+        if max_travel is not None:
+            rules = tuple(r for r in rules if not isinstance(r, TravelBudget)) + (TravelBudget(max_travel),)
+        penalty = penalty if penalty is not None else world.penalty()
+        if isinstance(stall, str) and stall == "default":
+            stall = NoProgress()
+        if stall is not None and not isinstance(stall, NoProgress):
+            raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
+        learn = estimator.learn
+        if learn != "task":
+            if estimator.restart_every is None:
+                raise ValueError(f"learn={learn!r}: the length and sigma^2 are learned on the restart steps; "
+                                 "restart_every=None has none")
+            if regions is not None:
+                raise ValueError(f"learn={learn!r}: the kernel's length is learned with one similarity; "
+                                 "regions has one per region (use learn='task')")
+        config = cls(mode, evidence, touch, step, estimator, max_steps, rules, penalty, metrics_every,
+                     metrics_resolution, interval_every, regions, float(d.approach_travel), stall, outer_tol,
+                     as_device(device))
+        if evidence is not None:                  # a reach: the range and budget
+            box = (np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()])
+                   if isinstance(penalty, RangePenalty) else None)
+            config = dataclasses.replace(config, evidence=evidence.for_run(dim=world.dim, bounds=box,
+                                                                           budget=config.budget))
+        return config
 
     # ------------------------------------------------------------------ what the loop asks of the settings
     @property
@@ -184,77 +242,6 @@ class ExploreConfig(EstimatorView):
             out["evidence_policy"] = self.evidence.describe()
         out["estimator"] = self.estimator.to_dict()
         return out
-
-
-def _from_world(cls, world, mode: str, *, evidence, touch, step, kernel, noise, max_steps, max_travel, stop, policy,
-                penalty, metrics_every, metrics_resolution, interval_every, regions, stall, outer_tol, device,
-                restart_every, learn, settings) -> ExploreConfig:
-    """:meth:`ExploreConfig.from_world` after its deprecated keywords were read (and warned of) by the entry point
-    that took them (it, or :func:`torch_gpioius.explore`): one warning, from the user's call."""
-    if mode not in MODES:
-        raise ValueError(f"mode: must be one of {MODES}, got {mode!r}")
-    evidence = evidence_policy(evidence)
-    if evidence is not None and mode != "visual-tactile" and evidence.needs_vision:
-        raise ValueError(f"evidence: the {evidence.name} policy is about the similarity; it needs "
-                         "mode='visual-tactile'")
-    if regions is not None:
-        regions = as_int(regions, "regions", 1, 64)
-        if mode != "visual-tactile":
-            raise ValueError("regions: a similarity per region needs mode='visual-tactile'")
-    touch = touch_model(touch)
-    if outer_tol is not None:
-        outer_tol = as_float(outer_tol, "outer_tol", positive=True)
-        if mode != "visual-tactile" or regions is not None:
-            raise ValueError("outer_tol: the truncated outer basis is GPIOIS's; it needs mode='visual-tactile' "
-                             "and no regions")
-        inference = touch.inference
-        if inference != "auto":
-            raise ValueError(f"outer_tol: the {touch.name} touch uses the {inference} "
-                             "engine, which has no truncated outer basis")
-    d = world.defaults
-    step = as_float(d.step if step is None else step, "step", lo=1e-4, hi=0.1, positive=True, unit="m")
-    estimator = _estimator(world, settings, kernel=kernel, noise=noise, policy=policy, learn=learn,
-                           restart_every=restart_every)
-    max_steps = as_int(d.max_steps if max_steps is None else max_steps, "max_steps", 0, 100_000)
-    metrics_every = d.metrics_every if metrics_every is None else metrics_every
-    if isinstance(metrics_every, str) and metrics_every == "schedule":
-        if not any(isinstance(r, TravelBudget) for r in (d.stop if stop is None else stop)) and max_travel is None:
-            raise ValueError("metrics_every='schedule': measures at fractions of a travel budget; this run has "
-                             "none (give max_travel, or a number of steps)")
-        metrics_every = None                            # the schedule alone: REPORT_FRACTIONS, a stop, the end
-    else:
-        metrics_every = as_int(metrics_every, "metrics_every", 1, 1_000_000)
-    if interval_every is not None:
-        interval_every = as_int(interval_every, "interval_every", 1, 1_000_000)
-    if metrics_resolution is not None:
-        metrics_resolution = as_float(metrics_resolution, "metrics_resolution", lo=1e-3, hi=0.5, unit="m")
-    rules = tuple(d.stop if stop is None else stop)
-    if not all(isinstance(r, StopRule) for r in rules):
-        raise ValueError("stop: every rule must be a torch_gpioius.exploration.StopRule")
-    if max_travel is not None:
-        rules = tuple(r for r in rules if not isinstance(r, TravelBudget)) + (TravelBudget(max_travel),)
-    penalty = penalty if penalty is not None else world.penalty()
-    if isinstance(stall, str) and stall == "default":
-        stall = NoProgress()
-    if stall is not None and not isinstance(stall, NoProgress):
-        raise ValueError(f"stall: expected a NoProgress rule or None, got {type(stall).__name__}")
-    learn = estimator.learn
-    if learn != "task":
-        if estimator.restart_every is None:
-            raise ValueError(f"learn={learn!r}: the length and sigma^2 are learned on the restart steps; "
-                             "restart_every=None has none")
-        if regions is not None:
-            raise ValueError(f"learn={learn!r}: the kernel's length is learned with one similarity; "
-                             "regions has one per region (use learn='task')")
-    config = cls(mode, evidence, touch, step, estimator, max_steps, rules, penalty, metrics_every,
-                 metrics_resolution, interval_every, regions, float(d.approach_travel), stall, outer_tol,
-                 as_device(device))
-    if evidence is not None:                  # a reach: the range and budget
-        box = (np.stack([penalty.lower.cpu().numpy(), penalty.upper.cpu().numpy()])
-               if isinstance(penalty, RangePenalty) else None)
-        config = dataclasses.replace(config, evidence=evidence.for_run(dim=world.dim, bounds=box,
-                                                                       budget=config.budget))
-    return config
 
 
 def _estimator(world, settings, *, kernel, noise, policy, learn, restart_every) -> EstimatorSettings:

@@ -689,6 +689,24 @@ def _camera_pose(s: _BagImport, tf, frame: str, t: float) -> np.ndarray:
                              "--camera-transform") from None
 
 
+def _clouds(reader, s: _BagImport, tf, t_first: float):
+    """Each cloud stamped in the time window, into the base frame, one at a time: ``(t, msg, frame, T_bc, points)``
+    with ``points`` `(n, 3)` its finite points [m] in the base frame and ``T_bc`` its frame's pose
+    (:func:`_camera_pose`); an empty cloud comes as `(0, 3)` points and no pose (none is looked up for it)."""
+    for t, msg in _iter_messages(reader, s.path, s.topics.cloud, "cloud"):
+        if not s.in_window(t, t_first):
+            continue
+        pts = decode_point_cloud2(msg, topic=s.topics.cloud)
+        frame = msg.header.frame_id.lstrip("/")
+        if not len(pts):
+            yield t, msg, frame, None, np.zeros((0, 3))
+            continue
+        T_bc = _camera_pose(s, tf, frame, t)
+        pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
+        del pts                             # one cloud held at a time, not its two frames' copies
+        yield t, msg, frame, T_bc, pts_b
+
+
 #: The voxel [m] the clouds are averaged into before their capture is corrected (:func:`_camera_correction`).
 CORRECTION_VOXEL = 0.005
 
@@ -714,12 +732,9 @@ def _camera_correction(reader, s: _BagImport, tf, inner: dict):
     # 5 mm voxels: the surface as measured (the labels' coarser voxels average a curved cover onto its chords, and
     # the gap the contacts show would read short), within the memory of a few clouds
     acc, pose = VoxelAccumulator(CORRECTION_VOXEL), None
-    for t, msg in _iter_messages(reader, s.path, s.topics.cloud, "cloud"):
-        if not s.in_window(t, inner["t_first"]):
+    for t, _, frame, T_bc, pts in _clouds(reader, s, tf, inner["t_first"]):
+        if T_bc is None:                    # an empty cloud
             continue
-        pts = decode_point_cloud2(msg, topic=s.topics.cloud)
-        frame = msg.header.frame_id.lstrip("/")
-        T_bc = _camera_pose(s, tf, frame, t)
         if pose is None:
             pose = T_bc
         elif not np.allclose(T_bc, pose, atol=1e-6):
@@ -727,7 +742,6 @@ def _camera_correction(reader, s: _BagImport, tf, inner: dict):
                                  f"base frame; the pose of the clouds' frame ({frame} at t = {t:.3f} s) changes "
                                  "between clouds (a camera riding on the arm, whose error is its hand-eye "
                                  "transform's, or several cameras): calibrate that, or import without camera_bound")
-        pts = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
         if s.crop is not None:
             pts = pts[np.all((pts >= s.crop[0]) & (pts <= s.crop[1]), axis=1)]
         if len(pts):
@@ -762,20 +776,13 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float, corrections=No
         seen_acc, free_acc = VoxelAccumulator(policy.voxel), VoxelAccumulator(policy.voxel)
     else:
         seen_all, free_all = [], []
-    for t, msg in _iter_messages(reader, path, topics.cloud, "cloud"):
-        if not s.in_window(t, t_first):
-            continue
+    for _, msg, frame, T_bc, pts_b in _clouds(reader, s, tf, t_first):
         n_clouds += 1
         n_declared += int(msg.height) * int(msg.width)
-        pts = decode_point_cloud2(msg, topic=topics.cloud)
-        n_raw += len(pts)
-        if len(pts) == 0:
+        n_raw += len(pts_b)
+        if len(pts_b) == 0:
             continue
-        frame = msg.header.frame_id.lstrip("/")
         cloud_frames.add(frame)
-        T_bc = _camera_pose(s, tf, frame, t)
-        pts_b = pts @ T_bc[:3, :3].T + T_bc[:3, 3]
-        del pts
         if corrections is not None:         # the capture moved about its camera, and the camera with it
             fix = corrections.captures[0]
             pts_b = fix.apply(pts_b)
@@ -825,7 +832,6 @@ def _bag_settings(settings, crop, policy):
     if settings is None:
         return None
     from ..models.estimator import EstimatorSettings
-
     from ..models.overrides import EstimatorOverrides
 
     try:

@@ -277,12 +277,12 @@ def resolved_changes(changes) -> "EstimatorOverrides":
 
 
 def warn_loose(owner: str, stacklevel: int, **given) -> list[str]:
-    """The DeprecationWarning of an entry point's loose estimator keywords (``given``, None: not given; they still
-    work, through the same resolver, for one release): the estimator's settings are one object,
-    ``settings=EstimatorOverrides(...)``. ``stacklevel`` counts from the caller of this function, as
-    :func:`warnings.warn`'s. Returns the names given.
+    """The DeprecationWarning of an entry point's loose estimator keywords (``given``, None or "default": not given,
+    as :func:`loose_keywords` fills them; they still work, through the same resolver, for one release): the
+    estimator's settings are one object, ``settings=EstimatorOverrides(...)``. ``stacklevel`` counts from the caller
+    of this function, as :func:`warnings.warn`'s. Returns the names given.
     """
-    named = [k for k, v in given.items() if v is not None]
+    named = [k for k, v in given.items() if v is not None and not (isinstance(v, str) and v == "default")]
     if named:
         import warnings
 

@@ -17,7 +17,7 @@ from ..exploration.world import ExplorationDefaults
 from ..models.estimator import (COVER_GAP_LIMIT, GAP_FIELD_LABELS, GAP_LABELS, INSIDE_DEPTH,  # noqa: F401
                                 EstimatorSettings)
 from ..models.labels import ObservationPolicy
-from ..models.overrides import EstimatorOverrides
+from ..models.overrides import EstimatorOverrides, resolved_changes
 
 __all__ = ["ROBOT_STUDY_DEFAULTS", "VIEWS", "DEFAULT_VIEWS", "SETTINGS", "object_defaults", "gap_defaults",
            "gap_field_defaults", "settings_for", "INSIDE_SETTINGS", "inside_labels", "ESTIMATOR_KEYS",
@@ -88,8 +88,6 @@ def gap_field_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None =
     return object_defaults(mesh, base).estimator_changed(labels=GAP_FIELD_LABELS)
 
 
-
-
 def settings_for(settings: str, mesh: trimesh.Trimesh, paper: ExplorationDefaults | None = None) -> dict:
     """``{"defaults", "views"}`` of a world under ``settings`` for a body ``mesh``: "default" (:func:`object_defaults`
     on the world's own ``paper`` settings, all three :data:`VIEWS`), "gap" (:func:`gap_defaults`, likewise),
@@ -137,24 +135,18 @@ ESTIMATOR_KEYS = ("kernel", "noise", "voxel", "learn") + INSIDE_SETTINGS
 
 
 def estimator_changes(estimator=None, **loose) -> "EstimatorOverrides":
-    """One :class:`~torch_gpioius.models.overrides.EstimatorOverrides` from ``estimator`` (one, its plain dict, or
-    None) with the loose values of :data:`ESTIMATOR_KEYS` on top (None: not given): ``kernel``, ``noise``, ``voxel``
-    and ``learn`` as the overrides take them, the inside points' depths and gap as labels where 0 means none
-    (:func:`inside_labels`).
+    """One :class:`~torch_gpioius.models.overrides.EstimatorOverrides` from ``estimator`` (any form
+    :func:`~torch_gpioius.models.overrides.resolved_changes` reads, or None) with the loose values of
+    :data:`ESTIMATOR_KEYS` on top (None: not given): ``kernel``, ``noise``, ``voxel`` and ``learn`` as the overrides
+    take them, the inside points' depths and gap as labels where 0 means none (:func:`inside_labels`).
 
     Raises:
         ValueError: an unknown key, or a value outside its range (names it).
     """
-
     unknown = sorted(set(loose) - set(ESTIMATOR_KEYS))
     if unknown:
         raise ValueError(f"estimator: unknown {unknown}; the loose settings are {', '.join(ESTIMATOR_KEYS)}")
-    if estimator is None:
-        estimator = EstimatorOverrides()
-    elif isinstance(estimator, dict):
-        estimator = EstimatorOverrides.from_dict(estimator)
-    if not isinstance(estimator, EstimatorOverrides):
-        raise ValueError(f"estimator: expected EstimatorOverrides or its dict, got {type(estimator).__name__}")
+    estimator = resolved_changes(estimator)
     labels = inside_labels(**{k: loose.get(k) for k in INSIDE_SETTINGS})
     return estimator.merged(EstimatorOverrides(kernel=loose.get("kernel"), noise=loose.get("noise"),
                                                voxel=loose.get("voxel"), learn=loose.get("learn"), labels=labels))
