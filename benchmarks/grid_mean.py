@@ -26,7 +26,7 @@ from planning_step import NOISE, THETA, make_data  # noqa: E402
 
 import torch_gpioius as tg  # noqa: E402
 from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ  # noqa: E402
-from torch_gpioius.surfaces import evaluate_grid  # noqa: E402
+from torch_gpioius.geometry.surfaces import evaluate_grid  # noqa: E402
 
 
 def one(n_outer: int, n_inner: int, spacing: float, device: str) -> dict:

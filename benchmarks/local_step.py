@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import torch_gpioius as tg  # noqa: E402
 from planning_step import NOISE, STEP, THETA, make_data  # noqa: E402
 from torch_gpioius.models.local import LocalGPIOIS  # noqa: E402
-from torch_gpioius.planning import plan_direction  # noqa: E402
+from torch_gpioius.exploration.planning import plan_direction  # noqa: E402
 
 
 def main() -> None:

@@ -50,7 +50,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
-from torch_gpioius.planning import plan_direction
+from torch_gpioius.exploration.planning import plan_direction
 from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 THETA, NOISE, STEP = 0.15, 0.08, 0.01

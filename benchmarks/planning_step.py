@@ -45,7 +45,7 @@ from torch_gpioius.inference.optim import (
     chol_params_to_task_covariance,
     task_covariance_to_chol_params,
 )
-from torch_gpioius.planning import plan_direction
+from torch_gpioius.exploration.planning import plan_direction
 from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 THETA, NOISE, STEP = 0.15, 0.08, 0.01

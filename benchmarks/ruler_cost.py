@@ -29,7 +29,7 @@ import torch
 import torch_gpioius as tg
 from torch_gpioius.sim.forcefield import METRICS_EDGE, METRICS_GRID, score_surface
 from torch_gpioius.sim.scenefile import load_scene
-from torch_gpioius.surfaces import converged_level_mesh, evaluate_grid, zero_level_mesh
+from torch_gpioius.geometry.surfaces import converged_level_mesh, evaluate_grid, zero_level_mesh
 
 ROOT = Path(__file__).resolve().parents[1]
 KEYS = ("chamfer", "fscore_5mm", "fscore_10mm", "bias", "hausdorff")

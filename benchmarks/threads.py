@@ -35,7 +35,7 @@ tr = tg.explore(tg.sim.paper_objects_2d()["B"], mode="visual-tactile", max_steps
 t2d = time.perf_counter() - t
 sys.path.insert(0, "benchmarks")
 from planning_step import make_data, THETA, NOISE, STEP
-from torch_gpioius.planning import plan_direction
+from torch_gpioius.exploration.planning import plan_direction
 xo, yo, xi, yi = make_data(2000, 300 + 5 * 8)
 m = tg.GPIOIS(torch.cat([xi[:300], xo]), torch.cat([yi[:300], yo]),
               torch.cat([torch.zeros(300, dtype=torch.long), torch.ones(2000, dtype=torch.long)]),

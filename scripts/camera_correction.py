@@ -71,7 +71,7 @@ def main() -> None:
     from torch_gpioius.exploration.calibration import contact_normals
     from torch_gpioius.models.gpiois import GPIOIS
     from torch_gpioius.sensors.extrinsics import correct_captures
-    from torch_gpioius.sensors.pointcloud import CameraError
+    from torch_gpioius.sensors.simulated.camera import CameraError
 
     error = CameraError.parse(args.error)
     bound = CameraError.parse(args.bound) if args.bound else CameraError(min(2 * error.translation, 0.1),

@@ -129,7 +129,7 @@ def write_files(body: trimesh.Trimesh, folder: Path, seed: int = 0, n_contacts: 
 def measure(estimate_path: Path, truth: trimesh.Trimesh, spacing: float = 0.003) -> dict:
     """The estimate against the body within the studies' range: the body's box grown by 3 cm, from a quarter of its
     height up (a camera above the table and a fingertip reach that part; the underside stands on the table)."""
-    from torch_gpioius.metrics import surface_agreement
+    from torch_gpioius.geometry.metrics import surface_agreement
     from torch_gpioius.sim.meshes import MeshDistance
 
     est = trimesh.load(estimate_path, process=False)

@@ -38,7 +38,7 @@ def measure(model, world, grid: float) -> dict:
 def old_ruler(model, world) -> dict:
     """Marching cubes alone on a 2 cm grid over the range grown by 5 cm, its facets as they are."""
     from torch_gpioius.sim.forcefield import METRICS_EDGE, score_surface
-    from torch_gpioius.surfaces import evaluate_grid, zero_level_mesh
+    from torch_gpioius.geometry.surfaces import evaluate_grid, zero_level_mesh
 
     observed = model.train_inputs[0].detach().cpu().numpy()[model.train_targets.detach().cpu().numpy() == 0]
     field = evaluate_grid(model, world.bounds(0.05), 0.02, 0, variance=False)

@@ -36,7 +36,7 @@ from torch_gpioius.geometry import predict_mean_task
 from torch_gpioius.io.runs import load_run
 from torch_gpioius.sim.meshes import MeshDistance
 from torch_gpioius.studies.study import make_world
-from torch_gpioius.surfaces import surface_samples
+from torch_gpioius.geometry.surfaces import surface_samples
 
 SPACING = 0.003     # the studies' sample spacing [m]
 NEAR = 0.03         # "observed near a far sample" [m]

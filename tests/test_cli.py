@@ -493,7 +493,7 @@ def test_unquoted_numbers_get_a_hint_at_the_quotes(capsys):
 def test_missing_extras_are_named_with_both_ways_to_install():
     """Issue 51, item 27: missing-extra messages said `pip install 'torch_gpioius[viewer]'` while the README installs
     with `-e ".[...]"`."""
-    from torch_gpioius._extras import install_hint
+    from torch_gpioius.core.extras import install_hint
 
     assert install_hint("viewer") == "pip install 'torch_gpioius[viewer]' (in a checkout: pip install -e '.[viewer]')"
     import pathlib

@@ -146,7 +146,7 @@ def test_a_fit_that_would_run_out_of_memory_is_refused_before_it_starts(tmp_path
     gaps = np.linalg.norm(contacts[:, None] - contacts[None], axis=-1) + np.eye(len(contacts))
     assert 3 < len(contacts) < 60 and gaps.min() >= 0.02 - 1e-12
     monkeypatch.setattr(offline, "available_memory", lambda: None)        # not known: the fit goes ahead
-    from torch_gpioius._progress import Heartbeat, status
+    from torch_gpioius.core.progress import Heartbeat, status
 
     stream = io.StringIO()
     with Heartbeat("gpioius fit", every=0.05, stream=stream):

@@ -4,11 +4,13 @@ Conventions (docs/theory.md, "Conventions"): SI units, float64, ``y = 0`` on a s
 prior mean 1, ``mu < 0`` inside; task 0 is the inner (tactile) shape, task 1 the outer (visual) shape; boxes are ``(2,
 d)`` [min corner; max corner].
 
-Layers, each importing only those before it (docs/architecture.md): ``kernels`` -> ``inference`` (exact engines,
-the K_t fit) -> ``models`` (GPIS, GPIOIS, LocalGPIOIS) -> ``geometry`` / ``surfaces`` / ``metrics`` -> ``planning``
--> ``sensors`` / ``contact`` -> ``exploration`` (public types, contracts, one loop, the world registry) -> ``sim``
-(the worlds) -> ``io`` (datasets, logs and resume, checkpoints, importers, exports) -> ``session``
-(``tg.explore``: the loop with its log) -> ``studies``, ``viewer``, ``cli``.
+Layers, each importing only those before it (docs/architecture.md): ``core`` (tolerances, exact arithmetic, threads,
+registries, validation) -> ``geometry`` (voxels, curves, the estimated surface's geometry, extraction and metrics) ->
+``kernels`` -> ``inference`` (exact engines, the K_t fit) -> ``models`` (GPIS, GPIOIS, LocalGPIOIS) -> ``sensors``
+(real and simulated) -> ``exploration`` (public types, contracts, the planner, the contact controller, one loop, the
+world registry) -> ``sim`` (the worlds) -> ``baselines`` -> ``io`` (datasets, logs and resume, checkpoints, importers,
+exports) -> ``session`` (``tg.explore``: the loop with its log), ``fitting`` -> ``studies``, ``viewer``, ``cli``.
+Modules of earlier releases import from their old paths for one release (:mod:`torch_gpioius.core.moved`).
 """
 
 from __future__ import annotations
@@ -16,8 +18,13 @@ from __future__ import annotations
 import sys as _sys
 
 from ._version import __version__  # noqa: E402
+from .core import moved as _moved  # noqa: E402
 
-from . import geometry, kernels, metrics, planning, sim, surfaces  # noqa: E402
+_moved.install()
+
+from . import geometry, kernels, sim  # noqa: E402
+from .geometry import metrics, surfaces  # noqa: E402
+from .exploration import planning  # noqa: E402
 from . import exploration, inference, io, models  # noqa: E402
 from .exploration import ObservationPolicy, Observations, RobotWorld, Trace, World  # noqa: E402
 from .session import explore  # noqa: E402
@@ -30,9 +37,9 @@ from .kernels import InverseMultiquadricKernel  # noqa: E402
 from .models import GPIOIS, GPIS, INNER, OUTER, LocalGPIOIS, UnidentifiedSimilarityWarning  # noqa: E402
 from .models.estimator import EstimatorSettings  # noqa: E402
 from .models.overrides import EstimatorOverrides  # noqa: E402
-from .exact import exact_arithmetic  # noqa: E402
-from .threads import torch_threads  # noqa: E402
-from .tolerances import tol  # noqa: E402
+from .core.exact import exact_arithmetic  # noqa: E402
+from .core.threads import torch_threads  # noqa: E402
+from .core.tolerances import tol  # noqa: E402
 
 __all__ = ["GPIOIS", "GPIS", "LocalGPIOIS", "INNER", "OUTER", "EstimatorSettings", "EstimatorOverrides",
            "InverseMultiquadricKernel",

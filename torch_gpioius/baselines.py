@@ -31,7 +31,7 @@ import numpy as np
 import torch
 import trimesh
 
-from .registry import Entry, Registry
+from .core.registry import Entry, Registry
 
 __all__ = ["BaselineData", "BaselineEstimate", "BASELINES", "register_baseline", "score_baselines",
            "vision_surface", "contact_depths", "shrunk", "BASELINE_METRICS", "BASELINE_EDGE"]
@@ -131,7 +131,7 @@ def vision_surface(data: BaselineData) -> tuple[object, trimesh.Trimesh] | None:
     import copy
 
     from .models.gpis import GPIS
-    from .surfaces import converged_level_mesh, evaluate_grid
+    from .geometry.surfaces import converged_level_mesh, evaluate_grid
 
     out = None
     if len(data.outer_y) and (data.outer_y == 0).any():

@@ -118,7 +118,7 @@ def _fit(args: argparse.Namespace) -> int:
 
     # --force replaces results, never the data: checked before the import
     check_not_inputs(fit_outputs(args.out, args.mesh, args.outer_mesh), [args.dataset, *clouds])
-    from ._progress import Heartbeat
+    from .core.progress import Heartbeat
 
     # arguments checked first; a fit refused or failed leaves no folder behind; a long one says what it does
     with claimed_folder(args.out, "fit", args.force) if args.out else nullcontext(), \
@@ -440,20 +440,20 @@ OUTER_TOL_HELP = ("visual-tactile runs with a truncated outer basis dropping a P
 
 
 def _device(text: str) -> str:
-    from ._validation import as_device
+    from .core.validation import as_device
 
     return str(_argument(as_device, text))
 
 
 def _outer_tol(text: str) -> float:
-    from ._validation import as_float
+    from .core.validation import as_float
 
     return _argument(lambda v: as_float(v, "outer_tol", positive=True), _number(text, "outer_tol", "a number"))
 
 
 def _length(option: str):
     """An argparse type for a length [m]: positive, at most 20 m (a larger one was meant in mm or cm)."""
-    from ._validation import as_length
+    from .core.validation import as_length
 
     def parse(text: str) -> float:
         return _argument(lambda v: as_length(v, f"--{option}"), _number(text, option, "a number of metres"))
@@ -464,7 +464,7 @@ def _length(option: str):
 
 def _kernel_length(option: str):
     """An argparse type for a kernel's length [m], in the one range every door takes (1 mm to 10 m)."""
-    from ._validation import as_kernel_length
+    from .core.validation import as_kernel_length
 
     def parse(text: str) -> float:
         return _argument(lambda v: as_kernel_length(v, f"--{option}"), _number(text, option, "a number of metres"))
@@ -497,7 +497,7 @@ def _kernel_name(text: str) -> str:
 
 def _noise(text: str) -> float:
     """An argparse type for sigma^2, in the one range every door takes."""
-    from ._validation import as_noise
+    from .core.validation import as_noise
 
     return _argument(lambda v: as_noise(v, "--noise"), _number(text, "noise", "a number"))
 
@@ -577,7 +577,7 @@ def _estimator_overrides(args: argparse.Namespace):
 
 def _camera_error(text: str):
     """An argparse type for a simulated camera error ("6mm,1deg"), as its canonical text."""
-    from .sensors.pointcloud import CameraError
+    from .sensors.simulated.camera import CameraError
 
     return str(_argument(CameraError.parse, text))
 
@@ -1017,8 +1017,8 @@ def _unquoted_vector(argv: list[str], extra: list[str]) -> str | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .registry import load_plugins
-    from .threads import torch_threads
+    from .core.registry import load_plugins
+    from .core.threads import torch_threads
 
     try:
         load_plugins()                       # before the choices are read from the registries

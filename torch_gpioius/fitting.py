@@ -13,15 +13,16 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from ._progress import status
+from .core.progress import status
 from .io.checkpoints import save_checkpoint
 from .io.outputs import FolderLock, StagedFiles, atomic_write
 from .io.datasets import Dataset, DatasetError, load_dataset, read_records, replay
 from .io.logs import load_logged_hyperparameters
 from .models.gpiois import GPIOIS, INNER
-from .metrics import hausdorff_distance, uncertainty_measure
+from .geometry.metrics import hausdorff_distance, uncertainty_measure
 from .models.estimator import EstimatorSettings
-from .surfaces import closed_curves, data_bounds, evaluate_grid, grid_resolution, zero_level_curves, zero_level_mesh
+from .geometry.surfaces import (closed_curves, data_bounds, evaluate_grid, grid_resolution, zero_level_curves,
+                                zero_level_mesh)
 from .io.export import check_format
 
 __all__ = ["fit_dataset", "fit_outputs", "replay_log", "data_bounds", "FIT_SCOUT", "fit_memory", "check_fit_memory",
@@ -59,7 +60,7 @@ def _plot_estimate(model, ds: Dataset, path: Path, title: str, resolution: float
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .metrics import prior_variance
+    from .geometry.metrics import prior_variance
 
     bounds = data_bounds(ds.x, pad=max(0.05, 2 * resolution))
     prior = prior_variance(model, INNER)

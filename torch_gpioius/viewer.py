@@ -393,7 +393,7 @@ class RunViewer:
         try:
             import viser
         except ImportError as exc:  # pragma: no cover - extra missing
-            from ._extras import install_hint
+            from .core.extras import install_hint
 
             raise ImportError(f"gpioius view needs the 'viewer' extra: {install_hint('viewer')}") from exc
         from .io.datasets import DatasetError
@@ -403,7 +403,7 @@ class RunViewer:
         host = check_host(host)
         allow_hosts = check_hosts(allow_hosts)
         if resolution is not None:
-            from ._validation import as_float
+            from .core.validation import as_float
 
             resolution = as_float(resolution, "resolution", lo=1e-3, hi=0.5, unit="m")
         files = run_files(source)
@@ -442,9 +442,9 @@ class RunViewer:
     def _estimate(self, k: int):
         key = (self.run.path, k)
         if key not in self._cache:
-            from .surfaces import data_bounds
+            from .geometry.surfaces import data_bounds
             from .io.runs import estimate_surface
-            from .metrics import prior_variance
+            from .geometry.metrics import prior_variance
             from .models.gpiois import UnidentifiedSimilarityWarning
 
             with warnings.catch_warnings():   # a dataset's step 0 has no touch yet: its similarity is unidentified

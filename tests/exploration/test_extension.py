@@ -12,7 +12,7 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.testing import KernelContract, WorldContract
-from torch_gpioius.contact import ContactConfig, ContactController
+from torch_gpioius.exploration.contact import ContactConfig, ContactController
 from torch_gpioius.exploration import (Evidence, ExplorationDefaults, Hardware, Measurement, ObservationPolicy,
                                        PointTouch, Recorder, SceneSupport, TouchModelBase, TravelBudget, World,
                                        register_evidence_policy, register_touch_model, register_world, world_entry)

@@ -67,7 +67,7 @@ def test_lost_contact_falls_back_to_the_last_contact():
     travel and path count both re-approaches, and only a second miss ends the run."""
     import torch
 
-    from torch_gpioius.contact import ContactResult
+    from torch_gpioius.exploration.contact import ContactResult
     from torch_gpioius.exploration import ExplorationState, Hardware
     from torch_gpioius.exploration.loop import recover
 
@@ -142,7 +142,7 @@ def test_the_first_reapproach_reaches_twice_the_controllers_own_search_for_lost_
     without a config, 10 cm), so that a small body's search does not spend 10 cm on a wrong normal."""
     import torch
 
-    from torch_gpioius.contact import ContactConfig, ContactResult
+    from torch_gpioius.exploration.contact import ContactConfig, ContactResult
     from torch_gpioius.exploration import ExplorationState, Hardware
     from torch_gpioius.exploration.loop import reapproach_reach, recover
 

@@ -9,7 +9,7 @@ import shapely.geometry
 import torch
 
 import torch_gpioius as tg
-from torch_gpioius._validation import as_labels
+from torch_gpioius.core.validation import as_labels
 from torch_gpioius.exploration.observations import ObservationPolicy, Observations, vision_observations
 from torch_gpioius.exploration.touch import PointTouch
 from torch_gpioius.sim.plane import PlanarView
@@ -426,7 +426,7 @@ def test_a_noisy_camera_smoothed_along_its_rays_keeps_its_surface_in_place():
     import trimesh
 
     from torch_gpioius.sensors import PinholeCamera, SimulatedDepthCamera, look_at
-    from torch_gpioius.voxels import voxel_average
+    from torch_gpioius.geometry.voxels import voxel_average
 
     centre, radius = np.array([0.5, 0.0, 0.25]), 0.1
     mesh = trimesh.creation.icosphere(subdivisions=5, radius=radius)

@@ -11,9 +11,9 @@ import torch
 import torch_gpioius as tg
 
 from tests.exploration.gate import assert_within_the_gate
-from torch_gpioius.contact import ContactResult
+from torch_gpioius.exploration.contact import ContactResult
 from torch_gpioius.exploration.reach import ReachPolicy
-from torch_gpioius.surfaces import zero_level_mesh
+from torch_gpioius.geometry.surfaces import zero_level_mesh
 
 CENTRE = np.array([0.5, 0.0, 0.25])
 RADIUS = 0.08

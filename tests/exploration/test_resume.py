@@ -317,7 +317,7 @@ def test_a_miscalibrated_cameras_captures_are_corrected_logged_and_resume_alike(
 
     # each view's error at the body's middle, as applied and once corrected (1.5-2.5 cm -> a few mm)
     from torch_gpioius.sensors.extrinsics import CaptureCorrection
-    from torch_gpioius.sensors.pointcloud import AppliedCameraError
+    from torch_gpioius.sensors.simulated.camera import AppliedCameraError
 
     middle = scene.inner.bounds.mean(axis=0)
     before, left = [], []

@@ -11,7 +11,7 @@ from torch_gpioius.inference import BatchedExactInference, DenseExactInference
 from torch_gpioius.inference.batched import SOLVE_BLOCK, _LowerFactor
 from torch_gpioius.inference.structured import DirectStructuredInference, StructuredExactInference
 from torch_gpioius.inference.optim import predicted_gain
-from torch_gpioius.planning import plan_direction
+from torch_gpioius.exploration.planning import plan_direction
 from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 THETA, NOISE = 0.15, 0.08

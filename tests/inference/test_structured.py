@@ -9,9 +9,9 @@ import torch
 
 import torch_gpioius as tg
 from torch_gpioius.inference import DenseExactInference
-from torch_gpioius.planning import plan_direction
+from torch_gpioius.exploration.planning import plan_direction
 from torch_gpioius.inference.structured import DirectStructuredInference, StructuredExactInference
-from torch_gpioius.tolerances import tol
+from torch_gpioius.core.tolerances import tol
 from torch_gpioius.kernels import InverseMultiquadricKernel as IMQ
 
 REL = 1e-6  # the tolerance; the engine achieves ~1e-10

@@ -8,7 +8,7 @@ import trimesh
 
 from torch_gpioius.io.datasets import DatasetError
 from torch_gpioius.io.importers import dataset_from_files, load_contacts_csv, load_point_cloud, read_contacts_csv
-from torch_gpioius.voxels import voxel_average
+from torch_gpioius.geometry.voxels import voxel_average
 from torch_gpioius.models.overrides import EstimatorOverrides
 
 PTS = np.array([[0.01, 0.02, 0.03], [0.04, -0.05, 0.06], [0.2, 0.1, -0.3], [0.021, 0.022, 0.023]])
@@ -402,7 +402,7 @@ def test_a_capture_that_sees_only_the_top_is_not_taken_for_another_frame(tmp_pat
 def _fitted(ds):
     """Final Chamfer [cm] of a dataset's inner estimate against the 6 cm sphere of tests.userfiles."""
     from tests.userfiles import CENTRE
-    from torch_gpioius.surfaces import zero_level_mesh
+    from torch_gpioius.geometry.surfaces import zero_level_mesh
 
     model = ds.to_model().fit()
     mesh = zero_level_mesh(model, [CENTRE - 0.12, CENTRE + 0.12], 0.01)
@@ -538,7 +538,8 @@ def _box_files(folder, error: str, *, top_only: bool = False, table: bool = Fals
     cover by cameras whose calibration is off by ``error``; returns the CSV, the clouds, their origins and the
     cover's mesh. ``top_only``: 40 contacts on the top face (else 120 on every face but the bottom); ``table``: the
     captures see the table the cover stands on too (at ``TABLE_Z``, in the clouds as a camera gives them)."""
-    from torch_gpioius.sensors.pointcloud import PinholeCamera, SimulatedDepthCamera, look_at
+    from torch_gpioius.sensors.simulated.camera import SimulatedDepthCamera
+    from torch_gpioius.sensors.pointcloud import PinholeCamera, look_at
 
     centre = np.array([0.5, 0.0, 0.2])
     inner = trimesh.creation.box((0.10, 0.08, 0.12))

@@ -89,7 +89,7 @@ def test_a_bags_voxels_are_chosen_by_the_depth_smoothed_along_the_rays(recording
     means recomputed from its unvoxelled import, not the means of the smoothed points."""
     from torch_gpioius.exploration.observations import ObservationPolicy
     from torch_gpioius.sensors import PointCloud
-    from torch_gpioius.voxels import voxel_average
+    from torch_gpioius.geometry.voxels import voxel_average
 
     msgs, truth = recording
     bag = write_bag(tmp_path / "one", _with(msgs, "/camera/depth/points", lambda ms: ms[:1]), storage="mcap")
@@ -387,7 +387,7 @@ def _pad_frames(recording, every=1, bad=None):
 
     from torch_gpioius.io.rosbag import BagMessage
     from torch_gpioius.sensors.tactile import TactileCalibration
-    from torch_gpioius.sim.tactile import pad_pose
+    from torch_gpioius.sensors.simulated.gelpad import pad_pose
 
     msgs, truth = recording
     ts = get_typestore(Stores.ROS2_HUMBLE).types

@@ -9,7 +9,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 from kinematics import UR5, SafetyGate, SafetyViolation, SimulatedUR5
-from torch_gpioius.contact import ContactConfig, ContactController, ContactFault
+from torch_gpioius.exploration.contact import ContactConfig, ContactController, ContactFault
 from torch_gpioius.sensors import ForceReading, ForceSensor, SensorError, SensorTimeout
 
 Q0 = [0.0, -1.2, 1.5, -1.9, -1.57, 0.0]

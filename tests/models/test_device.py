@@ -49,7 +49,7 @@ def test_cuda_agrees_with_cpu():
 @pytest.mark.parametrize("bad", ["meta", "cuda:99" if torch.cuda.is_available() else "cuda"])
 def test_devices_that_cannot_compute_are_refused_with_the_available_ones(bad):
     """Issue 33, item 14: `--device meta` failed with "Tensor.item() cannot be called on meta tensors"."""
-    from torch_gpioius._validation import as_device, available_devices
+    from torch_gpioius.core.validation import as_device, available_devices
 
     with pytest.raises(ValueError, match=r"device: cannot use .* here .*available: cpu"):
         as_device(bad)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import torch_gpioius as tg
-from torch_gpioius._validation import NOISE_RANGE
+from torch_gpioius.core.validation import NOISE_RANGE
 from torch_gpioius.cli import main
 from torch_gpioius.exploration.config import ExploreConfig
 from torch_gpioius.kernels import InverseMultiquadricKernel, KernelChoice, Matern52

@@ -7,7 +7,7 @@ import torch
 
 import torch_gpioius as tg
 from tests import reference as ref
-from torch_gpioius.surfaces import evaluate_grid
+from torch_gpioius.geometry.surfaces import evaluate_grid
 
 KT = torch.tensor([[0.05, 0.04], [0.04, 0.06]], dtype=torch.float64)
 

@@ -8,7 +8,8 @@ import pytest
 import trimesh
 
 from torch_gpioius.sensors.extrinsics import CaptureCorrection, correct_captures
-from torch_gpioius.sensors.pointcloud import CameraError, PinholeCamera, PointCloud, SimulatedDepthCamera, look_at
+from torch_gpioius.sensors.simulated.camera import CameraError, SimulatedDepthCamera
+from torch_gpioius.sensors.pointcloud import PinholeCamera, PointCloud, look_at
 
 C = np.array([0.5, 0.0, 0.2])
 GAP = 0.008

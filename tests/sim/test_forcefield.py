@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from torch_gpioius.contact import ContactConfig, ContactController
+from torch_gpioius.exploration.contact import ContactConfig, ContactController
 from torch_gpioius.sim.forcefield import Scene3D, sphere_scene
 from torch_gpioius.testing import WorldContract
 
@@ -153,7 +153,7 @@ def test_the_default_kernel_makes_no_phantom_surface_away_from_the_body():
     from torch_gpioius.kernels import Matern52
     from torch_gpioius.sim.forcefield import object_defaults
     from torch_gpioius.sim.meshes import MeshDistance
-    from torch_gpioius.surfaces import evaluate_grid, zero_level_mesh
+    from torch_gpioius.geometry.surfaces import evaluate_grid, zero_level_mesh
     import torch_gpioius as tg
 
     e = make_world("forcefield", "E", 0)
@@ -475,7 +475,7 @@ def test_a_scene_with_a_camera_error_moves_every_views_capture_by_its_own_draw_a
     """Issue 63, item 1: each simulated view of each run (its seed) draws an extrinsic error of the asked sizes; the
     captures carry it, the scene says what each view applied, the error survives a seed's perturbation, changes the
     scene's fingerprint, and a scene with a user's camera refuses it."""
-    from torch_gpioius.sensors.pointcloud import CameraError
+    from torch_gpioius.sensors.simulated.camera import CameraError
 
     s = sphere_scene().with_views(["fixed", "mirrored", "wrist"])
     off = s.with_camera_error("6mm,1deg")
@@ -485,7 +485,7 @@ def test_a_scene_with_a_camera_error_moves_every_views_capture_by_its_own_draw_a
     assert all(e["size_mm"] == pytest.approx(6.0) and e["angle_deg"] == pytest.approx(1.0) for e in errors.values())
     assert len({tuple(e["translation_mm"]) for e in errors.values()}) == 3          # each view its own draw
     # each view's capture is the plain one (the same noise) moved by that view's error about its optical centre
-    from torch_gpioius.sensors.pointcloud import AppliedCameraError
+    from torch_gpioius.sensors.simulated.camera import AppliedCameraError
 
     for name, plain, moved in zip(s.views, s.cameras(s.views).sources, off.cameras(off.views).sources):
         a, b, e = plain.capture(), moved.capture(), errors[name]

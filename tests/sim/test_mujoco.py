@@ -393,7 +393,7 @@ def test_a_camera_error_moves_the_mujoco_cameras_captures_by_each_views_draw(sce
     """Issue 63, item 1, in the MuJoCo world: the capture of a camera off by 6 mm and a degree is the calibrated one
     (the same noise) moved by the draw the scene reports, about the camera's reported origin; the error survives a
     seed's perturbation and changes the scene's fingerprint."""
-    from torch_gpioius.sensors.pointcloud import AppliedCameraError
+    from torch_gpioius.sensors.simulated.camera import AppliedCameraError
 
     off = scene.with_camera_error("6mm,1deg")
     assert scene.camera_errors() == {} and set(off.camera_errors()) == {"fixed"}

@@ -8,7 +8,7 @@ import torch_gpioius as tg
 from kinematics import tool_rotation
 from torch_gpioius.exploration import thin_points
 from torch_gpioius.sim import estimate_metrics_3d, sphere_scene
-from torch_gpioius.surfaces import surface_samples
+from torch_gpioius.geometry.surfaces import surface_samples
 
 C, R = np.array([0.5, 0.0, 0.25]), 0.08
 

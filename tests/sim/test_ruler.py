@@ -25,7 +25,7 @@ class _Sphere:
 
 def _ruler_figures(world, model, grid):
     from torch_gpioius.sim.ruler import METRICS_EDGE, score_surface
-    from torch_gpioius.surfaces import converged_level_mesh, evaluate_grid
+    from torch_gpioius.geometry.surfaces import converged_level_mesh, evaluate_grid
 
     field = evaluate_grid(model, world.bounds(0.05), grid, 0, variance=False)
     whole = converged_level_mesh(model, None, field=field, edge=METRICS_EDGE, keep=world.range)
@@ -46,7 +46,7 @@ def test_the_converged_ruler_measures_a_known_offset_sphere_in_closed_form_on_a_
     alone, on the 2 cm grid of the releases before, is off by more than the ruler's 2 % (the vertices interpolated
     linearly on the grid's edges)."""
     from torch_gpioius.sim.ruler import METRICS_EDGE, score_surface
-    from torch_gpioius.surfaces import evaluate_grid, zero_level_mesh
+    from torch_gpioius.geometry.surfaces import evaluate_grid, zero_level_mesh
 
     world = sphere_scene(radius=0.06, cover=0.01, subdivisions=6)       # facets of 1.4 mm: a sagitta of 4 um
     model = _Sphere(world.inner.bounds.mean(axis=0), 0.063)

@@ -368,7 +368,7 @@ def test_a_scene_files_camera_error_reaches_its_cameras(tmp_path):
 def test_a_scene_files_inside_depths_and_noise_take_the_ranges_the_worlds_build_with(tmp_path):
     """Issue 64: ``touch_inside = 0.15`` passed reading (0-0.2 m) and failed at build (0-0.1 m); sigma^2 was checked
     against three ranges. One range each, at every door: read and build refuse alike, naming the file's key."""
-    from torch_gpioius._validation import INSIDE_DEPTH_MAX, NOISE_RANGE
+    from torch_gpioius.core.validation import INSIDE_DEPTH_MAX, NOISE_RANGE
     from torch_gpioius.models.estimator import EstimatorSettings
     from torch_gpioius.sim.forcefield import ROBOT_STUDY_DEFAULTS, with_inside_depths
 

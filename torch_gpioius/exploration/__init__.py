@@ -5,11 +5,12 @@
 * contracts (:mod:`~torch_gpioius.exploration.protocols`): :class:`Toucher`, :class:`TouchModel`,
   :class:`EvidencePolicy`, :class:`Recorder`; stop rules (:class:`StopRule`); worlds (:class:`World`,
   :class:`Hardware`); the registries of worlds, touch models and evidence policies (:func:`register_world`,
-  :func:`register_touch_model`, :func:`register_evidence_policy`; :mod:`torch_gpioius.registry`);
+  :func:`register_touch_model`, :func:`register_evidence_policy`; :mod:`torch_gpioius.core.registry`);
 * the loop: :func:`run` (``torch_gpioius.explore``, the one public explore, builds its settings and adds the
   crash-safe log and resume).
 """
 
+from ..core.moved import renamed
 from .config import MODES, ExploreConfig, Run
 from .evidence import Evidence, TapPolicy
 from . import loop
@@ -41,16 +42,7 @@ __all__ = ["run", "begin", "MODES", "ExploreConfig", "Run", "Observations", "Obs
            "patch_observations"]
 
 
-def __getattr__(name):
-    if name == "explore":               # one public explore: torch_gpioius.explore
-        import warnings
-
-        from ..session import explore
-
-        warnings.warn(loop.EXPLORE_MOVED, DeprecationWarning, stacklevel=2)
-        return explore
-    if name == "PatchSettings":         # renamed PatchThinning (a deprecated alias; settings are the estimator's)
-        from . import patches
-
-        return patches.__getattr__(name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+#: The names of earlier releases (one explore: torch_gpioius.explore; "settings" are the estimator's).
+__getattr__ = renamed(__name__, {"explore": ("torch_gpioius", "explore", loop.EXPLORE_MOVED),
+                                 "PatchSettings": ("torch_gpioius.exploration.patches", "PatchThinning",
+                                                   "settings are the estimator's")})

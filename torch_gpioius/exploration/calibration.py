@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ..models.labels import ObservationPolicy
-from ..geometry import surface_geometry
+from ..geometry.differential import surface_geometry
 from ..models.gpiois import OUTER
 from .observations import Observations, vision_observations
 

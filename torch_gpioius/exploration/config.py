@@ -9,8 +9,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .._validation import as_device, as_float, as_int
-from ..planning import RangePenalty
+from ..core.validation import as_device, as_float, as_int
+from .planning import RangePenalty
 from ..kernels import InverseMultiquadricKernel, as_kernel
 from ..models.estimator import LEARN, RESTART_EVERY, EstimatorSettings, EstimatorView, as_learn  # noqa: F401
 from ..models.gpiois import INNER, OUTER

@@ -21,9 +21,10 @@ import warnings
 import numpy as np
 import torch
 
-from ..contact import ContactResult
-from ..geometry import surface_geometry
-from ..planning import plan_direction
+from ..core.moved import renamed
+from .contact import ContactResult
+from ..geometry.differential import surface_geometry
+from .planning import plan_direction
 from .config import LEARN_SIZE, ExploreConfig, Run
 from .calibration import camera_table, capture_views, correct_at_start, correct_camera, vision_crop
 from .observations import (Observations, deepen_vision_inside, drop_contradicted_inside, offset_outer_mean,
@@ -39,19 +40,11 @@ __all__ = ["run", "begin", "step", "ingest", "ingest_evidence", "unstall", "reco
 
 
 #: What the old second ``explore`` (this module's, and ``torch_gpioius.exploration``'s) says when asked for.
-EXPLORE_MOVED = ("torch_gpioius.exploration.explore is torch_gpioius.explore now (one explore, with the crash-safe "
-                 "log and resume); the loop itself is torch_gpioius.exploration.run")
+EXPLORE_MOVED = ("one explore, with the crash-safe log and resume; the loop itself is "
+                 "torch_gpioius.exploration.run")
 
 
-def __getattr__(name):
-    if name == "explore":               # one public explore: torch_gpioius.explore (the loop with its log)
-        import warnings
-
-        from ..session import explore
-
-        warnings.warn(EXPLORE_MOVED, DeprecationWarning, stacklevel=2)
-        return explore
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = renamed(__name__, {"explore": ("torch_gpioius", "explore", EXPLORE_MOVED)})
 
 
 def run(world: World, config: ExploreConfig, *, recorders=(), progress: bool = False,

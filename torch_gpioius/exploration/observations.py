@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .._validation import INSIDE_DEPTH_MAX, as_int, label_problem
+from ..core.validation import INSIDE_DEPTH_MAX, as_int, label_problem
 from ..models.gpiois import INNER, OUTER
 from ..models.labels import MAX_VOXEL, ObservationPolicy, check_voxel
-from ..voxels import voxel_average
+from ..geometry.voxels import voxel_average
 
 __all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices",
            "free_space_along", "retract_free_space", "vision_observations", "drop_contradicted_inside",

@@ -24,19 +24,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.moved import renamed
 from .observations import Observations, thin_indices
 
 __all__ = ["PatchThinning", "patch_observations", "DEPTH_RESOLUTION"]
 
 
-def __getattr__(name):
-    if name == "PatchSettings":         # renamed: "settings" are the estimator's
-        import warnings
-
-        warnings.warn("PatchSettings is PatchThinning now (settings are the estimator's)", DeprecationWarning,
-                      stacklevel=2)
-        return PatchThinning
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = renamed(__name__, {"PatchSettings": (__name__, "PatchThinning", "settings are the estimator's")})
 
 DEPTH_RESOLUTION = 1e-9
 """Depths closer than this [m] count as equal when ordering a patch's points (far below any gel's noise)."""

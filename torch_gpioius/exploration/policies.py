@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..registry import Entry, Registry
+from ..core.registry import Entry, Registry
 from .evidence import TapPolicy
 from .protocols import EvidencePolicyBase
 from .reach import ReachPolicy

@@ -15,8 +15,9 @@ __all__ = ["Toucher", "TouchModel", "TouchModelBase", "EvidencePolicy", "Recorde
 
 @runtime_checkable
 class Toucher(Protocol):
-    """Force-guarded motion of the fingertip (:class:`torch_gpioius.contact.ContactController` on a robot arm, a
-    geometric one in the 2-D world). Each method returns a :class:`torch_gpioius.contact.ContactResult`.
+    """Force-guarded motion of the fingertip (:class:`torch_gpioius.exploration.contact.ContactController` on a robot
+    arm, a geometric one in the 2-D world). Each method returns a
+    :class:`torch_gpioius.exploration.contact.ContactResult`.
 
     * ``approach(direction, max_travel)``: move along ``direction`` `(d,)` until contact, at most ``max_travel`` [m];
     * ``slide(step, normal)``: execute a planned step `(d,)` [m] along the surface, keeping contact;
@@ -35,7 +36,7 @@ class Toucher(Protocol):
 @runtime_checkable
 class TouchModel(Protocol):
     """What one touch tells (:mod:`torch_gpioius.exploration.touch`): ``observations(result, contacts, policy, step)``
-    turns a :class:`~torch_gpioius.contact.ContactResult` into an
+    turns a :class:`~torch_gpioius.exploration.contact.ContactResult` into an
     :class:`~torch_gpioius.exploration.observations.Observations` batch of the inner task; ``contacts`` `(k, d)` are
     all contacts so far, the new one last (free space keeps a margin from each)."""
 

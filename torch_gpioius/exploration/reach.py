@@ -9,8 +9,8 @@ of its true surface was more than 2 cm from every observation).
 A *reach* takes the global view every ``min_steps`` steps:
 
 1. **where**: the estimated inner surface ``{mu_in = 0}`` is meshed on a coarse grid over the exploration range
-   (marching cubes, :func:`torch_gpioius.surfaces.zero_level_mesh`) and sampled about every ``resolution``; each
-   sample's posterior variance ``V`` and outward normal come from the model (:func:`torch_gpioius.geometry.
+   (marching cubes, :func:`torch_gpioius.geometry.surfaces.zero_level_mesh`) and sampled about every ``resolution``;
+   each sample's posterior variance ``V`` and outward normal come from the model (:func:`torch_gpioius.geometry.
    surface_geometry`). A target must lie at least ``min_distance`` from the contact (nearer surface the sliding
    reaches by itself), in the range, and have ``V`` at least ``min_ratio`` times the largest variance within
    ``min_distance`` of the contact and ``min_variance`` times the prior variance: otherwise nothing is left that a
@@ -118,7 +118,7 @@ class ReachPolicy(EvidencePolicyBase):
     needs_vision = False
 
     def __post_init__(self) -> None:
-        from .._validation import as_float, as_int
+        from ..core.validation import as_float, as_int
 
         as_int(self.min_steps, "ReachPolicy.min_steps", 1, 1_000_000)
         as_int(self.max_checks, "ReachPolicy.max_checks", 1, 10_000)
@@ -134,7 +134,7 @@ class ReachPolicy(EvidencePolicyBase):
             raise ValueError(f"ReachPolicy.clearances: must be increasing distances in [0.005, 0.1] m, got {c!r}")
         object.__setattr__(self, "clearances", tuple(float(v) for v in c))
         if self.bounds is not None:
-            from .._validation import as_bounds
+            from ..core.validation import as_bounds
 
             object.__setattr__(self, "bounds", tuple(map(tuple, as_bounds(self.bounds, 3).tolist())))
         if self.budget is not None:
@@ -164,9 +164,9 @@ class ReachPolicy(EvidencePolicyBase):
     def plan(self, state) -> ReachPlan | None:
         """The target and the path of a reach from the current contact, or None when no surface qualifies or none
         can be reached within the travel left (see the module docstring). Reads the model, moves nothing."""
-        from ..geometry import surface_geometry
-        from ..metrics import prior_variance
-        from ..surfaces import data_bounds, surface_samples, zero_level_mesh
+        from ..geometry.differential import surface_geometry
+        from ..geometry.metrics import prior_variance
+        from ..geometry.surfaces import data_bounds, surface_samples, zero_level_mesh
 
         model = state.model
         x0 = model.train_inputs[0]
@@ -282,7 +282,7 @@ def _length(corners: np.ndarray) -> float:
 
 def _least_mean(model, xs: np.ndarray) -> np.ndarray:
     """`(m,)` the smaller posterior mean of the inner task and (GPIOIS) the outer one at points `(m, 3)`."""
-    from ..geometry import predict_mean_task
+    from ..geometry.differential import predict_mean_task
 
     x0 = model.train_inputs[0]
     q = torch.as_tensor(xs, dtype=x0.dtype, device=x0.device)

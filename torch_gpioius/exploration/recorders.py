@@ -9,8 +9,8 @@ from __future__ import annotations
 import math
 import warnings
 
-from .._progress import progress as progress_reporter
-from ..metrics import SHAPE_METRICS
+from ..core.progress import progress as progress_reporter
+from ..geometry.metrics import SHAPE_METRICS
 from .protocols import Recorder
 
 __all__ = ["MetricsRecorder", "IntervalRecorder", "ProgressRecorder", "NoEstimateWarning", "REPORT_FRACTIONS"]

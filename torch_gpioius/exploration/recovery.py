@@ -8,8 +8,8 @@ fingertip more than ``min_progress`` from where it is now, the run is stalled. T
 along the *measured* contact normal (the force direction, which the estimate cannot bend) until the force lets go,
 ``lift`` further, and approaches again along the opposite direction; the planner then starts afresh (no previous
 direction) and, where the estimate's normal still disagrees with the measured one, plans in the measured tangent
-plane (:func:`torch_gpioius.planning.plan_direction`). A recovery's travel counts in the travel budget and it
-counts as a step of the step budget. After ``max_recoveries`` recoveries that did not restore progress the run
+plane (:func:`torch_gpioius.exploration.planning.plan_direction`). A recovery's travel counts in the travel budget
+and it counts as a step of the step budget. After ``max_recoveries`` recoveries that did not restore progress the run
 ends with ``terminated = "stalled"``: a result, not a missing value.
 """
 

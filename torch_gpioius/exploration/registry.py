@@ -1,5 +1,5 @@
-"""Worlds by name: one :class:`~torch_gpioius.registry.Registry` that the command line, the scene files, the sweeps,
-the studies and the readers of logs use.
+"""Worlds by name: one :class:`~torch_gpioius.core.registry.Registry` that the command line, the scene files, the
+sweeps, the studies and the readers of logs use.
 
 A world registers itself once, beside its class (``register_world("mujoco", MujocoScene, objects=..., dimension=3,
 scene=SceneSupport(...))``), with its capabilities; nothing else matches world names in an if-chain. The built-in
@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable
 
-from ..registry import Entry, Registry
+from ..core.registry import Entry, Registry
 
 __all__ = ["WorldEntry", "SceneSupport", "WORLDS", "register_world", "world_entry", "world_names", "make_world",
            "canonical_world_name", "registered_tables"]

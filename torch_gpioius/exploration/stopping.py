@@ -109,7 +109,7 @@ class TravelBudget(StopRule):
         if isinstance(self.max_travel, bool) or not (isinstance(self.max_travel, (int, float))
                                                      and math.isfinite(self.max_travel) and self.max_travel > 0):
             raise ValueError(f"max_travel: must be a positive distance [m], got {self.max_travel!r}")
-        from .._validation import as_length
+        from ..core.validation import as_length
 
         as_length(self.max_travel, "max_travel")                  # 150 (mm meant as m) ran to the step cap
 

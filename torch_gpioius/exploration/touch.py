@@ -9,8 +9,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from .._validation import as_int
-from ..registry import Registry
+from ..core.validation import as_int
+from ..core.registry import Registry
 from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchThinning, patch_observations
 from .protocols import TouchModelBase
@@ -145,8 +145,8 @@ class PatchTouch(TouchModelBase):
         Returns:
             The kept rows, in their order; :attr:`last_dropped` says how many went and their information bound.
         """
-        from ..geometry import predict_task
-        from ..metrics import prior_variance
+        from ..geometry.differential import predict_task
+        from ..geometry.metrics import prior_variance
 
         n_patch = min(self._patch_rows, len(obs))
         if self.max_points is None or n_patch <= 1:

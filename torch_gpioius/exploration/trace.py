@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..metrics import SHAPE_METRICS
+from ..geometry.metrics import SHAPE_METRICS
 
 __all__ = ["Trace"]
 
@@ -35,7 +35,7 @@ class Trace:
         robot_time: `(n,)` robot clock at each record [s].
         final_mesh: 3-D only: the last estimated inner surface within the exploration range (``trimesh``).
         hausdorff_touched: `(n,)` Hausdorff distance [m] between the *touched* pieces of {mu_in = 0} (those the
-            fingertip slid along, :func:`torch_gpioius.surfaces.touched_pieces`) and the true inner surface.
+            fingertip slid along, :func:`torch_gpioius.geometry.surfaces.touched_pieces`) and the true inner surface.
         correlation: `(n,)` task correlation K_t[0,1] / sqrt(K_t[0,0] K_t[1,1]) (NaN in tactile mode).
         correlation_interval: `(n, 2)` profile-likelihood interval of the correlation (NaN where not computed).
         taps: `(n,)` cumulative number of evidence actions (taps).
@@ -49,8 +49,8 @@ class Trace:
         reapproaches: `(n,)` cumulative number of re-approaches after lost contact.
         reapproach_travel: `(n,)` cumulative travel of those re-approaches [m] (part of ``travel``).
         shape: the field's shape metrics per record, ``{name: (n,)}`` for each of
-            :data:`torch_gpioius.metrics.SHAPE_METRICS` (Chamfer, F-scores, bias, observed Hausdorff, unseen share;
-            NaN where not measured or where the world knows no truth).
+            :data:`torch_gpioius.geometry.metrics.SHAPE_METRICS` (Chamfer, F-scores, bias, observed Hausdorff,
+            unseen share; NaN where not measured or where the world knows no truth).
         estimate: `(n,)` 1 where the estimate was measured and has a surface to judge, 0 where it has none (no
             estimate), NaN where not measured.
         truncation: `(n,)` bound on the truncated outer basis' change of the Gram matrix relative to sigma^2

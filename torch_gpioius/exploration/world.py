@@ -6,7 +6,7 @@ supplies
 
 * :meth:`World.hardware`: a :class:`Hardware` with the robot (Cartesian moves behind a safety gate), the force
   sensor, the point-cloud source, and the contact controller that turns a planned step into force-guarded motion
-  (:class:`torch_gpioius.contact.ContactController` on a robot arm; a geometric one in the 2-D world);
+  (:class:`torch_gpioius.exploration.contact.ContactController` on a robot arm; a geometric one in the 2-D world);
 * where to start: ``start``, ``direction`` (the approach), and the exploration range (``bounds``, eq. 25);
 * :attr:`World.defaults`: the world's own settings (alpha, stop rules, the estimator's settings);
 * :meth:`World.measure`: the ground-truth metrics (eq. 23-24) where the truth is known;
@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_bounds
-from ..contact import ContactController
+from ..core.validation import as_bounds
+from .contact import ContactController
 from ..models.estimator import EstimatorSettings, EstimatorView
 from .protocols import Toucher
 from .registry import register_world
@@ -47,7 +47,7 @@ class Hardware:
         sensor: a :class:`torch_gpioius.sensors.ForceSensor`.
         camera: a :class:`torch_gpioius.sensors.PointCloudSource`.
         controller: ``approach(direction, max_travel)`` and ``slide(step, normal)`` returning
-            :class:`torch_gpioius.contact.ContactResult`.
+            :class:`torch_gpioius.exploration.contact.ContactResult`.
         tactile: a tactile pad at the fingertip (:class:`torch_gpioius.sensors.tactile.TactileSensor`) or None;
             ``touch="patch"`` reads it at each contact.
     """
@@ -119,13 +119,14 @@ class Measurement:
 
     Attributes:
         hausdorff: eq. (24) between the whole zero set {mu_in = 0} and the true inner surface [m].
-        hausdorff_touched: the same for the touched pieces only (:func:`torch_gpioius.surfaces.touched_pieces`).
+        hausdorff_touched: the same for the touched pieces only
+            (:func:`torch_gpioius.geometry.surfaces.touched_pieces`).
         uncertainty: eq. (23), relative to the prior variance.
         centre: centroid of the estimated inner region {mu_in < 0} (2-D; None otherwise or if empty).
         surface: the estimated surface (2-D: list of polylines; 3-D: a ``trimesh.Trimesh`` in the range, or None).
         estimate: whether the estimate has a surface to judge (2-D: a closed curve; 3-D: surface inside the range);
             None where the world did not look (no known truth).
-        shape: the field's shape metrics (:func:`torch_gpioius.metrics.surface_agreement`: Chamfer, F-scores,
+        shape: the field's shape metrics (:func:`torch_gpioius.geometry.metrics.surface_agreement`: Chamfer, F-scores,
             signed bias, Hausdorff over the observed surface, unseen share), ``{}`` where not computed.
     """
 
@@ -214,7 +215,7 @@ class World(abc.ABC):
 
     def penalty(self):
         """C(x) of eq. (19)/(25) for this world (default: zero)."""
-        from ..planning import ZeroPenalty
+        from .planning import ZeroPenalty
 
         return ZeroPenalty()
 
@@ -295,7 +296,7 @@ class RobotWorld(World):
         bounds: `(2, 3)` exploration range `[min corner; max corner]` [m] (the eq. 25 penalty keeps the planner in it).
         name: label for records.
         reference: an optional world with the true geometry (used for :meth:`measure` only).
-        config: :class:`torch_gpioius.contact.ContactConfig` for the controller.
+        config: :class:`torch_gpioius.exploration.contact.ContactConfig` for the controller.
         defaults: overrides of the robot study's defaults (theta 0.15, sigma^2 0.08, 1.5 m of travel).
     """
 
@@ -323,7 +324,7 @@ class RobotWorld(World):
         return Hardware(self.robot, self.sensor, self.camera, self.controller)
 
     def penalty(self):
-        from ..planning import RangePenalty
+        from .planning import RangePenalty
 
         return RangePenalty(self.range[0], self.range[1], beta=100.0)
 

@@ -22,7 +22,7 @@ from torch import Tensor
 
 from ..kernels import ExactKernel
 from .engine import ExactEngine
-from ..tolerances import tol
+from ..core.tolerances import tol
 
 __all__ = ["DenseExactInference", "JitterWarning", "NotPositiveDefiniteError", "robust_cholesky", "bordered",
            "engine_kernel"]

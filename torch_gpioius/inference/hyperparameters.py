@@ -146,6 +146,10 @@ def maximize_hyperparameters(kernel, x: Tensor, y: Tensor, task: Tensor, noise: 
     The length and sigma^2 are kept inside their bounds by a log-space sigmoid; K_t is ``L L^T`` with a positive
     diagonal (its log) as in ``GPIOIS.fit``. Deterministic for the same data.
 
+    Why this many parameters: the data (``x``, ``y``, ``task``), the point the search starts from (``kernel``,
+    ``noise``, ``task_covariance``, ``prior_mean``) and the search's box and budget are each one of the engine's inputs;
+    the models call it with their own, users call the models.
+
     Args:
         kernel: the model's kernel (its ``length`` is the start; it is not changed here).
         x: `(n, d)` points [m].

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from ..tolerances import tol
+from ..core.tolerances import tol
 
 __all__ = ["FitResult", "chol_params_to_task_covariance", "task_covariance_to_chol_params", "maximize_mll",
            "newton_maximize", "predicted_gain", "chain_to_cholesky", "cholesky_bounds",

@@ -52,7 +52,7 @@ from ..kernels import ExactKernel
 from .dense import bordered, engine_kernel, robust_cholesky
 from .engine import ExactEngine
 from .lowrank import truncated_basis
-from ..tolerances import tol
+from ..core.tolerances import tol
 
 __all__ = ["StructuredExactInference", "DirectStructuredInference"]
 

@@ -17,7 +17,7 @@ __all__ = ["FilePointCloud", "checkpoints", "datasets", "export", "importers", "
 
 
 def __getattr__(name):
-    if name == "offline":               # torch_gpioius.fitting now (its module warns)
+    if name == "offline":               # torch_gpioius.fitting now (core.moved warns)
         import importlib
 
         return importlib.import_module(f"{__name__}.offline")

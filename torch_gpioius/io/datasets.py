@@ -32,7 +32,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from .._validation import check_metres, label_problem
+from ..core.validation import check_metres, label_problem
 
 __all__ = ["FORMAT_VERSION", "FILE_KINDS", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter",
            "read_records", "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta",
@@ -271,7 +271,7 @@ def check_meta(meta: dict, where: str) -> dict:
     Raises:
         DatasetError: naming ``where`` and the field.
     """
-    from ..tolerances import tol
+    from ..core.tolerances import tol
 
     if not isinstance(meta, dict):
         raise DatasetError(f"{where}: header metadata must be a JSON object, got {type(meta).__name__}")

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import as_bounds
-from ..surfaces import data_bounds, grid_resolution  # noqa: F401  (grid_resolution: re-exported, its 0.3 home)
+from ..core.validation import as_bounds
+from ..geometry.surfaces import data_bounds, grid_resolution  # noqa: F401  (grid_resolution: re-exported, its 0.3 home)
 from .datasets import DatasetError
 from .outputs import FileClaim, atomic_write, check_distinct
 
@@ -207,7 +207,7 @@ def export_run(run: str | os.PathLike, mesh: str | os.PathLike | None = None, *,
 
 def _export_log(run, mesh: FileClaim | None, outer: FileClaim | None, step, resolution, bounds) -> dict:
     """:func:`export_run` of a log or dataset, its outputs claimed."""
-    from ..metrics import prior_variance
+    from ..geometry.metrics import prior_variance
     from .runs import estimate_surface, load_run
 
     history = load_run(run)
@@ -253,7 +253,7 @@ def export_model(model, path: str | os.PathLike, bounds, resolution: float, task
     Returns:
         the path written, or None when the level set does not cross the box (nothing is written then).
     """
-    from ..metrics import prior_variance
+    from ..geometry.metrics import prior_variance
     from .runs import estimate_surface
 
     bounds = np.asarray(bounds, dtype=np.float64)

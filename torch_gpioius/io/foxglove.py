@@ -64,10 +64,10 @@ def export_mcap(run: str | os.PathLike, path: str | os.PathLike, *, every: int |
     try:
         import foxglove  # noqa: F401
     except ImportError as exc:  # pragma: no cover - extra missing
-        from .._extras import install_hint
+        from ..core.extras import install_hint
 
         raise ImportError(f"MCAP export needs the 'foxglove' extra: {install_hint('foxglove')}") from exc
-    from ..surfaces import grid_resolution
+    from ..geometry.surfaces import grid_resolution
     from .outputs import check_new_file
     from .runs import load_run
 
@@ -180,8 +180,8 @@ def _estimate_entity(history, k: int, ds, res: float, frame: str, colour, pts):
     strips in 2-D), or None before the first contact or where the estimate has no surface."""
     from foxglove import messages as fm
 
-    from ..metrics import prior_variance
-    from ..surfaces import data_bounds
+    from ..geometry.metrics import prior_variance
+    from ..geometry.surfaces import data_bounds
     from .runs import estimate_surface
 
     if not ((ds.task == 0) & (ds.y == 0)).any():

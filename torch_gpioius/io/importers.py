@@ -9,9 +9,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import MIN_LABEL, check_metres
+from ..core.validation import MIN_LABEL, check_metres
 from ..sensors.pointcloud import PointCloud, PointCloudSource
-from ..voxels import VOXEL_RANGE, voxel_average  # noqa: F401  (re-exported: the 0.2 home of voxel_average)
+from ..geometry.voxels import VOXEL_RANGE, voxel_average  # noqa: F401  (re-exported: the 0.2 home of voxel_average)
 from .datasets import Dataset, DatasetError
 
 __all__ = ["load_point_cloud", "load_contacts_csv", "voxel_average", "dataset_from_files", "FilePointCloud"]
@@ -486,7 +486,7 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             every row. An exact fit's memory grows with the square and its time with the cube of the observations: a
             thousand contacts 3 mm apart under a 4 cm kernel say little more than a few hundred 5 mm apart.
         camera_bound: the largest error each capture's pose (its camera's calibration) may have, a
-            :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text (``"6mm,1deg"``): each capture with
+            :class:`~torch_gpioius.sensors.simulated.CameraError` or its text (``"6mm,1deg"``): each capture with
             a camera origin is moved rigidly about it to agree with the contacts and the other captures
             (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, the contacts' directions where the file
             gives them), within that bound, before it is labelled; a correction beyond half the bound is warned of.
@@ -683,7 +683,8 @@ def _corrected(files, captures, x_in: np.ndarray, y_in: np.ndarray, normal_in: n
     import warnings
 
     from ..sensors.extrinsics import correct_captures
-    from ..sensors.pointcloud import CameraError, PointCloud
+    from ..sensors.simulated.camera import CameraError
+    from ..sensors.pointcloud import PointCloud
 
     try:
         bound = CameraError.parse(bound).check_bound()
@@ -736,7 +737,7 @@ def _capture(path, origin, units: str, dim: int):
 
 def _thinned_rows(path, x, y, step, normal, spacing):
     """The rows of each kind (contact, free, inside) thinned to ``spacing`` [m] (:func:`dataset_from_files`)."""
-    from .._validation import as_length
+    from ..core.validation import as_length
     from ..exploration.observations import thin_indices
 
     try:

@@ -19,7 +19,7 @@ import torch
 
 from ..exploration.calibration import camera_table, capture_views, vision_crop
 from ..exploration.protocols import Recorder
-from ..metrics import SHAPE_METRICS
+from ..geometry.metrics import SHAPE_METRICS
 from ..exploration.state import ExplorationState, StepRecord
 from .datasets import DatasetError, LogWriter, TornLogWarning, read_records, replay, step_number
 

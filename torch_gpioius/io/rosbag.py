@@ -31,7 +31,7 @@ from typing import Sequence
 import numpy as np
 import torch
 
-from .._validation import as_bounds
+from ..core.validation import as_bounds
 from .datasets import Dataset, DatasetError
 
 __all__ = ["BagImportError", "BagTopics", "BagMessage", "import_bag", "decode_point_cloud2", "parse_transform",
@@ -258,7 +258,7 @@ def _open(path: Path):
         from rosbags.highlevel import AnyReader
         from rosbags.typesys import Stores, get_typestore
     except ImportError as exc:  # pragma: no cover - the extra is missing
-        from .._extras import install_hint
+        from ..core.extras import install_hint
 
         raise ImportError(f"import_bag needs the 'rosbag' extra: {install_hint('rosbag')}") from exc
     if not path.exists():
@@ -428,7 +428,7 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
             the seen surface (the recorded settings say so). None: the paper's 5 cm voxels and no settings recorded
             (``fit`` then uses the inverse multiquadric of 0.1 m and 0.006, or the deprecated ``kernel`` / ``noise``).
         camera_bound: the largest error the camera's pose in the base frame (its extrinsic calibration, or the tf
-            that places it) may have, a :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text
+            that places it) may have, a :class:`~torch_gpioius.sensors.simulated.CameraError` or its text
             (``"6mm,1deg"``): the clouds, as one capture, are moved rigidly about the camera to agree with the
             contacts (along the measured forces) within that bound before they are labelled
             (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, as ``gpioius fit --camera-bound`` corrects a
@@ -450,7 +450,7 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
     Why this many parameters: a recording's frames, thresholds and sensors are each one fact of the user's rig that
     the bag does not hold; the estimator's settings, the part that grows, are one object (``settings``).
 
-    Clouds are read one at a time and averaged into the voxels as they come (:class:`torch_gpioius.voxels.
+    Clouds are read one at a time and averaged into the voxels as they come (:class:`torch_gpioius.geometry.voxels.
     VoxelAccumulator`), so memory holds one cloud and the occupied voxels, not the recording.
 
     Returns:
@@ -577,7 +577,7 @@ class _BagImport:
                                  f"{time_window!r}")
             window = (w0, w1)
         if camera_bound is not None:
-            from ..sensors.pointcloud import CameraError
+            from ..sensors.simulated.camera import CameraError
 
             try:
                 camera_bound = CameraError.parse(camera_bound).check_bound()
@@ -727,7 +727,7 @@ def _camera_correction(reader, s: _BagImport, tf, inner: dict):
 
     from ..sensors.extrinsics import correct_captures
     from ..sensors.pointcloud import PointCloud
-    from ..voxels import VoxelAccumulator
+    from ..geometry.voxels import VoxelAccumulator
 
     # 5 mm voxels: the surface as measured (the labels' coarser voxels average a curved cover onto its chords, and
     # the gap the contacts show would read short), within the memory of a few clouds
@@ -762,7 +762,7 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float, corrections=No
     and the occupied voxels."""
     from ..exploration.observations import ObservationPolicy, vision_observations
     from ..sensors.pointcloud import PointCloud
-    from ..voxels import VoxelAccumulator
+    from ..geometry.voxels import VoxelAccumulator
 
     path, topics, policy = s.path, s.topics, s.policy
     cloud_frames = set()

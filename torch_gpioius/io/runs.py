@@ -208,15 +208,16 @@ def known_truth(meta: dict) -> dict | None:
 
 def estimate_surface(model, bounds: np.ndarray, resolution: float, task: int = 0):
     """The estimated surface ``{mu = 0}`` of ``task`` and its posterior variance, its vertices on the level set (the
-    converged ruler's meshes and curves, :func:`~torch_gpioius.surfaces.converged_level_mesh`, without a further split:
-    a mesh of ``resolution`` whose every vertex lies on the estimate, not interpolated on the grid's edges).
+    converged ruler's meshes and curves, :func:`~torch_gpioius.geometry.surfaces.converged_level_mesh`, without a
+    further split: a mesh of ``resolution`` whose every vertex lies on the estimate, not interpolated on the grid's
+    edges).
 
     Returns:
         2-D: ``(curves, variances)`` lists of `(m, 2)` polylines [m] and `(m,)` variances at their vertices;
         3-D: ``(mesh, variance)``, a :class:`trimesh.Trimesh` and `(V,)` variances at its vertices; ``(None, None)``
         (3-D) or ``([], [])`` (2-D) when the level set does not cross the box.
     """
-    from ..surfaces import converged_level_curves, converged_level_mesh
+    from ..geometry.surfaces import converged_level_curves, converged_level_mesh
 
     if bounds.shape[1] == 2:
         curves = converged_level_curves(model, bounds, resolution, task, edge=resolution)

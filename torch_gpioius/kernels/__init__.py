@@ -12,8 +12,8 @@ from __future__ import annotations
 import copy
 from dataclasses import dataclass
 
-from .._validation import as_float, as_kernel_length
-from ..registry import Registry
+from ..core.validation import as_float, as_kernel_length
+from ..core.registry import Registry
 from .base import ExactKernel, check_kernel
 from .inverse_multiquadric import InverseMultiquadricKernel, imq
 from .matern import Matern52

@@ -6,8 +6,8 @@ import torch
 from gpytorch.constraints import Interval, Positive
 from torch import Tensor
 
-from .._validation import as_float
-from ..tolerances import tol
+from ..core.validation import as_float
+from ..core.tolerances import tol
 from .base import ExactKernel
 
 __all__ = ["InverseMultiquadricKernel", "imq"]

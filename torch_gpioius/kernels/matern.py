@@ -18,8 +18,8 @@ import torch
 from gpytorch.constraints import GreaterThan
 from torch import Tensor
 
-from .._validation import as_float
-from ..tolerances import tol
+from ..core.validation import as_float
+from ..core.tolerances import tol
 from .base import ExactKernel
 
 __all__ = ["Matern52"]

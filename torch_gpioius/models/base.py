@@ -14,13 +14,13 @@ from gpytorch.likelihoods import GaussianLikelihood
 from gpytorch.means import ConstantMean
 from torch import Tensor
 
-from .._validation import as_device, as_float, as_int, as_labels, as_points, as_tasks, task_id
+from ..core.validation import as_device, as_float, as_int, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.hyperparameters import (LENGTH_BOUNDS, NOISE_BOUNDS, HyperparameterResult,
                                          maximize_hyperparameters)
 from ..kernels import ExactKernel, InverseMultiquadricKernel, as_kernel
-from ..exact import exact_arithmetic
-from ..tolerances import tol
+from ..core.exact import exact_arithmetic
+from ..core.tolerances import tol
 
 __all__ = ["ImplicitSurfaceGP"]
 
@@ -522,7 +522,7 @@ def kernel_for_theta(theta, kernel, owner: str):
     if kernel is not None:
         raise ValueError("theta and kernel: give one (theta is the inverse multiquadric's length scale; a kernel "
                          "carries its own)")
-    from .._validation import as_kernel_length
+    from ..core.validation import as_kernel_length
 
     length = as_kernel_length(theta, "theta")
     deprecated_theta(theta, owner)

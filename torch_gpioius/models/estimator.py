@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validation import as_float, as_int, as_noise
+from ..core.validation import as_float, as_int, as_noise
 from ..kernels import (ExactKernel, InverseMultiquadricKernel, KernelChoice, Matern52, as_kernel, from_description,
                        kernel_named)
 from .labels import ObservationPolicy
@@ -126,7 +126,7 @@ class LengthRule:
     hi: float = 0.10
 
     def __post_init__(self) -> None:
-        from ..tolerances import tol
+        from ..core.tolerances import tol
 
         _check_rule(self, "length_rule", *tol.theta_range)
 

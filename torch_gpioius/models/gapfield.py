@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .._validation import INSIDE_DEPTH_MAX, as_float, as_points
+from ..core.validation import INSIDE_DEPTH_MAX, as_float, as_points
 
 __all__ = ["GapField", "GAP_LENGTHS", "GAP_SCALES", "GAP_NOISES"]
 

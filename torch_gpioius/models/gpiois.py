@@ -15,14 +15,14 @@ from torch import Tensor
 
 from .base import ImplicitSurfaceGP, deprecated_theta
 from .gapfield import GapField
-from .._validation import as_float, as_int, as_labels, as_points, as_tasks, task_id
+from ..core.validation import as_float, as_int, as_labels, as_points, as_tasks, task_id
 from ..inference.dense import DenseExactInference
 from ..inference.batched import BatchedExactInference
 from ..inference.hyperparameters import HyperparameterResult
 from ..inference.optim import FitResult
 from ..inference.structured import StructuredExactInference
 from ..inference.task_fit import TaskCovarianceFitter
-from ..tolerances import tol
+from ..core.tolerances import tol
 
 __all__ = ["fit_stop_reason", "GPIOIS", "INNER", "OUTER", "UnidentifiedSimilarityWarning"]
 
@@ -122,6 +122,9 @@ class GPIOIS(ImplicitSurfaceGP):
 
     Raises:
         ValueError: NaN/inf coordinates, empty data, mismatched lengths, labels or task ids outside {0, 1}.
+
+    Why this many parameters: the constructor is the design card's public API (the training data and each of the
+    paper's hyperparameters by name); ``EstimatorSettings.make_model`` builds it from one settings object.
 
     Example:
         >>> model = GPIOIS(x, y, task, kernel=Matern52(lengthscale=0.1), noise=0.006).fit()

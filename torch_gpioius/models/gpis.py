@@ -7,7 +7,7 @@ from gpytorch.distributions import MultivariateNormal
 from torch import Tensor
 
 from .base import ImplicitSurfaceGP, deprecated_theta
-from .._validation import as_labels, as_points
+from ..core.validation import as_labels, as_points
 
 __all__ = ["GPIS"]
 
@@ -99,7 +99,7 @@ class GPIS(ImplicitSurfaceGP):
 
 def _inner_only(task) -> int:
     """0 for the inner task (a GPIS models that one only); the outer one refused by name."""
-    from .._validation import task_id
+    from ..core.validation import task_id
 
     t = task_id(task, "task")
     if t != 0:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
-from .._validation import INSIDE_DEPTH_MAX, as_int
+from ..core.validation import INSIDE_DEPTH_MAX, as_int
 
 __all__ = ["ObservationPolicy", "check_voxel", "MAX_VOXEL"]
 
@@ -214,8 +214,8 @@ MAX_VOXEL = 1.0
 
 def check_voxel(voxel) -> float:
     """``voxel`` [m] as a float: 0 (no averaging) or an edge in [``VOXEL_RANGE[0]``, ``MAX_VOXEL``] (the smallest
-    edge the averaging takes, :data:`torch_gpioius.voxels.VOXEL_RANGE`); raises ValueError naming the value."""
-    from ..voxels import VOXEL_RANGE
+    edge the averaging takes, :data:`torch_gpioius.geometry.voxels.VOXEL_RANGE`); raises ValueError naming the value."""
+    from ..geometry.voxels import VOXEL_RANGE
 
     if isinstance(voxel, bool) or not isinstance(voxel, (int, float)) or not (
             math.isfinite(voxel) and (voxel == 0 or VOXEL_RANGE[0] <= voxel <= MAX_VOXEL)):

@@ -16,10 +16,10 @@ import torch
 from gpytorch.distributions import MultivariateNormal
 from torch import Tensor
 
-from .._validation import as_labels, as_points, as_tasks, task_id
+from ..core.validation import as_labels, as_points, as_tasks, task_id
 from ..inference.local import LocalDenseInference, LocalStructuredInference, region_weights
 from ..inference.optim import FitResult, newton_maximize
-from ..tolerances import tol
+from ..core.tolerances import tol
 from .base import ImplicitSurfaceGP, deprecated_theta
 from .gpiois import INNER, OUTER, UnidentifiedSimilarityWarning
 

@@ -6,9 +6,10 @@ estimator's settings (:class:`~torch_gpioius.models.estimator.EstimatorSettings`
 holds. :class:`EstimatorOverrides` holds such changes, each checked once, when given, by the one check its setting
 has everywhere:
 
-* ``noise``: sigma^2 in :data:`~torch_gpioius._validation.NOISE_RANGE` (:func:`~torch_gpioius._validation.as_noise`);
+* ``noise``: sigma^2 in :data:`~torch_gpioius.core.validation.NOISE_RANGE`
+  (:func:`~torch_gpioius.core.validation.as_noise`);
 * ``kernel``: a :class:`~torch_gpioius.kernels.KernelChoice` (a registered name and a length in
-  :data:`~torch_gpioius._validation.KERNEL_LENGTH`) or a kernel object;
+  :data:`~torch_gpioius.core.validation.KERNEL_LENGTH`) or a kernel object;
 * ``voxel``: the camera's voxel edge, :func:`~torch_gpioius.models.labels.check_voxel` (0: every point);
 * ``learn``: :data:`~torch_gpioius.models.estimator.LEARN`; ``restart_every``: steps between K_t's restarts, or None;
 * ``labels``: single fields of the labelling policy, each by
@@ -26,7 +27,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from .._validation import as_int, as_noise
+from ..core.validation import as_int, as_noise
 from ..kernels import ExactKernel, KernelChoice, from_description
 from .estimator import EstimatorSettings, as_learn
 from .labels import ObservationPolicy, check_voxel

@@ -1,8 +1,11 @@
 """Sensors behind one interface each, registered by name (:data:`SENSORS`, :func:`register_sensor`): force sensors (the
 OptoForce USB DAQ over pyserial, a simulated fingertip sensor), tactile pads (DIGIT/GelSight depth maps,
-:mod:`.tactile`) and point-cloud sources (a simulated depth camera; recorded PLY/PCD/XYZ/NPZ files are read by
+:mod:`.tactile`) and point-cloud sources (recorded PLY/PCD/XYZ/NPZ files are read by
 :class:`torch_gpioius.io.FilePointCloud`). ``import torch_gpioius.sensors`` works without pyserial; constructing
-:class:`OptoForceDAQ` on a real port then raises an ImportError naming the ``sensors`` extra."""
+:class:`OptoForceDAQ` on a real port then raises an ImportError naming the ``sensors`` extra.
+
+The simulated sensors of the worlds (a fingertip force sensor, a depth camera with its errors, a gel pad) live in one
+place, :mod:`.simulated`; the MuJoCo world's own renderers stay with it (:mod:`torch_gpioius.sim.mujoco.hardware`)."""
 
 from .base import (
     ChecksumStorm,
@@ -14,9 +17,10 @@ from .base import (
     SensorTimeout,
     decode_status,
 )
-from .pointcloud import MultiViewSource, PinholeCamera, PointCloud, PointCloudSource, SimulatedDepthCamera, look_at
+from .pointcloud import MultiViewSource, PinholeCamera, PointCloud, PointCloudSource, look_at
 from .optoforce import FrameParser, OptoForceDAQ, encode_config, encode_frame
-from .simulated import FAULTS, ForceFieldContact, SimulatedForceSensor, SphereSDF
+from .simulated import (FAULTS, CameraError, ForceFieldContact, SimulatedDepthCamera, SimulatedForceSensor,
+                        SimulatedGelPad, SphereSDF)
 from .registry import SENSORS, SensorEntry, register_sensor
 from .tactile import (DIGIT_CALIBRATION, DepthMapTactileSensor, DigitTactileSensor, TactileCalibration, TactileReading,
                       TactileSensor, depth_from_image_message)
@@ -24,8 +28,9 @@ from .tactile import (DIGIT_CALIBRATION, DepthMapTactileSensor, DigitTactileSens
 __all__ = ["ForceReading", "ForceSensor", "SensorError", "SensorTimeout", "SensorDisconnected", "ChecksumStorm",
            "SensorStale", "decode_status", "OptoForceDAQ", "FrameParser", "encode_config", "encode_frame",
            "SimulatedForceSensor", "ForceFieldContact", "SphereSDF", "FAULTS", "PointCloud", "PointCloudSource",
-           "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "look_at", "TactileCalibration",
-           "TactileReading", "TactileSensor", "DepthMapTactileSensor", "DigitTactileSensor", "depth_from_image_message",
+           "MultiViewSource", "PinholeCamera", "SimulatedDepthCamera", "CameraError", "SimulatedGelPad", "look_at",
+           "TactileCalibration", "TactileReading", "TactileSensor", "DepthMapTactileSensor", "DigitTactileSensor",
+           "depth_from_image_message",
            "DIGIT_CALIBRATION", "SENSORS", "SensorEntry", "register_sensor"]
 
 

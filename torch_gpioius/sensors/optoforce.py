@@ -157,7 +157,7 @@ class OptoForceDAQ(ForceSensor):
             try:
                 serial = importlib.import_module("serial")
             except ImportError as exc:  # pragma: no cover - depends on the environment
-                from .._extras import install_hint
+                from ..core.extras import install_hint
 
                 raise ImportError(f"OptoForceDAQ needs pyserial: {install_hint('sensors')}") from exc
             try:

@@ -1,6 +1,6 @@
 """Sensors by name: force sensors, tactile pads and point-cloud sources, each with what it measures and whether it
-is hardware (:mod:`torch_gpioius.registry`). A sensor of one's own registers here so that the docs' tables, a world's
-``describe()`` and the tools that list the sensors know it::
+is hardware (:mod:`torch_gpioius.core.registry`). A sensor of one's own registers here so that the docs' tables,
+a world's ``describe()`` and the tools that list the sensors know it::
 
     register_sensor("ati_nano17", AtiNano17, measures="force", hardware=True, description="ATI Nano17 over NetFT")
 """
@@ -9,10 +9,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..registry import Entry, Registry
+from ..core.registry import Entry, Registry
 from .base import ForceSensor
 from .optoforce import OptoForceDAQ
-from .pointcloud import MultiViewSource, PointCloudSource, SimulatedDepthCamera
+from .pointcloud import MultiViewSource, PointCloudSource
+from .simulated import SimulatedDepthCamera
 from .simulated import SimulatedForceSensor
 from .tactile import DepthMapTactileSensor, DigitTactileSensor
 

@@ -3,7 +3,7 @@
 3-D with a kinematic UR5, a static force-field cover and a ray-cast depth camera; and ``mujoco``, a UR5 with a
 fingertip force sensor on MuJoCo's contact physics with cloth and foam covers (the optional extra ``mujoco``)."""
 
-from .._validation import as_bounds
+from ..core.validation import as_bounds
 from .forcefield import (
     ROBOT_STUDY_DEFAULTS,
     Scene3D,

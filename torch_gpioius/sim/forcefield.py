@@ -4,7 +4,8 @@ exploration range for the fingertip (eq. 25).
 
 The hardware is a kinematic UR5 (``kinematics.SimulatedUR5``) behind its safety gate, a simulated fingertip force
 sensor over a force-field contact model (the inner object 1000 N/m, the cover a static force field of a few N/m that
-the fingertip passes through), a simulated depth camera, and the :class:`torch_gpioius.contact.ContactController`.
+the fingertip passes through), a simulated depth camera, and the
+:class:`torch_gpioius.exploration.contact.ContactController`.
 The cover does not move: for cloth that the fingertip pushes aside, see the MuJoCo world.
 
 Frames: everything is in the UR5 base frame [m] (z up); the objects stand in front of the robot.
@@ -24,12 +25,13 @@ from ..models.estimator import (COVER_GAP_LIMIT, GAP_FIELD_LABELS, GAP_LABELS, I
 from ..exploration.registry import SceneSupport, register_world
 from ..exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, geometry_hash,
                                  perturbed_approaches)
-from ..metrics import hausdorff_distance
-from ..planning import RangePenalty
-from ..sensors.pointcloud import CameraError, PinholeCamera, SimulatedDepthCamera, error_key, look_at, view_errors
+from ..geometry.metrics import hausdorff_distance
+from ..exploration.planning import RangePenalty
+from ..sensors.simulated.camera import CameraError, SimulatedDepthCamera, error_key, view_errors
+from ..sensors.pointcloud import PinholeCamera, look_at
 from ..sensors.simulated import ForceFieldContact
-from ..surfaces import surface_samples
-from .._validation import as_bounds
+from ..geometry.surfaces import surface_samples
+from ..core.validation import as_bounds
 from .presets import (DEFAULT_VIEWS, ESTIMATOR_KEYS, INSIDE_SETTINGS, ROBOT_STUDY_DEFAULTS, SETTINGS,  # noqa: F401
                       VIEWS, as_views, estimator_changes, gap_defaults, gap_field_defaults, inside_labels,
                       object_defaults, settings_for, with_inside_depths)
@@ -344,7 +346,7 @@ class Scene3D(RangedScene):
                                     error_key=self._error_key(), support=self.support)
 
     def hardware(self) -> Hardware:
-        from ..contact import ContactConfig, ContactController
+        from ..exploration.contact import ContactConfig, ContactController
         from ..sensors.simulated import SimulatedForceSensor
 
         robot = simulated_ur5(self.start, self.direction, self.range[0], self.range[1], floor=self.support)
@@ -360,9 +362,9 @@ class Scene3D(RangedScene):
         return Hardware(robot, sensor, camera, ContactController(robot, sensor, config), self.tactile_pad(robot, field))
 
     def tactile_pad(self, robot, field=None):
-        """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
-        contact force of the field, sees the body through 0.5 mm of pinched cloth."""
-        from .tactile import SimulatedGelPad
+        """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sensors.simulated.gelpad.SimulatedGelPad`): it
+        faces the contact force of the field, sees the body through 0.5 mm of pinched cloth."""
+        from ..sensors.simulated.gelpad import SimulatedGelPad
 
         field = field or self.contact_model()
         return SimulatedGelPad(self.inner_sdf.distance, lambda: robot.tool_position().detach().numpy(),
@@ -434,7 +436,7 @@ class Scene3D(RangedScene):
 
     def with_camera_error(self, error) -> "Scene3D":
         """The same scene seen by simulated cameras whose calibration is off: each view of each run (its seed) draws a
-        rigid error of the sizes ``error`` gives (a :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its
+        rigid error of the sizes ``error`` gives (a :class:`~torch_gpioius.sensors.simulated.CameraError` or its
         text, ``"6mm,1deg"``; ``"0"``: none) and moves its captures by it (:meth:`camera_errors` says what each view
         applies); the error's sensing terms (``"3x"``, ``"20%"``, ``"20%holes"``) scale every view's depth noise and
         lose its pixels.
@@ -453,7 +455,7 @@ class Scene3D(RangedScene):
 
     def camera_errors(self) -> dict[str, dict]:
         """The extrinsic error each simulated view of this scene (its seed) applies, by view name
-        (:meth:`~torch_gpioius.sensors.pointcloud.AppliedCameraError.as_record`); empty without one (drawn as the
+        (:meth:`~torch_gpioius.sensors.simulated.AppliedCameraError.as_record`); empty without one (drawn as the
         cameras draw it, without building them)."""
         return view_errors(self.camera_error, self.views, self.seed, self._error_key())
 

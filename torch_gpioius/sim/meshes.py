@@ -537,7 +537,7 @@ def load_mesh(source, *, scale: float = 1.0, pose=None, repair: bool = True, res
     if not isinstance(repair, bool):           # repair = "false" in a scene file used to repair
         raise ValueError(f"repair: must be true or false, got {repair!r}")
     if resolution is not None:
-        from .._validation import as_length
+        from ..core.validation import as_length
 
         resolution = as_length(resolution, "resolution", hi=1.0)
     if not np.isfinite(np.asarray(mesh.vertices)).all():

@@ -17,16 +17,16 @@ import numpy as np
 import torch
 from shapely.geometry import LineString, Point, Polygon
 
-from ..contact import ContactResult
+from ..exploration.contact import ContactResult
 from ..exploration.observations import free_space_along
 from ..models.estimator import EstimatorSettings
 from ..exploration.stopping import OnceAround
 from ..exploration.registry import register_world
 from ..exploration.world import ContactTruth, ExplorationDefaults, Hardware, Measurement, World, geometry_hash
-from ..metrics import hausdorff_distance
+from ..geometry.metrics import hausdorff_distance
 from ..sensors.base import ForceReading, ForceSensor
 from ..sensors.pointcloud import PointCloud, PointCloudSource
-from .._validation import as_bounds
+from ..core.validation import as_bounds
 
 __all__ = ["Scene2D", "paper_objects_2d", "rectangle", "PlanarRobot", "PlanarGate", "PlanarForceSensor",
            "PlanarCamera", "PlanarView", "PlanarContact"]
@@ -254,7 +254,8 @@ class PlanarContact:
     def lift(self, direction, *, step: float = 0.005, until_force_below: float = 0.1, extra: float = 0.01,
              max_distance: float = 0.2, inside=None) -> ContactResult:
         """Move away along ``direction`` in ``step`` moves until the force drops below ``until_force_below``, then
-        ``extra`` further (at most ``max_distance``); see :meth:`torch_gpioius.contact.ContactController.lift`."""
+        ``extra`` further (at most ``max_distance``); see
+        :meth:`torch_gpioius.exploration.contact.ContactController.lift`."""
         d = np.asarray(direction, dtype=np.float64).reshape(2)
         d = d / np.linalg.norm(d)
         x = self.robot.tool_position().numpy()
@@ -343,8 +344,8 @@ class Scene2D(World):
     def measure(self, model, contacts, resolution: float | None = None) -> Measurement:
         """Hausdorff (eq. 24; whole zero set and touched pieces), uncertainty (eq. 23) and the centroid of the
         estimated region {mu_in < 0}, on a grid of ``resolution`` (default 1 cm) over :meth:`bounds` (10 cm)."""
-        from ..metrics import curve_shape_metrics, uncertainty_measure
-        from ..surfaces import closed_curves, evaluate_grid, touched_pieces, zero_level_curves
+        from ..geometry.metrics import curve_shape_metrics, uncertainty_measure
+        from ..geometry.surfaces import closed_curves, evaluate_grid, touched_pieces, zero_level_curves
 
         res = 0.01 if resolution is None else resolution
         bounds = self.bounds(0.1)

@@ -8,7 +8,7 @@ import abc
 import numpy as np
 
 from ..exploration.world import World
-from ..planning import RangePenalty
+from ..exploration.planning import RangePenalty
 
 __all__ = ["RangedScene"]
 
@@ -51,9 +51,9 @@ class RangedScene(World):
     def inner_quadrature(self, edge: float = 0.003) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """A quadrature of the true inner surface inside the exploration range (the shape metrics' reference;
         computed once per edge and world): ``(centroids (k, 3), areas (k,), vertices (v, 3))`` of the inner mesh's
-        facets split to edges of at most ``edge`` [m] (:func:`torch_gpioius.metrics.mesh_quadrature`), those whose
-        centroid (vertex) lies in the range."""
-        from ..metrics import mesh_quadrature
+        facets split to edges of at most ``edge`` [m] (:func:`torch_gpioius.geometry.metrics.mesh_quadrature`), those
+        whose centroid (vertex) lies in the range."""
+        from ..geometry.metrics import mesh_quadrature
 
         cache = self.__dict__.setdefault("_inner_quadrature", {})
         if edge not in cache:

@@ -14,9 +14,10 @@ from ..exploration.world import Measurement
 __all__ = ["METRICS_GRID", "METRICS_EDGE", "U_CELL", "SUP_FACETS", "estimate_metrics_3d", "score_surface"]
 
 #: The grid of the estimate's marching cubes for the metrics [m]. Every vertex is then moved onto the level set and
-#: the facets split to :data:`METRICS_EDGE` (:func:`torch_gpioius.surfaces.converged_level_mesh`), so the grid sets only
-#: which pieces of the estimate are found: a 2 cm grid missed a bunny estimate's thin ridge (its Hausdorff distance
-#: 8 % off, against 2 % on this grid). Halving it moves no figure by more than 2 % (docs/results-benchmark.md).
+#: the facets split to :data:`METRICS_EDGE` (:func:`torch_gpioius.geometry.surfaces.converged_level_mesh`), so the
+#: grid sets only which pieces of the estimate are found: a 2 cm grid missed a bunny estimate's thin ridge (its
+#: Hausdorff distance 8 % off, against 2 % on this grid). Halving it moves no figure by more than 2 %
+#: (docs/results-benchmark.md).
 METRICS_GRID = 0.01
 #: The longest facet edge of the estimate and of the truth for the metrics [m]. A facet's chord lies e^2 / (8 R) off a
 #: surface of curvature radius R (0.4 mm at 1 cm over 3 cm); :func:`score_surface` moves its quadrature points and each
@@ -37,18 +38,19 @@ def estimate_metrics_3d(model, scene, resolution: float = METRICS_GRID, spacing:
 
     The estimate ``{mu_in = 0}`` is meshed by marching cubes on a grid of ``resolution`` over the exploration range
     grown by a cell, every vertex moved onto the level set and every facet split to edges of at most ``spacing``
-    (:func:`~torch_gpioius.surfaces.converged_level_mesh`), then scored by :func:`score_surface` (inside: mu < 0).
+    (:func:`~torch_gpioius.geometry.surfaces.converged_level_mesh`), then scored by :func:`score_surface` (inside:
+    mu < 0).
     Halving ``resolution`` moves every figure by under 2 % (tests/sim/test_forcefield.py; docs/results-benchmark.md,
     "The ruler"). With ``contacts``, also the Hausdorff distance of the touched pieces only
-    (:func:`torch_gpioius.surfaces.touched_pieces`). The uncertainty averages the variance over the vertices,
-    gathered in cells of :data:`U_CELL` (:func:`torch_gpioius.metrics.cell_quadrature`).
+    (:func:`torch_gpioius.geometry.surfaces.touched_pieces`). The uncertainty averages the variance over the vertices,
+    gathered in cells of :data:`U_CELL` (:func:`torch_gpioius.geometry.metrics.cell_quadrature`).
 
     Returns:
         :class:`Measurement` (``surface``: the estimated mesh in the range, or None); NaN metrics when the estimate
         has no surface in the range.
     """
-    from ..metrics import cell_quadrature, uncertainty_measure, vertex_quadrature
-    from ..surfaces import clip_mesh, converged_level_mesh, evaluate_grid, touched_pieces
+    from ..geometry.metrics import cell_quadrature, uncertainty_measure, vertex_quadrature
+    from ..geometry.surfaces import clip_mesh, converged_level_mesh, evaluate_grid, touched_pieces
 
     # the grid over the range and a cell around it: the estimate is judged in the range alone
     field = evaluate_grid(model, scene.bounds(resolution), resolution, 0, variance=False)
@@ -57,7 +59,7 @@ def estimate_metrics_3d(model, scene, resolution: float = METRICS_GRID, spacing:
         return Measurement(estimate=False)
 
     def mean(points: np.ndarray) -> np.ndarray:
-        from ..geometry import predict_mean_task
+        from ..geometry.differential import predict_mean_task
 
         with torch.no_grad():
             return predict_mean_task(model, torch.as_tensor(points, dtype=torch.float64), 0).detach().cpu().numpy()
@@ -101,7 +103,7 @@ def score_surface(scene, surface: trimesh.Trimesh | None, inside, observations: 
     surface (the method's estimate, or a baseline's: :mod:`torch_gpioius.baselines`).
 
     The surface and the true inner mesh, each split to facets of edges at most ``spacing``
-    (:func:`~torch_gpioius.metrics.mesh_quadrature`,
+    (:func:`~torch_gpioius.geometry.metrics.mesh_quadrature`,
     :meth:`~torch_gpioius.sim.ranged.RangedScene.inner_quadrature`), are restricted to the exploration range (the
     robot can neither touch nor be judged on what lies outside it, e.g. under the arm). Means, shares and the median
     are integrals over the surfaces (each facet's centroid weighted by its area), with exact point-to-triangle
@@ -111,13 +113,15 @@ def score_surface(scene, surface: trimesh.Trimesh | None, inside, observations: 
 
     Args:
         scene: a :class:`~torch_gpioius.sim.ranged.RangedScene`.
-        surface: the estimate (a mesh on it, e.g. :func:`~torch_gpioius.surfaces.converged_level_mesh`), or None.
+        surface: the estimate (a mesh on it, e.g. :func:`~torch_gpioius.geometry.surfaces.converged_level_mesh`), or
+            None.
         inside: ``inside(points (m, 3)) -> (m,) bool``, whether points lie inside the estimate (the bias' sign); None:
             the side of the closest facet of ``surface``, whose normals point out.
         observations: `(k, 3)` the surface observations [m] ("unseen": true surface more than 2 cm from all).
         spacing: the facets' longest edge [m].
         mean: ``mean(points (m, 3)) -> (m,)``, the field whose zero level ``surface`` lies on (its vertices'
-            gradients in ``surface.metadata["gradients"]``, :func:`~torch_gpioius.surfaces.converged_level_mesh`);
+            gradients in ``surface.metadata["gradients"]``,
+            :func:`~torch_gpioius.geometry.surfaces.converged_level_mesh`);
             with it the facets' chords are corrected to second order: each centroid is moved onto the level set, and
             each true point's distance is taken to the level set near its closest facet point (one Newton step
             along the gradient interpolated there), so that facets twice as long measure as finely. None: the facets
@@ -125,10 +129,10 @@ def score_surface(scene, surface: trimesh.Trimesh | None, inside, observations: 
 
     Returns:
         ``(the surface in the range, Hausdorff distance [m], shape metrics)``
-        (:func:`~torch_gpioius.metrics.surface_agreement`), or None when the surface has nothing in the range.
+        (:func:`~torch_gpioius.geometry.metrics.surface_agreement`), or None when the surface has nothing in the range.
     """
-    from ..metrics import OBSERVED_WITHIN, mesh_quadrature, surface_agreement
-    from ..surfaces import clip_mesh
+    from ..geometry.metrics import OBSERVED_WITHIN, mesh_quadrature, surface_agreement
+    from ..geometry.surfaces import clip_mesh
     from .meshes import MeshDistance
 
     grads = None if surface is None or mean is None else surface.metadata.get("gradients")
@@ -236,6 +240,6 @@ def _sup_points(mesh: trimesh.Trimesh, grads, mean, spacing: float, keep: np.nda
 def _onto_level(points: np.ndarray, grads: np.ndarray, mean, limit: float) -> np.ndarray:
     """Points on or near facets moved onto the level set of ``mean`` by one Newton step along ``grads`` `(n, 3)`,
     each step at most ``limit`` [m] long (a facet's sagitta is far shorter)."""
-    from ..surfaces import newton_onto_level
+    from ..geometry.surfaces import newton_onto_level
 
     return newton_onto_level(points, grads, np.asarray(mean(points), dtype=float), limit)[0]

@@ -66,7 +66,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._validation import KERNEL_LENGTH, NOISE_RANGE
+from ..core.validation import KERNEL_LENGTH, NOISE_RANGE
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -132,7 +132,7 @@ def resolve_mesh(ref: str, base: Path) -> Path:
         try:
             import pybullet_data
         except ImportError:
-            from .._extras import install_hint
+            from ..core.extras import install_hint
 
             raise ValueError(f"object.mesh: {ref!r} needs pybullet's data: {install_hint('shapes')}") from None
         path = Path(pybullet_data.getDataPath()) / ref[len("pybullet:"):]
@@ -323,7 +323,7 @@ def _setting_problem(key: str, value) -> str | None:
             return str(exc).removeprefix(f"ObservationPolicy.{key}: ")
         return None
     if key == "camera_error":
-        from ..sensors.pointcloud import CameraError
+        from ..sensors.simulated.camera import CameraError
 
         try:
             CameraError.parse(value)

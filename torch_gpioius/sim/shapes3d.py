@@ -17,7 +17,7 @@ import torch
 import trimesh
 from skimage import measure
 
-from .._validation import as_bounds
+from ..core.validation import as_bounds
 
 __all__ = ["capsule", "rounded_box", "smooth_union", "offset", "mesh_from_sdf", "MeshSDF", "SDF"]
 

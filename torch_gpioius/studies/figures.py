@@ -169,8 +169,8 @@ class Snapshot:
 def _map(ax, scene, model, path: np.ndarray, b: np.ndarray, resolution: float, title: str):
     """One Fig. 4 map: the variance, the true shapes, the estimate (touched pieces solid), the path, the
     observations; returns the image (for the colour bar)."""
-    from ..metrics import prior_variance
-    from ..surfaces import evaluate_grid, touched_pieces, zero_level_curves
+    from ..geometry.metrics import prior_variance
+    from ..geometry.surfaces import evaluate_grid, touched_pieces, zero_level_curves
 
     extent = [b[0, 0], b[1, 0], b[0, 1], b[1, 1]]
     f = evaluate_grid(model, b, resolution, 0)
@@ -269,9 +269,9 @@ def figure_3d_object(name: str, scene, pair: dict, path: Path) -> None:
     from matplotlib.colors import LinearSegmentedColormap
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    from ..geometry import predict_task
-    from ..metrics import prior_variance
-    from ..surfaces import clip_mesh
+    from ..geometry.differential import predict_task
+    from ..geometry.metrics import prior_variance
+    from ..geometry.surfaces import clip_mesh
 
     plt = _plt()
     fig = plt.figure(figsize=(13, 11))

@@ -241,7 +241,7 @@ def run_study(objects=("A", "B", "C", "D"), out: str | Path = "outputs/study2d",
 def _run_study(scenes: dict, objects, out: Path, max_steps: int, progress: bool, smoke: bool,
                explore_kwargs: dict) -> dict:
     """:func:`run_study`'s runs, figures and tables, written into ``out`` (its staging folder)."""
-    from .._progress import progress as reporter
+    from ..core.progress import progress as reporter
 
     t0 = time.perf_counter()
     traces: dict[str, dict[str, Trace]] = {}

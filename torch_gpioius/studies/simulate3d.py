@@ -229,6 +229,9 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
     (every per-step record), ``logs/<object>_<mode>.gpioius`` (exploration logs with the robot trace),
     ``summary.json`` and ``summary.md`` (table and the Sec. VI-B claims as measured).
 
+    Why this many parameters: it is ``gpioius simulate3d``'s body, one parameter per flag (the estimator's settings are
+    one, ``estimator``); the rest pass to :func:`torch_gpioius.explore`.
+
     Args:
         objects: names among E-H.
         out: output folder (created).
@@ -287,7 +290,7 @@ def run_study_3d(objects=("E", "F", "G", "H"), out: str | Path = "outputs/study3
 def _run_study_3d(scenes: dict, objects: list, modes, out: Path, max_travel: float, metrics_every: int,
                   progress: bool, smoke: bool, estimator, outer_tol: float | None, explore_kwargs: dict) -> dict:
     """:func:`run_study_3d`'s runs, figures and tables, written into ``out`` (its staging folder)."""
-    from .._progress import progress as reporter
+    from ..core.progress import progress as reporter
 
     (out / "logs").mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()

@@ -38,10 +38,15 @@ from .study_aggregate import (METRICS, MIN_SEEDS_TO_JUDGE, NOT_APPLICABLE_METRIC
                               failures_text, no_harm_margin)
 from .study_runs import (BASE_MODES, CONTACT_WITHIN, FRACTIONS, RunFileError, RunSpec, atomic_json,  # noqa: F401
                          finished, make_world, read_run_file, run_one, scene_failure_record, sweep_modes)
-from .study_runs import __getattr__  # noqa: F401 (WORLDS, DEFAULT_OBJECTS, MODES: from the registries)
 from .study_plan import with_loose, MAX_SEEDS, StudyPlan  # noqa: F401
+from . import study_plan, study_runs
 
-# WORLDS and MODES: the module's __getattr__, from the registries
+
+def __getattr__(name):
+    # WORLDS, DEFAULT_OBJECTS and MODES from the registries (study_runs), SweepSettings (0.2's StudyPlan) from the plan
+    return study_plan.__getattr__(name) if name == "SweepSettings" else study_runs.__getattr__(name)
+
+
 __all__ = ["run_sweep", "StudyPlan", "RunSpec", "run_one", "aggregate", "read_run_file", "RunFileError",  # noqa
            "MODES", "WORLDS", "FRACTIONS", "MAX_SEEDS", "BASE_MODES", "sweep_modes"]  # noqa: F822
 
@@ -109,12 +114,12 @@ def run_sweep(world: str = "planar", objects=None, modes=("visual-tactile", "tac
             and the end only (worlds with a travel budget; the fractions the summary reports, at a fraction of the
             cost: docs/performance.md); None: every 5 steps under a travel budget, every step elsewhere. One per
             folder.
-        camera_error: the simulated cameras' errors, a :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its
+        camera_error: the simulated cameras' errors, a :class:`~torch_gpioius.sensors.simulated.CameraError` or its
             text ("6mm,1deg"; "2x,20%holes"): each view of each run draws a rigid error of the extrinsic sizes from
             its seed, its depth noise scaled and pixels lost as the sensing terms say, and the run's record says
             what it applied (``camera_error``); None: none. The 3-D worlds; one per folder.
         camera_bound: the visual-tactile runs correct each view's capture from their contacts within this bound (a
-            :class:`~torch_gpioius.sensors.pointcloud.CameraError` or its text, "12mm,2deg";
+            :class:`~torch_gpioius.sensors.simulated.CameraError` or its text, "12mm,2deg";
             ``ObservationPolicy.camera_bound``; each record's ``camera_corrections`` says what each view was moved by);
             None: the captures as the calibration places them. One per folder.
         estimator: changes to each world's estimator settings: an
@@ -228,7 +233,7 @@ def _built_first(sweep: StudyPlan, todo: list[RunSpec]) -> list[RunSpec]:
 
 def _execute(sweep: StudyPlan, todo: list[RunSpec]) -> str:
     """Run ``todo`` on Ray or in-process; returns how (for the report)."""
-    from .._progress import progress as reporter
+    from ..core.progress import progress as reporter
 
     use_ray = sweep.backend == "ray" or (sweep.backend == "auto" and _ray_available()
                                         and (len(todo) > 1 or sweep.address))

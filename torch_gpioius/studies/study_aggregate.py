@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..metrics import SHAPE_METRICS
+from ..geometry.metrics import SHAPE_METRICS
 from .stats import median_interval, paired_difference
 from ..baselines import BASELINE_METRICS, BASELINES
 from .study_runs import FRACTIONS, RunSpec, read_run_file

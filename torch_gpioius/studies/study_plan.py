@@ -9,20 +9,15 @@ from dataclasses import dataclass, field
 from typing import Any
 from pathlib import Path
 
-from .._validation import as_device, as_float, as_noise
+from ..core.moved import renamed
+from ..core.validation import as_device, as_float, as_noise
 from ..kernels import KernelChoice
 from .study_runs import RunSpec, study_worlds, sweep_modes
 
 __all__ = ["StudyPlan", "MAX_SEEDS", "checked_metrics_every"]
 
 
-def __getattr__(name):
-    if name == "SweepSettings":         # renamed: "settings" are the estimator's
-        import warnings
-
-        warnings.warn("SweepSettings is StudyPlan now (settings are the estimator's)", DeprecationWarning, stacklevel=2)
-        return StudyPlan
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = renamed(__name__, {"SweepSettings": (__name__, "StudyPlan", "settings are the estimator's")})
 
 #: Most seeds a sweep accepts per object and mode (a study over more is a mistake, not a request).
 MAX_SEEDS = 10_000
@@ -41,7 +36,7 @@ def _kernel_choice(kernel):
         kernel = KernelChoice(kernel)
     if not isinstance(kernel, KernelChoice):
         raise ValueError(f"kernel: expected a kernel's name or a KernelChoice, got {type(kernel).__name__}")
-    from ..tolerances import tol
+    from ..core.tolerances import tol
 
     if kernel.lengthscale is not None:
         as_float(kernel.lengthscale, "lengthscale", lo=tol.theta_range[0], hi=tol.theta_range[1], positive=True,
@@ -93,7 +88,7 @@ class StudyPlan:
         :class:`~torch_gpioius.models.overrides.EstimatorOverrides` (the voxel, kernel, sigma^2, what is learned, the
         camera bound, then ``estimator``'s other changes), or None for none."""
         from ..models.overrides import EstimatorOverrides
-        from ..sensors.pointcloud import CameraError
+        from ..sensors.simulated.camera import CameraError
 
         labels = {}
         if self.camera_bound is not None:
@@ -185,14 +180,14 @@ class StudyPlan:
         kernel = _kernel_choice(kernel)
         metrics_every = checked_metrics_every(metrics_every)
         if camera_error is not None:
-            from ..sensors.pointcloud import CameraError
+            from ..sensors.simulated.camera import CameraError
 
             error = CameraError.parse(camera_error)
             if not hasattr(entry.cls, "with_camera_error"):
                 raise ValueError(f"camera_error: the {world} world's cameras take no simulated camera error")
             camera_error = str(error) if error else None
         if camera_bound is not None:
-            from ..sensors.pointcloud import CameraError
+            from ..sensors.simulated.camera import CameraError
 
             bound = CameraError.parse(camera_bound).check_bound()
             if not entry.presets or entry.dimension != 3:

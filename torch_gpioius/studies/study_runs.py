@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..metrics import SHAPE_METRICS
+from ..geometry.metrics import SHAPE_METRICS
 
 __all__ = ["BASE_MODES", "FRACTIONS", "CONTACT_WITHIN", "BUDGET_METRICS_EVERY", "sweep_modes", "RunSpec", "make_world",
            "run_one", "read_run_file", "RunFileError", "scene_failure_record", "atomic_json", "finished",
@@ -54,10 +54,6 @@ def __getattr__(name):
         return {w: world_entry(w).object_names for w in study_worlds()}
     if name == "MODES":
         return sweep_modes()
-    if name == "SweepSettings":         # renamed StudyPlan (sweep re-exports this module's attributes)
-        from . import study_plan
-
-        return study_plan.__getattr__(name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
@@ -306,11 +302,11 @@ def read_run_file(path: str | Path) -> dict:
 
 def run_one(spec: RunSpec) -> dict:
     """Run one (object, mode, seed) and write its result file; returns the result (also when already on disk)."""
-    from ..registry import load_plugins
+    from ..core.registry import load_plugins
 
     load_plugins()                  # a Ray worker's process: the plugins' worlds, kernels and policies by name
     from ..session import explore
-    from ..threads import torch_threads
+    from ..core.threads import torch_threads
 
     out = Path(spec.out)
     result_path = out / "runs" / f"{spec.key}.json"

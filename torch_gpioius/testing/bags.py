@@ -29,6 +29,9 @@ def example_bag_messages(*, center=(-0.55, -0.109, 0.0), radius: float = 0.08, c
     NaN where rays miss, an ``rgb`` field and row padding). Used by the tests, the rosbag tutorial and as a
     template for what :func:`import_bag` expects.
 
+    Why this many parameters: each is one property of the synthetic recording (the body, the cover, the fingertip, the
+    rates, the force, the image) that a test of the importer varies alone; all keywords with defaults.
+
     Returns:
         ``(messages, truth)``; ``truth`` has ``center`` `(3,)`, ``radius``, ``cover_radius``, ``tip_radius``,
         ``tool_offset``, ``T_base_optical`` `(4, 4)` and ``contact_path`` `(k, 3)` (true contact points) [m].

@@ -103,7 +103,7 @@ def convex_parts(mesh: trimesh.Trimesh, threshold: float = 0.05, max_parts: int 
     try:
         import coacd
     except ImportError as exc:   # pragma: no cover - depends on the environment
-        from ..._extras import install_hint
+        from ...core.extras import install_hint
 
         raise ImportError(f"a mesh body in the MuJoCo world needs 'coacd': {install_hint('mujoco')}") from exc
     key = hashlib.sha256(np.ascontiguousarray(mesh.vertices, dtype=np.float64).tobytes()
@@ -188,7 +188,7 @@ class MeshBody:
         return out
 
     def surface_samples(self, spacing: float) -> np.ndarray:
-        from ...surfaces import surface_samples
+        from ...geometry.surfaces import surface_samples
 
         return surface_samples(self.mesh, spacing)
 

@@ -214,6 +214,10 @@ def make_cover(prims, kind: str, base: tuple, *, gap: float = 0.008, slack: floa
                pin: bool = True) -> CoverMesh:
     """Shrink-wrap a base mesh (:func:`tube_base` or :func:`cap_base`) onto ``prims`` as a cover of ``kind``.
 
+    Why this many parameters: the cloth's shape (``gap``, ``slack``, ``thickness``, ``radius``) and its material
+    (``young``, ``poisson``, ``damping``, ``density``, ``pin``) are MuJoCo's flex attributes one for one, each varied by
+    the cover kinds and the studies.
+
     Args:
         prims: the inner object: a list of primitives or a body (:mod:`~torch_gpioius.sim.mujoco.bodies`).
         kind: "tight", "loose" or "foam".
@@ -231,7 +235,7 @@ def make_cover(prims, kind: str, base: tuple, *, gap: float = 0.008, slack: floa
     Raises:
         ValueError: an unknown kind or a non-positive distance.
     """
-    from ..._validation import as_float
+    from ...core.validation import as_float
 
     if kind not in COVER_KINDS:
         raise ValueError(f"cover: must be one of {COVER_KINDS}, got {kind!r}")

@@ -301,7 +301,7 @@ class MujocoDepthCamera(PointCloudSource):
 
     def __init__(self, physics: MujocoPhysics, intrinsics: PinholeCamera, T_base_camera, *, noise_a: float = 0.0,
                  noise_b: float = 0.0, seed: int = 0, error=None, error_key=()) -> None:
-        from ...sensors.pointcloud import CameraError
+        from ...sensors.simulated.camera import CameraError
 
         self.physics, self.intrinsics = physics, intrinsics
         self.T_base_camera = np.asarray(T_base_camera, dtype=np.float64)
@@ -312,7 +312,7 @@ class MujocoDepthCamera(PointCloudSource):
         self.applied_error = self.error.drawn(seed, error_key)
 
     def capture(self) -> PointCloud:
-        from ...sensors.pointcloud import lost_blocks, sensed_points
+        from ...sensors.simulated.camera import lost_blocks, sensed_points
 
         lost = lost_blocks(self.error, self.intrinsics, self._rng)
         mj = self.physics.mj

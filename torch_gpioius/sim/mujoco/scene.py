@@ -4,7 +4,7 @@ mesh), and a cloth or foam cover that the fingertip pushes aside, on MuJoCo's co
 Everything the loop uses goes through the interfaces of :mod:`torch_gpioius.exploration.world`: the robot
 (:class:`MujocoUR5`, behind the same ``SafetyGate`` as every backend), the force sensor (:class:`MujocoForceSensor`),
 the camera (:class:`MujocoDepthCamera`, seeing the settled cover) and the unchanged
-:class:`torch_gpioius.contact.ContactController`. Metrics use the exact signed distance of the body
+:class:`torch_gpioius.exploration.contact.ContactController`. Metrics use the exact signed distance of the body
 (:mod:`~torch_gpioius.sim.mujoco.bodies`: the primitives' union, or the mesh itself).
 """
 
@@ -19,7 +19,7 @@ from ...models.estimator import EstimatorSettings
 from ...exploration.stopping import TravelBudget
 from ...exploration.world import (ContactTruth, ExplorationDefaults, Hardware, Measurement, geometry_hash,
                                   perturbed_approaches)
-from ..._validation import as_bounds
+from ...core.validation import as_bounds
 from .covers import COVER_KINDS, CoverMesh, cap_base, cover_flexcomp, make_cover, shrink_wrap, tube_base
 from .bodies import MeshBody, PrimitiveBody, as_body
 from .primitives import as_primitives
@@ -40,7 +40,7 @@ MAX_COVER_VERTICES = 20_000
 
 
 def _limited(value, name: str) -> float:
-    from ..._validation import as_float
+    from ...core.validation import as_float
 
     lo, hi, unit = SCENE_LIMITS[name]
     return as_float(value, name, lo=lo, hi=hi, unit=unit)
@@ -54,7 +54,7 @@ def _require_mujoco():
     try:
         import mujoco  # noqa: F401
     except ImportError as exc:   # pragma: no cover - depends on the environment
-        from ..._extras import install_hint
+        from ...core.extras import install_hint
 
         raise ImportError(f"the MuJoCo world needs the 'mujoco' package: {install_hint('mujoco')}") from exc
 
@@ -103,7 +103,7 @@ class MujocoScene(RangedScene):
                  seed: int = 0, sensor_noise: float = 0.02, timestep: float = 0.008, settle_time: float = 1.0,
                  camera_scale: float = 0.5, defaults: ExplorationDefaults | None = None,
                  tool_length: float = 0.05, tip_radius: float = 0.004, views="paper", camera_error=None) -> None:
-        from ...sensors.pointcloud import CameraError
+        from ...sensors.simulated.camera import CameraError
         from ..presets import as_views
 
         _require_mujoco()
@@ -349,7 +349,7 @@ class MujocoScene(RangedScene):
         return self._defaults
 
     def hardware(self) -> Hardware:
-        from ...contact import ContactConfig, ContactController
+        from ...exploration.contact import ContactConfig, ContactController
         from .hardware import MujocoForceSensor, MujocoPhysics
 
         physics = MujocoPhysics(self.model)
@@ -458,19 +458,19 @@ class MujocoScene(RangedScene):
         Raises:
             ValueError: a malformed error.
         """
-        from ...sensors.pointcloud import CameraError
+        from ...sensors.simulated.camera import CameraError
 
         return self._copy(self.start, self.direction, self.seed, camera_error=CameraError.parse(error))
 
     def _error_key(self) -> tuple:
-        from ...sensors.pointcloud import error_key
+        from ...sensors.simulated.camera import error_key
 
         return error_key(self.name)
 
     def camera_errors(self) -> dict[str, dict]:
         """The extrinsic error each view of this scene (its seed) applies, by view name; empty without one (drawn as
         the cameras draw it, without building them)."""
-        from ...sensors.pointcloud import view_errors
+        from ...sensors.simulated.camera import view_errors
 
         return view_errors(self.camera_error, self.views, self.seed, self._error_key())
 
@@ -484,13 +484,13 @@ class MujocoScene(RangedScene):
         return scene
 
     def tactile_pad(self, physics, robot, sensor):
-        """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sim.tactile.SimulatedGelPad`): it faces the
-        fingertip's noiseless contact force and sees the body through the cloth where the simulated cloth lies
+        """A DIGIT-like gel pad at the fingertip (:class:`~torch_gpioius.sensors.simulated.gelpad.SimulatedGelPad`): it
+        faces the fingertip's noiseless contact force and sees the body through the cloth where the simulated cloth lies
         between pad and body (rays against the cover's current faces), or the cover alone where the cover carries
         the force. Pinched cloth reads as its fabric thickness (1 mm); the simulated cloth counts as pinched within
         its collision layer (two element radii) + 1 mm of the body, as :meth:`contact_truth` counts it; foam,
         thicker than the gel, is read as foam."""
-        from ..tactile import SimulatedGelPad
+        from ...sensors.simulated.gelpad import SimulatedGelPad
 
         lift = self.cover.radius  # mj_rayFlex meets the faces' mid-surface; the cloth's face is this in front
 
@@ -531,7 +531,7 @@ class MujocoScene(RangedScene):
 
     def inner_outer_hausdorff(self, spacing: float = 0.003) -> float:
         """Hausdorff distance [m] between the inner surface and the settled cover (in the exploration range)."""
-        from ...metrics import hausdorff_distance
+        from ...geometry.metrics import hausdorff_distance
 
         verts = self.cover_vertices()
         return hausdorff_distance(self.inner_samples_in_range(spacing), verts[self.in_range(verts)])

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from torch_gpioius.cli import main
-from torch_gpioius.threads import max_threads, torch_threads
+from torch_gpioius.core.threads import max_threads, torch_threads
 
 
 def test_max_threads_is_the_cores_this_process_may_use():

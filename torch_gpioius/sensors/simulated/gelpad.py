@@ -34,7 +34,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..sensors.tactile import TactileCalibration, TactileReading
+from ..tactile import TactileCalibration, TactileReading
 
 __all__ = ["SimulatedGelPad", "SIM_PAD_CALIBRATION", "pad_pose"]
 

@@ -1,4 +1,4 @@
-"""The one way to register an extension by name (torch_gpioius.registry): names, aliases in any case where asked,
+"""The one way to register an extension by name (torch_gpioius.core.registry): names, aliases in any case where asked,
 conflicts refused by name, capabilities declared and filtered on, built-in modules imported on first use, and
 plugins that reach the command line through GPIOIUS_PLUGINS."""
 
@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import pytest
 
-from torch_gpioius.registry import Entry, Registry
+from torch_gpioius.core.registry import Entry, Registry
 
 
 @dataclass
@@ -67,7 +67,7 @@ class PluginIMQ(InverseMultiquadricKernel):
 def test_a_plugin_named_in_the_environment_reaches_the_command_line(tmp_path, monkeypatch, capsys):
     """Issue 53: a registration reached the command line only from Python. GPIOIUS_PLUGINS (or an entry point of
     torch_gpioius.plugins) names the module that registers; `gpioius registered` and `--kernel` then know it."""
-    from torch_gpioius import registry
+    from torch_gpioius.core import registry
     from torch_gpioius.cli import main
 
     (tmp_path / "my_lab_plugin.py").write_text(PLUGIN)
@@ -125,7 +125,7 @@ def test_a_plugin_that_would_replace_a_builtin_break_every_run_or_exit_is_refuse
     gone, K_t doubled, existing files read with it); a kernel that is not positive definite was accepted and every
     run of a study then failed; a plugin calling sys.exit(3) ended gpioius with status 3 and no word. Each is now
     refused when the plugin is imported, with the plugin and the reason named, and the built-in stays."""
-    from torch_gpioius import registry
+    from torch_gpioius.core import registry
     from torch_gpioius.cli import main
     from torch_gpioius.kernels import KERNELS, Matern52, kernel_named
 

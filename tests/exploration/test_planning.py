@@ -6,7 +6,7 @@ import torch
 
 import torch_gpioius as tg
 from tests import reference as ref
-from torch_gpioius.planning import RangePenalty, ZeroPenalty, plan_direction
+from torch_gpioius.exploration.planning import RangePenalty, ZeroPenalty, plan_direction
 
 
 def _half_circle_model():

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from kinematics import UR5, SimulatedUR5
-from torch_gpioius.contact import ContactConfig, ContactController, ContactFault
+from torch_gpioius.exploration.contact import ContactConfig, ContactController, ContactFault
 from torch_gpioius.sensors import ForceFieldContact, SimulatedForceSensor, SphereSDF
 
 Q0 = [0.0, -1.2, 1.5, -1.9, -1.57, 0.0]

@@ -13,7 +13,7 @@ from typing import Callable, Mapping, Protocol
 import numpy as np
 import torch
 
-from .base import ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorTimeout
+from ..base import ChecksumStorm, ForceReading, ForceSensor, SensorDisconnected, SensorTimeout
 
 __all__ = ["SignedDistance", "SphereSDF", "ForceFieldContact", "SimulatedForceSensor", "FAULTS"]
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from .geometry import surface_geometry
+from ..geometry.differential import surface_geometry
 
 __all__ = ["ZeroPenalty", "RangePenalty", "PlannedStep", "plan_direction"]
 
@@ -131,7 +131,7 @@ def plan_direction(model, x, step: float = 0.01, penalty=None, task: int = 0,
     Raises:
         ValueError: ``step`` is not a positive finite length of at most 1 m.
     """
-    from ._validation import as_length
+    from ..core.validation import as_length
 
     step = as_length(step, "step", hi=1.0)          # NaN gave a NaN direction, 0 a zero one
     penalty = penalty if penalty is not None else ZeroPenalty()

@@ -2,7 +2,7 @@
 
 import io
 
-from torch_gpioius import _progress
+from torch_gpioius.core import progress as _progress
 
 
 def test_lines_say_what_is_done_and_name_the_run_that_just_finished(monkeypatch):

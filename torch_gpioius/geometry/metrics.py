@@ -8,7 +8,7 @@ import numpy as np
 import torch
 import trimesh
 
-from .geometry import predict_task
+from .differential import predict_task
 from .polylines import distance_to_segments, resample_polyline, segments
 
 __all__ = ["resample_polyline", "uncertainty_measure", "prior_variance", "hausdorff_distance", "directed_hausdorff",
@@ -210,7 +210,7 @@ def _median(values, weights: np.ndarray) -> float:
 
 def vertex_quadrature(mesh: trimesh.Trimesh) -> tuple[np.ndarray, np.ndarray]:
     """A quadrature on a mesh's vertices: ``(vertices (n, 3), weights (n,))``, each vertex weighted by a third of its
-    facets' areas [m^2]. For a mesh whose vertices lie on a curved surface (:func:`~torch_gpioius.surfaces.
+    facets' areas [m^2]. For a mesh whose vertices lie on a curved surface (:func:`~torch_gpioius.geometry.surfaces.
     converged_level_mesh`), the points are on it, where facets' centroids lie a sagitta off it."""
     weights = np.zeros(len(mesh.vertices))
     np.add.at(weights, np.asarray(mesh.faces).ravel(), np.repeat(np.asarray(mesh.area_faces) / 3.0, 3))

@@ -16,7 +16,7 @@ from typing import Any
 
 import torch
 
-from .sensors.base import ForceReading, ForceSensor, SensorError
+from ..sensors.base import ForceReading, ForceSensor, SensorError
 
 __all__ = ["ContactConfig", "ContactController", "ContactFault", "ContactResult"]
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from torch_gpioius.exploration.patches import patch_observations
-from torch_gpioius.sim.tactile import SimulatedGelPad
+from torch_gpioius.sensors.simulated.gelpad import SimulatedGelPad
 
 T = 5e-4            # cloth thickness [m]
 FORCE = 2.0         # [N] along +z: the pad presses 1 mm (2000 N/m)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor
 
-from .tolerances import tol
+from ..core.tolerances import tol
 
 __all__ = ["SurfaceGeometry", "surface_geometry", "predict_task"]
 

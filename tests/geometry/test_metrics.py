@@ -4,7 +4,7 @@ import torch
 import trimesh
 
 import torch_gpioius as tg
-from torch_gpioius.metrics import hausdorff_distance, resample_polyline, uncertainty_measure
+from torch_gpioius.geometry.metrics import hausdorff_distance, resample_polyline, uncertainty_measure
 
 
 def circle(r, n=200, c=(0.0, 0.0)):
@@ -75,7 +75,7 @@ def test_relative_uncertainty_uses_the_task_prior_variance():
 def test_surface_agreement_on_concentric_spheres():
     """An estimate grown by delta everywhere: Chamfer delta, F-score 1 at thresholds >= delta and 0 below, bias
     +delta (the estimate outside), every sample observed; shrunk, the bias is -delta."""
-    from torch_gpioius.metrics import surface_agreement
+    from torch_gpioius.geometry.metrics import surface_agreement
 
     delta = 0.004
     d = np.full(500, delta)
@@ -101,7 +101,7 @@ def test_surface_agreement_on_concentric_spheres():
 
 def test_a_3d_run_records_the_fields_metrics_consistently():
     import torch_gpioius as tg
-    from torch_gpioius.metrics import SHAPE_METRICS
+    from torch_gpioius.geometry.metrics import SHAPE_METRICS
     from torch_gpioius.sim.forcefield import sphere_scene
 
     trace = tg.explore(sphere_scene(), max_travel=0.03, metrics_every=100)
@@ -118,7 +118,7 @@ def test_a_3d_run_records_the_fields_metrics_consistently():
 def test_curve_shape_metrics_on_concentric_circles():
     """The 2-D form: an estimate 4 mm outside a true circle everywhere. Chamfer 4 mm, F-score 0 at 1 mm and 1 from
     5 mm on, bias +4 mm (the estimate outside: the model's mean is negative on the true circle), all observed."""
-    from torch_gpioius.metrics import curve_shape_metrics
+    from torch_gpioius.geometry.metrics import curve_shape_metrics
 
     a = np.linspace(0, 2 * np.pi, 721)
     circle = lambda r: np.stack([r * np.cos(a), r * np.sin(a)], -1)        # noqa: E731  (closed: 0 and 2 pi)

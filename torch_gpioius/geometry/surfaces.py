@@ -9,8 +9,8 @@ import torch
 import trimesh
 from skimage import measure
 
-from ._validation import as_bounds
-from .geometry import predict_mean_task, predict_task
+from ..core.validation import as_bounds
+from .differential import predict_mean_task, predict_task
 from .polylines import distance_to_segments, segments
 
 __all__ = ["data_bounds", "grid_resolution", "GridField", "evaluate_grid", "zero_level_curves", "zero_level_mesh",
@@ -29,7 +29,7 @@ def grid_resolution(resolution, dim: int, default_2d: float = 0.005, default_3d:
     Raises:
         ValueError: zero, negative, NaN or out of range (0 used to mean the default silently).
     """
-    from ._validation import as_float
+    from ..core.validation import as_float
 
     if resolution is None:
         return default_2d if dim == 2 else default_3d
@@ -77,7 +77,7 @@ def evaluate_grid(model, bounds, resolution: float, task: int = 0, variance: boo
     Raises:
         ValueError: a bad box, a non-positive resolution, or a grid of more than ``MAX_GRID_POINTS`` nodes.
     """
-    from ._validation import as_float
+    from ..core.validation import as_float
     b = as_bounds(bounds, model.dim)
     resolution = as_float(resolution, "resolution", positive=True, unit="m")
     counts = [max(2, int(np.ceil((hi - lo) / resolution)) + 1) for lo, hi in b.T]
@@ -180,7 +180,7 @@ def project_to_level(model, points, task: int = 0, *, max_step: float, iteration
         ``(projected (n, d), residual (n,))``: the points moved, and each one's ``|mu| / |g|`` there [m] (inf where
         the gradient vanishes: such a point is left where it was); with ``gradients``, also ``g`` `(n, d)` [1/m].
     """
-    from .geometry import predict_mean_task
+    from .differential import predict_mean_task
 
     pts = np.array(points, dtype=np.float64, copy=True)
     residual = np.full(len(pts), np.inf)
@@ -252,7 +252,7 @@ def _settle(model, points: np.ndarray, grads: np.ndarray, task: int, max_step: f
     Returns:
         ``(points (n, d), residual (n,))``: the points moved, and ``|mu| / |g|`` [m] before the step (the distance
         they were moved by, to first order)."""
-    from .geometry import predict_mean_task
+    from .differential import predict_mean_task
 
     x0 = model.train_inputs[0]
     out = np.array(points, dtype=np.float64, copy=True)
