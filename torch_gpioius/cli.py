@@ -181,12 +181,14 @@ def _fit_report(args: argparse.Namespace, info: dict) -> None:
         print("no outer observations: fitted a tactile-only GPIS")
     print(f"log marginal likelihood = {info['mll']:.4f}")
     if info.get("camera_corrections"):
+        from .sensors.extrinsics import misfit_text
+
         c = info["camera_corrections"]
         print(f"captures corrected from the contacts (within {c['bound']['translation_mm']:g} mm and "
               f"{c['bound']['rotation_deg']:g} deg): " + "; ".join(
                   f"{k}: {e['size_mm']:.1f} mm, {e['angle_deg']:.2f} deg ({e['contacts']} contacts under it)"
                   for k, e in enumerate(c["captures"]))
-              + f"; the contacts' misfit {c['misfit_before_mm']:.1f} -> {c['misfit_after_mm']:.1f} mm")
+              + f"; {misfit_text(c)}")
     if info.get("converged") is False:
         print(f"  ({info['fit_note']})")
     if not info["estimate"]:
@@ -269,7 +271,7 @@ def _import_bag(args: argparse.Namespace) -> int:
                     settings=_estimator_overrides(args).apply(EstimatorSettings.preset(args.settings)),
                     crop=None if crop is None else [crop[:3], crop[3:]],
                     time_window=window, tactile_calibration=calibration, tactile_transform=args.tactile_transform,
-                    camera_bound=args.camera_bound)
+                    camera_bound=args.camera_bound, camera_mount=args.camera_mount)
     path = save_dataset(ds, out, overwrite=args.force)
     c = ds.meta["counts"]
     frames = ", ".join(ds.meta["camera_frames"]) or "none"
@@ -283,12 +285,15 @@ def _import_bag(args: argparse.Namespace) -> int:
               f"{c['patch_surface']} surface + {c['patch_free_space']} free-space points "
               f"({c['pad_frames_out_of_contact']} out of contact, {c['pad_frames_untouched']} with no pixel pressed)")
     if "camera_corrections" in ds.meta:
+        from .sensors.extrinsics import misfit_text
+
         record = ds.meta["camera_corrections"]
-        moved = record["captures"][0]
-        print(f"camera: moved {moved['size_mm']:.1f} mm and {moved['angle_deg']:.2f} deg to agree with the touches "
-              f"({moved['contacts']} contacts under its view; misfit {record['misfit_before_mm']} -> "
-              f"{record['misfit_after_mm']} mm)" if record["enough"] else
-              "camera: not corrected (too few contacts under its view); as the calibration places it")
+        moved = record.get("mount") or record["captures"][0]
+        under = sum(c["contacts"] for c in record["captures"])
+        who = f"camera on {record['mount_frame']}" if record.get("mount") else "camera"
+        print(f"{who}: moved {moved['size_mm']:.1f} mm and {moved['angle_deg']:.2f} deg to agree with the touches "
+              f"({under} contacts under its view; {misfit_text(record)})" if record["enough"] else
+              f"{who}: not corrected (too few contacts under its view); as the calibration places it")
     print(f"wrote {path}; next: gpioius fit {path} --out outputs/fit")
     return 0
 
@@ -840,6 +845,9 @@ def _add_import_bag(sub, common, fmt) -> None:
                      help="correct the camera's pose (its calibration or tf) from the contacts, by at most these "
                           "sizes, e.g. 6mm,1deg: a camera fixed in the base frame (the dataset records the "
                           "correction; a large one is warned of); default: as the calibration places it")
+    bag.add_argument("--camera-mount", default=None, metavar="FRAME",
+                     help="with --camera-bound: the tf frame of the link the camera rides on (a wrist camera's tool0): "
+                          "one hand-eye correction in that frame for every cloud; default: fixed in the base frame")
     bag.add_argument("--tool-offset", default="0 0 0", help="fingertip centre in the flange frame 'x y z' [m]")
     bag.add_argument("--tip-radius", type=float, default=0.0, help="fingertip radius [m] (contact = centre - r F/|F|)")
     bag.add_argument("--contact-force", type=float, default=1.0, help="|F| of a contact [N] (paper: 1.0)")

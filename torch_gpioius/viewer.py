@@ -706,11 +706,12 @@ class RunViewer:
                 found, at = run.params[step]["camera_corrections"], step
         if not isinstance(found, dict):
             return ""
+        from .sensors.extrinsics import misfit_text
+
         views = ", ".join(f"{c['size_mm']:.1f} mm {c['angle_deg']:.2f} deg" for c in found.get("captures", []))
         when = "" if at is None else f" at step {at}"
         return (f"  \ncamera captures corrected from the touches{when}: {views} "
-                f"(the contacts' misfit {found.get('misfit_before_mm', math.nan):.1f} -> "
-                f"{found.get('misfit_after_mm', math.nan):.1f} mm)")
+                f"({misfit_text(found)})")
 
     def _no_estimate(self, surface) -> str:
         """A line saying that this step's estimate has no surface (an empty picture must not look like a bug)."""

@@ -151,3 +151,60 @@ def test_the_table_the_captures_see_fixes_the_rotations_the_contacts_leave_loose
     with pytest.raises(ValueError, match="support"):
         correct_captures(captures, contacts, normals, max_translation=0.012, max_rotation=0.03,
                          support=((0.0, 0.0, 0.0), table))
+
+
+def _rigid(rotvec, translation) -> np.ndarray:
+    from torch_gpioius.sensors.pointcloud import rotation_matrix
+
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = rotation_matrix(rotvec), translation
+    return T
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_wrist_cameras_captures_share_one_correction_of_its_mount(box, seed):
+    """One camera on the arm's flange, its hand-eye transform off by 6 mm and a degree in the flange's frame, takes
+    the box from three flange poses: each capture is off by that one error as the base sees it then. With ``mount``
+    the captures share one correction in the flange's frame, which undoes the error to what the contacts can tell,
+    and each capture's is that one conjugated by its flange pose."""
+    outer, contacts, normals = box
+    rng = np.random.default_rng(seed)
+    mount_camera = _rigid(np.zeros(3), [0.03, 0.0, 0.02])            # the camera on the flange, as it is
+    d, a = rng.standard_normal(3), rng.standard_normal(3)
+    error = _rigid(math.radians(1.0) * a / np.linalg.norm(a), 0.006 * d / np.linalg.norm(d))   # in the flange frame
+    mounts, captures, truths = [], [], []
+    for k, eye in enumerate(EYES):
+        T_bc = look_at(eye, C)
+        M = T_bc @ np.linalg.inv(mount_camera)                        # the flange when the camera looks at C
+        cam = SimulatedDepthCamera(outer, PinholeCamera.kinect_v2(0.5), T_bc, noise_a=0.0015, noise_b=0.0015,
+                                   seed=[seed, k])
+        true = cam.capture()
+        G = M @ error @ np.linalg.inv(M)                              # the calibration's error as the base sees it
+        given = true.points @ G[:3, :3].T + G[:3, 3]
+        captures.append(PointCloud(given, G[:3, :3] @ true.origin + G[:3, 3]))
+        mounts.append(M)
+        truths.append(G)
+    found = correct_captures(captures, contacts, normals, max_translation=0.012, max_rotation=math.radians(2),
+                             gap=GAP, mount=mounts)
+    assert found.enough and found.mount is not None and found.mount.contacts >= 20
+    left = []
+    for G, M, c in zip(truths, mounts, found.captures):
+        seen = G[:3, :3] @ C + G[:3, 3]                               # the body's middle as the capture reports it
+        left.append(float(np.linalg.norm(c.apply(seen[None])[0] - C)))
+        # each capture's correction is the mount's, seen from the base through the flange's pose then
+        mount_origin = np.linalg.inv(M)[:3, :3] @ c.origin + np.linalg.inv(M)[:3, 3]
+        probe = rng.normal(size=(5, 3)) * 0.05 + C
+        in_mount = (probe - M[:3, 3]) @ M[:3, :3]
+        moved = M[:3, :3] @ found.mount.apply(in_mount).T + M[:3, 3][:, None]
+        assert np.allclose(c.apply(probe), moved.T, atol=1e-9)
+        assert np.allclose(mount_origin, found.mount.origin, atol=1e-9)
+    before = [float(np.linalg.norm(G[:3, :3] @ C + G[:3, 3] - C)) for G in truths]
+    assert min(before) > 0.005 and max(left) < 0.004, (before, left)
+    assert found.mount.size <= 0.012 and found.mount.angle <= math.radians(2)
+    record = found.as_record()
+    assert record["mount"]["contacts"] == found.mount.contacts and len(record["captures"]) == 3
+    with pytest.raises(ValueError, match=r"mount must be \(3, 4, 4\)"):
+        correct_captures(captures, contacts, normals, max_translation=0.012, max_rotation=0.03, mount=mounts[:2])
+    with pytest.raises(ValueError, match="rigid transform"):
+        correct_captures(captures, contacts, normals, max_translation=0.012, max_rotation=0.03,
+                         mount=[2 * m for m in mounts])

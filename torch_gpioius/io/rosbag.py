@@ -393,7 +393,7 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
                contact_force: float = 1.0, contact_spacing: float = 0.005, max_gap: float = 0.1,
                joint_names: Sequence[str] | None = None, crop=None, time_window=None,
                max_joint_speed: float = UR5_MAX_JOINT_SPEED, tactile_calibration=None, tactile_transform=None,
-               patch=None, camera_bound=None, **deprecated) -> Dataset:
+               patch=None, camera_bound=None, camera_mount: str | None = None, **deprecated) -> Dataset:
     """Read a ROS 2 bag into a :class:`Dataset` that ``gpioius fit`` / ``replay`` and :func:`load_dataset` accept.
 
     Args:
@@ -433,9 +433,14 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
             contacts (along the measured forces) within that bound before they are labelled
             (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`, as ``gpioius fit --camera-bound`` corrects a
             user's files); ``meta["camera_corrections"]`` records it and a correction beyond half the bound is warned
-            of. For a camera fixed in the base frame (the paper's Kinect): one that moves with the arm (its pose
-            changing between clouds) is refused, since its error is the hand-eye transform's, not one capture's.
-            None: the clouds as the calibration places them.
+            of. For a camera fixed in the base frame (the paper's Kinect); one that rides on the arm needs
+            ``camera_mount``. None: the clouds as the calibration places them.
+        camera_mount: with ``camera_bound``, the tf frame of the link a camera rides on (a wrist camera's ``tool0``
+            or ``flange``): its error is then its hand-eye transform's, one in that frame for every cloud, and the
+            clouds taken from several of the link's poses (at most :data:`MOUNT_CAPTURES` of them, spread over the
+            recording) correct it together; every cloud then moves by it as the link placed it. The record says
+            ``mount_frame`` and the ``mount``'s correction. None: a camera fixed in the base frame (clouds whose pose
+            changes between them are refused, naming this).
         **deprecated: ``policy`` (an :class:`~torch_gpioius.models.labels.ObservationPolicy` in place of the
             settings' labels), ``kernel`` and ``noise`` (stored in the header for the fit), for one release: give
             ``settings=EstimatorOverrides(policy=..., kernel=..., noise=...)``.
@@ -476,7 +481,7 @@ def import_bag(bag: str | os.PathLike, *, settings=None, topics: BagTopics | Non
                            crop=crop, time_window=time_window,
                            max_joint_speed=max_joint_speed, tactile_calibration=tactile_calibration,
                            tactile_transform=tactile_transform, patch=patch, settings=settings,
-                           camera_bound=camera_bound)
+                           camera_bound=camera_bound, camera_mount=camera_mount)
     reader = _open(s.path)
     try:
         if not list(reader.connections):
@@ -521,11 +526,13 @@ class _BagImport:
     ur5: object
     estimator: object = None
     camera_bound: object = None          # a CameraError, or None
+    camera_mount: str | None = None      # the tf frame a camera rides on, or None (fixed in the base frame)
 
     @classmethod
     def checked(cls, bag, *, topics, base_frame, camera_transform, tool_offset, tip_radius, contact_force,
                 contact_spacing, max_gap, joint_names, policy, crop, kernel, noise, time_window, max_joint_speed,
-                tactile_calibration, tactile_transform, patch, settings=None, camera_bound=None) -> "_BagImport":
+                tactile_calibration, tactile_transform, patch, settings=None, camera_bound=None,
+                camera_mount=None) -> "_BagImport":
         from kinematics.dh import UR5_JOINT_NAMES
         from kinematics.ur5 import UR5
 
@@ -583,9 +590,20 @@ class _BagImport:
                 camera_bound = CameraError.parse(camera_bound).check_bound()
             except ValueError as exc:
                 raise ValueError(f"import_bag: {exc}") from None
+        if camera_mount is not None:
+            if not isinstance(camera_mount, str) or not camera_mount.strip("/ "):
+                raise ValueError(f"import_bag: camera_mount must name a tf frame, got {camera_mount!r}")
+            if camera_bound is None:
+                raise ValueError("import_bag: camera_mount names the link whose camera camera_bound corrects; give "
+                                 "camera_bound too")
+            if T_fixed is not None:
+                raise ValueError("import_bag: camera_mount takes the camera's poses from tf (the link's, then the "
+                                 "camera's on it); camera_transform fixes one pose in the base frame: give one")
+            camera_mount = camera_mount.strip("/ ")
         return cls(Path(bag), topics, base_frame.lstrip("/"), T_fixed, tuple(tool_offset), tip_radius, contact_force,
                    contact_spacing, max_gap, names, policy, crop, kernel, noise, window, max_joint_speed,
-                   tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset), estimator, camera_bound)
+                   tactile_calibration, T_pad, patch, UR5(tool_offset=tool_offset), estimator, camera_bound,
+                   camera_mount)
 
     def in_window(self, t: float, t_first: float) -> bool:
         return self.window is None or t_first + self.window[0] <= t <= t_first + self.window[1]
@@ -709,49 +727,87 @@ def _clouds(reader, s: _BagImport, tf, t_first: float):
 
 #: The voxel [m] the clouds are averaged into before their capture is corrected (:func:`_camera_correction`).
 CORRECTION_VOXEL = 0.005
+#: A camera on a moving link: at most this many of its clouds, spread over the recording, fit its one correction (each
+#: is a capture; their overlaps are compared pairwise), which then moves every cloud.
+MOUNT_CAPTURES = 12
+
+
+def _mount_pose(s: _BagImport, tf, t: float, where: str) -> np.ndarray:
+    """``T_base_mount`` `(4, 4)` at ``t`` from tf (``s.camera_mount``'s frame)."""
+    try:
+        return tf.lookup(s.base, s.camera_mount, t)
+    except LookupError as exc:
+        raise BagImportError(f"{s.path}: {where}: camera_mount: {exc}") from None
 
 
 def _camera_correction(reader, s: _BagImport, tf, inner: dict):
-    """With ``s.camera_bound``: the clouds' measured points in the crop box, voxel-averaged, as one capture of a
-    camera fixed in the base frame, corrected from the contacts along their measured forces
-    (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`); the
+    """With ``s.camera_bound``: the clouds' measured points in the crop box, voxel-averaged, corrected from the
+    contacts along their measured forces (:func:`~torch_gpioius.sensors.extrinsics.correct_captures`): as one capture
+    of a camera fixed in the base frame, or, with ``s.camera_mount``, as captures of one camera riding on that link
+    from its poses then (one correction in the link's frame). The
     :class:`~torch_gpioius.sensors.extrinsics.CaptureCorrections` (a large correction warned of), None without a
     bound. A first pass over the clouds; :func:`_outer_from_clouds` labels them moved.
 
     Raises:
-        BagImportError: a camera whose pose changes between clouds (it moves with the arm), or no point in the box.
+        BagImportError: a camera whose pose changes between clouds without a mount (it moves with the arm), one that
+            moves on its mount, a mount tf cannot place, or no point in the box.
     """
     if s.camera_bound is None:
         return None
     import warnings
 
+    from ..geometry.voxels import VoxelAccumulator
     from ..sensors.extrinsics import correct_captures
     from ..sensors.pointcloud import PointCloud
-    from ..geometry.voxels import VoxelAccumulator
 
     # 5 mm voxels: the surface as measured (the labels' coarser voxels average a curved cover onto its chords, and
     # the gap the contacts show would read short), within the memory of a few clouds
-    acc, pose = VoxelAccumulator(CORRECTION_VOXEL), None
+    acc, pose, on_mount, captures, mounts = VoxelAccumulator(CORRECTION_VOXEL), None, None, [], []
+    where = f"topic {s.topics.cloud}"
     for t, _, frame, T_bc, pts in _clouds(reader, s, tf, inner["t_first"]):
         if T_bc is None:                    # an empty cloud
+            continue
+        if s.crop is not None:
+            pts = pts[np.all((pts >= s.crop[0]) & (pts <= s.crop[1]), axis=1)]
+        if s.camera_mount is not None:      # each cloud a capture, from the link's pose then
+            T_bm = _mount_pose(s, tf, t, where)
+            T_mc = np.linalg.inv(T_bm) @ T_bc
+            if on_mount is None:
+                on_mount = T_mc
+            elif not np.allclose(T_mc, on_mount, atol=1e-6):
+                raise BagImportError(f"{s.path}: {where}: camera_mount: the clouds' frame ({frame} at t = {t:.3f} s) "
+                                     f"moves on {s.camera_mount} (a camera rides rigidly on its mount); name the "
+                                     "link it is fixed to")
+            seen = VoxelAccumulator(CORRECTION_VOXEL)
+            seen.add(pts)
+            if len(seen.mean()) >= 10:
+                captures.append(PointCloud(seen.mean(), T_bc[:3, 3]))
+                mounts.append(T_bm)
             continue
         if pose is None:
             pose = T_bc
         elif not np.allclose(T_bc, pose, atol=1e-6):
-            raise BagImportError(f"{s.path}: topic {s.topics.cloud}: camera_bound corrects one camera fixed in the "
-                                 f"base frame; the pose of the clouds' frame ({frame} at t = {t:.3f} s) changes "
-                                 "between clouds (a camera riding on the arm, whose error is its hand-eye "
-                                 "transform's, or several cameras): calibrate that, or import without camera_bound")
-        if s.crop is not None:
-            pts = pts[np.all((pts >= s.crop[0]) & (pts <= s.crop[1]), axis=1)]
+            raise BagImportError(f"{s.path}: {where}: camera_bound corrects one camera fixed in the base frame; the "
+                                 f"pose of the clouds' frame ({frame} at t = {t:.3f} s) changes between clouds (a "
+                                 "camera riding on the arm: give camera_mount, the link it rides on; or several "
+                                 "cameras): or import without camera_bound")
         if len(pts):
             acc.add(pts)
-    seen = acc.mean()
-    if pose is None or not len(seen):
-        raise BagImportError(f"{s.path}: topic {s.topics.cloud}: camera_bound: no cloud point to correct")
-    found = correct_captures([PointCloud(seen, pose[:3, 3])], inner["contacts"], inner["normals"],
-                             max_translation=s.camera_bound.translation, max_rotation=s.camera_bound.rotation)
-    for line in found.warnings([s.topics.cloud]):
+    bound = dict(max_translation=s.camera_bound.translation, max_rotation=s.camera_bound.rotation)
+    if s.camera_mount is not None:
+        if not captures:
+            raise BagImportError(f"{s.path}: {where}: camera_bound: no cloud point to correct")
+        pick = np.unique(np.linspace(0, len(captures) - 1, min(len(captures), MOUNT_CAPTURES)).round().astype(int))
+        found = correct_captures([captures[i] for i in pick], inner["contacts"], inner["normals"], **bound,
+                                 mount=[mounts[i] for i in pick])
+        names = [f"the camera on {s.camera_mount}"]
+    else:
+        seen = acc.mean()
+        if pose is None or not len(seen):
+            raise BagImportError(f"{s.path}: {where}: camera_bound: no cloud point to correct")
+        found = correct_captures([PointCloud(seen, pose[:3, 3])], inner["contacts"], inner["normals"], **bound)
+        names = [s.topics.cloud]
+    for line in found.warnings(names):
         warnings.warn(line, UserWarning, stacklevel=4)
     return found
 
@@ -776,7 +832,7 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float, corrections=No
         seen_acc, free_acc = VoxelAccumulator(policy.voxel), VoxelAccumulator(policy.voxel)
     else:
         seen_all, free_all = [], []
-    for _, msg, frame, T_bc, pts_b in _clouds(reader, s, tf, t_first):
+    for t, msg, frame, T_bc, pts_b in _clouds(reader, s, tf, t_first):
         n_clouds += 1
         n_declared += int(msg.height) * int(msg.width)
         n_raw += len(pts_b)
@@ -784,7 +840,8 @@ def _outer_from_clouds(reader, s: _BagImport, tf, t_first: float, corrections=No
             continue
         cloud_frames.add(frame)
         if corrections is not None:         # the capture moved about its camera, and the camera with it
-            fix = corrections.captures[0]
+            fix = corrections.captures[0] if corrections.mount is None else \
+                corrections.mount.through(_mount_pose(s, tf, t, f"topic {topics.cloud}"))
             pts_b = fix.apply(pts_b)
             T_bc = T_bc.copy()
             T_bc[:3, 3] = fix.apply(T_bc[None, :3, 3])[0]
@@ -911,6 +968,8 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
         meta["estimator"] = s.estimator.to_dict()
     if outer["corrections"] is not None:
         meta["camera_corrections"] = outer["corrections"].as_record()
+        if s.camera_mount is not None:
+            meta["camera_corrections"]["mount_frame"] = s.camera_mount
     trace = {"positions": inner["tips"], "forces": inner["forces"], "timestamps": inner["t_w"] - inner["t_w"][0]}
     return Dataset(x, y, task, step, meta=meta, trace=trace)
 

@@ -23,6 +23,12 @@ Written here rather than taken from a registration library (Open3D's ICP, probre
 aligns several captures to contacts that lie a gap behind the surface they see, estimates that gap with them, and
 bounds each correction.
 
+A camera that rides on the arm (a wrist camera) is off by one error for every capture: its hand-eye transform's, fixed
+in the frame of the link it is mounted on. With ``mount`` (each capture's pose of that link), the captures share one
+correction ``D`` in the mount's frame, and capture ``k`` moves by ``M_k D M_k^-1`` (``M_k`` the mount's pose when it
+was taken): the same residuals, six unknowns instead of six per capture (an exact reparameterisation: the rotation of
+``D`` seen from the base is ``R(A_k w) = A_k R(w) A_k^T``).
+
 What the contacts can tell depends on where they are: contacts on one flat face fix the translation along its normal
 together with the gap, and nothing along the face. The Gauss-Newton curvature says which directions the data fix;
 :attr:`CaptureCorrection.weak` names those left to the prior.
@@ -30,6 +36,7 @@ together with the gap, and nothing along the face. The Gauss-Newton curvature sa
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
@@ -37,7 +44,7 @@ import numpy as np
 
 from .pointcloud import rigid_about, rotation_matrix, skew
 
-__all__ = ["CaptureCorrection", "CaptureCorrections", "correct_captures"]
+__all__ = ["CaptureCorrection", "CaptureCorrections", "correct_captures", "misfit_text"]
 
 #: Huber threshold of the residuals, in their standard deviations: a contact or overlap further off counts linearly
 #: (a wrong correspondence, a fold of the cover, an edge).
@@ -51,6 +58,8 @@ MIN_CONTACTS = 5
 #: ``support``): the table alone fixes each capture's height and its rotations about horizontal axes, and the prior
 #: holds the rest.
 MIN_SUPPORT = 100
+#: The gap's prior scale [m]: flat about none (the contacts fix the gap; the prior only keeps the system solvable).
+GAP_SCALE = 0.05
 #: A direction of a capture's correction is "weak" when the data's curvature along it is below this share of the
 #: prior's: the prior, not the touches, set it.
 WEAK = 1.0
@@ -105,6 +114,14 @@ class CaptureCorrection:
         """`(n, 3)` ``points`` [m] moved by the correction."""
         return rigid_about(points, self.origin, self.rotation, self.translation)
 
+    def through(self, pose: np.ndarray) -> "CaptureCorrection":
+        """This correction, given in a mount's frame, as the frame ``pose`` places it sees it (``pose``: `(4, 4)`
+        ``T_frame_mount``, e.g. the flange in the base frame when a wrist camera took a capture): the same motion,
+        ``M D M^-1``, about the origin moved with it."""
+        A, a = np.asarray(pose, dtype=np.float64)[:3, :3], np.asarray(pose, dtype=np.float64)[:3, 3]
+        return dataclasses.replace(self, translation=A @ self.translation, rotation=A @ self.rotation,
+                                   origin=a + A @ self.origin)
+
     def as_record(self) -> dict:
         """For records and ``fit.json``: the correction in mm and degrees about ``origin`` [m], its sizes, what fixed
         it (:meth:`from_record` reads it back)."""
@@ -124,9 +141,12 @@ class CaptureCorrections:
         captures: one :class:`CaptureCorrection` per capture, in order.
         gap: the cover's gap the contacts show once the captures are corrected [m] (NaN: no contact counted).
         before: the contacts' root-mean-square misfit under the captures as given [m] (their distance along the
-            cover's normal, less the gap fitted to them as given).
+            cover's normal, less the gap fitted to them as given; where none lies at about that gap, those within
+            what the bound allows, less their median or the gap given; NaN: no contact under any seen cover).
         after: the same once corrected [m].
         bound: ``(translation [m], rotation [rad])``, the largest correction allowed.
+        mount: with ``correct_captures(mount=...)``, the one correction of the camera's mount, in the mount's frame
+            about the camera's optical centre there (its ``weak`` directions in that frame); None otherwise.
         enough: whether at least :data:`MIN_CONTACTS` contacts lay under the seen cover (over all captures) at the
             end, or every capture held :data:`MIN_SUPPORT` points to a known support plane; when not, every
             correction is none (the captures as given): a handful of contacts pulls the captures where they fit
@@ -139,31 +159,54 @@ class CaptureCorrections:
     after: float
     bound: tuple = field(default=(0.0, 0.0))
     enough: bool = True
+    mount: CaptureCorrection | None = None
 
     def as_record(self) -> dict:
+        """For records and ``fit.json``: each capture's correction, the gap, the misfits before and after (None
+        where no contact was under the seen cover to measure it), the bound, and the mount's correction if any."""
         return {"captures": [c.as_record() for c in self.captures],
                 "gap_mm": None if not math.isfinite(self.gap) else round(self.gap * 1e3, 3),
-                "misfit_before_mm": round(self.before * 1e3, 3), "misfit_after_mm": round(self.after * 1e3, 3),
+                "misfit_before_mm": _mm(self.before), "misfit_after_mm": _mm(self.after),
                 "enough": self.enough,
                 "bound": {"translation_mm": round(self.bound[0] * 1e3, 3),
-                          "rotation_deg": round(math.degrees(self.bound[1]), 4)}}
+                          "rotation_deg": round(math.degrees(self.bound[1]), 4)},
+                **({"mount": self.mount.as_record()} if self.mount is not None else {})}
 
     def warnings(self, names=None, large: float = 0.5) -> list[str]:
         """Lines for the user: each capture whose correction is more than ``large`` of the bound, or at it.
 
         Args:
-            names: a name per capture (file names); default "capture k".
+            names: a name per capture (file names); default "capture k". With a mount, one name for the camera.
             large: the share of the bound beyond which a correction is worth a word.
         """
         out = []
-        for k, c in enumerate(self.captures):
-            name = names[k] if names is not None else f"capture {k}"
+        if self.mount is not None:      # one camera, one correction: said once, of its hand-eye transform
+            listed = [(names[0] if names else "the camera on its mount", self.mount)]
+        else:
+            listed = [(names[k] if names is not None else f"capture {k}", c) for k, c in enumerate(self.captures)]
+        for name, c in listed:
             share = max(c.size / self.bound[0] if self.bound[0] else 0.0, c.angle / self.bound[1] if self.bound[1]
                         else 0.0)
             if c.at_bound or share > large:
+                what = "its hand-eye calibration" if self.mount is not None else "the camera's calibration"
                 out.append(f"{name} moved {c.size * 1e3:.1f} mm and {math.degrees(c.angle):.2f} deg to agree with "
-                           f"the touches{' (the most allowed)' if c.at_bound else ''}: check the camera's calibration")
+                           f"the touches{' (the most allowed)' if c.at_bound else ''}: check {what}")
         return out
+
+
+def _mm(value: float) -> float | None:
+    """A length [m] in mm for a record, None where it was not measured (NaN: JSON has no NaN)."""
+    return round(value * 1e3, 3) if math.isfinite(value) else None
+
+
+def misfit_text(record: dict) -> str:
+    """``"the contacts' misfit 3.0 -> 0.8 mm"`` from a :meth:`CaptureCorrections.as_record` (older records' NaN
+    and this one's None: "not measured", where no contact lay under the seen cover as the calibration placed it)."""
+    def mm(v) -> str:
+        return "not measured" if v is None or not math.isfinite(v) else f"{v:.1f}"
+
+    before, after = record.get("misfit_before_mm"), record.get("misfit_after_mm")
+    return f"the contacts' misfit {mm(before)} -> {mm(after)} mm"
 
 
 def _local_planes(points: np.ndarray, origin: np.ndarray, neighbours: int = 12) -> tuple[np.ndarray, np.ndarray]:
@@ -219,7 +262,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                      overlap_reach: float = 0.01, sample: int = 1500, iterations: int = 25,
                      gap: float | None = None, seed: int = 0, contact_sigma: float = 0.0025,
                      overlap_sigma: float = 0.001, support=None, support_sigma: float = 0.003,
-                     support_sample: int = 300) -> CaptureCorrections:
+                     support_sample: int = 300, mount=None) -> CaptureCorrections:
     """Correct each capture's pose from the contacts and the other captures (see the module docstring).
 
     Why this many parameters: beside the bound (the one a user must give), each is a robust weight or a sample size
@@ -256,12 +299,17 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         support_sigma: a support point's misfit [m] beyond the capture's error (its depth noise, the table's
             flatness).
         support_sample: at most this many support points of each capture take part (evenly chosen, seeded).
+        mount: `(K, 4, 4)` the pose ``T_base_mount`` of the link the camera rides on when each capture was taken (a
+            wrist camera's flange), or None. With it the captures share one correction, the camera's hand-eye error
+            in the mount's frame (:attr:`CaptureCorrections.mount`), and each capture moves by it as seen from the
+            base then; the bound is the mount's. None: each capture its own correction (fixed cameras).
 
     Returns:
         :class:`CaptureCorrections`.
 
     Raises:
-        ValueError: no captures, bad shapes, non-finite values or a bound that is not positive.
+        ValueError: no captures, bad shapes, non-finite values, a bound that is not positive or a mount pose that
+            is not a rigid transform.
     """
     from scipy.spatial import cKDTree
 
@@ -321,6 +369,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 table[k] = sp[np.sort(rng.choice(len(sp), support_sample, replace=False))] \
                     if len(sp) > support_sample else sp
     K = len(captures)
+    mounted = _mount_poses(mount, K)
     # Each capture moves about its points' middle (the pivot d = pivot - c from its camera): q -> pivot + R (q - pivot)
     # + u. About the optical centre a metre away, a degree and 17 mm of translation are nearly the same motion at the
     # object, and Gauss-Newton crawls along that valley; about the object they are separate. The calibration's prior
@@ -336,9 +385,26 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         prior[6 * k:6 * k + 6, 6 * k:6 * k + 6] = np.linalg.inv(cov)
     # the gap: a flat prior of 5 cm about none (the contacts fix it; the prior only keeps the system solvable when no
     # contact lies under any seen cover)
-    prior[-1, -1] = 1.0 / 0.05 ** 2
+    prior[-1, -1] = 1.0 / GAP_SCALE ** 2
     x = np.zeros(6 * K + 1)                        # (u_k, w_k) per capture, then the gap
     fixed_gap = gap is not None
+    if mounted is not None:
+        # one camera on a moving link: the unknowns are its correction in the mount's frame, y = (u, w, gap), about a
+        # pivot there; capture k's are x_k = (A_k u, A_k w) about the pivot as the mount then placed it (exact)
+        A, a = mounted[:, :3, :3], mounted[:, :3, 3]
+        camera_m = np.mean([(origins[k] - a[k]) @ A[k] for k in range(K)], axis=0)
+        pivot_m = np.mean([(pts[k].mean(axis=0) - a[k]) @ A[k] for k in range(K)], axis=0)
+        pivots = [a[k] + A[k] @ pivot_m for k in range(K)]
+        lift = np.zeros((6 * K + 1, 7))
+        for k in range(K):
+            lift[6 * k:6 * k + 3, 0:3] = A[k]
+            lift[6 * k + 3:6 * k + 6, 3:6] = A[k]
+        lift[-1, -1] = 1.0
+        D = skew(pivot_m - camera_m)
+        prior_y = np.zeros((7, 7))
+        prior_y[:6, :6] = np.linalg.inv(np.block([[s_t ** 2 * np.eye(3) + s_w ** 2 * D @ D.T, -s_w ** 2 * D],
+                                                  [-s_w ** 2 * D.T, s_w ** 2 * np.eye(3)]]))
+        prior_y[-1, -1] = prior[-1, -1]
 
     def moved(k: int, xv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         R = rotation_matrix(xv[6 * k + 3:6 * k + 6])
@@ -418,58 +484,121 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     # how far the bound can move a capture at the object: an error of 6 mm and a degree moves the seen cover 1-2.5 cm,
     # beyond a tight cover's gap
     far = max(reach, max_translation + max_rotation * max(np.linalg.norm(pv - o) for pv, o in zip(pivots, origins)))
+    if not math.isfinite(before) and len(p):
+        # no contact at about the gap under the cover as given (a gap wider than ``reach``, or the error moved the
+        # cover): the misfit as given among the contacts within what the bound allows beyond any gap up to the gap's
+        # prior scale (5 cm), about their own median
+        J0, r0, _, _, _ = terms(x, far + GAP_SCALE)
+        off = r0[J0[:, -1] == -1.0] + x[-1]
+        if len(off):
+            before = float(np.sqrt(np.mean((off - (x[-1] if fixed_gap else np.median(off))) ** 2)))
     if len(p):
         starts = [_consensus_shift(pts[k], faces[k], cKDTree(pts[k]), p, nrm, far, reach,
                                    float(gap) if fixed_gap else None) for k in range(K)]
-        gaps, weights = [], []
+        gaps, weights, shifts = [], [], []
         for k, (shift, g_k, count, count0) in enumerate(starts):
             if count >= 5 and count > count0 + 2:        # clearly more contacts under the cover than as given
                 x[6 * k:6 * k + 3] = shift
                 gaps.append(g_k)
                 weights.append(count)
+                shifts.append(shift @ A[k] if mounted is not None else shift)
         if gaps and not fixed_gap:
             x[-1] = float(np.average(gaps, weights=weights))
+        if gaps and mounted is not None:                 # the mount's start: the captures' shifts, in its frame
+            x = lift @ np.r_[np.average(shifts, axis=0, weights=weights), np.zeros(3), x[-1]]
         if gaps:
             far = 2 * reach                              # the search put every capture within a cell or two
+    if mounted is not None:
+        y = np.linalg.lstsq(lift, x, rcond=None)[0]      # x lies in lift's range: exact
+        H = prior_y.copy()
     for it in range(iterations):
         reach_now = reach + (far - reach) * max(0.0, 1.0 - it / max(1.0, iterations / 2))
         J, r, sigma, _, _ = terms(x, reach_now)
         if not len(r):
             break
         w = _huber_weights(r / sigma, HUBER) / sigma ** 2
-        H = (J * w[:, None]).T @ J + prior
-        b = (J * w[:, None]).T @ r + prior @ x
+        if mounted is not None:                 # the same residuals, in the mount's unknowns
+            J = J @ lift
+            H = (J * w[:, None]).T @ J + prior_y
+            b = (J * w[:, None]).T @ r + prior_y @ y
+        else:
+            H = (J * w[:, None]).T @ J + prior
+            b = (J * w[:, None]).T @ r + prior @ x
         if fixed_gap:
             H[-1, :], H[:, -1], H[-1, -1], b[-1] = 0.0, 0.0, 1.0, 0.0
         step = np.linalg.solve(H, -b)
-        x = x + step
+        if mounted is not None:
+            y = y + step
+            x = lift @ y
+        else:
+            x = x + step
         if reach_now == reach and np.abs(step[:-1]).max() < 1e-7:
             break
-    out = []
     _, _, _, counts, overlaps = terms(x)
-    bounded = x.copy()                     # the (u, w) of the corrections as kept, for their misfit
-    for k in range(K):
-        u, w = x[6 * k:6 * k + 3], x[6 * k + 3:6 * k + 6].copy()
-        lever = pivots[k] - origins[k]
-        t = u + (np.eye(3) - rotation_matrix(w)) @ lever
-        # each capture kept within its bound: scaled back onto it where the solution went beyond
-        over = max(np.linalg.norm(t) / max_translation, np.linalg.norm(w) / max_rotation)
-        if over > 1.0:
-            t, w = t / over, w / over
-        bounded[6 * k:6 * k + 6] = np.r_[t - (np.eye(3) - rotation_matrix(w)) @ lever, w]
-        # what the data fixed: the directions of (u, w) along which their curvature is below the prior's
-        block = slice(6 * k, 6 * k + 6)
-        data = H[block, block] - prior[block, block]
-        vals, vecs = np.linalg.eigh(np.linalg.solve(prior[block, block], data))
-        weak = tuple(sorted({("x", "y", "z", "rx", "ry", "rz")[int(np.argmax(np.abs(v)))]
-                             for lam, v in zip(vals, vecs.T) if lam < WEAK}))
-        out.append(CaptureCorrection(t, w, origins[k].copy(), counts[k], overlaps[k], bool(over > 1.0), weak,
-                                     len(table[k])))
+    out, mount_fix = [], None
+    if mounted is not None:
+        # the mount's correction about the camera there, within the bound; each capture's as the base saw it then
+        t_m, w_m, over, u_m = _within_bound(y[0:3], y[3:6], pivot_m - camera_m, max_translation, max_rotation)
+        mount_fix = CaptureCorrection(t_m, w_m, camera_m, sum(counts), sum(overlaps) // 2, over > 1.0,
+                                      _weak(H[:6, :6], prior_y[:6, :6]), sum(len(s) for s in table))
+        bounded = lift @ np.r_[u_m, w_m, y[-1]]
+        for k in range(K):
+            w_k = mounted[k, :3, :3] @ w_m
+            t_k = mounted[k, :3, :3] @ u_m + (np.eye(3) - rotation_matrix(w_k)) @ (pivots[k] - origins[k])
+            out.append(CaptureCorrection(t_k, w_k, origins[k].copy(), counts[k], overlaps[k], over > 1.0, (),
+                                         len(table[k])))
+    else:
+        bounded = x.copy()                 # the (u, w) of the corrections as kept, for their misfit
+        for k in range(K):
+            t_k, w_k, over, u_k = _within_bound(x[6 * k:6 * k + 3], x[6 * k + 3:6 * k + 6], pivots[k] - origins[k],
+                                                max_translation, max_rotation)
+            bounded[6 * k:6 * k + 6] = np.r_[u_k, w_k]
+            block = slice(6 * k, 6 * k + 6)
+            out.append(CaptureCorrection(t_k, w_k, origins[k].copy(), counts[k], overlaps[k], over > 1.0,
+                                         _weak(H[block, block], prior[block, block]), len(table[k])))
     after, g1 = contact_misfit(bounded)
     bound = (float(max_translation), float(max_rotation))
     held = plane is not None and all(len(t) >= MIN_SUPPORT for t in table)    # every capture sees the table
     if sum(c.contacts for c in out) < MIN_CONTACTS and not held:   # too few to say anything: the captures as given
-        out = [CaptureCorrection(np.zeros(3), np.zeros(3), c.origin, c.contacts, c.overlap, False,
-                                 ("x", "y", "z", "rx", "ry", "rz")) for c in out]
-        return CaptureCorrections(out, g0, before, before, bound, enough=False)
-    return CaptureCorrections(out, float(x[-1]) if fixed_gap else g1, before, after, bound)
+        none = ("x", "y", "z", "rx", "ry", "rz")
+        out = [CaptureCorrection(np.zeros(3), np.zeros(3), c.origin, c.contacts, c.overlap, False, none) for c in out]
+        if mount_fix is not None:
+            mount_fix = CaptureCorrection(np.zeros(3), np.zeros(3), camera_m, mount_fix.contacts, mount_fix.overlap,
+                                          False, none)
+        return CaptureCorrections(out, g0, before, before, bound, enough=False, mount=mount_fix)
+    return CaptureCorrections(out, float(x[-1]) if fixed_gap else g1, before, after, bound, mount=mount_fix)
+
+
+def _within_bound(u: np.ndarray, w: np.ndarray, lever: np.ndarray, max_translation: float, max_rotation: float):
+    """A correction found about its pivot, ``(u, w)``, as the camera's: ``(t, w, over, u)`` with ``t`` the
+    translation about the optical centre (``lever`` = pivot - centre: ``t = u + (I - R(w)) lever``), both scaled back
+    onto the bound where the solution went beyond it (``over`` > 1: by how much), and ``u`` of what is kept."""
+    w = np.array(w, dtype=np.float64)
+    t = u + (np.eye(3) - rotation_matrix(w)) @ lever
+    over = max(np.linalg.norm(t) / max_translation, np.linalg.norm(w) / max_rotation)
+    if over > 1.0:
+        t, w = t / over, w / over
+    return t, w, float(over), t - (np.eye(3) - rotation_matrix(w)) @ lever
+
+
+def _weak(H: np.ndarray, prior: np.ndarray) -> tuple:
+    """What the data left to the prior: the directions of a correction's `(6, 6)` curvature ``H`` (the prior's
+    included) along which the data's part is below :data:`WEAK` of the prior's, named by their largest axis."""
+    vals, vecs = np.linalg.eigh(np.linalg.solve(prior, H - prior))
+    return tuple(sorted({("x", "y", "z", "rx", "ry", "rz")[int(np.argmax(np.abs(v)))]
+                         for lam, v in zip(vals, vecs.T) if lam < WEAK}))
+
+
+def _mount_poses(mount, K: int) -> np.ndarray | None:
+    """``mount`` as `(K, 4, 4)` rigid poses, checked; None without one."""
+    if mount is None:
+        return None
+    M = np.asarray(mount, dtype=np.float64)
+    if M.shape != (K, 4, 4) or not np.isfinite(M).all():
+        raise ValueError(f"correct_captures: mount must be ({K}, 4, 4) finite poses, one per capture, got shape "
+                         f"{M.shape}")
+    R = M[:, :3, :3]
+    if not (np.allclose(R @ R.transpose(0, 2, 1), np.eye(3), atol=1e-6) and np.allclose(np.linalg.det(R), 1.0)
+            and np.allclose(M[:, 3], [0.0, 0.0, 0.0, 1.0])):
+        raise ValueError("correct_captures: mount: every pose must be a rigid transform (a rotation and a translation)")
+    return M

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 
 from ..io.rosbag import BagMessage
+from ..sensors.pointcloud import look_at
 
 __all__ = ["example_bag_messages"]
 
@@ -19,28 +20,32 @@ __all__ = ["example_bag_messages"]
 def example_bag_messages(*, center=(-0.55, -0.109, 0.0), radius: float = 0.08, cover_radius: float = 0.1,
                          tip_radius: float = 0.005, tool_offset=(0.0, 0.0, 0.05), speed: float = 0.08,
                          joint_rate: float = 25.0, wrench_rate: float = 100.0, press_force: float = 2.5,
-                         image=(36, 48), seed: int = 0) -> tuple[list[BagMessage], dict]:
+                         image=(36, 48), seed: int = 0, camera: str = "fixed") -> tuple[list[BagMessage], dict]:
     """A synthetic recording of a UR5 touching a sphere under a spherical cover, as ROS 2 messages.
 
     The fingertip (a ball of ``tip_radius`` at ``tool_offset`` from the flange) approaches the sphere from above,
     slides along two arcs on it pressing with ``press_force``, lifts and re-presses; the joints (UR driver names)
     come from :meth:`kinematics.UR5.cartesian_step` along that path. A depth camera whose optical frame hangs off
     ``base -> camera_link -> camera_depth_optical_frame`` in ``/tf_static`` sees the cover (an organised cloud with
-    NaN where rays miss, an ``rgb`` field and row padding). Used by the tests, the rosbag tutorial and as a
-    template for what :func:`import_bag` expects.
+    NaN where rays miss, an ``rgb`` field and row padding). With ``camera="wrist"`` the camera rides on the flange
+    instead (``tool0 -> camera_link -> camera_depth_optical_frame`` in ``/tf_static``, the flange's pose in ``/tf`` at
+    every joint state) and takes :data:`WRIST_CLOUDS` clouds while the fingertip presses, each from the flange's pose
+    then. Used by the tests, the rosbag tutorial and as a template for what :func:`import_bag` expects.
 
     Why this many parameters: each is one property of the synthetic recording (the body, the cover, the fingertip, the
-    rates, the force, the image) that a test of the importer varies alone; all keywords with defaults.
+    rates, the force, the image, where the camera is) that a test of the importer varies alone; all keywords with
+    defaults.
 
     Returns:
         ``(messages, truth)``; ``truth`` has ``center`` `(3,)`, ``radius``, ``cover_radius``, ``tip_radius``,
-        ``tool_offset``, ``T_base_optical`` `(4, 4)` and ``contact_path`` `(k, 3)` (true contact points) [m].
+        ``tool_offset``, ``T_base_optical`` `(4, 4)` (None for a wrist camera; then ``T_tool0_optical``) and
+        ``contact_path`` `(k, 3)` (true contact points) [m].
     """
+    if camera not in ("fixed", "wrist"):
+        raise ValueError(f"example_bag_messages: camera must be 'fixed' or 'wrist', got {camera!r}")
     from kinematics.dh import UR5_JOINT_NAMES
     from kinematics.ur5 import UR5
     from rosbags.typesys import Stores, get_typestore
-
-    from ..sensors.pointcloud import look_at
 
     ts = get_typestore(Stores.ROS2_HUMBLE).types
     rng = np.random.default_rng(seed)
@@ -61,11 +66,18 @@ def example_bag_messages(*, center=(-0.55, -0.109, 0.0), radius: float = 0.08, c
     t0 = 1_700_000_000.0
     msgs, contact_path = _robot_messages(ts, t0, qs.detach().numpy(), reached, R, pressing, c, tip_radius,
                                          press_force, joint_rate, wrench_rate, rng, list(UR5_JOINT_NAMES))
-    T_bo = look_at(c + np.array([0.5, 0.3, 0.35]), c)
-    msgs += _camera_messages(ts, t0, T_bo, c, cover_radius, image)
+    if camera == "fixed":
+        T_bo = look_at(c + np.array([0.5, 0.3, 0.35]), c)
+        msgs += _camera_messages(ts, t0, T_bo, c, cover_radius, image)
+    else:
+        flange = ur5.forward_kinematics(qs, frame="flange").detach().numpy()
+        msgs += _wrist_camera_messages(ts, t0, flange, np.arange(len(qs)) / joint_rate, pressing, c, cover_radius,
+                                       image)
+        T_bo = None
     truth = {"center": c, "radius": radius, "cover_radius": cover_radius, "tip_radius": tip_radius,
              "tool_offset": tuple(tool_offset), "T_base_optical": T_bo, "contact_path": np.asarray(contact_path),
-             "path_error": float(np.abs(reached - path).max())}
+             "path_error": float(np.abs(reached - path).max()),
+             **({"T_tool0_optical": WRIST_CAMERA} if camera == "wrist" else {})}
     return msgs, truth
 
 
@@ -135,27 +147,59 @@ def _robot_messages(ts, t0, joints, reached, R, pressing, c, tip_radius, press_f
     return msgs, contact_path
 
 
+#: The wrist camera's optical frame in the flange frame (``camera="wrist"``): 10 cm beside the flange, looking at where
+#: the sphere's centre lies below a pressing fingertip.
+WRIST_CAMERA = look_at(np.array([0.1, 0.0, 0.0]), np.array([0.0, 0.0, 0.135]), up=(0.0, 1.0, 0.0))
+#: The clouds a wrist camera takes, evenly among the joint states where the fingertip presses.
+WRIST_CLOUDS = 6
+
+
 def _camera_messages(ts, t0, T_bo, c, cover_radius, image) -> list[BagMessage]:
     """The camera's static transforms and one organised cloud of the cover (NaN where rays miss, an ``rgb`` field
     and row padding)."""
-    msgs: list[BagMessage] = []
-    # camera: base -> camera_link (x forward) -> camera_depth_optical_frame (z forward), looking at the object
+    msgs = [_camera_static(ts, t0, "base", T_bo)]
+    msgs.append(_cloud_message(ts, t0 + 0.01, T_bo, c, cover_radius, image))
+    return msgs
+
+
+def _wrist_camera_messages(ts, t0, flange, times, pressing, c, cover_radius, image) -> list[BagMessage]:
+    """A camera on the flange: its static transforms from ``tool0``, the flange's pose `(k, 4, 4)` in ``/tf`` at each
+    of ``times`` [s], and :data:`WRIST_CLOUDS` clouds of the cover while ``pressing``, each from the flange then."""
+    msgs = [_camera_static(ts, t0, "tool0", WRIST_CAMERA)]
+    for t, T in zip(times, flange):
+        msgs.append(BagMessage("/tf", "tf2_msgs/msg/TFMessage", int((t0 + t) * 1e9),
+                               ts["tf2_msgs/msg/TFMessage"](transforms=[_transform(ts, t0 + t, "base", "tool0", T)])))
+    at = np.flatnonzero(pressing)
+    for i in at[np.linspace(0, len(at) - 1, WRIST_CLOUDS).round().astype(int)]:
+        msgs.append(_cloud_message(ts, t0 + times[i], flange[i] @ WRIST_CAMERA, c, cover_radius, image))
+    return sorted(msgs, key=lambda m: m.t_ns)
+
+
+def _transform(ts, t, parent, child, T):
+    tr, qx = T[:3, 3], _matrix_quat(T[:3, :3])
+    return ts["geometry_msgs/msg/TransformStamped"](
+        header=_header(ts, t, parent), child_frame_id=child, transform=ts["geometry_msgs/msg/Transform"](
+            translation=ts["geometry_msgs/msg/Vector3"](x=tr[0], y=tr[1], z=tr[2]),
+            rotation=ts["geometry_msgs/msg/Quaternion"](x=qx[0], y=qx[1], z=qx[2], w=qx[3])))
+
+
+def _camera_static(ts, t0, parent, T_po) -> BagMessage:
+    """``parent -> camera_link (x forward) -> camera_depth_optical_frame (z forward)`` in ``/tf_static``, the optical
+    frame at ``T_po`` `(4, 4)` in ``parent``."""
     R_link_optical = np.array([[0.0, 0, 1], [-1, 0, 0], [0, -1, 0]])  # REP 103: optical z = link x
     T_lo = np.eye(4)
     T_lo[:3, :3] = R_link_optical
     T_lo[:3, 3] = [0.0, 0.015, 0.0]
-    T_bl = T_bo @ np.linalg.inv(T_lo)
+    T_pl = T_po @ np.linalg.inv(T_lo)
+    tf = ts["tf2_msgs/msg/TFMessage"](transforms=[_transform(ts, t0, parent, "camera_link", T_pl),
+                                                  _transform(ts, t0, "camera_link", "camera_depth_optical_frame",
+                                                             T_lo)])
+    return BagMessage("/tf_static", "tf2_msgs/msg/TFMessage", int(t0 * 1e9), tf)
 
-    def tf_stamped(parent, child, T):
-        tr, qx = T[:3, 3], _matrix_quat(T[:3, :3])
-        return ts["geometry_msgs/msg/TransformStamped"](
-            header=_header(ts, t0, parent), child_frame_id=child, transform=ts["geometry_msgs/msg/Transform"](
-                translation=ts["geometry_msgs/msg/Vector3"](x=tr[0], y=tr[1], z=tr[2]),
-                rotation=ts["geometry_msgs/msg/Quaternion"](x=qx[0], y=qx[1], z=qx[2], w=qx[3])))
 
-    tf = ts["tf2_msgs/msg/TFMessage"](transforms=[tf_stamped("base", "camera_link", T_bl),
-                                                  tf_stamped("camera_link", "camera_depth_optical_frame", T_lo)])
-    msgs.append(BagMessage("/tf_static", "tf2_msgs/msg/TFMessage", int(t0 * 1e9), tf))
+def _cloud_message(ts, t, T_bo, c, cover_radius, image) -> BagMessage:
+    """One organised cloud of the cover seen from the optical frame at ``T_bo`` (NaN where rays miss, an ``rgb``
+    field and row padding), stamped ``t`` [s]."""
     h, w = image
     u, v = np.meshgrid(np.linspace(-0.35, 0.35, w), np.linspace(-0.27, 0.27, h))
     rays = np.stack([u, v, np.ones_like(u)], axis=-1)
@@ -172,12 +216,11 @@ def _camera_messages(ts, t0, T_bo, c, cover_radius, image) -> list[BagMessage]:
     cells[..., 16:20] = np.full((h, w), 0x00FF8800, dtype=np.uint32).view(np.uint8).reshape(h, w, 4)
     field = ts["sensor_msgs/msg/PointField"]
     cloud = ts["sensor_msgs/msg/PointCloud2"](
-        header=_header(ts, t0 + 0.01, "camera_depth_optical_frame"), height=h, width=w,
+        header=_header(ts, t, "camera_depth_optical_frame"), height=h, width=w,
         fields=[field(name="x", offset=0, datatype=7, count=1), field(name="y", offset=4, datatype=7, count=1),
                 field(name="z", offset=8, datatype=7, count=1), field(name="rgb", offset=16, datatype=7, count=1)],
         is_bigendian=False, point_step=step, row_step=w * step + pad, data=rec.reshape(-1), is_dense=False)
-    msgs.append(BagMessage("/camera/depth/points", "sensor_msgs/msg/PointCloud2", int((t0 + 0.01) * 1e9), cloud))
-    return msgs
+    return BagMessage("/camera/depth/points", "sensor_msgs/msg/PointCloud2", int(t * 1e9), cloud)
 
 
 def _matrix_quat(R: np.ndarray) -> tuple[float, float, float, float]:
