@@ -8,14 +8,7 @@ from torch_gpioius.geometry.voxels import voxel_average
 from torch_gpioius.io import FilePointCloud
 from torch_gpioius.sensors import PinholeCamera, PointCloud, SimulatedDepthCamera, look_at
 
-C, R = np.array([0.5, 0.0, 0.25]), 0.1
-EYE = np.array([0.5, -0.8, 0.9])
-
-
-def sphere_camera(**kw):
-    mesh = trimesh.creation.icosphere(subdivisions=5, radius=R)
-    mesh.apply_translation(C)
-    return SimulatedDepthCamera(mesh, PinholeCamera.kinect_v2(0.5), look_at(EYE, C), **kw)
+from tests.sensors.spheres import C, EYE, R, sphere_camera
 
 
 def test_look_at_is_a_rigid_pose_pointing_at_the_target():
