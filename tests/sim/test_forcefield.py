@@ -556,6 +556,29 @@ def test_a_body_under_a_thin_roof_is_approached_from_the_side():
     assert s_dir.tolist() == [0.0, 0.0, -1.0] and s_bounds[1, 2] == pytest.approx(max(0.12 + 0.03, s_start[2] - 0.01))
 
 
+def test_a_thick_piece_where_neither_grid_looks_is_approached_at_the_thick_piece():
+    """Every object reached: a 1 mm plate with a 1 cm cube on its corner (pybullet's blob 338: its thick piece lies
+    beyond the middle 80 % the grids from above and from the sides aim at; refused as "the approach only grazes") is
+    approached along an axis through the cube, from outside the cover, deep enough to feel; the range holds the first
+    contact."""
+    import trimesh
+
+    from torch_gpioius.sim.forcefield import Scene3D, approach_from_above, first_passage
+    from torch_gpioius.sim.meshes import MeshDistance
+
+    plate = trimesh.creation.box((0.12, 0.12, 0.001))
+    plate.apply_translation([0.5, 0.0, 0.0005])
+    cube = trimesh.creation.box((0.01, 0.01, 0.01))
+    cube.apply_translation([0.555, 0.055, 0.0055])
+    body = trimesh.boolean.union([plate, cube])
+    start, direction, bounds = approach_from_above(body, body)
+    passage = first_passage(body, MeshDistance(body), start, direction)
+    assert passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH
+    hit = start + passage[0] * direction                       # the first contact: on the cube
+    assert hit[0] >= 0.55 - 1e-9 and hit[1] >= 0.05 - 1e-9 and ((bounds[0] <= hit) & (hit <= bounds[1])).all()
+    assert np.abs(direction).max() == 1.0 and direction[2] <= 0.0
+
+
 def test_a_slide_off_an_edge_gives_up_after_a_tenth_of_the_seen_body_not_five_centimetres():
     """Issue 63 (every object reached): a slide that runs off an edge presses inward along the old normal, past the
     surface it left, and finds nothing however far it presses. The force-field world's controller searches a tenth of

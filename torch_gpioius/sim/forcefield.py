@@ -852,6 +852,8 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
         # from the side, at the body's middle height first (pybullet's blob 127: 0.4 mm deep at most from above);
         # none deep enough either: the scene then says that the approach from above grazes
         side = _side_approach(inner, outer, distance, clearance)
+        if side is None:                # thick only where neither grid looks: at the thick part, from outside it
+            side = _thick_part_approach(inner, outer, distance, clearance)
         if side is not None:
             start, down = side
     b_lo, b_hi = outer.bounds[0] - margin, outer.bounds[1] + margin
@@ -907,9 +909,40 @@ def _first_felt(inner: trimesh.Trimesh, distance, origins: np.ndarray, direction
 def _deepest_inside(inner: trimesh.Trimesh, distance, samples: int = 20000) -> float:
     """How deep [m] the deepest of ``samples`` seeded points in the body's box lies inside it (about half its greatest
     thickness; a lower bound, to a few tenths of a millimetre at 20,000 points in a 20 cm box)."""
+    return max(0.0, -float(np.min(distance(_box_samples(inner, samples)))))
+
+
+def _box_samples(inner: trimesh.Trimesh, samples: int) -> np.ndarray:
+    """`(samples, 3)` seeded points uniform in the body's box [m]."""
     lo, hi = inner.bounds
-    points = lo + np.random.default_rng(0).uniform(size=(samples, 3)) * (hi - lo)
-    return max(0.0, -float(np.min(distance(points))))
+    return lo + np.random.default_rng(0).uniform(size=(samples, 3)) * (hi - lo)
+
+
+#: The deepest points inside a body that :func:`_thick_part_approach` aims at, deepest first.
+THICK_CANDIDATES = 200
+
+
+def _thick_part_approach(inner: trimesh.Trimesh, outer: trimesh.Trimesh, distance,
+                         clearance: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """An approach to the body's thick part where neither the grid from above nor those from the sides meet one (a
+    blob whose thick piece sits at a corner or above nine tenths of its height, beside thin sheets): at each of the
+    deepest seeded points inside it (:data:`THICK_CANDIDATES`, deepest first), from above and then along +-x and +-y
+    (the directions the arm takes the other approaches in), starting ``clearance`` outside the cover's box; the first
+    whose first passage is at least ``Scene3D.MIN_APPROACH_DEPTH`` deep. ``(start (3,), direction (3,))`` [m], or
+    None."""
+    points = _box_samples(inner, 20000)
+    deepest = points[np.argsort(distance(points), kind="stable")[:THICK_CANDIDATES]]
+    o_lo, o_hi = outer.bounds
+    directions = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
+    for p in deepest[distance(deepest) < -Scene3D.MIN_APPROACH_DEPTH]:
+        for d in directions:
+            axis = int(np.argmax(np.abs(d)))
+            start = p.copy()
+            start[axis] = (o_lo[axis] - clearance) if d[axis] > 0 else (o_hi[axis] + clearance)
+            passage = first_passage(inner, distance, start, d)
+            if passage is not None and passage[1] >= Scene3D.MIN_APPROACH_DEPTH:
+                return start, d
+    return None
 
 
 def sphere_scene(radius: float = 0.08, cover: float = 0.01, center=(0.5, 0.0, 0.25), name: str = "sphere",
