@@ -99,9 +99,7 @@ def renamed(module: str, names: dict[str, tuple[str, str, str]]) -> Callable[[st
         if name not in names:
             raise AttributeError(f"module {module!r} has no attribute {name!r}")
         new_module, new_name, why = names[name]
-        where = new_module if new_name is None else f"{new_module}.{new_name}"
-        warnings.warn(f"{module}.{name} is {where} now ({why})", DeprecationWarning, stacklevel=2)
-        found = importlib.import_module(new_module)
-        return found if new_name is None else getattr(found, new_name)
+        warnings.warn(f"{module}.{name} is {new_module}.{new_name} now ({why})", DeprecationWarning, stacklevel=2)
+        return getattr(importlib.import_module(new_module), new_name)
 
     return __getattr__

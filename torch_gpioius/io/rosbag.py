@@ -756,7 +756,7 @@ def _camera_correction(reader, s: _BagImport, tf, inner: dict):
         return None
     import warnings
 
-    from ..geometry.voxels import VoxelAccumulator
+    from ..geometry.voxels import VoxelAccumulator, voxel_average
     from ..sensors.extrinsics import correct_captures
     from ..sensors.pointcloud import PointCloud
 
@@ -778,10 +778,9 @@ def _camera_correction(reader, s: _BagImport, tf, inner: dict):
                 raise BagImportError(f"{s.path}: {where}: camera_mount: the clouds' frame ({frame} at t = {t:.3f} s) "
                                      f"moves on {s.camera_mount} (a camera rides rigidly on its mount); name the "
                                      "link it is fixed to")
-            seen = VoxelAccumulator(CORRECTION_VOXEL)
-            seen.add(pts)
-            if len(seen.mean()) >= 10:
-                captures.append(PointCloud(seen.mean(), T_bc[:3, 3]))
+            seen = voxel_average(pts, CORRECTION_VOXEL)
+            if len(seen) >= 10:
+                captures.append(PointCloud(seen, T_bc[:3, 3]))
                 mounts.append(T_bm)
             continue
         if pose is None:

@@ -466,9 +466,10 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 overlaps[other] += len(i)
         return np.concatenate(J), np.concatenate(r), np.concatenate(sd), counts, overlaps
 
-    def contact_misfit(xv: np.ndarray) -> tuple[float, float]:
-        """The contacts' rms misfit and their median distance (the gap) under the captures at ``xv``."""
-        J, r, _, _, _ = terms(xv)
+    def contact_misfit(xv: np.ndarray, reach_now: float = reach) -> tuple[float, float]:
+        """The contacts' rms misfit and their median distance (the gap) under the captures at ``xv``, those within
+        ``reach_now`` of the gap counted."""
+        J, r, _, _, _ = terms(xv, reach_now)
         rows = J[:, -1] == -1.0
         if not rows.any():
             return math.nan, math.nan
@@ -488,10 +489,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         # no contact at about the gap under the cover as given (a gap wider than ``reach``, or the error moved the
         # cover): the misfit as given among the contacts within what the bound allows beyond any gap up to the gap's
         # prior scale (5 cm), about their own median
-        J0, r0, _, _, _ = terms(x, far + GAP_SCALE)
-        off = r0[J0[:, -1] == -1.0] + x[-1]
-        if len(off):
-            before = float(np.sqrt(np.mean((off - (x[-1] if fixed_gap else np.median(off))) ** 2)))
+        before = contact_misfit(x, far + GAP_SCALE)[0]
     if len(p):
         starts = [_consensus_shift(pts[k], faces[k], cKDTree(pts[k]), p, nrm, far, reach,
                                    float(gap) if fixed_gap else None) for k in range(K)]
@@ -542,11 +540,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         mount_fix = CaptureCorrection(t_m, w_m, camera_m, sum(counts), sum(overlaps) // 2, over > 1.0,
                                       _weak(H[:6, :6], prior_y[:6, :6]), sum(len(s) for s in table))
         bounded = lift @ np.r_[u_m, w_m, y[-1]]
-        for k in range(K):
-            w_k = mounted[k, :3, :3] @ w_m
-            t_k = mounted[k, :3, :3] @ u_m + (np.eye(3) - rotation_matrix(w_k)) @ (pivots[k] - origins[k])
-            out.append(CaptureCorrection(t_k, w_k, origins[k].copy(), counts[k], overlaps[k], over > 1.0, (),
-                                         len(table[k])))
+        out = [dataclasses.replace(mount_fix.through(mounted[k]), contacts=counts[k], overlap=overlaps[k], weak=(),
+                                   support=len(table[k])) for k in range(K)]
     else:
         bounded = x.copy()                 # the (u, w) of the corrections as kept, for their misfit
         for k in range(K):

@@ -843,7 +843,8 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
     if felt is None:
         # no ray from above is deep enough: a body too thin anywhere to be felt says so (pieces of thin sheets: 6 of
         # pybullet's procedural objects 200-299, 1-3 mm thick at most), not "the approach grazes"
-        thickest = _deepest_inside(inner, distance)
+        inside, depth = _deepest_samples(inner, distance)
+        thickest = max(0.0, float(depth[0]))
         if thickest < Scene3D.MIN_APPROACH_DEPTH:
             raise ValueError(f"the body is nowhere more than {thickest * 1e3:.1f} mm inside its surface (thin sheets, "
                              f"{len(inner.split(only_watertight=False))} pieces): a fingertip needs "
@@ -853,7 +854,8 @@ def approach_from_above(inner: trimesh.Trimesh, outer: trimesh.Trimesh, clearanc
         # none deep enough either: the scene then says that the approach from above grazes
         side = _side_approach(inner, outer, distance, clearance)
         if side is None:                # thick only where neither grid looks: at the thick part, from outside it
-            side = _thick_part_approach(inner, outer, distance, clearance)
+            side = _thick_part_approach(inner, outer, distance, clearance,
+                                        inside[depth > Scene3D.MIN_APPROACH_DEPTH][:THICK_CANDIDATES])
         if side is not None:
             start, down = side
     b_lo, b_hi = outer.bounds[0] - margin, outer.bounds[1] + margin
@@ -906,35 +908,33 @@ def _first_felt(inner: trimesh.Trimesh, distance, origins: np.ndarray, direction
     return None
 
 
-def _deepest_inside(inner: trimesh.Trimesh, distance, samples: int = 20000) -> float:
-    """How deep [m] the deepest of ``samples`` seeded points in the body's box lies inside it (about half its greatest
-    thickness; a lower bound, to a few tenths of a millimetre at 20,000 points in a 20 cm box)."""
-    return max(0.0, -float(np.min(distance(_box_samples(inner, samples)))))
-
-
-def _box_samples(inner: trimesh.Trimesh, samples: int) -> np.ndarray:
-    """`(samples, 3)` seeded points uniform in the body's box [m]."""
+def _deepest_samples(inner: trimesh.Trimesh, distance, samples: int = 20000) -> tuple[np.ndarray, np.ndarray]:
+    """``samples`` seeded points uniform in the body's box, deepest inside it first: `(samples, 3)` [m] and how deep
+    each lies inside `(samples,)` [m] (negative outside). The first depth is about half the body's greatest thickness
+    (a lower bound, to a few tenths of a millimetre at 20,000 points in a 20 cm box)."""
     lo, hi = inner.bounds
-    return lo + np.random.default_rng(0).uniform(size=(samples, 3)) * (hi - lo)
+    points = lo + np.random.default_rng(0).uniform(size=(samples, 3)) * (hi - lo)
+    depth = -distance(points)
+    order = np.argsort(-depth, kind="stable")
+    return points[order], depth[order]
 
 
 #: The deepest points inside a body that :func:`_thick_part_approach` aims at, deepest first.
 THICK_CANDIDATES = 200
 
 
-def _thick_part_approach(inner: trimesh.Trimesh, outer: trimesh.Trimesh, distance,
-                         clearance: float) -> tuple[np.ndarray, np.ndarray] | None:
+def _thick_part_approach(inner: trimesh.Trimesh, outer: trimesh.Trimesh, distance, clearance: float,
+                         deepest: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """An approach to the body's thick part where neither the grid from above nor those from the sides meet one (a
     blob whose thick piece sits at a corner or above nine tenths of its height, beside thin sheets): at each of the
-    deepest seeded points inside it (:data:`THICK_CANDIDATES`, deepest first), from above and then along +-x and +-y
+    deepest seeded points inside it (``deepest`` `(k, 3)` [m], deepest first: :func:`_deepest_samples`' more than
+    ``Scene3D.MIN_APPROACH_DEPTH`` inside, at most :data:`THICK_CANDIDATES`), from above and then along +-x and +-y
     (the directions the arm takes the other approaches in), starting ``clearance`` outside the cover's box; the first
     whose first passage is at least ``Scene3D.MIN_APPROACH_DEPTH`` deep. ``(start (3,), direction (3,))`` [m], or
     None."""
-    points = _box_samples(inner, 20000)
-    deepest = points[np.argsort(distance(points), kind="stable")[:THICK_CANDIDATES]]
     o_lo, o_hi = outer.bounds
     directions = np.array([[0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, -1.0, 0.0]])
-    for p in deepest[distance(deepest) < -Scene3D.MIN_APPROACH_DEPTH]:
+    for p in deepest:
         for d in directions:
             axis = int(np.argmax(np.abs(d)))
             start = p.copy()
