@@ -63,6 +63,11 @@ GAP_SCALE = 0.05
 #: A direction of a capture's correction is "weak" when the data's curvature along it is below this share of the
 #: prior's: the prior, not the touches, set it.
 WEAK = 1.0
+#: Points per local plane of a capture (:func:`_local_planes`): each plane's centre and normal average its point's
+#: nearest this many.
+PATCH = 12
+#: The least spread [m] a measured ``overlap_sigma`` takes (two noiseless renderings of one surface agree exactly).
+PAIR_FLOOR = 0.0002
 
 
 @dataclass(frozen=True)
@@ -209,7 +214,7 @@ def misfit_text(record: dict) -> str:
     return f"the contacts' misfit {mm(before)} -> {mm(after)} mm"
 
 
-def _local_planes(points: np.ndarray, origin: np.ndarray, neighbours: int = 12) -> tuple[np.ndarray, np.ndarray]:
+def _local_planes(points: np.ndarray, origin: np.ndarray, neighbours: int = PATCH) -> tuple[np.ndarray, np.ndarray]:
     """`(n, 3)` centres and unit normals of the planes through each capture point's nearest neighbours, the normals
     turned towards the camera (the cover's outside). The centre, not the point: a depth camera's noise (3 mm at a
     metre) averaged over the patch."""
@@ -261,7 +266,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                      reach: float = 0.006,
                      overlap_reach: float = 0.01, sample: int = 1500, iterations: int = 25,
                      gap: float | None = None, seed: int = 0, contact_sigma: float = 0.0025,
-                     overlap_sigma: float = 0.001, support=None, support_sigma: float = 0.003,
+                     overlap_sigma: float | None = None, support=None, support_sigma: float = 0.003,
                      support_sample: int = 300, mount=None) -> CaptureCorrections:
     """Correct each capture's pose from the contacts and the other captures (see the module docstring).
 
@@ -289,8 +294,14 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         seed: the sampling's seed.
         contact_sigma: a contact's misfit [m] beyond the captures' errors: how far it lies from the body's surface
             (a fingertip pressed 1-3 mm in), the cover's sag, the estimate's normal there.
-        overlap_sigma: the misfit of two captures' planes where they overlap [m] (each plane's depth noise averaged
-            over its patch).
+        overlap_sigma: the misfit of two captures' planes where they overlap [m], or None (default): measured at
+            each iteration, the pairs' robust spread (1.48 times their median absolute misfit; at least
+            :data:`PAIR_FLOOR`), which follows the cameras' own depth noise (1.3 mm on the simulated Kinect views of
+            the object sets a metre away, a few tenths of one on a wrist camera's close clouds). Neighbouring planes
+            share most of their points, so their pairs are far from independent: each counts as one
+            :data:`PATCH`-th of a pair (its standard deviation times ``sqrt(PATCH)``). Counted as independent with
+            1 mm, a thousand pairs outweighed twenty contacts hundreds of times over, and the far views' noise
+            turned calibrated captures by 0.3-0.4 degree about the vertical.
         support: ``(normal (3,), offset)``, the plane ``normal . x = offset`` [m] the object stands on, known in the
             base frame, or the height [m] of a horizontal one (a table whose height the robot measured, z up): each
             capture's points on it
@@ -412,9 +423,11 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
 
     def terms(xv: np.ndarray, reach_now: float = reach):
         """Rows (jacobian, residual, standard deviation) of the contacts, the support plane and the overlaps at
-        ``xv``; the counts per capture."""
+        ``xv``; the counts per capture; which rows are the overlaps' pairs (their standard deviation
+        ``overlap_sigma`` times ``sqrt(PATCH)``, or 1 where it is measured: set by the caller)."""
         n = 6 * K + 1
         J, r, sd, counts, overlaps = [np.zeros((0, n))], [np.zeros(0)], [np.zeros(0)], [0] * K, [0] * K
+        pairs = [np.zeros(0, dtype=bool)]
         g = xv[-1]
         cur = [moved(k, xv) for k in range(K)]
         for k, (_, _, R) in enumerate(cur):
@@ -426,6 +439,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 J.append(rows)
                 r.append((pivots[k] + arm + xv[6 * k:6 * k + 3]) @ plane[0] - plane[1])
                 sd.append(np.full(len(arm), support_sigma))
+                pairs.append(np.zeros(len(arm), dtype=bool))
         for k, (q, m, _) in enumerate(cur):
             arm = q - pivots[k] - xv[6 * k:6 * k + 3]                      # R (q0 - pivot): what the rotation turns
             if len(p):
@@ -445,6 +459,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 J.append(rows)
                 r.append(off[use] - g)
                 sd.append(np.full(len(jj), contact_sigma))
+                pairs.append(np.zeros(len(jj), dtype=bool))
                 counts[k] = int(use.sum())
             for other in range(k + 1, K):
                 q2, m2, _ = cur[other]
@@ -461,15 +476,16 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
                 rows[:, 6 * other + 3:6 * other + 6] = -np.cross(arm2, mm)
                 J.append(rows)
                 r.append(((q[i] - q2[jj]) * mm).sum(axis=1))
-                sd.append(np.full(len(i), overlap_sigma))
+                sd.append(np.full(len(i), 1.0 if overlap_sigma is None else overlap_sigma * math.sqrt(PATCH)))
+                pairs.append(np.ones(len(i), dtype=bool))
                 overlaps[k] += len(i)
                 overlaps[other] += len(i)
-        return np.concatenate(J), np.concatenate(r), np.concatenate(sd), counts, overlaps
+        return np.concatenate(J), np.concatenate(r), np.concatenate(sd), counts, overlaps, np.concatenate(pairs)
 
     def contact_misfit(xv: np.ndarray, reach_now: float = reach) -> tuple[float, float]:
         """The contacts' rms misfit and their median distance (the gap) under the captures at ``xv``, those within
         ``reach_now`` of the gap counted."""
-        J, r, _, _, _ = terms(xv, reach_now)
+        J, r, _, _, _, _ = terms(xv, reach_now)
         rows = J[:, -1] == -1.0
         if not rows.any():
             return math.nan, math.nan
@@ -511,9 +527,11 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         H = prior_y.copy()
     for it in range(iterations):
         reach_now = reach + (far - reach) * max(0.0, 1.0 - it / max(1.0, iterations / 2))
-        J, r, sigma, _, _ = terms(x, reach_now)
+        J, r, sigma, _, _, pairs = terms(x, reach_now)
         if not len(r):
             break
+        if overlap_sigma is None and pairs.any():      # the pairs' spread as they stand now (correlated: PATCH)
+            sigma[pairs] = max(PAIR_FLOOR, 1.4826 * float(np.median(np.abs(r[pairs])))) * math.sqrt(PATCH)
         w = _huber_weights(r / sigma, HUBER) / sigma ** 2
         if mounted is not None:                 # the same residuals, in the mount's unknowns
             J = J @ lift
@@ -532,7 +550,7 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
             x = x + step
         if reach_now == reach and np.abs(step[:-1]).max() < 1e-7:
             break
-    _, _, _, counts, overlaps = terms(x)
+    _, _, _, counts, overlaps, _ = terms(x)
     out, mount_fix = [], None
     if mounted is not None:
         # the mount's correction about the camera there, within the bound; each capture's as the base saw it then
