@@ -15,7 +15,9 @@ overlap,
     + |t_k|^2 / s_t^2 + |w_k|^2 / s_w^2``
 
 (``p_i`` a contact, ``q_i`` the capture's nearest point and ``m_i`` its normal there, towards the camera; ``rho`` the
-Huber loss), by Gauss-Newton with correspondences found again at each iteration (point-to-plane ICP). The prior's
+Huber loss; each residual in its standard deviation: the overlaps' measured at each iteration from their spread, and
+each pair counted as one :data:`PATCH`-th of one, since neighbouring planes share their points), by Gauss-Newton with
+correspondences found again at each iteration (point-to-plane ICP). The prior's
 scales ``s_t``, ``s_w`` are half the largest error the user says a calibration can have, and no correction goes beyond
 that bound (it is scaled back onto it and said).
 

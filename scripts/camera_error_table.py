@@ -1,0 +1,104 @@
+"""A camera-error study against its calibrated twin: the paired Chamfer distances and what each run's last camera
+correction left of the error its views were given (issue 63; docs/results-benchmark.md "A camera whose calibration
+is off").
+
+Each corrected run's record holds the error drawn for each view (``camera_error``) and the correction the loop last
+found (``camera_corrections``), both rigid motions about the view's optical centre; composed, they leave the view off
+by a rigid motion whose displacement at the body's middle and whose rotation are printed (the middle taken at the
+object sets' placement, ``--middle``, for every object). Without ``camera_error`` in the records (a calibrated camera
+corrected) the correction itself is what is left.
+
+    python scripts/camera_error_table.py outputs/cam65/primitives-0-99 outputs/reach64/primitives-0-99
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+def _rotation(w: np.ndarray) -> np.ndarray:
+    """`(3, 3)` the rotation of the rotation vector ``w`` [rad] (Rodrigues)."""
+    angle = float(np.linalg.norm(w))
+    if angle < 1e-15:
+        return np.eye(3)
+    k = w / angle
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def _rotvec(R: np.ndarray) -> np.ndarray:
+    """The rotation vector [rad] of ``R`` (angles below 180 degrees)."""
+    angle = math.acos(max(-1.0, min(1.0, (np.trace(R) - 1) / 2)))
+    if angle < 1e-12:
+        return np.zeros(3)
+    return angle / (2 * math.sin(angle)) * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+
+
+def _about(motion: dict) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)`` of a record's rigid motion about the view's optical centre ``o``: ``p -> o + R (p - o) + t``."""
+    return _rotation(np.radians(motion["rotation_deg"])), np.asarray(motion["translation_mm"]) / 1e3
+
+
+def left_of(record: dict, middle: np.ndarray) -> list[tuple[float, float, float, float]]:
+    """What a run's last camera correction left of each view's error: per view ``(displacement at middle [mm],
+    rotation [deg], its part about horizontal axes [deg], about the vertical [deg])``; empty where no correction was
+    made (none recorded, or not ``enough``). Without ``camera_error`` in the record the views were calibrated and the
+    correction is what is left."""
+    found = record.get("camera_corrections")
+    if not found or not found.get("enough"):
+        return []
+    given = list((record.get("camera_error") or {}).get("views", {}).values())
+    out = []
+    for k, c in enumerate(found["captures"]):
+        o = np.asarray(c["origin"], dtype=np.float64)
+        Rc, tc = _about(c)
+        Re, te = _about(given[k]) if given else (np.eye(3), np.zeros(3))
+        seen = o + Re @ (middle - o) + te
+        w = np.degrees(_rotvec(Rc @ Re))
+        out.append((float(np.linalg.norm(o + Rc @ (seen - o) + tc - middle)) * 1e3, float(np.linalg.norm(w)),
+                    float(np.linalg.norm(w[:2])), abs(float(w[2]))))
+    return out
+
+
+def _chamfers(study: Path) -> dict:
+    with open(study / "runs.csv") as f:
+        return {row["object"]: float(row["final_chamfer"]) if row["has_estimate"] == "True" else math.inf
+                for row in csv.DictReader(f) if row["mode"] == "visual-tactile"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("corrected", type=Path, help="the study with --camera-bound (and --camera-error)")
+    parser.add_argument("calibrated", type=Path, help="the same objects' study without either")
+    parser.add_argument("--middle", type=float, nargs=3, default=(0.5, 0.0, 0.16),
+                        help="the body's middle [m], base frame (the object sets' placement, 6 cm above the table)")
+    args = parser.parse_args()
+    fixed, calibrated = _chamfers(args.corrected), _chamfers(args.calibrated)
+    both = sorted(set(fixed) & set(calibrated))
+    a = np.array([calibrated[o] for o in both])
+    b = np.array([fixed[o] for o in both])
+    finite = np.isfinite(a) & np.isfinite(b)
+    ratio = b[finite] / a[finite]
+    left, turn, level, vertical = [], [], [], []
+    for path in sorted((args.corrected / "runs").glob("*.json")):
+        for views in left_of(json.loads(path.read_text()), np.asarray(args.middle)):
+            for store, value in zip((left, turn, level, vertical), views):
+                store.append(value)
+    print(f"{len(both)} objects in both: calibrated median Chamfer {np.median(a) * 100:.2f} cm, corrected "
+          f"{np.median(b) * 100:.2f} cm ({(np.median(b) / np.median(a) - 1) * 100:+.0f} %); paired ratio median "
+          f"{np.median(ratio):.2f} [IQR {np.percentile(ratio, 25):.2f}-{np.percentile(ratio, 75):.2f}]; within 10 % of "
+          f"calibrated on {int((b <= 1.1 * a).sum())} of {len(both)}")
+    if left:
+        print(f"left at the body's middle: median {np.median(left):.1f} mm (90th percentile "
+              f"{np.percentile(left, 90):.1f}), {len(left)} views; rotation left: {np.median(turn):.2f} deg, about "
+              f"horizontal axes {np.median(level):.2f}, about the vertical {np.median(vertical):.2f}")
+
+
+if __name__ == "__main__":
+    main()
