@@ -114,6 +114,18 @@ def test_bad_inputs_are_named():
         correct_captures([PointCloud(np.zeros((3, 3)))], np.zeros((2, 3)), **ok)
 
 
+def _box_on_table(lowest: float):
+    """The box's cover, the height of the table it stands on and 40 contacts with their normals on the faces whose
+    normal's z is above ``lowest`` (0.5: the top; -0.5: the top and the four sides)."""
+    inner = trimesh.creation.box((0.10, 0.08, 0.12))
+    inner.apply_translation(C)
+    outer = trimesh.creation.box((0.10 + 2 * GAP, 0.08 + 2 * GAP, 0.12 + 2 * GAP))
+    outer.apply_translation(C)
+    points, face = trimesh.sample.sample_surface(inner, 400, seed=1)
+    keep = inner.face_normals[face][:, 2] > lowest
+    return outer, C[2] - 0.06 - GAP, points[keep][:40], inner.face_normals[face][keep][:40]
+
+
 @pytest.mark.parametrize("seed", [0, 3])
 def test_the_table_the_captures_see_fixes_the_rotations_the_contacts_leave_loose(seed):
     """The box on a table, touched on its top face only (40 contacts): the contacts fix each capture's height and
@@ -124,14 +136,7 @@ def test_the_table_the_captures_see_fixes_the_rotations_the_contacts_leave_loose
 
     from torch_gpioius.sensors.pointcloud import rotation_matrix
 
-    inner = trimesh.creation.box((0.10, 0.08, 0.12))
-    inner.apply_translation(C)
-    outer = trimesh.creation.box((0.10 + 2 * GAP, 0.08 + 2 * GAP, 0.12 + 2 * GAP))
-    outer.apply_translation(C)
-    table = C[2] - 0.06 - GAP
-    points, face = trimesh.sample.sample_surface(inner, 400, seed=1)
-    top = inner.face_normals[face][:, 2] > 0.5
-    contacts, normals = points[top][:40], inner.face_normals[face][top][:40]
+    outer, table, contacts, normals = _box_on_table(lowest=0.5)
     cams = [SimulatedDepthCamera(outer, PinholeCamera.kinect_v2(0.5), look_at(e, C), noise_a=0.0015, noise_b=0.0015,
                                  seed=[seed, k], error=ERROR, support=table) for k, e in enumerate(EYES)]
     captures = [c.capture() for c in cams]
@@ -219,14 +224,7 @@ def test_the_overlaps_of_calibrated_views_do_not_turn_them_about_the_vertical():
     measured spread and one patch's worth each (the default), 0.19 degree and 1.2 mm (measured)."""
     from torch_gpioius.sensors.extrinsics import PATCH
 
-    inner = trimesh.creation.box((0.10, 0.08, 0.12))
-    inner.apply_translation(C)
-    outer = trimesh.creation.box((0.10 + 2 * GAP, 0.08 + 2 * GAP, 0.12 + 2 * GAP))
-    outer.apply_translation(C)
-    table = C[2] - 0.06 - GAP
-    points, face = trimesh.sample.sample_surface(inner, 400, seed=1)
-    up = inner.face_normals[face][:, 2] > -0.5
-    contacts, normals = points[up][:40], inner.face_normals[face][up][:40]
+    outer, table, contacts, normals = _box_on_table(lowest=-0.5)
     turned, moved = {None: [], 0.001 / math.sqrt(PATCH): []}, {None: [], 0.001 / math.sqrt(PATCH): []}
     for seed in range(6):
         captures = [SimulatedDepthCamera(outer, PinholeCamera.kinect_v2(0.5), look_at(e, C), noise_a=0.0015,
