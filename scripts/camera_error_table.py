@@ -66,9 +66,12 @@ def left_of(record: dict, middle: np.ndarray) -> list[tuple[float, float, float,
     return out
 
 
-def _chamfers(study: Path) -> dict:
+def _finals(study: Path) -> dict:
+    """``object -> (final Chamfer [m], F-score at 5 mm)`` of a study's visual-tactile runs (inf and NaN without an
+    estimate)."""
     with open(study / "runs.csv") as f:
-        return {row["object"]: float(row["final_chamfer"]) if row["has_estimate"] == "True" else math.inf
+        return {row["object"]: (float(row["final_chamfer"]) if row["has_estimate"] == "True" else math.inf,
+                                float(row["final_fscore_5mm"] or "nan"))
                 for row in csv.DictReader(f) if row["mode"] == "visual-tactile"}
 
 
@@ -79,10 +82,10 @@ def main() -> None:
     parser.add_argument("--middle", type=float, nargs=3, default=(0.5, 0.0, 0.16),
                         help="the body's middle [m], base frame (the object sets' placement, 6 cm above the table)")
     args = parser.parse_args()
-    fixed, calibrated = _chamfers(args.corrected), _chamfers(args.calibrated)
+    fixed, calibrated = _finals(args.corrected), _finals(args.calibrated)
     both = sorted(set(fixed) & set(calibrated))
-    a = np.array([calibrated[o] for o in both])
-    b = np.array([fixed[o] for o in both])
+    a, fa = np.array([calibrated[o] for o in both]).T
+    b, fb = np.array([fixed[o] for o in both]).T
     finite = np.isfinite(a) & np.isfinite(b)
     ratio = b[finite] / a[finite]
     left, turn, level, vertical = [], [], [], []
@@ -93,7 +96,8 @@ def main() -> None:
     print(f"{len(both)} objects in both: calibrated median Chamfer {np.median(a) * 100:.2f} cm, corrected "
           f"{np.median(b) * 100:.2f} cm ({(np.median(b) / np.median(a) - 1) * 100:+.0f} %); paired ratio median "
           f"{np.median(ratio):.2f} [IQR {np.percentile(ratio, 25):.2f}-{np.percentile(ratio, 75):.2f}]; within 10 % of "
-          f"calibrated on {int((b <= 1.1 * a).sum())} of {len(both)}")
+          f"calibrated on {int((b <= 1.1 * a).sum())} of {len(both)}, closer on {int((b < a).sum())} of "
+          f"{int(finite.sum())}; F-score at 5 mm {np.nanmedian(fa):.2f} -> {np.nanmedian(fb):.2f}")
     if left:
         print(f"left at the body's middle: median {np.median(left):.1f} mm (90th percentile "
               f"{np.percentile(left, 90):.1f}), {len(left)} views; rotation left: {np.median(turn):.2f} deg, about "

@@ -9,16 +9,16 @@ from scipy.spatial.transform import Rotation
 
 from tests.scriptfiles import load_script
 
-O = np.array([0.5, -0.25, 1.29])
+CENTRE = np.array([0.5, -0.25, 1.29])
 MIDDLE = np.array([0.5, 0.0, 0.16])
 
 
 def _motion(rotvec_deg, translation_mm) -> dict:
-    return {"rotation_deg": list(rotvec_deg), "translation_mm": list(translation_mm), "origin": O.tolist()}
+    return {"rotation_deg": list(rotvec_deg), "translation_mm": list(translation_mm), "origin": CENTRE.tolist()}
 
 
 def _inverse(motion: dict) -> dict:
-    """The motion about O that undoes ``motion``: R^-1 and -R^-1 t."""
+    """The motion about CENTRE (the optical centre) that undoes ``motion``: R^-1 and -R^-1 t."""
     R = Rotation.from_rotvec(np.radians(motion["rotation_deg"]))
     t = np.asarray(motion["translation_mm"])
     return _motion(np.degrees(R.inv().as_rotvec()), -R.inv().apply(t))
@@ -34,7 +34,7 @@ def test_a_correction_that_undoes_the_error_leaves_nothing_and_none_leaves_the_e
     record["camera_corrections"]["captures"] = [_motion([0, 0, 0], [0, 0, 0])]
     (left, turn, level, vertical), = table.left_of(record, MIDDLE)
     R = Rotation.from_rotvec(np.radians(error["rotation_deg"]))
-    moved = O + R.apply(MIDDLE - O) + np.asarray(error["translation_mm"]) / 1e3
+    moved = CENTRE + R.apply(MIDDLE - CENTRE) + np.asarray(error["translation_mm"]) / 1e3
     assert math.isclose(left, np.linalg.norm(moved - MIDDLE) * 1e3, rel_tol=1e-9)
     assert math.isclose(turn, np.linalg.norm([0.3, -0.6, 0.7]), rel_tol=1e-9)
     assert math.isclose(level, np.linalg.norm([0.3, -0.6]), rel_tol=1e-9) and math.isclose(vertical, 0.7, rel_tol=1e-9)
@@ -45,7 +45,8 @@ def test_a_calibrated_cameras_correction_is_what_is_left_and_no_correction_is_no
     fix = _motion([0.0, 0.0, -0.4], [1.0, 0.0, 0.0])
     (left, turn, _, vertical), = table.left_of({"camera_corrections": {"enough": True, "captures": [fix]}}, MIDDLE)
     R = Rotation.from_rotvec(np.radians([0.0, 0.0, -0.4]))
-    assert math.isclose(left, np.linalg.norm(O + R.apply(MIDDLE - O) + [0.001, 0, 0] - MIDDLE) * 1e3, rel_tol=1e-9)
+    moved = CENTRE + R.apply(MIDDLE - CENTRE) + [0.001, 0.0, 0.0]
+    assert math.isclose(left, np.linalg.norm(moved - MIDDLE) * 1e3, rel_tol=1e-9)
     assert math.isclose(turn, 0.4, rel_tol=1e-9) and math.isclose(vertical, 0.4, rel_tol=1e-9)
     assert table.left_of({"camera_corrections": {"enough": False, "captures": [fix]}}, MIDDLE) == []
     assert table.left_of({}, MIDDLE) == []
