@@ -239,3 +239,23 @@ def test_the_overlaps_of_calibrated_views_do_not_turn_them_about_the_vertical():
         [np.mean(turned[s]) for s in turned], [np.mean(moved[s]) for s in moved])
     assert turn_measured < 0.8 * turn_independent and turn_measured < 0.25, (turn_measured, turn_independent)
     assert moved_measured < 0.8 * moved_independent and moved_measured < 0.002, (moved_measured, moved_independent)
+
+
+def test_a_single_contact_under_the_seen_cover_measures_no_misfit_unless_the_gap_is_known(box):
+    """One contact under one view: its misfit about the gap fitted to it is 0 whatever the view's error, not a
+    measurement (it was reported as 0.0 mm; under several views it measures their disagreement). With the gap
+    estimated it is not measured (None in the record, "not measured" in the text); with the gap known it is the
+    contact's distance from that gap (a calibrated view: the depth noise's share)."""
+    from torch_gpioius.sensors.extrinsics import misfit_text
+
+    outer, contacts, normals = box
+    top = np.flatnonzero(normals[:, 2] > 0.5)[:1]
+    captures = [_cameras(outer, 0, error=None)[2].capture()]                # one view: one row
+    estimated = correct_captures(captures, contacts[top], normals[top], max_translation=0.012,
+                                 max_rotation=math.radians(2))
+    assert not estimated.enough and math.isnan(estimated.before)
+    record = estimated.as_record()
+    assert record["misfit_before_mm"] is None and "not measured" in misfit_text(record)
+    known = correct_captures(captures, contacts[top], normals[top], max_translation=0.012,
+                             max_rotation=math.radians(2), gap=GAP)
+    assert 0.0 < known.before < 0.003, known.before

@@ -149,7 +149,8 @@ class CaptureCorrections:
         gap: the cover's gap the contacts show once the captures are corrected [m] (NaN: no contact counted).
         before: the contacts' root-mean-square misfit under the captures as given [m] (their distance along the
             cover's normal, less the gap fitted to them as given; where none lies at about that gap, those within
-            what the bound allows, less their median or the gap given; NaN: no contact under any seen cover).
+            what the bound allows, less their median or the gap given; NaN: no contact under any seen cover, or a
+            single one with the gap estimated, whose misfit about its own distance says nothing).
         after: the same once corrected [m].
         bound: ``(translation [m], rotation [rad])``, the largest correction allowed.
         mount: with ``correct_captures(mount=...)``, the one correction of the camera's mount, in the mount's frame
@@ -208,7 +209,8 @@ def _mm(value: float) -> float | None:
 
 def misfit_text(record: dict) -> str:
     """``"the contacts' misfit 3.0 -> 0.8 mm"`` from a :meth:`CaptureCorrections.as_record` (older records' NaN
-    and this one's None: "not measured", where no contact lay under the seen cover as the calibration placed it)."""
+    and this one's None: "not measured", where no contact lay under the seen cover as the calibration placed it, or a
+    single one with the gap estimated)."""
     def mm(v) -> str:
         return "not measured" if v is None or not math.isfinite(v) else f"{v:.1f}"
 
@@ -486,13 +488,16 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
 
     def contact_misfit(xv: np.ndarray, reach_now: float = reach) -> tuple[float, float]:
         """The contacts' rms misfit and their median distance (the gap) under the captures at ``xv``, those within
-        ``reach_now`` of the gap counted."""
+        ``reach_now`` of the gap counted. The misfit is NaN (not measured) where no contact counts, and where a single
+        one does and the gap is estimated (its misfit about its own distance is 0 whatever the captures' error)."""
         J, r, _, _, _, _ = terms(xv, reach_now)
         rows = J[:, -1] == -1.0
         if not rows.any():
             return math.nan, math.nan
         off = r[rows] + xv[-1]
         g = xv[-1] if fixed_gap else float(np.median(off))
+        if len(off) < 2 and not fixed_gap:
+            return math.nan, g
         return float(np.sqrt(np.mean((off - g) ** 2))), g
 
     if fixed_gap:
