@@ -110,6 +110,8 @@ def test_bad_inputs_are_named():
         correct_captures([cloud], np.zeros((2, 3)), np.zeros((3, 3)), **ok)
     with pytest.raises(ValueError, match="max_translation must be a positive bound"):
         correct_captures([cloud], np.zeros((2, 3)), max_translation=0.0, max_rotation=0.02)
+    with pytest.raises(ValueError, match="overlap_sigma must be a positive misfit"):
+        correct_captures([cloud], np.zeros((2, 3)), overlap_sigma=0.0, **ok)
     with pytest.raises(ValueError, match="capture 0 needs at least 10"):
         correct_captures([PointCloud(np.zeros((3, 3)))], np.zeros((2, 3)), **ok)
 

@@ -323,8 +323,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
         :class:`CaptureCorrections`.
 
     Raises:
-        ValueError: no captures, bad shapes, non-finite values, a bound that is not positive or a mount pose that
-            is not a rigid transform.
+        ValueError: no captures, bad shapes, non-finite values, a bound or an ``overlap_sigma`` that is not
+            positive, or a mount pose that is not a rigid transform.
     """
     from scipy.spatial import cKDTree
 
@@ -345,6 +345,10 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     for name, v in (("max_translation", max_translation), ("max_rotation", max_rotation)):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise ValueError(f"correct_captures: {name} must be a positive bound, got {v!r}")
+    if overlap_sigma is not None and (isinstance(overlap_sigma, bool) or not isinstance(overlap_sigma, (int, float))
+                                      or not math.isfinite(overlap_sigma) or overlap_sigma <= 0):
+        raise ValueError(f"correct_captures: overlap_sigma must be a positive misfit [m] or None (measured), got "
+                         f"{overlap_sigma!r}")
     plane = None
     if support is not None:
         if isinstance(support, (int, float)) and not isinstance(support, bool):
