@@ -20,29 +20,12 @@ import math
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 
-def _rotation(w: np.ndarray) -> np.ndarray:
-    """`(3, 3)` the rotation of the rotation vector ``w`` [rad] (Rodrigues)."""
-    angle = float(np.linalg.norm(w))
-    if angle < 1e-15:
-        return np.eye(3)
-    k = w / angle
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
-
-
-def _rotvec(R: np.ndarray) -> np.ndarray:
-    """The rotation vector [rad] of ``R`` (angles below 180 degrees)."""
-    angle = math.acos(max(-1.0, min(1.0, (np.trace(R) - 1) / 2)))
-    if angle < 1e-12:
-        return np.zeros(3)
-    return angle / (2 * math.sin(angle)) * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-
-
-def _about(motion: dict) -> tuple[np.ndarray, np.ndarray]:
+def _about(motion: dict) -> tuple[Rotation, np.ndarray]:
     """``(R, t)`` of a record's rigid motion about the view's optical centre ``o``: ``p -> o + R (p - o) + t``."""
-    return _rotation(np.radians(motion["rotation_deg"])), np.asarray(motion["translation_mm"]) / 1e3
+    return Rotation.from_rotvec(np.radians(motion["rotation_deg"])), np.asarray(motion["translation_mm"]) / 1e3
 
 
 def left_of(record: dict, middle: np.ndarray) -> list[tuple[float, float, float, float]]:
@@ -58,10 +41,10 @@ def left_of(record: dict, middle: np.ndarray) -> list[tuple[float, float, float,
     for k, c in enumerate(found["captures"]):
         o = np.asarray(c["origin"], dtype=np.float64)
         Rc, tc = _about(c)
-        Re, te = _about(given[k]) if given else (np.eye(3), np.zeros(3))
-        seen = o + Re @ (middle - o) + te
-        w = np.degrees(_rotvec(Rc @ Re))
-        out.append((float(np.linalg.norm(o + Rc @ (seen - o) + tc - middle)) * 1e3, float(np.linalg.norm(w)),
+        Re, te = _about(given[k]) if given else (Rotation.identity(), np.zeros(3))
+        seen = o + Re.apply(middle - o) + te
+        w = np.degrees((Rc * Re).as_rotvec())
+        out.append((float(np.linalg.norm(o + Rc.apply(seen - o) + tc - middle)) * 1e3, float(np.linalg.norm(w)),
                     float(np.linalg.norm(w[:2])), abs(float(w[2]))))
     return out
 

@@ -1,6 +1,6 @@
 """scripts/camera_error_table.py: what a run's camera correction left of the error its views were given, from the
-run's record; checked against SciPy's rotations and the records' own conventions (rigid motions about the view's
-optical centre)."""
+run's record; checked against the records' own conventions (rigid motions about the view's optical centre): a
+correction built as the error's inverse, and a point moved by the error alone."""
 
 import math
 

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.validation import as_float
 from .pointcloud import rigid_about, rotation_matrix, skew
 
 __all__ = ["CaptureCorrection", "CaptureCorrections", "correct_captures", "misfit_text"]
@@ -345,10 +346,8 @@ def correct_captures(captures, contacts, normals=None, *, max_translation: float
     for name, v in (("max_translation", max_translation), ("max_rotation", max_rotation)):
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
             raise ValueError(f"correct_captures: {name} must be a positive bound, got {v!r}")
-    if overlap_sigma is not None and (isinstance(overlap_sigma, bool) or not isinstance(overlap_sigma, (int, float))
-                                      or not math.isfinite(overlap_sigma) or overlap_sigma <= 0):
-        raise ValueError(f"correct_captures: overlap_sigma must be a positive misfit [m] or None (measured), got "
-                         f"{overlap_sigma!r}")
+    if overlap_sigma is not None:               # None: measured from the pairs' spread
+        overlap_sigma = as_float(overlap_sigma, "correct_captures: overlap_sigma", positive=True, unit="m")
     plane = None
     if support is not None:
         if isinstance(support, (int, float)) and not isinstance(support, bool):
