@@ -32,6 +32,7 @@ from .observations import (Observations, deepen_vision_inside, drop_contradicted
                            vision_observations)
 from .recorders import IntervalRecorder, MetricsRecorder, ProgressRecorder
 from .state import ExplorationState, StepRecord
+from .touch import contact_observations
 from .timing import PartClock
 from .trace import Trace
 from .world import World
@@ -196,7 +197,7 @@ def ingest_evidence(state: ExplorationState, cfg: ExploreConfig,
         if np.linalg.norm(contact - state.contact) >= evidence.min_move:
             removed = retract_free_space(state.model, contact, cfg.policy.free_space_margin)
             state.retracted += len(removed)
-            xs.append(Observations(contact[None], [0.0], [0], step=state.steps, source="evidence"))
+            xs.append(contact_observations(contact, cfg.policy, state.steps, "evidence"))
         state.contacts[-1] = contact
         state.normal = evidence.normal
     if free is not None and len(free):

@@ -15,7 +15,17 @@ from .observations import Observations, ObservationPolicy, thin_points
 from .patches import PatchThinning, patch_observations
 from .protocols import TouchModelBase
 
-__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "register_touch_model", "touch_model", "inside_observation"]
+__all__ = ["PointTouch", "PatchTouch", "TOUCH_MODELS", "register_touch_model", "touch_model", "inside_observation",
+           "contact_observations"]
+
+
+def contact_observations(contact: np.ndarray, policy: ObservationPolicy, step: int, source: str) -> Observations:
+    """A settled contact `(d,)` [m] as the model takes it: y = 0 on the inner task, ``policy.contact_repeats``
+    times (each repetition is one more independent measurement of the same label: together one observation with a
+    ``contact_repeats``-th of sigma^2)."""
+    k = policy.contact_repeats
+    return Observations(np.repeat(np.asarray(contact, dtype=np.float64)[None], k, axis=0), np.zeros(k),
+                        np.zeros(k, np.int64), step=step, source=source)
 
 
 @dataclass(frozen=True)
@@ -32,7 +42,7 @@ class PointTouch(TouchModelBase):
         contact = np.asarray(contacts[-1], dtype=np.float64)
         free = thin_points(result.free_space.numpy(), policy.free_space_spacing, np.asarray(contacts),
                            policy.free_space_margin)
-        return Observations.concat([Observations(contact[None], [0.0], [0], step=step, source="touch"),
+        return Observations.concat([contact_observations(contact, policy, step, "touch"),
                                     inside_observation(contact, result, policy, step),
                                     Observations(free, np.ones(len(free)), np.zeros(len(free), np.int64), step=step,
                                                  source="touch")])

@@ -83,6 +83,13 @@ class ObservationPolicy:
             inside it and contradicted the inside points (docs/method-notes.md section 20). Without voxels, the
             smoothed points themselves. The free space and the inside points are the measured cloud's. None: each
             point in the voxel it was measured in (the paper).
+        contact_repeats: each contact (the touch's y = 0 observation; the inside and free-space points it brings are
+            not repeated) enters the model this many times: exactly one observation with the noise ``sigma^2 / k``,
+            the camera's observations keeping ``sigma^2`` (k identical labels with independent noise are, for the
+            posterior and for K_t's optimum, one label with a k-th of the variance; the marginal likelihood differs
+            by a constant). A fingertip's settled contact is measured more precisely than a voxel mean of a depth
+            camera's cloud; one sigma^2 for both counts them alike. 1 (the default): the paper's one noise
+            (docs/method-notes.md section 24).
     """
 
     vision_free_offset: float | None = 0.05
@@ -100,6 +107,7 @@ class ObservationPolicy:
     camera_bound: tuple | None = None
     camera_table: bool = True
     ray_smoothing: int | None = None
+    contact_repeats: int = 1
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -125,6 +133,8 @@ class ObservationPolicy:
         where = f"ObservationPolicy.{name}"
         if name == "ray_smoothing":
             return as_int(value, f"{where} (rays)", *_RAYS, allow_none=True)
+        if name == "contact_repeats":
+            return as_int(value, where, *_REPEATS)
         if name == "camera_bound":
             ok = value is None or (isinstance(value, (tuple, list)) and len(value) == 2
                                    and all(_in_range(v, hi) for v, hi in zip(value, _CAMERA_BOUND)))
@@ -154,6 +164,8 @@ class ObservationPolicy:
                     "none")
         if name == "ray_smoothing":
             return f"{_RAYS[0]}-{_RAYS[1]} rays, or none"
+        if name == "contact_repeats":
+            return f"a whole number {_REPEATS[0]}-{_REPEATS[1]}"
         if name in _FLAGS:
             return "true or false"
         if name in _LENGTHS:
@@ -235,6 +247,8 @@ _SPACINGS = ("free_space_spacing", "free_space_margin")
 _CAMERA_BOUND = (0.1, math.radians(20))
 #: The rays ``ray_smoothing`` may average over.
 _RAYS = (8, 10_000)
+#: The times ``contact_repeats`` may count a contact (64: a contact's noise down to a 64th of the camera's).
+_REPEATS = (1, 64)
 
 
 def _in_range(value, hi: float) -> bool:
