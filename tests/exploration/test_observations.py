@@ -448,3 +448,66 @@ def test_a_noisy_camera_smoothed_along_its_rays_keeps_its_surface_in_place():
     np.testing.assert_array_equal(xs[ys == 1], xr[yr == 1])                # free space: the measured cloud's
     candidates = {tuple(p) for p in cloud.behind(0.02, 0.02)}               # inside points: among its candidates,
     assert {tuple(p) for p in xs[ys < 0]} <= candidates and (ys < 0).sum() > (yr < 0).sum()   # fewer contradicted
+
+
+def test_a_repeated_contact_enters_k_times_and_its_inside_and_free_points_once():
+    contact = np.array([0.3, 0.1, 0.2])
+    force = np.array([0.0, 3.0, 4.0])
+    free = contact + np.outer(np.linspace(0.03, 0.09, 4), [0.0, 0.6, 0.8])
+    one = PointTouch().observations(_touch(contact, force, free), contact[None], ObservationPolicy(touch_inside=0.02), 3)
+    four = PointTouch().observations(_touch(contact, force, free), contact[None],
+                                     ObservationPolicy(touch_inside=0.02, contact_repeats=4), 3)
+    assert len(four) == len(one) + 3
+    np.testing.assert_array_equal(four.x[:4], np.repeat(contact[None], 4, axis=0))
+    assert four.y[:4].tolist() == [0.0] * 4 and (four.task == 0).all()
+    np.testing.assert_array_equal(four.x[4:], one.x[1:])          # the inside point and the free space, once
+    for bad in (0, 65, 2.5, True, "4"):
+        with pytest.raises(ValueError, match="contact_repeats"):
+            ObservationPolicy(contact_repeats=bad)
+
+
+def test_a_contact_repeated_k_times_is_one_contact_with_a_kth_of_the_noise():
+    """The model with each contact row k times (one sigma^2) equals, in its inner and outer posterior means and
+    variances, a dense Gaussian process written out here with the contacts' noise sigma^2 / k; its marginal likelihood
+    differs from that one's by the same constant at every K_t, so K_t's optimum is the same."""
+    from torch_gpioius.kernels import Matern52
+
+    rng = np.random.default_rng(0)
+    sphere = rng.standard_normal((60, 3))
+    sphere /= np.linalg.norm(sphere, axis=1, keepdims=True)
+    contacts, seen = 0.10 * sphere[:12], 0.108 * sphere[12:]
+    k, s = 4, 0.08
+    x_ref = np.concatenate([contacts, contacts * 1.5, seen, seen * 1.46])
+    y_ref = np.concatenate([np.zeros(12), np.ones(12), np.zeros(48), np.ones(48)])
+    t_ref = np.concatenate([np.zeros(24, np.int64), np.ones(96, np.int64)])
+    noise_ref = np.where((t_ref == 0) & (y_ref == 0), s / k, s)
+    x = np.concatenate([np.repeat(contacts, k, axis=0), x_ref[12:]])
+    y = np.concatenate([np.zeros(12 * k), y_ref[12:]])
+    t = np.concatenate([np.zeros(12 * k, np.int64), t_ref[12:]])
+    kernel = Matern52(0.05)
+
+    def reference(kt, q, task):
+        xt, tt = torch.as_tensor(x_ref), torch.as_tensor(t_ref)
+        g = kernel.value(xt, xt) * kt[tt][:, tt] + torch.diag(torch.as_tensor(noise_ref))
+        cross = kernel.value(torch.as_tensor(q), xt) * kt[task, tt]
+        mean = 1.0 + cross @ torch.linalg.solve(g, torch.as_tensor(y_ref) - 1.0)
+        var = kt[task, task] * kernel.value(torch.as_tensor(q[:1]), torch.as_tensor(q[:1]))[0, 0] - (
+            cross * torch.linalg.solve(g, cross.T).T).sum(1)
+        chol = torch.linalg.cholesky(g)
+        r = torch.as_tensor(y_ref) - 1.0
+        mll = -0.5 * r @ torch.cholesky_solve(r[:, None], chol)[:, 0] - chol.diagonal().log().sum()
+        return mean.numpy(), var.numpy(), float(mll)
+
+    q = rng.uniform(-0.15, 0.15, (40, 3))
+    constants = []
+    for kt in ([[1.0, 0.9], [0.9, 1.2]], [[0.7, 0.3], [0.3, 1.5]]):
+        for inference in ("dense", "structured"):
+            model = tg.GPIOIS(x, y, t, noise=s, kernel=Matern52(0.05), inference=inference)
+            model.task_covariance = kt
+            for task in (0, 1):
+                mean, var = model.predict(torch.as_tensor(q), task=task)
+                ref_mean, ref_var, ref_mll = reference(torch.tensor(kt, dtype=torch.float64), q, task)
+                np.testing.assert_allclose(mean.detach().numpy(), ref_mean, atol=1e-9)
+                np.testing.assert_allclose(var.detach().numpy(), ref_var, atol=1e-9)
+        constants.append(float(model.log_marginal_likelihood()) - ref_mll)
+    assert constants[0] == pytest.approx(constants[1], abs=1e-6)

@@ -376,3 +376,39 @@ def test_the_gap_field_settings_log_the_field_and_resume_alike(tmp_path):
     _resumes_alike(scene, log, run.steps[min(run.steps.index(fielded[0]) + 1, len(run.steps) - 2)], reference, kw)
     resumed = load_run(log)
     assert resumed.params[resumed.steps[-1]]["outer_field"] == field
+
+
+def test_repeated_contacts_are_in_the_model_k_times_in_the_header_and_replayed_from_the_log(tmp_path):
+    """``contact_repeats`` in the loop: every contact row of the model three times (its inside and free points once),
+    the header names the setting only when it is set, and the log's replay holds the same model."""
+    import trimesh
+
+    from torch_gpioius.io.runs import load_run
+    from torch_gpioius.sim.forcefield import Scene3D
+
+    body = trimesh.creation.icosphere(subdivisions=3, radius=0.06)
+    scene = Scene3D.from_mesh(body, cover="tight", at=[0.5, 0.0, 0.1],
+                              estimator=tg.EstimatorOverrides(labels={"contact_repeats": 3}))
+    assert scene.defaults.policy.contact_repeats == 3
+    log = tmp_path / "run.gpioius"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        reference = tg.explore(scene, log=log, max_travel=0.06, metrics_every=100, progress=False)
+    x, y, t = (v.numpy() for v in (reference.model.train_inputs[0], reference.model.train_targets,
+                                   reference.model.train_task))
+    surface = x[(t == 0) & (y == 0)]
+    assert len(surface) == 3 * len(reference.contacts)
+    for contact in reference.contacts:
+        assert (np.abs(surface - contact).max(axis=1) == 0).sum() == 3
+    run = load_run(log)
+    assert run.meta["policy"]["contact_repeats"] == 3
+    q = torch.as_tensor(np.asarray(reference.contacts[-2:]) * 0.9)
+    torch.testing.assert_close(run.model_at(run.steps[-1]).predict(q, 0)[0], reference.model.predict(q, 0)[0],
+                               rtol=0, atol=1e-9)
+    # the paper's one noise: not in the header, so that logs written before the setting existed still resume
+    one = tmp_path / "one.gpioius"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        tg.explore(scene.with_estimator(tg.EstimatorOverrides(labels={"contact_repeats": 1})), log=one,
+                   max_travel=0.02, metrics_every=100, progress=False)
+    assert "contact_repeats" not in load_run(one).meta["policy"]
