@@ -454,7 +454,8 @@ def test_a_repeated_contact_enters_k_times_and_its_inside_and_free_points_once()
     contact = np.array([0.3, 0.1, 0.2])
     force = np.array([0.0, 3.0, 4.0])
     free = contact + np.outer(np.linspace(0.03, 0.09, 4), [0.0, 0.6, 0.8])
-    one = PointTouch().observations(_touch(contact, force, free), contact[None], ObservationPolicy(touch_inside=0.02), 3)
+    one = PointTouch().observations(_touch(contact, force, free), contact[None],
+                                    ObservationPolicy(touch_inside=0.02), 3)
     four = PointTouch().observations(_touch(contact, force, free), contact[None],
                                      ObservationPolicy(touch_inside=0.02, contact_repeats=4), 3)
     assert len(four) == len(one) + 3
