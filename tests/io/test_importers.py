@@ -125,6 +125,19 @@ def test_dataset_from_files(tmp_path):
         dataset_from_files(tmp_path / "c2.csv", tmp_path / "cloud.npz")
 
 
+def test_a_users_contacts_enter_as_often_as_an_exploration_repeats_them(tmp_path):
+    """``contact_repeats``: each contact row of the files k times, as an exploration records it (its free space and
+    inside points once), with the contact's step."""
+    (tmp_path / "c.csv").write_text("x,y,z,label,step\n0.1,0,0,contact,1\n0.3,0,0,free,1\n0.1,0.01,0,contact,2\n")
+    np.savez(tmp_path / "cloud.npz", points=PTS)
+    ds = dataset_from_files(tmp_path / "c.csv", tmp_path / "cloud.npz",
+                            settings=EstimatorOverrides(voxel=0, labels={"contact_repeats": 3}))
+    inner = ds.task == 0
+    assert ds.y[inner].tolist() == [0, 0, 0, 1, 0, 0, 0]
+    np.testing.assert_array_equal(ds.x[inner][:3], np.repeat([[0.1, 0.0, 0.0]], 3, axis=0))
+    assert ds.step[inner].tolist() == [1, 1, 1, 1, 2, 2, 2]
+
+
 # ------------------------------------------------------------------------------------------ issue 14: importers
 def test_csv_rows_with_extra_or_missing_fields_are_named(tmp_path):
     (tmp_path / "a.csv").write_text("x,y,label\n0.1,0.2,contact\n0.1,0.2,contact,oops\n")

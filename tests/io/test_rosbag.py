@@ -519,6 +519,23 @@ def test_a_bag_imported_with_the_default_settings_has_inside_points_behind_its_c
     assert not (paper.y < 0).any() and paper.meta["counts"]["inside_points"] == 0
 
 
+def test_a_bags_contacts_enter_as_often_as_an_exploration_repeats_them(recording, mcap_bag):
+    """``contact_repeats``: each contact of the bag k times, with its step; the count of contacts says how many were
+    touched, and everything else is the import with one each."""
+    from torch_gpioius.models.overrides import EstimatorOverrides
+
+    msgs, truth = recording
+    one = _import(mcap_bag, truth, settings=EstimatorOverrides(labels={"contact_repeats": 1}))
+    three = _import(mcap_bag, truth, settings=EstimatorOverrides(labels={"contact_repeats": 3}))
+    n = one.meta["counts"]["contacts"]
+    assert three.meta["counts"]["contacts"] == n
+    touched = lambda ds: (ds.task == 0) & (ds.y == 0)                    # noqa: E731
+    assert touched(three).sum() == touched(one).sum() + 2 * n
+    np.testing.assert_array_equal(three.x[touched(three)][::3], one.x[touched(one)][:n])
+    np.testing.assert_array_equal(three.step[touched(three)][::3], one.step[touched(one)][:n])
+    assert len(three) == len(one) + 2 * n
+
+
 # ------------------------------------------------------------------------------------ a camera whose pose is off
 def _off_by(T: np.ndarray, translation: float, degrees: float, seed: int) -> str:
     """``T`` `(4, 4)` moved by ``translation`` [m] and turned by ``degrees`` about its own origin, each in a seeded

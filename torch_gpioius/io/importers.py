@@ -792,8 +792,8 @@ def _import_settings(settings, voxel, noise):
 
 
 def _inner_with_inside_points(x: np.ndarray, y: np.ndarray, normal: np.ndarray, step: np.ndarray, labels):
-    """The contacts' rows, each contact with a normal followed by its inside point ``labels.touch_inside`` behind it
-    (as an exploration records a touch), and each row's step."""
+    """The contacts' rows, each contact ``labels.contact_repeats`` times and, with a normal, followed by its inside
+    point ``labels.touch_inside`` behind it (as an exploration records a touch), and each row's step."""
     from ..exploration.observations import Observations
 
     surface = np.flatnonzero(y == 0)
@@ -802,7 +802,10 @@ def _inner_with_inside_points(x: np.ndarray, y: np.ndarray, normal: np.ndarray, 
     order = np.argsort(np.r_[np.arange(len(y)) * 2, surface[of] * 2 + 1], kind="stable")
     xs = np.concatenate([x, points.reshape(-1, x.shape[1])])[order]
     ys = np.r_[y, inside][order]
-    return Observations(xs, ys, np.zeros(len(ys), np.int64), source="touch"), np.asarray(step)[rows][order]
+    steps = np.asarray(step)[rows][order]
+    times = np.where(ys == 0, labels.contact_repeats, 1)          # a contact k times: its noise sigma^2 / k
+    return (Observations(np.repeat(xs, times, axis=0), np.repeat(ys, times), np.zeros(int(times.sum()), np.int64),
+                         source="touch"), np.repeat(steps, times))
 
 
 def _check_together(contacts_csv, x_in: np.ndarray, y_in: np.ndarray, cloud, pts: np.ndarray) -> None:

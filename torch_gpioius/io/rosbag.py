@@ -932,6 +932,9 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
     contacts, free, free_steps = inner["contacts"], inner["free"], inner["free_steps"]
     seen, free_o = outer["seen"], outer["free"]
     behind, behind_y, behind_steps = _inside_points(s, inner, seen, free_o)
+    repeats = s.estimator.labels.contact_repeats if s.estimator is not None else 1
+    steps_c = np.repeat(np.arange(1, len(contacts) + 1), repeats)  # each contact k times: its noise sigma^2 / k
+    contacts = np.repeat(contacts, repeats, axis=0)
     p_surf = np.concatenate(pads["surface"]) if pads["surface"] else np.empty((0, 3))
     p_free = np.concatenate(pads["free"]) if pads["free"] else np.empty((0, 3))
     x = np.concatenate([contacts, p_surf, free, p_free, behind, seen, free_o])
@@ -939,7 +942,7 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
                         np.zeros(len(seen)), np.ones(len(free_o))])
     n_inner = len(contacts) + len(p_surf) + len(free) + len(p_free) + len(behind)
     task = np.concatenate([np.zeros(n_inner), np.ones(len(seen) + len(free_o))]).astype(np.int64)
-    step = np.concatenate([np.arange(1, len(contacts) + 1), *pads["surface_steps"], np.asarray(free_steps),
+    step = np.concatenate([steps_c, *pads["surface_steps"], np.asarray(free_steps),
                            *pads["free_steps"], behind_steps, np.zeros(len(seen) + len(free_o))]).astype(np.int64)
     topics = s.topics
     meta = {"source": f"rosbag:{s.path.name}", "frame": s.base, "bag_topics": {"cloud": topics.cloud,
@@ -948,7 +951,7 @@ def _bag_dataset(s: _BagImport, inner: dict, pads: dict, outer: dict) -> Dataset
             "tool_offset": [float(v) for v in s.tool_offset], "voxel_size": s.policy.voxel,
             "time_window": None if s.window is None else list(s.window),
             "counts": {"wrench": inner["n_wrench"], "joint_states": inner["n_joints"], "clouds": outer["n_clouds"],
-                       "cloud_points": int(outer["n_raw"]), "contacts": int(len(contacts)),
+                       "cloud_points": int(outer["n_raw"]), "contacts": int(len(inner["contacts"])),
                        "free_space": int(len(free)), "outer_surface": int(len(seen)),
                        "outer_free_space": int(len(free_o)), "inside_points": int(len(behind))}}
     if topics.tactile is not None:
