@@ -353,12 +353,13 @@ def test_fit_reads_a_users_contacts_csv_and_cloud_with_units_and_camera_free_spa
     out = tmp_path / "fit"
     assert main(["fit", csv, "--cloud", cloud, "--units", "mm", "--voxel", "0.02", "--out", str(out)]) == 0
     plain = json.loads((out / "fit.json").read_text())
-    assert plain["n_inner"] == 40 and plain["n_outer"] > 100
+    repeats = EstimatorSettings.default().labels.contact_repeats         # each contact as often as a run counts it
+    assert plain["n_inner"] == 30 * repeats + 10 and plain["n_outer"] > 100
     assert main(["fit", csv, "--cloud", cloud, "--units", "mm", "--voxel", "0.02", "--camera-origin", "-500 0 600",
                  "--out", str(out)]) == 0
     with_free = json.loads((out / "fit.json").read_text())
     assert with_free["n_outer"] > plain["n_outer"]                       # the camera's free space was added
-    assert "touch.csv: " in capsys.readouterr().out and with_free["n_inner"] == 40
+    assert "touch.csv: " in capsys.readouterr().out and with_free["n_inner"] == 30 * repeats + 10
     assert main(["fit", str(EXAMPLE), "--cloud", cloud]) == 2            # a .gpioius file holds its own cloud
     assert "go with a contacts CSV" in capsys.readouterr().err
     bad = tmp_path / "bad"
@@ -395,7 +396,7 @@ def test_fit_takes_several_captures_each_with_its_own_camera(tmp_path, capsys):
     assert main(["fit", str(tmp_path / "touch.csv"), "--cloud", files[0], "--cloud", files[1], "--voxel", "0",
                  "--camera-origin", " ".join(map(str, eyes[0])), "--camera-origin", " ".join(map(str, eyes[1])),
                  "--out", str(out)]) == 0
-    assert "1 inner" in capsys.readouterr().out
+    assert f"{EstimatorSettings.default().labels.contact_repeats} inner" in capsys.readouterr().out
     assert main(["fit", str(tmp_path / "touch.csv"), "--cloud", files[0], "--cloud", files[1],
                  "--camera-origin", "0 0 0"]) == 2
     assert "1 given for 2 --cloud" in capsys.readouterr().err

@@ -9,6 +9,7 @@ import trimesh
 from torch_gpioius.io.datasets import DatasetError
 from torch_gpioius.io.importers import dataset_from_files, load_contacts_csv, load_point_cloud, read_contacts_csv
 from torch_gpioius.geometry.voxels import voxel_average
+from torch_gpioius.models.estimator import EstimatorSettings
 from torch_gpioius.models.overrides import EstimatorOverrides
 
 PTS = np.array([[0.01, 0.02, 0.03], [0.04, -0.05, 0.06], [0.2, 0.1, -0.3], [0.021, 0.022, 0.023]])
@@ -99,7 +100,8 @@ def test_inside_points_in_a_contacts_csv(tmp_path):
     x, y, _ = load_contacts_csv(p, units="mm")
     np.testing.assert_allclose(y, [0.0, -0.4, -0.2, 1.0], rtol=1e-15)
     np.savez(tmp_path / "cloud.npz", points=PTS * 1000 + [100, 0, 0])          # millimetres, around the contacts
-    ds = dataset_from_files(p, tmp_path / "cloud.npz", settings=EstimatorOverrides(voxel=0), units="mm")
+    ds = dataset_from_files(p, tmp_path / "cloud.npz", units="mm",
+                            settings=EstimatorOverrides(voxel=0, labels={"contact_repeats": 1}))
     assert ds.y[:4].tolist() == y.tolist()
     assert float(ds.to_model().train_targets.min()) == pytest.approx(-0.4, rel=1e-15)
     for body, match in [("x,y,label,depth\n1,2,inside,\n", "c.csv:2: an inside point needs its depth"),
@@ -119,7 +121,9 @@ def test_dataset_from_files(tmp_path):
     (tmp_path / "c.csv").write_text("x,y,z,label\n0.1,0,0,contact\n0.3,0,0,free\n")
     np.savez(tmp_path / "cloud.npz", points=PTS)
     ds = dataset_from_files(tmp_path / "c.csv", tmp_path / "cloud.npz", settings=EstimatorOverrides(voxel=0))
-    assert len(ds) == 6 and ds.task.tolist() == [0, 0, 1, 1, 1, 1] and ds.y.tolist() == [0, 1, 0, 0, 0, 0]
+    k = EstimatorSettings.default().labels.contact_repeats                # the contact as often as a run counts it
+    assert len(ds) == 5 + k and ds.task.tolist() == [0] * (k + 1) + [1] * 4
+    assert ds.y.tolist() == [0] * k + [1, 0, 0, 0, 0]
     (tmp_path / "c2.csv").write_text("x,y,label\n0.1,0,contact\n")
     with pytest.raises(DatasetError, match="3-D"):
         dataset_from_files(tmp_path / "c2.csv", tmp_path / "cloud.npz")
@@ -215,7 +219,8 @@ def test_contacts_and_clouds_in_millimetres_are_refused_naming_the_units(tmp_pat
         load_point_cloud(tmp_path / "cloud_mm.npz")
     with pytest.raises(DatasetError, match="touch_mm.csv"):
         dataset_from_files(mm, tmp_path / "cloud_mm.npz")
-    assert len(dataset_from_files(mm, tmp_path / "cloud_mm.npz", units="mm", settings=EstimatorOverrides(voxel=0))) == 7
+    one_each = EstimatorOverrides(voxel=0, labels={"contact_repeats": 1})
+    assert len(dataset_from_files(mm, tmp_path / "cloud_mm.npz", units="mm", settings=one_each)) == 7
 
 
 def test_a_dataset_in_millimetres_is_refused_wherever_it_is_built(tmp_path):

@@ -52,11 +52,15 @@ def _user_files(tmp_path, world, model, log):
     inner = np.flatnonzero(task == 0)
     depth = world.defaults.policy.touch_inside
     rows = ["x,y,z,label,step,nx,ny,nz"]
+    repeats = world.defaults.policy.contact_repeats
     for j, i in enumerate(inner):
         if y[i] < 0:
             continue                                            # placed by the fit from the contact's normal
+        if y[i] == 0 and j and y[inner[j - 1]] == 0 and (x[inner[j - 1]] == x[i]).all():
+            continue                                            # the model's repetition of a contact (the fit's too)
         normal = ["", "", ""]
-        nxt = inner[j + 1] if j + 1 < len(inner) else None
+        nxt = inner[j + repeats] if y[i] == 0 and j + repeats < len(inner) else (
+            inner[j + 1] if j + 1 < len(inner) else None)
         if y[i] == 0 and nxt is not None and y[nxt] < 0:       # a touch records its contact, then the point behind
             normal = [repr(float(v)) for v in (x[i] - x[nxt]) / depth]
         label = "contact" if y[i] == 0 else "free"
