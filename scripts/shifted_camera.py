@@ -20,18 +20,16 @@ study's ``runs.csv``, the scores) and the paired medians.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from worst_errors import visual_tactile_finals  # noqa: E402  (scripts/ is not a package)
+from worst_errors import final_arrays, offline_parser  # noqa: E402  (scripts/ is not a package)
 
 
 def inner_loo(model) -> np.ndarray:
@@ -104,19 +102,13 @@ def _chamfer(measured) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("logs", nargs="+", type=Path)
-    parser.add_argument("--scenes", type=Path, default=Path("examples/scenes/real"))
+    parser = offline_parser(__doc__)
     parser.add_argument("--first", type=int, default=0, help="the gap from the first this many contacts (0: all)")
     args = parser.parse_args()
-    warnings.simplefilter("ignore")
-    torch.set_num_threads(1)
     from torch_gpioius.models.gpiois import GPIOIS
 
     rows = []
-    for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
-        x, y, task = np.asarray(data.x), np.asarray(data.y), np.asarray(data.task)
-        contacts = x[(task == 0) & (y == 0)]
+    for log, run, world, model, x, y, task, contacts in final_arrays(args):
         outer = task == 1
         bounds = np.stack([x[outer].min(0) - 0.1, x[outer].max(0) + 0.1])
         moved = shifted_camera(x[outer], y[outer], contacts[:args.first] if args.first else contacts, run.kernel(),

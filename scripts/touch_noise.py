@@ -16,10 +16,8 @@ and the study's best simple baseline, per inner noise given.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +25,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from shifted_camera import best_baseline  # noqa: E402  (scripts/ is not a package)
-from worst_errors import visual_tactile_finals  # noqa: E402
+from worst_errors import final_arrays, offline_parser  # noqa: E402
 
 
 def with_touch_noise(model, x, y, task, inner_noise: float, kernel):
@@ -54,18 +52,12 @@ def with_touch_noise(model, x, y, task, inner_noise: float, kernel):
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("logs", nargs="+", type=Path)
-    parser.add_argument("--scenes", type=Path, default=Path("examples/scenes/real"))
+    parser = offline_parser(__doc__)
     parser.add_argument("--inner", type=float, nargs="+", default=[0.02, 0.005], help="the touches' noise(s)")
     args = parser.parse_args()
-    warnings.simplefilter("ignore")
-    torch.set_num_threads(1)
 
     rows = []
-    for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
-        x, y, task = np.asarray(data.x), np.asarray(data.y), np.asarray(data.task)
-        contacts = x[(task == 0) & (y == 0)]
+    for log, run, world, model, x, y, task, contacts in final_arrays(args):
         own = world.measure(model, contacts)
         row = [own.shape["chamfer"] if own.estimate else math.inf]
         cells = []

@@ -14,18 +14,15 @@ them (the transfer of the camera's shape), which are different levers.
 
 from __future__ import annotations
 
-import argparse
 import math
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
-import torch
 from scipy.spatial import cKDTree
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from worst_errors import visual_tactile_finals  # noqa: E402  (scripts/ is not a package)
+from worst_errors import final_arrays, offline_parser  # noqa: E402  (scripts/ is not a package)
 
 #: The bands of distance from the nearest contact [m].
 BANDS = (0.0, 0.01, 0.03, 0.06, math.inf)
@@ -65,20 +62,13 @@ def one_sided(bands: dict, name: str, near: int = 0) -> float:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("logs", nargs="+", type=Path)
-    parser.add_argument("--scenes", type=Path, default=Path("examples/scenes/real"))
-    args = parser.parse_args()
-    warnings.simplefilter("ignore")
-    torch.set_num_threads(1)
+    args = offline_parser(__doc__).parse_args()
     from torch_gpioius.baselines import BASELINES, BaselineData
     from torch_gpioius.sim.meshes import MeshDistance
     from torch_gpioius.sim.ruler import METRICS_GRID
 
     rows = []
-    for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
-        x, y, task = np.asarray(data.x), np.asarray(data.y), np.asarray(data.task)
-        contacts = x[(task == 0) & (y == 0)]
+    for log, run, world, model, x, y, task, contacts in final_arrays(args):
         first = run.states[run.steps[0]]
         fx, fy, ft = np.asarray(first.x), np.asarray(first.y), np.asarray(first.task)
         base = BaselineData(fx[ft == 1], fy[ft == 1], contacts, run.kernel(), float(model.noise),

@@ -69,6 +69,29 @@ def visual_tactile_finals(logs, scenes: Path):
         yield log, run, world_of(log, scenes), run.model_at(last), run.states[last]
 
 
+def offline_parser(doc: str) -> argparse.ArgumentParser:
+    """The command line of a study of finished runs' final data: the logs and ``--scenes`` (the study's scene
+    files), described by the first line of ``doc``."""
+    parser = argparse.ArgumentParser(description=doc.splitlines()[0])
+    parser.add_argument("logs", nargs="+", type=Path)
+    parser.add_argument("--scenes", type=Path, default=Path("examples/scenes/real"), help="the study's scene files")
+    return parser
+
+
+def final_arrays(args):
+    """``(log, run, world, model, x, y, task, contacts)`` of each visual-tactile log of ``args`` (an
+    :func:`offline_parser`'s), the final data as arrays and the contacts `(k, d)` in the order they were made, each
+    once (a run that counted a contact several times, ``contact_repeats``, holds it in as many rows); one torch thread
+    and warnings off, as the offline studies run."""
+    warnings.simplefilter("ignore")
+    torch.set_num_threads(1)
+    for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
+        x, y, task = np.asarray(data.x), np.asarray(data.y), np.asarray(data.task)
+        touched = x[(task == 0) & (y == 0)]
+        again = np.r_[False, (touched[1:] == touched[:-1]).all(axis=1)] if len(touched) else np.zeros(0, bool)
+        yield log, run, world, model, x, y, task, touched[~again]
+
+
 def worst_errors(log: Path, scenes: Path, far: float = 0.02) -> dict | None:
     """The worst misses of a study log's final estimate (None when it has no surface in the range).
 
