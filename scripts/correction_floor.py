@@ -67,6 +67,7 @@ def main() -> None:
     from scipy.spatial.transform import Rotation
 
     from torch_gpioius.exploration.calibration import contact_normals, vision_crop
+    from torch_gpioius.io.datasets import contact_rows
     from torch_gpioius.sensors.extrinsics import correct_captures
     from torch_gpioius.sensors.simulated.camera import CameraError
 
@@ -74,7 +75,7 @@ def main() -> None:
     bound = CameraError.parse(args.bound)
     found = {v: ([], [], []) for v in versions}
     for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
-        contacts = data.x[(data.task == 0) & (data.y == 0)]
+        contacts = data.x[contact_rows(data.x, data.y, data.task)]
         faced, normals = contact_normals(model, contacts)
         on_body, _, face = trimesh.proximity.closest_point(world.inner, faced)
         middle = world.inner.bounds.mean(axis=0)

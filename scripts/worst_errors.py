@@ -33,6 +33,7 @@ import torch
 from scipy.spatial import cKDTree
 
 from torch_gpioius.geometry import predict_mean_task
+from torch_gpioius.io.datasets import contact_rows
 from torch_gpioius.io.runs import load_run
 from torch_gpioius.sim.meshes import MeshDistance
 from torch_gpioius.studies.study import make_world
@@ -87,9 +88,7 @@ def final_arrays(args):
     torch.set_num_threads(1)
     for log, run, world, model, data in visual_tactile_finals(args.logs, args.scenes):
         x, y, task = np.asarray(data.x), np.asarray(data.y), np.asarray(data.task)
-        touched = x[(task == 0) & (y == 0)]
-        again = np.r_[False, (touched[1:] == touched[:-1]).all(axis=1)] if len(touched) else np.zeros(0, bool)
-        yield log, run, world, model, x, y, task, touched[~again]
+        yield log, run, world, model, x, y, task, x[contact_rows(x, y, task)]
 
 
 def worst_errors(log: Path, scenes: Path, far: float = 0.02) -> dict | None:

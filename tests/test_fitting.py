@@ -153,3 +153,13 @@ def test_a_fit_that_would_run_out_of_memory_is_refused_before_it_starts(tmp_path
         status("fitting K_t on 2,870 observations (2,015 inner)")
         time.sleep(0.2)
     assert "gpioius fit: fitting K_t on 2,870 observations (2,015 inner), 0 s so far" in stream.getvalue()
+
+
+def test_a_fit_counts_touches_not_the_rows_a_contact_is_counted_in():
+    """Two contacts, each in four rows (the default's ``contact_repeats``), are two touches: too few, and said so."""
+    from torch_gpioius.fitting import why_no_estimate
+    from torch_gpioius.io.datasets import Dataset
+
+    x = np.repeat([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], 4, axis=0)
+    ds = Dataset(x, np.zeros(8), np.zeros(8, np.int64), np.repeat([1, 2], 4))
+    assert why_no_estimate(ds, 0.05).startswith("only 2 contact(s): too few")

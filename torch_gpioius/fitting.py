@@ -202,7 +202,7 @@ def why_no_estimate(ds: Dataset, length: float) -> str:
     """Why a fit's inner estimate has no surface in the data's box, as far as the data tell: too few contacts, or a
     kernel's length [m] far below the spacing of the inner observations (each then stands alone, the mean falls back
     to its prior of 1 between them); else that the zero level does not cross the box."""
-    contacts = ds.x[(ds.task == 0) & (ds.y == 0)]
+    contacts = ds.x[ds.contact_rows()]
     if len(contacts) < 3:
         return f"only {len(contacts)} contact(s): too few to enclose a surface"
     inner = ds.x[ds.task == 0]
@@ -332,7 +332,7 @@ def _write_baselines(ds: Dataset, model, folder: Path, final: Path, resolution: 
     from .baselines import BASELINE_EDGE, BASELINES, BaselineData
 
     folder.mkdir(parents=True, exist_ok=True)
-    contact = (ds.task == 0) & (ds.y == 0)
+    contact = ds.contact_rows()                      # each once: the first five are five touches
     order = np.argsort(ds.step[contact], kind="stable")
     data = BaselineData(ds.x[ds.task == 1], ds.y[ds.task == 1], ds.x[contact][order], model.kernel,
                         float(model.noise), data_bounds(ds.x, pad=max(0.05, 2 * resolution)), resolution,
@@ -431,7 +431,7 @@ def _replay_steps(path: Path, out: Path, states: dict, learned: dict, chosen: li
                 if truth is not None and closed_curves(curves):
                     row["hausdorff"] = hausdorff_distance(curves, [truth], spacing=2e-3)
             if i in shots:
-                snapshots[k] = (curves, ds.x[(ds.task == 0) & (ds.y == 0)])
+                snapshots[k] = (curves, ds.x[ds.contact_rows()])
         else:
             mesh = zero_level_mesh(model, bounds, max(resolution, 0.02), INNER)
             if mesh is not None:

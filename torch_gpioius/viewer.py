@@ -664,12 +664,12 @@ class RunViewer:
                 return "n/a" if v is None or not math.isfinite(v) else f"{v:.3f}"
 
             h = p.get("hausdorff", math.nan)
-            surface_pts = int(((ds.task == 0) & (ds.y == 0)).sum())
             if run.meta.get("touch") == "patch":         # pad points are not touches: count both, by name
                 touches = sum(1 for st in run.steps if st <= k and "contact" in run.params.get(st, {}))
+                surface_pts = int(((ds.task == 0) & (ds.y == 0)).sum())
                 inner = f"{touches} touch{'' if touches == 1 else 'es'} ({surface_pts} pad surface points)"
-            else:
-                inner = f"{surface_pts} contacts"
+            else:                                        # each contact once, however often the model counts it
+                inner = f"{int(ds.contact_rows().sum())} contacts"
             touch_only = run.meta.get("mode") == "tactile"
             measures = ("similarity and correlation: do not apply (touch only)" if touch_only else
                         f"similarity {fmt(p.get('similarity'))}, correlation {fmt(p.get('correlation'))}")

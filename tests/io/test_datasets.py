@@ -336,3 +336,18 @@ def test_atomic_writes_use_a_temporary_name_of_their_own(tmp_path, monkeypatch):
     atomic_write(tmp_path / "r.json", "{}")
     assert len(set(seen)) == 2 and all(str(_os.getpid()) in s for s in seen)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json"]
+
+
+def test_contact_rows_take_each_contact_once_however_often_it_was_counted():
+    """Contacts counted three times in a row (``contact_repeats``) are one contact each; a contact touched again later,
+    after other rows, is a touch of its own; free space, inside points and the camera's seen points are none."""
+    from torch_gpioius.io.datasets import contact_rows
+
+    a, b = [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]
+    x = np.array([a, a, a, [0.1, 0.0, -0.02], [0.2, 0.0, 0.0], b, b, b, a, [0.3, 0.0, 0.0], [0.3, 0.0, 0.0]])
+    y = np.array([0, 0, 0, -0.4, 1, 0, 0, 0, 0, 0, 0.0])
+    task = np.array([0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 1])
+    assert np.flatnonzero(contact_rows(x, y, task)).tolist() == [0, 5, 8]
+    ds = tg.io.datasets.Dataset(x, y, task, np.arange(len(y)))
+    np.testing.assert_array_equal(ds.contact_rows(), contact_rows(x, y, task))
+    assert not contact_rows(np.zeros((0, 3)), np.zeros(0), np.zeros(0, int)).any()

@@ -36,7 +36,7 @@ from ..core.validation import check_metres, label_problem
 
 __all__ = ["FORMAT_VERSION", "FILE_KINDS", "DatasetError", "TornLogWarning", "Record", "Dataset", "LogWriter",
            "read_records", "replay", "save_dataset", "load_dataset", "validate_observations", "check_meta",
-           "step_number"]
+           "step_number", "contact_rows"]
 
 MAGIC = b"GPIOIUS\x00"
 FORMAT_VERSION = 1
@@ -332,6 +332,18 @@ def _check_trace(trace: dict, where: str) -> dict[str, np.ndarray]:
     return out
 
 
+def contact_rows(x: np.ndarray, y: np.ndarray, task: np.ndarray) -> np.ndarray:
+    """`(n,)` bool: the rows that are contacts (inner task, y = 0), each contact once: a row equal to the contact row
+    before it is the same contact counted again (``ObservationPolicy.contact_repeats`` records a contact k times in
+    a row, in an exploration, an import and a bag alike). What counts touches, or takes the first few, reads these."""
+    x = np.asarray(x)
+    touched = (np.asarray(task) == 0) & (np.asarray(y) == 0)
+    at = np.flatnonzero(touched)
+    again = np.r_[False, (x[at[1:]] == x[at[:-1]]).all(axis=1)] if len(at) else np.zeros(0, bool)
+    touched[at[again]] = False
+    return touched
+
+
 @dataclass
 class Dataset:
     """Observations with the step each arrived at, an optional robot/sensor trace, and metadata.
@@ -363,6 +375,10 @@ class Dataset:
 
     def __len__(self) -> int:
         return int(self.x.shape[0])
+
+    def contact_rows(self) -> np.ndarray:
+        """`(n,)` bool: the contacts' rows, each contact once (:func:`contact_rows`)."""
+        return contact_rows(self.x, self.y, self.task)
 
     def to_model(self, *, settings=None, **kwargs: Any):
         """A :class:`torch_gpioius.GPIOIS` on these observations (GPIS if no outer observation), not yet fit.
