@@ -460,16 +460,19 @@ class StructuredExactInference(ExactEngine):
         # contacts (y = 0): the planner plans from the contact just added, and U (N_o^2 doubles) is the largest
         # thing read per step. Free-space points get no derivative rows.
         dim, n_o = x.shape[1], len(self.xo)
-        contacts = x[y == 0]
-        if len(contacts) > self.ROTATED_CONTACTS_MAX:
-            contacts = contacts[:1]
+        at = torch.nonzero(y == 0).squeeze(-1)
+        if len(at) > 1:         # a contact in several rows in a row (ObservationPolicy.contact_repeats): its rows once
+            at = at[torch.cat([at.new_ones(1, dtype=torch.bool), (x[at[1:]] != x[at[:-1]]).any(-1)])]
+        if len(at) > self.ROTATED_CONTACTS_MAX:
+            at = at[:1]
+        contacts = x[at]
         rows = torch.cat([self.kernel.value(x, self.xo),
                           _kernel_rows(contacts, self.xo, self.kernel)[1:].reshape(-1, n_o)])
         rotated = rows @ self.u
         p_new = rotated[:len(x)]
-        contact_rows = None if self._raw is None else torch.cat([rows[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
+        contact_rows = None if self._raw is None else torch.cat([rows[at].unsqueeze(0),
                                                                  rows[len(x):].view(dim, len(contacts), n_o)])
-        self._rotated = (contacts, torch.cat([rotated[:len(x)][y == 0][:len(contacts)].unsqueeze(0),
+        self._rotated = (contacts, torch.cat([rotated[at].unsqueeze(0),
                                               rotated[len(x):].view(dim, len(contacts), self.rank)]), contact_rows)
         p_all = self._p.append(p_new)
         if self._raw is not None:
