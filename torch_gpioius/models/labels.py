@@ -83,8 +83,9 @@ class ObservationPolicy:
             inside it and contradicted the inside points (docs/method-notes.md section 20). Without voxels, the
             smoothed points themselves. The free space and the inside points are the measured cloud's. None: each
             point in the voxel it was measured in (the paper).
-        contact_repeats: each contact (the touch's y = 0 observation; the inside and free-space points it brings are
-            not repeated) enters the model this many times: exactly one observation with the noise ``sigma^2 / k``,
+        contact_repeats: each contact (a point touch's or a tap's y = 0 observation, in an exploration, a contacts
+            file or a bag; the inside and free-space points it brings, and a tactile pad's patch points, are not
+            repeated) enters the model this many times: exactly one observation with the noise ``sigma^2 / k``,
             the camera's observations keeping ``sigma^2`` (k identical labels with independent noise are, for the
             posterior and for K_t's optimum, one label with a k-th of the variance; the marginal likelihood differs
             by a constant). A fingertip's settled contact is measured more precisely than a voxel mean of a depth
