@@ -512,3 +512,60 @@ def test_a_contact_repeated_k_times_is_one_contact_with_a_kth_of_the_noise():
                 np.testing.assert_allclose(var.detach().numpy(), ref_var, atol=1e-9)
         constants.append(float(model.log_marginal_likelihood()) - ref_mll)
     assert constants[0] == pytest.approx(constants[1], abs=1e-6)
+
+
+def test_a_thin_part_gets_its_camera_inside_points_at_half_the_depth_with_halvings():
+    """A slab 2.4 cm thick seen from above and below: 2 cm behind either face lies 4 mm from the other, so every
+    inside point is contradicted and none is kept (the default). With ``inside_halvings`` each is tried again 1 cm
+    behind the same voxel, which nothing contradicts: labelled by that depth, all inside the slab, one per seen
+    voxel. A slab thicker than 4 cm keeps its 2 cm points with or without halvings: the setting changes nothing
+    where nothing was contradicted."""
+    from torch_gpioius.sensors.pointcloud import PointCloud
+
+    def slab(half):
+        g = np.stack(np.meshgrid(np.linspace(-0.1, 0.1, 41), np.linspace(-0.1, 0.1, 41)), -1).reshape(-1, 2)
+        top = PointCloud(np.c_[g, np.full(len(g), half)], np.array([0.0, 0.0, 1.0]))
+        bottom = PointCloud(np.c_[g, np.full(len(g), -half)], np.array([0.0, 0.0, -1.0]))
+        return PointCloud.merge([top, bottom])
+
+    base = ObservationPolicy(vision_inside=0.02, voxel=0.02)
+    halved = dataclasses.replace(base, inside_halvings=2)
+    x0, y0 = vision_observations(slab(0.012), base)
+    assert not (y0 < 0).any()                                  # the far face 4 mm from every 2 cm point
+    x1, y1 = vision_observations(slab(0.012), halved)
+    inside = y1 < 0
+    seen = (y1 == 0).sum()
+    assert inside.sum() == seen                                 # one per seen voxel, at the first depth kept
+    np.testing.assert_allclose(y1[inside], base.inside_label(0.01))
+    np.testing.assert_allclose(np.abs(x1[inside, 2]), 0.002, atol=1e-9)   # 1 cm behind a face 1.2 cm out
+    np.testing.assert_array_equal(x1[~inside], x0)              # the rest as without
+    # thick: the same observations with or without halvings
+    xa, ya = vision_observations(slab(0.03), base)
+    xb, yb = vision_observations(slab(0.03), halved)
+    assert (ya < 0).sum() == (ya == 0).sum()
+    np.testing.assert_array_equal(xa, xb)
+    np.testing.assert_array_equal(ya, yb)
+    with pytest.raises(ValueError, match="inside_halvings"):
+        ObservationPolicy(inside_halvings=5)
+
+
+def test_a_thin_part_in_2d_gets_inside_points_at_half_the_depth_and_a_thick_part_keeps_its_own():
+    """The 2-D world's view is sampled afresh at each depth: a 3 cm sliver has no points 2 cm in (thinner than twice
+    that) and gets them 1 cm in with one halving; a disc keeps its 2 cm ring and gets no second one inside it."""
+    sliver = shapely.geometry.box(0.0, 0.0, 0.2, 0.03)
+    ring = sliver.exterior
+    view = PlanarView(np.array([ring.interpolate(s).coords[0] for s in np.arange(0.0, ring.length, 0.005)]),
+                      origin=None, polygon=sliver, spacing=0.005)
+    base = ObservationPolicy(vision_inside=0.02)
+    halved = dataclasses.replace(base, inside_halvings=1)
+    assert not (vision_observations(view, base)[1] < 0).any()
+    x, y = vision_observations(view, halved)
+    assert (y < 0).sum() > 20 and np.allclose(y[y < 0], base.inside_label(0.01))
+    depth = np.array([sliver.exterior.distance(shapely.geometry.Point(p)) for p in x[y < 0]])
+    np.testing.assert_allclose(depth, 0.01, atol=1e-9)
+    disc = shapely.geometry.Point(0.0, 0.0).buffer(0.1, 256)
+    view = PlanarView(np.array(disc.exterior.coords)[:-1], origin=None, polygon=disc, spacing=0.01)
+    xa, ya = vision_observations(view, base)
+    xb, yb = vision_observations(view, halved)
+    np.testing.assert_array_equal(xa, xb)
+    np.testing.assert_array_equal(ya, yb)

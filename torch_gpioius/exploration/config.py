@@ -206,8 +206,8 @@ class ExploreConfig(EstimatorView):
 
     def _policy_record(self) -> dict:
         """The observation policy for the header; the inside-point settings, ``cover_offset``,
-        ``vision_inside_deep``, ``cover_gap_field``, ``camera_bound`` and ``contact_repeats`` only when set, so that
-        logs written before they existed still resume."""
+        ``vision_inside_deep``, ``cover_gap_field``, ``camera_bound``, ``contact_repeats`` and ``inside_halvings``
+        only when set, so that logs written before they existed still resume."""
         out = dataclasses.asdict(self.policy)
         for key in ("touch_inside", "vision_inside", "vision_inside_gap", "camera_bound"):
             if out[key] is None:
@@ -219,6 +219,8 @@ class ExploreConfig(EstimatorView):
             del out["camera_table"]
         if out["contact_repeats"] == 1:             # (since 2026-11-30)
             del out["contact_repeats"]
+        if out["inside_halvings"] == 0:             # (since 2026-12-01)
+            del out["inside_halvings"]
         return out
 
     def describe(self) -> dict:

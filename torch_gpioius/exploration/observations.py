@@ -568,10 +568,33 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
             xs.append(free)
             ys.append(np.ones(len(free)))
     if policy.vision_inside is not None and cloud.sees_free_space:
-        inside = cloud.behind(policy.vision_inside, policy.voxel)
-        xs.append(inside)
-        ys.append(np.full(len(inside), policy.inside_label(policy.vision_inside)))
-        obs = drop_contradicted_inside(Observations(np.concatenate(xs), np.concatenate(ys), np.ones(
-            sum(map(len, ys)), np.int64)), policy)
-        return obs.x, obs.y
+        xs, ys = _with_inside(cloud, policy, np.concatenate(xs), np.concatenate(ys))
     return np.concatenate(xs), np.concatenate(ys)
+
+
+def _with_inside(cloud, policy: ObservationPolicy, x: np.ndarray, y: np.ndarray) -> tuple[list, list]:
+    """``[x, inside...]``, ``[y, labels...]``: the observations `x` `(n, d)`, `y` `(n,)` of one capture and its
+    inside points ``policy.vision_inside`` behind the seen voxels that ``x`` does not contradict; where one is, again
+    at half the depth behind the same voxel, up to ``policy.inside_halvings`` times (a
+    :class:`~torch_gpioius.sensors.PointCloud` gives its voxels in the same order at every depth; a view sampled
+    afresh at each depth, the 2-D world's, is tried again where no point deeper was kept within that depth)."""
+    from scipy.spatial import cKDTree
+
+    xs, ys = [x], [y]
+    depth, todo = policy.vision_inside, None
+    for _ in range(policy.inside_halvings + 1):
+        inside = cloud.behind(depth, policy.voxel)
+        if todo is None or len(todo) != len(inside):
+            todo = np.ones(len(inside), dtype=bool)
+            if len(xs) > 2 and len(inside):          # a view sampled afresh: where nothing deeper was kept nearby
+                kept = np.concatenate(xs[2:])
+                todo = cKDTree(kept).query(inside)[0] > 2 * depth if len(kept) else todo
+        labels = np.full(int(todo.sum()), policy.inside_label(depth))
+        keep = uncontradicted(inside[todo], labels, policy, x, y)
+        xs.append(inside[todo][keep])
+        ys.append(labels[keep])
+        todo[np.flatnonzero(todo)[keep]] = False
+        if len(todo) and not todo.any():
+            break
+        depth /= 2
+    return xs, ys

@@ -91,6 +91,12 @@ class ObservationPolicy:
             by a constant). A fingertip's settled contact is measured more precisely than a voxel mean of a depth
             camera's cloud; one sigma^2 for both counts them alike. 1 (the default): the paper's one noise
             (docs/method-notes.md section 24).
+        inside_halvings: where a camera inside point ``vision_inside`` deep is contradicted (a part thinner than
+            that: a seen or felt surface within :data:`~torch_gpioius.exploration.observations.INSIDE_CLEARANCE`
+            of its depth, or free space within it), one is tried again behind the same seen voxel at half the depth
+            (labelled by that depth), up to this many times; the first that nothing contradicts is kept. Without it
+            a thin part (a limb, a lid's rim) has no inside point at all, and the estimate erodes it
+            (docs/method-notes.md section 25). 0 (the default): dropped.
     """
 
     vision_free_offset: float | None = 0.05
@@ -109,6 +115,7 @@ class ObservationPolicy:
     camera_table: bool = True
     ray_smoothing: int | None = None
     contact_repeats: int = 1
+    inside_halvings: int = 0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -136,6 +143,8 @@ class ObservationPolicy:
             return as_int(value, f"{where} (rays)", *_RAYS, allow_none=True)
         if name == "contact_repeats":
             return as_int(value, where, *_REPEATS)
+        if name == "inside_halvings":
+            return as_int(value, where, *_HALVINGS)
         if name == "camera_bound":
             ok = value is None or (isinstance(value, (tuple, list)) and len(value) == 2
                                    and all(_in_range(v, hi) for v, hi in zip(value, _CAMERA_BOUND)))
@@ -167,6 +176,8 @@ class ObservationPolicy:
             return f"{_RAYS[0]}-{_RAYS[1]} rays, or none"
         if name == "contact_repeats":
             return f"a whole number {_REPEATS[0]}-{_REPEATS[1]}"
+        if name == "inside_halvings":
+            return f"a whole number {_HALVINGS[0]}-{_HALVINGS[1]}"
         if name in _FLAGS:
             return "true or false"
         if name in _LENGTHS:
@@ -250,6 +261,8 @@ _CAMERA_BOUND = (0.1, math.radians(20))
 _RAYS = (8, 10_000)
 #: The times ``contact_repeats`` may count a contact (64: a contact's noise down to a 64th of the camera's).
 _REPEATS = (1, 64)
+#: ObservationPolicy.inside_halvings' range: four halvings take 2 cm to 1.25 mm, below a voxel's noise.
+_HALVINGS = (0, 4)
 
 
 def _in_range(value, hi: float) -> bool:
