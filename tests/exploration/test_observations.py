@@ -124,6 +124,34 @@ def test_an_inside_point_that_other_observations_contradict_is_dropped():
     assert len(far) == 2                                                             # 3 cm: beyond its depth
 
 
+
+def test_a_touchs_contradicted_inside_point_is_tried_again_up_its_line_with_halvings():
+    """The 1.5 cm slab again, with ``inside_halvings``: the contact's 2 cm point is tried 1 cm behind it (5 mm from
+    the far face, within 0.9 of that depth: contradicted too) and then 5 mm behind it (1 cm from the far face), where
+    it stays, the same row relabelled by that depth; with one halving only, it goes. Free space 1.5 cm
+    from the 2 cm point leaves the 1 cm one (1.8 cm from it) standing. The same check by step, as a contacts file is
+    labelled, moves the same point. A batch whose inside point has no surface point of its own is dropped as before."""
+    from torch_gpioius.exploration.observations import drop_contradicted_inside, inside_checked_by_step
+
+    policy = ObservationPolicy(touch_inside=0.02, inside_halvings=2)
+    grid = np.stack(np.meshgrid(np.linspace(-0.05, 0.05, 11), np.linspace(-0.05, 0.05, 11)), -1).reshape(-1, 2)
+    far_face = np.c_[grid, np.full(len(grid), -0.015)]
+    touch = Observations(np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -0.02]]), [0.0, policy.inside_label(0.02)], [0, 0])
+    thin = drop_contradicted_inside(touch, policy, far_face, np.zeros(len(grid)))
+    assert len(thin) == 2
+    np.testing.assert_allclose(thin.x[1], [0.0, 0.0, -0.005], atol=1e-15)
+    assert thin.y[1] == policy.inside_label(0.005)
+    once = drop_contradicted_inside(touch, dataclasses.replace(policy, inside_halvings=1), far_face,
+                                    np.zeros(len(grid)))
+    assert once.y.tolist() == [0.0]
+    near = drop_contradicted_inside(touch, policy, np.array([[0.0, 0.015, -0.02]]), np.ones(1))
+    np.testing.assert_allclose(near.x[1], [0.0, 0.0, -0.01], atol=1e-15)
+    x, y, keep = inside_checked_by_step(touch.x, touch.y, np.array([1, 1]), policy, far_face, np.zeros(len(grid)))
+    assert keep.all() and np.allclose(x, thin.x) and np.allclose(y, thin.y)
+    orphan = Observations(np.array([[0.0, 0.0, -0.02]]), [policy.inside_label(0.02)], [0])
+    assert len(drop_contradicted_inside(orphan, policy, far_face, np.zeros(len(grid)))) == 0
+
+
 def _sphere(radius, n, seed=0):
     v = np.random.default_rng(seed).normal(size=(n, 3))
     return radius * v / np.linalg.norm(v, axis=1, keepdims=True)

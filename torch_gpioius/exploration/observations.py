@@ -12,6 +12,8 @@ decide whether the similarity means anything (docs/method-notes.md). The same ru
 
 from __future__ import annotations
 
+import dataclasses
+
 import math
 from dataclasses import dataclass
 
@@ -25,7 +27,8 @@ from ..geometry.voxels import voxel_average
 
 __all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thin_points", "thin_indices",
            "free_space_along", "retract_free_space", "vision_observations", "drop_contradicted_inside",
-           "uncontradicted", "uncontradicted_by_step", "INSIDE_CLEARANCE", "retract_vision_inside", "offset_outer_mean",
+           "inside_checked_by_step", "uncontradicted", "uncontradicted_by_step", "INSIDE_CLEARANCE",
+           "retract_vision_inside", "offset_outer_mean",
            "renew_deep_vision_inside", "deepen_vision_inside",
            "cover_gap", "CoverGap", "GAP_MIN_CONTACTS", "INNER", "OUTER"]
 
@@ -181,9 +184,49 @@ def drop_contradicted_inside(obs: Observations, policy: ObservationPolicy, x_kno
     known observations ``x_known`` `(m, d)`, ``y_known`` `(m,)` of either task.
 
     An inside point says the body is thicker than its depth there; a robot cannot measure that, so each is checked
-    against what was seen and felt around it."""
+    against what was seen and felt around it. With ``policy.inside_halvings``, a contradicted point whose own
+    surface point is in ``obs`` (a contact, or a seen point, exactly its depth from it) is tried again at half the
+    depth on the same line, up to that many times, as :func:`vision_observations` does; the first depth nothing
+    contradicts replaces it (same row, its label that depth's)."""
     keep = uncontradicted(obs.x, obs.y, policy, x_known, y_known)
-    return obs if keep.all() else obs.subset(keep)
+    if keep.all():
+        return obs
+    if policy.inside_halvings:
+        obs, keep = _halved(obs, keep, policy, x_known, y_known)
+    return obs.subset(keep)
+
+
+def _halved(obs: Observations, keep: np.ndarray, policy: ObservationPolicy, x_known, y_known
+            ) -> tuple[Observations, np.ndarray]:
+    """``obs`` with its contradicted inside points (``~keep``) moved halfway to their own surface point and
+    relabelled where that depth is uncontradicted (up to ``policy.inside_halvings`` times), and ``keep`` with them
+    (:func:`drop_contradicted_inside`)."""
+    from scipy.spatial import cKDTree
+
+    x, y = obs.x.copy(), obs.y.copy()
+    surface = np.flatnonzero(y == 0)
+    todo = np.flatnonzero(~keep & (y < 0))
+    if not len(surface) or not len(todo):
+        return obs, keep
+    depth = policy.inside_depth(y[todo])
+    dist, j = cKDTree(x[surface]).query(x[todo])
+    own = np.abs(dist - depth) <= 1e-6 * depth          # its own surface point, exactly its depth away
+    todo, depth, origin = todo[own], depth[own], x[surface[j[own]]]
+    others = np.ones(len(y), dtype=bool)
+    others[todo] = False                                  # judged against the batch without the points being moved
+    xk = x[others] if x_known is None else np.concatenate([x[others], np.asarray(x_known, dtype=np.float64)])
+    yk = y[others] if y_known is None else np.concatenate([y[others], np.asarray(y_known, dtype=np.float64)])
+    keep = keep.copy()
+    for _ in range(policy.inside_halvings):
+        if not len(todo):
+            break
+        depth = depth / 2
+        x[todo] = origin + (x[todo] - origin) / 2
+        y[todo] = [policy.inside_label(d) for d in depth]
+        ok = uncontradicted(x[todo], y[todo], policy, xk, yk)
+        keep[todo[ok]] = True
+        todo, depth, origin = todo[~ok], depth[~ok], origin[~ok]
+    return dataclasses.replace(obs, x=x, y=y), keep
 
 
 def uncontradicted(x: np.ndarray, y: np.ndarray, policy: ObservationPolicy, x_known: np.ndarray | None = None,
@@ -216,16 +259,32 @@ def uncontradicted_by_step(x: np.ndarray, y: np.ndarray, steps: np.ndarray, poli
     """`(n,)` bool: the inner observations `x` `(n, d)`, `y` `(n,)` kept once the inside points that other
     observations contradict are dropped, each judged as an exploration judged it when it was placed: against the
     observations `x_other` `(m, d)`, `y_other` `(m,)` known throughout (the camera's) and the inner ones of its
-    ``steps`` `(n,)` and before. Logged files (a contacts CSV with steps, a bag) are labelled here."""
-    x, y, steps = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64), np.asarray(steps)
+    ``steps`` `(n,)` and before. Logged files (a contacts CSV with steps, a bag) are labelled here; with
+    ``policy.inside_halvings`` the points tried again at half the depth are :func:`inside_checked_by_step`'s."""
+    return inside_checked_by_step(x, y, steps, policy, x_other, y_other)[2]
+
+
+def inside_checked_by_step(x: np.ndarray, y: np.ndarray, steps: np.ndarray, policy: ObservationPolicy,
+                           x_other: np.ndarray, y_other: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(x, y, keep)``: the inner observations `x` `(n, d)`, `y` `(n,)` with each inside point judged as
+    :func:`drop_contradicted_inside` judged it in the step it was placed (``steps`` `(n,)`: against that step's
+    observations, the inner ones before it and the camera's `x_other` `(m, d)`, `y_other` `(m,)`), the points
+    tried again at half the depth (``policy.inside_halvings``) moved and relabelled, and `(n,)` bool which rows are
+    kept (:func:`uncontradicted_by_step`)."""
+    x, y, steps = np.array(x, dtype=np.float64), np.array(y, dtype=np.float64), np.asarray(steps)
     keep = np.ones(len(y), dtype=bool)
     inside = y < 0
     for step in np.unique(steps[inside]):
-        mine = inside & (steps == step)
-        known = ~inside & (steps <= step)
-        keep[mine] = uncontradicted(x[mine], y[mine], policy, np.concatenate([x[known], x_other]),
-                                    np.concatenate([y[known], y_other]))
-    return keep
+        batch = np.flatnonzero(steps == step)
+        earlier = ~inside & (steps < step)
+        xk, yk = np.concatenate([x[earlier], x_other]), np.concatenate([y[earlier], y_other])
+        mine = Observations(x[batch], y[batch], np.zeros(len(batch), np.int64))
+        ok = uncontradicted(mine.x, mine.y, policy, xk, yk)
+        if policy.inside_halvings and not ok.all():
+            mine, ok = _halved(mine, ok, policy, xk, yk)
+            x[batch], y[batch] = mine.x, mine.y
+        keep[batch] = ok
+    return x, y, keep
 
 
 def retract_free_space(model, contact: np.ndarray, margin: float) -> np.ndarray:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 import os
 from pathlib import Path
@@ -514,7 +515,7 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             file or argument).
         TypeError: a keyword it does not take.
     """
-    from ..exploration.observations import cover_gap, uncontradicted_by_step, vision_observations
+    from ..exploration.observations import cover_gap, inside_checked_by_step, vision_observations
     from ..models.overrides import loose_keywords
 
     loose = loose_keywords("dataset_from_files", deprecated, ("voxel", "noise"))
@@ -571,7 +572,8 @@ def dataset_from_files(contacts_csv: str | os.PathLike, point_cloud=None, *, uni
             _check_camera(f, c.points, o, units)
             _check_facing(f, k, len(files), c.points, c.origin, centre)
     inner, inner_steps = _inner_with_inside_points(x_in, y_in, normal_in, step_in, est.labels)
-    keep = uncontradicted_by_step(inner.x, inner.y, inner_steps, est.labels, outer[0], outer[1])
+    x_checked, y_checked, keep = inside_checked_by_step(inner.x, inner.y, inner_steps, est.labels, outer[0], outer[1])
+    inner = dataclasses.replace(inner, x=x_checked, y=y_checked)     # inside_halvings: some moved up their line
     behind = inner.y < 0
     if behind.sum() >= 5 and (~keep[behind]).mean() > 0.25:
         import warnings

@@ -909,9 +909,9 @@ def _bag_settings(settings, crop, policy):
 
 def _inside_points(s: _BagImport, inner: dict, seen: np.ndarray, free_o: np.ndarray):
     """The inside points behind the contacts (the settings' ``touch_inside`` along each measured force), each
-    judged as an exploration judges it (:func:`~torch_gpioius.exploration.observations.uncontradicted_by_step`):
+    judged as an exploration judges it (:func:`~torch_gpioius.exploration.observations.inside_checked_by_step`):
     `(k, 3)` points, `(k,)` labels and `(k,)` steps; none without settings that place them."""
-    from ..exploration.observations import uncontradicted_by_step
+    from ..exploration.observations import inside_checked_by_step
 
     labels = s.estimator.labels if s.estimator is not None else None
     if labels is None or labels.touch_inside is None:
@@ -922,8 +922,10 @@ def _inside_points(s: _BagImport, inner: dict, seen: np.ndarray, free_o: np.ndar
     x = np.concatenate([contacts, inner["free"], points])
     y = np.r_[np.zeros(len(contacts)), np.ones(len(inner["free"])), y_in]
     steps = np.r_[np.arange(1, len(contacts) + 1), inner["free_steps"], steps_in]
-    keep = uncontradicted_by_step(x, y, steps, labels, np.concatenate([seen, free_o]).reshape(-1, 3),
-                                  np.r_[np.zeros(len(seen)), np.ones(len(free_o))])[len(contacts) + len(inner["free"]):]
+    x, y, keep = inside_checked_by_step(x, y, steps, labels, np.concatenate([seen, free_o]).reshape(-1, 3),
+                                        np.r_[np.zeros(len(seen)), np.ones(len(free_o))])
+    ours = slice(len(contacts) + len(inner["free"]), None)        # inside_halvings: some moved up their line
+    points, y_in, keep = x[ours], y[ours], keep[ours]
     return points[keep], y_in[keep], steps_in[keep]
 
 

@@ -91,12 +91,13 @@ class ObservationPolicy:
             by a constant). A fingertip's settled contact is measured more precisely than a voxel mean of a depth
             camera's cloud; one sigma^2 for both counts them alike. 1 (the default): the paper's one noise
             (docs/method-notes.md section 24).
-        inside_halvings: where a camera inside point ``vision_inside`` deep is contradicted (a part thinner than
-            that: a seen or felt surface within :data:`~torch_gpioius.exploration.observations.INSIDE_CLEARANCE`
-            of its depth, or free space within it), one is tried again behind the same seen voxel at half the depth
-            (labelled by that depth), up to this many times; the first that nothing contradicts is kept. Without it
-            a thin part (a limb, a lid's rim) has no inside point at all, and the estimate erodes it
-            (docs/method-notes.md section 25). 0 (the default): dropped.
+        inside_halvings: where an inside point (the camera's, ``vision_inside`` behind a seen voxel, or a touch's,
+            ``touch_inside`` behind a contact) is contradicted (a part thinner than its depth: a seen or felt
+            surface within :data:`~torch_gpioius.exploration.observations.INSIDE_CLEARANCE` of its depth, or free
+            space within it), it is tried again on the same line at half the depth (labelled by that depth), up to
+            this many times; the first that nothing contradicts is kept. Without it a thin part (a limb, a lid's rim)
+            keeps no inside point at all, and the estimate erodes it (docs/method-notes.md section 25). 0 (the
+            default): dropped.
     """
 
     vision_free_offset: float | None = 0.05
