@@ -577,6 +577,26 @@ def test_a_thin_part_gets_its_camera_inside_points_at_half_the_depth_with_halvin
         ObservationPolicy(inside_halvings=5)
 
 
+
+def test_a_stray_voxel_in_front_of_a_face_gets_no_shallower_inside_point():
+    """Depth noise at grazing rays can leave a voxel mean a centimetre in front of the face it belongs to; its 2 cm
+    point then lies near that face, seen from the same side, and is contradicted. That is no thin part (nothing
+    faces the other way), and halving it would put an inside point in front of the face: none is placed."""
+    from torch_gpioius.sensors.pointcloud import PointCloud
+
+    g = np.stack(np.meshgrid(np.linspace(-0.1, 0.1, 41), np.linspace(-0.1, 0.1, 41)), -1).reshape(-1, 2)
+    face = np.c_[g, np.full(len(g), -0.001)]
+    p = np.stack(np.meshgrid(np.linspace(0.0, 0.015, 4), np.linspace(0.0, 0.015, 4)), -1).reshape(-1, 2)
+    stray = np.c_[p + 0.041, np.full(len(p), 0.012)]               # a voxel of its own, 13 mm in front of the face
+    cloud = PointCloud(np.r_[face, stray], np.array([0.0, 0.0, 1.0]))
+    base = ObservationPolicy(vision_inside=0.02, voxel=0.02)
+    x0, y0 = vision_observations(cloud, base)
+    x1, y1 = vision_observations(cloud, dataclasses.replace(base, inside_halvings=2))
+    assert (y0 < 0).sum() < (y0 == 0).sum()                        # the stray's 2 cm point was contradicted
+    np.testing.assert_array_equal(x0, x1)
+    np.testing.assert_array_equal(y0, y1)
+
+
 def test_a_thin_part_in_2d_gets_inside_points_at_half_the_depth_and_a_thick_part_keeps_its_own():
     """The 2-D world's view is sampled afresh at each depth: a 3 cm sliver has no points 2 cm in (thinner than twice
     that) and gets them 1 cm in with one halving; a disc keeps its 2 cm ring and gets no second one inside it."""

@@ -634,20 +634,27 @@ def vision_observations(cloud, policy: ObservationPolicy, crop: np.ndarray | Non
 def _with_inside(cloud, policy: ObservationPolicy, x: np.ndarray, y: np.ndarray) -> tuple[list, list]:
     """``[x, inside...]``, ``[y, labels...]``: the observations `x` `(n, d)`, `y` `(n,)` of one capture and its
     inside points ``policy.vision_inside`` behind the seen voxels that ``x`` does not contradict; where one is, again
-    at half the depth behind the same voxel, up to ``policy.inside_halvings`` times (a
-    :class:`~torch_gpioius.sensors.PointCloud` gives its voxels in the same order at every depth; a view sampled
-    afresh at each depth, the 2-D world's, is tried again where no point deeper was kept within that depth)."""
+    at half the depth behind the same voxel, up to ``policy.inside_halvings`` times, if it is a thin part
+    (:func:`_thin_parts`). A :class:`~torch_gpioius.sensors.PointCloud` gives its voxels in the same order at every
+    depth; a view sampled afresh at each depth (the 2-D world's, which knows its outline) is tried again where no
+    point deeper was kept within that depth."""
     from scipy.spatial import cKDTree
 
     xs, ys = [x], [y]
     depth, todo = policy.vision_inside, None
+    first = None
     for _ in range(policy.inside_halvings + 1):
         inside = cloud.behind(depth, policy.voxel)
-        if todo is None or len(todo) != len(inside):
+        if todo is None:
+            todo, first = np.ones(len(inside), dtype=bool), inside
+        elif len(todo) == len(inside):
+            if depth * 2 == policy.vision_inside:    # the first halving: contradicted by a thin part, not a stray voxel
+                todo &= _thin_parts(first, inside, policy.vision_inside)
+        else:                                        # a view sampled afresh: where nothing deeper was kept nearby
+            kept = np.concatenate(xs[1:])
             todo = np.ones(len(inside), dtype=bool)
-            if len(xs) > 2 and len(inside):          # a view sampled afresh: where nothing deeper was kept nearby
-                kept = np.concatenate(xs[2:])
-                todo = cKDTree(kept).query(inside)[0] > 2 * depth if len(kept) else todo
+            if len(kept) and len(inside):
+                todo = cKDTree(kept).query(inside)[0] > 2 * depth
         labels = np.full(int(todo.sum()), policy.inside_label(depth))
         keep = uncontradicted(inside[todo], labels, policy, x, y)
         xs.append(inside[todo][keep])
@@ -657,3 +664,26 @@ def _with_inside(cloud, policy: ObservationPolicy, x: np.ndarray, y: np.ndarray)
             break
         depth /= 2
     return xs, ys
+
+
+def _thin_parts(deep: np.ndarray, half: np.ndarray, depth: float) -> np.ndarray:
+    """`(n,)` bool: which seen voxels' inside points ``depth`` deep, `deep` `(n, d)`, lie within
+    :data:`INSIDE_CLEARANCE` of that depth of another voxel facing the other way (inward normals more than 120
+    degrees apart, :data:`THIN_FACING`): the far side of a part thinner than the depth, where half the depth can
+    still lie inside. A voxel whose point is near only surfaces facing its own way is a stray (a voxel mean that
+    depth noise at a grazing ray carried a centimetre out in front of the surface it belongs to, which then lies
+    behind it): no shallower point would lie inside. `half` `(n, d)` are the same voxels' points at half the depth
+    (their inward normals are the difference)."""
+    from scipy.spatial import cKDTree
+
+    if not len(deep):
+        return np.zeros(0, dtype=bool)
+    inward = (deep - half) / (depth / 2)
+    origin = 2 * half - deep
+    near = cKDTree(origin).query_ball_point(deep, INSIDE_CLEARANCE * depth)
+    return np.array([bool(len(j)) and bool((inward[j] @ inward[i] < THIN_FACING).any()) for i, j in enumerate(near)])
+
+
+#: The cosine between two voxels' normals below which they face opposite ways (:func:`_thin_parts`): 120 degrees, so
+#: that a stray voxel beside a rounded edge (its plane fit sideways, the face's down) is not taken for a thin part.
+THIN_FACING = -0.5

@@ -95,7 +95,9 @@ class ObservationPolicy:
             ``touch_inside`` behind a contact) is contradicted (a part thinner than its depth: a seen or felt
             surface within :data:`~torch_gpioius.exploration.observations.INSIDE_CLEARANCE` of its depth, or free
             space within it), it is tried again on the same line at half the depth (labelled by that depth), up to
-            this many times; the first that nothing contradicts is kept. Without it a thin part (a limb, a lid's rim)
+            this many times; the first that nothing contradicts is kept (the camera's only where a seen surface
+            facing the other way is what contradicts it, not a stray voxel in front of its own face). Without it a
+            thin part (a limb, a lid's rim)
             keeps no inside point at all, and the estimate erodes it (docs/method-notes.md section 25). 0 (the
             default): dropped.
     """
