@@ -58,7 +58,9 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
       along the cloud's normal, labelled -0.4 (``ObservationPolicy.touch_inside``, ``vision_inside``; the free-space
       ramp continued inside). With the paper's labels alone the estimate lay 0.6-0.9 cm inside the body on tight
       covers; the inside points bring it within 4 mm (docs/method-notes.md section 13). They assume a body thicker
-      than 2 cm: on a thin-walled one (the mug) they overshoot instead. They also assume a cover within 2 cm of the
+      than 2 cm: on a thin-walled one (the mug) they overshoot instead; one that the far side of a thinner part
+      contradicts is tried again at 1 cm and 5 mm (``ObservationPolicy.inside_halvings``, section 25).
+      They also assume a cover within 2 cm of the
       body: the camera's are retracted once the touches show it standing more than 3 cm off
       (``ObservationPolicy.vision_inside_gap``, :data:`COVER_GAP_LIMIT`). ``ObservationPolicy.cover_offset`` (the
       outer task's prior mean then standing for the gap they measure) is an option, off here: closer at the end under
