@@ -378,6 +378,15 @@ def test_the_gap_field_settings_log_the_field_and_resume_alike(tmp_path):
     assert resumed.params[resumed.steps[-1]]["outer_field"] == field
 
 
+
+def _logged_run(scene, log, travel):
+    """``(trace, x, y, task)``: a short run of ``scene`` logged to ``log``, and its final data as arrays."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        trace = tg.explore(scene, log=log, max_travel=travel, metrics_every=100, progress=False)
+    m = trace.model
+    return (trace, *(v.numpy() for v in (m.train_inputs[0], m.train_targets, m.train_task)))
+
 def test_repeated_contacts_are_in_the_model_k_times_in_the_header_and_replayed_from_the_log(tmp_path):
     """``contact_repeats`` in the loop: every contact row of the model three times (its inside and free points once),
     the header names the setting only when it is set, and the log's replay holds the same model."""
@@ -391,11 +400,7 @@ def test_repeated_contacts_are_in_the_model_k_times_in_the_header_and_replayed_f
                               estimator=tg.EstimatorOverrides(labels={"contact_repeats": 3}))
     assert scene.defaults.policy.contact_repeats == 3
     log = tmp_path / "run.gpioius"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        reference = tg.explore(scene, log=log, max_travel=0.06, metrics_every=100, progress=False)
-    x, y, t = (v.numpy() for v in (reference.model.train_inputs[0], reference.model.train_targets,
-                                   reference.model.train_task))
+    reference, x, y, t = _logged_run(scene, log, 0.06)
     surface = x[(t == 0) & (y == 0)]
     assert len(surface) == 3 * len(reference.contacts)
     for contact in reference.contacts:
@@ -432,11 +437,7 @@ def test_a_thin_bodys_inside_points_halved_in_the_loop_lie_inside_and_are_replay
     assert policy.inside_halvings == 2
     shallow = np.round([policy.inside_label(0.01), policy.inside_label(0.005)], 12)
     log = tmp_path / "run.gpioius"
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        reference = tg.explore(scene, log=log, max_travel=0.04, metrics_every=100, progress=False)
-    x, y, t = (v.numpy() for v in (reference.model.train_inputs[0], reference.model.train_targets,
-                                   reference.model.train_task))
+    reference, x, y, t = _logged_run(scene, log, 0.04)
     halved = np.isin(np.round(y, 12), shallow) & (t == 1)
     assert halved.sum() > 10
     assert (-MeshDistance(scene.outer)(x[halved]) > 0).mean() > 0.9                # inside the cover's surface
