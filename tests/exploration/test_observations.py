@@ -617,3 +617,12 @@ def test_a_thin_part_in_2d_gets_inside_points_at_half_the_depth_and_a_thick_part
     xb, yb = vision_observations(view, halved)
     np.testing.assert_array_equal(xa, xb)
     np.testing.assert_array_equal(ya, yb)
+    # a disc with a 3 cm arm: every 2 cm point of the disc is kept, and the arm still gets its 1 cm ones
+    body = disc.union(shapely.geometry.box(0.05, -0.015, 0.3, 0.015))
+    ring = body.exterior
+    view = PlanarView(np.array([ring.interpolate(s).coords[0] for s in np.arange(0.0, ring.length, 0.005)]),
+                      origin=None, polygon=body, spacing=0.005)
+    x, y = vision_observations(view, halved)
+    arm = (y < 0) & (x[:, 0] > 0.15)
+    assert arm.sum() > 10 and np.allclose(y[arm], base.inside_label(0.01))
+    assert (y == base.inside_label(0.02)).sum() > 10

@@ -13,7 +13,6 @@ decide whether the similarity means anything (docs/method-notes.md). The same ru
 from __future__ import annotations
 
 import dataclasses
-
 import math
 from dataclasses import dataclass
 
@@ -188,21 +187,19 @@ def drop_contradicted_inside(obs: Observations, policy: ObservationPolicy, x_kno
     surface point is in ``obs`` (a contact, or a seen point, exactly its depth from it) is tried again at half the
     depth on the same line, up to that many times, as :func:`vision_observations` does; the first depth nothing
     contradicts replaces it (same row, its label that depth's)."""
-    keep = uncontradicted(obs.x, obs.y, policy, x_known, y_known)
-    if keep.all():
-        return obs
-    if policy.inside_halvings:
-        obs, keep = _halved(obs, keep, policy, x_known, y_known)
-    return obs.subset(keep)
+    obs, keep = _checked(obs, policy, x_known, y_known)
+    return obs if keep.all() else obs.subset(keep)
 
 
-def _halved(obs: Observations, keep: np.ndarray, policy: ObservationPolicy, x_known, y_known
-            ) -> tuple[Observations, np.ndarray]:
-    """``obs`` with its contradicted inside points (``~keep``) moved halfway to their own surface point and
-    relabelled where that depth is uncontradicted (up to ``policy.inside_halvings`` times), and ``keep`` with them
-    (:func:`drop_contradicted_inside`)."""
+def _checked(obs: Observations, policy: ObservationPolicy, x_known, y_known) -> tuple[Observations, np.ndarray]:
+    """``obs`` with its contradicted inside points moved halfway to their own surface point and relabelled where
+    that depth is uncontradicted (up to ``policy.inside_halvings`` times), and `(n,)` bool which rows stand
+    (:func:`drop_contradicted_inside`, :func:`inside_checked_by_step`)."""
     from scipy.spatial import cKDTree
 
+    keep = uncontradicted(obs.x, obs.y, policy, x_known, y_known)
+    if keep.all() or not policy.inside_halvings:
+        return obs, keep
     x, y = obs.x.copy(), obs.y.copy()
     surface = np.flatnonzero(y == 0)
     todo = np.flatnonzero(~keep & (y < 0))
@@ -216,7 +213,6 @@ def _halved(obs: Observations, keep: np.ndarray, policy: ObservationPolicy, x_kn
     others[todo] = False                                  # judged against the batch without the points being moved
     xk = x[others] if x_known is None else np.concatenate([x[others], np.asarray(x_known, dtype=np.float64)])
     yk = y[others] if y_known is None else np.concatenate([y[others], np.asarray(y_known, dtype=np.float64)])
-    keep = keep.copy()
     for _ in range(policy.inside_halvings):
         if not len(todo):
             break
@@ -277,13 +273,9 @@ def inside_checked_by_step(x: np.ndarray, y: np.ndarray, steps: np.ndarray, poli
     for step in np.unique(steps[inside]):
         batch = np.flatnonzero(steps == step)
         earlier = ~inside & (steps < step)
-        xk, yk = np.concatenate([x[earlier], x_other]), np.concatenate([y[earlier], y_other])
-        mine = Observations(x[batch], y[batch], np.zeros(len(batch), np.int64))
-        ok = uncontradicted(mine.x, mine.y, policy, xk, yk)
-        if policy.inside_halvings and not ok.all():
-            mine, ok = _halved(mine, ok, policy, xk, yk)
-            x[batch], y[batch] = mine.x, mine.y
-        keep[batch] = ok
+        mine, keep[batch] = _checked(Observations(x[batch], y[batch], np.zeros(len(batch), np.int64)), policy,
+                                     np.concatenate([x[earlier], x_other]), np.concatenate([y[earlier], y_other]))
+        x[batch], y[batch] = mine.x, mine.y
     return x, y, keep
 
 
@@ -635,53 +627,65 @@ def _with_inside(cloud, policy: ObservationPolicy, x: np.ndarray, y: np.ndarray)
     """``[x, inside...]``, ``[y, labels...]``: the observations `x` `(n, d)`, `y` `(n,)` of one capture and its
     inside points ``policy.vision_inside`` behind the seen voxels that ``x`` does not contradict; where one is, again
     at half the depth behind the same voxel, up to ``policy.inside_halvings`` times, if it is a thin part
-    (:func:`_thin_parts`). A :class:`~torch_gpioius.sensors.PointCloud` gives its voxels in the same order at every
-    depth; a view sampled afresh at each depth (the 2-D world's, which knows its outline) is tried again where no
-    point deeper was kept within that depth."""
-    from scipy.spatial import cKDTree
-
+    (:func:`_thin_parts`). The lines behind the voxels are computed once
+    (:meth:`~torch_gpioius.sensors.PointCloud.with_normals`); a view without them (None: the 2-D world's, which
+    knows its outline and is sampled afresh at each depth) is :func:`_with_inside_resampled`."""
+    lines = cloud.with_normals(policy.voxel)
+    if lines is None:
+        return _with_inside_resampled(cloud, policy, x, y)
     xs, ys = [x], [y]
-    depth, todo = policy.vision_inside, None
-    first = None
-    for _ in range(policy.inside_halvings + 1):
-        inside = cloud.behind(depth, policy.voxel)
-        if todo is None:
-            todo, first = np.ones(len(inside), dtype=bool), inside
-        elif len(todo) == len(inside):
-            if depth * 2 == policy.vision_inside:    # the first halving: contradicted by a thin part, not a stray voxel
-                todo &= _thin_parts(first, inside, policy.vision_inside)
-        else:                                        # a view sampled afresh: where nothing deeper was kept nearby
-            kept = np.concatenate(xs[1:])
-            todo = np.ones(len(inside), dtype=bool)
-            if len(kept) and len(inside):
-                todo = cKDTree(kept).query(inside)[0] > 2 * depth
-        labels = np.full(int(todo.sum()), policy.inside_label(depth))
-        keep = uncontradicted(inside[todo], labels, policy, x, y)
-        xs.append(inside[todo][keep])
+    pts, nrm = lines
+    todo = np.ones(len(pts), dtype=bool)
+    depth = policy.vision_inside
+    for k in range(policy.inside_halvings + 1):
+        if k == 1:                                   # contradicted by a thin part, not a stray voxel
+            todo &= _thin_parts(pts, nrm, policy.vision_inside)
+        points = pts[todo] - depth * nrm[todo]
+        labels = np.full(len(points), policy.inside_label(depth))
+        keep = uncontradicted(points, labels, policy, x, y)
+        xs.append(points[keep])
         ys.append(labels[keep])
         todo[np.flatnonzero(todo)[keep]] = False
-        if len(todo) and not todo.any():
+        if not todo.any():
             break
         depth /= 2
     return xs, ys
 
 
-def _thin_parts(deep: np.ndarray, half: np.ndarray, depth: float) -> np.ndarray:
-    """`(n,)` bool: which seen voxels' inside points ``depth`` deep, `deep` `(n, d)`, lie within
-    :data:`INSIDE_CLEARANCE` of that depth of another voxel facing the other way (inward normals more than 120
-    degrees apart, :data:`THIN_FACING`): the far side of a part thinner than the depth, where half the depth can
-    still lie inside. A voxel whose point is near only surfaces facing its own way is a stray (a voxel mean that
-    depth noise at a grazing ray carried a centimetre out in front of the surface it belongs to, which then lies
-    behind it): no shallower point would lie inside. `half` `(n, d)` are the same voxels' points at half the depth
-    (their inward normals are the difference)."""
+def _with_inside_resampled(view, policy: ObservationPolicy, x: np.ndarray, y: np.ndarray) -> tuple[list, list]:
+    """:func:`_with_inside` for a view whose ``behind`` samples each depth afresh (the 2-D world's): at each half
+    depth, the points farther than the depth before from every point kept deeper."""
     from scipy.spatial import cKDTree
 
-    if not len(deep):
+    xs, ys = [x], [y]
+    depth = policy.vision_inside
+    for k in range(policy.inside_halvings + 1):
+        points = view.behind(depth, policy.voxel)
+        kept = np.concatenate(xs[1:]) if k else np.zeros((0, x.shape[1]))
+        if len(kept) and len(points):
+            points = points[cKDTree(kept).query(points)[0] > 2 * depth]
+        labels = np.full(len(points), policy.inside_label(depth))
+        keep = uncontradicted(points, labels, policy, x, y)
+        xs.append(points[keep])
+        ys.append(labels[keep])
+        depth /= 2
+    return xs, ys
+
+
+def _thin_parts(points: np.ndarray, normals: np.ndarray, depth: float) -> np.ndarray:
+    """`(n,)` bool: which seen voxels' inside points ``depth`` deep (behind `points` `(n, d)` along their outward
+    `normals` `(n, d)`) lie within :data:`INSIDE_CLEARANCE` of that depth of another voxel facing the other way
+    (normals more than 120 degrees apart, :data:`THIN_FACING`): the far side of a part thinner than the depth, where
+    half the depth can still lie inside. A voxel whose point is near only surfaces facing its own way is a stray (a
+    voxel mean that depth noise at a grazing ray carried a centimetre out in front of the surface it belongs to,
+    which then lies behind it): no shallower point would lie inside."""
+    from scipy.spatial import cKDTree
+
+    if not len(points):
         return np.zeros(0, dtype=bool)
-    inward = (deep - half) / (depth / 2)
-    origin = 2 * half - deep
-    near = cKDTree(origin).query_ball_point(deep, INSIDE_CLEARANCE * depth)
-    return np.array([bool(len(j)) and bool((inward[j] @ inward[i] < THIN_FACING).any()) for i, j in enumerate(near)])
+    near = cKDTree(points).query_ball_point(points - depth * normals, INSIDE_CLEARANCE * depth)
+    return np.array([bool(len(j)) and bool((normals[j] @ normals[i] < THIN_FACING).any())
+                     for i, j in enumerate(near)])
 
 
 #: The cosine between two voxels' normals below which they face opposite ways (:func:`_thin_parts`): 120 degrees, so

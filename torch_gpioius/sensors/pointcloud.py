@@ -263,10 +263,21 @@ class PointCloud:
         Raises:
             ValueError: the cloud has no ``origin``; ``depth`` not a positive number.
         """
-        if not self.sees_free_space:
-            raise ValueError("behind: the point cloud has no camera origin; pass origin= to its source")
         if isinstance(depth, bool) or not isinstance(depth, (int, float)) or not (math.isfinite(depth) and depth > 0):
             raise ValueError(f"behind: depth must be a positive number [m], got {depth!r}")
+        pts, nrm = self.with_normals(voxel)
+        return pts - depth * nrm
+
+    def with_normals(self, voxel: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """``(points, normals)``, each `(n, 3)`: the seen points that have a normal (:meth:`normals`) and their unit
+        outward normals, or with ``voxel`` [m] one mean point and mean normal per voxel of them (per view; voxels
+        whose normals disagree are left out): the lines :meth:`behind` places its points on, at any depth.
+
+        Raises:
+            ValueError: the cloud has no ``origin``.
+        """
+        if not self.sees_free_space:
+            raise ValueError("behind: the point cloud has no camera origin; pass origin= to its source")
         nrm = self.normals()
         keep = np.isfinite(nrm).all(axis=1)
         pts, nrm = self.points[keep], nrm[keep]
@@ -277,7 +288,7 @@ class PointCloud:
             length = np.linalg.norm(nrm, axis=1)
             ok = length > 0.5                                   # normals that agree within the voxel
             pts, nrm = pts[ok], nrm[ok] / length[ok, None]
-        return pts - depth * nrm
+        return pts, nrm
 
 
 #: Rays further off a local fit than this many robust standard deviations (1.4826 median absolute residuals) are

@@ -182,6 +182,11 @@ class PlanarView(PointCloud):
         n = max(3, int(math.ceil(ring.length / self.spacing)))
         return np.array([ring.interpolate(i * ring.length / n).coords[0] for i in range(n)])
 
+    def with_normals(self, voxel: float | None = None) -> None:
+        """None: a 2-D view has no fixed lines to place inside points on; :meth:`behind` samples the curve at each
+        depth afresh, from the outline it knows."""
+        return None
+
     def behind(self, depth: float, voxel: float | None = None) -> np.ndarray:
         """`(k, 2)` points on the curve ``depth`` [m] inside the outer polygon, every ``spacing`` (none where the
         polygon is thinner than twice ``depth``); ``voxel`` must be None (a 2-D view is not voxel-averaged)."""
