@@ -346,6 +346,82 @@ def test_the_cameras_inside_points_are_continued_down_to_the_gap_with_the_offset
     assert deepen_vision_inside(m, contacts, policy) is None                    # once
 
 
+def test_the_gaps_spread_is_their_interquartile_range_over_their_median():
+    """gap_spread against a by-hand count: for 1..9 cm the quartiles are 3 and 7 cm and the median 5 cm (0.8); one
+    gap everywhere is 0; fewer than GAP_MIN_CONTACTS gaps, or a median of 0, say nothing (NaN)."""
+    from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, gap_spread
+
+    assert gap_spread(np.arange(1, 10) / 100) == pytest.approx(0.8, abs=1e-12)
+    assert gap_spread(np.full(7, 0.04)) == 0.0
+    assert np.isnan(gap_spread(np.full(GAP_MIN_CONTACTS - 1, 0.04)))
+    assert np.isnan(gap_spread(np.zeros(9)))
+
+
+def _half_uneven_model(policy):
+    """A body of 10 cm radius under a cover standing off 4 cm over its upper half and from 4 cm at the equator to
+    9 cm at the bottom (a garment hanging below), seen all round, with the camera's inside points 2 cm behind the
+    cover; 12 contacts on the upper half, 30 on the lower."""
+    dirs = _sphere(1.0, 400, seed=4)
+    outer_r = 0.14 + 0.05 * np.clip(-dirs[:, 2], 0.0, None)
+    seen, inside = dirs * outer_r[:, None], dirs * (outer_r - 0.02)[:, None]
+    around = _sphere(0.10, 200, seed=5)
+    upper, lower = around[around[:, 2] > 0.03][:12], around[around[:, 2] < -0.03][:30]
+    x = np.r_[upper, lower, seen, inside]
+    y = np.r_[np.zeros(len(upper) + len(lower) + len(seen)), np.full(len(inside), policy.inside_label(0.02))]
+    t = np.r_[np.zeros(len(upper) + len(lower)), np.ones(len(seen) + len(inside))].astype(np.int64)
+    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t),
+                  kernel=tg.kernels.InverseMultiquadricKernel(0.1))
+    return m, upper, np.r_[upper, lower]
+
+
+def _one_step(m, contacts, policy):
+    """What the exploration does with the cover's gap at a step (exploration.loop._learn): retract, offset, deepen."""
+    from torch_gpioius.exploration.observations import (deepen_vision_inside, offset_outer_mean,
+                                                        retract_vision_inside)
+
+    removed = retract_vision_inside(m, contacts, policy)
+    changed = offset_outer_mean(m, contacts, policy)
+    deep = deepen_vision_inside(m, contacts, policy)
+    if deep is not None:
+        m.add_observations(deep.x, deep.y, deep.task)
+    return removed, changed, deep
+
+
+def test_an_even_gap_is_taken_and_once_the_touches_spread_the_camera_falls_back_for_good():
+    """``cover_even``: the contacts on the upper half read one 4 cm gap (spread near 0): the outer mean stands for
+    it and the camera's inside points are kept and continued, as the gap settings do. The contacts below read 4-9
+    cm: past ``cover_even`` the outer mean goes back to 1 and every camera inside point, first and continued, is
+    retracted, as the default does past the limit, and stays so with the even contacts again. Without
+    ``cover_even`` the same contacts keep the offset; contacts that are uneven from the start never set it."""
+    from torch_gpioius.exploration.observations import CoverGap, gap_spread
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
+                               cover_even=0.3)
+    m, upper, everywhere = _half_uneven_model(policy)
+    seen = m.train_inputs[0].numpy()[(m.train_task.numpy() == 1) & (m.train_targets.numpy() == 0)]
+    assert gap_spread(CoverGap().measured(upper, seen, 0.02)[1]) < 0.1
+    assert gap_spread(CoverGap().measured(everywhere, seen, 0.02)[1]) > 0.3
+    removed, changed, deep = _one_step(m, upper, policy)
+    assert len(removed) == 0 and changed and m.outer_mean < 1.0 - 0.03 / policy.ramp and deep is not None
+    inside_rows = int((m.train_targets < 0).sum())
+    removed, changed, deep = _one_step(m, everywhere, policy)
+    assert len(removed) == inside_rows and changed and m.outer_mean == 1.0 and deep is None
+    assert not (m.train_targets < 0).any()
+    removed, changed, deep = _one_step(m, upper, policy)                          # for good
+    assert len(removed) == 0 and not changed and m.outer_mean == 1.0 and deep is None
+    plain, _, _ = _half_uneven_model(policy)
+    loose = dataclasses.replace(policy, cover_even=None)
+    _one_step(plain, upper, loose)
+    _, changed, _ = _one_step(plain, everywhere, loose)
+    assert plain.outer_mean < 1.0 - 0.03 / policy.ramp and (plain.train_targets < 0).any()
+    first, _, _ = _half_uneven_model(policy)
+    removed, changed, deep = _one_step(first, everywhere, policy)
+    assert len(removed) > 0 and not changed and first.outer_mean == 1.0 and deep is None
+    for bad in (0.0, -0.1, 2.5, float("nan"), True):
+        with pytest.raises(ValueError, match="cover_even"):
+            ObservationPolicy(cover_even=bad)
+
+
 def _uneven_sphere(n, seed, thin=0.005, thick=0.05):
     """Directions on the unit sphere and a cover over a 10 cm sphere standing off by ``thin`` at the bottom (-z)
     growing linearly in z to ``thick`` at the top."""

@@ -397,28 +397,82 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
     none = np.zeros(0, dtype=np.int64)
     if policy.vision_inside_gap is None or getattr(model, "num_tasks", 1) < 2 or len(contacts) < GAP_MIN_CONTACTS:
         return none
-    if policy.cover_offset and policy.vision_inside_deep:   # kept, and deepened (deepen_vision_inside)
+    one_gap = policy.cover_offset and policy.vision_inside_deep
+    if one_gap and not _judges_evenness(policy):              # kept, and deepened (deepen_vision_inside)
         return none
     y = model.train_targets.cpu().numpy()
     outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
     inside = outer & (y < 0)
     if not inside.any():
         return none
-    seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
-    if not seen_gap > policy.vision_inside_gap:             # NaN (too few contacts under seen cover) keeps them
-        return none
+    if one_gap:                                               # kept while the gap is even; retracted once it is not
+        gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
+        if not _uneven(gaps, policy, offset_set=model.outer_mean != 1.0):
+            return none
+    else:
+        seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
+        if not seen_gap > policy.vision_inside_gap:         # NaN (too few contacts under seen cover) keeps them
+            return none
     model.remove_observations(torch.as_tensor(inside))
     return np.flatnonzero(inside)
 
 
-def _seen_gap(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
-              gap: CoverGap | None) -> float:
-    """The cover's gap [m] the ``contacts`` show under the model's seen points (outer task, ``y == 0``; ``y`` and
-    ``outer`` the model's labels and outer-task mask), with a reach of the camera's voxel or 2 cm: what
-    :func:`retract_vision_inside` and :func:`offset_outer_mean` decide by. ``gap``: the run's :class:`CoverGap`."""
+def _seen_gaps(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
+               gap: CoverGap | None) -> np.ndarray:
+    """`(j,)` each counted contact's gap [m] under the model's seen points (outer task, ``y == 0``; ``y`` and
+    ``outer`` the model's labels and outer-task mask), with a reach of the camera's voxel or 2 cm
+    (:meth:`CoverGap.measured`; none with fewer than :data:`GAP_MIN_CONTACTS` contacts). ``gap``: the run's
+    :class:`CoverGap`."""
     measure = gap if gap is not None else CoverGap()
     seen = model.train_inputs[0].cpu().numpy()[outer & (y == 0)]
-    return measure(contacts, seen, reach=max(0.02, policy.voxel or 0.0))
+    return measure.measured(contacts, seen, reach=max(0.02, policy.voxel or 0.0))[1]
+
+
+def _seen_gap(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
+              gap: CoverGap | None) -> float:
+    """The cover's gap [m] the ``contacts`` show under the model's seen points: the median of :func:`_seen_gaps`,
+    NaN with fewer than :data:`GAP_MIN_CONTACTS` counted; what :func:`retract_vision_inside` and
+    :func:`offset_outer_mean` decide by."""
+    gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
+    return float(np.median(gaps)) if len(gaps) >= GAP_MIN_CONTACTS else math.nan
+
+
+def gap_spread(gaps: np.ndarray) -> float:
+    """How unevenly a cover stands off the body, as the contacts' gaps `(j,)` [m] show it: their interquartile range
+    over their median (0: one gap everywhere; NaN with fewer than :data:`GAP_MIN_CONTACTS` gaps or a median of 0).
+
+    Why this measure: a cover grown evenly off a body reads the same gap under every contact, up to the seen cover's
+    local planes' error (on the benchmark's 4 cm covers 0.00-0.06 of the median on primitives, up to 0.5 on blobs,
+    whose overhangs the planes measure worst); a cover that hangs, sags or drapes reads the gap of each place, and
+    the quartiles, unlike the extremes, are not moved by one contact beside a seen edge (docs/method-notes.md
+    section 27)."""
+    gaps = np.asarray(gaps, dtype=np.float64)
+    if len(gaps) < GAP_MIN_CONTACTS:
+        return math.nan
+    p25, med, p75 = np.percentile(gaps, [25, 50, 75])
+    return float((p75 - p25) / med) if med > 0 else math.nan
+
+
+def _judges_evenness(policy: ObservationPolicy) -> bool:
+    """Whether the one gap is taken only while the contacts' gaps agree (``policy.cover_even``, one gap)."""
+    return policy.cover_even is not None and policy.cover_offset and policy.vision_inside_deep \
+        and not policy.cover_gap_field
+
+
+def _uneven(gaps: np.ndarray, policy: ObservationPolicy, offset_set: bool) -> bool:
+    """With ``policy.cover_even``: the contacts' ``gaps`` `(j,)` [m] show a cover standing off beyond
+    ``policy.vision_inside_gap`` (or the outer mean stands for it already, ``offset_set``) and spread wider than
+    ``cover_even`` of their median (:func:`gap_spread`); False with too few to judge."""
+    if len(gaps) < GAP_MIN_CONTACTS:
+        return False
+    beyond = offset_set or float(np.median(gaps)) > policy.vision_inside_gap
+    return beyond and gap_spread(gaps) > policy.cover_even
+
+
+def _retracted(model, y: np.ndarray, outer: np.ndarray, policy: ObservationPolicy) -> bool:
+    """Whether the camera's inside points were retracted (the policy places them and none is left): with
+    ``cover_even``, the record that the contacts found the cover uneven, decided from the model's data alone."""
+    return policy.vision_inside is not None and not (outer & (y < 0)).any()
 
 
 #: The outer task's prior mean follows the touches' gap (:func:`offset_outer_mean`) once that moved by more than this
@@ -453,8 +507,17 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
     outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
     if policy.cover_gap_field:
         return _offset_outer_field(model, y, outer, contacts, policy, gap)
-    seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
+    gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
+    seen_gap = float(np.median(gaps)) if len(gaps) >= GAP_MIN_CONTACTS else math.nan
     current = (1.0 - model.outer_mean) * policy.ramp             # the gap the mean stands for now [m]
+    if _judges_evenness(policy) and policy.vision_inside_deep:
+        if _uneven(gaps, policy, offset_set=current != 0.0):     # not one gap: the paper's one mean, for good
+            if current == 0.0:
+                return False
+            model.set_outer_mean(1.0)
+            return True
+        if current == 0.0 and _retracted(model, y, outer, policy):  # found uneven before: not set again
+            return False
     if not math.isfinite(seen_gap) or (current == 0.0 and not seen_gap > policy.vision_inside_gap):
         return False
     if abs(seen_gap - current) <= OFFSET_STEP:

@@ -64,6 +64,13 @@ class ObservationPolicy:
             offset_outer_mean`), set once the field somewhere exceeds ``vision_inside_gap`` and renewed as it moves,
             and the camera's inside points continued down to the field's gap where each lies, placed again each
             time (docs/method-notes.md section 18). False (the default): one gap, the touches' median.
+        cover_even: with ``cover_offset`` and ``vision_inside_deep`` (one gap), the gap counts as the cover's offset
+            only while the contacts' gaps agree: their interquartile range at most this share of their median
+            (:func:`~torch_gpioius.exploration.observations.gap_spread`). Where they spread wider, the cover does not
+            stand off evenly and one number is wrong over most of it: the camera's inside points are retracted as
+            without the gap settings, and an outer mean already set goes back to the paper's one mean, for the rest
+            of the run (docs/method-notes.md section 27). None: the one gap whatever its spread. Without the one
+            gap's settings (or with ``cover_gap_field``, whose field follows a gap that varies) it does nothing.
         camera_bound: ``(translation [m], rotation [rad])``, the largest error the camera's calibration may have:
             once the contacts are many enough, and again as more come, each view's capture is moved rigidly about its
             camera to agree with them and with the other views, within that bound, and the camera's observations are
@@ -114,6 +121,7 @@ class ObservationPolicy:
     cover_offset: bool = False
     vision_inside_deep: bool = False
     cover_gap_field: bool = False
+    cover_even: float | None = None
     camera_bound: tuple | None = None
     camera_table: bool = True
     ray_smoothing: int | None = None
@@ -155,6 +163,8 @@ class ObservationPolicy:
             ok = isinstance(value, bool)
         elif name in _LENGTHS:
             ok = value is None or _in_range(value, _LENGTHS[name])
+        elif name == "cover_even":
+            ok = value is None or _in_range(value, _SPREAD_MAX)
         elif name in _SPACINGS:
             ok = _in_range(value, 1.0)
         else:
@@ -185,6 +195,8 @@ class ObservationPolicy:
             return "true or false"
         if name in _LENGTHS:
             return f"in (0, {_LENGTHS[name]:g}] m or none"
+        if name == "cover_even":
+            return f"a share of the median gap in (0, {_SPREAD_MAX:g}], or none"
         if name in _SPACINGS:
             return "in (0, 1] m"
         cls.check_field(name, None)         # raises, naming the fields
@@ -256,6 +268,8 @@ _FLAGS = ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table
 #: The policy's optional lengths [m] and the largest each takes (None: off).
 _LENGTHS = {"vision_free_offset": 1.0, "voxel": MAX_VOXEL, "crop_margin": 10.0, "vision_free_far": 1.0,
             "touch_inside": INSIDE_DEPTH_MAX, "vision_inside": INSIDE_DEPTH_MAX, "vision_inside_gap": INSIDE_DEPTH_MAX}
+#: The largest ``cover_even``: an interquartile range twice the median gap admits nearly any cover.
+_SPREAD_MAX = 2.0
 #: The policy's spacings along the fingertip's path [m], in (0, 1].
 _SPACINGS = ("free_space_spacing", "free_space_margin")
 #: The largest camera bound: (translation [m], rotation [rad]).
