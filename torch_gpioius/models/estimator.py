@@ -234,7 +234,8 @@ class EstimatorSettings:
     def gap(cls) -> "EstimatorSettings":
         """:meth:`default` with the transfer that knows the cover's gap (an experiment, :data:`GAP_LABELS`): past
         the 3 cm cover gap the outer mean stands for the gap the touches measure and the camera's inside points are
-        continued down to it (docs/method-notes.md sections 16-17; the 3-D worlds' settings "gap")."""
+        continued down to it (docs/method-notes.md sections 16-17; the 3-D worlds' settings "gap"). With
+        ``labels.cover_even`` only while the contacts' gaps agree (section 27)."""
         return cls.default().replace(labels=GAP_LABELS, name="gap")
 
     @classmethod
