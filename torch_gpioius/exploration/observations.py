@@ -389,7 +389,9 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
     cover). Decided from the model's data and the contacts alone, so that a resumed run decides alike. ``gap``: the
     run's :class:`CoverGap`, which keeps each contact's distance from one step to the next (None: computed afresh).
     With ``policy.cover_offset`` the outer task's prior mean stands for the gap from then on as well
-    (:func:`offset_outer_mean`).
+    (:func:`offset_outer_mean`); with ``vision_inside_deep`` too they are kept (and continued,
+    :func:`deepen_vision_inside`), and with ``cover_even`` retracted, the continued ones with them, once the
+    contacts' gaps spread wider than that share of their median (:func:`gap_spread`).
 
     Returns:
         `(k,)` indices (into the observations before the call) that were removed; empty when kept.
@@ -497,6 +499,11 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
     distance on 11 of 15 runs (docs/method-notes.md section 15). Decided from the model's data and the contacts
     alone, so that a resumed run decides alike.
 
+    With ``policy.cover_even`` (and ``vision_inside_deep``, one gap) the mean is set only while the contacts' gaps
+    spread no wider than that share of their median (:func:`gap_spread`), and goes back to 1 for the rest of the run
+    once they do (:func:`retract_vision_inside` retracts the camera's inside points at the same step; a run whose
+    camera inside points were retracted does not set it again).
+
     Returns:
         Whether the mean changed (the caller re-learns K_t as every step does).
     """
@@ -510,7 +517,7 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
     gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
     seen_gap = float(np.median(gaps)) if len(gaps) >= GAP_MIN_CONTACTS else math.nan
     current = (1.0 - model.outer_mean) * policy.ramp             # the gap the mean stands for now [m]
-    if _judges_evenness(policy) and policy.vision_inside_deep:
+    if _judges_evenness(policy):
         if _uneven(gaps, policy, offset_set=current != 0.0):     # not one gap: the paper's one mean, for good
             if current == 0.0:
                 return False
