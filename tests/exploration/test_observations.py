@@ -12,6 +12,8 @@ import torch_gpioius as tg
 from torch_gpioius.core.validation import as_labels
 from torch_gpioius.exploration.observations import ObservationPolicy, Observations, vision_observations
 from torch_gpioius.exploration.touch import PointTouch
+
+from tests.gaps import gaps_by_hand
 from torch_gpioius.sim.plane import PlanarView
 from torch_gpioius.models.overrides import EstimatorOverrides
 
@@ -175,16 +177,8 @@ def test_the_covers_gap_is_the_contacts_median_distance_to_the_seen_cover():
 
 
 def _gap_by_hand(contacts, seen, reach, neighbours=6):
-    """The cover's gap recomputed contact by contact: the nearest seen points by sorting every distance, the plane's
-    normal as the least eigenvector of their scatter."""
-    counted = []
-    for c in contacts:
-        patch = seen[np.argsort(np.linalg.norm(seen - c, axis=1))[:neighbours]]
-        centre = patch.mean(axis=0)
-        normal = np.linalg.eigh((patch - centre).T @ (patch - centre))[1][:, 0]
-        gap = abs(float((c - centre) @ normal))
-        if np.sqrt(max(float((c - centre) @ (c - centre)) - gap ** 2, 0.0)) <= reach:
-            counted.append(gap)
+    """The cover's gap recomputed contact by contact (tests.gaps), the median of five or more."""
+    counted = gaps_by_hand(contacts, seen, reach, neighbours)
     return float(np.median(counted)) if len(counted) >= 5 else float("nan")
 
 

@@ -4,22 +4,9 @@ of a ball under a cover standing off it evenly."""
 import numpy as np
 import pytest
 
+from tests.gaps import gaps_by_hand
 from tests.scenes import SCENE
 from tests.scriptfiles import load_script
-
-
-def _by_hand(contacts, seen, reach, neighbours=6):
-    """Each contact's gap recomputed on its own: the nearest seen points by sorting every distance, the plane's normal
-    as the least eigenvector of their scatter; the contacts whose foot lies within ``reach`` of the patch count."""
-    counted = []
-    for c in contacts:
-        patch = seen[np.argsort(np.linalg.norm(seen - c, axis=1))[:neighbours]]
-        centre = patch.mean(axis=0)
-        normal = np.linalg.eigh((patch - centre).T @ (patch - centre))[1][:, 0]
-        gap = abs(float((c - centre) @ normal))
-        if np.sqrt(max(float((c - centre) @ (c - centre)) - gap ** 2, 0.0)) <= reach:
-            counted.append(gap)
-    return np.array(counted)
 
 
 def test_the_replay_reads_the_runs_gaps_and_the_covers_true_one(tmp_path, capsys):
@@ -47,14 +34,14 @@ def test_the_replay_reads_the_runs_gaps_and_the_covers_true_one(tmp_path, capsys
     contacts = final.x[contact_rows(final.x, final.y, final.task)]
     seen = final.x[(final.task == 1) & (final.y == 0)]
     reach = max(0.02, float(run.meta.get("voxel_size") or run.meta.get("voxel") or 0.0))
-    gaps = _by_hand(contacts, seen, reach)
+    gaps = gaps_by_hand(contacts, seen, reach)
     assert len(gaps) >= 5 and r["contacts"] == len(contacts)
     n, med, p25, p75, rel = r["end"]
     assert n == len(gaps)
     np.testing.assert_allclose([med, p25, p75], np.percentile(gaps, [50, 25, 75]), atol=1e-12)
     assert rel == pytest.approx((p75 - p25) / med, rel=1e-12)
     fired = next((k for k in range(5, len(contacts) + 1)
-                  if len(g := _by_hand(contacts[:k], seen, reach)) >= 5 and np.median(g) > 0.03), None)
+                  if len(g := gaps_by_hand(contacts[:k], seen, reach)) >= 5 and np.median(g) > 0.03), None)
     assert r["fired"] == fired and fired is not None         # the 3.5 cm cover passes the 3 cm limit
     n_true, true_med, _, _, true_rel = r["true"]
     assert n_true > 20 and 0.031 < true_med < 0.039 and true_rel < 0.2
