@@ -32,18 +32,19 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from worst_errors import world_of  # noqa: E402  (a sibling script: the world a study log ran in)
 
-from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, CoverGap  # noqa: E402
+from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, CoverGap, gap_spread  # noqa: E402
 from torch_gpioius.io.datasets import contact_rows  # noqa: E402
 from torch_gpioius.io.runs import load_run  # noqa: E402
 from torch_gpioius.sim.meshes import MeshDistance  # noqa: E402
 
 
 def spread(gaps: np.ndarray) -> tuple[int, float, float, float, float]:
-    """``(count, median, p25, p75, (p75 - p25) / median)`` of gaps [m] (NaN where there are none)."""
+    """``(count, median, p25, p75, spread)`` of gaps [m], the spread as the loop's rule reads it (``gap_spread``:
+    NaN with fewer than five); NaN where there are none."""
     if len(gaps) == 0:
         return 0, math.nan, math.nan, math.nan, math.nan
     p25, med, p75 = np.percentile(gaps, [25, 50, 75])
-    return len(gaps), float(med), float(p25), float(p75), float((p75 - p25) / med) if med > 0 else math.nan
+    return len(gaps), float(med), float(p25), float(p75), gap_spread(gaps)
 
 
 def replay(log: Path, scenes: Path, limit: float, reach: float | None) -> dict:

@@ -435,7 +435,11 @@ def _seen_gap(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, pol
     """The cover's gap [m] the ``contacts`` show under the model's seen points: the median of :func:`_seen_gaps`,
     NaN with fewer than :data:`GAP_MIN_CONTACTS` counted; what :func:`retract_vision_inside` and
     :func:`offset_outer_mean` decide by."""
-    gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
+    return _median_gap(_seen_gaps(model, y, outer, contacts, policy, gap))
+
+
+def _median_gap(gaps: np.ndarray) -> float:
+    """The median of the counted contacts' ``gaps`` `(j,)` [m], NaN with fewer than :data:`GAP_MIN_CONTACTS`."""
     return float(np.median(gaps)) if len(gaps) >= GAP_MIN_CONTACTS else math.nan
 
 
@@ -515,7 +519,7 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
     if policy.cover_gap_field:
         return _offset_outer_field(model, y, outer, contacts, policy, gap)
     gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
-    seen_gap = float(np.median(gaps)) if len(gaps) >= GAP_MIN_CONTACTS else math.nan
+    seen_gap = _median_gap(gaps)
     current = (1.0 - model.outer_mean) * policy.ramp             # the gap the mean stands for now [m]
     if _judges_evenness(policy):
         if _uneven(gaps, policy, offset_set=current != 0.0):     # not one gap: the paper's one mean, for good
