@@ -178,6 +178,75 @@ def test_a_run_cut_after_a_step_resumes_to_the_same_end(scene, tmp_path):
     np.testing.assert_allclose(resumed.contacts[:n], reference.contacts[:n], rtol=0, atol=1e-3)
 
 
+# a square cup of 8 cm inside, 6 mm walls, 10 cm tall, open at the top: rays from its middle up through the opening
+# never come within a tight cloth's 8 mm of it
+CUP = [{"type": "box", "size": (0.046, 0.046, 0.003), "pos": (0.5, 0.0, 0.103)}] + [
+    {"type": "box", "size": s, "pos": (0.5 + x, y, 0.153)}
+    for s, x, y in (((0.003, 0.046, 0.05), 0.043, 0.0), ((0.003, 0.046, 0.05), -0.043, 0.0),
+                    ((0.046, 0.003, 0.05), 0.0, 0.043), ((0.046, 0.003, 0.05), 0.0, -0.043))]
+#: 9 mm above the cup's floor: along every ray up through the opening the closest point to the cup is this centre,
+#: where the old wrap put each of them (as the mug's centre in its cavity did)
+CUP_CENTRE = (0.5, 0.0, 0.115)
+
+
+def cup_base(half_angle=100.0):
+    from torch_gpioius.sim.mujoco.covers import cap_base
+    return cap_base(CUP_CENTRE, (0.0, 0.0, 1.0), half_angle, 0.015, 0.07)
+
+
+def test_a_cloth_over_an_open_cup_spans_its_opening_as_a_membrane():
+    """The tight mug blew up at its first step: the rays through its opening never came within 8 mm of it, kept their
+    closest point (the centre, for each of them) and made elements of no area. With the base's faces they lie as a
+    membrane over the opening: each the mean of its neighbours (recomputed here), every vertex at least 8 mm off the
+    cup, none two on one point; without the faces the old collapse (the fallback) is what the docstring says."""
+    from torch_gpioius.sim.mujoco.covers import make_cover, shrink_wrap
+    from torch_gpioius.sim.mujoco.primitives import union_sdf
+    cup = as_primitives(CUP)
+    origins, dirs, faces, _ = base = cup_base()
+    collapsed = shrink_wrap(cup, origins, dirs, 0.008)
+    spanned = shrink_wrap(cup, origins, dirs, 0.008, faces=faces)
+    t_old, t = (np.linalg.norm(v - origins, axis=1) for v in (collapsed, spanned))
+    free = union_sdf(cup, collapsed) > 0.008 + 1e-6      # the rays that leave through the opening
+    assert np.allclose(collapsed[free], CUP_CENTRE)      # the fallback without the faces: all on the centre
+    assert 3 <= free.sum() < len(t) // 2
+    assert np.allclose(t[~free], t_old[~free])           # the rays that came within 8 mm are where they were
+    nbrs = [set() for _ in t]
+    for a, b, c in faces:
+        nbrs[a] |= {b, c}
+        nbrs[b] |= {a, c}
+        nbrs[c] |= {a, b}
+    for i in np.flatnonzero(free):
+        assert t[i] == pytest.approx(np.mean([t[j] for j in nbrs[i]]), abs=1e-12)
+    assert spanned[free, 2].min() > 0.203                # above the rim, not down in the cup
+    assert union_sdf(cup, spanned).min() >= 0.008 - 1e-6
+    gaps = np.linalg.norm(spanned[:, None] - spanned[None], axis=-1) + np.eye(len(t))
+    assert gaps.min() > 0.005
+    cover = make_cover(cup, "tight", base)
+    assert np.allclose(cover.vertices, spanned)
+    foam = make_cover(cup, "foam", base)                 # both layers spanned
+    assert union_sdf(cup, foam.vertices).min() >= 0.008 - 1e-6
+
+
+def test_a_cup_under_a_tight_cloth_settles_finite():
+    """The tight mug's defect on a cup of primitives: its cloth was NaN at the first step (elements of no area)."""
+    scene = MujocoScene.from_primitives(CUP, "tight", start=(0.5, 0.004, 0.32), direction=(0, 0, -1),
+                                        bounds=[[0.42, -0.08, 0.1], [0.58, 0.08, 0.26]], base="cap",
+                                        centre=CUP_CENTRE, facing=(0, 0, 1), half_angle=100.0, spacing=0.015,
+                                        gap=0.008, name="cup")
+    assert np.isfinite(scene.settled).all()
+    verts = scene.cover_vertices()
+    assert np.isfinite(verts).all() and verts[:, 2].max() < 0.26
+
+
+def test_a_cover_with_elements_of_no_area_is_refused():
+    """Where no ray of the base comes within the cover's distance (its centre far from the body), every vertex
+    collapses onto the centre: refused by name, not a NaN at MuJoCo's first step."""
+    from torch_gpioius.sim.mujoco.covers import cap_base, make_cover
+    base = cap_base((0.5, 0.0, 0.6), (0.0, 0.0, 1.0), 60.0, 0.03, 0.1)
+    with pytest.raises(ValueError, match="no area"):
+        make_cover(as_primitives(BOX), "tight", base)
+
+
 def test_bad_input_gets_named_errors():
     with pytest.raises(ValueError, match=r"inner\[0\].*between 1 mm and 2 m"):
         as_primitives([{"type": "capsule", "size": (0.05, -0.1), "pos": (0, 0, 0)}])

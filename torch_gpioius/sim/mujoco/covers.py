@@ -156,14 +156,28 @@ def _sdf_of(body):
 
 
 def shrink_wrap(body, origins: np.ndarray, directions: np.ndarray, offset: float,
-                far: float = 2.0) -> np.ndarray:
+                far: float = 2.0, faces: np.ndarray | None = None) -> np.ndarray:
     """Move from ``origin + far * direction`` inward along each ray to the first point ``offset`` [m] from the
-    object (signed distance = offset, bisection to 1e-6 m). A ray that never comes within ``offset`` keeps the
-    point where it is closest to the object.
+    object (signed distance = offset, bisection to 1e-6 m).
+
+    A ray that never comes within ``offset`` (one that leaves through a cup's opening) has no such point: every point
+    along it is farther than ``offset``. With the base mesh's ``faces`` it is placed as a membrane spanning the
+    opening would lie: at the harmonic mean over the mesh of its neighbours' distances along their rays, the rays that
+    did come within ``offset`` held fixed. Without them, or where no ray of its part of the mesh came within
+    ``offset``, it keeps the point where it is closest to the object (for rays from a centre inside an opening, the
+    centre itself: several vertices on one point, the degenerate elements :func:`make_cover` refuses).
 
     Args:
         body: the object: a list of primitives, or a body with ``sdf(points)``
             (:mod:`~torch_gpioius.sim.mujoco.bodies`).
+        origins, directions: `(n, 3)` the rays [m] (unit directions).
+        offset: distance from the object [m].
+        far: where the search starts along each ray [m].
+        faces: `(k, 3)` the base mesh's triangles (vertex ids of the rays), to span the rays that never come within
+            ``offset``.
+
+    Returns:
+        `(n, 3)` the wrapped vertices [m].
     """
     sdf = _sdf_of(body)
     o, d = np.asarray(origins, dtype=np.float64), np.asarray(directions, dtype=np.float64)
@@ -182,7 +196,41 @@ def shrink_wrap(body, origins: np.ndarray, directions: np.ndarray, offset: float
         hi = np.where(hit & out, mid, hi)
         lo = np.where(hit & ~out, mid, lo)
     t = np.where(hit, hi, lo)
+    if faces is not None and 0 < hit.sum() < len(hit):
+        t = _span(t, hit, np.asarray(faces, dtype=np.int64))
     return o + t[:, None] * d
+
+
+def _span(t: np.ndarray, fixed: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``t`` `(n,)` with the entries not ``fixed`` replaced by the harmonic interpolation of their neighbours over the
+    mesh ``faces`` (each free entry the mean of its neighbours; the fixed entries the boundary values). A group of
+    free entries with no fixed neighbour anywhere keeps its values.
+
+    Written here because it is ten lines of scipy's sparse solve: the graph Laplacian restricted to the free entries
+    (trimesh's smoothing moves the vertices themselves, not one number along each ray)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse.linalg import spsolve
+
+    n = len(t)
+    edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    edges = np.unique(np.sort(edges, axis=1), axis=0)
+    adj = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
+                        shape=(n, n)).tocsr()
+    adj.data[:] = 1.0
+    free = ~fixed
+    # a free group reaches the boundary values only if one of its vertices has a fixed neighbour
+    _, group = connected_components(adj[free][:, free], directed=False)
+    touches = np.asarray(adj[free][:, fixed].sum(axis=1)).ravel() > 0
+    reached = np.isin(group, np.unique(group[touches]))
+    idx = np.flatnonzero(free)[reached]
+    if not len(idx):
+        return t
+    lap = sp.diags(np.asarray(adj[idx].sum(axis=1)).ravel()) - adj[idx][:, idx]
+    rhs = adj[idx][:, fixed] @ t[fixed]
+    out = t.copy()
+    out[idx] = spsolve(lap.tocsc(), rhs)
+    return out
 
 
 def _outward(verts: np.ndarray, faces: np.ndarray, dirs: np.ndarray) -> np.ndarray:
@@ -206,6 +254,22 @@ def _tets_from_prisms(bottom: np.ndarray, faces: np.ndarray, n: int) -> np.ndarr
         A, B, C = a + n, b + n, c + n
         tets += [(a, b, c, A), (b, c, A, B), (c, A, B, C)]
     return np.asarray(tets, dtype=np.int64)
+
+
+def _refuse_degenerate(verts: np.ndarray, faces: np.ndarray) -> None:
+    """Refuse a wrapped cover with an element of no area (two vertices on one point, or three on a line): MuJoCo's
+    elasticity divides by it, and the first step turns the whole state to NaN."""
+    t = verts[faces]
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    bad = area < 1e-10                                  # m^2: 0.01 mm^2, where the elements are cm across
+    if bad.any():
+        where = np.unique(faces[bad])
+        first = np.round(verts[where[0]], 4).tolist()
+        raise ValueError(f"cover: {int(bad.sum())} of its {len(faces)} elements have no area (vertices "
+                         f"{where[:6].tolist()}{' ...' if len(where) > 6 else ''} at {first} "
+                         "and its neighbours coincide or lie on a line): rays of the base mesh that never come within "
+                         "the cover's distance of the body and have no neighbour that does; move the base's centre "
+                         "into the body")
 
 
 def make_cover(prims, kind: str, base: tuple, *, gap: float = 0.008, slack: float = 0.04,
@@ -255,8 +319,10 @@ def make_cover(prims, kind: str, base: tuple, *, gap: float = 0.008, slack: floa
     if not pin:
         boundary = np.zeros(0, dtype=np.int64)
     if kind == "foam":
-        inner = shrink_wrap(prims, origins, dirs, gap)
-        outer = shrink_wrap(prims, origins, dirs, gap + thickness)
+        inner = shrink_wrap(prims, origins, dirs, gap, faces=faces)
+        outer = shrink_wrap(prims, origins, dirs, gap + thickness, faces=faces)
+        _refuse_degenerate(inner, faces)
+        _refuse_degenerate(outer, faces)
         n = len(inner)
         verts = np.concatenate([inner, outer])
         elements = _tets_from_prisms(inner, faces, n)
@@ -266,7 +332,8 @@ def make_cover(prims, kind: str, base: tuple, *, gap: float = 0.008, slack: floa
         mesh._foam_outer = faces + n
         return mesh
     dist = gap if kind == "tight" else slack
-    verts = shrink_wrap(prims, origins, dirs, dist)
+    verts = shrink_wrap(prims, origins, dirs, dist, faces=faces)
+    _refuse_degenerate(verts, faces)
     faces = _outward(verts, faces, dirs)
     return CoverMesh(verts, faces, boundary, 2, kind, radius, young or CLOTH_YOUNG,
                      poisson if poisson is not None else 0.2, 1e-3, damping if damping is not None else 0.02,
