@@ -173,12 +173,12 @@ def _resumes_alike(scene, log, cut: int, reference, kw: dict) -> None:
 
 @pytest.mark.parametrize("offset", [False, True], ids=["retracted", "outer-mean"])
 def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
-    """Under a cover 4 cm off an ellipsoid (the defaults for a user's object) the touches measure the gap once five
-    contacts lie under seen cover and retract the camera's inside points at the first step whose contacts put it above
-    ``vision_inside_gap``: the log says which, its replay holds the run's final data. With ``cover_offset`` (an option)
-    the outer task's prior mean is set to 1 - gap / ramp from that step on, logged with each step, and the log's model
-    at the last step is the run's; without it the mean stays 1. Either way a run cut before that step, or after it,
-    and resumed ends where the uninterrupted one ends.
+    """Under a cover 4 cm off an ellipsoid (the defaults for a user's object without the one gap's settings) the
+    touches measure the gap once five contacts lie under seen cover and retract the camera's inside points at the first
+    step whose contacts put it above ``vision_inside_gap``: the log says which, its replay holds the run's final data.
+    With ``cover_offset`` alone the outer task's prior mean is set to 1 - gap / ramp from that step on, logged with each
+    step, and the log's model at the last step is the run's; without it the mean stays 1. Either way a run cut before
+    that step, or after it, and resumed ends where the uninterrupted one ends.
 
     The step of the retraction is a chaotic run's (another CPU reaches it a step or two later): the test recomputes
     the rule at every step from the run's own contacts and seen points, and never names the step."""
@@ -191,10 +191,12 @@ def test_a_wide_covers_gap_is_logged_and_resumes_alike(tmp_path, offset):
     body = trimesh.creation.icosphere(subdivisions=3, radius=0.06)
     body.apply_scale([1.3, 1.0, 0.8])
     scene = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1],
-                              estimator=tg.EstimatorOverrides(labels={"cover_offset": offset}))
+                              estimator=tg.EstimatorOverrides(labels={"cover_offset": offset,
+                                                                      "vision_inside_deep": False, "cover_even": None}))
     policy = scene.defaults.policy
-    assert policy.vision_inside_gap == 0.03 and policy.cover_offset == offset
-    assert not Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1]).defaults.policy.cover_offset
+    assert policy.vision_inside_gap == 0.03 and policy.cover_offset == offset and not policy.vision_inside_deep
+    default = Scene3D.from_mesh(body, cover="tight", gap=0.04, at=[0.5, 0.0, 0.1]).defaults.policy
+    assert default.cover_offset and default.vision_inside_deep and default.cover_even == 0.25  # one gap while even
     kw = dict(max_travel=0.08, metrics_every=100, progress=False)
     log = tmp_path / "run.gpioius"
     with warnings.catch_warnings():

@@ -617,11 +617,12 @@ def test_captures_of_a_miscalibrated_camera_are_corrected_from_the_contacts_and_
 
 
 def test_a_users_files_under_a_wide_cover_take_the_gap_rules_their_settings_name(tmp_path):
-    """A 6 cm ball under a cover 4 cm off it, seen from both sides: the default settings retract the camera's inside
-    points (nothing below the seen cover is left, the outer mean stays 1); the settings with the outer mean standing
-    for the gap keep them and continue them down to it, and the dataset records the mean: one number
-    (``cover_offset``), or the gap field (``cover_gap_field``), which the model built from the dataset takes and
-    reads as about 4 cm at the cover."""
+    """A 6 cm ball under a cover 4 cm off it, seen from both sides. Without the gap settings the camera's inside
+    points are retracted (nothing below the seen cover is left, the outer mean stays 1). The default takes the one gap,
+    since the touches agree on it here (``cover_even``), as the ungated setting does: it keeps the inside points and
+    continues them down to the gap, and the dataset records the mean (``cover_offset``). The gap field
+    (``cover_gap_field``) is recorded as the field, which the model built from the dataset takes and reads as about
+    4 cm at the cover."""
     import torch_gpioius as tg
     from torch_gpioius.io.importers import dataset_from_files
 
@@ -630,18 +631,20 @@ def test_a_users_files_under_a_wide_cover_take_the_gap_rules_their_settings_name
     csv_path, clouds = sphere_files(tmp_path, contacts=40, gap=0.04)
     base = tg.EstimatorSettings.default()
     origins = [list(e) for e in EYES]
-    plain = dataset_from_files(csv_path, clouds, settings=base, camera_origin=origins)
+    off = {"cover_offset": False, "vision_inside_deep": False}
+    plain = dataset_from_files(csv_path, clouds, settings=base.replace(labels=off), camera_origin=origins)
     assert not ((plain.task == 1) & (plain.y < 0)).any() and "outer_mean" not in plain.meta
     assert plain.to_model().outer_mean == 1.0
-    labels = {"cover_offset": True, "vision_inside_deep": True}
-    one = dataset_from_files(csv_path, clouds, settings=base.replace(labels=labels), camera_origin=origins)
-    gap = one.meta["cover_gap"]
-    assert 0.03 < gap <= 0.04
     first = base.labels.inside_label(base.labels.vision_inside)
-    assert ((one.task == 1) & (one.y < first - 1e-9)).any()                     # continued below the first
-    assert one.meta["outer_mean"] == pytest.approx(1 - gap / base.labels.ramp, abs=1e-12)
-    assert one.to_model().outer_mean == one.meta["outer_mean"]
-    field = dataset_from_files(csv_path, clouds, settings=base.replace(labels={**labels, "cover_gap_field": True}),
+    sets = {"default": base, "ungated": base.replace(labels={"cover_even": None})}
+    for name, settings in sets.items():
+        one = dataset_from_files(csv_path, clouds, settings=settings, camera_origin=origins)
+        gap = one.meta["cover_gap"]
+        assert 0.03 < gap <= 0.04, name
+        assert ((one.task == 1) & (one.y < first - 1e-9)).any(), name           # continued below the first
+        assert one.meta["outer_mean"] == pytest.approx(1 - gap / base.labels.ramp, abs=1e-12)
+        assert one.to_model().outer_mean == one.meta["outer_mean"]
+    field = dataset_from_files(csv_path, clouds, settings=base.replace(labels={"cover_gap_field": True}),
                                camera_origin=origins)
     model = field.to_model()
     assert model.outer_field is not None and "outer_mean" not in field.meta

@@ -175,9 +175,10 @@ def test_a_scene_files_settings_reach_the_exploration(tmp_path):
     assert isinstance(d.kernel, Matern52) and d.kernel.ell == 0.04 and d.noise == 0.08   # 16 cm -> 4 cm (floor)
     assert d.policy.touch_inside == 0.02 and d.policy.vision_inside == 0.02               # inside points
     assert d.policy.vision_inside_gap == 0.03                       # retracted behind a cover standing 3 cm off
-    assert not d.policy.cover_offset                                # the outer mean is an option, off
-    on = load_scene(_write(tmp_path, GOOD + "[forcefield]\ncover_offset = true\n")).defaults
-    assert on.policy.cover_offset and on.policy.vision_inside_gap == 0.03
+    # one gap, while the touches' gaps agree: the outer mean and the camera's inside points continued down to it
+    assert d.policy.cover_offset and d.policy.vision_inside_deep and d.policy.cover_even == 0.25
+    off = load_scene(_write(tmp_path, GOOD + "[forcefield]\ncover_offset = false\n")).defaults
+    assert not off.policy.cover_offset and off.policy.vision_inside_gap == 0.03
     plain = load_scene(_write(tmp_path, GOOD + "[forcefield]\ntouch_inside = 0\nvision_inside = 0.01\n"
                                                "vision_inside_gap = 0\ncover_offset = false\n")).defaults
     assert plain.policy.touch_inside is None and plain.policy.vision_inside == 0.01
@@ -256,7 +257,7 @@ def test_one_file_builds_both_worlds_with_each_worlds_own_cover_options(tmp_path
                               "c.toml"), world="mujoco", settings="default")
     assert loose.defaults.policy.vision_inside is None and loose.defaults.policy.touch_inside == 0.02
     assert mine.defaults.policy.vision_inside_gap == 0.03 and mj.defaults.policy.vision_inside_gap is None
-    assert not mine.defaults.policy.cover_offset and not mj.defaults.policy.cover_offset
+    assert mine.defaults.policy.cover_offset and not mj.defaults.policy.cover_offset
     with pytest.raises(ValueError, match="vision_inside"):
         load_scene(_write(tmp_path, text.replace("spacing = 0.03\n", "spacing = 0.03\nvision_inside = 0.5\n"),
                           "d.toml"), world="mujoco")

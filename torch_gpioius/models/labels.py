@@ -50,14 +50,15 @@ class ObservationPolicy:
         cover_offset: once the touches show the cover standing off the body by more than ``vision_inside_gap``, the
             outer task's prior mean is set to ``1 - gap / ramp`` (:func:`offset_outer_mean`), so that the transfer
             carries the cover's shape onto the body without its offset (the camera's inside points are retracted
-            as without it; docs/method-notes.md section 15); False (the default everywhere): the paper's one mean
+            as without it; docs/method-notes.md section 15); on in the ``"default"`` preset, where ``cover_even``
+            keeps it to covers whose gap the touches agree on; False (this class's default, the paper's): one mean
             for both tasks.
         vision_inside_deep: with ``cover_offset``, once the touches show the cover standing off by a gap ``g`` beyond
             ``vision_inside_gap``, the camera's inside points are kept (not retracted) and more are added behind
             them every ``vision_inside`` down to ``g + vision_inside``, each labelled by its depth
             (:func:`~torch_gpioius.exploration.observations.deepen_vision_inside`): the outer field a signed distance
-            down to the level the offset mean reads (docs/method-notes.md section 16). False (the default): as
-            without it.
+            down to the level the offset mean reads (docs/method-notes.md section 16); on in the ``"default"``
+            preset. False (this class's default): as without it.
         cover_gap_field: with ``cover_offset`` and ``vision_inside_deep``, the gap a place at a time: the outer
             task's prior mean ``1 - g(x) / ramp`` from a smooth field ``g`` regressed from each contact's gap
             (:class:`~torch_gpioius.models.gapfield.GapField`, :func:`~torch_gpioius.exploration.observations.
@@ -69,8 +70,9 @@ class ObservationPolicy:
             (:func:`~torch_gpioius.exploration.observations.gap_spread`). Where they spread wider, the cover does not
             stand off evenly and one number is wrong over most of it: the camera's inside points are retracted as
             without the gap settings, and an outer mean already set goes back to the paper's one mean, for the rest
-            of the run (docs/method-notes.md section 27). None: the one gap whatever its spread. Without the one
-            gap's settings (or with ``cover_gap_field``, whose field follows a gap that varies) it does nothing.
+            of the run (docs/method-notes.md section 27). The ``"default"`` preset's is 0.25 (``COVER_EVEN``). None
+            (this class's default): the one gap whatever its spread. Without the one gap's settings (or with
+            ``cover_gap_field``, whose field follows a gap that varies) it does nothing.
         camera_bound: ``(translation [m], rotation [rad])``, the largest error the camera's calibration may have:
             once the contacts are many enough, and again as more come, each view's capture is moved rigidly about its
             camera to agree with them and with the other views, within that bound, and the camera's observations are

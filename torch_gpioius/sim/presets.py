@@ -36,7 +36,7 @@ DEFAULT_VIEWS = ("fixed",)
 
 
 #: What ``Scene3D.from_mesh(settings=...)`` accepts: "default" (this library's, for a user's object), "paper",
-#: "gap" (an experiment: the defaults with the transfer that knows the cover's gap, :func:`gap_defaults`) or
+#: "gap" (an experiment: the defaults with one gap whatever the touches' spread, :func:`gap_defaults`) or
 #: "gapfield" (another: that gap a place at a time, :func:`gap_field_defaults`).
 SETTINGS = ("default", "paper", "gap", "gapfield")
 
@@ -62,23 +62,25 @@ def object_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = No
       contradicts is tried again at 1 cm and 5 mm (``ObservationPolicy.inside_halvings``, section 25).
       They also assume a cover within 2 cm of the
       body: the camera's are retracted once the touches show it standing more than 3 cm off
-      (``ObservationPolicy.vision_inside_gap``, :data:`COVER_GAP_LIMIT`). ``ObservationPolicy.cover_offset`` (the
-      outer task's prior mean then standing for the gap they measure) is an option, off here: closer at the end under
-      the real shapes' wide covers, worse early there and on the robot study's loose sleeve and poncho
-      (docs/method-notes.md section 15).
+      (``ObservationPolicy.vision_inside_gap``, :data:`COVER_GAP_LIMIT`), unless the touches' gaps agree (their
+      interquartile range at most a quarter of their median, ``ObservationPolicy.cover_even``): then the outer
+      task's prior mean stands for the gap they measure (``cover_offset``) and the camera's inside points are
+      continued down to it (``vision_inside_deep``), for as long as they agree. One gap whatever the touches'
+      spread harmed the robot study's loose sleeve and poncho (docs/method-notes.md sections 15 and 26); read only
+      while they agree it leaves the sleeve as it was and helps under covers that stand off evenly (section 27).
     """
     d = ROBOT_STUDY_DEFAULTS if base is None else base
     return d.with_estimator(EstimatorSettings.default().for_extent(float(np.max(mesh.extents))))
 
 
 def gap_defaults(mesh: trimesh.Trimesh, base: ExplorationDefaults | None = None) -> ExplorationDefaults:
-    """:func:`object_defaults` with the transfer that knows the cover's gap (``settings="gap"``, an experiment, not
-    the default): once the touches show the cover standing more than 3 cm off, the outer task's prior mean stands for
-    the gap they measure (``ObservationPolicy.cover_offset``) and the camera's inside points are kept and continued
-    down to it, each labelled by its depth (``ObservationPolicy.vision_inside_deep``); under tighter covers nothing
-    changes unless the first contacts read more than 3 cm (4 blobs of 80 tight and hanging runs). Measured offline
-    on finished runs' data in docs/method-notes.md section 16, and in the loop in docs/results-benchmark.md ("A
-    transfer that knows the gap, in the loop")."""
+    """:func:`object_defaults` with the one gap taken whether the touches agree on it or not (``settings="gap"``, an
+    experiment, for a cover known to stand off evenly): once the touches show the cover standing more than 3 cm off,
+    the outer task's prior mean stands for the gap they measure (``ObservationPolicy.cover_offset``) and the camera's
+    inside points are kept and continued down to it, each labelled by its depth (``ObservationPolicy.
+    vision_inside_deep``), for the rest of the run (the default only while the touches' gaps agree,
+    ``cover_even``). Measured offline on finished runs' data in docs/method-notes.md section 16, and in the loop in
+    docs/results-benchmark.md ("A transfer that knows the gap, in the loop")."""
     return object_defaults(mesh, base).estimator_changed(labels=GAP_LABELS)
 
 
