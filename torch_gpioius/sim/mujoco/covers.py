@@ -215,13 +215,14 @@ def _span(t: np.ndarray, fixed: np.ndarray, faces: np.ndarray) -> np.ndarray:
     n = len(t)
     edges = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     edges = np.unique(np.sort(edges, axis=1), axis=0)
+    # each edge once in each direction (unique above), so every entry is 1
     adj = sp.coo_matrix((np.ones(2 * len(edges)), (np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]])),
                         shape=(n, n)).tocsr()
-    adj.data[:] = 1.0
     free = ~fixed
+    rows = adj[free]
     # a free group reaches the boundary values only if one of its vertices has a fixed neighbour
-    _, group = connected_components(adj[free][:, free], directed=False)
-    touches = np.asarray(adj[free][:, fixed].sum(axis=1)).ravel() > 0
+    _, group = connected_components(rows[:, free], directed=False)
+    touches = np.asarray(rows[:, fixed].sum(axis=1)).ravel() > 0
     reached = np.isin(group, np.unique(group[touches]))
     idx = np.flatnonzero(free)[reached]
     if not len(idx):
@@ -256,12 +257,16 @@ def _tets_from_prisms(bottom: np.ndarray, faces: np.ndarray, n: int) -> np.ndarr
     return np.asarray(tets, dtype=np.int64)
 
 
+def _areas(verts: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """`(k,)` the areas [m^2] of the triangles ``faces`` `(k, 3)` of ``verts`` `(n, 3)`."""
+    t = verts[faces]
+    return 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+
+
 def _refuse_degenerate(verts: np.ndarray, faces: np.ndarray) -> None:
     """Refuse a wrapped cover with an element of no area (two vertices on one point, or three on a line): MuJoCo's
     elasticity divides by it, and the first step turns the whole state to NaN."""
-    t = verts[faces]
-    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-    bad = area < 1e-10                                  # m^2: 0.01 mm^2, where the elements are cm across
+    bad = _areas(verts, faces) < 1e-10          # m^2: 0.01 mm^2, where the elements are cm across
     if bad.any():
         where = np.unique(faces[bad])
         first = np.round(verts[where[0]], 4).tolist()
@@ -344,9 +349,7 @@ def cover_mass(cover: CoverMesh) -> float:
     """Total mass [kg] from the material density and the cover's area (cloth) or volume (foam)."""
     v = cover.vertices
     if cover.dim == 2:
-        t = v[cover.elements]
-        area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1).sum()
-        return float(cover.density * area)
+        return float(cover.density * _areas(v, cover.elements).sum())
     t = v[cover.elements]
     vol = np.abs(np.einsum("ij,ij->i", t[:, 1] - t[:, 0], np.cross(t[:, 2] - t[:, 0], t[:, 3] - t[:, 0]))).sum() / 6
     return float(cover.density * vol)
