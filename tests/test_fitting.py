@@ -163,3 +163,29 @@ def test_a_fit_counts_touches_not_the_rows_a_contact_is_counted_in():
     x = np.repeat([[0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], 4, axis=0)
     ds = Dataset(x, np.zeros(8), np.zeros(8, np.int64), np.repeat([1, 2], 4))
     assert why_no_estimate(ds, 0.05).startswith("only 2 contact(s): too few")
+
+
+@pytest.mark.filterwarnings("ignore::torch_gpioius.models.gpiois.FitNotConvergedWarning")
+def test_a_fit_on_files_carries_the_outer_mean_through_the_transfer_it_learned(tmp_path):
+    """A 6 cm ball under a cover 4 cm off it (the files of tests/io's wide-cover test): the dataset records the one
+    gap's mean ``1 - g / ramp``; the default's fit learns K_t there, moves the mean to ``carried_mean`` of that K_t
+    (its transfer r below 1 here) and re-learns K_t, as an exploration does step by step. Without ``cover_carry``
+    the fit keeps the recorded mean."""
+    import torch_gpioius as tg
+    from torch_gpioius.exploration.observations import carried_mean
+    from torch_gpioius.io.importers import dataset_from_files
+
+    from tests.userfiles import EYES, sphere_files
+
+    csv_path, clouds = sphere_files(tmp_path, contacts=40, gap=0.04)
+    base = tg.EstimatorSettings.default()
+    ds = dataset_from_files(csv_path, clouds, settings=base, camera_origin=[list(e) for e in EYES])
+    recorded = ds.meta["outer_mean"]
+    first = ds.to_model(settings=base).fit(scout=offline.FIT_SCOUT)
+    kt = first.task_covariance
+    assert 0 < float(kt[0, 1] / kt[1, 1]) < 0.99
+    carried = fit_dataset(ds, settings=base)
+    assert carried["outer_mean"] == pytest.approx(carried_mean(recorded, kt), abs=1e-12)
+    assert carried["outer_mean"] > recorded + 0.01
+    plain = fit_dataset(ds, settings=base.replace(labels={"cover_carry": False}))
+    assert plain["outer_mean"] == recorded

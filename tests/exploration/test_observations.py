@@ -696,3 +696,80 @@ def test_a_thin_part_in_2d_gets_inside_points_at_half_the_depth_and_a_thick_part
     arm = (y < 0) & (x[:, 0] > 0.15)
     assert arm.sum() > 10 and np.allclose(y[arm], base.inside_label(0.01))
     assert (y == base.inside_label(0.02)).sum() > 10
+
+
+def _task_covariance(r: float, outer: float = 1.2, inner: float = 1.0) -> torch.Tensor:
+    """A K_t whose transfer ``K_t[0,1] / K_t[1,1]`` is ``r``."""
+    c = r * outer
+    assert c * c <= inner * outer
+    return torch.tensor([[inner, c], [c, outer]], dtype=torch.float64)
+
+
+@pytest.mark.parametrize("r", [0.8, 0.6])
+def test_the_carried_mean_puts_the_inner_zero_level_where_the_outer_field_reads_the_gap(r):
+    """Without inner observations the inner posterior mean is the outer residual carried across: ``1 + r (mu_out -
+    m_out)`` exactly (a multi-task GP's closed form, ``r = K_t[0,1] / K_t[1,1]``). With the outer mean at
+    ``carried_mean(1 - g / ramp)`` it is ``r (mu_out + g / ramp)``: zero exactly where the outer field reads the
+    gap's level, the body ``g`` below the cover; with ``1 - g / ramp`` alone it is ``1 - r`` there (the estimate
+    sinks). A cover 4 cm off a sphere seen all round, inside points down to the gap, free space 5 cm out."""
+    from torch_gpioius.exploration.observations import carried_mean
+
+    policy = ObservationPolicy()
+    gap, cover = 0.04, 0.14
+    seen = _sphere(cover, 200, seed=3)
+    unit = seen / cover
+    x = np.r_[seen, seen - 0.02 * unit, seen - gap * unit, seen + 0.05 * unit]
+    y = np.r_[np.zeros(len(seen)), np.full(len(seen), policy.inside_label(0.02)),
+              np.full(len(seen), policy.inside_label(gap)), np.ones(len(seen))]
+    m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.ones(len(x), dtype=torch.int64), noise=0.08,
+                  kernel=tg.kernels.Matern52(0.04), task_covariance=_task_covariance(r))
+    base = 1.0 - gap / policy.ramp
+    carried = carried_mean(base, m.task_covariance)
+    assert carried == pytest.approx(base + 1.0 / r - 1.0, abs=1e-12)
+    q = torch.as_tensor(_sphere(1.0, 50, seed=8) * np.random.default_rng(8).uniform(0.08, 0.16, (50, 1)))
+    for mean in (base, carried):
+        m.set_outer_mean(mean)
+        inner, outer = m.predict_mean(q, 0).detach(), m.predict_mean(q, 1).detach()
+        torch.testing.assert_close(inner, 1.0 + r * (outer - mean), rtol=0, atol=1e-10)
+    torch.testing.assert_close(inner, r * (outer + gap / policy.ramp), rtol=0, atol=1e-10)
+
+
+def test_the_carried_mean_is_bounded_and_left_alone_without_a_transfer():
+    """The transfer is floored at CARRY_MIN_RATIO (a correction of at most one label unit); a K_t whose tasks share
+    nothing (r = 0), disagree in sign or has no outer variance leaves the mean as it is."""
+    from torch_gpioius.exploration.observations import CARRY_MIN_RATIO, carried_mean
+
+    assert carried_mean(0.2, _task_covariance(0.3)) == pytest.approx(0.2 + 1.0 / CARRY_MIN_RATIO - 1.0, abs=1e-12)
+    assert carried_mean(0.2, _task_covariance(1.0, inner=1.5)) == pytest.approx(0.2, abs=1e-12)
+    assert carried_mean(0.2, torch.eye(2, dtype=torch.float64)) == 0.2
+    assert carried_mean(0.2, _task_covariance(-0.5)) == 0.2
+    assert carried_mean(0.2, torch.tensor([[1.0, 0.0], [0.0, 0.0]], dtype=torch.float64)) == 0.2
+    assert carried_mean(0.2, np.full((2, 2), np.nan)) == 0.2
+
+
+def test_the_outer_mean_is_carried_through_the_learned_transfer_once_set():
+    """The wide cover of the tests above, K_t with r = 0.8: with ``cover_carry`` the first setting is the gap's own
+    ``1 - g / ramp`` (a K_t learned at the mean of 1 carries the gap in its r), the next renews it to
+    ``carried_mean`` (a move of 1.25 cm of gap, past OFFSET_STEP), and it then stays while nothing moves; without
+    ``cover_carry`` the second call leaves the gap's mean. K_t itself is never changed here."""
+    from torch_gpioius.exploration.observations import carried_mean, cover_gap, offset_outer_mean
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.02, cover_offset=True, cover_carry=True)
+    seen = _sphere(0.14, 300, seed=4)
+    contacts = _sphere(0.10, 12, seed=5)
+    x, y = np.r_[contacts, seen], np.zeros(len(contacts) + len(seen))
+    t = np.r_[np.zeros(len(contacts)), np.ones(len(seen))].astype(np.int64)
+    base = 1.0 - cover_gap(contacts, seen, reach=0.02) / policy.ramp
+    for carry in (True, False):
+        m = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.as_tensor(t),
+                      kernel=tg.kernels.InverseMultiquadricKernel(0.1), task_covariance=_task_covariance(0.8))
+        kt = m.task_covariance
+        p = dataclasses.replace(policy, cover_carry=carry)
+        assert offset_outer_mean(m, contacts, p) and abs(m.outer_mean - base) < 1e-15
+        assert offset_outer_mean(m, contacts, p) == carry
+        assert abs(m.outer_mean - (carried_mean(base, kt) if carry else base)) < 1e-15
+        assert not offset_outer_mean(m, contacts, p)
+        assert torch.equal(m.task_covariance, kt)
+    assert ObservationPolicy().cover_carry is False
+    with pytest.raises(ValueError, match="cover_carry"):
+        ObservationPolicy(cover_carry=1)

@@ -168,7 +168,8 @@ def _resumes_alike(scene, log, cut: int, reference, kw: dict) -> None:
     assert resumed.n_steps == reference.n_steps
     assert np.abs(resumed.contacts - reference.contacts).max() < 1e-9
     assert torch.equal(resumed.model.train_targets, reference.model.train_targets)
-    assert resumed.model.outer_mean == reference.model.outer_mean
+    # the mean carried through the learned transfer (cover_carry) reads K_t, which a log restores to its rounding
+    assert resumed.model.outer_mean == pytest.approx(reference.model.outer_mean, rel=0, abs=1e-12)
 
 
 @pytest.mark.parametrize("offset", [False, True], ids=["retracted", "outer-mean"])

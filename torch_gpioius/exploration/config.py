@@ -206,13 +206,15 @@ class ExploreConfig(EstimatorView):
 
     def _policy_record(self) -> dict:
         """The observation policy for the header; the inside-point settings, ``cover_offset``,
-        ``vision_inside_deep``, ``cover_gap_field``, ``cover_even``, ``camera_bound``, ``contact_repeats`` and
-        ``inside_halvings`` only when set, so that logs written before they existed still resume."""
+        ``vision_inside_deep``, ``cover_gap_field``, ``cover_carry``, ``cover_even``, ``camera_bound``,
+        ``contact_repeats`` and ``inside_halvings`` only when set, so that logs written before they existed still
+        resume."""
         out = dataclasses.asdict(self.policy)
         for key in ("touch_inside", "vision_inside", "vision_inside_gap", "camera_bound", "cover_even"):
             if out[key] is None:
                 del out[key]
-        for key in ("cover_offset", "vision_inside_deep", "cover_gap_field"):  # (since 2026-11-27, -29 and -29)
+        for key in ("cover_offset", "vision_inside_deep", "cover_gap_field", "cover_carry"):  # (since 11-27, -29,
+            # -29 and 12-01)
             if not out[key]:
                 del out[key]
         if out.get("camera_bound") is None:        # camera_table: said only where a bound makes it act

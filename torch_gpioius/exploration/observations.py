@@ -28,7 +28,7 @@ __all__ = ["Observations", "ObservationPolicy", "check_voxel", "MAX_VOXEL", "thi
            "free_space_along", "retract_free_space", "vision_observations", "drop_contradicted_inside",
            "inside_checked_by_step", "uncontradicted", "uncontradicted_by_step", "INSIDE_CLEARANCE",
            "retract_vision_inside", "offset_outer_mean",
-           "renew_deep_vision_inside", "deepen_vision_inside",
+           "renew_deep_vision_inside", "deepen_vision_inside", "carried_mean", "CARRY_MIN_RATIO",
            "cover_gap", "CoverGap", "GAP_MIN_CONTACTS", "INNER", "OUTER"]
 
 @dataclass
@@ -531,10 +531,45 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
             return False
     if not math.isfinite(seen_gap) or (current == 0.0 and not seen_gap > policy.vision_inside_gap):
         return False
-    if abs(seen_gap - current) <= OFFSET_STEP:
+    want = 1.0 - seen_gap / policy.ramp
+    if policy.cover_carry and current != 0.0:   # set before: K_t was learned at a gap's mean (first: at 1, whose r
+        want = carried_mean(want, model.task_covariance)                  # carries the gap itself)
+    if abs(want - model.outer_mean) * policy.ramp <= OFFSET_STEP:    # without the carry: the gap moved that far
         return False
-    model.set_outer_mean(1.0 - seen_gap / policy.ramp)
+    model.set_outer_mean(want)
     return True
+
+
+#: The smallest transfer ``r = K_t[0,1] / K_t[1,1]`` :func:`carried_mean` divides by: a correction of at most one
+#: label unit (the whole ramp). Below it the learned tasks hardly share a shape, and a mean moved further would stand
+#: for a gap the touches did not measure.
+CARRY_MIN_RATIO = 0.5
+
+
+def carried_mean(base: float, task_covariance) -> float:
+    """The outer task's prior mean that puts the inner estimate's zero level where ``base`` (``1 - g / ramp``, a
+    cover ``g`` off the body) means it to lie, under the transfer the learned ``task_covariance`` `(2, 2)` makes.
+
+    Where the touches are far, the inner posterior mean is ``1 + r (mu_out(x) - m_out)`` with ``r = K_t[0,1] /
+    K_t[1,1]`` (exactly so without inner observations: the inner task's prediction is the outer residual carried
+    across by the task covariance). At the body, ``g`` below the cover, the outer field reads ``-g / ramp``; the inner
+    estimate is 0 there when ``m_out = 1 / r - g / ramp = base + (1 / r - 1)``. With ``r = 1`` that is ``base``; the
+    marginal likelihood rarely gives 1 (0.5-0.95 under the benchmark's 4 cm covers), and with ``base`` alone the
+    estimate sinks into the body away from the touches (docs/method-notes.md section 31).
+
+    Args:
+        base: the mean that stands for the gap, ``1 - g / ramp`` [label units].
+        task_covariance: K_t, the last fit's.
+
+    Returns:
+        ``base + 1 / max(r, CARRY_MIN_RATIO) - 1``; ``base`` itself where ``r`` is not a positive number (a K_t not
+        yet learned, or tasks that disagree in sign).
+    """
+    kt = np.asarray(task_covariance, dtype=np.float64)
+    r = kt[0, 1] / kt[1, 1] if kt[1, 1] > 0 else math.nan
+    if not (math.isfinite(r) and r > 0):
+        return float(base)
+    return float(base) + 1.0 / max(float(r), CARRY_MIN_RATIO) - 1.0
 
 
 #: The gap field becomes the outer mean (:func:`offset_outer_mean` with ``cover_gap_field``) once it exceeds the

@@ -17,8 +17,10 @@ Presets (:func:`EstimatorSettings.preset`):
   (2-5 cm), each in the voxel its depth smoothed along the camera's rays (over 24 of them) lies in, a second
   free-space point 10 cm in front of each seen point, inside points 2 cm behind every contact and every seen point,
   and those behind the seen surface retracted once the touches show the cover standing more than 3 cm off the body,
-  unless their gaps agree: then the outer task's prior mean stands for the gap they measure and the camera's inside
-  points are continued down to it, for as long as they agree (one gap while the touches agree, section 27);
+  unless their gaps agree: then the outer task's prior mean stands for the gap they measure (corrected, once set,
+  for the transfer K_t learned, so that away from the touches the estimate lies the gap below the cover; section 31)
+  and the camera's inside points are continued down to it, for as long as they agree (one gap while the touches
+  agree, section 27);
   each contact counted four times (a fingertip's contact with a quarter of the camera's noise); an inside point
   contradicted on a part thinner than its depth tried again at 1 cm and 5 mm;
 * ``"paper"``: the paper's robot experiment (Sec. VI): the inverse multiquadric of theta = 0.15 m, sigma^2 = 0.08,
@@ -225,7 +227,7 @@ class EstimatorSettings:
                                    vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT, voxel=0.05,
                                    ray_smoothing=RAY_NEIGHBOURS, contact_repeats=CONTACT_REPEATS,
                                    inside_halvings=INSIDE_HALVINGS, cover_offset=True, vision_inside_deep=True,
-                                   cover_even=COVER_EVEN)
+                                   cover_even=COVER_EVEN, cover_carry=True)
         return cls(Matern52(lengthscale=0.1), 0.08, labels, VoxelRule(), LengthRule(), name="default")
 
     @classmethod
@@ -613,5 +615,6 @@ def _past_gap(p) -> str:
         where = " a place at a time" if p.cover_gap_field else ""
         even = (f" while the touches' gaps agree (interquartile range at most {p.cover_even:g} of the median; "
                 "else retracted)" if p.cover_even is not None and not p.cover_gap_field else "")
-        return f"past {gap}: continued down to the gap{where}, the outer mean standing for it{even}"
+        carry = (" through the learned transfer" if p.cover_carry and not p.cover_gap_field else "")
+        return f"past {gap}: continued down to the gap{where}, the outer mean standing for it{carry}{even}"
     return f"retracted past {gap}" + (", the outer mean then standing for it" if p.cover_offset else "")

@@ -305,7 +305,8 @@ class GPIOIS(ImplicitSurfaceGP):
         With a correlation near 1 the inner estimate away from the touches is ``1 + r (mu_out - m_out)`` (``r =
         K_t[0,1] / K_t[1,1]``): a cover that stands off the body by ``g`` everywhere is the body's field shifted by
         ``g / ramp`` label units (the labels rise from 0 on a surface to 1 a ramp out), and an outer mean of ``1 -
-        g / ramp`` lets the transfer carry the cover's shape without its offset (docs/method-notes.md section 15);
+        g / ramp`` lets the transfer carry the cover's shape without its offset where ``r = 1`` (docs/method-notes.md
+        section 15; ``1 - g / ramp + 1 / r - 1`` for the learned ``r``: ``ObservationPolicy.cover_carry``);
         a field ``g(x)`` does the same where the gap changes from place to place (section 18). The labels stay as
         they are (0, 1, negative inside); the engines see each task's residual from its own mean. The engine is
         rebuilt at the next use; K_t is kept (re-learn with :meth:`fit`).

@@ -73,6 +73,17 @@ class ObservationPolicy:
             of the run (docs/method-notes.md section 27). The ``"default"`` preset's is 0.25 (``COVER_EVEN``). None
             (this class's default): the one gap whatever its spread. Without the one gap's settings (or with
             ``cover_gap_field``, whose field follows a gap that varies) it does nothing.
+        cover_carry: with ``cover_offset`` and one constant gap ``g`` (not ``cover_gap_field``), the outer mean also
+            answers the transfer K_t learned: away from the touches the inner estimate is ``1 + r (mu_out - m_out)``
+            with ``r = K_t[0,1] / K_t[1,1]``, which puts its zero level ``g`` below the cover only when ``r = 1``;
+            with ``r`` below 1 (0.5-0.95 under 4 cm covers) the estimate sinks into the body away from the touches.
+            The mean renewed once set is ``1 - g / ramp + (1 / r - 1)``
+            (:func:`~torch_gpioius.exploration.observations.carried_mean`, ``r`` the last fit's, floored at
+            :data:`~torch_gpioius.exploration.observations.CARRY_MIN_RATIO`), moved when it moves by more than
+            :data:`~torch_gpioius.exploration.observations.OFFSET_STEP` of gap; set first without it (K_t learned at
+            the mean of 1 has an ``r`` that carries the gap itself). A fit on files applies it once after the first
+            fit and re-learns K_t (docs/method-notes.md section 31). On in the ``"default"`` preset; False (this
+            class's default): ``1 - g / ramp``.
         camera_bound: ``(translation [m], rotation [rad])``, the largest error the camera's calibration may have:
             once the contacts are many enough, and again as more come, each view's capture is moved rigidly about its
             camera to agree with them and with the other views, within that bound, and the camera's observations are
@@ -129,6 +140,7 @@ class ObservationPolicy:
     ray_smoothing: int | None = None
     contact_repeats: int = 1
     inside_halvings: int = 0
+    cover_carry: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -266,7 +278,7 @@ def check_voxel(voxel) -> float:
 
 
 #: The policy's on/off fields.
-_FLAGS = ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table")
+_FLAGS = ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table", "cover_carry")
 #: The policy's optional lengths [m] and the largest each takes (None: off).
 _LENGTHS = {"vision_free_offset": 1.0, "voxel": MAX_VOXEL, "crop_margin": 10.0, "vision_free_far": 1.0,
             "touch_inside": INSIDE_DEPTH_MAX, "vision_inside": INSIDE_DEPTH_MAX, "vision_inside_gap": INSIDE_DEPTH_MAX}
