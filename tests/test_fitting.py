@@ -169,8 +169,8 @@ def test_a_fit_counts_touches_not_the_rows_a_contact_is_counted_in():
 def test_a_fit_on_files_carries_the_outer_mean_through_the_transfer_it_learned(tmp_path):
     """A 6 cm ball under a cover 4 cm off it (the files of tests/io's wide-cover test): the dataset records the one
     gap's mean ``1 - g / ramp``; the default's fit learns K_t there, moves the mean to ``carried_mean`` of that K_t
-    (its transfer r below 1 here) and re-learns K_t, as an exploration does step by step. Without ``cover_carry``
-    the fit keeps the recorded mean."""
+    (its transfer r below 1 here) and re-learns K_t, as an exploration does step by step. Without ``cover_carry``,
+    or for a mean the files' gap rules did not set, the fit keeps the recorded mean."""
     import torch_gpioius as tg
     from torch_gpioius.exploration.observations import carried_mean
     from torch_gpioius.io.importers import dataset_from_files
@@ -189,3 +189,8 @@ def test_a_fit_on_files_carries_the_outer_mean_through_the_transfer_it_learned(t
     assert carried["outer_mean"] > recorded + 0.01
     plain = fit_dataset(ds, settings=base.replace(labels={"cover_carry": False}))
     assert plain["outer_mean"] == recorded
+    # a mean not set by the files' gap rules (no cover_gap recorded, as a run's own) is not corrected again
+    from torch_gpioius.io.datasets import Dataset
+
+    meta = {k: v for k, v in ds.meta.items() if k != "cover_gap"}
+    assert fit_dataset(Dataset(ds.x, ds.y, ds.task, ds.step, meta=meta), settings=base)["outer_mean"] == recorded

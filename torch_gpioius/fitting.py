@@ -245,14 +245,15 @@ def _fit_settings(settings, kernel, noise, learn):
     return settings.merged(changes) if isinstance(settings, EstimatorOverrides) else changes.apply(settings)
 
 
-def _carry(model, settings) -> None:
-    """With ``labels.cover_carry`` and an outer mean standing for one gap (the file's gap rules set it): the mean
-    corrected once for the transfer the first fit learned (:func:`~torch_gpioius.exploration.observations.
-    carried_mean`), and K_t re-learned from there; an exploration does this step by step."""
+def _carry(model, settings, ds: Dataset) -> None:
+    """With ``labels.cover_carry`` and an outer mean standing for one gap that the files' gap rules set
+    (``dataset_from_files`` records ``cover_gap`` and that mean): the mean corrected once for the transfer the first
+    fit learned (:func:`~torch_gpioius.exploration.observations.carried_mean`), and K_t re-learned from there; an
+    exploration does this step by step (its log's dataset carries no gap's mean to correct again)."""
     from .exploration.observations import carried_mean
 
     if (settings is None or not settings.labels.cover_carry or not isinstance(model, GPIOIS)
-            or model.outer_field is not None or not model.outer_mean < 1.0):
+            or "cover_gap" not in ds.meta or model.outer_field is not None or not model.outer_mean < 1.0):
         return
     model.set_outer_mean(carried_mean(model.outer_mean, model.task_covariance))
     model.fit(multi_start=False)
@@ -273,7 +274,7 @@ def _fit(ds: Dataset, path, out, resolution, settings, mesh, outer_mesh) -> dict
     model = ds.to_model(settings=used)
     # a large file's first K_t: its starts scouted on a thinned copy, the full data re-learned from the basins found
     model = model.fit(scout=FIT_SCOUT) if isinstance(model, GPIOIS) else model.fit()
-    _carry(model, used)
+    _carry(model, used, ds)
     learn = used.learn if used is not None else "task"
     if learn != "task":
         model.learn_hyperparameters(*LEARN_SIZE, learn_noise=learn == "all")
