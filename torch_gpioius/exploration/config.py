@@ -213,8 +213,8 @@ class ExploreConfig(EstimatorView):
         for key in ("touch_inside", "vision_inside", "vision_inside_gap", "camera_bound", "cover_even"):
             if out[key] is None:
                 del out[key]
-        for key in ("cover_offset", "vision_inside_deep", "cover_gap_field", "cover_carry"):  # (since 11-27, -29,
-            # -29 and 12-01)
+        # cover_offset since 2026-11-27, vision_inside_deep and cover_gap_field since -29, cover_carry since 12-01
+        for key in ("cover_offset", "vision_inside_deep", "cover_gap_field", "cover_carry"):
             if not out[key]:
                 del out[key]
         if out.get("camera_bound") is None:        # camera_table: said only where a bound makes it act

@@ -491,7 +491,8 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
     """With ``policy.cover_offset``, set the outer task's prior mean to ``1 - g / ramp`` once the touches show the
     cover standing off the body by ``g`` more than ``policy.vision_inside_gap`` (:func:`cover_gap` of ``contacts``
     `(k, d)` [m] and the model's seen points, as :func:`retract_vision_inside` measures it), and follow ``g`` when it
-    moves by more than :data:`OFFSET_STEP` afterwards.
+    moves by more than :data:`OFFSET_STEP` afterwards; with ``policy.cover_carry`` the mean followed is
+    :func:`carried_mean` of ``1 - g / ramp`` under the last fit's K_t, from the step after it was first set.
 
     A cover ``g`` off the body everywhere is the body's field ``g / ramp`` label units higher (the labels rise from 0
     on a surface by one per ramp, :attr:`ObservationPolicy.ramp`); with the one prior mean of the paper, the learned
@@ -520,20 +521,20 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
         return _offset_outer_field(model, y, outer, contacts, policy, gap)
     gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
     seen_gap = _median_gap(gaps)
-    current = (1.0 - model.outer_mean) * policy.ramp             # the gap the mean stands for now [m]
+    held = model.outer_mean != 1.0          # the mean stands for a gap (carried through K_t with cover_carry)
     if _judges_evenness(policy):
-        if _uneven(gaps, policy, offset_set=current != 0.0):     # not one gap: the paper's one mean, for good
-            if current == 0.0:
+        if _uneven(gaps, policy, offset_set=held):              # not one gap: the paper's one mean, for good
+            if not held:
                 return False
             model.set_outer_mean(1.0)
             return True
-        if current == 0.0 and _retracted(model, y, outer, policy):  # found uneven before: not set again
+        if not held and _retracted(model, y, outer, policy):    # found uneven before: not set again
             return False
-    if not math.isfinite(seen_gap) or (current == 0.0 and not seen_gap > policy.vision_inside_gap):
+    if not math.isfinite(seen_gap) or (not held and not seen_gap > policy.vision_inside_gap):
         return False
     want = 1.0 - seen_gap / policy.ramp
-    if policy.cover_carry and current != 0.0:   # set before: K_t was learned at a gap's mean (first: at 1, whose r
-        want = carried_mean(want, model.task_covariance)                  # carries the gap itself)
+    if policy.cover_carry and held:   # set before: K_t was learned at a gap's mean (first: at 1, whose r carries
+        want = carried_mean(want, model.task_covariance)                  # the gap itself)
     if abs(want - model.outer_mean) * policy.ramp <= OFFSET_STEP:    # without the carry: the gap moved that far
         return False
     model.set_outer_mean(want)
