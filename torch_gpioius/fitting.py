@@ -246,16 +246,23 @@ def _fit_settings(settings, kernel, noise, learn):
 
 
 def _carry(model, settings, ds: Dataset) -> None:
-    """With ``labels.cover_carry`` and an outer mean standing for one gap that the files' gap rules set
-    (``dataset_from_files`` records ``cover_gap`` and that mean): the mean corrected once for the transfer the first
-    fit learned (:func:`~torch_gpioius.exploration.observations.carried_mean`), and K_t re-learned from there; an
+    """With ``labels.cover_carry`` and an outer mean standing for one gap, or a field of gaps, that the files' gap
+    rules set (``dataset_from_files`` records ``cover_gap`` and that mean): the mean corrected once for the transfer
+    the first fit learned (:func:`~torch_gpioius.exploration.observations.carried_mean`; a field raised by the same
+    ``1 / r - 1``, :meth:`~torch_gpioius.models.gapfield.GapField.carried`), and K_t re-learned from there; an
     exploration does this step by step (its log's dataset carries no gap's mean to correct again)."""
     from .exploration.observations import carried_mean
 
     if (settings is None or not settings.labels.cover_carry or not isinstance(model, GPIOIS)
-            or "cover_gap" not in ds.meta or model.outer_field is not None or not model.outer_mean < 1.0):
+            or "cover_gap" not in ds.meta):
         return
-    model.set_outer_mean(carried_mean(model.outer_mean, model.task_covariance))
+    field = model.outer_field
+    if field is not None and not field.carry:                # a gap per place: the same carry over the field
+        model.set_outer_mean(field.carried(carried_mean(0.0, model.task_covariance)))
+    elif field is None and model.outer_mean < 1.0:
+        model.set_outer_mean(carried_mean(model.outer_mean, model.task_covariance))
+    else:
+        return
     model.fit(multi_start=False)
 
 

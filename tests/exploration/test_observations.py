@@ -371,10 +371,14 @@ def _half_uneven_model(policy):
 def _one_step(m, contacts, policy):
     """What the exploration does with the cover's gap at a step (exploration.loop._learn): retract, offset, deepen."""
     from torch_gpioius.exploration.observations import (deepen_vision_inside, offset_outer_mean,
-                                                        retract_vision_inside)
+                                                        renew_deep_vision_inside, retract_vision_inside)
 
     removed = retract_vision_inside(m, contacts, policy)
     changed = offset_outer_mean(m, contacts, policy)
+    if changed:                                              # the field moved: its deep points placed again
+        renewed = renew_deep_vision_inside(m, policy)
+        assert not len(removed) or not len(renewed)          # (two removals in one step would need re-indexing)
+        removed = renewed if len(renewed) else removed
     deep = deepen_vision_inside(m, contacts, policy)
     if deep is not None:
         m.add_observations(deep.x, deep.y, deep.task)
@@ -414,6 +418,55 @@ def test_an_even_gap_is_taken_and_once_the_touches_spread_the_camera_falls_back_
     for bad in (0.0, -0.1, 2.5, float("nan"), True):
         with pytest.raises(ValueError, match="cover_even"):
             ObservationPolicy(cover_even=bad)
+
+
+def test_a_cover_found_uneven_takes_the_gap_a_place_at_a_time_for_good(monkeypatch):
+    """``cover_uneven_field``: the even upper contacts set the one gap as ``cover_even`` does; once the lower ones
+    spread the gaps, the outer mean becomes the field of the contacts' gaps (reading about 4 cm above and more below,
+    as the cover stands), the camera's first inside points are kept and those continued at the one gap are placed
+    again from the field (deeper below, where it hangs further off); the even contacts again leave the field. A
+    cover uneven from the start takes the field at once. Where the field does not pass the limit at a region of the
+    places (``FIELD_SHARE`` made unreachable), every step is ``cover_even``'s alone; the setting without
+    ``cover_even``, or beside ``cover_gap_field``, is refused."""
+    from torch_gpioius.exploration import observations as obs
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
+                               cover_even=0.3, cover_uneven_field=True)
+    m, upper, everywhere = _half_uneven_model(policy)
+    first = policy.inside_label(0.02)
+    n_first = int((m.train_targets.numpy() == first).sum())
+    removed, changed, deep = _one_step(m, upper, policy)
+    assert len(removed) == 0 and changed and m.outer_field is None and m.outer_mean < 1.0 - 0.03 / policy.ramp
+    one_gap_deep = deep.x
+    removed, changed, deep = _one_step(m, everywhere, policy)
+    field = m.outer_field
+    assert changed and field is not None and len(removed) == len(one_gap_deep)   # the one gap's deep points
+    y = m.train_targets.numpy()
+    assert int((y == first).sum()) == n_first and (y < first - 1e-9).any()        # first kept, continued again
+    seen = m.train_inputs[0].numpy()[(m.train_task.numpy() == 1) & (y == 0)]
+    top, bottom = seen[:, 2] > 0.08, seen[:, 2] < -0.12
+    assert 0.03 < np.median(field.gap(seen[top]).numpy()) < 0.05
+    assert np.median(field.gap(seen[bottom]).numpy()) > np.median(field.gap(seen[top]).numpy()) + 0.01
+    _one_step(m, upper, policy)                             # for good: the field stays (renewed from these)
+    y = m.train_targets.numpy()
+    assert m.outer_field is not None and int((y == first).sum()) == n_first and (y < first - 1e-9).any()
+    at_once, _, _ = _half_uneven_model(policy)
+    removed, changed, deep = _one_step(at_once, everywhere, policy)
+    assert len(removed) == 0 and changed and at_once.outer_field is not None and deep is not None
+    monkeypatch.setattr(obs, "FIELD_SHARE", 1.01)                                 # the field never passes a region
+    plain = dataclasses.replace(policy, cover_uneven_field=False)
+    for contacts_seq in ((upper, everywhere, upper), (everywhere,)):
+        a, _, _ = _half_uneven_model(policy)
+        b, _, _ = _half_uneven_model(policy)
+        for contacts in contacts_seq:
+            ra, ca, da = _one_step(a, contacts, policy)
+            rb, cb, db = _one_step(b, contacts, plain)
+            np.testing.assert_array_equal(ra, rb)
+            assert ca == cb and a.outer_mean == b.outer_mean and a.outer_field is None
+            np.testing.assert_array_equal(a.train_targets.numpy(), b.train_targets.numpy())
+    for bad in ({"cover_even": None}, {"cover_gap_field": True}):
+        with pytest.raises(ValueError, match="cover_uneven_field"):
+            dataclasses.replace(policy, **bad)
 
 
 def _uneven_sphere(n, seed, thin=0.005, thick=0.05):
@@ -512,7 +565,8 @@ def test_the_cameras_inside_points_go_down_to_the_fields_gap_where_each_lies_and
     again = deepen_vision_inside(m, contacts, policy)
     np.testing.assert_array_equal(again.x, deep.x)
     np.testing.assert_array_equal(again.y, deep.y)
-    assert len(renew_deep_vision_inside(m, dataclasses.replace(policy, cover_gap_field=False))) == 0
+    plain, _ = _gap_field_model(policy, dirs, outer_r, contacts)                 # no field, none to renew
+    assert len(renew_deep_vision_inside(plain, dataclasses.replace(policy, cover_gap_field=False))) == 0
 
 
 def test_a_noisy_camera_smoothed_along_its_rays_keeps_its_surface_in_place():
@@ -773,3 +827,47 @@ def test_the_outer_mean_is_carried_through_the_learned_transfer_once_set():
     assert ObservationPolicy().cover_carry is False
     with pytest.raises(ValueError, match="cover_carry"):
         ObservationPolicy(cover_carry=1)
+
+
+def test_a_gap_field_is_carried_through_the_learned_transfer_as_one_gap_is():
+    """``cover_gap_field`` with ``cover_carry``: the field's mean is raised by the same ``1 / r - 1``. Without inner
+    observations the inner posterior mean is ``1 + r (mu_out - m_out(x))``, so with the carried field it is ``r
+    (mu_out + g(x) / ramp)`` to 1e-10: zero where the outer field reads each place's own gap. In the loop the field is
+    set first without the carry, renewed with it from the last fit's K_t (r = 0.8) and then left; without
+    ``cover_carry`` the second call leaves it. The carry survives the field's record."""
+    from torch_gpioius.exploration.observations import carried_mean, offset_outer_mean
+    from torch_gpioius.models.gapfield import GapField
+
+    policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
+                               cover_gap_field=True, cover_carry=True)
+    dirs, outer_r = _uneven_sphere(400, seed=4)
+    contacts = _sphere(0.10, 60, seed=5)
+    for carry in (True, False):
+        m, seen = _gap_field_model(policy, dirs, outer_r, contacts)
+        m.task_covariance = _task_covariance(0.8)
+        kt = m.task_covariance
+        p = dataclasses.replace(policy, cover_carry=carry)
+        assert offset_outer_mean(m, contacts, p) and m.outer_field.carry == 0.0
+        assert offset_outer_mean(m, contacts, p) == carry
+        assert m.outer_field.carry == pytest.approx(carried_mean(0.0, kt) if carry else 0.0, abs=1e-15)
+        assert not offset_outer_mean(m, contacts, p)
+    field = m.outer_field.carried(0.25)
+    assert GapField.from_dict(field.as_dict()) == field and "carry" not in m.outer_field.as_dict()
+    torch.testing.assert_close(field.mean(seen), m.outer_field.mean(seen) + 0.25, rtol=0, atol=1e-15)
+    # the identity, on the camera's observations alone (no inner rows), the field a smooth gap of 0.5-5 cm
+    r = 0.7
+    x = np.r_[seen, dirs * (outer_r - 0.02)[:, None], dirs * 0.10, seen + 0.05 * dirs]
+    y = np.r_[np.zeros(len(seen)), np.full(len(seen), policy.inside_label(0.02)),
+              -(outer_r - 0.10) / policy.ramp, np.ones(len(seen))]
+    o = tg.GPIOIS(torch.as_tensor(x), torch.as_tensor(y), torch.ones(len(x), dtype=torch.int64), noise=0.08,
+                  kernel=tg.kernels.Matern52(0.04), task_covariance=_task_covariance(r))
+    gaps = GapField(seen, outer_r - 0.10, 0.08, 0.02, 0.004, ramp=policy.ramp)
+    carried = gaps.carried(carried_mean(0.0, o.task_covariance))
+    assert carried.carry == pytest.approx(1.0 / r - 1.0, abs=1e-12)
+    q = torch.as_tensor(_sphere(1.0, 50, seed=8) * np.random.default_rng(8).uniform(0.08, 0.16, (50, 1)))
+    o.set_outer_mean(carried)
+    inner, outer = o.predict_mean(q, 0).detach(), o.predict_mean(q, 1).detach()
+    torch.testing.assert_close(inner, 1.0 + r * (outer - carried.mean(q)), rtol=0, atol=1e-10)
+    torch.testing.assert_close(inner, r * (outer + gaps.gap(q) / policy.ramp), rtol=0, atol=1e-10)
+    with pytest.raises(ValueError, match="carry"):
+        gaps.carried(1.5)

@@ -124,12 +124,13 @@ def test_a_checkpoint_keeps_the_gap_field(random_data, tmp_path):
     from torch_gpioius.io import checkpoints
 
     points, gaps = _gaps()
-    m = _model(random_data).set_outer_mean(GapField.fit(points, gaps))
-    back = checkpoints.load_checkpoint(checkpoints.save_checkpoint(m, tmp_path / "m.pt"))
-    assert back.outer_field == m.outer_field
     q = torch.tensor([[0.1, 0.0], [-0.2, 0.1]], dtype=torch.float64)
-    for task in (0, 1):
-        torch.testing.assert_close(back.predict(q, task)[0], m.predict(q, task)[0], rtol=0, atol=1e-12)
+    for carry in (0.0, 0.3):                        # carried through the transfer (cover_carry) or not
+        m = _model(random_data).set_outer_mean(GapField.fit(points, gaps).carried(carry))
+        back = checkpoints.load_checkpoint(checkpoints.save_checkpoint(m, tmp_path / "m.pt"))
+        assert back.outer_field == m.outer_field and back.outer_field.carry == carry
+        for task in (0, 1):
+            torch.testing.assert_close(back.predict(q, task)[0], m.predict(q, task)[0], rtol=0, atol=1e-12)
 
 
 def test_a_field_the_outer_mean_cannot_take_is_refused_and_changes_nothing(random_data):

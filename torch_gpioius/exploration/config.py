@@ -206,15 +206,16 @@ class ExploreConfig(EstimatorView):
 
     def _policy_record(self) -> dict:
         """The observation policy for the header; the inside-point settings, ``cover_offset``,
-        ``vision_inside_deep``, ``cover_gap_field``, ``cover_carry``, ``cover_even``, ``camera_bound``,
-        ``contact_repeats`` and ``inside_halvings`` only when set, so that logs written before they existed still
-        resume."""
+        ``vision_inside_deep``, ``cover_gap_field``, ``cover_carry``, ``cover_uneven_field``, ``cover_even``,
+        ``camera_bound``, ``contact_repeats`` and ``inside_halvings`` only when set, so that logs written before they
+        existed still resume."""
         out = dataclasses.asdict(self.policy)
         for key in ("touch_inside", "vision_inside", "vision_inside_gap", "camera_bound", "cover_even"):
             if out[key] is None:
                 del out[key]
-        # cover_offset since 2026-11-27, vision_inside_deep and cover_gap_field since -29, cover_carry since 12-01
-        for key in ("cover_offset", "vision_inside_deep", "cover_gap_field", "cover_carry"):
+        # cover_offset since 2026-11-27, vision_inside_deep and cover_gap_field since -29, cover_carry since 12-01,
+        # cover_uneven_field since 12-02
+        for key in ("cover_offset", "vision_inside_deep", "cover_gap_field", "cover_carry", "cover_uneven_field"):
             if not out[key]:
                 del out[key]
         if out.get("camera_bound") is None:        # camera_table: said only where a bound makes it act

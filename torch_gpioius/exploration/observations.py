@@ -408,9 +408,13 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
     if not inside.any():
         return none
     if one_gap:                                               # kept while the gap is even; retracted once it is not
+        if getattr(model, "outer_field", None) is not None:   # cover_uneven_field: a gap per place, kept
+            return none
         gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
         if not _uneven(gaps, policy, offset_set=model.outer_mean != 1.0):
             return none
+        if policy.cover_uneven_field and _firing_field(model, y, outer, contacts, policy, gap) is not None:
+            return none                                       # kept: offset_outer_mean takes the field
     else:
         seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
         if not seen_gap > policy.vision_inside_gap:         # NaN (too few contacts under seen cover) keeps them
@@ -517,19 +521,24 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
         return False
     y = model.train_targets.cpu().numpy()
     outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
-    if policy.cover_gap_field:
+    if policy.cover_gap_field or getattr(model, "outer_field", None) is not None:   # (cover_uneven_field's)
         return _offset_outer_field(model, y, outer, contacts, policy, gap)
     gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
     seen_gap = _median_gap(gaps)
     held = model.outer_mean != 1.0          # the mean stands for a gap (carried through K_t with cover_carry)
     if _judges_evenness(policy):
-        if _uneven(gaps, policy, offset_set=held):              # not one gap: the paper's one mean, for good
-            if not held:
+        if not held and _retracted(model, y, outer, policy):    # found uneven before: not set again
+            return False
+        if _uneven(gaps, policy, offset_set=held):              # not one gap: a gap per place, or the paper's
+            field = (_firing_field(model, y, outer, contacts, policy, gap) if policy.cover_uneven_field
+                     else None)
+            if field is not None:                               # cover_uneven_field: for the rest of the run
+                model.set_outer_mean(field)
+                return True
+            if not held:                                        # one mean, for good
                 return False
             model.set_outer_mean(1.0)
             return True
-        if not held and _retracted(model, y, outer, policy):    # found uneven before: not set again
-            return False
     if not math.isfinite(seen_gap) or (not held and not seen_gap > policy.vision_inside_gap):
         return False
     want = 1.0 - seen_gap / policy.ramp
@@ -590,23 +599,51 @@ def _offset_outer_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.nd
     contacts' gaps, set once the field exceeds ``policy.vision_inside_gap`` at a share :data:`FIELD_SHARE` of the
     places the contacts measured it (at least :data:`FIELD_PLACES` of them), and renewed when it moves by more than
     :data:`OFFSET_STEP` at any seen point."""
+    field, feet, seen = _gap_field(model, y, outer, contacts, policy, gap)
+    if field is None:
+        return False
+    current = model.outer_field
+    if current is None:
+        if not _fires(field, feet, policy):
+            return False
+    else:
+        if policy.cover_carry:      # set before: carried through the last fit's K_t (first: without, as one gap)
+            field = field.carried(carried_mean(0.0, model.task_covariance))
+        moved = float((field.gap(seen) - current.gap(seen)).abs().max())
+        if max(moved, abs(field.carry - current.carry) * policy.ramp) <= OFFSET_STEP:
+            return False
+    model.set_outer_mean(field)
+    return True
+
+
+def _gap_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
+               gap: CoverGap | None):
+    """The :class:`GapField` of the counted contacts' gaps (clipped to [0, ``INSIDE_DEPTH_MAX``]), their feet on
+    the model's seen cover `(j, d)` and the seen points `(m, d)`; the field None with fewer than
+    :data:`GAP_MIN_CONTACTS` gaps."""
     from ..models.gapfield import GapField
 
     measure = gap if gap is not None else CoverGap()
     seen = model.train_inputs[0].cpu().numpy()[outer & (y == 0)]
     feet, gaps = measure.measured(contacts, seen, reach=max(0.02, policy.voxel or 0.0))
     if len(gaps) < GAP_MIN_CONTACTS:
-        return False
-    field = GapField.fit(feet, np.clip(gaps, 0.0, INSIDE_DEPTH_MAX), ramp=policy.ramp)
-    current = model.outer_field
-    if current is None:
-        beyond = field.gap(feet).numpy() > policy.vision_inside_gap
-        if len(beyond) < FIELD_PLACES or not beyond.mean() >= FIELD_SHARE:
-            return False
-    elif float((field.gap(seen) - current.gap(seen)).abs().max()) <= OFFSET_STEP:
-        return False
-    model.set_outer_mean(field)
-    return True
+        return None, feet, seen
+    return GapField.fit(feet, np.clip(gaps, 0.0, INSIDE_DEPTH_MAX), ramp=policy.ramp), feet, seen
+
+
+def _fires(field, feet: np.ndarray, policy: ObservationPolicy) -> bool:
+    """Whether ``field`` exceeds ``policy.vision_inside_gap`` at :data:`FIELD_SHARE` of the places ``feet`` `(j, d)`
+    the contacts measured it, at least :data:`FIELD_PLACES` of them."""
+    beyond = field.gap(feet).numpy() > policy.vision_inside_gap
+    return len(beyond) >= FIELD_PLACES and bool(beyond.mean() >= FIELD_SHARE)
+
+
+def _firing_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
+                  gap: CoverGap | None):
+    """The gap field :func:`offset_outer_mean` would set first (:func:`_gap_field`, when :func:`_fires`), else
+    None: with ``cover_uneven_field``, what a cover found uneven takes in place of one gap."""
+    field, feet, _ = _gap_field(model, y, outer, contacts, policy, gap)
+    return field if field is not None and _fires(field, feet, policy) else None
 
 
 def renew_deep_vision_inside(model, policy: ObservationPolicy) -> np.ndarray:
@@ -618,7 +655,8 @@ def renew_deep_vision_inside(model, policy: ObservationPolicy) -> np.ndarray:
         `(k,)` indices (into the observations before the call) that were removed; empty when none.
     """
     none = np.zeros(0, dtype=np.int64)
-    if not policy.cover_gap_field or policy.vision_inside is None or getattr(model, "num_tasks", 1) < 2:
+    if (not (policy.cover_gap_field or getattr(model, "outer_field", None) is not None)
+            or policy.vision_inside is None or getattr(model, "num_tasks", 1) < 2):
         return none
     y = model.train_targets.cpu().numpy()
     outer = (model.train_inputs[1].squeeze(-1) == OUTER).cpu().numpy()
@@ -658,8 +696,8 @@ def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
     behind = outer & (y < 0)
     if not behind.any() or (y[behind] < first - 1e-9).any():      # none to continue, or continued already
         return None
-    if policy.cover_gap_field:
-        field = getattr(model, "outer_field", None)
+    field = getattr(model, "outer_field", None)
+    if policy.cover_gap_field or field is not None:                # (the latter: cover_uneven_field, taken)
         if field is None:                                          # not yet set (_offset_outer_field)
             return None
     else:

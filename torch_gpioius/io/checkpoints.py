@@ -90,8 +90,9 @@ def save_checkpoint(model, path: str | os.PathLike, *, extra: dict | None = None
         if field is not None:      # the outer mean's gap field: its gaps, where they were measured, its numbers
             tensors["outer_field_points"] = field.points.clone()
             tensors["outer_field_gaps"] = field.gaps.clone()
-            tensors["outer_field_params"] = torch.tensor([field.length, field.scale, field.noise, field.prior,
-                                                          field.ramp], dtype=torch.float64)
+            params = [field.length, field.scale, field.noise, field.prior, field.ramp] + (
+                [field.carry] if field.carry else [])                  # the carry since 2026-12-01, when not 0
+            tensors["outer_field_params"] = torch.tensor(params, dtype=torch.float64)
     kernel = model.kernel.describe()
     _check_extra(kernel, "the kernel's description")
     payload = {
@@ -170,9 +171,10 @@ def load_checkpoint(path: str | os.PathLike):
         if "outer_field_points" in tensors:        # saved with the outer mean a gap field (since 2026-11-29)
             from ..models.gapfield import GapField
 
-            length, scale, noise, prior, ramp = tensors["outer_field_params"].tolist()
-            model.set_outer_mean(GapField(tensors["outer_field_points"], tensors["outer_field_gaps"], length, scale,
-                                          noise, prior, ramp))
+            params = tensors["outer_field_params"].tolist()
+            if len(params) not in (5, 6):
+                raise ValueError(f"outer_field_params: 5 or 6 numbers, got {len(params)}")
+            model.set_outer_mean(GapField(tensors["outer_field_points"], tensors["outer_field_gaps"], *params))
     except (KeyError, ValueError, RuntimeError) as exc:
         raise CheckpointError(f"{path}: checkpoint data is inconsistent ({exc})") from exc
     model.eval()

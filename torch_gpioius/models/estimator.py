@@ -613,8 +613,9 @@ def _past_gap(p) -> str:
     gap = f"a {_cm(p.vision_inside_gap)} cover gap"
     if p.cover_offset and p.vision_inside_deep:
         where = " a place at a time" if p.cover_gap_field else ""
+        uneven = "else a place at a time" if p.cover_uneven_field else "else retracted"
         even = (f" while the touches' gaps agree (interquartile range at most {p.cover_even:g} of the median; "
-                "else retracted)" if p.cover_even is not None and not p.cover_gap_field else "")
-        carry = (" through the learned transfer" if p.cover_carry and not p.cover_gap_field else "")
+                f"{uneven})" if p.cover_even is not None and not p.cover_gap_field else "")
+        carry = " through the learned transfer" if p.cover_carry else ""
         return f"past {gap}: continued down to the gap{where}, the outer mean standing for it{carry}{even}"
     return f"retracted past {gap}" + (", the outer mean then standing for it" if p.cover_offset else "")

@@ -53,14 +53,16 @@ class GapField:
         ramp: the distance [m] over which the labels rise from 0 on a surface to 1 in free space
             (:attr:`ObservationPolicy.ramp <torch_gpioius.models.ObservationPolicy.ramp>`): a gap ``g`` is ``g / ramp``
             label units (:meth:`mean`).
+        carry: a constant added to the mean [label units], ``1 / r - 1`` for the transfer ``r = K_t[0,1] /
+            K_t[1,1]`` a fit learned (:meth:`carried`; ``ObservationPolicy.cover_carry``), in [-1, 1]; 0: none.
 
     Raises:
         ValueError: points or gaps malformed, not finite, of different counts or none; a gap outside
-            ``[0, INSIDE_DEPTH_MAX]``; a length, scale or noise not a positive number.
+            ``[0, INSIDE_DEPTH_MAX]``; a length, scale or noise not a positive number; a carry outside [-1, 1].
     """
 
     def __init__(self, points, gaps, length: float, scale: float, noise: float, prior: float | None = None,
-                 ramp: float = 0.05):
+                 ramp: float = 0.05, carry: float = 0.0):
         if not torch.is_tensor(points):     # lists of Python floats would become float32 tensors
             try:
                 points = np.asarray(points, dtype=np.float64)
@@ -77,6 +79,7 @@ class GapField:
         self.scale = as_float(scale, "scale", positive=True)
         self.noise = as_float(noise, "noise", positive=True)
         self.ramp = as_float(ramp, "ramp", positive=True)
+        self.carry = as_float(carry, "carry", lo=-1.0, hi=1.0)
         self.prior = float(np.median(g)) if prior is None else as_float(prior, "prior", lo=0.0, hi=INSIDE_DEPTH_MAX)
         self.points = p.detach().cpu().double()
         self.gaps = torch.as_tensor(g, dtype=torch.float64)
@@ -132,25 +135,35 @@ class GapField:
         return g.clamp(0.0, INSIDE_DEPTH_MAX)
 
     def mean(self, x) -> Tensor:
-        """The outer task's prior mean ``1 - g(x) / ramp`` at `(n, d)` points [label units]: `(n,)`."""
-        return 1.0 - self.gap(x) / self.ramp
+        """The outer task's prior mean ``1 - g(x) / ramp + carry`` at `(n, d)` points [label units]: `(n,)`."""
+        return 1.0 - self.gap(x) / self.ramp + self.carry
 
     @property
     def constant_mean(self) -> float:
-        """The outer mean the median gap stands for, ``1 - g0 / ramp`` (what one mean for the whole cover was)."""
-        return 1.0 - self.prior / self.ramp
+        """The outer mean the median gap stands for, ``1 - g0 / ramp + carry`` (what one mean for the whole cover
+        was)."""
+        return 1.0 - self.prior / self.ramp + self.carry
+
+    def carried(self, carry: float) -> "GapField":
+        """The same field (its gaps, places and numbers) with the mean raised by ``carry`` [label units] in place of
+        its own (:func:`~torch_gpioius.exploration.observations.carried_mean`'s ``1 / r - 1``)."""
+        return GapField(self.points, self.gaps, self.length, self.scale, self.noise, self.prior, self.ramp, carry)
 
     def as_dict(self) -> dict:
-        """The field as plain numbers (a log's or checkpoint's record): :meth:`from_dict` rebuilds it exactly."""
-        return {"points": self.points.tolist(), "gaps": self.gaps.tolist(), "length": self.length,
-                "scale": self.scale, "noise": self.noise, "prior": self.prior, "ramp": self.ramp}
+        """The field as plain numbers (a log's or checkpoint's record): :meth:`from_dict` rebuilds it exactly (the
+        carry only when it is not 0, so that records written before it existed read alike)."""
+        out = {"points": self.points.tolist(), "gaps": self.gaps.tolist(), "length": self.length,
+               "scale": self.scale, "noise": self.noise, "prior": self.prior, "ramp": self.ramp}
+        if self.carry:
+            out["carry"] = self.carry
+        return out
 
     @classmethod
     def from_dict(cls, record: dict, where: str = "gap field") -> "GapField":
         """The field :meth:`as_dict` wrote; ValueError naming ``where`` for a record that is not one."""
         try:
             return cls(record["points"], record["gaps"], record["length"], record["scale"], record["noise"],
-                       record["prior"], record.get("ramp", 0.05))
+                       record["prior"], record.get("ramp", 0.05), record.get("carry", 0.0))
         except (KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f"{where}: not a gap field record ({exc!r})") from None
 
@@ -160,5 +173,6 @@ class GapField:
     __hash__ = None
 
     def __repr__(self) -> str:
+        carry = f", carry {self.carry:.3g}" if self.carry else ""
         return (f"GapField({len(self.points)} gaps, median {self.prior * 100:.1f} cm, length {self.length:g} m, "
-                f"scale {self.scale:g} m, noise {self.noise:g} m)")
+                f"scale {self.scale:g} m, noise {self.noise:g} m{carry})")

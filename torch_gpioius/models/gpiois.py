@@ -319,7 +319,8 @@ class GPIOIS(ImplicitSurfaceGP):
             ValueError: not a finite number in that range, nor a gap field; the model is left unchanged.
         """
         if isinstance(value, GapField):
-            _check_outer_mean(1.0 - 0.1 / value.ramp)          # the deepest gap a field gives, INSIDE_DEPTH_MAX
+            _check_outer_mean(1.0 - 0.1 / value.ramp + value.carry)   # the deepest gap a field gives (0.1 m)
+            _check_outer_mean(1.0 + value.carry)                       # and the shallowest
             if value != self._outer_field:
                 self._outer_field = value
                 self.outer_mean_module.constant.data.fill_(value.constant_mean)

@@ -73,8 +73,17 @@ class ObservationPolicy:
             of the run (docs/method-notes.md section 27). The ``"default"`` preset's is 0.25 (``COVER_EVEN``). None
             (this class's default): the one gap whatever its spread. Without the one gap's settings (or with
             ``cover_gap_field``, whose field follows a gap that varies) it does nothing.
-        cover_carry: with ``cover_offset`` and one constant gap ``g`` (not ``cover_gap_field``), the outer mean also
-            answers the transfer K_t learned: away from the touches the inner estimate is ``1 + r (mu_out - m_out)``
+        cover_uneven_field: with ``cover_even``, a cover the touches find uneven takes the gap a place at a time
+            (``cover_gap_field``'s field, :class:`~torch_gpioius.models.gapfield.GapField`) in place of the paper's
+            one mean: where the contacts' gaps spread wider than ``cover_even`` and the field fitted to them exceeds
+            ``vision_inside_gap`` at a region of their places
+            (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`), the camera's inside points are kept and
+            continued down to the field's gap where each lies, and the field is the outer mean for the rest of the
+            run, renewed as it moves; where the field stays below, retracted as without it. One gap while the
+            touches agree on it, a gap per place once they do not. False (the default): retracted.
+        cover_carry: with ``cover_offset``, the outer mean that stands for the gap ``g`` (one number, or a field
+            ``g(x)`` with ``cover_gap_field`` or ``cover_uneven_field``, raised alike) also answers the transfer K_t
+            learned: away from the touches the inner estimate is ``1 + r (mu_out - m_out)``
             with ``r = K_t[0,1] / K_t[1,1]``, which puts its zero level ``g`` below the cover only when ``r = 1``;
             with ``r`` below 1 (0.5-0.95 under 4 cm covers) the estimate sinks into the body away from the touches.
             The mean renewed once set is ``1 - g / ramp + (1 / r - 1)``
@@ -141,6 +150,7 @@ class ObservationPolicy:
     contact_repeats: int = 1
     inside_halvings: int = 0
     cover_carry: bool = False
+    cover_uneven_field: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -148,6 +158,9 @@ class ObservationPolicy:
         if self.cover_gap_field and not (self.cover_offset and self.vision_inside_deep):
             raise ValueError("ObservationPolicy.cover_gap_field: needs cover_offset and vision_inside_deep (the gap "
                              "field stands in for their one gap)")
+        if self.cover_uneven_field and (self.cover_even is None or self.cover_gap_field):
+            raise ValueError("ObservationPolicy.cover_uneven_field: needs cover_even (the rule that finds the cover "
+                             "uneven) and not cover_gap_field (whose field is taken whatever the spread)")
         if self.vision_free_far is not None and (self.vision_free_offset is None or
                                                  not self.vision_free_far > self.vision_free_offset):
             raise ValueError(f"ObservationPolicy.vision_free_far: must lie beyond vision_free_offset "
@@ -278,7 +291,8 @@ def check_voxel(voxel) -> float:
 
 
 #: The policy's on/off fields.
-_FLAGS = ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table", "cover_carry")
+_FLAGS = ("cover_offset", "vision_inside_deep", "cover_gap_field", "camera_table", "cover_carry",
+          "cover_uneven_field")
 #: The policy's optional lengths [m] and the largest each takes (None: off).
 _LENGTHS = {"vision_free_offset": 1.0, "voxel": MAX_VOXEL, "crop_margin": 10.0, "vision_free_far": 1.0,
             "touch_inside": INSIDE_DEPTH_MAX, "vision_inside": INSIDE_DEPTH_MAX, "vision_inside_gap": INSIDE_DEPTH_MAX}
