@@ -378,7 +378,9 @@ def test_the_gap_field_settings_log_the_field_and_resume_alike(tmp_path):
     assert ((state.task == 1) & (state.y < first - 1e-9)).any()                  # continued down to it
     _resumes_alike(scene, log, run.steps[min(run.steps.index(fielded[0]) + 1, len(run.steps) - 2)], reference, kw)
     resumed = load_run(log)
-    assert resumed.params[resumed.steps[-1]]["outer_field"] == field
+    again = resumed.params[resumed.steps[-1]]["outer_field"]
+    # the field's carry through the learned transfer (cover_carry) reads K_t, which a log restores to its rounding
+    assert abs(again.carry - field.carry) < 1e-12 and again.carried(field.carry) == field
 
 
 

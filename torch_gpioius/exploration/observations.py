@@ -411,10 +411,10 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
         if getattr(model, "outer_field", None) is not None:   # cover_uneven_field: a gap per place, kept
             return none
         gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
+        if _takes_field(model, y, outer, contacts, gaps, policy, gap) is not None:
+            return none                                       # kept: offset_outer_mean takes the field
         if not _uneven(gaps, policy, offset_set=model.outer_mean != 1.0):
             return none
-        if policy.cover_uneven_field and _firing_field(model, y, outer, contacts, policy, gap) is not None:
-            return none                                       # kept: offset_outer_mean takes the field
     else:
         seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
         if not seen_gap > policy.vision_inside_gap:         # NaN (too few contacts under seen cover) keeps them
@@ -529,13 +529,12 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
     if _judges_evenness(policy):
         if not held and _retracted(model, y, outer, policy):    # found uneven before: not set again
             return False
-        if _uneven(gaps, policy, offset_set=held):              # not one gap: a gap per place, or the paper's
-            field = (_firing_field(model, y, outer, contacts, policy, gap) if policy.cover_uneven_field
-                     else None)
-            if field is not None:                               # cover_uneven_field: for the rest of the run
-                model.set_outer_mean(field)
-                return True
-            if not held:                                        # one mean, for good
+        field = _takes_field(model, y, outer, contacts, gaps, policy, gap)
+        if field is not None:                                   # cover_uneven_field: for the rest of the run
+            model.set_outer_mean(field)
+            return True
+        if _uneven(gaps, policy, offset_set=held):              # not one gap: the paper's one mean, for good
+            if not held:
                 return False
             model.set_outer_mean(1.0)
             return True
@@ -638,10 +637,15 @@ def _fires(field, feet: np.ndarray, policy: ObservationPolicy) -> bool:
     return len(beyond) >= FIELD_PLACES and bool(beyond.mean() >= FIELD_SHARE)
 
 
-def _firing_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, policy: ObservationPolicy,
-                  gap: CoverGap | None):
-    """The gap field :func:`offset_outer_mean` would set first (:func:`_gap_field`, when :func:`_fires`), else
-    None: with ``cover_uneven_field``, what a cover found uneven takes in place of one gap."""
+def _takes_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, gaps: np.ndarray,
+                 policy: ObservationPolicy, gap: CoverGap | None):
+    """With ``policy.cover_uneven_field``, the gap field a cover the touches find uneven takes in place of one gap
+    (None when it takes none): where the contacts' ``gaps`` `(j,)` [m] spread wider than ``cover_even``
+    (:func:`gap_spread`) and their field (:func:`_gap_field`) exceeds the cover-gap limit at a region of the places
+    they measured it (:func:`_fires`, as ``cover_gap_field`` sets it first); whatever their median, which under a
+    cover 5 mm off on one side and 5 cm on the other lies near the limit."""
+    if not policy.cover_uneven_field or not gap_spread(gaps) > policy.cover_even:
+        return None
     field, feet, _ = _gap_field(model, y, outer, contacts, policy, gap)
     return field if field is not None and _fires(field, feet, policy) else None
 

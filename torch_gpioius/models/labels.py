@@ -77,9 +77,10 @@ class ObservationPolicy:
             (``cover_gap_field``'s field, :class:`~torch_gpioius.models.gapfield.GapField`) in place of the paper's
             one mean: where the contacts' gaps spread wider than ``cover_even`` and the field fitted to them exceeds
             ``vision_inside_gap`` at a region of their places
-            (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`), the camera's inside points are kept and
+            (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`), whatever their median (a cover 5 mm off
+            on one side and 5 cm on the other has a median near the limit), the camera's inside points are kept and
             continued down to the field's gap where each lies, and the field is the outer mean for the rest of the
-            run, renewed as it moves; where the field stays below, retracted as without it. One gap while the
+            run, renewed as it moves; where the field stays below, as ``cover_even`` alone. One gap while the
             touches agree on it, a gap per place once they do not. False (the default): retracted.
         cover_carry: with ``cover_offset``, the outer mean that stands for the gap ``g`` (one number, or a field
             ``g(x)`` with ``cover_gap_field`` or ``cover_uneven_field``, raised alike) also answers the transfer K_t
