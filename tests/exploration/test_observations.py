@@ -454,6 +454,19 @@ def test_a_cover_found_uneven_takes_the_gap_a_place_at_a_time_for_good(monkeypat
     at_once, _, _ = _half_uneven_model(policy)
     removed, changed, deep = _one_step(at_once, everywhere, policy)
     assert len(removed) == 0 and changed and at_once.outer_field is not None and deep is not None
+    # uneven from the start (three above, the four lowest below: 3.7-8.8 cm): cover_even alone retracts at once; the
+    # field, not yet judged on fewer than FIELD_PLACES places, waits (nothing changes), then is taken with more
+    lower = everywhere[len(upper):]
+    few = np.r_[upper[:3], lower[np.argsort(lower[:, 2])[:4]]]
+    assert len(few) < obs.FIELD_PLACES
+    alone, _, _ = _half_uneven_model(policy)
+    removed, changed, _ = _one_step(alone, few, dataclasses.replace(policy, cover_uneven_field=False))
+    assert len(removed) > 0 and not changed
+    waits, _, _ = _half_uneven_model(policy)
+    removed, changed, deep = _one_step(waits, few, policy)
+    assert len(removed) == 0 and not changed and deep is None and waits.outer_mean == 1.0
+    removed, changed, _ = _one_step(waits, everywhere, policy)
+    assert len(removed) == 0 and changed and waits.outer_field is not None
     # a cover 5 mm off at the bottom and 5 cm at the top: the contacts' median (about 2.7 cm) is below the limit, so
     # one gap is never taken; their spread is wide and the field passes 3 cm over the upper part: taken
     dirs, outer_r = _uneven_sphere(400, seed=4)

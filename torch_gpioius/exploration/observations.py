@@ -413,7 +413,7 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
         gaps = _seen_gaps(model, y, outer, contacts, policy, gap)
         if _takes_field(model, y, outer, contacts, gaps, policy, gap) is not None:
             return none                                       # kept: offset_outer_mean takes the field
-        if not _uneven(gaps, policy, offset_set=model.outer_mean != 1.0):
+        if _field_pending(model, gaps, policy) or not _uneven(gaps, policy, offset_set=model.outer_mean != 1.0):
             return none
     else:
         seen_gap = _seen_gap(model, y, outer, contacts, policy, gap)
@@ -533,10 +533,10 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
         if field is not None:                                   # cover_uneven_field: for the rest of the run
             model.set_outer_mean(field)
             return True
-        if _uneven(gaps, policy, offset_set=held):              # not one gap: the paper's one mean, for good
-            if not held:
+        if _uneven(gaps, policy, offset_set=held):              # not one gap
+            if not held or _field_pending(model, gaps, policy):        # (the field not yet judged: nothing changes)
                 return False
-            model.set_outer_mean(1.0)
+            model.set_outer_mean(1.0)                           # the paper's one mean, for good
             return True
     if not math.isfinite(seen_gap) or (not held and not seen_gap > policy.vision_inside_gap):
         return False
@@ -637,6 +637,19 @@ def _fires(field, feet: np.ndarray, policy: ObservationPolicy) -> bool:
     return len(beyond) >= FIELD_PLACES and bool(beyond.mean() >= FIELD_SHARE)
 
 
+def _fields_a_cover(model, policy: ObservationPolicy) -> bool:
+    """Whether ``policy.cover_uneven_field`` can act on ``model`` (one whose outer mean can be set)."""
+    return policy.cover_uneven_field and hasattr(model, "set_outer_mean")
+
+
+def _field_pending(model, gaps: np.ndarray, policy: ObservationPolicy) -> bool:
+    """With ``policy.cover_uneven_field``, whether the contacts' ``gaps`` `(j,)` are too few for the field to be
+    judged (:data:`FIELD_PLACES`): the cover found uneven then waits for them before it is given up for good (one
+    gap's median passes the limit from the fifth contact on, and an uneven cover read there would otherwise be
+    retracted before its field could be taken)."""
+    return _fields_a_cover(model, policy) and len(gaps) < FIELD_PLACES
+
+
 def _takes_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, gaps: np.ndarray,
                  policy: ObservationPolicy, gap: CoverGap | None):
     """With ``policy.cover_uneven_field``, the gap field a cover the touches find uneven takes in place of one gap
@@ -644,7 +657,7 @@ def _takes_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, 
     (:func:`gap_spread`) and their field (:func:`_gap_field`) exceeds the cover-gap limit at a region of the places
     they measured it (:func:`_fires`, as ``cover_gap_field`` sets it first); whatever their median, which under a
     cover 5 mm off on one side and 5 cm on the other lies near the limit."""
-    if not policy.cover_uneven_field or not gap_spread(gaps) > policy.cover_even:
+    if not _fields_a_cover(model, policy) or not gap_spread(gaps) > policy.cover_even:
         return None
     field, feet, _ = _gap_field(model, y, outer, contacts, policy, gap)
     return field if field is not None and _fires(field, feet, policy) else None
@@ -705,6 +718,8 @@ def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
         if field is None:                                          # not yet set (_offset_outer_field)
             return None
     else:
+        if _fields_a_cover(model, policy) and model.outer_mean == 1.0:   # the one gap not taken (not yet
+            return None                                                  # judged even, or the field pending)
         field, seen_gap = None, _seen_gap(model, y, outer, contacts, policy, gap)
         if not seen_gap > policy.vision_inside_gap:
             return None

@@ -80,8 +80,10 @@ class ObservationPolicy:
             (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`), whatever their median (a cover 5 mm off
             on one side and 5 cm on the other has a median near the limit), the camera's inside points are kept and
             continued down to the field's gap where each lies, and the field is the outer mean for the rest of the
-            run, renewed as it moves; where the field stays below, as ``cover_even`` alone. One gap while the
-            touches agree on it, a gap per place once they do not. False (the default): retracted.
+            run, renewed as it moves; where the field stays below, as ``cover_even`` alone (judged once the
+            contacts measured :data:`~torch_gpioius.exploration.observations.FIELD_PLACES` places; before, a cover
+            found uneven is not yet given up). One gap while the touches agree on it, a gap per place once they do
+            not. False (the default): retracted.
         cover_carry: with ``cover_offset``, the outer mean that stands for the gap ``g`` (one number, or a field
             ``g(x)`` with ``cover_gap_field`` or ``cover_uneven_field``, raised alike) also answers the transfer K_t
             learned: away from the touches the inner estimate is ``1 + r (mu_out - m_out)``
