@@ -653,11 +653,13 @@ def _field_pending(model, gaps: np.ndarray, policy: ObservationPolicy) -> bool:
 def _takes_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, gaps: np.ndarray,
                  policy: ObservationPolicy, gap: CoverGap | None):
     """With ``policy.cover_uneven_field``, the gap field a cover the touches find uneven takes in place of one gap
-    (None when it takes none): where the contacts' ``gaps`` `(j,)` [m] spread wider than ``cover_even``
-    (:func:`gap_spread`) and their field (:func:`_gap_field`) exceeds the cover-gap limit at a region of the places
-    they measured it (:func:`_fires`, as ``cover_gap_field`` sets it first); whatever their median, which under a
-    cover 5 mm off on one side and 5 cm on the other lies near the limit."""
-    if not _fields_a_cover(model, policy) or not gap_spread(gaps) > policy.cover_even:
+    (None when it takes none): where ``cover_even`` finds the cover uneven (:func:`_uneven`: the contacts' ``gaps``
+    `(j,)` [m] past the cover-gap limit at their median, or the one gap taken already, and spread wider than
+    ``cover_even``) and their field (:func:`_gap_field`) exceeds the limit at a region of the places they measured
+    it (:func:`_fires`, as ``cover_gap_field`` sets it first). Not on the field's region alone: replayed on the
+    tight covers' runs of objects 0-99 (an 8 mm cover), it passes there on 50 of 197, beside seen edges and under
+    bridged concavities, where a field made runs worse (docs/method-notes.md section 18); the median passes on 8."""
+    if not _fields_a_cover(model, policy) or not _uneven(gaps, policy, offset_set=model.outer_mean != 1.0):
         return None
     field, feet, _ = _gap_field(model, y, outer, contacts, policy, gap)
     return field if field is not None and _fires(field, feet, policy) else None

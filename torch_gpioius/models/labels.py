@@ -75,10 +75,10 @@ class ObservationPolicy:
             ``cover_gap_field``, whose field follows a gap that varies) it does nothing.
         cover_uneven_field: with ``cover_even``, a cover the touches find uneven takes the gap a place at a time
             (``cover_gap_field``'s field, :class:`~torch_gpioius.models.gapfield.GapField`) in place of the paper's
-            one mean: where the contacts' gaps spread wider than ``cover_even`` and the field fitted to them exceeds
+            one mean: where ``cover_even`` finds the cover uneven (the contacts' median gap past
+            ``vision_inside_gap``, their spread wider than ``cover_even``) and the field fitted to the gaps exceeds
             ``vision_inside_gap`` at a region of their places
-            (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`), whatever their median (a cover 5 mm off
-            on one side and 5 cm on the other has a median near the limit), the camera's inside points are kept and
+            (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`), the camera's inside points are kept and
             continued down to the field's gap where each lies, and the field is the outer mean for the rest of the
             run, renewed as it moves; where the field stays below, as ``cover_even`` alone (judged once the
             contacts measured :data:`~torch_gpioius.exploration.observations.FIELD_PLACES` places; before, a cover
