@@ -10,6 +10,12 @@ points (the outer task's surface observations at the end) and prints, per run:
   least five counted), or "-" where it never does;
 * at that contact and at the end: how many contacts were counted, the gaps' median, their quartiles and the spread
   ``(p75 - p25) / median``;
+* where a field of the gaps would be taken (docs/method-notes.md section 32): the contact at which the field of the
+  gaps counted so far (``GapField``) first passes ``--limit`` at a quarter of their places (``FIELD_SHARE``, at
+  least ``FIELD_PLACES``: the ``gapfield`` preset's rule, the region alone), and the contact at which
+  ``cover_uneven_field`` takes it (the touches found uneven by ``cover_even``: their median past the limit, or one
+  gap taken already, and their spread past ``--even``), with "gap" where one gap was taken first; replayed on the
+  default's contacts, so exact up to the first step that differs;
 * the truth, from the world the run was rebuilt in: the distance of each seen point from the body (the cover's real
   gap where the camera saw it), its median and spread, over all seen points in the exploration range.
 
@@ -32,7 +38,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from worst_errors import world_of  # noqa: E402  (a sibling script: the world a study log ran in)
 
-from torch_gpioius.exploration.observations import GAP_MIN_CONTACTS, CoverGap, gap_spread  # noqa: E402
+from torch_gpioius.exploration.observations import (FIELD_PLACES, FIELD_SHARE, GAP_MIN_CONTACTS, CoverGap,  # noqa: E402
+                                                    gap_spread)
+from torch_gpioius.models.gapfield import GapField  # noqa: E402
+from torch_gpioius.core.validation import INSIDE_DEPTH_MAX  # noqa: E402
 from torch_gpioius.io.datasets import contact_rows  # noqa: E402
 from torch_gpioius.io.runs import load_run  # noqa: E402
 from torch_gpioius.sim.meshes import MeshDistance  # noqa: E402
@@ -47,13 +56,49 @@ def spread(gaps: np.ndarray) -> tuple[int, float, float, float, float]:
     return len(gaps), float(med), float(p25), float(p75), gap_spread(gaps)
 
 
-def replay(log: Path, scenes: Path, limit: float, reach: float | None) -> dict:
+def _field_passes(feet: np.ndarray, gaps: np.ndarray, limit: float) -> bool:
+    """Whether the field of ``gaps`` measured at ``feet`` passes ``limit`` at a region of the places (as
+    ``exploration.observations`` judges it before taking the field)."""
+    if len(gaps) < FIELD_PLACES:
+        return False
+    field = GapField.fit(feet, np.clip(gaps, 0.0, INSIDE_DEPTH_MAX))
+    return bool((field.gap(feet).numpy() > limit).mean() >= FIELD_SHARE)
+
+
+def field_taken(contacts: np.ndarray, seen: np.ndarray, reach: float, limit: float, even: float) -> tuple:
+    """``(region, taken)``: the contact count at which the field of the gaps first passes ``limit`` over a region
+    (None: never), and what ``cover_uneven_field`` does ("field N", "gap N, field M" where one gap was taken at N
+    first, "retracted N" / "gap N, retracted M" where the cover is found uneven and its field does not pass, "gap N"
+    where the one gap is kept; None where nothing is taken)."""
+    measure = CoverGap()
+    region, held, state = None, None, None
+    for k in range(GAP_MIN_CONTACTS, len(contacts) + 1):
+        feet, gaps = measure.measured(contacts[:k], seen, reach)
+        if len(gaps) < GAP_MIN_CONTACTS:
+            continue
+        passes = _field_passes(feet, gaps, limit)
+        if region is None and passes:
+            region = k
+        if state is None:
+            median = float(np.median(gaps))
+            uneven = (held is not None or median > limit) and gap_spread(gaps) > even
+            if uneven and len(gaps) >= FIELD_PLACES:        # judged: the field, or given up
+                state = (f"gap {held}, " if held else "") + ("field" if passes else "retracted") + f" {k}"
+            elif held is None and not uneven and median > limit:
+                held = k
+        if region is not None and state is not None:
+            break
+    return region, state if state is not None else (f"gap {held}" if held else None)
+
+
+def replay(log: Path, scenes: Path, limit: float, reach: float | None, even: float = 0.25) -> dict:
     """One run's measured gaps at the firing contact and at the end, and the true gap at its seen points."""
     run = load_run(log)
     final = run.states[run.steps[-1]]
     contacts = final.x[contact_rows(final.x, final.y, final.task)]
     seen = final.x[(final.task == 1) & (final.y == 0)]
-    voxel = float(run.meta.get("voxel_size") or run.meta.get("voxel") or 0.0)
+    voxel = float(run.meta.get("voxel_size") or run.meta.get("voxel") or run.meta.get("policy", {}).get("voxel")
+                  or 0.0)
     reach = reach if reach is not None else max(0.02, voxel)
     measure = CoverGap()
     fired, at_fire = None, None
@@ -63,11 +108,12 @@ def replay(log: Path, scenes: Path, limit: float, reach: float | None) -> dict:
             fired, at_fire = k, spread(gaps)
             break
     _, gaps = measure.measured(contacts, seen, reach)
+    region, taken = field_taken(contacts, seen, reach, limit, even)
     world = world_of(log, scenes)
     inside = world.in_range(seen) if hasattr(world, "in_range") else np.ones(len(seen), bool)
     true = np.abs(np.asarray(MeshDistance(world.inner, signed=False)(seen[inside]), dtype=float))
     return {"name": log.stem, "contacts": len(contacts), "fired": fired, "at_fire": at_fire, "end": spread(gaps),
-            "true": spread(true)}
+            "true": spread(true), "region": region, "taken": taken}
 
 
 def _cm(v: float) -> str:
@@ -88,16 +134,17 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--limit", type=float, default=0.03, help="the gap beyond which the rule fires [m]")
     parser.add_argument("--reach", type=float, default=None,
                         help="a contact counts within this of its seen patch [m] (default: the run's voxel or 2 cm)")
+    parser.add_argument("--even", type=float, default=0.25, help="cover_even: the spread one gap is kept within")
     args = parser.parse_args(argv)
     print("| run | contacts | fires at | counted | median [cm] | IQR [cm] | spread | end: counted | median | IQR "
-          "| spread | true: seen points | median | IQR | spread |")
-    print("|---" * 15 + "|")
+          "| spread | true: seen points | median | IQR | spread | field's region at | cover_uneven_field |")
+    print("|---" * 17 + "|")
     for log in args.logs:
         if "visual-tactile" not in log.stem:
             continue
-        r = replay(log, args.scenes, args.limit, args.reach)
+        r = replay(log, args.scenes, args.limit, args.reach, args.even)
         print(f"| {r['name']} | {r['contacts']} | {r['fired'] or '-'} | {_row(r['at_fire'])} | {_row(r['end'])} "
-              f"| {_row(r['true'])} |")
+              f"| {_row(r['true'])} | {r['region'] or '-'} | {r['taken'] or '-'} |")
 
 
 if __name__ == "__main__":
