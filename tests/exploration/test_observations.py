@@ -420,19 +420,20 @@ def test_an_even_gap_is_taken_and_once_the_touches_spread_the_camera_falls_back_
             ObservationPolicy(cover_even=bad)
 
 
-def test_a_cover_found_uneven_takes_the_gap_a_place_at_a_time_for_good(monkeypatch):
+def test_a_gap_the_touches_stop_agreeing_on_becomes_a_gap_per_place_for_good(monkeypatch):
     """``cover_uneven_field``: the even upper contacts set the one gap as ``cover_even`` does; once the lower ones
     spread the gaps, the outer mean becomes the field of the contacts' gaps (reading about 4 cm above and more below,
     as the cover stands), the camera's first inside points are kept and those continued at the one gap are placed
-    again from the field (deeper below, where it hangs further off); the even contacts again leave the field. A
-    cover uneven from the start takes the field at once, but one whose median gap lies below the limit does not,
-    though its field passes it over a region (5 mm to 5 cm; 2 to 6.5 cm takes it). Where the field does not
-    pass the limit at a region of the places (``FIELD_SHARE`` made unreachable), every step is ``cover_even``'s
-    alone; the setting without ``cover_even``, or beside ``cover_gap_field``, is refused."""
+    again from the field (deeper below, where it hangs further off); the even contacts again leave the field. Where
+    the touches spread before the field can be judged (seven places), the one gap is kept until it can. A cover
+    uneven from the touches' first judgement is retracted as ``cover_even`` does, and so is one whose field does not
+    pass the limit at a region of the places (``FIELD_SHARE`` made unreachable): every step then equals
+    ``cover_even``'s alone. The setting without ``cover_even``, or beside ``cover_gap_field``, is refused."""
     from torch_gpioius.exploration import observations as obs
 
     policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
                                cover_even=0.3, cover_uneven_field=True)
+    plain = dataclasses.replace(policy, cover_uneven_field=False)
     m, upper, everywhere = _half_uneven_model(policy)
     first = policy.inside_label(0.02)
     n_first = int((m.train_targets.numpy() == first).sum())
@@ -451,39 +452,41 @@ def test_a_cover_found_uneven_takes_the_gap_a_place_at_a_time_for_good(monkeypat
     _one_step(m, upper, policy)                             # for good: the field stays (renewed from these)
     y = m.train_targets.numpy()
     assert m.outer_field is not None and int((y == first).sum()) == n_first and (y < first - 1e-9).any()
-    at_once, _, _ = _half_uneven_model(policy)
-    removed, changed, deep = _one_step(at_once, everywhere, policy)
-    assert len(removed) == 0 and changed and at_once.outer_field is not None and deep is not None
-    # uneven from the start (three above, the four lowest below: 3.7-8.8 cm): cover_even alone retracts at once; the
-    # field, not yet judged on fewer than FIELD_PLACES places, waits (nothing changes), then is taken with more
+    # the one gap taken on five even places, then two lower ones spread them (3.6-8.8 cm) on seven places: kept
+    # (cover_even alone gives it up), and the field taken once more contacts come
     lower = everywhere[len(upper):]
-    few = np.r_[upper[:3], lower[np.argsort(lower[:, 2])[:4]]]
-    assert len(few) < obs.FIELD_PLACES
-    alone, _, _ = _half_uneven_model(policy)
-    removed, changed, _ = _one_step(alone, few, dataclasses.replace(policy, cover_uneven_field=False))
-    assert len(removed) > 0 and not changed
+    deepest = lower[np.argsort(lower[:, 2])]
     waits, _, _ = _half_uneven_model(policy)
-    removed, changed, deep = _one_step(waits, few, policy)
-    assert len(removed) == 0 and not changed and deep is None and waits.outer_mean == 1.0
-    removed, changed, _ = _one_step(waits, everywhere, policy)
-    assert len(removed) == 0 and changed and waits.outer_field is not None
-    # a cover 5 mm off at the bottom and 5 cm at the top: the contacts' median (about 2.7 cm) is below the limit, so
-    # cover_even does not find it uneven, though the field passes 3 cm over the upper part: not taken (a tight
-    # cover's contacts beside seen edges read so too); the same cover 1.5 cm deeper everywhere: taken
+    alone, _, _ = _half_uneven_model(policy)
+    for mm, p in ((waits, policy), (alone, plain)):
+        assert _one_step(mm, upper[:6], p)[1] and mm.outer_mean < 1.0
+    held = waits.outer_mean
+    assert len(_one_step(alone, np.r_[upper[:6], deepest[:2]], plain)[0]) > 0 and alone.outer_mean == 1.0
+    removed, changed, _ = _one_step(waits, np.r_[upper[:6], deepest[:2]], policy)
+    assert len(removed) == 0 and not changed and waits.outer_mean == held and waits.outer_field is None
+    _, changed, _ = _one_step(waits, everywhere, policy)
+    assert changed and waits.outer_field is not None and int((waits.train_targets.numpy() == first).sum()) == n_first
+    # uneven from the first judgement (every contact at once; a cover 2 to 6.5 cm off): cover_even's retraction
     dirs, outer_r = _uneven_sphere(400, seed=4)
     contacts = _sphere(0.10, 60, seed=5)
-    for deeper, taken in ((0.0, False), (0.015, True)):
-        graded, _ = _gap_field_model(policy, dirs, outer_r + deeper, contacts)
-        removed, changed, deep = _one_step(graded, contacts, policy)
-        assert len(removed) == 0 and (graded.outer_field is not None) == taken and changed == taken
+    at_once = [_half_uneven_model(policy)[0], _gap_field_model(policy, dirs, outer_r + 0.015, contacts)[0]]
+    reference = [_half_uneven_model(policy)[0], _gap_field_model(policy, dirs, outer_r + 0.015, contacts)[0]]
+    cases = [(everywhere,), (contacts,)]
+    monkeypatch_cases = [((upper, everywhere, upper), _half_uneven_model)]
+    for a, b, seq in zip(at_once, reference, cases):
+        for c in seq:
+            ra, ca, _ = _one_step(a, c, policy)
+            rb, cb, _ = _one_step(b, c, plain)
+            assert len(ra) > 0 and a.outer_field is None
+            np.testing.assert_array_equal(ra, rb)
+            assert ca == cb and a.outer_mean == b.outer_mean == 1.0
+            np.testing.assert_array_equal(a.train_targets.numpy(), b.train_targets.numpy())
     monkeypatch.setattr(obs, "FIELD_SHARE", 1.01)                                 # the field never passes a region
-    plain = dataclasses.replace(policy, cover_uneven_field=False)
-    for contacts_seq in ((upper, everywhere, upper), (everywhere,)):
-        a, _, _ = _half_uneven_model(policy)
-        b, _, _ = _half_uneven_model(policy)
-        for contacts in contacts_seq:
-            ra, ca, da = _one_step(a, contacts, policy)
-            rb, cb, db = _one_step(b, contacts, plain)
+    for seq, make in monkeypatch_cases:
+        a, b = make(policy)[0], make(policy)[0]
+        for c in seq:
+            ra, ca, _ = _one_step(a, c, policy)
+            rb, cb, _ = _one_step(b, c, plain)
             np.testing.assert_array_equal(ra, rb)
             assert ca == cb and a.outer_mean == b.outer_mean and a.outer_field is None
             np.testing.assert_array_equal(a.train_targets.numpy(), b.train_targets.numpy())

@@ -643,23 +643,28 @@ def _fields_a_cover(model, policy: ObservationPolicy) -> bool:
 
 
 def _field_pending(model, gaps: np.ndarray, policy: ObservationPolicy) -> bool:
-    """With ``policy.cover_uneven_field``, whether the contacts' ``gaps`` `(j,)` are too few for the field to be
-    judged (:data:`FIELD_PLACES`): the cover found uneven then waits for them before it is given up for good (one
-    gap's median passes the limit from the fifth contact on, and an uneven cover read there would otherwise be
-    retracted before its field could be taken)."""
-    return _fields_a_cover(model, policy) and len(gaps) < FIELD_PLACES
+    """With ``policy.cover_uneven_field`` and the one gap taken, whether the contacts' ``gaps`` `(j,)` are too few for
+    the field to be judged (:data:`FIELD_PLACES`): the one gap the touches stop agreeing on is then kept until they
+    are, not given up (it is taken from the fifth contact on)."""
+    return (_fields_a_cover(model, policy) and getattr(model, "outer_mean", 1.0) != 1.0
+            and len(gaps) < FIELD_PLACES)
 
 
 def _takes_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, gaps: np.ndarray,
                  policy: ObservationPolicy, gap: CoverGap | None):
-    """With ``policy.cover_uneven_field``, the gap field a cover the touches find uneven takes in place of one gap
-    (None when it takes none): where ``cover_even`` finds the cover uneven (:func:`_uneven`: the contacts' ``gaps``
-    `(j,)` [m] past the cover-gap limit at their median, or the one gap taken already, and spread wider than
-    ``cover_even``) and their field (:func:`_gap_field`) exceeds the limit at a region of the places they measured
-    it (:func:`_fires`, as ``cover_gap_field`` sets it first). Not on the field's region alone: replayed on the
-    tight covers' runs of objects 0-99 (an 8 mm cover), it passes there on 50 of 197, beside seen edges and under
-    bridged concavities, where a field made runs worse (docs/method-notes.md section 18); the median passes on 8."""
-    if not _fields_a_cover(model, policy) or not _uneven(gaps, policy, offset_set=model.outer_mean != 1.0):
+    """With ``policy.cover_uneven_field``, the gap field a cover takes in place of its one gap once the touches stop
+    agreeing on it (None when it takes none): where the one gap was taken (the outer mean stands for it) and the
+    contacts' ``gaps`` `(j,)` [m] now spread wider than ``cover_even`` (:func:`_uneven`), and their field
+    (:func:`_gap_field`) exceeds the limit at a region of the places they measured it (:func:`_fires`, as
+    ``cover_gap_field`` sets it first).
+
+    Not where the touches disagree from their first judgement: there (a tight cover bridging a concavity, whose
+    touches under the bridge read 2-4 cm; a sleeve sagging 1.5-4 cm off) a field carries the bridge's or the sag's gap
+    over the parts around it, and in the loop 7 of 8 such tight blobs and 5 of 5 sleeve seeds came out worse, where
+    the covers whose touches first agreed came out closer on 33 runs and worse on 16 (docs/method-notes.md section
+    32)."""
+    held = getattr(model, "outer_mean", 1.0) != 1.0
+    if not _fields_a_cover(model, policy) or not held or not _uneven(gaps, policy, offset_set=True):
         return None
     field, feet, _ = _gap_field(model, y, outer, contacts, policy, gap)
     return field if field is not None and _fires(field, feet, policy) else None
@@ -720,8 +725,6 @@ def deepen_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy,
         if field is None:                                          # not yet set (_offset_outer_field)
             return None
     else:
-        if _fields_a_cover(model, policy) and model.outer_mean == 1.0:   # the one gap not taken (not yet
-            return None                                                  # judged even, or the field pending)
         field, seen_gap = None, _seen_gap(model, y, outer, contacts, policy, gap)
         if not seen_gap > policy.vision_inside_gap:
             return None

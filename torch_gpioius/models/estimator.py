@@ -613,7 +613,8 @@ def _past_gap(p) -> str:
     gap = f"a {_cm(p.vision_inside_gap)} cover gap"
     if p.cover_offset and p.vision_inside_deep:
         where = " a place at a time" if p.cover_gap_field else ""
-        uneven = "else a place at a time" if p.cover_uneven_field else "else retracted"
+        uneven = ("once they stop agreeing a place at a time, if they agreed first; else retracted"
+                  if p.cover_uneven_field else "else retracted")
         even = (f" while the touches' gaps agree (interquartile range at most {p.cover_even:g} of the median; "
                 f"{uneven})" if p.cover_even is not None and not p.cover_gap_field else "")
         carry = " through the learned transfer" if p.cover_carry else ""

@@ -73,17 +73,17 @@ class ObservationPolicy:
             of the run (docs/method-notes.md section 27). The ``"default"`` preset's is 0.25 (``COVER_EVEN``). None
             (this class's default): the one gap whatever its spread. Without the one gap's settings (or with
             ``cover_gap_field``, whose field follows a gap that varies) it does nothing.
-        cover_uneven_field: with ``cover_even``, a cover the touches find uneven takes the gap a place at a time
+        cover_uneven_field: with ``cover_even``, a cover whose one gap was taken (the touches agreed on it) and whose
+            touches then stop agreeing (their spread past ``cover_even``) takes the gap a place at a time
             (``cover_gap_field``'s field, :class:`~torch_gpioius.models.gapfield.GapField`) in place of the paper's
-            one mean: where ``cover_even`` finds the cover uneven (the contacts' median gap past
-            ``vision_inside_gap``, their spread wider than ``cover_even``) and the field fitted to the gaps exceeds
-            ``vision_inside_gap`` at a region of their places
-            (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`), the camera's inside points are kept and
-            continued down to the field's gap where each lies, and the field is the outer mean for the rest of the
-            run, renewed as it moves; where the field stays below, as ``cover_even`` alone (judged once the
-            contacts measured :data:`~torch_gpioius.exploration.observations.FIELD_PLACES` places; before, a cover
-            found uneven is not yet given up). One gap while the touches agree on it, a gap per place once they do
-            not. False (the default): retracted.
+            one mean, where that field exceeds ``vision_inside_gap`` at a region of their places
+            (:data:`~torch_gpioius.exploration.observations.FIELD_SHARE`; judged once they measured
+            :data:`~torch_gpioius.exploration.observations.FIELD_PLACES` places, the one gap kept until then): the
+            camera's inside points are kept and continued down to the field's gap where each lies, and the field is
+            the outer mean for the rest of the run, renewed as it moves. Where the field stays below, and where the
+            touches disagree from their first judgement (a tight cover bridging a concavity, a sagging sleeve:
+            there a field made runs worse), as ``cover_even`` alone (docs/method-notes.md section 32). False (the
+            default): the one gap given up once the touches stop agreeing.
         cover_carry: with ``cover_offset``, the outer mean that stands for the gap ``g`` (one number, or a field
             ``g(x)`` with ``cover_gap_field`` or ``cover_uneven_field``, raised alike) also answers the transfer K_t
             learned: away from the touches the inner estimate is ``1 + r (mu_out - m_out)``
