@@ -391,7 +391,8 @@ def retract_vision_inside(model, contacts: np.ndarray, policy: ObservationPolicy
     With ``policy.cover_offset`` the outer task's prior mean stands for the gap from then on as well
     (:func:`offset_outer_mean`); with ``vision_inside_deep`` too they are kept (and continued,
     :func:`deepen_vision_inside`), and with ``cover_even`` retracted, the continued ones with them, once the
-    contacts' gaps spread wider than that share of their median (:func:`gap_spread`).
+    contacts' gaps spread wider than that share of their median (:func:`gap_spread`), unless ``cover_uneven_field``
+    turns the one gap into a field of the gaps (:func:`_takes_field`), which keeps them.
 
     Returns:
         `(k,)` indices (into the observations before the call) that were removed; empty when kept.
@@ -511,7 +512,9 @@ def offset_outer_mean(model, contacts: np.ndarray, policy: ObservationPolicy, ga
     With ``policy.cover_even`` (and ``vision_inside_deep``, one gap) the mean is set only while the contacts' gaps
     spread no wider than that share of their median (:func:`gap_spread`), and goes back to 1 for the rest of the run
     once they do (:func:`retract_vision_inside` retracts the camera's inside points at the same step; a run whose
-    camera inside points were retracted does not set it again).
+    camera inside points were retracted does not set it again); with ``policy.cover_uneven_field`` too, a gap set
+    that way becomes the field of the contacts' gaps instead, where it passes the limit over a region, and is renewed
+    as :func:`_offset_outer_field` renews it for the rest of the run (:func:`_takes_field`).
 
     Returns:
         Whether the mean changed (the caller re-learns K_t as every step does).
@@ -671,7 +674,8 @@ def _takes_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, 
 
 
 def renew_deep_vision_inside(model, policy: ObservationPolicy) -> np.ndarray:
-    """With ``policy.cover_gap_field``, remove the camera's inside points continued below the first
+    """With ``policy.cover_gap_field``, or a model whose outer mean is a gap field (``cover_uneven_field``), remove
+    the camera's inside points continued below the first
     (:func:`deepen_vision_inside` places them again from the renewed field at the same step): call it when
     :func:`offset_outer_mean` changed the field.
 
