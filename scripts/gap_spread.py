@@ -38,8 +38,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from worst_errors import world_of  # noqa: E402  (a sibling script: the world a study log ran in)
 
-from torch_gpioius.exploration.observations import (FIELD_PLACES, FIELD_SHARE, GAP_MIN_CONTACTS, CoverGap,  # noqa: E402
-                                                    gap_spread)
+from torch_gpioius.exploration.observations import (FIELD_PLACES, GAP_MIN_CONTACTS, CoverGap, ObservationPolicy,  # noqa: E402
+                                                    _fires, gap_spread)
 from torch_gpioius.models.gapfield import GapField  # noqa: E402
 from torch_gpioius.core.validation import INSIDE_DEPTH_MAX  # noqa: E402
 from torch_gpioius.io.datasets import contact_rows  # noqa: E402
@@ -59,10 +59,10 @@ def spread(gaps: np.ndarray) -> tuple[int, float, float, float, float]:
 def _field_passes(feet: np.ndarray, gaps: np.ndarray, limit: float) -> bool:
     """Whether the field of ``gaps`` measured at ``feet`` passes ``limit`` at a region of the places (as
     ``exploration.observations`` judges it before taking the field)."""
-    if len(gaps) < FIELD_PLACES:
+    if len(gaps) < FIELD_PLACES:                      # (refused by the rule itself; not worth a fit)
         return False
-    field = GapField.fit(feet, np.clip(gaps, 0.0, INSIDE_DEPTH_MAX))
-    return bool((field.gap(feet).numpy() > limit).mean() >= FIELD_SHARE)
+    return _fires(GapField.fit(feet, np.clip(gaps, 0.0, INSIDE_DEPTH_MAX)), feet,
+                  ObservationPolicy(vision_inside_gap=limit))
 
 
 def field_taken(contacts: np.ndarray, seen: np.ndarray, reach: float, limit: float, even: float) -> tuple:

@@ -469,30 +469,30 @@ def test_a_gap_the_touches_stop_agreeing_on_becomes_a_gap_per_place_for_good(mon
     # uneven from the first judgement (every contact at once; a cover 2 to 6.5 cm off): cover_even's retraction
     dirs, outer_r = _uneven_sphere(400, seed=4)
     contacts = _sphere(0.10, 60, seed=5)
-    at_once = [_half_uneven_model(policy)[0], _gap_field_model(policy, dirs, outer_r + 0.015, contacts)[0]]
-    reference = [_half_uneven_model(policy)[0], _gap_field_model(policy, dirs, outer_r + 0.015, contacts)[0]]
-    cases = [(everywhere,), (contacts,)]
-    monkeypatch_cases = [((upper, everywhere, upper), _half_uneven_model)]
-    for a, b, seq in zip(at_once, reference, cases):
-        for c in seq:
-            ra, ca, _ = _one_step(a, c, policy)
-            rb, cb, _ = _one_step(b, c, plain)
-            assert len(ra) > 0 and a.outer_field is None
-            np.testing.assert_array_equal(ra, rb)
-            assert ca == cb and a.outer_mean == b.outer_mean == 1.0
-            np.testing.assert_array_equal(a.train_targets.numpy(), b.train_targets.numpy())
+    for make, c in ((lambda: _half_uneven_model(policy)[0], everywhere),
+                    (lambda: _gap_field_model(policy, dirs, outer_r + 0.015, contacts)[0], contacts)):
+        a = make()
+        removed = _steps_as_cover_even(a, make(), [c], policy, plain)
+        assert len(removed) > 0 and a.outer_mean == 1.0
     monkeypatch.setattr(obs, "FIELD_SHARE", 1.01)                                 # the field never passes a region
-    for seq, make in monkeypatch_cases:
-        a, b = make(policy)[0], make(policy)[0]
-        for c in seq:
-            ra, ca, _ = _one_step(a, c, policy)
-            rb, cb, _ = _one_step(b, c, plain)
-            np.testing.assert_array_equal(ra, rb)
-            assert ca == cb and a.outer_mean == b.outer_mean and a.outer_field is None
-            np.testing.assert_array_equal(a.train_targets.numpy(), b.train_targets.numpy())
+    _steps_as_cover_even(_half_uneven_model(policy)[0], _half_uneven_model(policy)[0], [upper, everywhere, upper],
+                         policy, plain)
     for bad in ({"cover_even": None}, {"cover_gap_field": True}):
         with pytest.raises(ValueError, match="cover_uneven_field"):
             dataclasses.replace(policy, **bad)
+
+
+def _steps_as_cover_even(a, b, contacts_seq, policy, plain):
+    """Each step of the model ``a`` under ``policy`` (``cover_uneven_field``) equals the model ``b``'s under
+    ``plain`` (``cover_even`` alone): the rows removed, whether the mean changed, the mean, no field, the labels; the
+    last step's removed rows."""
+    for c in contacts_seq:
+        ra, ca, _ = _one_step(a, c, policy)
+        rb, cb, _ = _one_step(b, c, plain)
+        np.testing.assert_array_equal(ra, rb)
+        assert ca == cb and a.outer_mean == b.outer_mean and a.outer_field is None
+        np.testing.assert_array_equal(a.train_targets.numpy(), b.train_targets.numpy())
+    return ra
 
 
 def _uneven_sphere(n, seed, thin=0.005, thick=0.05):

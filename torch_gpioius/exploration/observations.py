@@ -667,7 +667,8 @@ def _takes_field(model, y: np.ndarray, outer: np.ndarray, contacts: np.ndarray, 
     the covers whose touches first agreed came out closer on 33 runs and worse on 16 (docs/method-notes.md section
     32)."""
     held = getattr(model, "outer_mean", 1.0) != 1.0
-    if not _fields_a_cover(model, policy) or not held or not _uneven(gaps, policy, offset_set=True):
+    if (not _fields_a_cover(model, policy) or not held or len(gaps) < FIELD_PLACES    # (too few: _fires refuses)
+            or not _uneven(gaps, policy, offset_set=True)):
         return None
     field, feet, _ = _gap_field(model, y, outer, contacts, policy, gap)
     return field if field is not None and _fires(field, feet, policy) else None
