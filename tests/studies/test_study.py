@@ -839,3 +839,40 @@ def test_the_watcher_ends_a_process_holding_files_in_the_studys_ray_session(tmp_
         for p in procs:
             p.kill()
             p.wait()
+
+
+def test_a_run_of_a_preset_an_earlier_release_defined_otherwise_is_done_again(tmp_path, monkeypatch):
+    """A run record keeps the digest of the preset it started from; a run made before a release changed that preset
+    (the default's cover_uneven_field, turned on) is set aside and done again, not mixed with the new preset's runs.
+    Records written before the digest are judged by the preset's on/off labels where nothing else could set them."""
+    from torch_gpioius.models.estimator import PRESETS, EstimatorSettings
+    from torch_gpioius.studies.study_runs import _preset_changed, preset_digest
+
+    assert len({preset_digest(n) for n in PRESETS}) == len(PRESETS)
+    ball = ball_scene(tmp_path)
+    kw = dict(modes=["tactile"], seeds=1, out=tmp_path / "s", smoke=True, backend="local", progress=False,
+              settings="default")
+    run_sweep("forcefield", scenes=[ball], **kw)
+    path = tmp_path / "s" / "runs" / "ball_tactile_0.json"
+    run = json.loads(path.read_text())
+    assert run["preset"] == {"name": "default", "digest": preset_digest("default")}
+    assert run_sweep("forcefield", scenes=[ball], **kw)["skipped"] == 1             # the same release: done
+    # the default preset as a release that turned one of its labels off defined it
+    before = PRESETS["default"]
+    monkeypatch.setitem(PRESETS, "default", lambda: before().replace(labels={"cover_uneven_field": False}))
+    assert preset_digest("default") != run["preset"]["digest"]
+    with pytest.warns(RuntimeWarning, match="as an earlier release defined them"):
+        again = run_sweep("forcefield", scenes=[ball], **kw)
+    assert again["skipped"] == 0 and (path.parent / (path.name + ".stale")).exists()
+    monkeypatch.setitem(PRESETS, "default", before)
+    # records from before the digest: a set object's run of the default, as the labels it recorded say
+    labels = EstimatorSettings.default().to_dict()["labels"]
+    old = {"estimator": {"name": "default", "labels": {k: v for k, v in labels.items()
+                                                         if k != "cover_uneven_field"}},
+           "scene_hash": "set:primitives:0:0.12:wide"}
+    assert "cover_uneven_field: False, now True" in _preset_changed(old)
+    assert _preset_changed({**old, "estimator": {"name": "default", "labels": labels}}) is None
+    for kept in ({"overrides": {"labels": {"cover_uneven_field": False}}},      # asked for: the folder's own
+                 {"scene_hash": "0123abcd"},                                    # a scene file's section may set it
+                 {"estimator": {**old["estimator"], "name": "custom"}}):
+        assert _preset_changed({**old, **kept}) is None

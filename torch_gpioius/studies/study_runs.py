@@ -8,6 +8,7 @@ import json
 import math
 import os
 import time
+import dataclasses
 from dataclasses import dataclass
 from typing import Any
 from pathlib import Path
@@ -18,7 +19,7 @@ from ..geometry.metrics import SHAPE_METRICS
 
 __all__ = ["BASE_MODES", "FRACTIONS", "CONTACT_WITHIN", "BUDGET_METRICS_EVERY", "sweep_modes", "RunSpec", "make_world",
            "run_one", "read_run_file", "RunFileError", "scene_failure_record", "atomic_json", "finished",
-           "study_worlds", "asked_travel", "SMOKE_TRAVEL"]
+           "study_worlds", "asked_travel", "SMOKE_TRAVEL", "preset_digest"]
 
 
 #: The modes of exploration a sweep runs: the paper's two and the local similarity (``regions``); each also with an
@@ -371,6 +372,9 @@ def run_one(spec: RunSpec) -> dict:
         record["camera_corrections"] = trace.camera_corrections
     if spec.settings is not None:
         record["settings"] = spec.settings
+    preset = _asked_preset(spec, estimator)
+    if preset is not None:           # the preset's content as run: a later release that changes it sets this run aside
+        record["preset"] = {"name": preset, "digest": preset_digest(preset)}
     if spec.scene_hash is not None:
         record["scene_hash"] = spec.scene_hash
     if spec.device is not None:
@@ -520,6 +524,10 @@ def finished(path: Path, spec: RunSpec | None = None) -> bool:
         _set_aside(path, "stale", f"a run of the scene file as it was before it changed (scene_hash "
                                   f"{run.get('scene_hash')}, now {spec.scene_hash})")
         return False
+    changed = _preset_changed(run) if spec is not None else None
+    if changed is not None:
+        _set_aside(path, "stale", changed)
+        return False
     ruler = _current_ruler(spec.world) if spec is not None else None
     measured = any(_number(v) and math.isfinite(v) for v in run["series"].get("hausdorff", []))
     if ruler is not None and run.get("ruler") != ruler and measured:
@@ -535,6 +543,68 @@ def finished(path: Path, spec: RunSpec | None = None) -> bool:
         _set_aside(path, "stale", f"a run of another travel budget ({run.get('budget')} m, asked {travel:g} m)")
         return False
     return True
+
+
+def preset_digest(name: str) -> str:
+    """A digest of the named estimator preset's settings as this release defines them (16 hex digits of the SHA-256
+    of :meth:`~torch_gpioius.models.estimator.EstimatorSettings.to_dict`): a run record keeps it, so that a run made
+    before a release changed the preset (the default's labels, its kernel) is done again, not mixed with runs of the
+    new one."""
+    import hashlib
+
+    from ..models.estimator import PRESETS
+
+    from ..models.labels import ObservationPolicy
+
+    data = PRESETS[name]().to_dict()
+    # the labels that differ from ObservationPolicy's own: a field a later release adds (off unless a preset sets
+    # it) leaves the digest as it was
+    plain = dataclasses.asdict(ObservationPolicy())
+    data["labels"] = {k: v for k, v in data["labels"].items() if k not in plain or plain[k] != v}
+    text = json.dumps(data, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _asked_preset(spec: RunSpec, estimator) -> str | None:
+    """The preset a run's settings start from: the one asked for (``--settings``; a set object's "default"), else
+    the name of the settings the run used where that is a preset (a world's or scene file's own), else None."""
+    from ..models.estimator import PRESETS
+
+    name = spec.settings or ("default" if spec.set_object is not None else None) or estimator.name
+    return name if name in PRESETS else None
+
+
+def _preset_changed(run: dict) -> str | None:
+    """Why a run record's preset is not this release's (None: it is, or the record cannot tell): its digest differs
+    (:func:`preset_digest`); for records written before the digest, the preset's on/off labels and ``cover_even``
+    differ from the ones the record's settings hold, where nothing else could have set them (no ``--estimator``
+    changes, no scene file)."""
+    from ..models.estimator import PRESETS
+    from ..models.labels import ObservationPolicy, _FLAGS
+
+    recorded = run.get("preset")
+    if isinstance(recorded, dict) and recorded.get("name") in PRESETS:
+        now = preset_digest(recorded["name"])
+        if recorded.get("digest") != now:
+            return (f"a run of the {recorded['name']!r} settings as an earlier release defined them (digest "
+                    f"{recorded.get('digest')}, now {now})")
+        return None
+    estimator = run.get("estimator")
+    scene_file = not str(run.get("scene_hash") or "set:").startswith("set:")    # (a set object's: no file)
+    if (recorded is not None or run.get("overrides") or scene_file
+            or not isinstance(estimator, dict) or not isinstance(estimator.get("labels"), dict)):
+        return None
+    name = run.get("settings") or estimator.get("name")        # (a preset's name only while nothing changed it)
+    if name not in PRESETS:
+        return None
+    labels = PRESETS[name]().labels
+    default = ObservationPolicy()
+    differ = [f"{key}: {estimator['labels'].get(key, getattr(default, key))!r}, now {getattr(labels, key)!r}"
+              for key in (*_FLAGS, "cover_even")
+              if estimator["labels"].get(key, getattr(default, key)) != getattr(labels, key)]
+    if not differ:
+        return None
+    return f"a run of the {name!r} settings as an earlier release defined them ({'; '.join(differ)})"
 
 
 def _current_ruler(world: str) -> str | None:
