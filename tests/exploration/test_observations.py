@@ -428,7 +428,7 @@ def test_a_gap_the_touches_stop_agreeing_on_becomes_a_gap_per_place_for_good(mon
     the touches spread before the field can be judged (seven places), the one gap is kept until it can. A cover
     uneven from the touches' first judgement is retracted as ``cover_even`` does, and so is one whose field does not
     pass the limit at a region of the places (``FIELD_SHARE`` made unreachable): every step then equals
-    ``cover_even``'s alone. The setting without ``cover_even``, or beside ``cover_gap_field``, is refused."""
+    ``cover_even``'s alone. Without ``cover_even``, or beside ``cover_gap_field``, the setting does nothing."""
     from torch_gpioius.exploration import observations as obs
 
     policy = ObservationPolicy(vision_inside=0.02, vision_inside_gap=0.03, cover_offset=True, vision_inside_deep=True,
@@ -477,9 +477,23 @@ def test_a_gap_the_touches_stop_agreeing_on_becomes_a_gap_per_place_for_good(mon
     monkeypatch.setattr(obs, "FIELD_SHARE", 1.01)                                 # the field never passes a region
     _steps_as_cover_even(_half_uneven_model(policy)[0], _half_uneven_model(policy)[0], [upper, everywhere, upper],
                          policy, plain)
-    for bad in ({"cover_even": None}, {"cover_gap_field": True}):
-        with pytest.raises(ValueError, match="cover_uneven_field"):
-            dataclasses.replace(policy, **bad)
+    monkeypatch.undo()
+    # where no gap is ever given up (cover_even off) or the field is taken whatever the spread (cover_gap_field),
+    # the setting does nothing: every step equals the same policy's without it
+    for other in ({"cover_even": None}, {"cover_gap_field": True}):
+        on = dataclasses.replace(policy, **other)
+        off = dataclasses.replace(on, cover_uneven_field=False)
+        a, b = _half_uneven_model(on)[0], _half_uneven_model(off)[0]
+        for c in (upper, everywhere, upper):
+            ra, ca, _ = _one_step(a, c, on)
+            rb, cb, _ = _one_step(b, c, off)
+            np.testing.assert_array_equal(ra, rb)
+            assert ca == cb and (a.outer_field is None) == (b.outer_field is None)
+            np.testing.assert_array_equal(a.train_targets.numpy(), b.train_targets.numpy())
+            if a.outer_field is None:
+                assert a.outer_mean == b.outer_mean
+            else:
+                np.testing.assert_array_equal(a.outer_field.gap(seen).numpy(), b.outer_field.gap(seen).numpy())
 
 
 def _steps_as_cover_even(a, b, contacts_seq, policy, plain):

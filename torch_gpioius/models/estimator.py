@@ -20,7 +20,7 @@ Presets (:func:`EstimatorSettings.preset`):
   unless their gaps agree: then the outer task's prior mean stands for the gap they measure (corrected, once set,
   for the transfer K_t learned, so that away from the touches the estimate lies the gap below the cover; section 31)
   and the camera's inside points are continued down to it, for as long as they agree (one gap while the touches
-  agree, section 27);
+  agree, section 27); once they stop agreeing, a field of their gaps a place at a time instead (section 32);
   each contact counted four times (a fingertip's contact with a quarter of the camera's noise); an inside point
   contradicted on a part thinner than its depth tried again at 1 cm and 5 mm;
 * ``"paper"``: the paper's robot experiment (Sec. VI): the inverse multiquadric of theta = 0.15 m, sigma^2 = 0.08,
@@ -143,7 +143,7 @@ class LengthRule:
 
 #: The labels' changes of the one gap taken whatever the touches' spread (:meth:`EstimatorSettings.gap`): the default
 #: takes it only while they agree (:data:`COVER_EVEN`).
-GAP_LABELS = {"cover_offset": True, "vision_inside_deep": True, "cover_even": None}
+GAP_LABELS = {"cover_offset": True, "vision_inside_deep": True, "cover_even": None, "cover_uneven_field": False}
 #: ... and of that gap a place at a time (:meth:`EstimatorSettings.gap_field`).
 GAP_FIELD_LABELS = {**GAP_LABELS, "cover_gap_field": True}
 
@@ -227,7 +227,7 @@ class EstimatorSettings:
                                    vision_inside=INSIDE_DEPTH, vision_inside_gap=COVER_GAP_LIMIT, voxel=0.05,
                                    ray_smoothing=RAY_NEIGHBOURS, contact_repeats=CONTACT_REPEATS,
                                    inside_halvings=INSIDE_HALVINGS, cover_offset=True, vision_inside_deep=True,
-                                   cover_even=COVER_EVEN, cover_carry=True)
+                                   cover_even=COVER_EVEN, cover_carry=True, cover_uneven_field=True)
         return cls(Matern52(lengthscale=0.1), 0.08, labels, VoxelRule(), LengthRule(), name="default")
 
     @classmethod

@@ -82,8 +82,10 @@ class ObservationPolicy:
             camera's inside points are kept and continued down to the field's gap where each lies, and the field is
             the outer mean for the rest of the run, renewed as it moves. Where the field stays below, and where the
             touches disagree from their first judgement (a tight cover bridging a concavity, a sagging sleeve:
-            there a field made runs worse), as ``cover_even`` alone (docs/method-notes.md section 32). False (the
-            default): the one gap given up once the touches stop agreeing.
+            there a field made runs worse), as ``cover_even`` alone (docs/method-notes.md section 32). On in the
+            ``"default"`` preset; False (this class's default): the one gap given up once the touches stop agreeing.
+            Without ``cover_even`` and the one gap's settings (no gap is ever given up), or with ``cover_gap_field``
+            (whose field is taken whatever the spread), it does nothing.
         cover_carry: with ``cover_offset``, the outer mean that stands for the gap ``g`` (one number, or a field
             ``g(x)`` with ``cover_gap_field`` or ``cover_uneven_field``, raised alike) also answers the transfer K_t
             learned: away from the touches the inner estimate is ``1 + r (mu_out - m_out)``
@@ -161,9 +163,6 @@ class ObservationPolicy:
         if self.cover_gap_field and not (self.cover_offset and self.vision_inside_deep):
             raise ValueError("ObservationPolicy.cover_gap_field: needs cover_offset and vision_inside_deep (the gap "
                              "field stands in for their one gap)")
-        if self.cover_uneven_field and (self.cover_even is None or self.cover_gap_field):
-            raise ValueError("ObservationPolicy.cover_uneven_field: needs cover_even (the rule that finds the cover "
-                             "uneven) and not cover_gap_field (whose field is taken whatever the spread)")
         if self.vision_free_far is not None and (self.vision_free_offset is None or
                                                  not self.vision_free_far > self.vision_free_offset):
             raise ValueError(f"ObservationPolicy.vision_free_far: must lie beyond vision_free_offset "
