@@ -580,7 +580,7 @@ def _preset_changed(run: dict) -> str | None:
     differ from the ones the record's settings hold, where nothing else could have set them (no ``--estimator``
     changes, no scene file)."""
     from ..models.estimator import PRESETS
-    from ..models.labels import ObservationPolicy, _FLAGS
+    from ..models.labels import ObservationPolicy
 
     recorded = run.get("preset")
     if isinstance(recorded, dict) and recorded.get("name") in PRESETS:
@@ -599,8 +599,9 @@ def _preset_changed(run: dict) -> str | None:
         return None
     labels = PRESETS[name]().labels
     default = ObservationPolicy()
+    flags = [f.name for f in dataclasses.fields(default) if isinstance(getattr(default, f.name), bool)]
     differ = [f"{key}: {estimator['labels'].get(key, getattr(default, key))!r}, now {getattr(labels, key)!r}"
-              for key in (*_FLAGS, "cover_even")
+              for key in (*flags, "cover_even")
               if estimator["labels"].get(key, getattr(default, key)) != getattr(labels, key)]
     if not differ:
         return None
