@@ -641,10 +641,11 @@ def _fires(field, feet: np.ndarray, policy: ObservationPolicy) -> bool:
 
 
 def _fields_a_cover(model, policy: ObservationPolicy) -> bool:
-    """Whether ``policy.cover_uneven_field`` can act on ``model`` (one whose outer mean can be set): only where a gap
-    the touches stop agreeing on is given up (:func:`_judges_evenness`); with ``cover_even`` off it never is, and
-    ``cover_gap_field`` takes its field whatever the spread."""
-    return policy.cover_uneven_field and _judges_evenness(policy) and hasattr(model, "set_outer_mean")
+    """Whether ``policy.cover_uneven_field`` can act on ``model`` (one whose outer mean can be set). Its callers are
+    reached only where a gap the touches stop agreeing on is given up (:func:`_judges_evenness`): with ``cover_even``
+    off no gap ever is, and ``cover_gap_field`` takes its field whatever the spread, so there the setting does
+    nothing."""
+    return policy.cover_uneven_field and hasattr(model, "set_outer_mean")
 
 
 def _field_pending(model, gaps: np.ndarray, policy: ObservationPolicy) -> bool:

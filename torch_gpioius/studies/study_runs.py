@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import json
 import math
+import dataclasses
 import os
 import time
-import dataclasses
 from dataclasses import dataclass
 from typing import Any
 from pathlib import Path
@@ -553,7 +553,6 @@ def preset_digest(name: str) -> str:
     import hashlib
 
     from ..models.estimator import PRESETS
-
     from ..models.labels import ObservationPolicy
 
     data = PRESETS[name]().to_dict()
@@ -599,10 +598,9 @@ def _preset_changed(run: dict) -> str | None:
         return None
     labels = PRESETS[name]().labels
     default = ObservationPolicy()
-    flags = [f.name for f in dataclasses.fields(default) if isinstance(getattr(default, f.name), bool)]
-    differ = [f"{key}: {estimator['labels'].get(key, getattr(default, key))!r}, now {getattr(labels, key)!r}"
-              for key in (*flags, "cover_even")
-              if estimator["labels"].get(key, getattr(default, key)) != getattr(labels, key)]
+    keys = [f.name for f in dataclasses.fields(default) if isinstance(getattr(default, f.name), bool)] + ["cover_even"]
+    was = {key: estimator["labels"].get(key, getattr(default, key)) for key in keys}    # (absent: the class's own)
+    differ = [f"{key}: {was[key]!r}, now {getattr(labels, key)!r}" for key in keys if was[key] != getattr(labels, key)]
     if not differ:
         return None
     return f"a run of the {name!r} settings as an earlier release defined them ({'; '.join(differ)})"
