@@ -12,10 +12,11 @@ points (the outer task's surface observations at the end) and prints, per run:
   ``(p75 - p25) / median``;
 * where a field of the gaps would be taken (docs/method-notes.md section 32): the contact at which the field of the
   gaps counted so far (``GapField``) first passes ``--limit`` at a quarter of their places (``FIELD_SHARE``, at
-  least ``FIELD_PLACES``: the ``gapfield`` preset's rule, the region alone), and the contact at which
-  ``cover_uneven_field`` takes it (the touches found uneven by ``cover_even``: their median past the limit, or one
-  gap taken already, and their spread past ``--even``), with "gap" where one gap was taken first; replayed on the
-  default's contacts, so exact up to the first step that differs;
+  least ``FIELD_PLACES``: the ``gapfield`` preset's rule, the region alone), and what the default's rules do
+  (``cover_even`` with ``cover_uneven_field``): one gap taken while the touches agree on it, then its field once they
+  stop agreeing ("gap N, field M") or given up where the field does not pass ("gap N, retracted M"), and the camera's
+  inside points retracted at once where the touches disagree from their first judgement ("retracted N"); replayed on
+  the run's contacts, so exact up to the first step that differs;
 * the truth, from the world the run was rebuilt in: the distance of each seen point from the body (the cover's real
   gap where the camera saw it), its median and spread, over all seen points in the exploration range.
 
@@ -67,9 +68,12 @@ def _field_passes(feet: np.ndarray, gaps: np.ndarray, limit: float) -> bool:
 
 def field_taken(contacts: np.ndarray, seen: np.ndarray, reach: float, limit: float, even: float) -> tuple:
     """``(region, taken)``: the contact count at which the field of the gaps first passes ``limit`` over a region
-    (None: never), and what ``cover_uneven_field`` does ("field N", "gap N, field M" where one gap was taken at N
-    first, "retracted N" / "gap N, retracted M" where the cover is found uneven and its field does not pass, "gap N"
-    where the one gap is kept; None where nothing is taken)."""
+    (None: never), and what the default's rules do (``cover_even`` with ``cover_uneven_field``, as
+    ``exploration.observations`` decides): "gap N" where one gap is taken at contact N and kept; "gap N, field M"
+    where the touches stop agreeing on it at M and their field passes, "gap N, retracted M" where it does not (judged
+    once the touches measured ``FIELD_PLACES`` places; the one gap is kept until then); "retracted N" where the
+    touches disagree from their first judgement (no gap and no field: the camera's inside points are retracted at
+    once); None where nothing is taken."""
     measure = CoverGap()
     region, held, state = None, None, None
     for k in range(GAP_MIN_CONTACTS, len(contacts) + 1):
@@ -82,8 +86,10 @@ def field_taken(contacts: np.ndarray, seen: np.ndarray, reach: float, limit: flo
         if state is None:
             median = float(np.median(gaps))
             uneven = (held is not None or median > limit) and gap_spread(gaps) > even
-            if uneven and len(gaps) >= FIELD_PLACES:        # judged: the field, or given up
-                state = (f"gap {held}, " if held else "") + ("field" if passes else "retracted") + f" {k}"
+            if uneven and held is None:                     # uneven from the first judgement: retracted at once
+                state = f"retracted {k}"
+            elif uneven and len(gaps) >= FIELD_PLACES:      # the one gap judged: the field, or given up
+                state = f"gap {held}, " + ("field" if passes else "retracted") + f" {k}"
             elif held is None and not uneven and median > limit:
                 held = k
         if region is not None and state is not None:

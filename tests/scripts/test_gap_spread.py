@@ -47,3 +47,53 @@ def test_the_replay_reads_the_runs_gaps_and_the_covers_true_one(tmp_path, capsys
     assert n_true > 20 and 0.031 < true_med < 0.039 and true_rel < 0.2
     spread.main([str(log), "--scenes", str(tmp_path)])
     assert "| ball_visual-tactile_0 |" in capsys.readouterr().out
+
+
+def _under_a_flat_cover(gaps):
+    """Seen points on a flat cover (z = 0, a 1 cm grid over 60 cm) and one contact under it per gap [m], 6 cm apart."""
+    grid = np.arange(-0.3, 0.3001, 0.01)
+    seen = np.stack(np.meshgrid(grid, grid), -1).reshape(-1, 2)
+    seen = np.column_stack([seen, np.zeros(len(seen))])
+    at = [(-0.24 + 0.06 * (i % 9), -0.24 + 0.06 * (i // 9)) for i in range(len(gaps))]
+    return np.array([(x, y, -g) for (x, y), g in zip(at, gaps)]), seen
+
+
+def _first_uneven(gaps, limit, even, held):
+    """The contact count k (from five) at which the first k gaps first read uneven: past ``limit``, or one gap
+    ``held``, and their interquartile range past ``even`` of their median (None: never)."""
+    for k in range(5, len(gaps) + 1):
+        g = np.asarray(gaps[:k])
+        p25, med, p75 = np.percentile(g, [25, 50, 75])
+        if (held or med > limit) and (p75 - p25) / med > even:
+            return k
+    return None
+
+
+def test_the_replayed_rules_are_the_defaults_one_gap_its_field_or_retracted_at_once():
+    """What the script says the default's gap rules did follows exploration.observations: touches that disagree from
+    their first judgement retract at once (no gap, no field, whatever the count of places); touches that agree take
+    one gap at the fifth contact and keep it, and once they stop agreeing it is judged (field or retracted) no sooner
+    than FIELD_PLACES places. Gaps under a flat cover, so that each contact's gap is its depth (checked by hand)."""
+    from torch_gpioius.exploration.observations import FIELD_PLACES
+    from torch_gpioius.models.estimator import COVER_EVEN
+
+    spread = load_script("gap_spread")
+    limit = 0.03
+    uneven = [0.01, 0.05, 0.02, 0.045, 0.035, 0.04, 0.015, 0.05, 0.03, 0.04]
+    contacts, seen = _under_a_flat_cover(uneven)
+    np.testing.assert_allclose(gaps_by_hand(contacts, seen, 0.02), uneven, atol=1e-12)
+    _, taken = spread.field_taken(contacts, seen, 0.02, limit, COVER_EVEN)
+    k = _first_uneven(uneven, limit, COVER_EVEN, held=False)
+    assert k == 5 < FIELD_PLACES and taken == f"retracted {k}"        # at once, before the places a field needs
+
+    even = [0.04] * 5 + [0.005] * 3 + [0.075] * 4
+    contacts, seen = _under_a_flat_cover(even)
+    _, taken = spread.field_taken(contacts, seen, 0.02, limit, COVER_EVEN)
+    k = _first_uneven(even, limit, COVER_EVEN, held=True)
+    assert k is not None and k < FIELD_PLACES                        # they stop agreeing before the field is judged
+    assert taken in (f"gap 5, field {FIELD_PLACES}", f"gap 5, retracted {FIELD_PLACES}")
+
+    contacts, seen = _under_a_flat_cover([0.04] * 12)
+    assert spread.field_taken(contacts, seen, 0.02, limit, COVER_EVEN)[1] == "gap 5"
+    contacts, seen = _under_a_flat_cover([0.01] * 12)
+    assert spread.field_taken(contacts, seen, 0.02, limit, COVER_EVEN)[1] is None
