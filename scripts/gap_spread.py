@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from worst_errors import world_of  # noqa: E402  (a sibling script: the world a study log ran in)
 
 from torch_gpioius.exploration.observations import (FIELD_PLACES, GAP_MIN_CONTACTS, CoverGap, ObservationPolicy,  # noqa: E402
-                                                    _fires, gap_spread)
+                                                    _fires, _uneven, gap_spread)
 from torch_gpioius.models.gapfield import GapField  # noqa: E402
 from torch_gpioius.core.validation import INSIDE_DEPTH_MAX  # noqa: E402
 from torch_gpioius.io.datasets import contact_rows  # noqa: E402
@@ -75,6 +75,7 @@ def field_taken(contacts: np.ndarray, seen: np.ndarray, reach: float, limit: flo
     touches disagree from their first judgement (no gap and no field: the camera's inside points are retracted at
     once); None where nothing is taken."""
     measure = CoverGap()
+    rule = ObservationPolicy(vision_inside_gap=limit, cover_even=even)      # the loop's judgement of evenness
     region, held, state = None, None, None
     for k in range(GAP_MIN_CONTACTS, len(contacts) + 1):
         feet, gaps = measure.measured(contacts[:k], seen, reach)
@@ -85,7 +86,7 @@ def field_taken(contacts: np.ndarray, seen: np.ndarray, reach: float, limit: flo
             region = k
         if state is None:
             median = float(np.median(gaps))
-            uneven = (held is not None or median > limit) and gap_spread(gaps) > even
+            uneven = _uneven(gaps, rule, offset_set=held is not None)
             if uneven and held is None:                     # uneven from the first judgement: retracted at once
                 state = f"retracted {k}"
             elif uneven and len(gaps) >= FIELD_PLACES:      # the one gap judged: the field, or given up
